@@ -1,0 +1,31 @@
+# One command to set up and run the demo, one to run the tests (see README.md).
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+
+.PHONY: setup demo test test-vcan paper bench clean
+
+$(BIN)/keepout: pyproject.toml
+	$(PY) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q -e '.[dev,dask]'
+	touch $(BIN)/keepout
+
+setup: $(BIN)/keepout
+
+demo: setup
+	$(BIN)/keepout sil run
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+# SocketCAN tests inside the User-Mode-Linux guest that has vcan0 (see ../shared/tools/README-vcan-vm.md)
+test-vcan: setup
+	../shared/tools/vcan-vm --setup -- true
+	KEEPOUT_REQUIRE_VCAN=1 ../shared/tools/vcan-vm -- $(BIN)/python -m pytest -q -m socketcan
+
+paper: setup
+	$(BIN)/keepout paper --out docs/paper
+
+clean:
+	rm -rf $(VENV) build *.egg-info

@@ -1,0 +1,5 @@
+"""keepout.fsw: the flight software (executive, modes, estimation, control, FDIR, TM/TC, bus driver).
+
+Flight code never imports ``hil_sim``: everything it learns about the world comes through the bus
+or through telecommands.
+"""

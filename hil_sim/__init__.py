@@ -1,0 +1,2 @@
+"""keepout.hil_sim: the world the flight software lives in (truth dynamics, sensors, actuators,
+ephemeris truth, virtual CAN devices, the SIL orchestrator, campaigns and reports)."""

@@ -1,0 +1,51 @@
+"""The ``keepout`` command line.
+
+Each area of the project owns its subcommands: a module listed in ``_COMMAND_MODULES`` exposes
+``add_cli(subparsers)``, which adds its parsers and sets ``func`` on them. This file only assembles
+them, so adding a command never means editing another area's code.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+_COMMAND_MODULES = (
+    "gnc.paper",          # keepout paper
+    "hil_sim.mission_cli",  # keepout config schema|validate|check
+    "hil_sim.sil_cli",    # keepout sil run
+    "hil_sim.bus_cli",    # keepout bus monitor|log
+    "fsw.ground",         # keepout ground [send ...]
+    "hil_sim.campaign_cli",  # keepout campaign run|rerun|baseline|compare|shrink
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="keepout",
+        description="Constrained attitude GNC: flight software, SIL simulator and campaigns.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in _COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name != name:
+                raise
+            continue  # area not built yet in this checkout
+        module.add_cli(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    result = args.func(args)
+    return int(result or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
