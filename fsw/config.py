@@ -1,0 +1,400 @@
+"""Flight-software configuration: everything the onboard software knows about itself and its mission.
+
+`FswConfig` is a pydantic v2 model (extra keys forbidden, units in key names). The mission YAML embeds
+it under the key ``flight_software:``; `load_fsw_config` accepts either such a mission file or a bare
+FswConfig YAML. ``FswConfig.model_json_schema()`` is the JSON Schema editors use: every field carries a
+description and a default, so the schema is the reference manual.
+
+Conventions: vectors carry their frame suffix (``_B`` body, ``_N`` inertial GCRS/J2000 equatorial),
+quaternions are scalar first Hamilton ``[eta, q1, q2, q3]``; ``q_BS`` rotates star-tracker-frame vectors
+into the body frame, a target ``q_NB`` rotates body vectors into N.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from pathlib import Path
+from typing import Annotated, Literal, Union
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Quat = Annotated[list[float], Field(min_length=4, max_length=4)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+def _unit(v: list[float], what: str) -> list[float]:
+    arr = np.asarray(v, dtype=float)
+    n = float(np.linalg.norm(arr))
+    if not math.isfinite(n) or n < 1e-9:
+        raise ValueError(f"{what} must be a non-zero finite vector, got {v}")
+    return (arr / n).tolist()
+
+
+# --------------------------------------------------------------------------------------------- rates
+class RatesConfig(_Strict):
+    """Rate groups of the executive. One tick source drives all groups."""
+
+    gnc_rate_hz: float = Field(10.0, ge=1.0, le=50.0, description="GNC rate group frequency [Hz] (1..50).")
+    housekeeping_rate_hz: float = Field(1.0, gt=0.0, le=10.0, description="Housekeeping rate group frequency [Hz]; must divide the GNC rate.")
+    tick_source: Literal["sync", "clock"] = Field(
+        "sync",
+        description="'sync': lockstep, one GNC cycle per simulator SYNC frame (deterministic); "
+        "'clock': real time, cycles paced by the monotonic clock with the newest sensor samples.",
+    )
+    lockstep_timeout_s: float = Field(5.0, gt=0.0, le=600.0, description="Lockstep: how long to wait for a SYNC tick before declaring the simulator gone [s].")
+    slip_event_throttle_s: float = Field(10.0, ge=0.0, le=3600.0, description="Minimum interval between two cycle-slip warning events per rate group [s]; every slip is still counted.")
+
+    @model_validator(mode="after")
+    def _divides(self) -> "RatesConfig":
+        ratio = self.gnc_rate_hz / self.housekeeping_rate_hz
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError(
+                f"rates.housekeeping_rate_hz={self.housekeeping_rate_hz} must divide rates.gnc_rate_hz={self.gnc_rate_hz}"
+            )
+        return self
+
+
+# ---------------------------------------------------------------------------------------- spacecraft
+class WheelConfig(_Strict):
+    """One reaction wheel as the flight software knows it."""
+
+    axis_B: Vec3 = Field(description="Spin axis in body frame (normalised on load).")
+    max_torque_Nm: float = Field(0.05, gt=0.0, le=10.0, description="Motor torque limit [N m].")
+    max_speed_rad_s: float = Field(600.0, gt=0.0, le=2000.0, description="Wheel speed limit [rad/s].")
+    spin_inertia_kgm2: float = Field(0.002, gt=0.0, le=10.0, description="Wheel inertia about its spin axis [kg m^2].")
+
+    _norm = field_validator("axis_B")(lambda v: _unit(v, "wheel axis_B"))
+
+
+def _pyramid_wheels() -> list[WheelConfig]:
+    s = 1.0 / math.sqrt(3.0)
+    return [WheelConfig(axis_B=[sx * s, sy * s, s]) for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
+
+
+class SpacecraftConfig(_Strict):
+    """Spacecraft knowledge: inertia, wheels, star-tracker mounting."""
+
+    inertia_B_kgm2: list[Vec3] = Field(
+        default_factory=lambda: [[10.0, 0.0, 0.0], [0.0, 12.0, 0.0], [0.0, 0.0, 8.0]],
+        min_length=3, max_length=3,
+        description="Spacecraft inertia about the centre of mass in body frame [kg m^2], symmetric positive definite.",
+    )
+    wheels: list[WheelConfig] = Field(default_factory=_pyramid_wheels, min_length=3, max_length=6, description="Reaction wheels (3..6), in bus order RW1..RWn.")
+    star_tracker_q_BS: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Star-tracker mounting quaternion q_BS (rotates star-tracker vectors into body), scalar first.")
+    max_rate_deg_s: float = Field(1.0, gt=0.0, le=20.0, description="Body rate limit: the angular-velocity command is scaled so |omega_cmd| never exceeds it [deg/s].")
+
+    @field_validator("inertia_B_kgm2")
+    @classmethod
+    def _spd(cls, v: list[list[float]]) -> list[list[float]]:
+        J = np.asarray(v, dtype=float)
+        if not np.allclose(J, J.T, atol=1e-9 * max(1.0, np.abs(J).max())):
+            raise ValueError("spacecraft.inertia_B_kgm2 must be symmetric")
+        if np.linalg.eigvalsh(J).min() <= 0:
+            raise ValueError("spacecraft.inertia_B_kgm2 must be positive definite")
+        return v
+
+    _qn = field_validator("star_tracker_q_BS")(lambda v: _unit(v, "star_tracker_q_BS"))
+
+    @model_validator(mode="after")
+    def _span(self) -> "SpacecraftConfig":
+        axes = np.array([w.axis_B for w in self.wheels])
+        if np.linalg.matrix_rank(axes, tol=1e-6) < 3:
+            raise ValueError("spacecraft.wheels: wheel axes must span 3-D (three-axis control)")
+        return self
+
+
+# ------------------------------------------------------------------------------------------ estimator
+class EstimatorConfig(_Strict):
+    """Multiplicative EKF: gyro propagation, star-tracker updates, gyro-bias estimation."""
+
+    gyro_arw_rad_s_sqrt_hz: float = Field(1e-4, gt=0.0, le=1.0, description="Gyro angle random walk (rate white-noise density) [rad/s/sqrt(Hz)].")
+    gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-6, gt=0.0, le=1e-2, description="Gyro bias random walk density [rad/s^2/sqrt(Hz)].")
+    star_tracker_sigma_arcsec: float = Field(20.0, gt=0.0, le=3600.0, description="Star-tracker 1-sigma attitude noise per axis [arcsec].")
+    initial_attitude_sigma_deg: float = Field(5.0, gt=0.0, le=180.0, description="Initial attitude 1-sigma per axis after (re)initialisation from the star tracker [deg].")
+    initial_bias_sigma_deg_s: float = Field(0.05, gt=0.0, le=10.0, description="Initial gyro bias 1-sigma per axis [deg/s].")
+    star_tracker_max_age_s: float = Field(0.5, gt=0.0, le=10.0, description="A star-tracker sample older than this is stale and not used [s].")
+    innovation_gate_deg: float = Field(1.0, gt=0.0, le=180.0, description="Innovations larger than this are rejected (not fused) and reported to FDIR [deg].")
+
+
+# ----------------------------------------------------------------------------------- keep-out zones
+class ConeShape(_Strict):
+    """Circular cone of half-angle `half_angle_deg` around the body direction."""
+
+    shape: Literal["cone"] = "cone"
+    half_angle_deg: float = Field(gt=0.0, lt=90.0, description="Cone half-angle about the body direction [deg].")
+
+
+class SuperellipseShape(_Strict):
+    """|x/a|^p + |y/b|^p <= 1 in the tangent plane at the body direction (gnomonic angles)."""
+
+    shape: Literal["superellipse"] = "superellipse"
+    semi_axes_deg: Annotated[list[float], Field(min_length=2, max_length=2)] = Field(description="Angular semi-axes [a, b] along the local x (towards celestial north, rotated by orientation_deg) and y axes [deg], each in (0, 89).")
+    exponent: float = Field(2.0, gt=0.1, le=20.0, description="Superellipse exponent p (2: ellipse, <1: star/astroid, large: rectangle).")
+    orientation_deg: float = Field(0.0, ge=-360.0, le=360.0, description="Rotation of the semi-axes about the body direction, from celestial north towards east [deg].")
+
+    @field_validator("semi_axes_deg")
+    @classmethod
+    def _range(cls, v: list[float]) -> list[float]:
+        if any(not (0.0 < a < 89.0) for a in v):
+            raise ValueError(f"semi_axes_deg must lie in (0, 89) deg, got {v}")
+        return v
+
+
+class PolygonShape(_Strict):
+    """Star-shaped polygon with respect to the body direction, vertices as angular offsets."""
+
+    shape: Literal["polygon"] = "polygon"
+    vertices_deg: list[Annotated[list[float], Field(min_length=2, max_length=2)]] = Field(
+        min_length=3, description="Vertices [x, y] as angular offsets from the body direction in the local tangent frame [deg] (x towards celestial north rotated by orientation_deg, y east), counter-clockwise, star-shaped about the origin."
+    )
+    orientation_deg: float = Field(0.0, ge=-360.0, le=360.0, description="Rotation of the polygon about the body direction [deg].")
+
+    @field_validator("vertices_deg")
+    @classmethod
+    def _range(cls, v: list[list[float]]) -> list[list[float]]:
+        for p in v:
+            if math.hypot(*p) >= 89.0 or math.hypot(*p) <= 0.0:
+                raise ValueError(f"polygon vertex {p} must be between 0 and 89 deg from the body direction")
+        return v
+
+
+SkyShape = Annotated[Union[ConeShape, SuperellipseShape, PolygonShape], Field(discriminator="shape")]
+
+
+class SkyZoneConfig(_Strict):
+    """A keep-out zone for the instrument boresight on S^2, centred on a body or a fixed direction."""
+
+    name: str = Field(description="Zone name used in events and telemetry.", min_length=1, max_length=24)
+    body: Literal["sun", "moon", "earth", "inertial"] = Field(description="Centre: the Sun, Moon or Earth direction from the spacecraft (onboard ephemeris), or a fixed inertial direction.")
+    direction_N: Vec3 | None = Field(None, description="Centre direction for body='inertial' (normalised on load).")
+    geometry: SkyShape = Field(description="Zone shape about the centre direction.")
+    add_body_angular_radius: bool = Field(True, description="Earth only: enlarge the zone by the Earth's apparent angular radius seen from the onboard orbit.")
+
+    @model_validator(mode="after")
+    def _dir(self) -> "SkyZoneConfig":
+        if self.body == "inertial":
+            if self.direction_N is None:
+                raise ValueError(f"zone '{self.name}': body='inertial' requires direction_N")
+            self.__dict__["direction_N"] = _unit(self.direction_N, f"zone '{self.name}' direction_N")
+        elif self.direction_N is not None:
+            raise ValueError(f"zone '{self.name}': direction_N is only allowed with body='inertial'")
+        return self
+
+
+class S3ConeConfig(_Strict):
+    """Forbidden attitudes within a geodesic cone on S^3 around a centre quaternion."""
+
+    shape: Literal["cone"] = "cone"
+    name: str = Field(min_length=1, max_length=24)
+    center_q: Quat = Field(description="Centre quaternion g on S^3 (scalar first, normalised on load).")
+    half_angle_deg: float = Field(gt=0.0, lt=90.0, description="Half-angle of the cone on S^3 [deg] (note: an S^3 angle is half the rotation angle).")
+    antipodal_copy: bool = Field(False, description="Also forbid -g (the same physical attitudes on the other sheet of the double cover).")
+
+    _qn = field_validator("center_q")(lambda v: _unit(v, "center_q"))
+
+
+class S3SuperellipsoidConfig(_Strict):
+    """Star-shaped zone on S^3: central projection of |p1/a1|^e + |p2/a2|^e + |p3/a3|^e <= 1 in the tangent space at g."""
+
+    shape: Literal["superellipsoid"] = "superellipsoid"
+    name: str = Field(min_length=1, max_length=24)
+    center_q: Quat = Field(description="Kernel/centre quaternion g (normalised on load).")
+    semi_axes: Vec3 = Field(description="Semi-axes in the tangent space at g (dimensionless, tangent-plane units; 1 = 45 deg on S^3).")
+    exponent: float = Field(2.0, gt=0.1, le=20.0, description="Superellipsoid exponent.")
+    antipodal_copy: bool = Field(False, description="Also forbid the antipodal copy about -g.")
+
+    _qn = field_validator("center_q")(lambda v: _unit(v, "center_q"))
+
+    @field_validator("semi_axes")
+    @classmethod
+    def _pos(cls, v: list[float]) -> list[float]:
+        if any(a <= 0 or a > 50 for a in v):
+            raise ValueError(f"semi_axes must be in (0, 50], got {v}")
+        return v
+
+
+S3Zone = Annotated[Union[S3ConeConfig, S3SuperellipsoidConfig], Field(discriminator="shape")]
+
+
+# --------------------------------------------------------------------------------------------- laws
+class LawConfig(_Strict):
+    """Parameters of the paper's feedback laws."""
+
+    k1: float = Field(1.0, gt=0.0, le=100.0, description="Law gain k1 (paper eq. for u) [1/s in the kinematic model].")
+    kappa: float = Field(1.0, gt=0.0, le=100.0, description="StarShapedLaw gain kappa (must exceed the kappa_bar reported by gnc.checks).")
+    eps: float | Literal["auto"] = Field("auto", description="Layer thickness eps (in d_s units, 1 - cos angle), or 'auto' to take eps_fraction of the admissible upper bound every cycle.")
+    eps_fraction: float = Field(0.5, gt=0.0, lt=1.0, description="With eps='auto': eps = eps_fraction * eps_max from gnc.checks.")
+    eps_max_used: float = Field(0.15, gt=0.0, le=1.0, description="Upper cap on eps whatever the check allows (keeps the avoidance layer thin).")
+    margin_deg: float = Field(3.0, ge=0.0, le=30.0, description="The law avoids physical zones inflated by this margin [deg]; see fsw.guidance for how to choose it.")
+    check_period_s: float = Field(1.0, gt=0.0, le=60.0, description="How often the full assumption check (gnc.checks) is re-run while zones move [s]; it is re-run at once on target/gain/zone changes.")
+
+
+# -------------------------------------------------------------------------------------------- modes
+class PointingConfig(_Strict):
+    """POINTING mode: instrument boresight to a target direction avoiding sky zones."""
+
+    boresight_B: Vec3 = Field([0.0, 0.0, 1.0], description="Instrument boresight in body frame (normalised).")
+    target_N: Vec3 = Field([1.0, 0.0, 0.0], description="Initial target direction in N (normalised); SET_TARGET changes it.")
+    roll_axis_B: Vec3 = Field([1.0, 0.0, 0.0], description="Body axis (not parallel to the boresight) whose projection is steered towards roll_reference_N.")
+    roll_reference_N: Vec3 = Field([0.0, 0.0, 1.0], description="Inertial reference for the roll about the boresight (falls back to another axis when nearly parallel to the boresight).")
+    roll_gain_1_s: float = Field(0.05, ge=0.0, le=10.0, description="Roll law gain about the boresight [1/s]; 0 disables roll control.")
+    zones: list[SkyZoneConfig] = Field(default_factory=list, max_length=6, description="Keep-out zones for the boresight (at most 6).")
+
+    _n = field_validator("boresight_B", "target_N", "roll_axis_B", "roll_reference_N")(lambda v: _unit(v, "direction"))
+
+    @model_validator(mode="after")
+    def _roll(self) -> "PointingConfig":
+        if abs(float(np.dot(self.boresight_B, self.roll_axis_B))) > 0.99:
+            raise ValueError("pointing.roll_axis_B must not be parallel to pointing.boresight_B")
+        names = [z.name for z in self.zones]
+        if len(set(names)) != len(names):
+            raise ValueError(f"pointing.zones: duplicate zone names {names}")
+        return self
+
+
+class QuaternionModeConfig(_Strict):
+    """QUATERNION mode: full attitude target on S^3 avoiding forbidden-attitude zones."""
+
+    target_q_NB: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Initial target attitude q_NB (scalar first, normalised); SET_TARGET changes it.")
+    law: Literal["auto", "star", "gradient"] = Field("auto", description="'gradient' (all zones must be cones), 'star' (any zones) or 'auto' (gradient when all are cones).")
+    zones: list[S3Zone] = Field(default_factory=list, max_length=16, description="Forbidden-attitude zones on S^3.")
+
+    _qn = field_validator("target_q_NB")(lambda v: _unit(v, "target_q_NB"))
+
+    @model_validator(mode="after")
+    def _law(self) -> "QuaternionModeConfig":
+        if self.law == "gradient" and any(z.shape != "cone" for z in self.zones):
+            raise ValueError("quaternion.law='gradient' needs every quaternion zone to be a cone")
+        return self
+
+
+class SafeConfig(_Strict):
+    """SAFE mode: rate damping, then a body axis (solar arrays) to the Sun."""
+
+    sun_axis_B: Vec3 = Field([0.0, 0.0, -1.0], description="Body axis pointed at the Sun in SAFE (normalised).")
+    damping_exit_rate_deg_s: float = Field(0.05, gt=0.0, le=10.0, description="Rate damping ends when |omega| stays below this for 1 s [deg/s].")
+    sun_gain_1_s: float = Field(0.1, gt=0.0, le=10.0, description="Sun-pointing gain [1/s].")
+    max_rate_deg_s: float = Field(0.5, gt=0.0, le=20.0, description="Rate limit in SAFE [deg/s].")
+    _n = field_validator("sun_axis_B")(lambda v: _unit(v, "sun_axis_B"))
+
+
+class ControlConfig(_Strict):
+    """Rate loop: tau = J (kp (omega_cmd - omega) + d omega_cmd/dt) + omega x (J omega + h_wheels)."""
+
+    rate_bandwidth_rad_s: float = Field(1.0, gt=0.0, le=20.0, description="Rate-loop bandwidth kp [rad/s] (keep below ~gnc_rate_hz).")
+    feedforward_command_rate: bool = Field(True, description="Add J d(omega_cmd)/dt (finite difference, limited) as feed-forward.")
+    max_command_accel_deg_s2: float = Field(0.5, gt=0.0, le=50.0, description="Slew-rate limit on omega_cmd [deg/s^2] (what the wheels can deliver).")
+
+
+# --------------------------------------------------------------------------------------------- FDIR
+FdirAction = Literal["none", "safe", "reset_estimator", "isolate_wheel", "isolate_wheel_safe"]
+
+
+class FdirRule(_Strict):
+    """Limit-check rule: when the monitored value exceeds `limit` for `persistence_cycles` consecutive GNC cycles, emit the event and take `action` (once per trip)."""
+
+    enabled: bool = True
+    limit: float = Field(description="Threshold in the rule's unit (see the rule description).")
+    persistence_cycles: int = Field(3, ge=1, le=100000, description="Consecutive GNC cycles beyond the limit before the rule trips.")
+    action: FdirAction = Field("none", description="Action when tripped.")
+
+
+class FdirConfig(_Strict):
+    """FDIR rules (limit, persistence, event, action)."""
+
+    imu_stale: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=5, action="safe"), description="IMU frame missing/corrupt/stale (limit unused: any bad cycle counts).")
+    star_tracker_stale: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=50, action="none"), description="Star tracker missing/corrupt/invalid: estimator coasts; event after persistence.")
+    innovation: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=5, action="reset_estimator"), description="Star-tracker innovation above `limit` [deg].")
+    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.95, persistence_cycles=3, action="isolate_wheel_safe"), description="Wheel fault flag, missing status, or |speed| above `limit` x max_speed.")
+    keepout_yellow: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=1, action="none"), description="Physical keep-out margin below `limit` [deg] (yellow): warning event.")
+    keepout_red: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.0, persistence_cycles=2, action="safe"), description="Physical keep-out margin below `limit` [deg] (red, 0 = inside).")
+    cycle_slip: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="none"), description="A GNC cycle slip counts; `persistence_cycles` consecutive slipping cycles trip the rule.")
+
+
+# -------------------------------------------------------------------------------------- orbit/TMTC
+class OrbitKnowledge(_Strict):
+    """Onboard circular-orbit model (Earth direction and Moon parallax)."""
+
+    radius_km: float = Field(42164.0, gt=6478.0, le=2.0e6, description="Orbit radius [km].")
+    inclination_deg: float = Field(0.0, ge=0.0, le=180.0)
+    raan_deg: float = Field(0.0, ge=-360.0, le=360.0)
+    arg_latitude_at_epoch_deg: float = Field(0.0, ge=-360.0, le=360.0, description="Argument of latitude at the epoch [deg].")
+
+
+class TmTcConfig(_Strict):
+    """Telemetry/telecommand sockets (loopback unless the mission names another address)."""
+
+    telemetry_host: str = Field("127.0.0.1", description="Destination address of telemetry datagrams.")
+    telemetry_port: int = Field(50100, ge=1, le=65535)
+    telecommand_bind_host: str = Field("127.0.0.1", description="Address the telecommand socket binds to.")
+    telecommand_port: int = Field(50101, ge=0, le=65535, description="0 = ephemeral port.")
+    gnc_packet_every_n_cycles: int = Field(1, ge=1, le=1000, description="Send the GNC state packet every n GNC cycles.")
+
+
+class FswConfig(_Strict):
+    """Complete flight-software configuration (embedded in the mission YAML under ``flight_software:``)."""
+
+    epoch_utc: _dt.datetime = Field(_dt.datetime(2026, 3, 20, 12, 0, tzinfo=_dt.timezone.utc), description="UTC epoch of tick 0 (ISO 8601).")
+    initial_mode: Literal["SAFE", "POINTING", "QUATERNION"] = Field("SAFE", description="Mode at start.")
+    rates: RatesConfig = Field(default_factory=RatesConfig)
+    spacecraft: SpacecraftConfig = Field(default_factory=SpacecraftConfig)
+    orbit: OrbitKnowledge = Field(default_factory=OrbitKnowledge)
+    estimator: EstimatorConfig = Field(default_factory=EstimatorConfig)
+    law: LawConfig = Field(default_factory=LawConfig)
+    control: ControlConfig = Field(default_factory=ControlConfig)
+    pointing: PointingConfig = Field(default_factory=PointingConfig)
+    quaternion: QuaternionModeConfig = Field(default_factory=QuaternionModeConfig)
+    safe: SafeConfig = Field(default_factory=SafeConfig)
+    fdir: FdirConfig = Field(default_factory=FdirConfig)
+    tmtc: TmTcConfig = Field(default_factory=TmTcConfig)
+
+    @field_validator("epoch_utc")
+    @classmethod
+    def _tz(cls, v: _dt.datetime) -> _dt.datetime:
+        return v if v.tzinfo else v.replace(tzinfo=_dt.timezone.utc)
+
+    @property
+    def gnc_period_s(self) -> float:
+        return 1.0 / self.rates.gnc_rate_hz
+
+
+class ConfigError(ValueError):
+    """A configuration file is missing, unreadable or invalid; the message names the file and key."""
+
+
+def load_fsw_config(path: str | Path) -> FswConfig:
+    """Load an FswConfig from a mission YAML (key ``flight_software:``) or a bare FswConfig YAML."""
+    import yaml
+
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read: {exc}") from exc
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: not valid YAML: {exc}") from exc
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{p}: expected a mapping at the top level, got {type(data).__name__}")
+    prefix = ""
+    if "flight_software" in data:
+        data = data["flight_software"] or {}
+        prefix = "flight_software."
+    return parse_fsw_config(data, source=str(p), prefix=prefix)
+
+
+def parse_fsw_config(data: dict, source: str = "<dict>", prefix: str = "") -> FswConfig:
+    try:
+        return FswConfig.model_validate(data)
+    except ValidationError as exc:
+        lines = []
+        for err in exc.errors():
+            key = prefix + ".".join(str(x) for x in err["loc"])
+            lines.append(f"  {key}: {err['msg']}")
+        raise ConfigError(f"{source}: invalid flight-software configuration:\n" + "\n".join(lines)) from None
