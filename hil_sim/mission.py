@@ -1,0 +1,455 @@
+"""The mission file: everything one SIL run needs, as pydantic v2 models.
+
+A mission YAML holds the TRUTH (the spacecraft as built, its orbit, the epoch, the initial state, the
+faults to inject), how to run it (bus, duration, seed, rates), the ground's timeline of telecommands,
+the requirements a run is judged against, and, under ``flight_software:``, the flight software's own
+configuration (``fsw.config.FswConfig``: what the spacecraft *believes*, its zones, laws and limits).
+The flight software reads only that key (it never imports hil_sim).
+
+Conventions: quaternions scalar first [eta, q1, q2, q3], ``q_NB`` rotates body vectors into the
+inertial frame N (GCRS/J2000 equatorial); ``omega_BN_B`` is the body rate relative to N in body
+components. Every physical key carries its unit in its name (``_deg``, ``_s``, ``_Nm``, ...).
+"""
+from __future__ import annotations
+
+import math
+import re
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
+
+import numpy as np
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
+
+from fsw.config import FswConfig
+
+if TYPE_CHECKING:
+    from hil_sim.params import WorldParams
+
+SCHEMA_VERSION = 1
+MAX_WHEELS = 6  # RW1..RW6 in config/icd/keepout.dbc
+
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Matrix3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
+UnitVec3 = Annotated[list[float], Field(min_length=3, max_length=3,
+                                        description="direction (normalised on load)"),
+                     AfterValidator(lambda v: _unit_vector(v))]
+UnitQuat = Annotated[list[float], Field(min_length=4, max_length=4,
+                                        description="unit quaternion, scalar first [eta, q1, q2, q3]"),
+                     AfterValidator(lambda v: _unit_quaternion(v))]
+
+BUS_PATTERN = r"^(auto|socketcan:[A-Za-z0-9_]+|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?)$"
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_default=True)
+
+
+def _unit_vector(values: list[float], what: str = "a direction") -> list[float]:
+    norm = math.sqrt(sum(v * v for v in values))
+    if not norm > 1e-9 or not math.isfinite(norm):
+        raise ValueError(f"{what} must be a non-zero finite vector")
+    return [v / norm for v in values]
+
+
+def _unit_quaternion(values: list[float]) -> list[float]:
+    norm = math.sqrt(sum(v * v for v in values))
+    if not math.isfinite(norm) or abs(norm - 1.0) > 1e-3:
+        raise ValueError(f"quaternion norm is {norm:.6g}; give a unit quaternion (|q| within 1e-3 of 1), "
+                         "scalar first [eta, q1, q2, q3]")
+    return [v / norm for v in values]
+
+
+# ---------------------------------------------------------------------------------------------
+# Spacecraft truth
+# ---------------------------------------------------------------------------------------------
+
+class WheelTruth(_Model):
+    """One reaction wheel as built (maps onto hil_sim.params.WheelParams)."""
+
+    axis_B: UnitVec3 = Field(description="spin axis in body axes (normalised on load)")
+    Js_kgm2: float = Field(gt=0, le=10, description="rotor inertia about its spin axis [kg m^2]")
+    max_torque_Nm: float = Field(gt=0, le=10, description="motor torque limit [N m]")
+    max_speed_rad_s: float = Field(gt=0, le=1000, description="speed limit [rad/s] (6000 rpm = 628 rad/s)")
+    viscous_friction_Nm_per_rad_s: float = Field(0.0, ge=0, le=1, description="viscous friction [N m s/rad]")
+    coulomb_friction_Nm: float = Field(0.0, ge=0, le=1, description="Coulomb friction torque [N m]")
+    failure: Literal["none", "stuck", "no_torque"] = Field(
+        "none", description="none: healthy; stuck: seized bearing; no_torque: motor/driver dead")
+
+
+class ImuTruth(_Model):
+    """Rate gyro as built (maps onto hil_sim.params.ImuParams; axes are body axes)."""
+
+    rate_hz: float = Field(100.0, gt=0, le=1000, description="sample rate [Hz]")
+    angle_random_walk_rad_per_sqrt_s: float = Field(
+        2.9e-6, ge=0, le=1e-2, description="white rate noise density (ARW) [rad/sqrt(s)]")
+    bias_random_walk_rad_s_per_sqrt_s: float = Field(
+        1e-7, ge=0, le=1e-3, description="bias random walk: std of the bias change over dt is this * sqrt(dt) "
+        "[rad/s/sqrt(s)]")
+    bias_B_rad_s: Vec3 = Field([0.0, 0.0, 0.0], description="gyro bias at t=0 in body axes [rad/s]")
+    bias_turn_on_std_rad_s: float = Field(4.8e-6, ge=0, le=1e-2, description="random turn-on bias added to "
+                                          "bias_B_rad_s, 1-sigma per axis [rad/s]")
+    scale_factor_ppm: Vec3 = Field([0.0, 0.0, 0.0], description="scale-factor error per axis [ppm]")
+    quantisation_rad_s: float = Field(1e-7, ge=0, le=1e-2, description="output resolution [rad/s]")
+    saturation_rad_s: float = Field(0.35, gt=0, le=20, description="measurement range per axis [rad/s]")
+
+
+class StarTrackerTruth(_Model):
+    """Star tracker as built (maps onto hil_sim.params.StarTrackerParams)."""
+
+    rate_hz: float = Field(10.0, gt=0, le=100, description="output rate [Hz]")
+    cross_boresight_std_arcsec: float = Field(5.0, ge=0, le=3600, description="1-sigma noise about the two axes "
+                                              "across the boresight [arcsec]")
+    about_boresight_std_arcsec: float = Field(40.0, ge=0, le=36000, description="1-sigma roll noise [arcsec]")
+    q_BS: UnitQuat = Field([1.0, 0.0, 0.0, 0.0], description="mounting: rotates sensor-frame vectors into body")
+    boresight_S: UnitVec3 = Field([0.0, 0.0, 1.0], description="boresight in sensor axes")
+    sun_exclusion_deg: float = Field(30.0, ge=0, lt=180, description="blinded when the Sun is this close [deg]")
+    moon_exclusion_deg: float = Field(25.0, ge=0, lt=180, description="blinded when the Moon is this close [deg]")
+    max_rate_deg_s: float = Field(2.0, gt=0, le=90, description="no solution above this body rate [deg/s]")
+
+
+class Disturbance(_Model):
+    """External torque on the spacecraft: constant plus first-order Gauss-Markov per body axis."""
+
+    constant_B_Nm: Vec3 = Field([0.0, 0.0, 0.0], description="constant torque in body axes [N m]")
+    random_std_Nm: float = Field(0.0, ge=0, le=1, description="stationary 1-sigma of the random part [N m]")
+    random_correlation_time_s: float = Field(60.0, ge=0, le=1e6, description="its correlation time [s] "
+                                             "(0: white, redrawn every integration step)")
+
+
+class SpacecraftTruth(_Model):
+    """The spacecraft as built (the flight software has its own, possibly imperfect, knowledge)."""
+
+    inertia_B_kgm2: Matrix3 = Field(description="whole spacecraft with the wheels locked, about the centre of "
+                                    "mass in body axes [kg m^2]")
+    instrument_boresight_B: UnitVec3 = Field(description="the sensitive instrument's line of sight in body "
+                                             "axes: the keep-out requirement is judged on this axis")
+    wheels: list[WheelTruth] = Field(min_length=3, max_length=MAX_WHEELS)
+    imu: ImuTruth = Field(default_factory=ImuTruth)
+    star_tracker: StarTrackerTruth = Field(default_factory=StarTrackerTruth)
+    disturbance: Disturbance = Field(default_factory=Disturbance)
+
+    @field_validator("inertia_B_kgm2")
+    @classmethod
+    def _physical_inertia(cls, value: list[list[float]]) -> list[list[float]]:
+        J = np.asarray(value, dtype=float)
+        if not np.all(np.isfinite(J)):
+            raise ValueError("inertia must be finite")
+        if not np.allclose(J, J.T, rtol=1e-9, atol=1e-9 * max(1.0, float(np.abs(J).max()))):
+            raise ValueError("inertia must be symmetric (J[i][j] == J[j][i])")
+        eig = np.linalg.eigvalsh(J)
+        if eig[0] <= 0:
+            raise ValueError(f"inertia must be positive definite; principal moments are {np.round(eig, 6).tolist()}")
+        if eig[0] + eig[1] < eig[2] * (1 - 1e-9):
+            raise ValueError(f"principal moments {np.round(eig, 6).tolist()} violate the triangle inequality "
+                             "(I1 + I2 >= I3): no rigid body has this inertia")
+        return value
+
+
+EARTH_RADIUS_KM = 6378.137
+
+
+class Orbit(_Model):
+    """Keplerian elements at the epoch (two-body truth orbit about the Earth in N)."""
+
+    semi_major_axis_km: float = Field(gt=EARTH_RADIUS_KM, le=2.0e6, description="semi-major axis [km]")
+    eccentricity: float = Field(0.0, ge=0, lt=1, description="eccentricity")
+    inclination_deg: float = Field(0.0, ge=0, le=180, description="inclination [deg]")
+    raan_deg: float = Field(0.0, ge=0, lt=360, description="right ascension of the ascending node [deg]")
+    arg_perigee_deg: float = Field(0.0, ge=0, lt=360, description="argument of perigee [deg]")
+    mean_anomaly_deg: float = Field(0.0, ge=0, lt=360, description="mean anomaly at the epoch [deg]")
+
+
+class InitialState(_Model):
+    """Truth state at t = 0."""
+
+    q_NB: UnitQuat = Field(description="attitude, scalar first; rotates body vectors into N")
+    omega_BN_B_rad_s: Vec3 = Field([0.0, 0.0, 0.0], description="body rate [rad/s]")
+    wheel_speeds_rad_s: list[float] | None = Field(None, description="one per wheel [rad/s]; default all zero")
+
+
+
+# ---------------------------------------------------------------------------------------------
+# Ground timeline (telecommands sent by the ground monitor at simulated times)
+# ---------------------------------------------------------------------------------------------
+
+class _Timed(_Model):
+    t_s: float = Field(ge=0, description="simulated time at which the ground sends the telecommand [s]")
+
+
+class SetModeCommand(_Timed):
+    command: Literal["SET_MODE"]
+    mode: Literal["SAFE", "POINTING", "QUATERNION"]
+
+
+class SetTargetCommand(_Timed):
+    """A new target: a pointing direction (POINTING) or an attitude (QUATERNION)."""
+
+    command: Literal["SET_TARGET"]
+    target_N: Vec3 | None = Field(None, description="boresight target direction in N (POINTING)")
+    ra_dec_deg: Annotated[list[float], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="target as [right ascension, declination] [deg] (POINTING)")
+    q_target_NB: UnitQuat | None = Field(None, description="target attitude (QUATERNION)")
+
+    def target_direction_N(self) -> np.ndarray | None:
+        if self.target_N is not None:
+            return np.asarray(_unit_vector(self.target_N, "target_N"))
+        if self.ra_dec_deg is not None:
+            return ra_dec_to_unit(*self.ra_dec_deg)
+        return None
+
+
+class SetGainsCommand(_Timed):
+    command: Literal["SET_GAINS"]
+    k1: float | None = Field(None, gt=0)
+    kappa: float | None = Field(None, gt=0)
+    eps: float | None = Field(None, gt=0, lt=1)
+    rate_limit_deg_s: float | None = Field(None, gt=0, le=30)
+
+
+class SimpleCommand(_Timed):
+    command: Literal["NOOP", "RESET_COUNTERS"]
+
+
+TimelineEntry = Annotated[Union[SetModeCommand, SetTargetCommand, SetGainsCommand, SimpleCommand],
+                          Field(discriminator="command")]
+
+
+# ---------------------------------------------------------------------------------------------
+# Fault injection (hil_sim.faults), requirements, run settings
+# ---------------------------------------------------------------------------------------------
+
+class BusFault(_Model):
+    """A fault injected on the frames of one DBC message during [start_s, end_s)."""
+
+    kind: Literal["drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent"]
+    message: str = Field(description="DBC message name, e.g. IMU_RATE, ST_QUAT_A, RW2_STATUS")
+    start_s: float = Field(ge=0, description="start of the fault window, simulated time [s]")
+    end_s: float = Field(gt=0, description="end of the fault window, simulated time [s]")
+    delay_s: float | None = Field(None, gt=0, le=10, description="for kind=delay: extra latency [s]")
+    bit: int | None = Field(None, ge=0, le=63, description="for kind=corrupt: which payload bit to flip")
+    probability: float = Field(1.0, gt=0, le=1, description="fraction of the frames in the window affected")
+
+
+class Requirements(_Model):
+    """What a run must achieve to pass (judged on truth by the simulator, not on the FSW's view)."""
+
+    min_keepout_margin_deg: float = Field(0.0, description="every zone's minimum signed margin must exceed "
+                                          "this [deg] (0: never inside a physical zone)")
+    settling_tolerance_deg: float = Field(0.05, gt=0, le=10, description="settled when the truth pointing "
+                                          "(or attitude) error stays below this [deg]")
+    max_settling_time_s: float | None = Field(None, gt=0, description="after the last target command [s]")
+    max_final_pointing_error_deg: float = Field(0.05, gt=0, le=180, description="truth error at the end [deg]")
+    max_wheel_speed_fraction: float = Field(0.9, gt=0, le=1, description="peak |wheel speed| / its limit")
+    max_cycle_slips: int = Field(0, ge=0)
+    expected_fdir_events: list[str] = Field([], description="FDIR event names that MUST occur (fault runs)")
+    max_unexpected_fdir_events: int = Field(0, ge=0, description="FDIR events not in expected_fdir_events")
+
+
+class Simulation(_Model):
+    dynamics_rate_hz: float = Field(100.0, gt=0, le=2000, description="truth integration rate (RK4) [Hz]")
+
+
+class Mission(_Model):
+    """One SIL mission: truth, run settings, ground timeline, requirements, and the flight software config."""
+
+    schema_version: Literal[1] = Field(description="mission file format version (this is version 1)")
+    name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$", description="run folders are named after it")
+    description: str = ""
+    epoch_utc: datetime = Field(description="UTC time at t = 0, ISO 8601 with a zone, e.g. 2026-03-20T12:00:00Z")
+    duration_s: float = Field(gt=0, le=10 * 86400, description="simulated duration [s]")
+    seed: int = Field(0, ge=0, le=2**32 - 1, description="seed of every random process in the truth models")
+    bus: str = Field("auto", pattern=BUS_PATTERN, description="auto | socketcan:vcan0 | "
+                     "udp_multicast[:group:port] | virtual[:channel]")
+    tmtc_ports: Literal["auto", "fixed"] = Field(
+        "auto", description="auto: the SIL picks free UDP ports for telemetry and telecommands for each run "
+        "(parallel runs never collide) and writes them into the config it saves; fixed: use "
+        "flight_software.tmtc as given")
+    simulation: Simulation = Field(default_factory=Simulation)
+    spacecraft: SpacecraftTruth
+    orbit: Orbit
+    initial_state: InitialState
+    timeline: list[TimelineEntry] = Field([], description="telecommands the ground sends, by simulated time")
+    faults: list[BusFault] = Field([], description="bus faults to inject")
+    requirements: Requirements = Field(default_factory=Requirements)
+    flight_software: FswConfig
+
+    @field_validator("epoch_utc")
+    @classmethod
+    def _aware(cls, value: datetime) -> datetime:
+        if value.tzinfo is None:
+            raise ValueError("give the epoch with a time zone, e.g. 2026-03-20T12:00:00Z")
+        return value.astimezone(timezone.utc)
+
+    # -- cross-field checks: reported with key paths, all at once, by the loader ----------------
+    def semantic_problems(self) -> list[tuple[tuple[str | int, ...], str]]:
+        """Problems that involve several keys (each with the key path it concerns)."""
+        out: list[tuple[tuple[str | int, ...], str]] = []
+        n_wheels = len(self.spacecraft.wheels)
+        fsw = self.flight_software
+        if fsw.epoch_utc != self.epoch_utc:
+            out.append((("flight_software", "epoch_utc"), f"the flight software's epoch {fsw.epoch_utc.isoformat()} "
+                        f"differs from the mission epoch {self.epoch_utc.isoformat()}; give the same instant "
+                        "(onboard time would be offset from truth)"))
+        if len(fsw.spacecraft.wheels) != n_wheels:
+            out.append((("flight_software", "spacecraft", "wheels"), f"the flight software knows "
+                        f"{len(fsw.spacecraft.wheels)} wheels but the spacecraft has {n_wheels} "
+                        "(spacecraft.wheels); each wheel is one RWn node on the bus"))
+        axes = np.asarray([w.axis_B for w in self.spacecraft.wheels])
+        if np.linalg.matrix_rank(axes, tol=1e-6) < 3:
+            out.append((("spacecraft", "wheels"), "the wheel axes do not span 3 axes: some body torques "
+                        "cannot be produced"))
+        if self.orbit.semi_major_axis_km * (1 - self.orbit.eccentricity) < EARTH_RADIUS_KM + 150:
+            out.append((("orbit",), f"perigee radius {self.orbit.semi_major_axis_km * (1 - self.orbit.eccentricity):.1f} km "
+                        f"is below {EARTH_RADIUS_KM + 150:.0f} km (150 km altitude): the orbit hits the atmosphere"))
+        speeds = self.initial_state.wheel_speeds_rad_s
+        if speeds is not None:
+            if len(speeds) != n_wheels:
+                out.append((("initial_state", "wheel_speeds_rad_s"),
+                            f"{len(speeds)} speeds given for {n_wheels} wheels"))
+            else:
+                for i, (s, w) in enumerate(zip(speeds, self.spacecraft.wheels)):
+                    if abs(s) > w.max_speed_rad_s:
+                        out.append((("initial_state", "wheel_speeds_rad_s", i),
+                                    f"{s} rad/s exceeds wheel {i}'s limit {w.max_speed_rad_s} rad/s"))
+        for i, entry in enumerate(self.timeline):
+            if entry.t_s > self.duration_s:
+                out.append((("timeline", i, "t_s"), f"t_s = {entry.t_s} s is after the end of the run "
+                            f"(duration_s = {self.duration_s} s)"))
+            if isinstance(entry, SetTargetCommand):
+                given = [k for k in ("target_N", "ra_dec_deg", "q_target_NB") if getattr(entry, k) is not None]
+                if len(given) != 1:
+                    out.append((("timeline", i), "SET_TARGET needs exactly one of target_N, ra_dec_deg, "
+                                f"q_target_NB (got {', '.join(given) or 'none'})"))
+            if isinstance(entry, SetGainsCommand) and all(
+                    getattr(entry, k) is None for k in ("k1", "kappa", "eps", "rate_limit_deg_s")):
+                out.append((("timeline", i), "SET_GAINS sets nothing: give at least one of k1, kappa, eps, "
+                            "rate_limit_deg_s"))
+        times = [e.t_s for e in self.timeline]
+        if times != sorted(times):
+            out.append((("timeline",), "entries must be in increasing t_s order"))
+        for i, fault in enumerate(self.faults):
+            if fault.end_s <= fault.start_s:
+                out.append((("faults", i, "end_s"), f"end_s ({fault.end_s}) must be after start_s "
+                            f"({fault.start_s})"))
+            if fault.kind == "delay" and fault.delay_s is None:
+                out.append((("faults", i), "kind 'delay' needs delay_s"))
+            if fault.kind == "corrupt" and fault.bit is None:
+                out.append((("faults", i), "kind 'corrupt' needs bit"))
+            if re.fullmatch(r"RW([1-6])_(CMD|STATUS)", fault.message):
+                wheel = int(fault.message[2])
+                if wheel > n_wheels:
+                    out.append((("faults", i, "message"), f"{fault.message}: the spacecraft has only "
+                                f"{n_wheels} wheels"))
+        return out
+
+
+def world_params(mission: Mission) -> "WorldParams":
+    """The truth-model parameters (hil_sim.params.WorldParams) this mission describes."""
+    from hil_sim.params import (DisturbanceParams, ImuParams, OrbitParams, SpacecraftParams, StarTrackerParams,
+                                WheelParams, WorldParams)
+
+    sc = mission.spacecraft
+    speeds = mission.initial_state.wheel_speeds_rad_s or [0.0] * len(sc.wheels)
+    wheels = tuple(
+        WheelParams(axis_B=tuple(w.axis_B), Js_kgm2=w.Js_kgm2, max_torque_Nm=w.max_torque_Nm,
+                    max_speed_rad_s=w.max_speed_rad_s, viscous_friction_Nm_per_rad_s=w.viscous_friction_Nm_per_rad_s,
+                    coulomb_friction_Nm=w.coulomb_friction_Nm, initial_speed_rad_s=speed, failure=w.failure)
+        for w, speed in zip(sc.wheels, speeds))
+    spacecraft = SpacecraftParams(
+        inertia_B_kgm2=tuple(tuple(row) for row in sc.inertia_B_kgm2), wheels=wheels,
+        disturbance=DisturbanceParams(constant_B_Nm=tuple(sc.disturbance.constant_B_Nm),
+                                      random_std_Nm=sc.disturbance.random_std_Nm,
+                                      random_correlation_time_s=sc.disturbance.random_correlation_time_s),
+        q_NB0=tuple(mission.initial_state.q_NB), omega_BN_B0_rad_s=tuple(mission.initial_state.omega_BN_B_rad_s))
+    imu = sc.imu
+    st = sc.star_tracker
+    orbit = mission.orbit
+    return WorldParams(
+        spacecraft=spacecraft,
+        imu=ImuParams(rate_hz=imu.rate_hz, bias_B_rad_s=tuple(imu.bias_B_rad_s),
+                      bias_turn_on_std_rad_s=imu.bias_turn_on_std_rad_s,
+                      bias_random_walk_rad_s_per_sqrt_s=imu.bias_random_walk_rad_s_per_sqrt_s,
+                      angle_random_walk_rad_per_sqrt_s=imu.angle_random_walk_rad_per_sqrt_s,
+                      scale_factor_ppm=tuple(imu.scale_factor_ppm), quantisation_rad_s=imu.quantisation_rad_s,
+                      saturation_rad_s=imu.saturation_rad_s),
+        star_tracker=StarTrackerParams(rate_hz=st.rate_hz, q_BS=tuple(st.q_BS), boresight_S=tuple(st.boresight_S),
+                                       cross_boresight_std_arcsec=st.cross_boresight_std_arcsec,
+                                       about_boresight_std_arcsec=st.about_boresight_std_arcsec,
+                                       sun_exclusion_deg=st.sun_exclusion_deg,
+                                       moon_exclusion_deg=st.moon_exclusion_deg, max_rate_deg_s=st.max_rate_deg_s),
+        orbit=OrbitParams(semi_major_axis_km=orbit.semi_major_axis_km, eccentricity=orbit.eccentricity,
+                          inclination_deg=orbit.inclination_deg, raan_deg=orbit.raan_deg,
+                          arg_perigee_deg=orbit.arg_perigee_deg, mean_anomaly_deg=orbit.mean_anomaly_deg),
+        epoch_utc=mission.epoch_utc.strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+        max_integration_step_s=1.0 / mission.simulation.dynamics_rate_hz,
+    )
+
+
+def ra_dec_to_unit(ra_deg: float, dec_deg: float) -> np.ndarray:
+    """Unit vector in N from right ascension and declination [deg]."""
+    ra, dec = math.radians(ra_deg), math.radians(dec_deg)
+    return np.array([math.cos(dec) * math.cos(ra), math.cos(dec) * math.sin(ra), math.sin(dec)])
+
+
+def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
+    """Load and validate a mission file; raise yaml_loader.ConfigError listing every problem."""
+    from hil_sim.yaml_loader import ConfigError, Problem, load_marked, problems_from_validation
+    from pydantic import ValidationError
+
+    doc = load_marked(path, text)
+    try:
+        mission = Mission.model_validate(doc.data)
+    except ValidationError as exc:
+        raise ConfigError(problems_from_validation(doc, exc, Mission)) from None
+    problems = [Problem(doc.file, *doc.mark_for(loc), _path(loc), msg) for loc, msg in mission.semantic_problems()]
+    if problems:
+        raise ConfigError(problems)
+    return mission
+
+
+def _path(loc: tuple[str | int, ...]) -> str:
+    from hil_sim.yaml_loader import format_path
+    return format_path(loc)
+
+
+SCHEMA_PATH = Path(__file__).resolve().parent.parent / "config" / "schema" / "mission.schema.json"
+DRAFT07 = "http://json-schema.org/draft-07/schema#"
+
+
+def mission_json_schema() -> dict[str, Any]:
+    """The JSON Schema of a mission file, kept to draft-07 features so every yaml-language-server takes it.
+
+    pydantic emits 2020-12 idioms; we rewrite them: ``$defs`` -> ``definitions``, a ``$ref`` with sibling
+    keywords (ignored next to ``$ref`` before 2019-09) -> ``allOf: [{$ref}]`` plus the siblings,
+    ``prefixItems`` -> draft-07 tuple ``items``, and drop OpenAPI's ``discriminator`` (the ``const`` of
+    each branch already selects it).
+    """
+    raw = Mission.model_json_schema(ref_template="#/definitions/{model}")
+    definitions = raw.pop("$defs", {})
+    body = _draft07(raw)
+    return {"$schema": DRAFT07, **body, "definitions": {k: _draft07(v) for k, v in sorted(definitions.items())}}
+
+
+def _draft07(node: Any) -> Any:
+    if isinstance(node, list):
+        return [_draft07(v) for v in node]
+    if not isinstance(node, dict):
+        return node
+    out = {k: _draft07(v) for k, v in node.items() if k != "discriminator"}
+    if "prefixItems" in out:
+        out["items"] = out.pop("prefixItems")
+        out.setdefault("additionalItems", False)
+    if "$ref" in out and len(out) > 1:
+        ref = out.pop("$ref")
+        out = {"allOf": [{"$ref": ref}], **out}
+    return out
+
+
+def write_json_schema(path: str | Path = SCHEMA_PATH) -> Path:
+    """Write the draft-07 mission schema (sorted keys, trailing newline) and return the path."""
+    import json
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(mission_json_schema(), indent=2, sort_keys=False) + "\n", encoding="utf-8")
+    return path
