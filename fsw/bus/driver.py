@@ -1,0 +1,296 @@
+"""Flight-software side of the bus: turns ICD frames into typed samples and commands into frames.
+
+Two ways to read the bus:
+  * lockstep (:meth:`FswBusDriver.collect_tick`): wait for SYNC(k), then for the ``frames_following``
+    device frames of tick k; times are simulation times t_k = k * period (from SYNC), so runs are
+    deterministic whatever the host load;
+  * real time (:meth:`FswBusDriver.collect_latest`): take whatever has arrived, newest sample of each
+    kind with its age on the monotonic clock.
+
+Only frames the E2E receiver delivers (ok / ok_some_lost) reach these samples.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import can
+import numpy as np
+
+from fsw.bus.e2e import E2EReceiver, ReceivedFrame
+from fsw.bus.icd import E2ESender, Icd
+
+FSW_NODE = "FSW"
+MAX_WHEELS = 6
+
+
+@dataclass(frozen=True)
+class ImuSample:
+    """One gyro sample: omega_BN_B [rad/s] in body axes; ``t`` its time [s] (sim time in lockstep)."""
+
+    omega_BN_B: np.ndarray
+    saturated: bool
+    t: float
+    valid: bool = True
+
+
+@dataclass(frozen=True)
+class StarTrackerSample:
+    """Star tracker attitude q_NS (scalar first, as transmitted: not renormalised), valid flag,
+    blind source (0 none, 1 sun, 2 moon, 3 rate) and time of validity ``t`` [s] (exposure time)."""
+
+    q_NS: np.ndarray
+    valid: bool
+    blind_source: int
+    t: float
+
+
+@dataclass(frozen=True)
+class WheelStatus:
+    """Reaction wheel report: speed [rad/s], applied torque [N m], motor current [A], temperature [degC],
+    fault bit flags (1 overspeed, 2 command timeout, 4 drive fault), report time ``t`` [s]."""
+
+    speed_rad_s: float
+    torque_Nm: float
+    current_A: float
+    temp_C: float
+    fault: int
+    t: float
+
+
+@dataclass
+class TickInputs:
+    """Everything the flight software received for lockstep tick ``tick`` (t = tick * period_s).
+
+    ``imu`` is the newest gyro sample of the tick, ``imu_samples`` all of them in arrival order (100 Hz IMU
+    at 10 Hz GNC gives 10); a field is None when nothing valid arrived for it during this tick.
+    ``complete`` is False when fewer than the announced frames arrived before the timeout.
+    """
+
+    tick: int
+    t: float
+    period_s: float
+    imu: ImuSample | None
+    star_tracker: StarTrackerSample | None
+    wheels: list[WheelStatus | None]
+    imu_samples: list[ImuSample] = field(default_factory=list)
+    frames_expected: int = 0
+    frames_received: int = 0
+
+    @property
+    def complete(self) -> bool:
+        return self.frames_received >= self.frames_expected
+
+
+@dataclass
+class LatestInputs:
+    """Real-time view: newest valid sample of each kind, with its age [s] on the driver clock (None if never)."""
+
+    t: float
+    imu: ImuSample | None
+    imu_age_s: float | None
+    star_tracker: StarTrackerSample | None
+    star_tracker_age_s: float | None
+    wheels: list[WheelStatus | None]
+    wheel_ages_s: list[float | None]
+    imu_samples: list[ImuSample] = field(default_factory=list)
+
+
+class FswBusDriver:
+    """The flight software's bus driver (see module docstring).
+
+    ``bus``: an open python-can bus (``fsw.bus.open_bus``); ``icd``: the loaded ICD; ``n_wheels``: 1..6
+    (wheels beyond n_wheels are ignored); ``clock``: monotonic clock for real-time ages.
+    """
+
+    def __init__(self, bus: can.BusABC, icd: Icd, n_wheels: int,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        if not 1 <= n_wheels <= MAX_WHEELS:
+            raise ValueError(f"n_wheels must be 1..{MAX_WHEELS} (the ICD has RW1..RW{MAX_WHEELS}), got {n_wheels}")
+        self.bus = bus
+        self.icd = icd
+        self.n_wheels = n_wheels
+        self.clock = clock
+        self._sender = E2ESender(icd)
+        own = icd.ids_sent_by(FSW_NODE)
+        watch = [n for n in icd.names_sent_by("SIM", "IMU", "STR", *[f"RW{i}" for i in range(1, n_wheels + 1)])]
+        self.receiver = E2EReceiver(icd, ignore_ids=own, watch=watch)
+        self._device_ids = frozenset(icd.by_id) - own - {icd.spec("SYNC").frame_id}
+        self._sync_id = icd.spec("SYNC").frame_id
+        self._wheel_index = {icd.spec(f"RW{i}_STATUS").frame_id: i - 1 for i in range(1, n_wheels + 1)}
+        self._st_half: dict[str, tuple[int, dict, float]] = {}
+        # newest samples (real time and lockstep alike)
+        self._imu: ImuSample | None = None
+        self._imu_rx: float | None = None
+        self._imu_batch: list[ImuSample] = []
+        self._st: StarTrackerSample | None = None
+        self._st_rx: float | None = None
+        self._st_new = False
+        self._wheels: list[WheelStatus | None] = [None] * n_wheels
+        self._wheels_rx: list[float | None] = [None] * n_wheels
+        self._wheels_new = [False] * n_wheels
+        self._pending_sync: dict | None = None  # a SYNC seen while finishing the previous tick
+        self.t_tick = 0.0
+        self.period_s = 0.0
+        self.last_tick: int | None = None
+        self.incomplete_ticks = 0
+
+    # ------------------------------------------------------------------------------------ counters
+    @property
+    def counters(self) -> dict[str, dict[str, int]]:
+        """E2E classification counts per received message (plus ``_bus`` for unknown ids / own echoes)."""
+        return self.receiver.counters
+
+    @property
+    def sent(self) -> dict[str, int]:
+        return dict(self._sender.sent)
+
+    # ------------------------------------------------------------------------------------ lockstep
+    def collect_tick(self, timeout_s: float) -> TickInputs | None:
+        """Wait up to ``timeout_s`` for SYNC(k) and its announced frames; None if no SYNC arrived.
+
+        ``timeout_s`` bounds the whole call (SYNC plus its frames); 0 means "only what is queued now", the
+        in-process fast mode. Late frames of a tick are used at the next tick, as received.
+        """
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        sync = self._pending_sync
+        self._pending_sync = None
+        while sync is None:
+            frame = self._receive(deadline)
+            if frame is None:
+                return None
+            if frame.delivered and frame.frame_id == self._sync_id:
+                sync = dict(frame.signals)
+        tick = int(sync["tick"])
+        self.period_s = float(sync["period_ms"]) / 1000.0
+        self.t_tick = tick * self.period_s
+        expected = int(sync["frames_following"])
+        self._begin_tick()
+        received = 0
+        while received < expected:
+            frame = self._receive(deadline)
+            if frame is None:
+                break
+            if frame.frame_id == self._sync_id and frame.delivered:
+                self._pending_sync = dict(frame.signals)  # next tick already started: stop here
+                break
+            if frame.frame_id in self._device_ids:
+                received += 1
+        if received < expected:
+            self.incomplete_ticks += 1
+        self.receiver.check_timeouts(self.t_tick)
+        self.last_tick = tick
+        return self._tick_inputs(tick, expected, received)
+
+    def _begin_tick(self) -> None:
+        self._imu_batch = []
+        self._st_new = False
+        self._wheels_new = [False] * self.n_wheels
+
+    def _tick_inputs(self, tick: int, expected: int, received: int) -> TickInputs:
+        batch = self._imu_batch
+        n = len(batch)
+        # The IMU frames of tick k were sampled over (t_{k-1}, t_k]; spread their times evenly.
+        samples = [ImuSample(s.omega_BN_B, s.saturated, self.t_tick - (n - 1 - i) * self.period_s / n, s.valid)
+                   for i, s in enumerate(batch)]
+        wheels = [w if new else None for w, new in zip(self._wheels, self._wheels_new)]
+        return TickInputs(
+            tick=tick, t=self.t_tick, period_s=self.period_s,
+            imu=samples[-1] if samples else None,
+            star_tracker=self._st if self._st_new else None,
+            wheels=wheels, imu_samples=samples,
+            frames_expected=expected, frames_received=received,
+        )
+
+    def _receive(self, deadline: float) -> ReceivedFrame | None:
+        """Next classified frame before ``deadline`` (own echoes skipped); None on timeout."""
+        while True:
+            remaining = deadline - time.monotonic()
+            msg = self.bus.recv(timeout=max(0.0, remaining))
+            if msg is None:
+                return None
+            # Lockstep: frames are stamped with the simulation time of the tick, never the host clock.
+            now = self.t_tick
+            frame = self.receiver.classify(msg, now)
+            if frame is None:
+                continue
+            self._apply(frame, now)
+            return frame
+
+    # ----------------------------------------------------------------------------------- real time
+    def collect_latest(self) -> LatestInputs:
+        """Drain the bus without blocking and return the newest valid samples with their ages [s]."""
+        self._imu_batch = []
+        while True:
+            msg = self.bus.recv(timeout=0.0)
+            if msg is None:
+                break
+            now = self.clock()
+            frame = self.receiver.classify(msg, now)
+            if frame is not None:
+                self._apply(frame, now)
+        now = self.clock()
+        self.receiver.check_timeouts(now)
+
+        def age(rx: float | None) -> float | None:
+            return None if rx is None else now - rx
+
+        return LatestInputs(
+            t=now, imu=self._imu, imu_age_s=age(self._imu_rx),
+            star_tracker=self._st, star_tracker_age_s=age(self._st_rx),
+            wheels=list(self._wheels), wheel_ages_s=[age(r) for r in self._wheels_rx],
+            imu_samples=list(self._imu_batch),
+        )
+
+    # ------------------------------------------------------------------------------ frame -> sample
+    def _apply(self, frame: ReceivedFrame, now: float) -> None:
+        if not frame.delivered:
+            return
+        s = frame.signals
+        name = frame.name
+        if name == "IMU_RATE":
+            sample = ImuSample(np.array([s["omega_x"], s["omega_y"], s["omega_z"]]), bool(s["saturated"]), now,
+                               bool(s["valid"]))
+            self._imu, self._imu_rx = sample, now
+            self._imu_batch.append(sample)
+        elif name in ("ST_QUAT_A", "ST_QUAT_B"):
+            self._star_tracker_half(name, s, now)
+        elif frame.frame_id in self._wheel_index:
+            i = self._wheel_index[frame.frame_id]
+            self._wheels[i] = WheelStatus(float(s["speed"]), float(s["torque"]), float(s["current"]),
+                                          float(s["temp"]), int(s["fault"]), now)
+            self._wheels_rx[i] = now
+            self._wheels_new[i] = True
+
+    def _star_tracker_half(self, name: str, s: dict, now: float) -> None:
+        seq = int(s["sample_seq"])
+        self._st_half[name] = (seq, s, now)
+        a, b = self._st_half.get("ST_QUAT_A"), self._st_half.get("ST_QUAT_B")
+        if a is None or b is None or a[0] != b[0]:
+            return
+        sa, sb = a[1], b[1]
+        q = np.array([sa["q_w"], sa["q_x"], sb["q_y"], sb["q_z"]])
+        t_valid = now - float(sb["age_ms"]) / 1000.0
+        self._st = StarTrackerSample(q, bool(sa["valid"]), int(sa["blind_source"]), t_valid)
+        self._st_rx = now
+        self._st_new = True
+        self._st_half.clear()
+
+    # ------------------------------------------------------------------------------------- sending
+    def send_wheel_torques(self, tick: int, torques_Nm: Sequence[float]) -> None:
+        """Send RW1_CMD..RWn_CMD for ``tick``. Values are limited to the ICD range (+-0.655 N m);
+        NaN is sent as 0 (the allocation upstream must saturate first; this only keeps the bus valid)."""
+        if len(torques_Nm) != self.n_wheels:
+            raise ValueError(f"send_wheel_torques: expected {self.n_wheels} torques, got {len(torques_Nm)}")
+        for i, tau in enumerate(torques_Nm, start=1):
+            name = f"RW{i}_CMD"
+            lo, hi = self.icd.signal_range(name, "torque_cmd")
+            value = 0.0 if not np.isfinite(tau) else min(max(float(tau), lo), hi)
+            self.bus.send(self._sender.frame(name, {"torque_cmd": value, "tick_lsb": tick & 0xFFFF}))
+
+    def send_cycle_done(self, tick: int) -> None:
+        self.bus.send(self._sender.frame("CYCLE_DONE", {"tick": tick & 0xFFFFFFFF}))
+
+    def send_heartbeat(self, mode: int, cycle: int) -> None:
+        self.bus.send(self._sender.frame("FSW_HEARTBEAT", {"mode": int(mode) & 0x0F, "cycle": cycle & 0xFFFFFFFF}))

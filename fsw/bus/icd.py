@@ -1,0 +1,190 @@
+"""The interface control document: config/icd/keepout.dbc, loaded with cantools.
+
+All frames on the bus are built and read here, through cantools, with strict range checks. The E2E
+fields (``E2E_CRC``, ``E2E_Counter``) are ordinary DBC signals: encoding happens twice, first with the CRC
+signal zero to get the payload bytes the CRC covers, then with the computed CRC, so no byte is ever
+packed by hand.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import can
+import cantools
+
+from fsw.bus.e2e import e2e_crc
+
+DEFAULT_DBC_PATH = Path(__file__).resolve().parents[2] / "config" / "icd" / "keepout.dbc"
+
+E2E_CRC_SIGNAL = "E2E_CRC"
+E2E_COUNTER_SIGNAL = "E2E_Counter"
+
+
+class IcdError(ValueError):
+    """The DBC file violates a rule the bus relies on (named file, message and rule)."""
+
+
+@dataclass(frozen=True)
+class MessageSpec:
+    """One ICD frame: identity, size, timing and E2E parameters (from the DBC attributes)."""
+
+    name: str
+    frame_id: int
+    dlc: int
+    senders: tuple[str, ...]
+    cycle_time_s: float
+    timeout_s: float
+    data_id: int
+    max_delta_counter: int
+    signals: tuple[str, ...]  # application signals (without the E2E ones)
+    ranges: Mapping[str, tuple[float, float]]
+    db_message: Any  # cantools Message
+
+
+def _attribute(message: Any, name: str, default: Any) -> Any:
+    attrs = message.dbc.attributes if message.dbc is not None else {}
+    if name in attrs:
+        return attrs[name].value
+    return default
+
+
+class Icd:
+    """The bus ICD. ``Icd()`` loads the project's DBC; ``Icd(path)`` another one.
+
+    Checks at load time that every message carries the E2E signals at the fixed positions (CRC in byte 0,
+    counter in bits 8..11), has a unique E2EDataID and a positive cycle time, and fits classic CAN.
+    """
+
+    def __init__(self, dbc_path: str | Path | None = None) -> None:
+        self.path = Path(dbc_path) if dbc_path is not None else DEFAULT_DBC_PATH
+        if not self.path.is_file():
+            raise IcdError(f"ICD file {self.path} not found (expected a DBC file, e.g. {DEFAULT_DBC_PATH})")
+        self.db = cantools.database.load_file(str(self.path), strict=True)
+        self.messages: dict[str, MessageSpec] = {}
+        self.by_id: dict[int, MessageSpec] = {}
+        seen_ids: dict[int, str] = {}
+        for message in self.db.messages:
+            spec = self._spec(message)
+            if spec.data_id in seen_ids:
+                raise IcdError(
+                    f"{self.path}: message {spec.name} reuses E2EDataID {spec.data_id} of {seen_ids[spec.data_id]}"
+                )
+            seen_ids[spec.data_id] = spec.name
+            self.messages[spec.name] = spec
+            self.by_id[spec.frame_id] = spec
+        self.nodes: tuple[str, ...] = tuple(node.name for node in self.db.nodes)
+
+    def _spec(self, message: Any) -> MessageSpec:
+        where = f"{self.path}: message {message.name}"
+        if message.is_extended_frame or message.length > 8:
+            raise IcdError(f"{where}: must be a classic CAN 2.0A frame (11-bit id, <= 8 bytes)")
+        names = {s.name: s for s in message.signals}
+        crc, counter = names.get(E2E_CRC_SIGNAL), names.get(E2E_COUNTER_SIGNAL)
+        if crc is None or (crc.start, crc.length, crc.byte_order) != (0, 8, "little_endian"):
+            raise IcdError(f"{where}: needs signal {E2E_CRC_SIGNAL} at bits 0..7 (byte 0), little endian")
+        if counter is None or (counter.start, counter.length, counter.byte_order) != (8, 4, "little_endian"):
+            raise IcdError(f"{where}: needs signal {E2E_COUNTER_SIGNAL} at bits 8..11, little endian")
+        cycle_ms = message.cycle_time or 0
+        if cycle_ms <= 0:
+            raise IcdError(f"{where}: GenMsgCycleTime must be set (> 0 ms)")
+        data_id = int(_attribute(message, "E2EDataID", 0))
+        if data_id <= 0:
+            raise IcdError(f"{where}: E2EDataID attribute must be set (1..65535)")
+        timeout_ms = int(_attribute(message, "E2ETimeoutMs", 3 * cycle_ms)) or 3 * cycle_ms
+        ranges = {}
+        for s in message.signals:
+            lo = s.minimum if s.minimum is not None else -math.inf
+            hi = s.maximum if s.maximum is not None else math.inf
+            ranges[s.name] = (lo, hi)
+        return MessageSpec(
+            name=message.name,
+            frame_id=message.frame_id,
+            dlc=message.length,
+            senders=tuple(message.senders),
+            cycle_time_s=cycle_ms / 1000.0,
+            timeout_s=timeout_ms / 1000.0,
+            data_id=data_id,
+            max_delta_counter=int(_attribute(message, "E2EMaxDeltaCounter", 2)),
+            signals=tuple(s.name for s in message.signals if s.name not in (E2E_CRC_SIGNAL, E2E_COUNTER_SIGNAL)),
+            ranges=ranges,
+            db_message=message,
+        )
+
+    # ------------------------------------------------------------------------------- queries
+    def spec(self, name: str) -> MessageSpec:
+        try:
+            return self.messages[name]
+        except KeyError:
+            raise KeyError(f"message {name!r} is not in the ICD {self.path}; known: {sorted(self.messages)}") from None
+
+    def ids_sent_by(self, *nodes: str) -> frozenset[int]:
+        """Frame ids whose DBC sender is one of ``nodes``."""
+        return frozenset(m.frame_id for m in self.messages.values() if set(m.senders) & set(nodes))
+
+    def names_sent_by(self, *nodes: str) -> tuple[str, ...]:
+        return tuple(m.name for m in self.messages.values() if set(m.senders) & set(nodes))
+
+    def signal_range(self, name: str, signal: str) -> tuple[float, float]:
+        return self.spec(name).ranges[signal]
+
+    def resolution(self, name: str, signal: str) -> float:
+        """Scale factor (LSB size) of a signal, in its DBC unit."""
+        return float(self.spec(name).db_message.get_signal_by_name(signal).scale)
+
+    # ---------------------------------------------------------------------------- encode/decode
+    def encode(self, name: str, signals: Mapping[str, float], counter: int) -> can.Message:
+        """Build the frame ``name`` with alive counter ``counter`` (0..15) and its E2E CRC.
+
+        Raises ``cantools`` EncodeError (a ValueError) naming the signal when a value is outside its
+        DBC range or a signal is missing: a sender bug must not be silently clipped onto the bus.
+        """
+        spec = self.spec(name)
+        values = dict(signals)
+        values[E2E_COUNTER_SIGNAL] = counter & 0x0F
+        values[E2E_CRC_SIGNAL] = 0
+        message = spec.db_message
+        payload = message.encode(values, scaling=True, padding=False, strict=True)
+        values[E2E_CRC_SIGNAL] = e2e_crc(spec.data_id, payload[1:])
+        data = message.encode(values, scaling=True, padding=False, strict=True)
+        return can.Message(arbitration_id=spec.frame_id, data=data, is_extended_id=False, is_fd=False)
+
+    def decode_checked(self, spec: MessageSpec, data: bytes) -> dict[str, float] | None:
+        """Decode ``data`` through cantools; None if the length is wrong or a signal is out of range."""
+        try:
+            values = spec.db_message.decode(data, decode_choices=False, scaling=True, allow_truncated=False,
+                                            allow_excess=False)
+        except (cantools.database.DecodeError, ValueError, KeyError):
+            return None
+        for signal, value in values.items():
+            lo, hi = spec.ranges[signal]
+            # Half an LSB of slack: the DBC limits are physical values that the raw grid may not hit exactly.
+            slack = 0.5 * abs(spec.db_message.get_signal_by_name(signal).scale)
+            if not (lo - slack <= value <= hi + slack):
+                return None
+        return values
+
+    def decode(self, msg: can.Message) -> tuple[str, dict[str, float]]:
+        """Decode a frame without E2E checks (tools, logs). Raises KeyError for an unknown id."""
+        spec = self.by_id.get(msg.arbitration_id)
+        if spec is None:
+            raise KeyError(f"frame id 0x{msg.arbitration_id:03X} is not in the ICD {self.path}")
+        return spec.name, spec.db_message.decode(bytes(msg.data), decode_choices=False)
+
+
+class E2ESender:
+    """Keeps one alive counter per message and builds protected frames through an :class:`Icd`."""
+
+    def __init__(self, icd: Icd) -> None:
+        self.icd = icd
+        self.counters: dict[str, int] = {name: 0 for name in icd.messages}
+        self.sent: dict[str, int] = {name: 0 for name in icd.messages}
+
+    def frame(self, name: str, signals: Mapping[str, float]) -> can.Message:
+        counter = self.counters[name]
+        msg = self.icd.encode(name, signals, counter)
+        self.counters[name] = (counter + 1) & 0x0F
+        self.sent[name] += 1
+        return msg

@@ -1,0 +1,141 @@
+"""Transports: one spec string picks the python-can interface underneath.
+
+Specs:
+  ``socketcan:IFACE``               SocketCAN (``socketcan`` alone means vcan0). The real thing.
+  ``udp_multicast[:GROUP:PORT]``     python-can's multi-process interface, for kernels without CAN.
+                                    Without GROUP/PORT they are derived from the run id, so two SIL
+                                    runs never hear each other (receivers bind the port, so the port
+                                    differs as well as the group).
+  ``virtual[:CHANNEL]``              python-can's in-process bus (unit tests, campaigns' fast mode).
+  ``auto``                          socketcan on vcan0 when /sys/class/net/vcan0 exists, else
+                                    udp_multicast; the choice is reported through ``BusInfo``.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+
+VCAN_CREATE_COMMANDS = (
+    "sudo modprobe vcan",
+    "sudo ip link add dev {iface} type vcan",
+    "sudo ip link set up {iface}",
+)
+UDP_GROUP_PREFIX = "239.74"   # administratively scoped IPv4 multicast (RFC 2365), like python-can's default
+UDP_PORT_BASE = 43200
+UDP_PORT_SPAN = 16000
+
+
+class BusUnavailableError(RuntimeError):
+    """The requested transport cannot be opened here (message says how to fix it)."""
+
+
+class BusSpecError(ValueError):
+    """A malformed --bus spec (message lists the accepted forms)."""
+
+
+SPEC_HELP = "accepted: auto | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL]"
+
+
+@dataclass(frozen=True)
+class BusInfo:
+    """What ``resolve_spec`` chose: the concrete spec and why."""
+
+    spec: str          # concrete spec, e.g. "udp_multicast:239.74.12.34:51234"
+    interface: str     # python-can interface name
+    channel: str
+    port: int | None
+    note: str          # human-readable explanation ("auto: vcan0 not present, using udp_multicast ...")
+
+
+def interface_present(iface: str) -> bool:
+    return Path("/sys/class/net", iface).exists()
+
+
+def vcan_hint(iface: str = "vcan0") -> str:
+    commands = "\n  ".join(c.format(iface=iface) for c in VCAN_CREATE_COMMANDS)
+    return (
+        f"SocketCAN interface {iface} does not exist on this machine. Create it with:\n  {commands}\n"
+        "or, where the kernel has no CAN at all, run inside ../shared/tools/vcan-vm "
+        "(e.g. `vcan-vm -- .venv/bin/python -m pytest -m socketcan`), or use --bus udp_multicast."
+    )
+
+
+def udp_endpoint_for_run(run_id: str | int | None) -> tuple[str, int]:
+    """Multicast group and port derived from a run id (stable, spread over 65k groups x 16k ports)."""
+    key = str(run_id if run_id is not None else f"pid-{os.getpid()}").encode()
+    digest = hashlib.sha256(key).digest()
+    group = f"{UDP_GROUP_PREFIX}.{digest[0]}.{max(1, digest[1])}"
+    port = UDP_PORT_BASE + int.from_bytes(digest[2:4], "big") % UDP_PORT_SPAN
+    return group, port
+
+
+def resolve_spec(spec: str, run_id: str | int | None = None) -> BusInfo:
+    """Turn a --bus spec into a concrete one. Raises BusSpecError for malformed specs."""
+    spec = (spec or "auto").strip()
+    kind, _, rest = spec.partition(":")
+    kind = kind.lower()
+    if kind == "auto":
+        if rest:
+            raise BusSpecError(f"bus spec {spec!r}: 'auto' takes no arguments; {SPEC_HELP}")
+        if interface_present("vcan0"):
+            info = resolve_spec("socketcan:vcan0")
+            return BusInfo(info.spec, info.interface, info.channel, None, "auto: using socketcan on vcan0")
+        info = resolve_spec("udp_multicast", run_id)
+        return BusInfo(info.spec, info.interface, info.channel, info.port,
+                       f"auto: vcan0 not present, using udp_multicast group {info.channel} port {info.port}")
+    if kind == "socketcan":
+        iface = rest or "vcan0"
+        if ":" in iface or not iface:
+            raise BusSpecError(f"bus spec {spec!r}: bad interface name; {SPEC_HELP}")
+        return BusInfo(f"socketcan:{iface}", "socketcan", iface, None, f"socketcan on {iface}")
+    if kind == "udp_multicast":
+        if rest:
+            group, sep, port_text = rest.rpartition(":")
+            if not sep or not group:
+                raise BusSpecError(f"bus spec {spec!r}: give both GROUP and PORT, e.g. "
+                                   f"udp_multicast:239.74.1.2:43210; {SPEC_HELP}")
+            try:
+                port = int(port_text)
+            except ValueError:
+                raise BusSpecError(f"bus spec {spec!r}: PORT {port_text!r} is not an integer") from None
+            if not 1024 <= port <= 65535:
+                raise BusSpecError(f"bus spec {spec!r}: PORT must be 1024..65535")
+        else:
+            group, port = udp_endpoint_for_run(run_id)
+        return BusInfo(f"udp_multicast:{group}:{port}", "udp_multicast", group, port,
+                       f"udp_multicast group {group} port {port}")
+    if kind == "virtual":
+        channel = rest or "keepout"
+        return BusInfo(f"virtual:{channel}", "virtual", channel, None, f"virtual channel {channel}")
+    raise BusSpecError(f"unknown bus spec {spec!r}; {SPEC_HELP}")
+
+
+def open_bus(spec: str = "auto", run_id: str | int | None = None, *, info_out: list | None = None) -> can.BusABC:
+    """Open the bus named by ``spec`` (see module docstring). The BusInfo is appended to ``info_out``.
+
+    Raises BusUnavailableError (with the commands that create vcan0) when socketcan is asked for and the
+    interface is missing.
+    """
+    info = resolve_spec(spec, run_id)
+    if info_out is not None:
+        info_out.append(info)
+    if info.interface == "socketcan":
+        if not interface_present(info.channel):
+            raise BusUnavailableError(vcan_hint(info.channel))
+        return can.Bus(interface="socketcan", channel=info.channel, receive_own_messages=False, fd=False)
+    if info.interface == "udp_multicast":
+        # fd=False: classic CAN frames only, as on the spacecraft bus.
+        return can.Bus(interface="udp_multicast", channel=info.channel, port=info.port, fd=False)
+    return can.Bus(interface="virtual", channel=info.channel, receive_own_messages=False)
+
+
+def drain(bus: can.BusABC) -> int:
+    """Discard everything already queued on ``bus``; returns how many frames were dropped."""
+    count = 0
+    while bus.recv(timeout=0.0) is not None:
+        count += 1
+    return count
