@@ -32,6 +32,7 @@ import argparse
 import enum
 import json
 import math
+import operator
 import struct
 import sys
 from collections.abc import Iterable, Mapping, Sequence
@@ -48,8 +49,8 @@ EVENT_APID = 0x012
 TC_APID = 0x050
 
 # Default UDP ports on loopback (the mission config may override host and ports).
-DEFAULT_TM_PORT = 47100
-DEFAULT_TC_PORT = 47101
+DEFAULT_TM_PORT = 50100  # same defaults as fsw.config.TmTcConfig
+DEFAULT_TC_PORT = 50101
 DEFAULT_HOST = "127.0.0.1"
 
 TM_SECONDARY_HEADER = struct.Struct("!d")  # onboard time, s
@@ -126,9 +127,10 @@ class Limits:
     red: tuple[float | None, float | None] = (None, None)
 
     def check(self, value: float) -> LimitState:
-        """Limit state of ``value``; NaN is RED (a channel that should have a number has none)."""
+        """Limit state of ``value``. NaN means "no value" (an unused zone slot, nothing measured yet)
+        and is not a limit violation: GREEN."""
         if isinstance(value, float) and math.isnan(value):
-            return LimitState.RED
+            return LimitState.GREEN
         if _outside(value, self.red):
             return LimitState.RED
         if _outside(value, self.yellow):
@@ -635,10 +637,10 @@ EVENTS: tuple[EventDef, ...] = (
              "{rate_group} cycle slip: exec {exec_time_ms:.2f} ms ({count} total)",
              (Arg("rate_group", "ENUM", enum=RATE_GROUPS), Arg("exec_time_ms", "F32", "ms"), Arg("count", "U32")),
              throttle=3, throttle_window_s=10.0),
-    EventDef("CMD_DISPATCHED", 60, Severity.COMMAND, "command {name} (opcode {opcode}) dispatched, seq {seq}",
-             (_OPCODE, Arg("name", "STRING"), Arg("seq", "U16"))),
-    EventDef("CMD_COMPLETED", 61, Severity.COMMAND, "command {name} (opcode {opcode}) completed",
-             (_OPCODE, Arg("name", "STRING"))),
+    EventDef("CMD_DISPATCHED", 60, Severity.COMMAND, "command {command} (opcode {opcode}) dispatched, seq {seq}",
+             (_OPCODE, Arg("command", "STRING"), Arg("seq", "U16"))),
+    EventDef("CMD_COMPLETED", 61, Severity.COMMAND, "command {command} (opcode {opcode}) completed",
+             (_OPCODE, Arg("command", "STRING"))),
     EventDef("CMD_REJECTED", 62, Severity.WARNING_HI, "command opcode {opcode} rejected: {error}: {reason}",
              (_OPCODE, Arg("error", "ENUM", enum=TC_ERRORS), _REASON), throttle=20, throttle_window_s=10.0),
     EventDef("EVENTS_THROTTLED", 70, Severity.DIAGNOSTIC, "{count} {event} events throttled",
@@ -664,8 +666,8 @@ COMMANDS: tuple[CommandDef, ...] = (
     CommandDef(
         "SET_GAINS", 0x05, "set law gains; eps = 0 selects the admissible eps automatically",
         (Arg("k1", "F64", "", "law gain k1", min=1e-6, max=100.0),
-         Arg("kappa", "F64", "", "star-shaped law gain kappa", min=0.0, max=1e4),
-         Arg("eps", "F64", "", "eps-layer width in d_s units (0: auto)", min=0.0, max=2.0),
+         Arg("kappa", "F64", "", "star-shaped law gain kappa", min=1e-6, max=100.0),
+         Arg("eps", "F64", "", "eps-layer width in d_s units (0: auto)", min=0.0, max=1.0),
          Arg("rate_limit_deg_s", "F64", "deg/s", "body rate command limit", min=1e-3, max=20.0)),
     ),
 )
@@ -680,8 +682,16 @@ class ArgError(ValueError):
     """An argument value has the wrong type or is out of range (message names the argument)."""
 
 
-def coerce_arg(arg: Arg, value: Any) -> Any:
-    """Convert ``value`` to the Python value of ``arg`` (enum -> name str) or raise ArgError."""
+class ArgTruncatedError(ArgError):
+    """The encoded arguments end before every declared argument was read."""
+
+
+def coerce_arg(arg: Arg, value: Any, check_range: bool = True) -> Any:
+    """Convert ``value`` to the Python value of ``arg`` (enum -> name str) or raise ArgError.
+
+    ``check_range=False`` keeps the type conversion but skips the declared min/max (used by tests and
+    the ground ``--no-check`` option to send deliberately out-of-range telecommands).
+    """
     t = arg.type
     if t == "ENUM":
         assert arg.enum is not None
@@ -691,8 +701,13 @@ def coerce_arg(arg: Arg, value: Any) -> Any:
             if value.upper() not in arg.enum:
                 raise ArgError(f"{arg.name}: {value!r} not one of {list(arg.enum)}")
             return value.upper()
-        if isinstance(value, int) and not isinstance(value, bool) and 0 <= value < len(arg.enum):
-            return arg.enum[value]
+        if not isinstance(value, bool):
+            try:
+                index = operator.index(value)  # accepts numpy integers too
+            except TypeError:
+                index = -1
+            if 0 <= index < len(arg.enum):
+                return arg.enum[index]
         raise ArgError(f"{arg.name}: {value!r} not one of {list(arg.enum)}")
     if t == "STRING":
         text = str(value)
@@ -713,7 +728,8 @@ def coerce_arg(arg: Arg, value: Any) -> Any:
             number = float(value)
         except (TypeError, ValueError):
             raise ArgError(f"{arg.name}: {value!r} is not a number") from None
-        _check_range(arg, number)
+        if check_range:
+            _check_range(arg, number)
         return number
     # integers
     try:
@@ -725,7 +741,8 @@ def coerce_arg(arg: Arg, value: Any) -> Any:
     low, high = _INT_RANGES[t]
     if not low <= number <= high:
         raise ArgError(f"{arg.name}: {number} outside {t} range [{low}, {high}]")
-    _check_range(arg, number)
+    if check_range:
+        _check_range(arg, number)
     return number
 
 
@@ -740,14 +757,14 @@ def _check_range(arg: Arg, number: float) -> None:
         raise ArgError(f"{arg.name}: {number} above maximum {arg.max}")
 
 
-def encode_args(args: Sequence[Arg], values: Mapping[str, Any]) -> bytes:
+def encode_args(args: Sequence[Arg], values: Mapping[str, Any], check_range: bool = True) -> bytes:
     """Encode ``values`` (by arg name, coerced and range-checked) in declaration order."""
     out = bytearray()
     for arg in args:
         if arg.name in values:
-            value = coerce_arg(arg, values[arg.name])
+            value = coerce_arg(arg, values[arg.name], check_range)
         elif arg.default is not None:
-            value = coerce_arg(arg, arg.default)
+            value = coerce_arg(arg, arg.default, check_range)
         else:
             raise ArgError(f"missing argument {arg.name!r}")
         out += encode_value(arg.type, value, arg.enum)
@@ -770,25 +787,25 @@ def encode_value(type_name: str, value: Any, enum_names: tuple[str, ...] | None 
 def decode_args(args: Sequence[Arg], data: bytes | memoryview, offset: int = 0) -> tuple[dict[str, Any], int]:
     """Decode args from ``data`` starting at ``offset``; returns (values, new offset).
 
-    Raises ArgError on truncation or an enum index outside the declared names (no range checks: the
+    Raises ArgTruncatedError on truncation, ArgError on an enum index outside the declared names (no range checks: the
     caller validates with ``coerce_arg`` where it must).
     """
     values: dict[str, Any] = {}
     for arg in args:
         if arg.type == "STRING":
             if offset >= len(data):
-                raise ArgError(f"truncated before string argument {arg.name!r}")
+                raise ArgTruncatedError(f"truncated before string argument {arg.name!r}")
             length = data[offset]
             end = offset + 1 + length
             if end > len(data):
-                raise ArgError(f"string argument {arg.name!r} truncated")
+                raise ArgTruncatedError(f"string argument {arg.name!r} truncated")
             values[arg.name] = bytes(data[offset + 1:end]).decode("utf-8", "replace")
             offset = end
             continue
         code = _STRUCT_CODES[arg.type]
         size = struct.calcsize("!" + code)
         if offset + size > len(data):
-            raise ArgError(f"truncated before argument {arg.name!r}")
+            raise ArgTruncatedError(f"truncated before argument {arg.name!r}")
         (raw,) = struct.unpack_from("!" + code, data, offset)
         offset += size
         if arg.type == "ENUM":

@@ -1,0 +1,318 @@
+"""Telecommands: CCSDS TC space packets over UDP, decoded and validated with the dictionary.
+
+``CommandDispatcher`` owns the uplink socket (bound to loopback unless the mission config names another
+address), checks every datagram (length, header, APID, CRC, opcode, argument types and ranges) before any
+handler runs, and classifies every failure as one of the typed errors INVALID_OPCODE, VALIDATION, FORMAT
+or EXECUTION. Every datagram changes the counters; none can raise out of ``handle_datagram``/``poll``.
+
+Handlers are registered per opcode and called with the decoded arguments as keywords (enums as their
+names, e.g. ``handler(mode="POINTING")``). A handler signals a rejected request by raising
+``CommandValidationError`` (e.g. target inside a keep-out zone) or ``CommandExecutionError``; any other
+exception is also counted as an execution error, never propagated.
+"""
+from __future__ import annotations
+
+import select
+import socket
+import struct
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from spacepackets.ccsds.spacepacket import (
+    CCSDS_HEADER_LEN,
+    MAX_SEQ_COUNT,
+    PacketType,
+    SpacePacket,
+    SpacePacketHeader,
+)
+
+from fsw.dictionary import (
+    CRC_LEN,
+    DEFAULT_HOST,
+    DEFAULT_TC_PORT,
+    DICTIONARY,
+    MAX_TC_PACKET_LEN,
+    ArgError,
+    ArgTruncatedError,
+    CommandDef,
+    TelemetryDictionary,
+    coerce_arg,
+    decode_args,
+    encode_args,
+)
+from fsw.telemetry import crc16_ccitt
+
+if TYPE_CHECKING:
+    from fsw.telemetry import TelemetrySender
+
+OPCODE = struct.Struct("!H")
+MIN_TC_PACKET_LEN = CCSDS_HEADER_LEN + OPCODE.size + CRC_LEN
+
+INVALID_OPCODE = "INVALID_OPCODE"
+VALIDATION = "VALIDATION"
+FORMAT = "FORMAT"
+EXECUTION = "EXECUTION"
+
+
+class CommandError(Exception):
+    """Base of the typed telecommand errors; ``kind`` is one of the four error classes."""
+
+    kind = EXECUTION
+
+
+class InvalidOpcodeError(CommandError):
+    kind = INVALID_OPCODE
+
+
+class CommandValidationError(CommandError):
+    """Arguments are well formed but not acceptable (out of range, target inside a zone, ...)."""
+
+    kind = VALIDATION
+
+
+class CommandFormatError(CommandError):
+    """The packet is malformed: length, header, APID, CRC or argument encoding."""
+
+    kind = FORMAT
+
+
+class CommandExecutionError(CommandError):
+    kind = EXECUTION
+
+
+@dataclass(frozen=True)
+class CommandResult:
+    accepted: bool
+    error: str | None  # None when accepted, else INVALID_OPCODE / VALIDATION / FORMAT / EXECUTION
+    opcode: int | None
+    name: str | None
+    seq_count: int | None
+    reason: str
+    args: Mapping[str, Any] | None = None
+
+
+# --------------------------------------------------------------------------------------- codec
+def encode_command(dictionary: TelemetryDictionary, command: str | int,
+                   args: Mapping[str, Any] | Sequence[Any] = (), seq_count: int = 0,
+                   check_range: bool = True) -> bytes:
+    """Build a TC space packet; ``args`` by name or positionally (trailing args with defaults may be left out).
+
+    Raises ``ArgError`` (names the argument) for a value the dictionary does not allow, unless
+    ``check_range=False`` (only the type must fit: lets tests send out-of-range commands).
+    """
+    definition = dictionary.command(command)
+    if not isinstance(args, Mapping):
+        args = list(args)
+        if len(args) > len(definition.args):
+            raise ArgError(f"{definition.name} takes {len(definition.args)} args "
+                           f"({[a.name for a in definition.args]}), got {len(args)}")
+        args = {a.name: v for a, v in zip(definition.args, args)}
+    payload = OPCODE.pack(definition.opcode) + encode_args(definition.args, args, check_range)
+    return encode_tc_packet(dictionary.tc_apid, seq_count, payload)
+
+
+def encode_tc_packet(apid: int, seq_count: int, payload: bytes) -> bytes:
+    """A TC space packet around ``payload`` (opcode + args) with a trailing CRC-16/CCITT-FALSE."""
+    header = SpacePacketHeader(packet_type=PacketType.TC, apid=apid, seq_count=seq_count % (MAX_SEQ_COUNT + 1),
+                               data_len=len(payload) + CRC_LEN - 1)
+    body = SpacePacket(header, sec_header=None, user_data=payload).pack()
+    return bytes(body) + struct.pack("!H", crc16_ccitt(body))
+
+
+def decode_command(dictionary: TelemetryDictionary, data: bytes) -> tuple[CommandDef, dict[str, Any], int]:
+    """Check and decode a TC packet: returns (command, validated args, seq count).
+
+    Raises ``CommandFormatError``, ``InvalidOpcodeError`` or ``CommandValidationError``.
+    """
+    if len(data) < MIN_TC_PACKET_LEN:
+        raise CommandFormatError(f"packet of {len(data)} bytes shorter than the minimum {MIN_TC_PACKET_LEN}")
+    if len(data) > MAX_TC_PACKET_LEN:
+        raise CommandFormatError(f"packet of {len(data)} bytes longer than the maximum {MAX_TC_PACKET_LEN}")
+    header = SpacePacketHeader.unpack(data)
+    if header.ccsds_version != 0:
+        raise CommandFormatError(f"CCSDS version {header.ccsds_version}, expected 0")
+    if header.packet_type != PacketType.TC:
+        raise CommandFormatError("packet type is TM, expected TC")
+    if header.sec_header_flag:
+        raise CommandFormatError("secondary header flag set; keepout TCs carry none")
+    if header.apid != dictionary.tc_apid:
+        raise CommandFormatError(f"APID {header.apid:#x} is not the telecommand APID {dictionary.tc_apid:#x}")
+    if header.packet_len != len(data):
+        raise CommandFormatError(f"length field says {header.packet_len} bytes, datagram has {len(data)}")
+    if crc16_ccitt(data) != 0:
+        raise CommandFormatError("CRC mismatch")
+    payload = data[CCSDS_HEADER_LEN:-CRC_LEN]
+    (opcode,) = OPCODE.unpack_from(payload, 0)
+    definition = dictionary.command_by_opcode(opcode)
+    if definition is None:
+        raise InvalidOpcodeError(f"opcode {opcode:#06x} not in the dictionary")
+    try:
+        raw_args, end = decode_args(definition.args, payload, OPCODE.size)
+    except ArgTruncatedError as exc:
+        raise CommandFormatError(f"{definition.name}: {exc}") from None
+    except ArgError as exc:
+        raise CommandValidationError(f"{definition.name}: {exc}") from None
+    if end != len(payload):
+        raise CommandFormatError(f"{definition.name}: {len(payload) - end} bytes after the last argument")
+    try:
+        args = {arg.name: coerce_arg(arg, raw_args[arg.name]) for arg in definition.args}
+    except ArgError as exc:
+        raise CommandValidationError(f"{definition.name}: {exc}") from None
+    return definition, args, header.seq_count
+
+
+# --------------------------------------------------------------------------------------- dispatcher
+Handler = Callable[..., Any]
+
+
+class CommandDispatcher:
+    """Receives, checks and dispatches telecommands; counts every outcome.
+
+    ``port=None`` creates no socket (``handle_datagram`` only); ``port=0`` binds an ephemeral port
+    (read it from ``address``). ``telemetry`` (optional) receives the COMMAND and rejection events.
+    """
+
+    COUNTER_NAMES = ("received", "accepted", "rejected", "invalid_opcode", "validation", "format",
+                     "execution", "seq_gaps")
+
+    def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, telemetry: TelemetrySender | None = None,
+                 host: str = DEFAULT_HOST, port: int | None = DEFAULT_TC_PORT, *,
+                 max_packets_per_poll: int = 64) -> None:
+        self.dictionary = dictionary
+        self.telemetry = telemetry
+        self.max_packets_per_poll = max_packets_per_poll
+        self._handlers: dict[int, Handler] = {}
+        self.counters: dict[str, int] = dict.fromkeys(self.COUNTER_NAMES, 0)
+        self.last_opcode = 0
+        self.last_result: CommandResult | None = None
+        self._last_seq: int | None = None
+        self._sock: socket.socket | None = None
+        if port is not None:
+            self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self._sock.bind((host, port))
+            self._sock.setblocking(False)
+
+    # ---- registration ----
+    def register(self, opcode: int | str, handler: Handler) -> None:
+        """Route ``opcode`` (number or command name) to ``handler(**args)``."""
+        definition = self.dictionary.command(opcode)
+        if definition.opcode in self._handlers:
+            raise ValueError(f"a handler for {definition.name} is already registered")
+        self._handlers[definition.opcode] = handler
+
+    # ---- input ----
+    def poll(self, timeout_s: float = 0.0) -> list[CommandResult]:
+        """Handle every datagram waiting on the socket (at most ``max_packets_per_poll``)."""
+        if self._sock is None:
+            return []
+        results: list[CommandResult] = []
+        if timeout_s > 0.0:
+            ready, _, _ = select.select([self._sock], [], [], timeout_s)
+            if not ready:
+                return results
+        for _ in range(self.max_packets_per_poll):
+            try:
+                # Read more than the maximum so an oversized datagram is seen as oversized, not cut.
+                data = self._sock.recv(65536)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                break
+            results.append(self.handle_datagram(data))
+        return results
+
+    def handle_datagram(self, data: bytes) -> CommandResult:
+        """Check, decode and dispatch one datagram. Never raises (except BaseException like Ctrl-C)."""
+        self.counters["received"] += 1
+        opcode: int | None = None
+        name: str | None = None
+        seq: int | None = None
+        try:
+            try:
+                definition, args, seq = decode_command(self.dictionary, bytes(data))
+            except InvalidOpcodeError:
+                opcode = _peek_opcode(data)
+                raise
+            opcode, name = definition.opcode, definition.name
+            self._track_sequence(seq)
+            handler = self._handlers.get(opcode)
+            if handler is None:
+                raise InvalidOpcodeError(f"{name} has no handler in this flight software")
+            self._event("CMD_DISPATCHED", opcode=opcode, command=name, seq=seq)
+            try:
+                handler(**args)
+            except CommandError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - a handler bug must not take down the task
+                raise CommandExecutionError(f"{name}: {type(exc).__name__}: {exc}") from exc
+        except CommandError as exc:
+            return self._reject(exc.kind, opcode, name, seq, str(exc))
+        except Exception as exc:  # noqa: BLE001 - last line of defence: count, never crash
+            return self._reject(FORMAT, opcode, name, seq, f"unexpected {type(exc).__name__}: {exc}")
+        self.counters["accepted"] += 1
+        self.last_opcode = opcode
+        self._event("CMD_COMPLETED", opcode=opcode, command=name)
+        result = CommandResult(True, None, opcode, name, seq, "accepted", args)
+        self.last_result = result
+        return result
+
+    def _reject(self, kind: str, opcode: int | None, name: str | None, seq: int | None,
+                reason: str) -> CommandResult:
+        self.counters["rejected"] += 1
+        self.counters[kind.lower()] += 1
+        self._event("CMD_REJECTED", opcode=opcode or 0, error=kind, reason=reason)
+        result = CommandResult(False, kind, opcode, name, seq, reason)
+        self.last_result = result
+        return result
+
+    def _track_sequence(self, seq: int) -> None:
+        # The ground counts TCs per APID too; a jump means an uplinked command never arrived.
+        if self._last_seq is not None and seq != (self._last_seq + 1) % (MAX_SEQ_COUNT + 1):
+            self.counters["seq_gaps"] += 1
+        self._last_seq = seq
+
+    def _event(self, event_name: str, /, **args: Any) -> None:
+        if self.telemetry is None:
+            return
+        try:
+            self.telemetry.event(event_name, **args)
+        except Exception:  # noqa: BLE001 - reporting must never turn a command into a crash
+            pass
+
+    # ---- housekeeping ----
+    def hk_values(self) -> dict[str, int]:
+        """The dispatcher's housekeeping channels, named as in the dictionary's HK packet."""
+        c = self.counters
+        return {"tc_accepted": c["accepted"], "tc_rejected": c["rejected"],
+                "tc_invalid_opcode": c["invalid_opcode"], "tc_validation_errors": c["validation"],
+                "tc_format_errors": c["format"], "tc_execution_errors": c["execution"],
+                "tc_last_opcode": self.last_opcode}
+
+    def reset_counters(self) -> None:
+        self.counters = dict.fromkeys(self.COUNTER_NAMES, 0)
+
+    @property
+    def address(self) -> tuple[str, int] | None:
+        return self._sock.getsockname() if self._sock is not None else None
+
+    def fileno(self) -> int:
+        """Socket file descriptor (for select in a real-time loop); -1 without a socket."""
+        return self._sock.fileno() if self._sock is not None else -1
+
+    def close(self) -> None:
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def __enter__(self) -> "CommandDispatcher":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _peek_opcode(data: bytes) -> int | None:
+    if len(data) >= CCSDS_HEADER_LEN + OPCODE.size:
+        return OPCODE.unpack_from(data, CCSDS_HEADER_LEN)[0]
+    return None
