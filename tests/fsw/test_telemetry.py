@@ -1,0 +1,194 @@
+"""TelemetrySender over real UDP sockets on loopback; packet layout checked by an independent parser."""
+from __future__ import annotations
+
+import math
+import socket
+import struct
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from fsw.dictionary import DICTIONARY, EVENT_APID, GNC_APID, HK_APID, DictionaryError
+from fsw.telemetry import (
+    SEQ_MODULO,
+    TelemetryDecodeError,
+    TelemetrySender,
+    crc16_ccitt,
+    decode_tm_packet,
+)
+
+
+def crc16_ccitt_bitwise(data: bytes) -> int:
+    """Textbook CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF), written independently of the code under test."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
+            crc &= 0xFFFF
+    return crc
+
+
+def parse_primary_header(raw: bytes) -> dict[str, int]:
+    """CCSDS 133.0-B-2 primary header, parsed by hand."""
+    word0, word1, length = struct.unpack("!HHH", raw[:6])
+    return {"version": word0 >> 13, "type": (word0 >> 12) & 1, "sec_hdr": (word0 >> 11) & 1,
+            "apid": word0 & 0x7FF, "seq_flags": word1 >> 14, "seq": word1 & 0x3FFF, "data_len": length}
+
+
+@pytest.fixture
+def receiver() -> Iterator[socket.socket]:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(2.0)
+    yield sock
+    sock.close()
+
+
+@pytest.fixture
+def sender(receiver: socket.socket) -> Iterator[TelemetrySender]:
+    tm = TelemetrySender(DICTIONARY, "127.0.0.1", receiver.getsockname()[1], clock=lambda: 123.25)
+    yield tm
+    tm.close()
+
+
+def test_crc_matches_the_standard_check_value_and_a_bitwise_reference() -> None:
+    assert crc16_ccitt(b"123456789") == 0x29B1  # catalogue check value of CRC-16/CCITT-FALSE
+    payload = bytes(range(256)) * 3
+    assert crc16_ccitt(payload) == crc16_ccitt_bitwise(payload)
+
+
+def test_gnc_packet_over_udp_has_a_valid_ccsds_layout(sender: TelemetrySender, receiver: socket.socket) -> None:
+    q = np.array([0.5, 0.5, -0.5, 0.5])
+    sent = sender.send_channels("GNC", {"mode": "POINTING", "q_est_NB": q, "margin_min_deg": 4.25,
+                                        "wheel_speed_rad_s": [10.0, -20.0, 30.0, -40.0], "cycle": 77,
+                                        "st_blind_source": "MOON", "st_valid": False, "active_zone": -1})
+    raw = receiver.recv(65536)
+    assert raw == sent
+    hdr = parse_primary_header(raw)
+    assert hdr == {"version": 0, "type": 0, "sec_hdr": 1, "apid": GNC_APID, "seq_flags": 0b11, "seq": 0,
+                   "data_len": len(raw) - 7}
+    assert struct.unpack("!H", raw[-2:])[0] == crc16_ccitt_bitwise(raw[:-2])
+    assert struct.unpack("!d", raw[6:14])[0] == 123.25
+    decoded = decode_tm_packet(DICTIONARY, raw)
+    assert decoded.packet == "GNC" and decoded.time_s == 123.25
+    v = decoded.values
+    assert [v[f"q_est_NB_{i}"] for i in range(4)] == list(q)
+    assert v["mode"] == "POINTING" and v["st_blind_source"] == "MOON" and v["st_valid"] is False
+    assert v["cycle"] == 77 and v["active_zone"] == -1 and v["margin_min_deg"] == 4.25
+    assert v["wheel_speed_rad_s_1"] == -20.0
+    assert math.isnan(v["wheel_speed_rad_s_4"]), "channels never set are NaN, not a plausible 0"
+
+
+def test_sequence_counts_are_per_apid(sender: TelemetrySender, receiver: socket.socket) -> None:
+    sender.send_channels("GNC", {"cycle": 1})
+    sender.send_channels("HK", {"cycles": 1})
+    sender.event("COUNTERS_RESET")
+    sender.send_channels("GNC", {"cycle": 2})
+    sender.event("COUNTERS_RESET")
+    sender.send_channels("GNC", {"cycle": 3})
+    seen = [parse_primary_header(receiver.recv(65536)) for _ in range(6)]
+    by_apid: dict[int, list[int]] = {}
+    for hdr in seen:
+        by_apid.setdefault(hdr["apid"], []).append(hdr["seq"])
+    assert by_apid == {GNC_APID: [0, 1, 2], HK_APID: [0], EVENT_APID: [0, 1]}
+    assert sender.counters["packets_sent"] == 6 and sender.counters["events_sent"] == 2
+
+
+def test_sequence_count_rolls_over_at_14_bits() -> None:
+    tm = TelemetrySender(DICTIONARY, port=None, clock=lambda: 0.0)
+    seqs = [parse_primary_header(tm.send_channels("HK"))["seq"] for _ in range(SEQ_MODULO + 2)]
+    assert seqs[SEQ_MODULO - 1] == SEQ_MODULO - 1 and seqs[SEQ_MODULO] == 0 and seqs[-1] == 1
+
+
+def test_partial_updates_keep_the_last_values(sender: TelemetrySender, receiver: socket.socket) -> None:
+    sender.send_channels("GNC", {"eps": 0.125, "kappa": 3.0})
+    sender.send_channels("GNC", {"kappa": 4.0})
+    receiver.recv(65536)
+    values = decode_tm_packet(DICTIONARY, receiver.recv(65536)).values
+    assert values["eps"] == 0.125 and values["kappa"] == 4.0
+
+
+def test_integers_saturate_and_floats_round_to_their_type() -> None:
+    tm = TelemetrySender(DICTIONARY, port=None)
+    values = decode_tm_packet(DICTIONARY, tm.send_channels(
+        "GNC", {"cycle": 2**40, "active_zone": 300, "zone_count": -4, "eps": 0.1})).values
+    assert values["cycle"] == 2**32 - 1 and values["active_zone"] == 127 and values["zone_count"] == 0
+    assert values["eps"] == float(np.float32(0.1))
+
+
+def test_programming_errors_are_loud() -> None:
+    tm = TelemetrySender(DICTIONARY, port=None)
+    with pytest.raises(DictionaryError, match="no channel"):
+        tm.send_channels("GNC", {"not_a_channel": 1.0})
+    with pytest.raises(DictionaryError, match="no channel"):
+        tm.send_channels("GNC", {"cycles": 1})  # an HK channel in the GNC packet
+    with pytest.raises(DictionaryError, match="7 values for 6"):
+        tm.send_channels("GNC", {"wheel_speed_rad_s": np.zeros(7)})
+    with pytest.raises(DictionaryError, match="unknown packet"):
+        tm.send_channels("FAST", {})
+    with pytest.raises(DictionaryError, match="missing arg"):
+        tm.event("MODE_CHANGED", from_mode="SAFE")
+    with pytest.raises(DictionaryError, match="unknown event"):
+        tm.event("EXPLODED")
+
+
+def test_event_packet_carries_id_severity_and_typed_args(sender: TelemetrySender,
+                                                         receiver: socket.socket) -> None:
+    assert sender.event("MODE_CHANGED", from_mode="SAFE", to_mode=np.int64(1), cause="FDIR")
+    raw = receiver.recv(65536)
+    hdr = parse_primary_header(raw)
+    assert hdr["apid"] == EVENT_APID and hdr["type"] == 0
+    event_id, severity = struct.unpack("!HB", raw[14:17])
+    assert event_id == DICTIONARY.event("MODE_CHANGED").id and severity == 4  # ACTIVITY_HI
+    decoded = decode_tm_packet(DICTIONARY, raw)
+    assert decoded.event == "MODE_CHANGED" and decoded.severity == "ACTIVITY_HI"
+    assert decoded.args == {"from_mode": "SAFE", "to_mode": "POINTING", "cause": "FDIR"}
+    assert decoded.message == "mode SAFE -> POINTING (FDIR)"
+    assert sender.recent_events[-1].message == decoded.message
+
+
+def test_events_are_throttled_per_window_and_the_suppression_is_reported() -> None:
+    tm = TelemetrySender(DICTIONARY, port=None)
+    throttle = DICTIONARY.event("CYCLE_SLIP").throttle
+    assert throttle == 3
+    sent = [tm.event("CYCLE_SLIP", time_s=0.1 * i, rate_group="GNC", exec_time_ms=150.0, count=i)
+            for i in range(8)]
+    assert sent == [True] * 3 + [False] * 5
+    assert tm.counters["events_throttled"] == 5
+    assert tm.event("CYCLE_SLIP", time_s=10.5, rate_group="GNC", exec_time_ms=150.0, count=9)
+    names = [e.name for e in tm.recent_events]
+    assert names[-2:] == ["EVENTS_THROTTLED", "CYCLE_SLIP"]
+    assert tm.recent_events[-2].args == {"event": "CYCLE_SLIP", "count": 5}
+    # An unthrottled event is never suppressed.
+    assert all(tm.event("COUNTERS_RESET", time_s=11.0) for _ in range(20))
+
+
+def test_decoder_rejects_damaged_packets() -> None:
+    tm = TelemetrySender(DICTIONARY, port=None)
+    raw = bytearray(tm.send_channels("HK", {"cycles": 5}))
+    flipped = bytearray(raw)
+    flipped[20] ^= 0x01
+    with pytest.raises(TelemetryDecodeError, match="CRC"):
+        decode_tm_packet(DICTIONARY, flipped)
+    with pytest.raises(TelemetryDecodeError, match="length"):
+        decode_tm_packet(DICTIONARY, raw[:-3])
+    with pytest.raises(TelemetryDecodeError, match="shorter"):
+        decode_tm_packet(DICTIONARY, raw[:5])
+    wrong_apid = bytearray(raw)
+    wrong_apid[1] = 0x7E
+    wrong_apid[-2:] = struct.pack("!H", crc16_ccitt_bitwise(bytes(wrong_apid[:-2])))
+    with pytest.raises(TelemetryDecodeError, match="unknown APID"):
+        decode_tm_packet(DICTIONARY, wrong_apid)
+
+
+def test_sockets_bind_to_loopback_by_default(sender: TelemetrySender) -> None:
+    assert sender.local_address is not None and sender.local_address[0] == "127.0.0.1"
+
+
+def test_send_errors_are_counted_not_raised() -> None:
+    tm = TelemetrySender(DICTIONARY, "127.0.0.1", 9)
+    tm._sock.close()  # simulate a dead socket: sendto raises OSError
+    tm.send_channels("HK", {"cycles": 1})
+    assert tm.counters["send_errors"] == 1 and tm.counters["packets_sent"] == 0
