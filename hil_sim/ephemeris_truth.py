@@ -1,0 +1,136 @@
+"""Truth Sun and Moon for the simulator, from astropy's built-in ephemeris (no download, works offline).
+
+astropy (``solar_system_ephemeris.set('builtin')``: ERFA epv00 for the Earth/Sun, the full Meeus/ELP
+series for the Moon) is far too slow to call every 10 ms, so it is evaluated once on a grid of TDB epochs
+(``node_spacing_s``, default 1 h) and the geocentric GCRS positions are interpolated with a cubic spline.
+Interpolation error (tests/hil_sim/test_world.py): < 1e-7 rad (0.02 arcsec) for the Moon with 1 h nodes,
+much less for the Sun; astropy's own built-in Moon is good to ~10 arcsec, the Sun to ~1 arcsec. The grid is
+extended lazily as the run advances and shared between worlds with the same epoch (campaigns).
+
+IERS: GCRS positions of bodies need no Earth-orientation data, and we pass TDB times directly, so no IERS
+table or leap-second download is ever attempted (``iers.conf.auto_download`` is switched off here anyway).
+"""
+from __future__ import annotations
+
+import math
+import threading
+import warnings
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+_ASTROPY_LOCK = threading.Lock()
+
+
+def _configure_astropy_offline() -> None:
+    from astropy.utils import iers
+
+    iers.conf.auto_download = False
+    iers.conf.auto_max_age = None
+
+
+@lru_cache(maxsize=64)
+def _astropy_nodes(epoch_tdb_jd: float, node_spacing_s: float, first: int, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sun and Moon geocentric GCRS positions (km), shape (count, 3) each, at t = (first..first+count-1)*h."""
+    _configure_astropy_offline()
+    from astropy.coordinates import get_body, solar_system_ephemeris
+    from astropy.time import Time
+
+    offsets_day = (first + np.arange(count)) * node_spacing_s / 86400.0
+    with _ASTROPY_LOCK, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # ERFA "dubious year" notes concern UTC, which we never use
+        with solar_system_ephemeris.set("builtin"):
+            times = Time(epoch_tdb_jd, offsets_day, format="jd", scale="tdb")
+            sun = get_body("sun", times).cartesian.xyz.to_value("km").T
+            moon = get_body("moon", times).cartesian.xyz.to_value("km").T
+    return np.ascontiguousarray(sun), np.ascontiguousarray(moon)
+
+
+def astropy_sun_moon_N_km(t_tdb_jd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Direct (uninterpolated) astropy geocentric GCRS Sun and Moon positions, km, shape (n, 3)."""
+    _configure_astropy_offline()
+    from astropy.coordinates import get_body, solar_system_ephemeris
+    from astropy.time import Time
+
+    with _ASTROPY_LOCK, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with solar_system_ephemeris.set("builtin"):
+            times = Time(np.atleast_1d(np.asarray(t_tdb_jd, dtype=float)), format="jd", scale="tdb")
+            sun = get_body("sun", times).cartesian.xyz.to_value("km").T
+            moon = get_body("moon", times).cartesian.xyz.to_value("km").T
+    return sun, moon
+
+
+def _spline_coefficients(values: np.ndarray, h: float) -> np.ndarray:
+    """Not-a-knot cubic spline through equally spaced nodes: coefficients (n-1, 4, 3) for s in [0, h):
+    p(s) = c0 s^3 + c1 s^2 + c2 s + c3."""
+    from scipy.interpolate import CubicSpline
+
+    spline = CubicSpline(np.arange(values.shape[0]) * h, values, axis=0)
+    return np.ascontiguousarray(np.transpose(spline.c, (1, 0, 2)))
+
+
+class TruthEphemeris:
+    """Geocentric Sun and Moon positions (km, GCRS) as functions of t (s since ``epoch_tdb_jd``)."""
+
+    # Nodes are fetched in blocks of this many (about 4 days at 1 h) so astropy is called rarely.
+    BLOCK_NODES = 96
+
+    def __init__(self, epoch_tdb_jd: float, node_spacing_s: float = 3600.0) -> None:
+        self.epoch_tdb_jd = float(epoch_tdb_jd)
+        self.node_spacing_s = float(node_spacing_s)
+        self.t_start_s = 0.0
+        self.t_end_s = -1.0
+        self.sun_coeffs = np.zeros((0, 4, 3))
+        self.moon_coeffs = np.zeros((0, 4, 3))
+        self.ensure(0.0, 1.0)
+
+    def ensure(self, t_min_s: float, t_max_s: float) -> None:
+        """Make the table cover [t_min_s, t_max_s] (extends by whole blocks; cheap when already covered)."""
+        if self.t_start_s <= t_min_s and t_max_s < self.t_end_s:
+            return
+        h = self.node_spacing_s
+        lo_block = math.floor(min(t_min_s, self.t_start_s if self.t_end_s > 0 else t_min_s) / h / self.BLOCK_NODES)
+        hi_block = math.floor(max(t_max_s, self.t_end_s) / h / self.BLOCK_NODES) + 1
+        # One node of margin each side keeps the spline's not-a-knot end conditions away from the span used.
+        first = lo_block * self.BLOCK_NODES - 2
+        count = (hi_block - lo_block) * self.BLOCK_NODES + 5
+        suns, moons = [], []
+        for b in range(lo_block, hi_block):
+            s, m = _astropy_nodes(self.epoch_tdb_jd, h, b * self.BLOCK_NODES - 2, self.BLOCK_NODES + 5)
+            suns.append(s if not suns else s[5:])
+            moons.append(m if not moons else m[5:])
+        sun = np.concatenate(suns)[:count]
+        moon = np.concatenate(moons)[:count]
+        self.sun_coeffs = _spline_coefficients(sun, h)
+        self.moon_coeffs = _spline_coefficients(moon, h)
+        self.t0_s = first * h  # time of node 0
+        self.t_start_s = (first + 2) * h
+        self.t_end_s = (first + count - 3) * h
+
+    def positions_N_km(self, t_s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """Sun and Moon geocentric positions at t (s since epoch), shape (..., 3) each."""
+        t = np.asarray(t_s, dtype=float)
+        self.ensure(float(t.min()), float(t.max()))
+        flat = t.reshape(-1)
+        sun = np.empty((flat.size, 3))
+        moon = np.empty((flat.size, 3))
+        for k in range(flat.size):
+            spline_eval(self.sun_coeffs, self.t0_s, self.node_spacing_s, flat[k], sun[k])
+            spline_eval(self.moon_coeffs, self.t0_s, self.node_spacing_s, flat[k], moon[k])
+        return sun.reshape(t.shape + (3,)), moon.reshape(t.shape + (3,))
+
+
+@njit(cache=True)
+def spline_eval(coeffs, t0_s, h_s, t_s, out):
+    """Evaluate the (n-1, 4, 3) spline at t_s into out[0:3] (km)."""
+    x = (t_s - t0_s) / h_s
+    k = int(math.floor(x))
+    if k < 0:
+        k = 0
+    elif k > coeffs.shape[0] - 1:
+        k = coeffs.shape[0] - 1
+    s = t_s - t0_s - k * h_s
+    for j in range(3):
+        out[j] = ((coeffs[k, 0, j] * s + coeffs[k, 1, j]) * s + coeffs[k, 2, j]) * s + coeffs[k, 3, j]

@@ -1,0 +1,308 @@
+"""The simulated world: hub + wheels + disturbance, IMU, star tracker, orbit and Sun/Moon truth.
+
+``World(params, seed)`` is one run; ``WorldBatch(params_list, seed)`` steps M runs together as arrays in
+one compiled call per step (campaigns, benchmarks). A World is a WorldBatch of one whose outputs are
+unwrapped, so both share every line of model code.
+
+Randomness: one ``numpy.random.Generator`` per model (disturbance, IMU, star tracker), each from
+``SeedSequence(seed, spawn_key=(k,))`` - the k-th spawned child of the world seed - unless that model's
+params carry their own ``seed``. So the same seed gives bit-identical outputs, and changing one model's seed
+(or how often one sensor is sampled) never changes another model's numbers. In a batch each model's
+generator draws for all runs at once (run m's noise depends on the batch seed and M, not on run m alone).
+
+Time: ``t`` is seconds since ``params.epoch_utc``; the ephemerides run on TDB = UTC + 69.184 s.
+"""
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+from typing import NamedTuple, Sequence
+
+import numpy as np
+from numba import njit
+
+from gnc.ephemeris import julian_date_tdb, parse_utc
+from hil_sim import dynamics as dyn
+from hil_sim import sensors as sen
+from hil_sim.ephemeris_truth import TruthEphemeris, spline_eval
+from hil_sim.orbit import orbit_elements_array, orbit_position_N_km
+from hil_sim.params import WHEEL_FAILURE_MODES, WorldParams
+
+# spawn_key of each model's generator under the world seed (fixed: adding a model never shifts the others)
+SEED_KEY_DISTURBANCE, SEED_KEY_IMU, SEED_KEY_STAR_TRACKER = 0, 1, 2
+
+# AUX[m, :] layout: spacecraft position (km), then unit directions from the spacecraft in N.
+AUX_R_SC, AUX_SUN, AUX_MOON, AUX_EARTH = 0, 3, 6, 9
+
+
+class WheelStatus(NamedTuple):
+    speed_rad_s: float  # relative to the body, about the wheel axis
+    torque_Nm: float  # motor torque applied (after saturation, speed cut, failure)
+    current_A: float
+    temp_C: float
+    fault: int  # bits: 1 stuck, 2 no torque, 4 speed limit, 8 torque saturated
+
+
+class Truth(NamedTuple):
+    t: float
+    q_NB: np.ndarray
+    omega_BN_B: np.ndarray
+    wheel_speeds_rad_s: np.ndarray
+    sun_N: np.ndarray  # unit, from the spacecraft
+    moon_N: np.ndarray  # unit, from the spacecraft (with parallax)
+    earth_N: np.ndarray  # unit, from the spacecraft to the Earth's centre
+    r_sc_N_km: np.ndarray
+    disturbance_B_Nm: np.ndarray
+
+
+@lru_cache(maxsize=16)
+def _shared_ephemeris(epoch_tdb_jd: float, spacing_s: float) -> TruthEphemeris:
+    return TruthEphemeris(epoch_tdb_jd, spacing_s)
+
+
+def model_generator(seed: int | None, key: int, own_seed: int | None) -> np.random.Generator:
+    """The generator of one model: its own seed if set, else child ``key`` of the world seed."""
+    if own_seed is not None:
+        return np.random.default_rng(np.random.SeedSequence(own_seed))
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(key,)))
+
+
+@njit(cache=True)
+def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
+                       t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
+    dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS)
+    sun = np.empty(3)
+    moon = np.empty(3)
+    r = np.empty(3)
+    spline_eval(sun_c, eph_t0, eph_h, t_end_s, sun)
+    spline_eval(moon_c, eph_t0, eph_h, t_end_s, moon)
+    for m in range(X.shape[0]):
+        orbit_position_N_km(ORB[m], t_end_s, r)
+        rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+        s0, s1, s2 = sun[0] - r[0], sun[1] - r[1], sun[2] - r[2]
+        sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        m0, m1, m2 = moon[0] - r[0], moon[1] - r[1], moon[2] - r[2]
+        mn = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+        for j in range(3):
+            AUX[m, AUX_R_SC + j] = r[j]
+            AUX[m, AUX_EARTH + j] = -r[j] / rn
+        AUX[m, AUX_SUN], AUX[m, AUX_SUN + 1], AUX[m, AUX_SUN + 2] = s0 / sn, s1 / sn, s2 / sn
+        AUX[m, AUX_MOON], AUX[m, AUX_MOON + 1], AUX[m, AUX_MOON + 2] = m0 / mn, m1 / mn, m2 / mn
+
+
+class WorldBatch:
+    """M runs stepped together. All runs share the epoch and the number of wheels; any other parameter may
+    differ per run (dispersions). Array outputs have a leading run axis."""
+
+    def __init__(self, params: Sequence[WorldParams], seed: int | None = 0) -> None:
+        params = list(params)
+        if not params:
+            raise ValueError("WorldBatch: need at least one WorldParams")
+        if not all(isinstance(p, WorldParams) for p in params):
+            raise ValueError("WorldBatch: every entry must be a hil_sim.params.WorldParams")
+        epochs = {(parse_utc(p.epoch_utc), p.ephemeris_node_spacing_s) for p in params}
+        if len(epochs) != 1:
+            raise ValueError("WorldBatch: all runs must share epoch_utc and ephemeris_node_spacing_s")
+        self.params = params
+        self.seed = seed
+        self.n_runs = M = len(params)
+        p0 = params[0]
+        self.epoch_tdb_jd = julian_date_tdb(parse_utc(p0.epoch_utc))
+        self.ephemeris = _shared_ephemeris(self.epoch_tdb_jd, p0.ephemeris_node_spacing_s)
+        self.max_step_s = np.array([p.max_integration_step_s for p in params]).min()
+
+        self.G, self.W, self.B, self.X = dyn.pack_spacecraft([p.spacecraft for p in params])
+        self.n_wheels = N = self.G.shape[1]
+        self.D = np.zeros((M, 3))
+        self.TEMP = self.W[:, :, dyn.W_TAMB].copy()
+        self.U_APPLIED = np.zeros((M, N))
+        self.FLAGS = np.zeros((M, N), dtype=np.int64)
+        for m in range(M):
+            for i in range(N):
+                mode = int(self.W[m, i, dyn.W_MODE])
+                self.FLAGS[m, i] = {dyn.MODE_STUCK: dyn.FAULT_STUCK, dyn.MODE_NO_TORQUE: dyn.FAULT_NO_TORQUE}.get(mode, 0)
+        self.ORB = np.stack([orbit_elements_array(p.orbit) for p in params])
+        self.AUX = np.zeros((M, 12))
+        self._has_random_disturbance = bool(np.any(self.B[:, dyn.B_DIST_STD] > 0.0))
+        self._no_normals = np.zeros((1, M, 3))
+
+        self.rng_disturbance = model_generator(seed, SEED_KEY_DISTURBANCE, p0.spacecraft.disturbance.seed)
+        self.rng_imu = model_generator(seed, SEED_KEY_IMU, p0.imu.seed)
+        self.rng_star_tracker = model_generator(seed, SEED_KEY_STAR_TRACKER, p0.star_tracker.seed)
+
+        self.GYRO_P = sen.pack_gyro([p.imu for p in params])
+        turn_on = np.array([p.imu.bias_turn_on_std_rad_s for p in params])[:, None]
+        self.BIAS = (np.array([p.imu.bias_B_rad_s for p in params])
+                     + turn_on * self.rng_imu.standard_normal((M, 3)))
+        self.imu_period_s = np.array([1.0 / p.imu.rate_hz for p in params])
+        self._t_last_imu: float | None = None
+        self.GYRO_OUT = np.zeros((M, 3))
+        self.GYRO_SAT = np.zeros(M, dtype=np.bool_)
+
+        self.ST_P = sen.pack_star_tracker([p.star_tracker for p in params])
+        self.ST_BASIS = np.stack([sen.sensor_frame_basis_S(np.asarray(p.star_tracker.boresight_S)) for p in params])
+        self.star_tracker_period_s = np.array([1.0 / p.star_tracker.rate_hz for p in params])
+        self.ST_Q = np.zeros((M, 4))
+        self.ST_Q[:, 0] = 1.0
+        self.ST_VALID = np.zeros(M, dtype=np.bool_)
+        self.ST_BLIND = np.zeros(M, dtype=np.int64)
+
+        self._t = 0.0
+        self._advance(0.0, np.zeros((M, N)), 0)
+
+    # ----------------------------------------------------------------------------------------- stepping
+    @property
+    def t(self) -> float:
+        """Simulation time, s since the epoch."""
+        return self._t
+
+    def _advance(self, dt_s: float, u_cmd: np.ndarray, n_sub: int) -> None:
+        t_end = self._t + dt_s
+        eph = self.ephemeris
+        if t_end >= eph.t_end_s or t_end < eph.t_start_s:
+            eph.ensure(min(self._t, t_end), t_end)
+        if self._has_random_disturbance and n_sub > 0:
+            normals = self.rng_disturbance.standard_normal((n_sub, self.n_runs, 3))
+        else:
+            normals = self._no_normals
+        _world_step_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_cmd, normals,
+                           dt_s / n_sub if n_sub else 0.0, n_sub, self.U_APPLIED, self.FLAGS, t_end, self.ORB,
+                           eph.sun_coeffs, eph.moon_coeffs, eph.t0_s, eph.node_spacing_s, self.AUX)
+        self._t = t_end
+
+    def step(self, dt_s: float, wheel_torque_cmd_Nm: np.ndarray) -> None:
+        """Advance all runs by dt_s (split into equal RK4 sub-steps <= max_integration_step_s) with the motor
+        torque commands (M, N) N m held. Non-finite commands raise ValueError."""
+        if not dt_s > 0.0:
+            raise ValueError(f"step: dt_s must be > 0, got {dt_s!r}")
+        u = np.asarray(wheel_torque_cmd_Nm, dtype=np.float64)
+        if u.shape != (self.n_runs, self.n_wheels):
+            u = u.reshape(self.n_runs, self.n_wheels)
+        if not np.isfinite(u).all():
+            raise ValueError("step: wheel_torque_cmd_Nm contains NaN or inf")
+        n_sub = max(1, math.ceil(dt_s / self.max_step_s - 1e-9))
+        self._advance(dt_s, u, n_sub)
+
+    # ------------------------------------------------------------------------------------------ sensors
+    def imu_sample_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Gyro outputs (M,3) rad/s and saturation flags (M,) at the current time."""
+        dt_since = self.imu_period_s[0] if self._t_last_imu is None else self._t - self._t_last_imu
+        self._t_last_imu = self._t
+        normals = self.rng_imu.standard_normal((self.n_runs, 6))
+        sen.gyro_sample_batch(self.X, self.BIAS, self.GYRO_P, normals, dt_since, self.GYRO_OUT, self.GYRO_SAT)
+        return self.GYRO_OUT, self.GYRO_SAT
+
+    def star_tracker_sample_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q_NS (M,4), valid (M,), blind_source (M,) at the current time."""
+        normals = self.rng_star_tracker.standard_normal((self.n_runs, 3))
+        sen.star_tracker_sample_batch(self.X, self.ST_P, self.ST_BASIS, self.AUX[:, AUX_SUN:AUX_SUN + 3],
+                                      self.AUX[:, AUX_MOON:AUX_MOON + 3], normals, self.ST_Q, self.ST_VALID,
+                                      self.ST_BLIND)
+        return self.ST_Q, self.ST_VALID, self.ST_BLIND
+
+    # ------------------------------------------------------------------------------------------- truth
+    @property
+    def q_NB(self) -> np.ndarray:
+        return self.X[:, 0:4]
+
+    @property
+    def omega_BN_B(self) -> np.ndarray:
+        return self.X[:, 4:7]
+
+    @property
+    def wheel_speeds_rad_s(self) -> np.ndarray:
+        return self.X[:, 7:]
+
+    @property
+    def sun_N(self) -> np.ndarray:
+        return self.AUX[:, AUX_SUN:AUX_SUN + 3]
+
+    @property
+    def moon_N(self) -> np.ndarray:
+        return self.AUX[:, AUX_MOON:AUX_MOON + 3]
+
+    @property
+    def earth_N(self) -> np.ndarray:
+        return self.AUX[:, AUX_EARTH:AUX_EARTH + 3]
+
+    @property
+    def r_sc_N_km(self) -> np.ndarray:
+        return self.AUX[:, AUX_R_SC:AUX_R_SC + 3]
+
+    def angular_momentum_N(self) -> np.ndarray:
+        return dyn.angular_momentum_N(self.X, self.G, self.W, self.B)
+
+    def wheel_currents_A(self) -> np.ndarray:
+        return self.U_APPLIED / self.W[:, :, dyn.W_KT]
+
+    # ------------------------------------------------------------------------------------------ faults
+    def set_wheel_failure(self, wheel: int, mode: str, run: int = 0) -> None:
+        """Change wheel ``wheel`` of run ``run`` to ``none``, ``stuck`` (seizes: momentum goes to the hub,
+        total angular momentum conserved) or ``no_torque``."""
+        if mode not in WHEEL_FAILURE_MODES:
+            raise ValueError(f"set_wheel_failure: mode {mode!r} not allowed; use one of {WHEEL_FAILURE_MODES}")
+        if not 0 <= wheel < self.n_wheels:
+            raise ValueError(f"set_wheel_failure: wheel index {wheel} out of range 0..{self.n_wheels - 1}")
+        if mode == "stuck":
+            dyn.seize_wheel(self.X, self.G, self.W, self.B, run, wheel)
+        else:
+            self.W[run, wheel, dyn.W_MODE] = dyn._MODE_CODES[mode]
+            dyn.update_free_inertia(self.G, self.W, self.B, run)
+
+
+class World:
+    """One simulated run (the contract in the team brief). See the module docstring."""
+
+    def __init__(self, params: WorldParams | None = None, seed: int | None = 0) -> None:
+        self.params = params if params is not None else WorldParams()
+        self.seed = seed
+        self.batch = WorldBatch([self.params], seed)
+        self.n_wheels = self.batch.n_wheels
+        self.imu_period_s = float(self.batch.imu_period_s[0])
+        self.star_tracker_period_s = float(self.batch.star_tracker_period_s[0])
+        self._u = np.zeros((1, self.n_wheels))
+
+    @property
+    def t(self) -> float:
+        return self.batch._t
+
+    def step(self, dt_s: float, wheel_torque_cmd_Nm: np.ndarray | Sequence[float]) -> None:
+        """Advance truth by dt_s seconds (RK4 sub-steps <= max_integration_step_s), motor torques (N,) N m held."""
+        b = self.batch
+        u = self._u
+        cmd = np.asarray(wheel_torque_cmd_Nm, dtype=np.float64)
+        if cmd.shape != (self.n_wheels,):
+            raise ValueError(f"step: wheel_torque_cmd_Nm must have shape ({self.n_wheels},), got {cmd.shape}")
+        u[0] = cmd
+        if not (math.isfinite(u.sum()) and dt_s > 0.0):
+            raise ValueError(f"step: need dt_s > 0 and finite torques, got dt_s={dt_s!r}, cmd={cmd!r}")
+        n_sub = max(1, math.ceil(dt_s / b.max_step_s - 1e-9))
+        b._advance(dt_s, u, n_sub)
+
+    def imu_sample(self) -> sen.ImuSample:
+        omega, sat = self.batch.imu_sample_arrays()
+        return sen.ImuSample(omega[0].copy(), bool(sat[0]), self.batch._t)
+
+    def star_tracker_sample(self) -> sen.StarTrackerSample:
+        q, valid, blind = self.batch.star_tracker_sample_arrays()
+        return sen.StarTrackerSample(q[0].copy(), bool(valid[0]), int(blind[0]))
+
+    def wheel_status(self) -> list[WheelStatus]:
+        b = self.batch
+        cur = b.wheel_currents_A()[0]
+        return [WheelStatus(float(b.X[0, 7 + i]), float(b.U_APPLIED[0, i]), float(cur[i]), float(b.TEMP[0, i]),
+                            int(b.FLAGS[0, i])) for i in range(self.n_wheels)]
+
+    @property
+    def truth(self) -> Truth:
+        b = self.batch
+        return Truth(b._t, b.X[0, 0:4].copy(), b.X[0, 4:7].copy(), b.X[0, 7:].copy(), b.sun_N[0].copy(),
+                     b.moon_N[0].copy(), b.earth_N[0].copy(), b.r_sc_N_km[0].copy(),
+                     b.B[0, dyn.B_TAU_CONST:dyn.B_TAU_CONST + 3] + b.D[0])
+
+    def angular_momentum_N(self) -> np.ndarray:
+        """Total inertial angular momentum, N m s (3,)."""
+        return self.batch.angular_momentum_N()[0]
+
+    def set_wheel_failure(self, wheel: int, mode: str) -> None:
+        self.batch.set_wheel_failure(wheel, mode, 0)
