@@ -135,6 +135,7 @@ class FswBusDriver:
         self.period_s = 0.0
         self.last_tick: int | None = None
         self.incomplete_ticks = 0
+        self._supervision_started = False
 
     # ------------------------------------------------------------------------------------ counters
     @property
@@ -165,6 +166,7 @@ class FswBusDriver:
         tick = int(sync["tick"])
         self.period_s = float(sync["period_ms"]) / 1000.0
         self.t_tick = tick * self.period_s
+        self._start_supervision(self.t_tick)
         expected = int(sync["frames_following"])
         self._begin_tick()
         received = 0
@@ -218,10 +220,17 @@ class FswBusDriver:
             self._apply(frame, now)
             return frame
 
+    def _start_supervision(self, now: float) -> None:
+        # Timeouts count from the first time the application asks for data, on the clock it uses.
+        if not self._supervision_started:
+            self.receiver.reset_clock(now)
+            self._supervision_started = True
+
     # ----------------------------------------------------------------------------------- real time
     def collect_latest(self) -> LatestInputs:
         """Drain the bus without blocking and return the newest valid samples with their ages [s]."""
         self._imu_batch = []
+        self._start_supervision(self.clock())
         while True:
             msg = self.bus.recv(timeout=0.0)
             if msg is None:
@@ -250,8 +259,7 @@ class FswBusDriver:
         s = frame.signals
         name = frame.name
         if name == "IMU_RATE":
-            sample = ImuSample(np.array([s["omega_x"], s["omega_y"], s["omega_z"]]), bool(s["saturated"]), now,
-                               bool(s["valid"]))
+            sample = ImuSample(np.array([s["omega_x"], s["omega_y"], s["omega_z"]]), bool(s["saturated"]), now)
             self._imu, self._imu_rx = sample, now
             self._imu_batch.append(sample)
         elif name in ("ST_QUAT_A", "ST_QUAT_B"):
@@ -279,7 +287,7 @@ class FswBusDriver:
 
     # ------------------------------------------------------------------------------------- sending
     def send_wheel_torques(self, tick: int, torques_Nm: Sequence[float]) -> None:
-        """Send RW1_CMD..RWn_CMD for ``tick``. Values are limited to the ICD range (+-0.655 N m);
+        """Send RW1_CMD..RWn_CMD for ``tick``. Values are limited to the ICD range (+-1.638 N m);
         NaN is sent as 0 (the allocation upstream must saturate first; this only keeps the bus valid)."""
         if len(torques_Nm) != self.n_wheels:
             raise ValueError(f"send_wheel_torques: expected {self.n_wheels} torques, got {len(torques_Nm)}")

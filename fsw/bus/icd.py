@@ -62,7 +62,10 @@ class Icd:
         self.path = Path(dbc_path) if dbc_path is not None else DEFAULT_DBC_PATH
         if not self.path.is_file():
             raise IcdError(f"ICD file {self.path} not found (expected a DBC file, e.g. {DEFAULT_DBC_PATH})")
-        self.db = cantools.database.load_file(str(self.path), strict=True)
+        try:
+            self.db = cantools.database.load_file(str(self.path), strict=True)
+        except (cantools.database.UnsupportedDatabaseFormatError, ValueError) as exc:
+            raise IcdError(f"ICD file {self.path} is not a valid DBC: {exc}") from exc
         self.messages: dict[str, MessageSpec] = {}
         self.by_id: dict[int, MessageSpec] = {}
         seen_ids: dict[int, str] = {}

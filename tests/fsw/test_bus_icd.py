@@ -1,0 +1,109 @@
+"""The DBC interface control document: contract messages, E2E layout, scalings vs sensor noise."""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import cantools
+import numpy as np
+import pytest
+
+from fsw.bus.icd import DEFAULT_DBC_PATH, E2ESender, Icd, IcdError
+
+CONTRACT_MESSAGES = {"SYNC", "IMU_RATE", "ST_QUAT_A", "ST_QUAT_B", "FSW_HEARTBEAT", "CYCLE_DONE"} | {
+    f"RW{i}_{kind}" for i in range(1, 7) for kind in ("CMD", "STATUS")}
+
+
+@pytest.fixture(scope="module")
+def icd() -> Icd:
+    return Icd()
+
+
+def test_contract_messages_present_and_nothing_else(icd: Icd) -> None:
+    assert set(icd.messages) == CONTRACT_MESSAGES
+
+
+def test_every_message_has_cycle_time_e2e_and_fits_classic_can(icd: Icd) -> None:
+    for spec in icd.messages.values():
+        assert spec.cycle_time_s > 0, spec.name
+        assert 1 <= spec.dlc <= 8 and spec.frame_id < 0x800, spec.name
+        assert spec.timeout_s >= spec.cycle_time_s, spec.name
+    assert len({s.data_id for s in icd.messages.values()}) == len(icd.messages)
+
+
+def test_sync_has_highest_priority_and_commands_beat_sensors(icd: Icd) -> None:
+    ids = {n: s.frame_id for n, s in icd.messages.items()}
+    assert ids["SYNC"] == min(ids.values())
+    assert max(ids[f"RW{i}_CMD"] for i in range(1, 7)) < ids["IMU_RATE"]
+
+
+def test_every_signal_comment_states_its_resolution(icd: Icd) -> None:
+    """Each physical (scaled) signal's comment states the resolution, and the number matches the scale."""
+    for spec in icd.messages.values():
+        for sig in spec.db_message.signals:
+            if sig.scale == 1 or sig.name.startswith("E2E_"):
+                continue
+            comment = sig.comment or ""
+            m = re.search(r"[Rr]esolution ([0-9.eE+-]+)", comment)
+            assert m, f"{spec.name}.{sig.name}: comment lacks 'Resolution <value>'"
+            assert float(m.group(1)) == pytest.approx(sig.scale), f"{spec.name}.{sig.name}"
+
+
+def test_resolutions_are_below_the_default_sensor_noise(icd: Icd) -> None:
+    """Quantisation must not dominate: compare LSBs with the truth models' default noise (hil_sim.params)."""
+    from hil_sim.params import ImuParams, StarTrackerParams, WheelParams
+
+    imu = ImuParams()
+    per_sample_noise = imu.angle_random_walk_rad_per_sqrt_s * math.sqrt(imu.rate_hz)
+    assert icd.resolution("IMU_RATE", "omega_x") < per_sample_noise
+    assert icd.signal_range("IMU_RATE", "omega_x")[1] >= imu.saturation_rad_s
+    st = StarTrackerParams()
+    # quaternion component error ~ half the rotation angle
+    q_noise = 0.5 * math.radians(st.cross_boresight_std_arcsec / 3600.0)
+    assert icd.resolution("ST_QUAT_A", "q_w") < q_noise
+    wheel = WheelParams(axis_B=(0.0, 0.0, 1.0))
+    assert icd.signal_range("RW1_CMD", "torque_cmd")[1] >= wheel.max_torque_Nm
+    assert icd.signal_range("RW1_STATUS", "speed")[1] >= wheel.max_speed_rad_s
+    assert icd.resolution("RW1_CMD", "torque_cmd") < 0.01 * wheel.max_torque_Nm
+
+
+def test_encode_decode_round_trip_within_half_lsb(icd: Icd) -> None:
+    rng = np.random.default_rng(1)
+    sender = E2ESender(icd)
+    for spec in icd.messages.values():
+        for _ in range(20):
+            values = {}
+            for sig in spec.db_message.signals:
+                if sig.name.startswith("E2E_"):
+                    continue
+                lo, hi = spec.ranges[sig.name]
+                v = rng.uniform(lo, hi)
+                values[sig.name] = round(v) if sig.scale == 1 and sig.offset == 0 else v
+            frame = sender.frame(spec.name, values)
+            name, decoded = icd.decode(frame)
+            assert name == spec.name
+            for k, v in values.items():
+                scale = spec.db_message.get_signal_by_name(k).scale
+                assert abs(decoded[k] - v) <= 0.5 * scale + 1e-12, (spec.name, k)
+
+
+def test_out_of_range_value_is_refused_naming_the_signal(icd: Icd) -> None:
+    with pytest.raises(cantools.database.EncodeError, match="omega_x"):
+        icd.encode("IMU_RATE", dict(omega_x=1.0, omega_y=0, omega_z=0, saturated=0), 0)
+    with pytest.raises(KeyError, match="NOPE"):
+        icd.encode("NOPE", {}, 0)
+
+
+def test_dbc_without_e2e_signals_is_rejected(tmp_path: Path) -> None:
+    text = DEFAULT_DBC_PATH.read_text().replace("SG_ E2E_CRC : 0|8@1+", "SG_ E2E_XYZ : 0|8@1+", 1)
+    bad = tmp_path / "bad.dbc"
+    bad.write_text(text)
+    with pytest.raises(IcdError, match="E2E_CRC"):
+        Icd(bad)
+    overlap = tmp_path / "overlap.dbc"
+    overlap.write_text(DEFAULT_DBC_PATH.read_text().replace("SG_ E2E_CRC : 0|8@1+", "SG_ E2E_CRC : 56|8@1+", 1))
+    with pytest.raises(IcdError, match="overlapping"):
+        Icd(overlap)
+    with pytest.raises(IcdError, match="not found"):
+        Icd(tmp_path / "missing.dbc")
