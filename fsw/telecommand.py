@@ -23,6 +23,7 @@ from spacepackets.ccsds.spacepacket import (
     CCSDS_HEADER_LEN,
     MAX_SEQ_COUNT,
     PacketType,
+    SequenceFlags,
     SpacePacket,
     SpacePacketHeader,
 )
@@ -134,6 +135,8 @@ def decode_command(dictionary: TelemetryDictionary, data: bytes) -> tuple[Comman
         raise CommandFormatError(f"CCSDS version {header.ccsds_version}, expected 0")
     if header.packet_type != PacketType.TC:
         raise CommandFormatError("packet type is TM, expected TC")
+    if header.seq_flags != SequenceFlags.UNSEGMENTED:
+        raise CommandFormatError(f"sequence flags {int(header.seq_flags):#04b}; keepout TCs are unsegmented")
     if header.sec_header_flag:
         raise CommandFormatError("secondary header flag set; keepout TCs carry none")
     if header.apid != dictionary.tc_apid:
