@@ -225,12 +225,13 @@ S3Zone = Annotated[Union[S3ConeConfig, S3SuperellipsoidConfig], Field(discrimina
 class LawConfig(_Strict):
     """Parameters of the paper's feedback laws."""
 
-    k1: float = Field(1.0, gt=0.0, le=100.0, description="Law gain k1 (paper eq. for u) [1/s in the kinematic model].")
+    k1: float = Field(0.1, gt=0.0, le=100.0, description="Law gain k1 [1/s]: the kinematic law's time scale (the paper uses 1 in its kinematic study; a spacecraft needs ~0.05-0.2 so the rate loop can follow). The resulting rate command is then saturated at the rate limit.")
     kappa: float = Field(1.0, gt=0.0, le=100.0, description="StarShapedLaw gain kappa (must exceed the kappa_bar reported by gnc.checks).")
     eps: float | Literal["auto"] = Field("auto", description="Layer thickness eps (in d_s units, 1 - cos angle), or 'auto' to take eps_fraction of the admissible upper bound every cycle.")
     eps_fraction: float = Field(0.5, gt=0.0, lt=1.0, description="With eps='auto': eps = eps_fraction * eps_max from gnc.checks.")
     eps_max_used: float = Field(0.15, gt=0.0, le=1.0, description="Upper cap on eps whatever the check allows (keeps the avoidance layer thin).")
     margin_deg: float = Field(3.0, ge=0.0, le=30.0, description="The law avoids physical zones inflated by this margin [deg]; see fsw.guidance for how to choose it.")
+    merge_gap_deg: float = Field(2.0, ge=0.0, le=30.0, description="Two (inflated) zones whose bounding caps are closer than this gap are replaced by one conservative cone containing both (Assumption 1 would force a uselessly thin eps) [deg].")
     check_period_s: float = Field(1.0, gt=0.0, le=60.0, description="How often the full assumption check (gnc.checks) is re-run while zones move [s]; it is re-run at once on target/gain/zone changes.")
 
 
@@ -305,15 +306,18 @@ class FdirRule(_Strict):
 
 
 class FdirConfig(_Strict):
-    """FDIR rules (limit, persistence, event, action)."""
+    """FDIR rules (limit, persistence, event, action). Monitored values and their units per rule."""
 
-    imu_stale: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=5, action="safe"), description="IMU frame missing/corrupt/stale (limit unused: any bad cycle counts).")
-    star_tracker_stale: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=50, action="none"), description="Star tracker missing/corrupt/invalid: estimator coasts; event after persistence.")
-    innovation: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=5, action="reset_estimator"), description="Star-tracker innovation above `limit` [deg].")
-    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.95, persistence_cycles=3, action="isolate_wheel_safe"), description="Wheel fault flag, missing status, or |speed| above `limit` x max_speed.")
-    keepout_yellow: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=1, action="none"), description="Physical keep-out margin below `limit` [deg] (yellow): warning event.")
-    keepout_red: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.0, persistence_cycles=2, action="safe"), description="Physical keep-out margin below `limit` [deg] (red, 0 = inside).")
-    cycle_slip: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="none"), description="A GNC cycle slip counts; `persistence_cycles` consecutive slipping cycles trip the rule.")
+    imu_stale: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=5, action="safe"), description="No valid IMU sample this cycle (value 1/0; limit 0.5).")
+    imu_corrupt: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="none"), description="IMU frames with CRC/sequence/length errors this cycle (count; limit).")
+    star_tracker_stale: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=50, action="none"), description="No valid fresh star-tracker sample this cycle (value 1/0): the estimator coasts; event after persistence.")
+    star_tracker_corrupt: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="none"), description="Star-tracker frames with CRC/sequence/length errors this cycle (count; limit).")
+    innovation: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=5, action="reset_estimator"), description="Star-tracker innovation angle above `limit` [deg].")
+    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="isolate_wheel_safe"), description="Wheel reports a fault flag or no status (value 1/0), per wheel.")
+    wheel_speed: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.95, persistence_cycles=5, action="safe"), description="|wheel speed| / max_speed above `limit`, per wheel.")
+    keepout_yellow: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=1, action="none"), description="Physical keep-out margin below `limit` [deg] (yellow): KEEP_OUT_MARGIN_LOW warning.")
+    keepout_red: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.0, persistence_cycles=2, action="safe"), description="Physical keep-out margin below `limit` [deg] (red, 0 = inside): KEEP_OUT_VIOLATION.")
+    cycle_slip: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="none"), description="GNC cycle slipped (value 1/0): `persistence_cycles` consecutive slipping cycles trip the rule.")
 
 
 # -------------------------------------------------------------------------------------- orbit/TMTC

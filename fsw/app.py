@@ -1,0 +1,466 @@
+"""The flight software application: wires bus driver, estimator, guidance, control, FDIR, TM/TC.
+
+`FlightSoftware(config, driver, telemetry, dispatcher)`:
+
+* ``run_cycle(inputs)``: one GNC cycle (telecommands, estimate, guide, control, wheel torques and
+  CYCLE_DONE on the bus, FDIR, GNC telemetry); ``inputs`` is a lockstep `TickInputs` or a real-time
+  `LatestInputs`;
+* ``run_lockstep()`` / ``run_realtime()``: the executive's loops (see `fsw.executive`);
+* telecommand handlers for NOOP, RESET_COUNTERS, SET_MODE, SET_TARGET, SET_GAINS are registered on the
+  dispatcher.
+
+The flight software learns about the world only through the bus driver and telecommands.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from fsw.control import RateController
+from fsw.estimation import AttitudeEstimator
+from fsw.executive import Executive
+from fsw.fdir import Fdir, FdirInputs
+from fsw.guidance import Guidance
+
+MODES = ("SAFE", "POINTING", "QUATERNION")
+_CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
+
+
+class _NullTelemetry:
+    """Stand-in when no telemetry sender is given (bench, some tests): records events only."""
+
+    def __init__(self):
+        self.events: list[tuple[str, dict]] = []
+        self.counters = {"packets_sent": 0, "send_errors": 0, "events_sent": 0, "events_throttled": 0}
+
+    def send_channels(self, packet_name, values=None, time_s=None):
+        self.counters["packets_sent"] += 1
+
+    def event(self, name, /, time_s=None, **args):
+        self.events.append((name, args))
+        return True
+
+    def reset_counters(self):
+        for k in self.counters:
+            self.counters[k] = 0
+
+
+@dataclass
+class CycleRecord:
+    """Last cycle's outputs (for tests, bench and SIL summaries)."""
+
+    t: float
+    mode: str
+    q_est_NB: np.ndarray
+    omega_cmd_BN_B: np.ndarray
+    wheel_torque_cmd_Nm: np.ndarray
+    margins_deg: list
+    margin_min_deg: float
+    pointing_error_deg: float
+    att_error_deg: float
+    exec_time_ms: float
+
+
+class FlightSoftware:
+    def __init__(self, config, driver, telemetry=None, dispatcher=None, clock=time.perf_counter):
+        self.cfg = config
+        self.driver = driver
+        self.telemetry = telemetry if telemetry is not None else _NullTelemetry()
+        self.dispatcher = dispatcher
+        self.clock = clock
+        self.n_wheels = len(config.spacecraft.wheels)
+        self.period_s = config.gnc_period_s
+        self.t_s = 0.0
+        self.cycle = 0
+        self.estimator = AttitudeEstimator(config.estimator, np.asarray(config.spacecraft.star_tracker_q_BS))
+        self.guidance = Guidance(config, events=self._event)
+        self.control = RateController(config)
+        self.fdir = Fdir(config, self.n_wheels, event=self._event)
+        self.executive = Executive(
+            config.rates.gnc_rate_hz, config.rates.housekeeping_rate_hz, config.rates.slip_event_throttle_s,
+            gnc_task=self._gnc_task, hk_task=self.housekeeping, on_slip=self._on_slip, clock=clock,
+        )
+        self._corrupt_prev = {"IMU": 0, "STAR_TRACKER": 0}
+        self._st_was_valid = True
+        self._st_outage_start = 0.0
+        self._target_reached = False
+        self._rt_t0: float | None = None
+        self.inject_overrun_s = 0.0  # test hook: busy-wait this long in the next GNC cycle
+        self.last: CycleRecord | None = None
+        self.mode_reason = "INIT"
+        self._start_wall = time.monotonic()
+        if dispatcher is not None:
+            self._register_commands(dispatcher)
+        self._event("FSW_STARTED", gnc_rate_hz=config.rates.gnc_rate_hz)
+
+    # ------------------------------------------------------------------------------------ events
+    def _event(self, name: str, /, **args) -> None:
+        try:
+            self.telemetry.event(name, time_s=self.t_s, **args)
+        except TypeError:
+            self.telemetry.event(name, **args)
+
+    def _on_slip(self, group: str, exec_ms: float, total: int) -> None:
+        self._event("CYCLE_SLIP", rate_group=group, exec_time_ms=exec_ms, count=total)
+
+    @property
+    def mode(self) -> str:
+        return self.guidance.mode
+
+    def set_mode(self, mode: str, cause: str = "TELECOMMAND") -> None:
+        old = self.guidance.mode
+        self.guidance.set_mode(mode)
+        self.mode_reason = cause
+        self._target_reached = False
+        if old != mode or mode == "SAFE":
+            self._event("MODE_CHANGED", from_mode=old, to_mode=mode, cause=cause)
+
+    # ---------------------------------------------------------------------------------- commands
+    def _register_commands(self, d) -> None:
+        d.register("NOOP", self._cmd_noop)
+        d.register("RESET_COUNTERS", self._cmd_reset_counters)
+        d.register("SET_MODE", self._cmd_set_mode)
+        d.register("SET_TARGET", self._cmd_set_target)
+        d.register("SET_GAINS", self._cmd_set_gains)
+
+    def _cmd_noop(self) -> None:
+        return None
+
+    def _cmd_reset_counters(self) -> None:
+        self.executive.reset_counters()
+        self.fdir.reset_counters()
+        if hasattr(self.telemetry, "reset_counters"):
+            self.telemetry.reset_counters()
+        if self.dispatcher is not None:
+            self.dispatcher.reset_counters()
+        self._event("COUNTERS_RESET")
+
+    def _cmd_set_mode(self, mode) -> None:
+        mode = str(mode)
+        if mode not in MODES:
+            from fsw.telecommand import CommandValidationError
+
+            raise CommandValidationError(f"SET_MODE: unknown mode {mode!r}")
+        self.set_mode(mode, "TELECOMMAND")
+
+    def _cmd_set_target(self, kind, c0, c1, c2, c3=0.0) -> None:
+        from fsw.telecommand import CommandValidationError
+
+        kind = str(kind)
+        if kind == "DIRECTION":
+            v = np.array([c0, c1, c2], dtype=float)
+        else:
+            v = np.array([c0, c1, c2, c3], dtype=float)
+        n = float(np.linalg.norm(v))
+        if not math.isfinite(n) or abs(n - 1.0) > 1e-3:
+            raise CommandValidationError(f"SET_TARGET: {kind} must be a unit vector (norm {n:.6f})")
+        v = v / n
+        hit = self.guidance.target_violation(kind, v)
+        if hit is not None:
+            zone, margin = hit
+            bodies = self._zone_bodies(kind)
+            self._event("TARGET_REJECTED", zone=zone, body=bodies[zone] if zone < len(bodies) else "INERTIAL", margin_deg=margin)
+            raise CommandValidationError(f"SET_TARGET: target inside keep-out zone {zone} (margin {margin:.3f} deg)")
+        if kind == "DIRECTION":
+            self.guidance.set_target_direction(v)
+        else:
+            self.guidance.set_target_quaternion(v)
+        self._target_reached = False
+        c = list(v) + [0.0] * (4 - len(v))
+        self._event("TARGET_SET", kind=kind, c0=c[0], c1=c[1], c2=c[2], c3=c[3])
+
+    def _zone_bodies(self, kind: str) -> list[str]:
+        if kind == "DIRECTION":
+            return [{"sun": "SUN", "moon": "MOON", "earth": "EARTH", "inertial": "INERTIAL"}[s.body] for s in self.guidance.slots]
+        return ["ATTITUDE"] * len(self.guidance.s3_law_zones)
+
+    def _cmd_set_gains(self, k1, kappa, eps, rate_limit_deg_s) -> None:
+        from fsw.telecommand import CommandValidationError
+
+        try:
+            self.guidance.set_gains(k1, kappa, "auto" if eps == 0 else eps, rate_limit_deg_s)
+        except ValueError as exc:
+            raise CommandValidationError(f"SET_GAINS: {exc}") from None
+        self._event("GAINS_SET", k1=k1, kappa=kappa, eps=eps, rate_limit_deg_s=rate_limit_deg_s)
+
+    # ------------------------------------------------------------------------------------ cycles
+    def run_cycle(self, inputs) -> CycleRecord:
+        """One GNC cycle (timed by the executive when called through run_lockstep/run_realtime)."""
+        self._gnc_task(inputs, self.executive.slipped_last)
+        return self.last
+
+    def _gnc_task(self, inputs, slipped_before: bool) -> None:
+        t_start = self.clock()
+        dt = self.period_s
+        if hasattr(inputs, "tick"):
+            tick = int(inputs.tick)
+            self.t_s = float(inputs.t)
+            realtime = False
+        else:
+            tick = self.cycle
+            if self._rt_t0 is None:
+                self._rt_t0 = float(inputs.t)
+            self.t_s = float(inputs.t) - self._rt_t0
+            realtime = True
+        if self.dispatcher is not None:
+            self.dispatcher.poll()
+        if self.inject_overrun_s > 0.0:
+            end = self.clock() + self.inject_overrun_s
+            self.inject_overrun_s = 0.0
+            while self.clock() < end:
+                pass
+
+        # ---- sensors
+        imu_samples = list(getattr(inputs, "imu_samples", []) or [])
+        imu = inputs.imu
+        if realtime:
+            age = inputs.imu_age_s
+            if imu is not None and (age is None or age > 2.5 * dt):
+                imu = None
+        if imu is not None and not getattr(imu, "valid", True):
+            imu = None
+        imu_samples = [s for s in imu_samples if getattr(s, "valid", True)] or ([imu] if imu is not None else [])
+        st = inputs.star_tracker
+        st_latency = 0.0
+        st_fresh = st is not None and st.valid
+        if st_fresh:
+            if realtime:
+                st_latency = float(inputs.star_tracker_age_s or 0.0)
+            else:
+                st_latency = max(0.0, float(inputs.t) - float(st.t))
+            if st_latency > self.cfg.estimator.star_tracker_max_age_s:
+                st_fresh = False
+            q = np.asarray(st.q_NS, dtype=float)
+            nq = float(np.linalg.norm(q))
+            if not (0.9 < nq < 1.1):
+                st_fresh = False
+        wheels = list(inputs.wheels)
+        if realtime:
+            ages = inputs.wheel_ages_s
+            wheels = [w if (w is not None and a is not None and a < 3 * dt) else None for w, a in zip(wheels, ages)]
+
+        # ---- estimation (propagate across every IMU sample of the tick)
+        est = self.estimator
+        if imu_samples:
+            n = len(imu_samples)
+            status = None
+            for i, s in enumerate(imu_samples):
+                last = i == n - 1
+                status = est.step(dt / n, s.omega_BN_B, (st.q_NS / np.linalg.norm(st.q_NS)) if (last and st_fresh) else None,
+                                  st_latency if last else 0.0)
+        else:
+            status = est.step(dt, None, (st.q_NS / np.linalg.norm(st.q_NS)) if st_fresh else None, st_latency)
+        self._st_events(st, st_fresh)
+
+        # ---- guidance and control
+        q_est = est.q_NB if est.initialized else None
+        omega = est.omega_BN_B
+        g = self.guidance.step(self.t_s, dt, q_est, omega)
+        speeds = np.array([w.speed_rad_s if w is not None else np.nan for w in wheels])
+        ctrl = self.control.step(dt, g.omega_cmd_BN_B, omega, speeds)
+        try:
+            self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm.tolist())
+            if not realtime:
+                self.driver.send_cycle_done(tick)
+        except Exception as exc:  # noqa: BLE001 - a transmit failure is reported, the loop goes on
+            self._bus_tx_errors = getattr(self, "_bus_tx_errors", 0) + 1
+            self._event("FATAL_ERROR", reason=f"bus send failed: {type(exc).__name__}: {exc}"[:110])
+
+        # ---- FDIR
+        corrupt = self._corrupt_deltas()
+        fin = FdirInputs(
+            imu_missing=imu is None,
+            imu_corrupt_frames=corrupt["IMU"],
+            st_missing=not st_fresh,
+            st_corrupt_frames=corrupt["STAR_TRACKER"],
+            innovation_deg=status.innovation_deg if status is not None else None,
+            wheel_fault=[(w is None) or bool(w.fault) for w in wheels],
+            wheel_speed_ratio=[abs(s) / m if np.isfinite(s) else float("nan") for s, m in zip(speeds, self.control.max_speed)],
+            wheel_speed_rad_s=[float(s) for s in speeds],
+            margins_deg=g.margins_deg if g.mode != "SAFE" else [],
+            zone_bodies=g.zone_bodies,
+            slipped=slipped_before,
+        )
+        for action in self.fdir.evaluate(fin):
+            self._execute(action)
+
+        # ---- target reached (event once per target)
+        err = g.pointing_error_deg if g.mode == "POINTING" else g.att_error_deg
+        if g.mode != "SAFE" and not self._target_reached and err == err and err < 0.05:
+            self._target_reached = True
+            self._event("TARGET_REACHED", error_deg=err)
+
+        exec_ms = 1e3 * (self.clock() - t_start)
+        self.last = CycleRecord(self.t_s, g.mode, est.q_NB.copy(), g.omega_cmd_BN_B, ctrl.wheel_torque_cmd_Nm,
+                                g.margins_deg, g.margin_min_deg, g.pointing_error_deg, g.att_error_deg, exec_ms)
+        if self.cycle % self.cfg.tmtc.gnc_packet_every_n_cycles == 0:
+            self._send_gnc_tm(g, ctrl, speeds, imu is not None, st, st_fresh, status, exec_ms)
+        self.cycle += 1
+
+    def _st_events(self, st, st_fresh: bool) -> None:
+        if not st_fresh and self._st_was_valid:
+            self._st_outage_start = self.t_s
+            if st is not None and st.blind_source:
+                self._event("ST_BLINDED", source=("NONE", "SUN", "MOON", "RATE")[min(int(st.blind_source), 3)])
+        elif st_fresh and not self._st_was_valid:
+            self._event("ST_RECOVERED", outage_s=self.t_s - self._st_outage_start)
+        self._st_was_valid = st_fresh
+
+    def _corrupt_deltas(self) -> dict[str, int]:
+        counters = self.driver.counters
+        totals = {
+            "IMU": sum(counters.get("IMU_RATE", {}).get(c, 0) for c in _CORRUPT_CLASSES),
+            "STAR_TRACKER": sum(counters.get(m, {}).get(c, 0) for m in ("ST_QUAT_A", "ST_QUAT_B") for c in _CORRUPT_CLASSES),
+        }
+        out = {k: max(0, totals[k] - self._corrupt_prev[k]) for k in totals}
+        self._corrupt_prev = totals
+        return out
+
+    def _execute(self, action) -> None:
+        a = action.action
+        if a in ("isolate_wheel", "isolate_wheel_safe") and action.wheel is not None:
+            if self.control.isolate(action.wheel):
+                self._event("WHEEL_ISOLATED", wheel=action.wheel + 1)
+        if a == "reset_estimator":
+            self.estimator.reset()
+            self._event("ESTIMATOR_RESET", reason=f"FDIR {action.monitor}")
+        if a in ("safe", "isolate_wheel_safe") and self.guidance.mode != "SAFE":
+            self.set_mode("SAFE", "FDIR")
+
+    # ---------------------------------------------------------------------------------- telemetry
+    def _send_gnc_tm(self, g, ctrl, speeds, imu_valid, st, st_fresh, status, exec_ms) -> None:
+        est = self.estimator
+        nw = self.n_wheels
+        margins = list(g.margins_deg)[:6] + [float("nan")] * (6 - min(6, len(g.margins_deg)))
+        wheel_speed = [float(s) for s in speeds] + [float("nan")] * (6 - nw)
+        wheel_tau = [float(x) for x in ctrl.wheel_torque_cmd_Nm] + [0.0] * (6 - nw)
+        values = {
+            "cycle": self.cycle,
+            "mode": g.mode,
+            "safe_phase": g.safe_phase,
+            "q_est_NB": est.q_NB,
+            "omega_est_BN_B": est.omega_BN_B,
+            "omega_cmd_BN_B": g.omega_cmd_BN_B,
+            "rate_norm_deg_s": math.degrees(float(np.linalg.norm(est.omega_BN_B))),
+            "bias_est_B": est.bias_B,
+            "cov_trace": float(np.trace(est.P[0:3, 0:3])) if est.initialized else float("nan"),
+            "st_age_s": est.coasting_s,
+            "boresight_N": g.boresight_N,
+            "target_N": g.target_N,
+            "q_target_NB": g.q_target_NB,
+            "pointing_error_deg": g.pointing_error_deg,
+            "att_error_deg": g.att_error_deg,
+            "roll_error_deg": g.roll_error_deg,
+            "active_zone": g.active_zone,
+            "zone_count": g.zone_count,
+            "margin_deg": margins,
+            "margin_min_deg": g.margin_min_deg,
+            "eps": g.eps,
+            "eps_max": g.eps_max,
+            "kappa": self.guidance.kappa,
+            "k1": self.guidance.k1,
+            "zones_merged": g.zones_merged,
+            "assumptions_ok": g.assumptions_ok,
+            "torque_cmd_B_Nm": ctrl.torque_cmd_B_Nm,
+            "torque_scale": ctrl.torque_scale,
+            "wheel_speed_rad_s": wheel_speed,
+            "wheel_torque_cmd_Nm": wheel_tau,
+            "sun_N": g.sun_N,
+            "moon_N": g.moon_N,
+            "st_valid": bool(st_fresh),
+            "imu_valid": bool(imu_valid),
+            "st_blind_source": ("NONE", "SUN", "MOON", "RATE")[min(int(st.blind_source), 3)] if st is not None else "NONE",
+            "exec_time_ms": exec_ms,
+        }
+        try:
+            self.telemetry.send_channels("GNC", values, time_s=self.t_s)
+        except TypeError:
+            self.telemetry.send_channels("GNC", values)
+
+    def housekeeping(self) -> None:
+        """Housekeeping rate group: assumption checks (throttled), heartbeat, HK telemetry."""
+        gd = self.guidance
+        period_cycles = max(1, round(self.cfg.law.check_period_s / self.period_s))
+        if gd.mode in ("POINTING", "QUATERNION") and (gd.checks_dirty or self.cycle % period_cycles < self.executive.hk_divider):
+            try:
+                gd.run_assumption_check()
+            except Exception as exc:  # noqa: BLE001 - a check failure must not stop the flight software
+                self._event("ASSUMPTION_VIOLATED", reason=f"check failed: {type(exc).__name__}: {exc}"[:110])
+                gd._checks_dirty = False
+        try:
+            self.driver.send_heartbeat(MODES.index(gd.mode), self.cycle)
+        except Exception:  # noqa: BLE001
+            self._bus_tx_errors = getattr(self, "_bus_tx_errors", 0) + 1
+        self._send_hk_tm()
+
+    def hk_values(self) -> dict:
+        ex = self.executive
+        counters = self.driver.counters
+        def total(*classes):
+            return sum(c.get(k, 0) for name, c in counters.items() if not name.startswith("_") for k in classes)
+        tm = self.telemetry.counters
+        values = {
+            "uptime_s": time.monotonic() - self._start_wall,
+            "hk_mode": self.guidance.mode,
+            "cycles": self.cycle,
+            "slips_gnc": ex.gnc.slips,
+            "slips_hk": ex.hk.slips,
+            "exec_max_ms_gnc": ex.gnc.exec_max_ms,
+            "exec_mean_ms_gnc": ex.gnc.exec_mean_ms,
+            "exec_max_ms_hk": ex.hk.exec_max_ms,
+            "exec_mean_ms_hk": ex.hk.exec_mean_ms,
+            "jitter_max_ms": 1e3 * ex.jitter.max_s,
+            "bus_rx_ok": total("ok", "ok_some_lost"),
+            "bus_crc_errors": total("crc_error"),
+            "bus_alive_errors": total("wrong_sequence", "ok_some_lost"),
+            "bus_repeated": total("repeated"),
+            "bus_decode_errors": total("bad_length", "out_of_range"),
+            "bus_timeouts": total("timeout"),
+            "bus_tx_errors": getattr(self, "_bus_tx_errors", 0),
+            "imu_stale_cycles": self.fdir.stale_counts["IMU"],
+            "st_stale_cycles": self.fdir.stale_counts["STAR_TRACKER"],
+            "tm_packets_sent": tm.get("packets_sent", 0),
+            "tm_send_errors": tm.get("send_errors", 0),
+            "events_sent": tm.get("events_sent", 0),
+            "events_throttled": tm.get("events_throttled", 0),
+            "fdir_trips": self.fdir.trips,
+            "wheels_isolated": self.control.isolated_mask,
+        }
+        for mon, state in self.fdir.states().items():
+            values[f"fdir_{mon.lower()}"] = state
+        if self.dispatcher is not None:
+            values.update(self.dispatcher.hk_values())
+        return values
+
+    def _send_hk_tm(self) -> None:
+        values = self.hk_values()
+        try:
+            import psutil
+
+            values["rss_mb"] = psutil.Process().memory_info().rss / 1e6
+        except Exception:  # noqa: BLE001
+            pass
+        try:
+            self.telemetry.send_channels("HK", values, time_s=self.t_s)
+        except TypeError:
+            self.telemetry.send_channels("HK", values)
+
+    # -------------------------------------------------------------------------------------- loops
+    def run_lockstep(self, max_ticks: int | None = None, timeout_s: float | None = None) -> int:
+        """Run one GNC cycle per SYNC tick until ``max_ticks`` or the simulator stops sending SYNC."""
+        timeout = self.cfg.rates.lockstep_timeout_s if timeout_s is None else timeout_s
+        n = self.executive.run_lockstep(self.driver.collect_tick, timeout, max_ticks)
+        return n
+
+    def run_realtime(self, duration_s: float | None = None) -> int:
+        """Run on the monotonic clock for ``duration_s`` (None: until stop())."""
+        return self.executive.run_realtime(self.driver.collect_latest, duration_s)
+
+    def stop(self) -> None:
+        self.executive.stop()
+
+    def shutdown(self) -> None:
+        self._event("FSW_STOPPED", cycles=self.cycle)

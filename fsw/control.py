@@ -1,0 +1,106 @@
+"""Rate loop and reaction-wheel allocation.
+
+Rigid body with wheels (body frame B, Basilisk convention): ``J omega_dot = -omega x (J omega + h_w) - G tau_w
++ tau_ext``, where ``G`` (3 x n) holds the wheel spin axes, ``tau_w`` the wheel motor torques [N m]
+(the torque the motor applies to its wheel; the body feels the reaction ``-G tau_w``) and
+``h_w = G (Js * Omega)`` the wheels' spin momentum (wheel speeds relative to the body).
+
+Rate loop (computed torque on the body):
+
+    tau_B = J (kp (omega_cmd - omega) + omega_cmd_dot) + omega x (J omega + h_w)
+
+``omega_cmd`` is first slew-rate limited to what the wheels can deliver (``max_command_accel_deg_s2``);
+its finite difference is the feed-forward ``omega_cmd_dot``. Allocation: ``tau_w = -G^+ tau_B`` with the
+minimum-norm pseudo-inverse of the active (non-isolated) wheels; if any wheel exceeds its torque limit the
+whole vector is scaled down by the worst ratio, which keeps the torque direction (the loop slows down
+rather than turning the wrong way).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class ControlOutput:
+    torque_cmd_B_Nm: np.ndarray
+    wheel_torque_cmd_Nm: np.ndarray
+    torque_scale: float
+    omega_cmd_shaped_BN_B: np.ndarray
+
+
+def allocate_min_norm(G: np.ndarray, active: np.ndarray, torque_B_Nm: np.ndarray, max_torque_Nm: np.ndarray) -> tuple[np.ndarray, float]:
+    """Wheel motor torques that produce body torque ``torque_B_Nm`` (reaction, -G tau_w), min norm,
+    uniformly scaled into the limits. Returns (tau_w (n,), scale in (0, 1])."""
+    n = G.shape[1]
+    tau = np.zeros(n)
+    idx = np.flatnonzero(active)
+    if idx.size == 0:
+        return tau, 0.0
+    Ga = G[:, idx]
+    tau[idx] = -np.linalg.pinv(Ga) @ torque_B_Nm
+    ratio = float(np.max(np.abs(tau) / max_torque_Nm))
+    scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
+    return tau * scale, scale
+
+
+class RateController:
+    """Rate loop + allocation for the configured wheels; `step` once per GNC cycle."""
+
+    def __init__(self, cfg):
+        sc = cfg.spacecraft
+        self.J = np.asarray(sc.inertia_B_kgm2, dtype=float)
+        self.G = np.array([w.axis_B for w in sc.wheels], dtype=float).T
+        self.Js = np.array([w.spin_inertia_kgm2 for w in sc.wheels])
+        self.max_torque = np.array([w.max_torque_Nm for w in sc.wheels])
+        self.max_speed = np.array([w.max_speed_rad_s for w in sc.wheels])
+        self.n = self.G.shape[1]
+        self.kp = cfg.control.rate_bandwidth_rad_s
+        self.ff = cfg.control.feedforward_command_rate
+        self.max_accel = math.radians(cfg.control.max_command_accel_deg_s2)
+        self.active = np.ones(self.n, dtype=bool)
+        self.reset()
+
+    def reset(self) -> None:
+        self._omega_cmd_prev: np.ndarray | None = None
+        self.wheel_speed = np.zeros(self.n)
+
+    def isolate(self, wheel: int) -> bool:
+        """Remove a wheel from allocation; refuses (False) if the rest could not span 3-D."""
+        if not self.active[wheel]:
+            return True
+        trial = self.active.copy()
+        trial[wheel] = False
+        if np.linalg.matrix_rank(self.G[:, trial], tol=1e-6) < 3:
+            return False
+        self.active = trial
+        return True
+
+    @property
+    def isolated_mask(self) -> int:
+        return int(sum(1 << i for i in range(self.n) if not self.active[i]))
+
+    def step(self, dt_s: float, omega_cmd_BN_B: np.ndarray, omega_BN_B: np.ndarray, wheel_speed_rad_s: np.ndarray | None = None) -> ControlOutput:
+        if wheel_speed_rad_s is not None:
+            ws = np.asarray(wheel_speed_rad_s, dtype=float)
+            self.wheel_speed = np.where(np.isfinite(ws), ws, self.wheel_speed)
+        cmd = np.asarray(omega_cmd_BN_B, dtype=float)
+        if self._omega_cmd_prev is None:
+            prev = np.asarray(omega_BN_B, dtype=float)
+        else:
+            prev = self._omega_cmd_prev
+        step = cmd - prev
+        max_step = self.max_accel * dt_s
+        norm = float(np.linalg.norm(step))
+        if norm > max_step:
+            step *= max_step / norm
+        shaped = prev + step
+        cmd_dot = step / dt_s if (self.ff and self._omega_cmd_prev is not None) else np.zeros(3)
+        self._omega_cmd_prev = shaped
+        w = np.asarray(omega_BN_B, dtype=float)
+        h_w = self.G @ (self.Js * self.wheel_speed)
+        torque = self.J @ (self.kp * (shaped - w) + cmd_dot) + np.cross(w, self.J @ w + h_w)
+        tau_w, scale = allocate_min_norm(self.G, self.active, torque, self.max_torque)
+        return ControlOutput(torque, tau_w, scale, shaped)

@@ -1,0 +1,214 @@
+"""Attitude determination: a multiplicative extended Kalman filter (MEKF).
+
+State: the attitude estimate ``q_NB`` (scalar-first unit quaternion) and the gyro bias ``bias_B``
+[rad/s]. The filter's error state is ``dx = [dtheta_B (3), dbias_B (3)]`` with the true attitude
+``q_NB = q_est (x) [1, dtheta/2]`` (body-frame small rotation) and ``bias = bias_est + dbias``.
+
+Gyro model: ``omega_meas = omega_true + bias + eta_v`` with bias random walk ``bias_dot = eta_u``;
+``eta_v`` is the angle random walk density (rad/s/sqrt(Hz)), ``eta_u`` the bias random walk density
+(rad/s^2/sqrt(Hz)) (Crassidis & Junkins, Optimal Estimation of Dynamic Systems, ch. 7; Markley &
+Crassidis, Fundamentals of Spacecraft Attitude Determination and Control, sec. 6.2).
+
+Star tracker: it reports ``q_NS``; with the configured mounting ``q_BS`` the measured body attitude is
+``q_NB,meas = q_NS (x) q_BS^*``. The sample's own time stamp is used to bring it to the filter time with
+the gyro rate (latency compensation). Without a valid, fresh sample the filter coasts on the gyro and its
+covariance grows (``cov_trace_deg2``, the attitude part, is telemetered).
+
+The numeric kernels are numba-compiled (the GNC cycle must stay well under 2 ms).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from gnc.attitude import quat_multiply_nb
+
+
+@njit(cache=True)
+def _skew(v):
+    S = np.zeros((3, 3))
+    S[0, 1] = -v[2]
+    S[0, 2] = v[1]
+    S[1, 0] = v[2]
+    S[1, 2] = -v[0]
+    S[2, 0] = -v[1]
+    S[2, 1] = v[0]
+    return S
+
+
+@njit(cache=True)
+def _rotvec_quat(phi):
+    """Exact quaternion of the rotation vector phi (body frame)."""
+    ang = math.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
+    out = np.empty(4)
+    if ang < 1e-12:
+        out[0] = 1.0
+        out[1] = 0.5 * phi[0]
+        out[2] = 0.5 * phi[1]
+        out[3] = 0.5 * phi[2]
+    else:
+        s = math.sin(0.5 * ang) / ang
+        out[0] = math.cos(0.5 * ang)
+        out[1] = s * phi[0]
+        out[2] = s * phi[1]
+        out[3] = s * phi[2]
+    n = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2 + out[3] ** 2)
+    return out / n
+
+
+@njit(cache=True)
+def mekf_propagate(q, bias, P, omega_meas, dt, sig_v, sig_u):
+    """Propagate attitude, bias and covariance over ``dt`` [s] with the gyro sample (held constant)."""
+    w = omega_meas - bias
+    qn = quat_multiply_nb(q, _rotvec_quat(w * dt))
+    qn /= math.sqrt(qn[0] ** 2 + qn[1] ** 2 + qn[2] ** 2 + qn[3] ** 2)
+    # Discrete transition of the error state (first order in dt for the attitude block).
+    Phi = np.eye(6)
+    Phi[0:3, 0:3] -= _skew(w) * dt
+    for i in range(3):
+        Phi[i, 3 + i] = -dt
+    Q = np.zeros((6, 6))
+    qa = sig_v * sig_v * dt + sig_u * sig_u * dt ** 3 / 3.0
+    qc = -sig_u * sig_u * dt * dt / 2.0
+    qb = sig_u * sig_u * dt
+    for i in range(3):
+        Q[i, i] = qa
+        Q[i, 3 + i] = qc
+        Q[3 + i, i] = qc
+        Q[3 + i, 3 + i] = qb
+    Pn = Phi @ P @ Phi.T + Q
+    Pn = 0.5 * (Pn + Pn.T)
+    return qn, Pn
+
+
+@njit(cache=True)
+def mekf_innovation(q, q_meas):
+    """Small-angle innovation dtheta_B [rad] = 2 vec(q_est^* (x) q_meas), sign-fixed (double cover)."""
+    qc = q.copy()
+    qc[1:] = -qc[1:]
+    dq = quat_multiply_nb(qc, q_meas)
+    if dq[0] < 0.0:
+        dq = -dq
+    # exact rotation vector of dq (robust for large innovations too)
+    vn = math.sqrt(dq[1] ** 2 + dq[2] ** 2 + dq[3] ** 2)
+    out = np.empty(3)
+    if vn < 1e-12:
+        out[:] = 2.0 * dq[1:]
+    else:
+        ang = 2.0 * math.atan2(vn, dq[0])
+        out[:] = dq[1:] * (ang / vn)
+    return out
+
+
+@njit(cache=True)
+def mekf_update(q, bias, P, dtheta, sigma_rad):
+    """Fuse one attitude measurement given its innovation (H = [I 0], R = sigma^2 I)."""
+    S = P[0:3, 0:3] + np.eye(3) * sigma_rad * sigma_rad
+    K = P[:, 0:3] @ np.linalg.inv(S)
+    dx = K @ dtheta
+    IKH = np.eye(6)
+    IKH[:, 0:3] -= K
+    # Joseph form keeps P symmetric positive definite in single steps with large gains.
+    Pn = IKH @ P @ IKH.T + (K * (sigma_rad * sigma_rad)) @ K.T
+    Pn = 0.5 * (Pn + Pn.T)
+    qn = quat_multiply_nb(q, _rotvec_quat(dx[0:3]))
+    qn /= math.sqrt(qn[0] ** 2 + qn[1] ** 2 + qn[2] ** 2 + qn[3] ** 2)
+    return qn, bias + dx[3:6], Pn
+
+
+@dataclass
+class EstimatorStatus:
+    initialized: bool
+    star_tracker_used: bool
+    innovation_deg: float  # last innovation angle (nan when none this cycle)
+    innovation_rejected: bool
+    coasting_s: float  # time since the last fused star-tracker sample [s]
+    cov_trace_deg2: float
+
+
+class AttitudeEstimator:
+    """MEKF for q_NB and the gyro bias. Call `step` once per GNC cycle."""
+
+    def __init__(self, cfg, q_BS: np.ndarray):
+        self.cfg = cfg
+        self.q_SB = np.asarray(q_BS, dtype=float) * np.array([1.0, -1.0, -1.0, -1.0])
+        self.sig_v = cfg.gyro_arw_rad_s_sqrt_hz
+        self.sig_u = cfg.gyro_bias_rw_rad_s2_sqrt_hz
+        self.sig_st = math.radians(cfg.star_tracker_sigma_arcsec / 3600.0)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the attitude: the next valid star-tracker sample re-initialises (bias kept at 0)."""
+        self.q_NB = np.array([1.0, 0.0, 0.0, 0.0])
+        self.bias_B = np.zeros(3)
+        self.P = np.eye(6)
+        self.initialized = False
+        self.coasting_s = 0.0
+        self.omega_BN_B = np.zeros(3)
+        self.last_innovation_deg = float("nan")
+        self.resets = 0
+
+    def _initial_P(self) -> np.ndarray:
+        sa = math.radians(self.cfg.initial_attitude_sigma_deg)
+        sb = math.radians(self.cfg.initial_bias_sigma_deg_s)
+        return np.diag([sa * sa] * 3 + [sb * sb] * 3)
+
+    def measured_q_NB(self, q_NS: np.ndarray) -> np.ndarray:
+        return quat_multiply_nb(np.ascontiguousarray(q_NS, dtype=float), self.q_SB)
+
+    def step(self, dt_s: float, omega_meas_B: np.ndarray | None, q_NS: np.ndarray | None, st_latency_s: float = 0.0) -> EstimatorStatus:
+        """One cycle: propagate with the gyro over ``dt_s`` then fuse the star tracker if given.
+
+        ``omega_meas_B`` None (no valid IMU sample) propagates with the last bias-corrected rate;
+        ``q_NS`` None (blinded, stale, invalid) coasts. ``st_latency_s`` is how old the star-tracker
+        sample is with respect to the end of the propagation.
+        """
+        if omega_meas_B is not None:
+            omega_meas = np.ascontiguousarray(omega_meas_B, dtype=float)
+        else:
+            omega_meas = self.omega_BN_B + self.bias_B
+        used = False
+        rejected = False
+        innov_deg = float("nan")
+        if self.initialized:
+            self.q_NB, self.P = mekf_propagate(self.q_NB, self.bias_B, self.P, omega_meas, dt_s, self.sig_v, self.sig_u)
+        self.omega_BN_B = omega_meas - self.bias_B
+        if q_NS is not None:
+            q_meas = self.measured_q_NB(q_NS)
+            if 0.0 < st_latency_s < self.cfg.star_tracker_max_age_s:
+                q_meas = quat_multiply_nb(q_meas, _rotvec_quat(self.omega_BN_B * st_latency_s))
+            if not self.initialized:
+                self.q_NB = q_meas / np.linalg.norm(q_meas)
+                self.P = self._initial_P()
+                self.initialized = True
+                used = True
+                innov_deg = 0.0
+            else:
+                dtheta = mekf_innovation(self.q_NB, q_meas)
+                innov_deg = math.degrees(math.sqrt(float(dtheta @ dtheta)))
+                sigma_pred_deg = math.degrees(math.sqrt(float(np.trace(self.P[0:3, 0:3])) + 3 * self.sig_st**2))
+                if innov_deg > max(self.cfg.innovation_gate_deg, 4.0 * sigma_pred_deg):
+                    rejected = True
+                else:
+                    self.q_NB, self.bias_B, self.P = mekf_update(self.q_NB, self.bias_B, self.P, dtheta, self.sig_st)
+                    used = True
+        if used:
+            self.coasting_s = 0.0
+        else:
+            self.coasting_s += dt_s
+        self.last_innovation_deg = innov_deg
+        return EstimatorStatus(
+            initialized=self.initialized,
+            star_tracker_used=used,
+            innovation_deg=innov_deg,
+            innovation_rejected=rejected,
+            coasting_s=self.coasting_s,
+            cov_trace_deg2=self.cov_trace_deg2,
+        )
+
+    @property
+    def cov_trace_deg2(self) -> float:
+        return float(np.degrees(np.degrees(np.trace(self.P[0:3, 0:3])))) if self.initialized else float("nan")

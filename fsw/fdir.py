@@ -1,0 +1,192 @@
+"""Fault detection, isolation and recovery: limit checks with persistence.
+
+Every monitor follows the classic limit-check pattern: a monitored value, a limit, a persistence count
+(consecutive GNC cycles beyond the limit), an event when it trips and an action, taken once per trip.
+A monitor clears (event FDIR_CLEARED) when its value is back within the limit; it can then trip again.
+
+Monitors (dictionary names) and their configuration keys (`fsw.config.FdirConfig`):
+
+==================  ======================  =================================================
+IMU_STALE           imu_stale               1 when no valid IMU sample arrived this cycle
+IMU_CORRUPT         imu_corrupt             IMU frames rejected by E2E this cycle (count)
+ST_STALE            star_tracker_stale      1 when no valid fresh star-tracker sample this cycle
+ST_CORRUPT          star_tracker_corrupt    star-tracker frames rejected by E2E this cycle
+INNOVATION          innovation              star-tracker innovation [deg]
+WHEEL_FAULT         wheel_fault             per wheel: 1 when fault flags set or status missing
+WHEEL_SPEED         wheel_speed             per wheel: |speed| / max_speed
+KEEP_OUT_MARGIN     keepout_yellow/_red     smallest signed physical margin [deg] (below limit)
+CYCLE_SLIP          cycle_slip              1 when the GNC cycle slipped
+==================  ======================  =================================================
+
+Actions are returned to the application (`FlightSoftware`), which executes them: ``safe`` (enter SAFE),
+``reset_estimator``, ``isolate_wheel`` (remove it from allocation), ``isolate_wheel_safe`` (both).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+_ACTION_CODES = {
+    "none": "EVENT_ONLY",
+    "safe": "ENTER_SAFE",
+    "reset_estimator": "RESET_ESTIMATOR",
+    "isolate_wheel": "ISOLATE_WHEEL",
+    "isolate_wheel_safe": "ISOLATE_WHEEL",
+}
+_STATE_RANK = {"DISABLED": 0, "NOMINAL": 1, "PERSISTING": 2, "TRIPPED": 3}
+
+
+@dataclass
+class FdirAction:
+    action: str  # safe | reset_estimator | isolate_wheel | isolate_wheel_safe
+    monitor: str
+    wheel: int | None = None
+
+
+class LimitMonitor:
+    """One limit check. ``below=True`` trips when the value is *below* the limit (margins)."""
+
+    def __init__(self, monitor: str, rule, below: bool = False):
+        self.monitor = monitor
+        self.rule = rule
+        self.below = below
+        self.count = 0
+        self.state = "NOMINAL" if rule.enabled else "DISABLED"
+        self.trips = 0
+        self.last_value = float("nan")
+
+    def beyond(self, value: float) -> bool:
+        return value < self.rule.limit if self.below else value > self.rule.limit
+
+    def update(self, value: float | None) -> str | None:
+        """Feed one cycle's value (None: not evaluated this cycle). Returns 'tripped', 'cleared' or None."""
+        if self.state == "DISABLED" or value is None:
+            return None
+        self.last_value = float(value)
+        if self.beyond(value):
+            self.count += 1
+            if self.state == "TRIPPED":
+                return None
+            if self.count >= self.rule.persistence_cycles:
+                self.state = "TRIPPED"
+                self.trips += 1
+                return "tripped"
+            self.state = "PERSISTING"
+            return None
+        was = self.state
+        self.count = 0
+        self.state = "NOMINAL"
+        return "cleared" if was == "TRIPPED" else None
+
+    def reset(self) -> None:
+        self.count = 0
+        if self.state != "DISABLED":
+            self.state = "NOMINAL"
+
+
+@dataclass
+class FdirInputs:
+    """What FDIR looks at in one GNC cycle (None = not applicable this cycle)."""
+
+    imu_missing: bool
+    imu_corrupt_frames: int
+    st_missing: bool
+    st_corrupt_frames: int
+    innovation_deg: float | None
+    wheel_fault: list[bool] = field(default_factory=list)
+    wheel_speed_ratio: list[float] = field(default_factory=list)
+    wheel_speed_rad_s: list[float] = field(default_factory=list)
+    margins_deg: list[float] = field(default_factory=list)
+    zone_bodies: list[str] = field(default_factory=list)
+    slipped: bool = False
+
+
+class Fdir:
+    """All monitors; `evaluate` once per GNC cycle returns the actions to take."""
+
+    def __init__(self, cfg, n_wheels: int, event: Callable[..., object] | None = None):
+        f = cfg.fdir
+        self.event = event or (lambda name, **args: None)
+        self.imu_stale = LimitMonitor("IMU_STALE", f.imu_stale)
+        self.imu_corrupt = LimitMonitor("IMU_CORRUPT", f.imu_corrupt)
+        self.st_stale = LimitMonitor("ST_STALE", f.star_tracker_stale)
+        self.st_corrupt = LimitMonitor("ST_CORRUPT", f.star_tracker_corrupt)
+        self.innovation = LimitMonitor("INNOVATION", f.innovation)
+        self.wheel_fault = [LimitMonitor("WHEEL_FAULT", f.wheel_fault) for _ in range(n_wheels)]
+        self.wheel_speed = [LimitMonitor("WHEEL_SPEED", f.wheel_speed) for _ in range(n_wheels)]
+        self.keepout_yellow = LimitMonitor("KEEP_OUT_MARGIN", f.keepout_yellow, below=True)
+        self.keepout_red = LimitMonitor("KEEP_OUT_MARGIN", f.keepout_red, below=True)
+        self.cycle_slip = LimitMonitor("CYCLE_SLIP", f.cycle_slip)
+        self.stale_counts = {"IMU": 0, "STAR_TRACKER": 0}
+
+    def all_monitors(self) -> list[LimitMonitor]:
+        return [self.imu_stale, self.imu_corrupt, self.st_stale, self.st_corrupt, self.innovation,
+                *self.wheel_fault, *self.wheel_speed, self.keepout_yellow, self.keepout_red, self.cycle_slip]
+
+    @property
+    def trips(self) -> int:
+        return sum(m.trips for m in self.all_monitors())
+
+    def reset_counters(self) -> None:
+        for m in self.all_monitors():
+            m.trips = 0
+
+    def states(self) -> dict[str, str]:
+        """Worst state per dictionary monitor (HK channels fdir_<monitor>)."""
+        out: dict[str, str] = {}
+        for m in self.all_monitors():
+            cur = out.get(m.monitor)
+            if cur is None or _STATE_RANK[m.state] > _STATE_RANK[cur]:
+                out[m.monitor] = m.state
+        return out
+
+    def _trip(self, mon: LimitMonitor, value: float, actions: list[FdirAction], wheel: int | None = None) -> None:
+        rule = mon.rule
+        self.event("FDIR_TRIPPED", monitor=mon.monitor, action=_ACTION_CODES[rule.action], value=float(value))
+        if rule.action != "none":
+            actions.append(FdirAction(rule.action, mon.monitor, wheel))
+
+    def _run(self, mon: LimitMonitor, value: float | None, actions: list[FdirAction], wheel: int | None = None) -> str | None:
+        res = mon.update(value)
+        if res == "tripped":
+            self._trip(mon, value, actions, wheel)
+        elif res == "cleared":
+            self.event("FDIR_CLEARED", monitor=mon.monitor)
+        return res
+
+    def evaluate(self, x: FdirInputs) -> list[FdirAction]:
+        actions: list[FdirAction] = []
+        self.stale_counts["IMU"] = self.stale_counts["IMU"] + 1 if x.imu_missing else 0
+        self.stale_counts["STAR_TRACKER"] = self.stale_counts["STAR_TRACKER"] + 1 if x.st_missing else 0
+        if self._run(self.imu_stale, 1.0 if x.imu_missing else 0.0, actions) == "tripped":
+            self.event("SENSOR_STALE", sensor="IMU", cycles=self.stale_counts["IMU"])
+        if self._run(self.st_stale, 1.0 if x.st_missing else 0.0, actions) == "tripped":
+            self.event("SENSOR_STALE", sensor="STAR_TRACKER", cycles=self.stale_counts["STAR_TRACKER"])
+        if x.imu_corrupt_frames:
+            self.event("SENSOR_CORRUPT", sensor="IMU", count=x.imu_corrupt_frames)
+        if x.st_corrupt_frames:
+            self.event("SENSOR_CORRUPT", sensor="STAR_TRACKER", count=x.st_corrupt_frames)
+        self._run(self.imu_corrupt, float(x.imu_corrupt_frames), actions)
+        self._run(self.st_corrupt, float(x.st_corrupt_frames), actions)
+        if x.innovation_deg is not None and x.innovation_deg == x.innovation_deg:  # not NaN
+            if self._run(self.innovation, x.innovation_deg, actions) == "tripped":
+                self.event("INNOVATION_HIGH", innovation_deg=x.innovation_deg)
+        for i, faulty in enumerate(x.wheel_fault):
+            if self._run(self.wheel_fault[i], 1.0 if faulty else 0.0, actions, wheel=i) == "tripped":
+                self.event("WHEEL_FAULT", wheel=i + 1, fault=1)
+        for i, ratio in enumerate(x.wheel_speed_ratio):
+            if ratio != ratio:
+                continue
+            if self._run(self.wheel_speed[i], ratio, actions, wheel=i) == "tripped":
+                self.event("WHEEL_SPEED_LIMIT", wheel=i + 1, speed_rad_s=x.wheel_speed_rad_s[i] if i < len(x.wheel_speed_rad_s) else ratio)
+        if x.margins_deg:
+            finite = [(m, k) for k, m in enumerate(x.margins_deg) if m == m]
+            if finite:
+                worst, k = min(finite)
+                body = x.zone_bodies[k] if k < len(x.zone_bodies) else "INERTIAL"
+                if self.keepout_yellow.update(worst) == "tripped":
+                    self.event("KEEP_OUT_MARGIN_LOW", zone=k, body=body, margin_deg=worst)
+                if self._run(self.keepout_red, worst, actions) == "tripped":
+                    self.event("KEEP_OUT_VIOLATION", zone=k, body=body, margin_deg=worst)
+        self._run(self.cycle_slip, 1.0 if x.slipped else 0.0, actions)
+        return actions

@@ -1,0 +1,601 @@
+"""Guidance: the modes (SAFE, POINTING, QUATERNION), the keep-out zones, and the paper's laws.
+
+Each GNC cycle the active mode turns the attitude estimate into a body-rate command ``omega_cmd_BN_B``:
+
+* POINTING: the instrument boresight ``y_N = R_NB b_B`` is the state on S^2. Sun, Moon and Earth zones
+  are rebuilt from the onboard ephemeris (`gnc.sky_zones`), inflated by ``law.margin_deg``; the
+  `gnc.laws.StarShapedLaw` gives ``u`` and `gnc.attitude.pointing_rate_command` gives
+  ``omega = b^x R^T u`` (no component about the boresight). A separate proportional roll law turns
+  about the boresight so that ``roll_axis_B`` lines up with ``roll_reference_N`` in the plane normal to
+  the boresight (it cannot move the boresight, so it cannot affect keep-out).
+* QUATERNION: the state is the attitude quaternion on S^3, zones are forbidden-attitude sets on S^3.
+  `GradientLaw` when every zone is a cone (and law is 'auto' or 'gradient'), else `StarShapedLaw`;
+  ``omega = 2 A(q)^T u``.
+* SAFE: rate damping (omega_cmd = 0) until the rate stays below a threshold for 1 s, then the
+  configured body axis is turned to the Sun (same S^2 map without zones).
+
+Rate command scaling. ``omega_law`` is multiplied by ``min(1, omega_max / |omega_law|)``: a positive,
+state-dependent time scaling. It changes the speed along the kinematic closed-loop path but not the path
+itself, so the paper's safety and convergence results carry over to the scaled command.
+
+Double cover (QUATERNION). q and -q are the same attitude, but the paper's law lives on S^3 where they are
+different points (its seven-cone example even puts a zone at -x_d). Choice: the law sees a *continuous
+lift* of the estimate. On entering the mode and on every new target the sign is chosen in the target's
+hemisphere (q . x_d >= 0, the shorter rotation); afterwards the sign is kept continuous from cycle to cycle
+(flip whenever q_est . q_prev < 0). The closed loop is then exactly the paper's continuous system on S^3, so
+its guarantees apply to the lifted path, there is no chattering at q . x_d = 0, and no unwinding is forced
+unless the zones demand it. A zone's physical set of attitudes is both +U and -U; a zone that must be
+avoided on both sheets sets ``antipodal_copy: true`` (the default is false so that the paper's S^3
+problems are reproduced exactly).
+
+Keep-out margin: how to choose ``law.margin_deg``. The law guarantees d_s(y, U_infl) > 0 only for the
+kinematic system ydot = P(y)u. The real loop lags it, so the boresight can cross into the inflated layer
+by the lag error; the requirement is judged on the physical zones, so choose
+
+    margin_deg >= ephemeris error + estimation error + tracking overshoot + rebuild tolerance
+
+* ephemeris: Moon 0.3 deg (gnc.ephemeris, max), Sun 0.01 deg, Earth (onboard orbit) as good as the orbit;
+* estimation: 3 sigma of the attitude estimate, sqrt(cov_trace) (~0.01 deg with a star tracker; grows
+  while coasting: the estimator's coasting time bounds it);
+* tracking overshoot: when the law turns the rate command at the eps-layer, the rate loop needs
+  ``omega_max / rate_bandwidth`` seconds to follow and the wheels decelerate at most at
+  ``alpha = tau_max_eff / J``; the boresight travels about
+  ``omega_max^2 / (2 alpha) + omega_max / rate_bandwidth`` (rad) past the point where the command turned;
+  with the defaults (1 deg/s, 1 rad/s, 0.05 N m on 10 kg m^2) that is ~1.0 deg + ~0.3 deg before
+  the law's own layer even starts to act. Measured in tests/fsw/test_closed_loop.py (slew past a Sun
+  star zone and a Moon cone): the smallest physical margin reached with margin_deg = M is reported there;
+* ``ZONE_REBUILD_TOL_DEG`` (0.01 deg) for the zone rebuild tolerance.
+
+A margin of 2-3 deg is adequate for the default spacecraft at 1 deg/s; scale the tracking term with
+omega_max^2 / alpha for faster slews or weaker wheels. ``KEEP_OUT_MARGIN_LOW`` (yellow limit) tells
+operations when the loop eats more of the margin than budgeted.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gnc import sky_zones
+from gnc.attitude import (
+    attitude_error_angle,
+    pointing_rate_command_nb,
+    quat_to_dcm_nb,
+    quaternion_rate_command_nb,
+)
+from gnc.ephemeris import EARTH_RADIUS_KM, julian_date_tdb, moon_direction_N, sun_direction_from_spacecraft_N
+
+ZONE_REBUILD_TOL_DEG = 0.01
+_MU_EARTH_KM3_S2 = 398600.4418
+_BODY_CODES = {"sun": "SUN", "moon": "MOON", "earth": "EARTH", "inertial": "INERTIAL"}
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def d_s_to_deg(d_s: float) -> float:
+    """Spherical separation d_s = 1 - cos(angle) -> angle in degrees, sign kept (negative inside)."""
+    mag = math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - abs(d_s)))))
+    return mag if d_s >= 0 else -mag
+
+
+def signed_margin_deg(zone, x: np.ndarray) -> float:
+    """Signed angular distance [deg] from the zone boundary (negative inside)."""
+    return d_s_to_deg(float(zone.signed_separation(x)))
+
+
+class SkyEphemeris:
+    """Onboard directions of the Sun, Moon and Earth from the spacecraft (N frame) at mission time t."""
+
+    def __init__(self, cfg):
+        self.jd0 = julian_date_tdb(cfg.epoch_utc)
+        o = cfg.orbit
+        self.radius_km = o.radius_km
+        self.n_rad_s = math.sqrt(_MU_EARTH_KM3_S2 / o.radius_km**3)
+        i, raan = math.radians(o.inclination_deg), math.radians(o.raan_deg)
+        self.u0 = math.radians(o.arg_latitude_at_epoch_deg)
+        node = np.array([math.cos(raan), math.sin(raan), 0.0])
+        # in-plane axis 90 deg ahead of the ascending node
+        self.p_hat = node
+        self.q_hat = np.array([-math.sin(raan) * math.cos(i), math.cos(raan) * math.cos(i), math.sin(i)])
+        self.earth_angular_radius_deg = math.degrees(math.asin(EARTH_RADIUS_KM / o.radius_km))
+
+    def position_N_km(self, t_s: float) -> np.ndarray:
+        u = self.u0 + self.n_rad_s * t_s
+        return self.radius_km * (math.cos(u) * self.p_hat + math.sin(u) * self.q_hat)
+
+    def directions(self, t_s: float) -> dict[str, np.ndarray]:
+        jd = self.jd0 + t_s / 86400.0
+        r = self.position_N_km(t_s)
+        return {
+            "sun": np.asarray(sun_direction_from_spacecraft_N(jd, r), dtype=float),
+            "moon": np.asarray(moon_direction_N(jd, r), dtype=float),
+            "earth": -r / np.linalg.norm(r),
+        }
+
+
+@dataclass
+class _SkySlot:
+    index: int
+    name: str
+    body: str
+    builder_phys: sky_zones.SkyZoneBuilder
+    builder_law: sky_zones.SkyZoneBuilder
+    fixed_center: np.ndarray | None
+    center_N: np.ndarray | None = None
+    built_center: np.ndarray | None = None
+    phys: object | None = None
+    law: object | None = None
+
+
+@dataclass
+class GuidanceOutput:
+    omega_cmd_BN_B: np.ndarray
+    mode: str
+    safe_phase: str = "NONE"
+    active_zone: int = -1
+    eps: float = float("nan")
+    eps_max: float = float("nan")
+    margins_deg: list[float] = field(default_factory=list)
+    margin_min_deg: float = float("nan")
+    pointing_error_deg: float = float("nan")
+    att_error_deg: float = float("nan")
+    roll_error_deg: float = float("nan")
+    boresight_N: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    target_N: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    q_target_NB: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
+    zones_merged: bool = False
+    assumptions_ok: bool = True
+    sun_N: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    moon_N: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    zone_count: int = 0
+    zone_bodies: list[str] = field(default_factory=list)
+
+
+def _saturate(omega: np.ndarray, max_rate_rad_s: float) -> np.ndarray:
+    n = float(np.linalg.norm(omega))
+    return omega * (max_rate_rad_s / n) if n > max_rate_rad_s else omega
+
+
+def _make_star_law(target, zones, k1, kappa, eps):
+    from gnc.laws import StarShapedLaw
+
+    return StarShapedLaw(target, zones, k1=k1, kappa=kappa, eps=eps)
+
+
+def _make_gradient_law(target, zones, k1, eps):
+    from gnc.laws import GradientLaw
+
+    return GradientLaw(target, zones, k1=k1, eps=eps)
+
+
+class ZoneGeometry:
+    """The law's view of a set of zones for one target: merging, admissible eps, retreat target."""
+
+    def __init__(self, dim: int, merge_gap_deg: float):
+        self.dim = dim
+        self.merge_gap_rad = math.radians(merge_gap_deg)
+        self.groups: list[list[int]] = []
+
+    def merge(self, zones: list) -> tuple[list, list[list[int]]]:
+        """Group zones whose bounding caps are closer than the merge gap; a group becomes one cone."""
+        n = len(zones)
+        caps = [sky_zones.cap_of(z) for z in zones]
+        parent = list(range(n))
+
+        def find(i: int) -> int:
+            while parent[i] != i:
+                parent[i] = parent[parent[i]]
+                i = parent[i]
+            return i
+
+        for i in range(n):
+            for j in range(i + 1, n):
+                d = math.acos(max(-1.0, min(1.0, float(caps[i][0] @ caps[j][0]))))
+                if d - caps[i][1] - caps[j][1] < self.merge_gap_rad:
+                    parent[find(i)] = find(j)
+        groups: dict[int, list[int]] = {}
+        for i in range(n):
+            groups.setdefault(find(i), []).append(i)
+        out_groups = sorted(groups.values(), key=lambda g: g[0])
+        merged = []
+        for g in out_groups:
+            merged.append(zones[g[0]] if len(g) == 1 else sky_zones.enclosing_cone([caps[i] for i in g]))
+        return merged, out_groups
+
+    @staticmethod
+    def fast_eps_max(target: np.ndarray, zones: list) -> float:
+        """min(1 - cos(delta), d_s(x_d, U)) with delta from bounding caps (a conservative lower bound)."""
+        bound = 1.0
+        caps = [sky_zones.cap_of(z) for z in zones]
+        for i in range(len(zones)):
+            for j in range(i + 1, len(zones)):
+                gap = math.acos(max(-1.0, min(1.0, float(caps[i][0] @ caps[j][0])))) - caps[i][1] - caps[j][1]
+                delta = max(gap, 0.0) / 2.0
+                bound = min(bound, 1.0 - math.cos(delta))
+        for z in zones:
+            bound = min(bound, float(z.separation(target)))
+        return bound
+
+    @staticmethod
+    def retreat_target(target: np.ndarray, zones: list, eps: float) -> tuple[np.ndarray, int]:
+        """If the target lies in a zone's eps-layer, move it away from that zone's kernel along the
+        geodesic until it is 1.5 eps outside (returns the substitute target and the zone index, or -1)."""
+        for i, z in enumerate(zones):
+            if float(z.separation(target)) > eps:
+                continue
+            g = np.asarray(z.kernel, dtype=float)
+            t = target - g
+            t = t - (t @ target) * target
+            if np.linalg.norm(t) < 1e-9:
+                t = np.roll(target, 1) - (np.roll(target, 1) @ target) * target
+            t /= np.linalg.norm(t)
+            x = target
+            for k in range(1, 721):
+                s = math.radians(0.25 * k)
+                x = math.cos(s) * target + math.sin(s) * t
+                if float(z.separation(x)) > 1.5 * eps:
+                    break
+            return x, i
+        return target, -1
+
+
+class Guidance:
+    """Mode logic and guidance laws; `step` runs once per GNC cycle."""
+
+    MODES = ("SAFE", "POINTING", "QUATERNION")
+
+    def __init__(self, cfg, events=None):
+        self.cfg = cfg
+        self.events = events or (lambda name, **args: None)
+        self.mode = cfg.initial_mode
+        self.k1 = cfg.law.k1
+        self.kappa = cfg.law.kappa
+        self.eps_cfg = cfg.law.eps
+        self.max_rate_rad_s = math.radians(cfg.spacecraft.max_rate_deg_s)
+        self.ephem = SkyEphemeris(cfg)
+        p = cfg.pointing
+        self.b_B = np.asarray(p.boresight_B, dtype=float)
+        self.target_N = np.asarray(p.target_N, dtype=float)
+        self.roll_axis_B = np.asarray(p.roll_axis_B, dtype=float)
+        self.roll_ref_N = np.asarray(p.roll_reference_N, dtype=float)
+        self.q_target = np.asarray(cfg.quaternion.target_q_NB, dtype=float)
+        self.sun_axis_B = np.asarray(cfg.safe.sun_axis_B, dtype=float)
+        margin = cfg.law.margin_deg
+        self.slots: list[_SkySlot] = []
+        for i, z in enumerate(p.zones):
+            extra = self.ephem.earth_angular_radius_deg if (z.body == "earth" and z.add_body_angular_radius) else 0.0
+            fixed = np.asarray(z.direction_N, dtype=float) if z.body == "inertial" else None
+            self.slots.append(
+                _SkySlot(
+                    i, z.name, z.body,
+                    sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra),
+                    sky_zones.SkyZoneBuilder(z.geometry, margin + ZONE_REBUILD_TOL_DEG, extra),
+                    fixed,
+                )
+            )
+        self.sky_geometry = ZoneGeometry(3, cfg.law.merge_gap_deg)
+        self._sky_law = None
+        self._sky_law_key = None
+        self._sky_groups: list[list[int]] = []
+        self._sky_law_zones: list = []
+        self._build_s3_zones()
+        self._s3_law = None
+        self._q_lift: np.ndarray | None = None
+        # SAFE mode state
+        self.safe_phase = "RATE_DAMPING"
+        self._damped_s = 0.0
+        # assumption-check cache (refreshed by the housekeeping task and on changes)
+        self.eps_max_checked = float("inf")
+        self.assumptions_ok = True
+        self.check_errors: list[str] = []
+        self._checks_dirty = True
+        self._occulted = -1
+        self.last_t_s = 0.0
+
+    # ------------------------------------------------------------------------------ configuration
+    def _build_s3_zones(self) -> None:
+        from gnc import zones as gz
+
+        m = math.radians(self.cfg.law.margin_deg)
+        self.s3_phys, self.s3_law_zones, self.s3_names = [], [], []
+        for zc in self.cfg.quaternion.zones:
+            centers = [np.asarray(zc.center_q, dtype=float)]
+            if zc.antipodal_copy:
+                centers.append(-centers[0])
+            for c in centers:
+                if zc.shape == "cone":
+                    ha = math.radians(zc.half_angle_deg)
+                    self.s3_phys.append(gz.ConicZone(c, ha))
+                    self.s3_law_zones.append(gz.ConicZone(c, ha + m))
+                else:
+                    a = np.asarray(zc.semi_axes, dtype=float)
+                    # margin applied per principal direction in angle (exact along the semi-axes)
+                    a_infl = np.tan(np.minimum(np.arctan(a) + m, math.radians(89.0)))
+                    self.s3_phys.append(gz.StarZone.superellipsoid(c, None, a, zc.exponent))
+                    self.s3_law_zones.append(gz.StarZone.superellipsoid(c, None, a_infl, zc.exponent))
+                self.s3_names.append(zc.name)
+        law = self.cfg.quaternion.law
+        all_cones = all(z.shape == "cone" for z in self.cfg.quaternion.zones)
+        self.s3_use_gradient = law == "gradient" or (law == "auto" and all_cones)
+
+    def set_mode(self, mode: str) -> None:
+        if mode not in self.MODES:
+            raise ValueError(f"unknown mode {mode!r}; allowed: {self.MODES}")
+        self.mode = mode
+        if mode == "SAFE":
+            self.safe_phase = "RATE_DAMPING"
+            self._damped_s = 0.0
+        if mode == "QUATERNION":
+            self._q_lift = None
+        self._checks_dirty = True
+
+    def set_gains(self, k1: float, kappa: float, eps: float | str, rate_limit_deg_s: float) -> None:
+        if not (k1 > 0 and kappa > 0 and rate_limit_deg_s > 0):
+            raise ValueError("k1, kappa and rate limit must be positive")
+        if eps != "auto" and not (0.0 < float(eps) < 1.0):
+            raise ValueError("eps must be in (0, 1) or 'auto'")
+        self.k1, self.kappa, self.eps_cfg = float(k1), float(kappa), eps
+        self.max_rate_rad_s = math.radians(rate_limit_deg_s)
+        self._sky_law_key = None
+        self._s3_law = None
+        self._checks_dirty = True
+
+    def target_violation(self, kind: str, value: np.ndarray) -> tuple[int, float] | None:
+        """(zone index, margin deg) when a candidate target lies inside an (inflated) zone, else None."""
+        if kind == "DIRECTION":
+            self._update_sky(self.last_t_s)
+            x = _unit(np.asarray(value, dtype=float))
+            for s in self.slots:
+                m = signed_margin_deg(s.law, x)
+                if m <= 0.0:
+                    return s.index, m
+            return None
+        q = _unit(np.asarray(value, dtype=float))
+        for i, z in enumerate(self.s3_law_zones):
+            m = signed_margin_deg(z, q)
+            if m <= 0.0:
+                return i, m
+        return None
+
+    def set_target_direction(self, target_N: np.ndarray) -> None:
+        self.target_N = _unit(np.asarray(target_N, dtype=float))
+        self._sky_law_key = None
+        self._checks_dirty = True
+
+    def set_target_quaternion(self, q_NB: np.ndarray) -> None:
+        self.q_target = _unit(np.asarray(q_NB, dtype=float))
+        self._q_lift = None
+        self._s3_law = None
+        self._checks_dirty = True
+
+    # ------------------------------------------------------------------------------------ zones
+    def _update_sky(self, t_s: float) -> bool:
+        """Recompute zone centres; rebuild zones that moved more than the tolerance. True if any rebuilt."""
+        dirs = self.ephem.directions(t_s) if self.slots else {}
+        self._dirs = dirs
+        rebuilt = False
+        cos_tol = math.cos(math.radians(ZONE_REBUILD_TOL_DEG))
+        for s in self.slots:
+            c = s.fixed_center if s.fixed_center is not None else dirs[s.body]
+            s.center_N = c
+            if s.built_center is None or float(c @ s.built_center) < cos_tol:
+                s.phys = s.builder_phys.build(c)
+                s.law = s.builder_law.build(c)
+                s.built_center = c.copy()
+                rebuilt = True
+        return rebuilt
+
+    def run_assumption_check(self) -> None:
+        """Full check of the paper's assumptions (gnc.checks) for the current mode; housekeeping rate."""
+        from gnc.checks import check_assumptions
+
+        if self.mode == "POINTING" and self._sky_law_zones:
+            target, zones, kappa = self._sky_target, self._sky_law_zones, self.kappa
+        elif self.mode == "QUATERNION" and self.s3_law_zones:
+            target, zones = self.q_target, self.s3_law_zones
+            kappa = None if self.s3_use_gradient else self.kappa
+        else:
+            self.eps_max_checked, self.assumptions_ok, self.check_errors = float("inf"), True, []
+            self._checks_dirty = False
+            return
+        eps = self._current_eps if math.isfinite(getattr(self, "_current_eps", float("nan"))) else 0.01
+        rep = check_assumptions(target, zones, eps, kappa=kappa)
+        ok_before = self.assumptions_ok
+        self.assumptions_ok = bool(rep.ok)
+        self.check_errors = list(rep.errors)
+        self.eps_max_checked = float(rep.eps_max) if rep.eps_max is not None and math.isfinite(rep.eps_max) else float("inf")
+        if getattr(self, "_current_eps", 0.0) >= self.eps_max_checked:
+            self._sky_law_key = None  # the cached law's eps is no longer admissible: rebuild next cycle
+            self._s3_law = None
+        if not rep.ok and (ok_before or self._checks_dirty):
+            self.events("ASSUMPTION_VIOLATED", reason="; ".join(rep.errors)[:110] or "check failed")
+        self._checks_dirty = False
+
+    @property
+    def checks_dirty(self) -> bool:
+        return self._checks_dirty
+
+    def _eps_for(self, eps_max: float) -> float:
+        auto = self.eps_cfg == "auto"
+        eps = min(self.cfg.law.eps_fraction * eps_max, self.cfg.law.eps_max_used) if auto else float(self.eps_cfg)
+        if not auto and eps >= eps_max:
+            eps = self.cfg.law.eps_fraction * eps_max
+        return max(eps, 1e-6)
+
+    # ------------------------------------------------------------------------------------- modes
+    def step(self, t_s: float, dt_s: float, q_NB: np.ndarray | None, omega_BN_B: np.ndarray) -> GuidanceOutput:
+        self.last_t_s = t_s
+        if q_NB is None:
+            # no attitude knowledge: only rate damping is possible, whatever the mode
+            out = GuidanceOutput(np.zeros(3), self.mode, safe_phase="RATE_DAMPING" if self.mode == "SAFE" else "NONE")
+            if self.slots:
+                self._update_sky(t_s)
+            return out
+        q = np.ascontiguousarray(q_NB, dtype=float)
+        if self.mode == "POINTING":
+            return self._pointing(t_s, q, omega_BN_B)
+        if self.mode == "QUATERNION":
+            return self._quaternion(t_s, q)
+        return self._safe(t_s, dt_s, q, omega_BN_B)
+
+    def _sky_margins(self, y_N: np.ndarray) -> tuple[list[float], float]:
+        margins = [signed_margin_deg(s.phys, y_N) for s in self.slots]
+        return margins, (min(margins) if margins else float("nan"))
+
+    def _pointing(self, t_s: float, q: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
+        rebuilt = self._update_sky(t_s)
+        R = quat_to_dcm_nb(q)
+        y = R @ self.b_B
+        out = GuidanceOutput(np.zeros(3), "POINTING", boresight_N=y, target_N=self.target_N.copy())
+        out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
+        u = self.k1 * self.target_N
+        if self.slots:
+            if rebuilt or self._sky_law_key is None:
+                zones = [s.law for s in self.slots]
+                merged, groups = self.sky_geometry.merge(zones)
+                if groups != self._sky_groups:
+                    self._report_merge(self._sky_groups, groups)
+                    self._checks_dirty = True
+                self._sky_groups = groups
+                self._sky_law_zones = merged
+                eps_max = min(ZoneGeometry.fast_eps_max(self.target_N, merged), self.eps_max_checked)
+                target = self.target_N
+                eps = self._eps_for(max(eps_max, 1e-5))
+                target, occ = ZoneGeometry.retreat_target(self.target_N, merged, eps)
+                if occ != self._occulted:
+                    if occ >= 0:
+                        self.events("ASSUMPTION_VIOLATED", reason=f"target in the eps-layer of zone {occ}: steering to the nearest safe direction")
+                    self._occulted = occ
+                    self._checks_dirty = True
+                if occ >= 0:
+                    eps_max = min(ZoneGeometry.fast_eps_max(target, merged), self.eps_max_checked)
+                    eps = self._eps_for(max(eps_max, 1e-5))
+                self._sky_target = target
+                self._sky_eps, self._sky_eps_max = eps, eps_max
+                self._current_eps = eps
+                self._sky_law = _make_star_law(target, merged, 1.0, self.kappa, eps)
+                self._sky_law_key = True
+            u = self.k1 * np.asarray(self._sky_law.control(y), dtype=float)
+            out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
+            diag_zone = self._active_zone(y)
+            out.active_zone = diag_zone
+            out.margins_deg, out.margin_min_deg = self._sky_margins(y)
+            out.zones_merged = any(len(g) > 1 for g in self._sky_groups)
+            out.zone_count = len(self.slots)
+            out.zone_bodies = [_BODY_CODES[s.body] for s in self.slots]
+        out.assumptions_ok = self.assumptions_ok
+        omega_law = pointing_rate_command_nb(q, self.b_B, np.ascontiguousarray(u))
+        omega_cmd = _saturate(np.asarray(omega_law), self.max_rate_rad_s)
+        roll_err = self._roll_error(R, y)
+        omega_roll = self.cfg.pointing.roll_gain_1_s * roll_err * self.b_B
+        out.omega_cmd_BN_B = omega_cmd + _saturate(omega_roll, 0.5 * self.max_rate_rad_s)
+        out.pointing_error_deg = math.degrees(math.acos(max(-1.0, min(1.0, float(y @ self.target_N)))))
+        out.roll_error_deg = math.degrees(roll_err)
+        return out
+
+    def _active_zone(self, y: np.ndarray) -> int:
+        """Index (configured zone numbering) of the zone whose eps-layer contains y, or -1."""
+        for gi, z in enumerate(self._sky_law_zones):
+            if float(z.separation(y)) < self._sky_eps:
+                return self._sky_groups[gi][0]
+        return -1
+
+    def _report_merge(self, old: list[list[int]], new: list[list[int]]) -> None:
+        old_pairs = {(g[0], j) for g in old for j in g[1:]}
+        new_pairs = {(g[0], j) for g in new for j in g[1:]}
+        for a, b in sorted(new_pairs - old_pairs):
+            ca, cb = self.slots[a].center_N, self.slots[b].center_N
+            sep = math.degrees(math.acos(max(-1.0, min(1.0, float(ca @ cb)))))
+            self.events("ZONES_MERGED", zone_a=a, zone_b=b, separation_deg=sep)
+        for a, b in sorted(old_pairs - new_pairs):
+            self.events("ZONES_SPLIT", zone_a=a, zone_b=b)
+
+    def _roll_error(self, R: np.ndarray, y_N: np.ndarray) -> float:
+        """Angle [rad] about the boresight from roll_axis_B's projection to the reference's projection."""
+        b = self.b_B
+        ref_N = self.roll_ref_N
+        if abs(float(ref_N @ y_N)) > 0.95:  # reference nearly along the boresight: use another axis
+            ref_N = np.array([1.0, 0.0, 0.0]) if abs(y_N[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        r_B = R.T @ ref_N
+        a = self.roll_axis_B - (self.roll_axis_B @ b) * b
+        r = r_B - (r_B @ b) * b
+        return math.atan2(float(b @ np.cross(a, r)), float(a @ r))
+
+    def _quaternion(self, t_s: float, q: np.ndarray) -> GuidanceOutput:
+        xd = self.q_target
+        if self._q_lift is None:
+            x = q if float(q @ xd) >= 0.0 else -q
+        else:
+            x = q if float(q @ self._q_lift) >= 0.0 else -q
+        self._q_lift = x
+        out = GuidanceOutput(np.zeros(3), "QUATERNION", q_target_NB=xd.copy())
+        if self.s3_law_zones:
+            if self._s3_law is None:
+                eps_max = min(ZoneGeometry.fast_eps_max(xd, self.s3_law_zones), self.eps_max_checked)
+                eps = self._eps_for(max(eps_max, 1e-5))
+                self._s3_eps, self._s3_eps_max = eps, eps_max
+                self._current_eps = eps
+                if self.s3_use_gradient:
+                    self._s3_law = _make_gradient_law(xd, self.s3_law_zones, 1.0, eps)
+                else:
+                    self._s3_law = _make_star_law(xd, self.s3_law_zones, 1.0, self.kappa, eps)
+            u = self.k1 * np.asarray(self._s3_law.control(x), dtype=float)
+            out.eps, out.eps_max = self._s3_eps, self._s3_eps_max
+            out.active_zone = -1
+            for i, z in enumerate(self.s3_law_zones):
+                if float(z.separation(x)) < self._s3_eps:
+                    out.active_zone = i
+                    break
+            margins = [signed_margin_deg(z, x) for z in self.s3_phys]
+            out.margins_deg, out.margin_min_deg = margins, min(margins)
+            out.zone_count = len(self.s3_phys)
+            out.zone_bodies = ["ATTITUDE"] * len(self.s3_phys)
+        else:
+            u = self.k1 * xd
+        out.assumptions_ok = self.assumptions_ok
+        omega = quaternion_rate_command_nb(np.ascontiguousarray(x), np.ascontiguousarray(u))
+        out.omega_cmd_BN_B = _saturate(np.asarray(omega), self.max_rate_rad_s)
+        out.att_error_deg = math.degrees(float(attitude_error_angle(q, xd)))
+        R = quat_to_dcm_nb(q)
+        out.boresight_N = R @ self.b_B
+        return out
+
+    def _safe(self, t_s: float, dt_s: float, q: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
+        sc = self.cfg.safe
+        rate = float(np.linalg.norm(omega))
+        dirs = self.ephem.directions(t_s)
+        self._dirs = dirs
+        sun = dirs["sun"]
+        R = quat_to_dcm_nb(q)
+        out = GuidanceOutput(np.zeros(3), "SAFE", sun_N=sun, moon_N=dirs["moon"], boresight_N=R @ self.b_B)
+        if self.slots:
+            self._update_sky(t_s)
+            out.margins_deg, out.margin_min_deg = self._sky_margins(out.boresight_N)
+            out.zone_count = len(self.slots)
+            out.zone_bodies = [_BODY_CODES[s.body] for s in self.slots]
+        if self.safe_phase == "RATE_DAMPING":
+            self._damped_s = self._damped_s + dt_s if rate < math.radians(sc.damping_exit_rate_deg_s) else 0.0
+            if self._damped_s >= 1.0:
+                self._set_safe_phase("SUN_ACQUISITION")
+            out.safe_phase = self.safe_phase
+            return out
+        s_N = R @ self.sun_axis_B
+        err = math.degrees(math.acos(max(-1.0, min(1.0, float(s_N @ sun)))))
+        if self.safe_phase == "SUN_ACQUISITION" and err < 1.0:
+            self._set_safe_phase("SUN_POINTING")
+        elif self.safe_phase == "SUN_POINTING" and err > 5.0:
+            self._set_safe_phase("SUN_ACQUISITION")
+        u = sc.sun_gain_1_s * sun
+        omega_cmd = np.asarray(pointing_rate_command_nb(q, self.sun_axis_B, np.ascontiguousarray(u)))
+        out.omega_cmd_BN_B = _saturate(omega_cmd, math.radians(sc.max_rate_deg_s))
+        out.safe_phase = self.safe_phase
+        out.pointing_error_deg = err
+        out.target_N = sun
+        return out
+
+    def _set_safe_phase(self, phase: str) -> None:
+        self.safe_phase = phase
+        self.events("SAFE_PHASE_CHANGED", phase=phase)
