@@ -1,0 +1,190 @@
+"""Ground monitor: archive completeness, sequence gaps, live table, CLI send, TC round trip."""
+from __future__ import annotations
+
+import json
+import multiprocessing
+import socket
+import threading
+import time
+from pathlib import Path
+
+from rich.console import Console
+
+from fsw.dictionary import DICTIONARY, GNC_APID, HK_APID, LimitState
+from fsw.ground import (
+    DECODED_ARCHIVE,
+    EVENTS_ARCHIVE,
+    RAW_ARCHIVE,
+    SUMMARY_FILE,
+    GroundMonitor,
+    limit_state,
+    main,
+    read_raw_archive,
+    render_tables,
+    run_ground_monitor,
+)
+from fsw.telecommand import CommandDispatcher
+from fsw.telemetry import TelemetrySender, encode_tm_packet
+
+
+def _gnc_values(cycle: int) -> list:
+    packet = DICTIONARY.packet("GNC")
+    values = []
+    for channel in packet.channels:
+        if channel.name == "cycle":
+            values.append(cycle)
+        elif channel.type in ("F32", "F64"):
+            values.append(0.5)
+        elif channel.type == "BOOL":
+            values.append(True)
+        else:
+            values.append(0)
+    return values
+
+
+def _receive(monitor: GroundMonitor, count: int, timeout_s: float = 3.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while monitor.stats.datagrams < count and time.monotonic() < deadline:
+        monitor.poll(0.05)
+    assert monitor.stats.datagrams == count
+
+
+def test_skipped_sequence_count_is_detected_and_every_packet_archived(tmp_path: Path) -> None:
+    monitor = GroundMonitor(DICTIONARY, "127.0.0.1", 0, tmp_path)
+    packet = DICTIONARY.packet("GNC")
+    seqs = [0, 1, 2, 5, 6]  # 3 and 4 "lost on the link"
+    datagrams = [encode_tm_packet(packet, s, 10.0 + s, _gnc_values(s)) for s in seqs]
+    datagrams.insert(2, b"\x01\x02garbage that is not a space packet")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as link:
+        for raw in datagrams:
+            link.sendto(raw, monitor.address)
+    _receive(monitor, len(datagrams))
+    monitor.close()
+
+    stats = monitor.stats
+    assert stats.decode_errors == 1 and stats.decoded == 5
+    assert [(g.apid, g.expected, g.received, g.missing) for g in stats.gaps] == [(GNC_APID, 3, 5, 2)]
+    assert stats.missing == 2
+    archived = [raw for _, raw in read_raw_archive(tmp_path / RAW_ARCHIVE)]
+    assert archived == datagrams, "the raw archive holds every datagram, undecodable ones included"
+    lines = [json.loads(line) for line in (tmp_path / DECODED_ARCHIVE).read_text().splitlines()]
+    assert len(lines) == 6 and "error" in lines[2]
+    assert [line["seq"] for line in lines if "seq" in line] == seqs
+    assert lines[4]["gap_missing"] == 2 and lines[4]["values"]["cycle"] == 5
+    summary = json.loads((tmp_path / SUMMARY_FILE).read_text())
+    assert summary["missing_packets"] == 2 and summary["per_apid"][f"{GNC_APID:#05x}"]["gaps"] == 1
+
+
+def test_rollover_is_not_a_gap_and_a_restart_is_not_16000_lost() -> None:
+    monitor = GroundMonitor(DICTIONARY, "127.0.0.1", 0)
+    packet = DICTIONARY.packet("HK")
+    values = [0] * len(packet.channels)
+    for seq in (16382, 16383, 0, 1, 0, 1):  # wrap, then the flight software restarts
+        monitor.process(encode_tm_packet(packet, seq, 0.0, values))
+    monitor.close()
+    stats = monitor.stats.per_apid[HK_APID]
+    assert stats.missing == 0 and stats.gaps == 0 and stats.duplicates_or_restarts == 1
+
+
+def test_sender_to_monitor_end_to_end_with_events(tmp_path: Path) -> None:
+    monitor = GroundMonitor(DICTIONARY, "127.0.0.1", 0, tmp_path)
+    tm = TelemetrySender(DICTIONARY, "127.0.0.1", monitor.address[1], clock=lambda: 5.0)
+    for cycle in range(20):
+        tm.send_channels("GNC", {"cycle": cycle, "margin_min_deg": 1.0, "mode": "POINTING"})
+    tm.event("KEEP_OUT_MARGIN_LOW", zone=1, body="MOON", margin_deg=1.0)
+    tm.close()
+    _receive(monitor, 21)
+    assert monitor.stats.missing == 0
+    assert monitor.latest["cycle"] == 19 and monitor.latest["mode"] == "POINTING"
+    assert monitor.events[-1].event == "KEEP_OUT_MARGIN_LOW" and monitor.events[-1].severity == "WARNING_HI"
+    assert limit_state(DICTIONARY, "margin_min_deg", monitor.latest["margin_min_deg"]) is LimitState.YELLOW
+    console = Console(record=True, width=140)
+    console.print(render_tables(monitor))
+    screen = console.export_text()
+    assert "margin_min_deg" in screen and "YELLOW" in screen and "keep-out margin low: zone 1 (MOON)" in screen
+    monitor.close()
+    events = [json.loads(line) for line in (tmp_path / EVENTS_ARCHIVE).read_text().splitlines()]
+    assert [e["event"] for e in events] == ["KEEP_OUT_MARGIN_LOW"]
+
+
+def test_tc_round_trip_ground_send_to_dispatcher_and_command_event_back() -> None:
+    monitor = GroundMonitor(DICTIONARY, "127.0.0.1", 0)
+    telemetry = TelemetrySender(DICTIONARY, "127.0.0.1", monitor.address[1])
+    dispatcher = CommandDispatcher(DICTIONARY, telemetry, "127.0.0.1", 0)
+    modes: list[str] = []
+    dispatcher.register("SET_MODE", lambda mode: modes.append(mode))
+    tc_port = dispatcher.address[1]
+
+    json_dictionary = str(Path(__file__).resolve().parents[2] / "config" / "telemetry_dictionary.json")
+    assert main(["ground", "--dictionary", json_dictionary, "send", "SET_MODE", "POINTING",
+                 "--port", str(tc_port)]) == 0
+    results = []
+    deadline = time.monotonic() + 3.0
+    while not results and time.monotonic() < deadline:
+        results = dispatcher.poll(timeout_s=0.1)
+    assert [r.accepted for r in results] == [True]
+    assert modes == ["POINTING"]
+    assert dispatcher.counters["accepted"] == 1 and dispatcher.hk_values()["tc_accepted"] == 1
+    _receive(monitor, 2)  # CMD_DISPATCHED + CMD_COMPLETED arrive as telemetry
+    assert [(e.event, e.severity) for e in monitor.events] == [("CMD_DISPATCHED", "COMMAND"),
+                                                               ("CMD_COMPLETED", "COMMAND")]
+    assert monitor.events[-1].args["command"] == "SET_MODE"
+    dispatcher.close()
+    telemetry.close()
+    monitor.close()
+
+
+def test_cli_send_rejects_bad_arguments_with_a_clear_message(capsys) -> None:
+    assert main(["ground", "send", "SET_MODE", "SPIN", "--port", "9"]) == 2
+    assert "mode: 'SPIN' not one of" in capsys.readouterr().err
+    assert main(["ground", "send", "WARP", "--port", "9"]) == 2
+    assert "unknown command" in capsys.readouterr().err
+
+
+def test_monitor_runs_until_stop_event_in_a_thread(tmp_path: Path) -> None:
+    monitor = GroundMonitor(DICTIONARY, "127.0.0.1", 0, tmp_path)
+    stop = threading.Event()
+    thread = threading.Thread(target=monitor.run, kwargs={"stop_event": stop})
+    thread.start()
+    tm = TelemetrySender(DICTIONARY, "127.0.0.1", monitor.address[1])
+    for _ in range(5):
+        tm.send_channels("HK", {"cycles": 1})
+    time.sleep(0.3)
+    stop.set()
+    thread.join(timeout=5.0)
+    tm.close()
+    assert not thread.is_alive()
+    assert json.loads((tmp_path / SUMMARY_FILE).read_text())["datagrams"] == 5
+
+
+def test_run_ground_monitor_as_a_separate_process(tmp_path: Path) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:  # pick a free port for the child
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    ctx = multiprocessing.get_context("spawn")
+    ready, stop = ctx.Event(), ctx.Event()
+    process = ctx.Process(target=run_ground_monitor,
+                          kwargs={"archive_dir": str(tmp_path), "port": port, "stop_event": stop, "ready": ready,
+                                  "duration_s": 30.0})
+    process.start()
+    try:
+        assert ready.wait(20.0)
+        tm = TelemetrySender(DICTIONARY, "127.0.0.1", port)
+        for cycle in range(10):
+            tm.send_channels("GNC", {"cycle": cycle})
+        tm.close()
+        time.sleep(0.3)
+        stop.set()
+        process.join(timeout=10.0)
+    finally:
+        if process.is_alive():
+            process.kill()
+    assert process.exitcode == 0
+    assert len(list(read_raw_archive(tmp_path / RAW_ARCHIVE))) == 10
+    assert json.loads((tmp_path / SUMMARY_FILE).read_text())["missing_packets"] == 0
+
+
+def test_cli_monitor_with_duration(tmp_path: Path, capsys) -> None:
+    assert main(["ground", "--port", "0", "--duration", "0.3", "--no-live", "--archive", str(tmp_path)]) == 0
+    assert "received 0 packets" in capsys.readouterr().out
+    assert (tmp_path / SUMMARY_FILE).exists()
