@@ -370,6 +370,8 @@ class _LiveDisplay:
     def stop(self) -> None:
         self.update()
         self.live.stop()
+        if not self.live.console.is_terminal:
+            self.live.console.line()
 
     def update(self) -> None:
         self.live.update(render_tables(self.monitor), refresh=True)
@@ -422,15 +424,34 @@ def add_cli(subparsers: Any) -> None:
     parser.add_argument("--no-live", action="store_true", help="no live table; print events as lines")
     parser.set_defaults(func=_cmd_monitor)
     sub = parser.add_subparsers(dest="ground_command", metavar="{send}")
-    send = sub.add_parser("send", help="send one telecommand, e.g. `keepout ground send SET_MODE POINTING`")
+    send = sub.add_parser("send", help="send one telecommand, e.g. `keepout ground send SET_MODE POINTING`",
+                          epilog=_command_help(DICTIONARY), formatter_class=argparse.RawDescriptionHelpFormatter)
     send.add_argument("opcode", help="command name (or numeric opcode)")
     send.add_argument("args", nargs="*", help="command arguments in dictionary order")
     send.add_argument("--host", dest="tc_host", default=DEFAULT_HOST, help="flight software TC address")
     send.add_argument("--port", dest="tc_port", type=int, default=DEFAULT_TC_PORT, help="telecommand UDP port")
-    send.add_argument("--seq", type=int, default=0, help="TC sequence count to use")
+    send.add_argument("--seq", type=int, default=0, help="TC sequence count to use (without --seq-file)")
+    send.add_argument("--seq-file", default=None,
+                      help="file holding the next TC sequence count (incremented per send), so that the "
+                           "flight software sees consecutive counts across invocations")
     send.add_argument("--no-check", action="store_true",
                       help="skip the dictionary range checks (test the flight-side validation)")
     send.set_defaults(func=_cmd_send)
+
+
+def _command_help(dictionary: TelemetryDictionary) -> str:
+    lines = ["commands (args in order; enums by name):"]
+    for command in dictionary.commands:
+        parts = []
+        for arg in command.args:
+            kind = "|".join(arg.enum) if arg.enum else arg.type
+            bounds = f" [{arg.min}..{arg.max}]" if arg.min is not None or arg.max is not None else ""
+            unit = f" {arg.unit}" if arg.unit else ""
+            optional = f"={arg.default}" if arg.default is not None else ""
+            parts.append(f"{arg.name}{optional}:{kind}{bounds}{unit}")
+        lines.append(f"  {command.name:<15} " + " ".join(parts))
+    lines.append("example: keepout ground send SET_TARGET DIRECTION 0 0.6 0.8")
+    return "\n".join(lines)
 
 
 def _load_dictionary(path: str | None) -> TelemetryDictionary:
@@ -465,7 +486,13 @@ def _cmd_send(args: argparse.Namespace) -> int:
     try:
         dictionary = _load_dictionary(args.dictionary)
         command: str | int = int(args.opcode, 0) if args.opcode[:1].isdigit() else args.opcode.upper()
-        with CommandSender(dictionary, args.tc_host, args.tc_port, args.seq) as sender:
+        dictionary.command(command)  # unknown command: fail before touching the sequence file
+        seq = args.seq
+        if args.seq_file:
+            from spacepackets.seqcount import CcsdsFileSeqCountProvider
+
+            seq = CcsdsFileSeqCountProvider(Path(args.seq_file)).get_and_increment()
+        with CommandSender(dictionary, args.tc_host, args.tc_port, seq) as sender:
             packet = sender.send(command, *args.args, check_range=not args.no_check)
     except (ArgError, DictionaryError, ValueError) as exc:
         print(f"keepout ground send: {exc}", file=sys.stderr)
