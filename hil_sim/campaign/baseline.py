@@ -1,0 +1,160 @@
+"""Baselines: store a campaign's results, and compare a later campaign against them.
+
+Two complementary checks per metric:
+
+- paired, run by run: with the same campaign inputs (same fingerprint), run i of both campaigns had the
+  same dispersions and noise seeds, so any difference beyond the metric's tolerance
+  (``|new - old| > abs + rel |old|``) is a change in the software under test;
+- distributional: a two-sample Kolmogorov-Smirnov test and a Mann-Whitney U test on the finite values
+  (p < alpha flags a moved distribution), which also works when the inputs differ (other seeds or runs).
+
+Any run that passed in the baseline and fails now is always a regression.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hil_sim.campaign.spec import BaselinePolicy, Tolerance
+
+DEFAULT_REL = 1e-9
+BASELINE_TABLE = "results.parquet"
+BASELINE_META = "baseline.json"
+
+
+def save_baseline(results_dir: Path, dest: Path) -> Path:
+    """Copy a campaign's results table and identity into ``dest`` (a folder)."""
+    src = results_dir / "results.parquet"
+    if not src.exists():
+        raise FileNotFoundError(f"{results_dir} has no results.parquet; run the campaign first")
+    plan = json.loads((results_dir / "plan.json").read_text())
+    dest.mkdir(parents=True, exist_ok=True)
+    df = pd.read_parquet(src)
+    df.to_parquet(dest / BASELINE_TABLE, index=False)
+    (dest / BASELINE_META).write_text(json.dumps({**plan, "source": str(results_dir), "runs_in_table": len(df)},
+                                                 indent=2) + "\n")
+    return dest
+
+
+def load_baseline(dest: Path) -> tuple[pd.DataFrame, dict]:
+    if not (dest / BASELINE_TABLE).exists():
+        raise FileNotFoundError(f"no baseline at {dest} (expected {BASELINE_TABLE}); "
+                                "save one with `keepout campaign baseline save RESULTS_DIR`")
+    return pd.read_parquet(dest / BASELINE_TABLE), json.loads((dest / BASELINE_META).read_text())
+
+
+@dataclass
+class MetricComparison:
+    metric: str
+    paired_runs: int
+    runs_beyond_tolerance: int
+    max_abs_diff: float
+    ks_pvalue: float
+    mw_pvalue: float
+    baseline_median: float
+    new_median: float
+    flagged: bool
+    reasons: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Comparison:
+    same_inputs: bool
+    metrics: list[MetricComparison]
+    new_failures: list[int]
+    fixed_runs: list[int]
+
+    @property
+    def regressed(self) -> bool:
+        return bool(self.new_failures) or any(m.flagged for m in self.metrics)
+
+    def text(self) -> str:
+        lines = [f"{'metric':28s} {'paired':>6s} {'beyond tol':>10s} {'max |diff|':>11s} {'KS p':>8s} "
+                 f"{'MW p':>8s} {'median old':>11s} {'median new':>11s}  verdict"]
+        for m in self.metrics:
+            lines.append(f"{m.metric:28s} {m.paired_runs:6d} {m.runs_beyond_tolerance:10d} {m.max_abs_diff:11.4g} "
+                         f"{m.ks_pvalue:8.3g} {m.mw_pvalue:8.3g} {m.baseline_median:11.4g} {m.new_median:11.4g}  "
+                         + ("MOVED: " + "; ".join(m.reasons) if m.flagged else "ok"))
+        if not self.same_inputs:
+            lines.append("note: campaign inputs differ from the baseline's (fingerprint): per-run differences "
+                         "are not meaningful, only the distribution tests count")
+        if self.new_failures:
+            lines.append(f"new failures (passed in the baseline): runs {self.new_failures}")
+        if self.fixed_runs:
+            lines.append(f"runs that failed in the baseline and pass now: {self.fixed_runs}")
+        lines.append("REGRESSION" if self.regressed else "no regression beyond tolerance")
+        return "\n".join(lines)
+
+
+def _tolerance(policy: BaselinePolicy, metric: str) -> Tolerance:
+    return policy.tolerances.get(metric, Tolerance(abs=0.0, rel=DEFAULT_REL))
+
+
+def _beyond(old: np.ndarray, new: np.ndarray, tol: Tolerance) -> np.ndarray:
+    both_nan = np.isnan(old) & np.isnan(new)
+    same_inf = np.isinf(old) & np.isinf(new) & (np.sign(old) == np.sign(new))
+    with np.errstate(invalid="ignore"):
+        diff = np.abs(new - old)
+        allowed = tol.abs + tol.rel * np.abs(old)
+        out = ~(diff <= allowed)
+    return out & ~both_nan & ~same_inf
+
+
+def compare(baseline: pd.DataFrame, new: pd.DataFrame, policy: BaselinePolicy, *, same_inputs: bool) -> Comparison:
+    metrics = sorted(c for c in set(baseline.columns) & set(new.columns) if c.startswith("m."))
+    merged = baseline.merge(new, on="run", suffixes=("_old", "_new"))
+    out = []
+    for col in metrics:
+        name = col[2:]
+        tol = _tolerance(policy, name)
+        old_all = baseline[col].to_numpy(dtype=float)
+        new_all = new[col].to_numpy(dtype=float)
+        o = merged[f"{col}_old"].to_numpy(dtype=float)
+        n = merged[f"{col}_new"].to_numpy(dtype=float)
+        beyond = _beyond(o, n, tol) if same_inputs else np.zeros(o.size, dtype=bool)
+        with np.errstate(invalid="ignore"):
+            d = np.abs(n - o)
+        d = d[np.isfinite(d)]
+        ks_p, mw_p = _two_sample(old_all, new_all)
+        reasons = []
+        if beyond.any():
+            reasons.append(f"{int(beyond.sum())} runs differ beyond abs {tol.abs:g} + rel {tol.rel:g}")
+        if ks_p < policy.alpha:
+            reasons.append(f"KS p = {ks_p:.3g} < {policy.alpha:g}")
+        if mw_p < policy.alpha:
+            reasons.append(f"Mann-Whitney p = {mw_p:.3g} < {policy.alpha:g}")
+        out.append(MetricComparison(metric=name, paired_runs=int(o.size), runs_beyond_tolerance=int(beyond.sum()),
+                                    max_abs_diff=float(d.max()) if d.size else 0.0, ks_pvalue=ks_p, mw_pvalue=mw_p,
+                                    baseline_median=_median(old_all), new_median=_median(new_all),
+                                    flagged=bool(reasons), reasons=reasons))
+    failed_old = merged["status_old"] != "pass"
+    failed_new = merged["status_new"] != "pass"
+    return Comparison(same_inputs=same_inputs, metrics=out,
+                      new_failures=sorted(merged.loc[failed_new & ~failed_old, "run"].astype(int).tolist()),
+                      fixed_runs=sorted(merged.loc[failed_old & ~failed_new, "run"].astype(int).tolist()))
+
+
+def _two_sample(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    a, b = a[np.isfinite(a)], b[np.isfinite(b)]
+    if a.size < 2 or b.size < 2:
+        return 1.0, 1.0
+    if np.array_equal(np.sort(a), np.sort(b)):
+        return 1.0, 1.0  # identical samples: the tests' p-values are exactly 1 by definition
+    from scipy.stats import ks_2samp, mannwhitneyu
+    ks = ks_2samp(a, b)
+    try:
+        mw = mannwhitneyu(a, b, alternative="two-sided")
+        mw_p = float(mw.pvalue)
+    except ValueError:  # all values identical across both samples
+        mw_p = 1.0
+    return float(ks.pvalue), mw_p if math.isfinite(mw_p) else 1.0
+
+
+def _median(v: np.ndarray) -> float:
+    v = v[np.isfinite(v)]
+    return float(np.median(v)) if v.size else math.nan

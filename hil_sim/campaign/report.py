@@ -1,0 +1,238 @@
+"""The campaign report: plots, Markdown and HTML.
+
+Plots (PNG, in ``report/``): per criterion a histogram and an empirical CDF of its metric with the
+limit drawn; the worst runs' trajectories on the sphere with the keep-out zones; a scatter of the
+first criterion's metric (the keep-out margin in the shipped campaigns) against every dispersed
+parameter, failures in red. The verdict is statistical (Clopper-Pearson, see ``results.verdict``).
+"""
+from __future__ import annotations
+
+import html
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import pandas as pd
+
+from hil_sim.campaign.execute import STATUS_ERROR, STATUS_FAIL, RunRecord
+from hil_sim.campaign.results import Verdict
+from hil_sim.campaign.spec import Campaign, Criterion
+
+WORST_RUNS = 4
+
+
+def slack(criterion: Criterion, value: float) -> float:
+    """Distance to the limit on the passing side (negative: failing)."""
+    if value is None or not math.isfinite(value):
+        return -math.inf
+    return value - criterion.limit if criterion.op in (">", ">=") else (
+        criterion.limit - value if criterion.op in ("<", "<=") else -abs(value - criterion.limit))
+
+
+def worst_runs(campaign: Campaign, records: Sequence[RunRecord], count: int = WORST_RUNS) -> list[RunRecord]:
+    """Errors first, then the smallest slack of the first criterion."""
+    c = campaign.criteria[0]
+    ranked = sorted(records, key=lambda r: (r.status != STATUS_ERROR, slack(c, r.metrics.get(c.metric, math.nan)),
+                                            r.run))
+    return ranked[:count]
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def plot_distribution(df: pd.DataFrame, criterion: Criterion, path: Path) -> Path | None:
+    plt = _plt()
+    col = f"m.{criterion.metric}"
+    if col not in df:
+        return None
+    values = df[col].to_numpy(dtype=float)
+    finite = values[np.isfinite(values)]
+    n_inf = int(values.size - finite.size)
+    fig, (ax_h, ax_c) = plt.subplots(1, 2, figsize=(10, 3.6))
+    if finite.size:
+        ax_h.hist(finite, bins=min(40, max(5, int(np.sqrt(finite.size)) * 2)), color="#4c72b0", alpha=0.85)
+        xs = np.sort(finite)
+        ax_c.step(xs, np.arange(1, xs.size + 1) / values.size, where="post", color="#4c72b0")
+    for ax in (ax_h, ax_c):
+        ax.axvline(criterion.limit, color="#c44e52", lw=2, ls="--", label=f"limit {criterion.op} {criterion.limit:g}")
+        ax.set_xlabel(criterion.metric)
+        ax.grid(alpha=0.3)
+    ax_h.set_ylabel("runs")
+    ax_c.set_ylabel("fraction of runs <= x")
+    ax_c.set_ylim(0, 1.02)
+    ax_h.legend(loc="best", fontsize=8)
+    title = f"{criterion.name}: {criterion.text()}"
+    if n_inf:
+        title += f"  ({n_inf} runs not finite, not drawn)"
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _sphere_axes(ax) -> None:
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 37), np.linspace(0, np.pi, 19))
+    ax.plot_wireframe(np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color="0.85", lw=0.4)
+    ax.set_box_aspect((1, 1, 1))
+    ax.set_xlim(-1, 1), ax.set_ylim(-1, 1), ax.set_zlim(-1, 1)
+    ax.set_xlabel("x_N"), ax.set_ylabel("y_N"), ax.set_zlabel("z_N")
+
+
+def plot_worst_trajectories(campaign: Campaign, worst: Sequence[RunRecord],
+                            trajectories: dict[int, dict[str, np.ndarray]], path: Path) -> Path | None:
+    """Boresight (or the given S^2 path) of the worst runs on the unit sphere with their zones."""
+    shown = [(r, trajectories.get(r.run, {})) for r in worst]
+    shown = [(r, t) for r, t in shown if _sphere_path(t) is not None]
+    if not shown:
+        return None
+    plt = _plt()
+    cols = min(len(shown), 2)
+    rows = int(math.ceil(len(shown) / cols))
+    fig = plt.figure(figsize=(5.2 * cols, 4.8 * rows))
+    c = campaign.criteria[0]
+    for k, (rec, traj) in enumerate(shown):
+        ax = fig.add_subplot(rows, cols, k + 1, projection="3d")
+        _sphere_axes(ax)
+        for key in sorted(traj):
+            if key.startswith("zone_") and traj[key].ndim == 2 and traj[key].shape[1] == 3:
+                b = traj[key]
+                ax.plot(b[:, 0], b[:, 1], b[:, 2], color="#c44e52", lw=1.5)
+        x = _sphere_path(traj)
+        centre = x.mean(axis=0)
+        if np.linalg.norm(centre) > 1e-6:  # look at the path from outside the sphere
+            centre = centre / np.linalg.norm(centre)
+            ax.view_init(elev=np.degrees(np.arcsin(np.clip(centre[2], -1, 1))),
+                         azim=np.degrees(np.arctan2(centre[1], centre[0])))
+        ax.plot(x[:, 0], x[:, 1], x[:, 2], color="#4c72b0", lw=1.6)
+        ax.scatter(*x[0], color="#55a868", s=25, label="start")
+        if "target" in traj and np.asarray(traj["target"]).shape == (3,):
+            ax.scatter(*traj["target"], color="k", marker="*", s=60, label="target")
+        value = rec.metrics.get(c.metric, math.nan)
+        ax.set_title(f"run {rec.run} [{rec.status}] {c.metric} = {value:.3g}", fontsize=9)
+        if k == 0:
+            ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _sphere_path(traj: dict[str, np.ndarray]) -> np.ndarray | None:
+    for key in ("boresight_N", "x"):
+        x = traj.get(key)
+        if x is not None and x.ndim == 2 and x.shape[1] == 3 and x.shape[0] > 1:
+            return x
+    return None
+
+
+def plot_scatter(df: pd.DataFrame, criterion: Criterion, path: Path) -> Path | None:
+    """The first criterion's metric against every dispersed parameter column."""
+    col = f"m.{criterion.metric}"
+    params = [c for c in df.columns if c.startswith("p.") and df[c].nunique(dropna=True) > 1]
+    if col not in df or not params:
+        return None
+    plt = _plt()
+    cols = min(3, len(params))
+    rows = int(math.ceil(len(params) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
+    failed = df["status"].isin([STATUS_FAIL, STATUS_ERROR]).to_numpy()
+    y = df[col].to_numpy(dtype=float)
+    for ax, p in zip(axes.flat, params):
+        x = df[p].to_numpy(dtype=float)
+        ax.scatter(x[~failed], y[~failed], s=10, color="#4c72b0", label="pass")
+        ax.scatter(x[failed], y[failed], s=16, color="#c44e52", marker="x", label="fail")
+        ax.axhline(criterion.limit, color="#c44e52", ls="--", lw=1)
+        ax.set_xlabel(p[2:], fontsize=8)
+        ax.set_ylabel(criterion.metric, fontsize=8)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(params):]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    fig.suptitle(f"{criterion.metric} against each dispersed parameter", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _stats(df: pd.DataFrame, campaign: Campaign) -> list[tuple[str, str, str, str, str, str, str]]:
+    rows = []
+    for c in campaign.criteria:
+        col = f"m.{c.metric}"
+        if col not in df:
+            rows.append((c.name, c.text(), "-", "-", "-", "-", "metric missing"))
+            continue
+        v = df[col].to_numpy(dtype=float)
+        fin = v[np.isfinite(v)]
+        fails = int((~df[f"v.{c.name}"]).sum())
+        q = (lambda p: f"{np.percentile(fin, p):.4g}") if fin.size else (lambda p: "-")
+        rows.append((c.name, c.text(), q(0), q(50), q(5), q(95), f"{fails}"))
+    return rows
+
+
+def write_report(campaign: Campaign, df: pd.DataFrame, records: Sequence[RunRecord], verdict: Verdict,
+                 trajectories: dict[int, dict[str, np.ndarray]], out_dir: Path) -> dict[str, Path]:
+    """Write ``report/*.png``, ``report.md`` and ``report.html`` into ``out_dir``; return the paths."""
+    rep = out_dir / "report"
+    rep.mkdir(parents=True, exist_ok=True)
+    plots: list[tuple[str, Path]] = []
+    for c in campaign.criteria:
+        p = plot_distribution(df, c, rep / f"distribution_{c.name}.png")
+        if p:
+            plots.append((f"{c.name}: histogram and CDF of {c.metric}", p))
+    worst = worst_runs(campaign, records)
+    p = plot_worst_trajectories(campaign, worst, trajectories, rep / "worst_trajectories.png")
+    if p:
+        plots.append(("worst runs on the sphere", p))
+    p = plot_scatter(df, campaign.criteria[0], rep / f"scatter_{campaign.criteria[0].metric}.png")
+    if p:
+        plots.append((f"{campaign.criteria[0].metric} against the dispersed parameters", p))
+
+    stats = _stats(df, campaign)
+    failing = [r for r in sorted(records, key=lambda r: r.run) if r.status != "pass"]
+    md = [f"# Campaign `{campaign.name}`", "", campaign.description.strip(), "",
+          f"**Verdict: {verdict.text()}**", "",
+          f"Mode `{campaign.mode}`, master seed {campaign.master_seed}, {len(records)} runs.", "",
+          "| requirement | predicate | min | median | p5 | p95 | failures |", "|---|---|---|---|---|---|---|"]
+    md += [f"| {' | '.join(row)} |" for row in stats]
+    md += ["", "## Plots", ""]
+    md += [f"![{title}](report/{p.name})" for title, p in plots]
+    md += ["", "## Worst runs", "", "| run | status | " + " | ".join(c.metric for c in campaign.criteria) + " |",
+           "|---|---|" + "---|" * len(campaign.criteria)]
+    for r in worst:
+        md.append(f"| {r.run} | {r.status} | " + " | ".join(f"{r.metrics.get(c.metric, math.nan):.4g}"
+                                                          for c in campaign.criteria) + " |")
+    if failing:
+        md += ["", f"## Failing runs ({len(failing)})", "",
+               "Reproduce one with `keepout campaign rerun <this folder> --run N`; shrink it with "
+               "`keepout campaign shrink <this folder> --run N`.", ""]
+        for r in failing[:50]:
+            why = r.error.splitlines()[0] if r.error else ", ".join(
+                c.name for c in campaign.criteria if not r.verdicts.get(c.name, False))
+            md.append(f"- run {r.run}: {r.status}: {why}")
+    md_path = out_dir / "report.md"
+    md_path.write_text("\n".join(md) + "\n", encoding="utf-8")
+
+    body = [f"<h1>Campaign {html.escape(campaign.name)}</h1>",
+            f"<p>{html.escape(campaign.description.strip())}</p>",
+            f"<p><b>Verdict: {html.escape(verdict.text())}</b></p>",
+            "<table border=1 cellpadding=4><tr><th>requirement</th><th>predicate</th><th>min</th><th>median</th>"
+            "<th>p5</th><th>p95</th><th>failures</th></tr>"]
+    body += ["<tr>" + "".join(f"<td>{html.escape(x)}</td>" for x in row) + "</tr>" for row in stats]
+    body += ["</table>"]
+    body += [f"<h3>{html.escape(t)}</h3><img src='report/{p.name}' style='max-width:100%'>" for t, p in plots]
+    if failing:
+        body += ["<h2>Failing runs</h2><ul>"] + [
+            f"<li>run {r.run}: {html.escape(r.status)} {html.escape(r.error.splitlines()[0] if r.error else '')}</li>"
+            for r in failing[:50]] + ["</ul>"]
+    html_path = out_dir / "report.html"
+    html_path.write_text("<!doctype html><html><head><meta charset='utf-8'><title>campaign "
+                         f"{html.escape(campaign.name)}</title></head><body>" + "\n".join(body) + "</body></html>\n",
+                         encoding="utf-8")
+    return {"markdown": md_path, "html": html_path, **{p.stem: p for _, p in plots}}

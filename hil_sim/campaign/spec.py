@@ -1,0 +1,299 @@
+"""The campaign file: a base mission, its dispersions, how many runs, the seed, the mode and the pass criteria.
+
+A campaign YAML is validated like a mission (pydantic v2, ``extra="forbid"``, every problem reported as
+``file:line:col key.path: message`` by ``hil_sim.yaml_loader``). Dispersions name key paths into the
+mission model, e.g. ``spacecraft.inertia_B_kgm2`` or ``timeline[1].target_N``; a path that does not exist
+in the base mission is reported at load time with the keys that do exist there.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+SCHEMA_VERSION = 1
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+PATH_DESCRIPTION = ("key path into the mission, dots between keys and [i] for list items, "
+                    "e.g. spacecraft.inertia_B_kgm2 or timeline[1].target_N")
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+# ---------------------------------------------------------------------------------------------
+# Scalar distributions (also used inside compound dispersions)
+# ---------------------------------------------------------------------------------------------
+
+class Uniform(_Model):
+    """Uniform on [low, high]."""
+
+    dist: Literal["uniform"]
+    low: float
+    high: float
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "Uniform":
+        if not self.high > self.low:
+            raise ValueError(f"high ({self.high}) must be greater than low ({self.low})")
+        return self
+
+
+class Normal(_Model):
+    """Gaussian N(mean, sigma^2)."""
+
+    dist: Literal["normal"]
+    mean: float = 0.0
+    sigma: float = Field(gt=0)
+
+
+class ClippedNormal(_Model):
+    """Gaussian N(mean, sigma^2) clipped to [low, high] (draws beyond a bound land on the bound)."""
+
+    dist: Literal["clipped_normal"]
+    mean: float = 0.0
+    sigma: float = Field(gt=0)
+    low: float
+    high: float
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "ClippedNormal":
+        if not self.high > self.low:
+            raise ValueError(f"high ({self.high}) must be greater than low ({self.low})")
+        return self
+
+
+ScalarDistribution = Annotated[Union[Uniform, Normal, ClippedNormal], Field(discriminator="dist")]
+
+
+# ---------------------------------------------------------------------------------------------
+# Dispersions: each one draws a value and writes it at ``path`` in the mission
+# ---------------------------------------------------------------------------------------------
+
+class _Dispersion(_Model):
+    name: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]{0,47}$",
+                      description="column name in the results table; also keys this dispersion's own seed, "
+                      "so adding or removing another dispersion never changes this one's draws")
+    path: str = Field(min_length=1, description=PATH_DESCRIPTION)
+
+
+class ScalarDispersion(_Dispersion):
+    """A number: set to the draw, or add it to / multiply the nominal by it."""
+
+    kind: Literal["scalar"]
+    distribution: ScalarDistribution
+    apply: Literal["set", "add", "multiply"] = Field(
+        "set", description="set: value = draw; add: nominal + draw; multiply: nominal * draw")
+
+
+class VectorDispersion(_Dispersion):
+    """A vector (or a flat list) drawn per component with one distribution each (or one for all)."""
+
+    kind: Literal["vector"]
+    distribution: ScalarDistribution | list[ScalarDistribution]
+    apply: Literal["set", "add", "multiply"] = "add"
+
+
+class DirectionDispersion(_Dispersion):
+    """A unit vector: uniform on the whole sphere, or uniform in a cap around the nominal direction."""
+
+    kind: Literal["direction"]
+    cone_half_angle_deg: float | None = Field(
+        None, gt=0, le=180, description="uniform in the cap of this half-angle around the nominal direction "
+        "(omit: uniform on the whole sphere)")
+
+
+class AttitudeDispersion(_Dispersion):
+    """A unit quaternion (scalar first): uniform on SO(3), or a rotation of random axis and bounded angle
+    applied to the nominal (q = q_nominal * dq, i.e. about body axes)."""
+
+    kind: Literal["attitude"]
+    max_angle_deg: float | None = Field(
+        None, gt=0, le=180, description="uniform rotation angle in [0, max] about a uniformly random axis "
+        "(omit: uniform on SO(3))")
+
+
+class InertiaDispersion(_Dispersion):
+    """A 3x3 inertia matrix: J = s R J_nominal R^T, with s a scale draw and R a small misalignment
+    (rotation vector with components N(0, misalignment_sigma_deg^2))."""
+
+    kind: Literal["inertia"]
+    scale: ScalarDistribution | None = Field(None, description="scale factor s on every element")
+    misalignment_sigma_deg: float = Field(0.0, ge=0, le=30, description="per-axis 1-sigma of the principal "
+                                          "axes misalignment rotation vector [deg]")
+
+
+class EpochDispersion(_Dispersion):
+    """An instant uniform in [start, end]: moves the Sun and Moon (ISO-8601 UTC strings)."""
+
+    kind: Literal["epoch"]
+    start_utc: str = Field(description="ISO 8601 with a zone, e.g. 2026-01-01T00:00:00Z")
+    end_utc: str
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "EpochDispersion":
+        from datetime import datetime
+        try:
+            start = datetime.fromisoformat(self.start_utc.replace("Z", "+00:00"))
+            end = datetime.fromisoformat(self.end_utc.replace("Z", "+00:00"))
+        except ValueError as exc:
+            raise ValueError(f"start_utc/end_utc must be ISO 8601: {exc}") from None
+        if start.tzinfo is None or end.tzinfo is None:
+            raise ValueError("give start_utc and end_utc with a time zone (e.g. a trailing Z)")
+        if not end > start:
+            raise ValueError("end_utc must be after start_utc")
+        return self
+
+
+class ChoiceDispersion(_Dispersion):
+    """One of a list of values (any YAML value), with optional probabilities."""
+
+    kind: Literal["choice"]
+    values: list[Any] = Field(min_length=1)
+    probabilities: list[float] | None = None
+
+    @model_validator(mode="after")
+    def _probabilities(self) -> "ChoiceDispersion":
+        if self.probabilities is not None:
+            if len(self.probabilities) != len(self.values) or any(p < 0 for p in self.probabilities):
+                raise ValueError("probabilities: one non-negative number per value")
+            if not math.isclose(sum(self.probabilities), 1.0, abs_tol=1e-9):
+                raise ValueError(f"probabilities must sum to 1 (they sum to {sum(self.probabilities)})")
+        return self
+
+
+class WheelFailureDispersion(_Dispersion):
+    """Fail each wheel independently with a probability (at most ``max_failed``), from a random time.
+
+    The failure is injected as bus faults appended to the list at ``path`` (normally ``faults``): the
+    wheel's command frames stop reaching it (``message_template`` with {n} = 1-based wheel number), so
+    the wheel device's command timeout zeroes its torque, as a dead drive electronics would.
+    """
+
+    kind: Literal["wheel_failure"]
+    n_wheels: int = Field(ge=1, le=6)
+    probability: float = Field(gt=0, le=1, description="per wheel, independent")
+    max_failed: int = Field(1, ge=1, le=6)
+    start_s: ScalarDistribution = Field(description="failure onset, simulated time [s]")
+    fault_kind: Literal["drop", "silent"] = "drop"
+    message_template: str = Field("RW{n}_CMD", description="DBC message of wheel n (1-based)")
+
+
+Dispersion = Annotated[Union[ScalarDispersion, VectorDispersion, DirectionDispersion, AttitudeDispersion,
+                             InertiaDispersion, EpochDispersion, ChoiceDispersion, WheelFailureDispersion],
+                       Field(discriminator="kind")]
+
+
+# ---------------------------------------------------------------------------------------------
+# Pass criteria, verdict, baseline tolerances
+# ---------------------------------------------------------------------------------------------
+
+class Criterion(_Model):
+    """A per-run requirement: ``metric op limit`` must hold (a missing or NaN metric fails)."""
+
+    name: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]{0,47}$")
+    metric: str = Field(description="a metric of the run summary, e.g. min_margin_deg")
+    op: Literal["<", "<=", ">", ">=", "=="]
+    limit: float
+    description: str = ""
+
+    def holds(self, value: float | None) -> bool:
+        if value is None or not math.isfinite(float(value)):
+            return False
+        v = float(value)
+        return {"<": v < self.limit, "<=": v <= self.limit, ">": v > self.limit,
+                ">=": v >= self.limit, "==": v == self.limit}[self.op]
+
+    def text(self) -> str:
+        return f"{self.metric} {self.op} {self.limit:g}"
+
+
+class Verdict(_Model):
+    """Statistical campaign verdict: the one-sided Clopper-Pearson lower bound on the success probability
+    at ``confidence`` must reach ``required_success``."""
+
+    confidence: float = Field(0.95, gt=0, lt=1)
+    required_success: float = Field(0.95, gt=0, lt=1)
+
+
+class Tolerance(_Model):
+    """How far a metric may move against a baseline before ``compare`` flags it."""
+
+    abs: float = Field(0.0, ge=0, description="per-run |new - old| allowed (absolute)")
+    rel: float = Field(0.0, ge=0, description="per-run |new - old| allowed relative to |old|")
+
+
+class BaselinePolicy(_Model):
+    alpha: float = Field(0.01, gt=0, lt=0.5, description="significance of the two-sample tests")
+    tolerances: dict[str, Tolerance] = Field(default_factory=dict, description="per metric; metrics not "
+                                             "listed must reproduce to 1e-9 relative")
+
+
+class Campaign(_Model):
+    """A dispersed campaign of one base mission."""
+
+    schema_version: Literal[1] = Field(description="campaign file format version (this is version 1)")
+    name: str = Field(pattern=NAME_PATTERN, description="output folders are named after it")
+    description: str = ""
+    base_mission: str = Field(description="mission YAML, relative to this file")
+    runs: int = Field(ge=1, le=1_000_000)
+    master_seed: int = Field(ge=0, le=2**63 - 1, description="root of numpy.random.SeedSequence")
+    mode: Literal["fast", "sil"] = "fast"
+    duration_s: float | None = Field(None, gt=0, description="overrides the mission's duration_s")
+    dispersions: list[Dispersion] = Field(default_factory=list)
+    criteria: list[Criterion] = Field(min_length=1)
+    verdict: Verdict = Field(default_factory=Verdict)
+    baseline: BaselinePolicy = Field(default_factory=BaselinePolicy)
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> "Campaign":
+        for what, names in (("dispersions", [d.name for d in self.dispersions]),
+                            ("criteria", [c.name for c in self.criteria])):
+            dupes = sorted({n for n in names if names.count(n) > 1})
+            if dupes:
+                raise ValueError(f"{what}: names must be unique; repeated: {dupes}")
+        return self
+
+    def fingerprint(self) -> str:
+        """Hash of everything that determines the runs' inputs (not ``runs``: extending a campaign
+        with more runs keeps the finished ones valid)."""
+        data = self.model_dump(mode="json", exclude={"runs", "description", "verdict", "baseline"})
+        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def load_campaign(path: str | Path, *, text: str | None = None) -> Campaign:
+    """Load and validate a campaign file; raise ``hil_sim.yaml_loader.ConfigError`` listing every problem."""
+    from hil_sim.yaml_loader import load_model
+    return load_model(path, Campaign, text=text)
+
+
+def resolve_base_mission(campaign_path: str | Path, campaign: Campaign) -> Path:
+    """The base mission file, relative to the campaign file; a clear error when it is missing."""
+    base = (Path(campaign_path).resolve().parent / campaign.base_mission).resolve()
+    if not base.is_file():
+        raise FileNotFoundError(f"{campaign_path}: base_mission '{campaign.base_mission}' not found "
+                                f"(looked for {base})")
+    return base
+
+
+SCHEMA_PATH = Path(__file__).resolve().parents[2] / "config" / "schema" / "campaign.schema.json"
+
+
+def campaign_json_schema() -> dict[str, Any]:
+    """Draft-07 JSON Schema of a campaign file (same rewriting as the mission schema)."""
+    from hil_sim.mission import DRAFT07, _draft07
+    raw = Campaign.model_json_schema(ref_template="#/definitions/{model}")
+    definitions = raw.pop("$defs", {})
+    body = _draft07(raw)
+    return {"$schema": DRAFT07, **body, "definitions": {k: _draft07(v) for k, v in sorted(definitions.items())}}
+
+
+def write_json_schema(path: str | Path = SCHEMA_PATH) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(campaign_json_schema(), indent=2) + "\n", encoding="utf-8")
+    return path
