@@ -223,3 +223,38 @@ def test_arg_encoding_round_trips(data: st.DataObject) -> None:
     decoded, end = decode_args(args, encode_args(args, values))
     assert decoded == values
     assert end == len(encode_args(args, values))
+
+
+def _event_calls_in_flight_code() -> list[tuple[str, int, str, set[str] | None]]:
+    """(file, line, event name, keyword names or None if **kwargs) for every literal event call in fsw/."""
+    import ast
+
+    calls = []
+    for path in sorted((REPO / "fsw").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and node.func.attr in ("event", "_event") and node.args
+                    and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)):
+                continue
+            receiver = node.func.value
+            if isinstance(receiver, ast.Attribute) and receiver.attr.lower() == "dictionary":
+                continue  # a dictionary lookup, not an emission
+            if any(k.arg is None for k in node.keywords):
+                keywords = None
+            else:
+                keywords = {k.arg for k in node.keywords if k.arg != "time_s"}
+            calls.append((str(path.relative_to(REPO)), node.lineno, node.args[0].value, keywords))
+    return calls
+
+
+def test_flight_code_emits_only_dictionary_events_with_their_declared_args() -> None:
+    problems = []
+    for where, line, name, keywords in _event_calls_in_flight_code():
+        try:
+            declared = {a.name for a in DICTIONARY.event(name).args}
+        except DictionaryError:
+            problems.append(f"{where}:{line}: unknown event {name}")
+            continue
+        if keywords is not None and keywords != declared:
+            problems.append(f"{where}:{line}: {name} args {sorted(keywords)} != declared {sorted(declared)}")
+    assert not problems, "\n".join(problems)
