@@ -1,0 +1,248 @@
+"""The spacecraft's CAN devices, wrapping the truth models (``hil_sim.world.World``).
+
+Each node behaves like its hardware on the bus:
+  * :class:`WheelNode`: applies the latest valid RWn_CMD; after ``cmd_timeout_s`` without one it zeroes
+    its torque and raises the "command timeout" fault bit; reports RWn_STATUS every GNC tick.
+  * :class:`ImuNode`: samples the gyro at the IMU rate; each sample becomes an IMU_RATE frame
+    ``latency_s`` later.
+  * :class:`StarTrackerNode`: samples at its own rate; ST_QUAT_A/B go out ``latency_s`` later with the
+    sample's age at transmission in ``age_ms``.
+
+Nodes never touch the bus themselves: they hand frames (with the simulation time at which they are due)
+to the simulator, which owns the bus, the SYNC protocol and fault injection. Frames are built through
+the ICD (cantools), each node keeping its own alive counters.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Protocol, Sequence
+
+import can
+import numpy as np
+
+from fsw.bus.icd import E2ESender, Icd
+
+# Fault bits of RWn_STATUS.fault (see the DBC comment).
+FAULT_OVERSPEED, FAULT_CMD_TIMEOUT, FAULT_DRIVE = 1, 2, 4
+# Fault bits of hil_sim.world.WheelStatus.fault.
+_WORLD_STUCK, _WORLD_NO_TORQUE, _WORLD_SPEED_LIMIT = 1, 2, 4
+_EPS_S = 1e-9
+
+
+class WorldLike(Protocol):
+    """What the devices need from a world (hil_sim.world.World satisfies it)."""
+
+    t: float
+    n_wheels: int
+
+    def imu_sample(self) -> Any: ...
+    def star_tracker_sample(self) -> Any: ...
+    def wheel_status(self) -> Sequence[Any]: ...
+
+
+@dataclass
+class PendingFrame:
+    """A frame due on the bus at simulation time ``due_s``. ``build(t_tx)`` encodes it at transmission."""
+
+    due_s: float
+    source: str
+    build: Any  # Callable[[float], can.Message]
+
+
+def _clamp(value: float, lo: float, hi: float) -> tuple[float, bool]:
+    if value < lo:
+        return lo, True
+    if value > hi:
+        return hi, True
+    return value, False
+
+
+@dataclass
+class WheelNode:
+    """Reaction wheel drive electronics, node RW``index`` (1-based)."""
+
+    index: int
+    icd: Icd
+    cmd_timeout_s: float = 0.3
+    sender: E2ESender | None = None
+    torque_cmd_Nm: float = 0.0
+    last_cmd_t: float | None = None
+    commands_applied: int = 0
+    last_cmd_tick: int | None = None
+
+    def __post_init__(self) -> None:
+        self.sender = self.sender or E2ESender(self.icd)
+        self.name = f"RW{self.index}"
+        self.cmd_name = f"RW{self.index}_CMD"
+        self.status_name = f"RW{self.index}_STATUS"
+
+    def on_command(self, signals: dict, t_s: float) -> None:
+        """A valid RWn_CMD (already E2E-checked) arrived at simulation time ``t_s``."""
+        self.torque_cmd_Nm = float(signals["torque_cmd"])
+        self.last_cmd_tick = int(signals["tick_lsb"])
+        self.last_cmd_t = t_s
+        self.commands_applied += 1
+
+    def timed_out(self, t_s: float) -> bool:
+        return self.last_cmd_t is None or t_s - self.last_cmd_t > self.cmd_timeout_s + _EPS_S
+
+    def torque_at(self, t_s: float) -> float:
+        """Motor torque command in force at ``t_s`` [N m] (0 before the first command and after a timeout)."""
+        return 0.0 if self.timed_out(t_s) else self.torque_cmd_Nm
+
+    def status_frame(self, status: Any, t_s: float) -> can.Message:
+        """RWn_STATUS from the truth wheel status (speed, applied torque, current, temperature, flags)."""
+        fault = 0
+        if status.fault & _WORLD_SPEED_LIMIT:
+            fault |= FAULT_OVERSPEED
+        if status.fault & (_WORLD_STUCK | _WORLD_NO_TORQUE):
+            fault |= FAULT_DRIVE
+        if self.last_cmd_t is not None and self.timed_out(t_s):
+            fault |= FAULT_CMD_TIMEOUT
+        values = {"fault": fault}
+        for signal, value in (("speed", status.speed_rad_s), ("torque", status.torque_Nm),
+                              ("current", status.current_A), ("temp", status.temp_C)):
+            lo, hi = self.icd.signal_range(self.status_name, signal)
+            values[signal], clipped = _clamp(float(value), lo, hi)
+            if clipped and signal == "speed":
+                values["fault"] |= FAULT_OVERSPEED
+        values["temp"] = round(values["temp"])
+        return self.sender.frame(self.status_name, values)
+
+
+@dataclass
+class ImuNode:
+    """Gyro node: one IMU_RATE frame per sample, ``latency_s`` after the sample."""
+
+    icd: Icd
+    rate_hz: float
+    latency_s: float = 0.001
+    sender: E2ESender | None = None
+    samples: int = 0
+
+    def __post_init__(self) -> None:
+        self.sender = self.sender or E2ESender(self.icd)
+        self.period_s = 1.0 / self.rate_hz
+        self.next_due_s = 0.0
+        self._range = self.icd.signal_range("IMU_RATE", "omega_x")
+
+    def poll(self, world: WorldLike, t_s: float) -> list[PendingFrame]:
+        """Sample if a sample is due at ``t_s`` (world at t_s); returns the frame(s) to publish later."""
+        if t_s + _EPS_S < self.next_due_s:
+            return []
+        self.next_due_s += self.period_s * max(1, math.floor((t_s - self.next_due_s + _EPS_S) / self.period_s) + 1)
+        sample = world.imu_sample()
+        omega = np.asarray(sample.omega_BN_B, dtype=float)
+        saturated = bool(sample.saturated)
+        values = {}
+        for axis, w in zip("xyz", omega):
+            values[f"omega_{axis}"], clipped = _clamp(float(w), *self._range)
+            saturated |= clipped
+        values["saturated"] = int(saturated)
+        self.samples += 1
+        sender = self.sender
+        return [PendingFrame(t_s + self.latency_s, "IMU", lambda t_tx, v=values: sender.frame("IMU_RATE", v))]
+
+
+@dataclass
+class StarTrackerNode:
+    """Star tracker node: ST_QUAT_A + ST_QUAT_B per sample, ``latency_s`` after the exposure."""
+
+    icd: Icd
+    rate_hz: float
+    latency_s: float = 0.05
+    sender: E2ESender | None = None
+    samples: int = 0
+
+    def __post_init__(self) -> None:
+        self.sender = self.sender or E2ESender(self.icd)
+        self.period_s = 1.0 / self.rate_hz
+        self.next_due_s = 0.0
+        self._seq = 0
+
+    def poll(self, world: WorldLike, t_s: float) -> list[PendingFrame]:
+        if t_s + _EPS_S < self.next_due_s:
+            return []
+        self.next_due_s += self.period_s * max(1, math.floor((t_s - self.next_due_s + _EPS_S) / self.period_s) + 1)
+        sample = world.star_tracker_sample()
+        q = np.asarray(sample.q_NS, dtype=float)
+        if q[0] < 0:  # same rotation, canonical sign (keeps the scalar part non-negative)
+            q = -q
+        seq = self._seq
+        self._seq = (self._seq + 1) & 0x0F
+        self.samples += 1
+        a = {"q_w": float(np.clip(q[0], -1, 1)), "q_x": float(np.clip(q[1], -1, 1)), "valid": int(sample.valid),
+             "blind_source": int(sample.blind_source), "sample_seq": seq}
+        b_static = {"q_y": float(np.clip(q[2], -1, 1)), "q_z": float(np.clip(q[3], -1, 1)), "sample_seq": seq}
+        t_sample = t_s
+        sender = self.sender
+
+        def build_b(t_tx: float) -> can.Message:
+            age_ms = min(255, max(0, round((t_tx - t_sample) * 1000.0)))
+            return sender.frame("ST_QUAT_B", dict(b_static, age_ms=age_ms))
+
+        due = t_s + self.latency_s
+        return [PendingFrame(due, "STR", lambda t_tx: sender.frame("ST_QUAT_A", a)),
+                PendingFrame(due, "STR", build_b)]
+
+
+@dataclass
+class DeviceTiming:
+    """Device behaviour not in the truth parameters: latencies [s] and the wheels' command timeout [s]."""
+
+    imu_latency_s: float = 0.001
+    star_tracker_latency_s: float = 0.05
+    wheel_cmd_timeout_s: float = 0.3
+
+    def __post_init__(self) -> None:
+        for name in ("imu_latency_s", "star_tracker_latency_s", "wheel_cmd_timeout_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"DeviceTiming.{name}: must be a finite number >= 0 [s], got {value!r}")
+
+
+@dataclass
+class Devices:
+    """All nodes of one spacecraft: the wheels, the IMU and the star tracker."""
+
+    icd: Icd
+    wheels: list[WheelNode]
+    imu: ImuNode
+    star_tracker: StarTrackerNode
+    pending: list[PendingFrame] = field(default_factory=list)
+
+    @classmethod
+    def for_world(cls, world: WorldLike, icd: Icd, timing: DeviceTiming | None = None) -> "Devices":
+        timing = timing or DeviceTiming()
+        n = int(world.n_wheels)
+        if not 1 <= n <= 6:
+            raise ValueError(f"the ICD has nodes RW1..RW6; this spacecraft has {n} wheels")
+        imu_rate = 1.0 / float(getattr(world, "imu_period_s", 0.01))
+        st_rate = 1.0 / float(getattr(world, "star_tracker_period_s", 0.1))
+        return cls(
+            icd=icd,
+            wheels=[WheelNode(i, icd, timing.wheel_cmd_timeout_s) for i in range(1, n + 1)],
+            imu=ImuNode(icd, imu_rate, timing.imu_latency_s),
+            star_tracker=StarTrackerNode(icd, st_rate, timing.star_tracker_latency_s),
+        )
+
+    def sample_sensors(self, world: WorldLike, t_s: float) -> None:
+        """Called with the world at ``t_s`` (after each dynamics step): sensors sample when due."""
+        self.pending.extend(self.imu.poll(world, t_s))
+        self.pending.extend(self.star_tracker.poll(world, t_s))
+
+    def frames_due(self, t_s: float) -> list[can.Message]:
+        """Sensor frames whose transmission time has come by ``t_s``, oldest first, built at ``t_s``."""
+        due = [p for p in self.pending if p.due_s <= t_s + _EPS_S]
+        if not due:
+            return []
+        self.pending = [p for p in self.pending if p.due_s > t_s + _EPS_S]
+        due.sort(key=lambda p: p.due_s)  # stable: keeps A before B
+        return [p.build(t_s) for p in due]
+
+    def wheel_status_frames(self, world: WorldLike, t_s: float) -> list[can.Message]:
+        return [node.status_frame(status, t_s) for node, status in zip(self.wheels, world.wheel_status())]
+
+    def wheel_torques(self, t_s: float) -> np.ndarray:
+        return np.array([w.torque_at(t_s) for w in self.wheels])

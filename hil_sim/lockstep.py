@@ -1,0 +1,341 @@
+"""The SIL time keeper: devices on the bus, SYNC/CYCLE_DONE lockstep, real-time pacing, fault injection.
+
+One GNC tick k (period T, t_k = k T):
+
+  begin_tick()   sensor frames due by t_k and the wheel statuses at t_k go through the fault injector;
+                 SYNC(k, frames_following = number of ICD device frames that follow) goes out first,
+                 then those frames.
+  ...            the flight software runs its cycle and sends RWn_CMD(k) and CYCLE_DONE(k)
+  end_tick()     frames from the flight software are taken off the bus (lockstep: until CYCLE_DONE(k)
+                 or ``cycle_done_timeout_s``, counted as a timeout; the world steps anyway with the held
+                 commands), wheel nodes take valid commands, then the world steps over [t_k, t_k + T]
+                 at the dynamics rate while sensors sample when due.
+
+Three ways to drive it, sharing that code:
+  * ``run_lockstep(n)``: multi-process SIL (flight software in another process on a real bus);
+  * in-process (campaigns' fast mode): ``begin_tick()``; run the FSW cycle on a ``virtual`` bus in the
+    same thread; ``end_tick(wait_s=0)``. No threads, no sleeps;
+  * ``run_realtime(n)``: SYNC paced to the monotonic clock; never waits for the flight software;
+    commands are applied at the dynamics step during which they arrive ("late commands applied late").
+
+Lockstep runs are deterministic: no wall-clock value enters the frames or the world.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable
+
+import can
+
+from fsw.bus.e2e import E2EReceiver
+from fsw.bus.icd import E2ESender, Icd
+from hil_sim.devices import Devices, DeviceTiming, WorldLike
+from hil_sim.faults import FaultInjector
+
+SIM_NODES = ("SIM", "IMU", "STR", "RW1", "RW2", "RW3", "RW4", "RW5", "RW6")
+
+
+@dataclass
+class SimStats:
+    """Counters of the time keeper (the bus E2E counters are in ``Simulator.receiver.counters``)."""
+
+    ticks: int = 0
+    frames_sent: int = 0
+    cycle_done: int = 0
+    cycle_done_timeouts: int = 0   # lockstep: no CYCLE_DONE(k) within the timeout
+    cycle_done_late: int = 0       # real time: CYCLE_DONE(k) arrived after tick k+1 began (or never)
+    stale_cycle_done: int = 0      # a CYCLE_DONE for another tick than the one awaited
+    wheel_commands: int = 0
+    heartbeats: int = 0
+    realtime_overruns: int = 0     # real time: the simulator itself fell behind the clock
+    max_lateness_s: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+class Simulator:
+    """Devices + time keeper for one world on one bus (see the module docstring).
+
+    ``world``: hil_sim.world.World (or anything with its methods); ``bus``: an open python-can bus;
+    ``icd``: the loaded ICD; ``gnc_period_s``: T (a multiple of ``dynamics_dt_s``, itself by default the
+    world's max integration step); ``faults``: FaultSpec / mission BusFault entries.
+    """
+
+    def __init__(self, world: WorldLike, bus: can.BusABC, icd: Icd | None = None, *,
+                 gnc_period_s: float = 0.1, dynamics_dt_s: float | None = None,
+                 timing: DeviceTiming | None = None, faults: Iterable[Any] = (), fault_seed: int = 0,
+                 cycle_done_timeout_s: float = 2.0, clock: Callable[[], float] = time.monotonic,
+                 on_frame: Callable[[str, float, can.Message], None] | None = None) -> None:
+        self.world = world
+        self.bus = bus
+        self.icd = icd or Icd()
+        if dynamics_dt_s is None:
+            params = getattr(world, "params", None)
+            dynamics_dt_s = float(getattr(params, "max_integration_step_s", 0.01))
+        n_sub = round(gnc_period_s / dynamics_dt_s)
+        if n_sub < 1 or not math.isclose(n_sub * dynamics_dt_s, gnc_period_s, rel_tol=1e-9, abs_tol=1e-12):
+            raise ValueError(f"gnc_period_s ({gnc_period_s} s) must be a whole multiple of dynamics_dt_s "
+                             f"({dynamics_dt_s} s)")
+        period_ms = gnc_period_s * 1000.0
+        if abs(period_ms - round(period_ms)) > 1e-9 or not 1 <= round(period_ms) <= 4095:
+            raise ValueError(f"gnc_period_s ({gnc_period_s} s) must be whole milliseconds in 1..4095 (SYNC.period_ms)")
+        self.period_s = gnc_period_s
+        self.period_ms = int(round(period_ms))
+        self.n_sub = n_sub
+        self.dt_s = gnc_period_s / n_sub
+        self.devices = Devices.for_world(world, self.icd, timing)
+        self.n_wheels = len(self.devices.wheels)
+        self.injector = FaultInjector(self.icd, faults, seed=fault_seed)
+        self.cycle_done_timeout_s = cycle_done_timeout_s
+        self.clock = clock
+        self.on_frame = on_frame
+        self._sync_sender = E2ESender(self.icd)
+        own = self.icd.ids_sent_by(*SIM_NODES)
+        watch = [f"RW{i}_CMD" for i in range(1, self.n_wheels + 1)] + ["CYCLE_DONE"]
+        self.receiver = E2EReceiver(self.icd, ignore_ids=own, watch=watch)
+        self._cmd_index = {self.icd.spec(f"RW{i}_CMD").frame_id: i - 1 for i in range(1, self.n_wheels + 1)}
+        self._cycle_done_id = self.icd.spec("CYCLE_DONE").frame_id
+        self._heartbeat_id = self.icd.spec("FSW_HEARTBEAT").frame_id
+        self.tick = 0
+        self.t0_s = float(world.t)
+        self.stats = SimStats()
+        self._done_ticks: set[int] = set()
+        self._tick_open = False
+        self._awaiting: int | None = None
+        # Sensors sample the initial state (t = t0) before the first tick.
+        self.devices.sample_sensors(world, self.t0_s)
+
+    # ------------------------------------------------------------------------------------ time
+    @property
+    def t_s(self) -> float:
+        """Simulation time of the current tick, t0 + k T (exact, not accumulated)."""
+        return self.t0_s + self.tick * self.period_s
+
+    def _sub_t(self, j: int) -> float:
+        return self.t0_s + self.tick * self.period_s + j * self.dt_s
+
+    # ------------------------------------------------------------------------------- tick phases
+    def begin_tick(self) -> int:
+        """Publish SYNC(k) and the device frames of tick k. Returns the number of frames sent."""
+        if self._tick_open:
+            raise RuntimeError("begin_tick() called twice without end_tick()")
+        t = self.t_s
+        frames = self.devices.frames_due(t) + self.devices.wheel_status_frames(self.world, t)
+        frames = self.injector.process(frames, t)
+        following = sum(1 for m in frames if m.arbitration_id in self.icd.by_id)
+        sync = self._sync_sender.frame("SYNC", {"tick": self.tick & 0xFFFFFFFF,
+                                                "frames_following": min(following, 255),
+                                                "period_ms": self.period_ms})
+        out = self.injector.process([sync], t, extras=False) if self.injector else [sync]
+        for msg in out + frames:
+            self._send(msg, t)
+        self._tick_open = True
+        self._awaiting = self.tick
+        return len(out) + len(frames)
+
+    def end_tick(self, wait_s: float | None = None) -> bool:
+        """Take the flight software's frames, then step the world over one GNC period.
+
+        ``wait_s``: how long to wait for CYCLE_DONE(k) (default ``cycle_done_timeout_s``; 0 = only what
+        is queued, the in-process mode). Returns True if CYCLE_DONE(k) was received.
+        """
+        if not self._tick_open:
+            raise RuntimeError("end_tick() without begin_tick()")
+        k = self.tick
+        wait = self.cycle_done_timeout_s if wait_s is None else wait_s
+        done = self._receive_until_done(k, time.monotonic() + max(0.0, wait))
+        if not done:
+            self.stats.cycle_done_timeouts += 1
+        self._advance_period(paced=None)
+        return done
+
+    def _advance_period(self, paced: Callable[[int], None] | None) -> None:
+        """Step the world over [t_k, t_k + T] in dynamics steps; ``paced(j)`` runs before step j (real time)."""
+        for j in range(self.n_sub):
+            if paced is not None:
+                paced(j)
+            t = self._sub_t(j)
+            self.world.step(self.dt_s, self.devices.wheel_torques(t))
+            self.devices.sample_sensors(self.world, self._sub_t(j + 1))
+        self.receiver.check_timeouts(self._sub_t(self.n_sub))
+        self.tick += 1
+        self.stats.ticks += 1
+        self._tick_open = False
+
+    # ---------------------------------------------------------------------------------- receiving
+    def _receive_until_done(self, k: int, deadline: float) -> bool:
+        for msg in self.injector.release(self.t_s, "rx"):  # flight-software frames delayed by a fault
+            self._classify(msg, self.t_s)
+        while True:
+            if k in self._done_ticks:
+                self._done_ticks.discard(k)
+                return True
+            remaining = deadline - time.monotonic()
+            msg = self.bus.recv(timeout=max(0.0, remaining))
+            if msg is None:
+                return False
+            self._handle_rx(msg, self.t_s)
+
+    def poll(self, t_s: float) -> int:
+        """Handle everything queued now, stamping it with simulation time ``t_s``. Returns the count."""
+        n = 0
+        for msg in self.injector.release(t_s, "rx"):
+            self._classify(msg, t_s)
+        while True:
+            msg = self.bus.recv(timeout=0.0)
+            if msg is None:
+                return n
+            self._handle_rx(msg, t_s)
+            n += 1
+
+    def _handle_rx(self, msg: can.Message, t_s: float) -> None:
+        for m in (self.injector.process([msg], t_s, extras=False, direction="rx") if self.injector else [msg]):
+            self._classify(m, t_s)
+
+    def _classify(self, msg: can.Message, t_s: float) -> None:
+        frame = self.receiver.classify(msg, t_s)
+        if frame is None:
+            return
+        if self.on_frame is not None:
+            self.on_frame("rx", t_s, msg)
+        if not frame.delivered:
+            return
+        if frame.frame_id in self._cmd_index:
+            self.devices.wheels[self._cmd_index[frame.frame_id]].on_command(frame.signals, t_s)
+            self.stats.wheel_commands += 1
+        elif frame.frame_id == self._cycle_done_id:
+            tick = int(frame.signals["tick"])
+            self.stats.cycle_done += 1
+            if tick == self._awaiting:
+                self._done_ticks.add(tick)
+            else:
+                self.stats.stale_cycle_done += 1
+        elif frame.frame_id == self._heartbeat_id:
+            self.stats.heartbeats += 1
+
+    def _send(self, msg: can.Message, t_s: float) -> None:
+        self.bus.send(msg)
+        self.stats.frames_sent += 1
+        if self.on_frame is not None:
+            self.on_frame("tx", t_s, msg)
+
+    # -------------------------------------------------------------------------------------- loops
+    def step_in_process(self, fsw_cycle: Callable[[], Any]) -> bool:
+        """One tick with the flight software in this process (same thread, virtual bus):
+        begin_tick(); fsw_cycle(); end_tick(wait_s=0). Returns whether CYCLE_DONE(k) was seen."""
+        self.begin_tick()
+        fsw_cycle()
+        return self.end_tick(wait_s=0.0)
+
+    def run_lockstep(self, n_ticks: int, on_tick: Callable[["Simulator"], None] | None = None) -> SimStats:
+        """Multi-process lockstep: each tick waits for CYCLE_DONE(k) (up to cycle_done_timeout_s)."""
+        for _ in range(n_ticks):
+            self.begin_tick()
+            self.end_tick()
+            if on_tick is not None:
+                on_tick(self)
+        return self.stats
+
+    def run_realtime(self, n_ticks: int, on_tick: Callable[["Simulator"], None] | None = None,
+                     sleep: Callable[[float], None] = time.sleep) -> SimStats:
+        """Real time: tick k starts at wall time start + k T; the world advances one dynamics step per
+        dt of wall time; frames are handled when they arrive. Never waits for the flight software."""
+        start = self.clock() - self.tick * self.period_s  # resume-safe
+
+        def pace(j: int) -> None:
+            target = start + (self.tick * self.period_s) + j * self.dt_s
+            now = self.clock()
+            if target > now:
+                sleep(target - now)
+            else:
+                lateness = now - target
+                self.stats.max_lateness_s = max(self.stats.max_lateness_s, lateness)
+                if lateness > self.dt_s:
+                    self.stats.realtime_overruns += 1
+            self.poll(self._sub_t(j))
+
+        for _ in range(n_ticks):
+            pace(0)
+            awaited = self.tick
+            self.begin_tick()
+            self._advance_period(paced=lambda j: pace(j) if j else self.poll(self._sub_t(0)))
+            # CYCLE_DONE(k) must have arrived before tick k+1 begins; anything later is late.
+            if awaited in self._done_ticks:
+                self._done_ticks.discard(awaited)
+            else:
+                self.stats.cycle_done_late += 1
+            if on_tick is not None:
+                on_tick(self)
+        return self.stats
+
+
+# ------------------------------------------------------------------------------------------------------
+# A minimal flight-software stand-in (tests, benchmarks, bus bring-up): it is NOT the flight software.
+# ------------------------------------------------------------------------------------------------------
+class RateDampingResponder:
+    """Answers each SYNC like the flight software would, with a rate-damping law on the wheels.
+
+    Wheel torques tau = gain * pinv(A) omega_meas (A: 3 x n wheel axes in body), which removes body rate
+    (the wheels absorb the momentum). Uses the real ``FswBusDriver``; runs in process or in its own
+    process (``python -m hil_sim.lockstep --bus SPEC --wheels N``).
+    """
+
+    def __init__(self, driver: Any, wheel_axes_B: Any, gain_Nm_per_rad_s: float = 2.0) -> None:
+        import numpy as np
+
+        self.driver = driver
+        self.pinv = np.linalg.pinv(np.asarray(wheel_axes_B, dtype=float).T)
+        self.gain = gain_Nm_per_rad_s
+        self.cycles = 0
+        self.last_inputs = None
+
+    def cycle(self, timeout_s: float = 0.0) -> bool:
+        """Collect one tick's inputs, send torques and CYCLE_DONE. False if no SYNC arrived."""
+        import numpy as np
+
+        inputs = self.driver.collect_tick(timeout_s)
+        if inputs is None:
+            return False
+        self.last_inputs = inputs
+        omega = inputs.imu.omega_BN_B if inputs.imu is not None else np.zeros(3)
+        torques = self.gain * (self.pinv @ omega)
+        self.driver.send_wheel_torques(inputs.tick, torques)
+        self.driver.send_cycle_done(inputs.tick)
+        self.cycles += 1
+        if self.cycles % 10 == 0:
+            self.driver.send_heartbeat(0, self.cycles)
+        return True
+
+
+def _responder_main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    import numpy as np
+
+    from fsw.bus import FswBusDriver, open_bus
+
+    parser = argparse.ArgumentParser(description="minimal flight-software stand-in answering SYNC frames")
+    parser.add_argument("--bus", required=True, help="bus spec, e.g. socketcan:vcan0")
+    parser.add_argument("--wheels", type=int, default=4)
+    parser.add_argument("--ticks", type=int, default=0, help="stop after this many cycles (0: until idle)")
+    parser.add_argument("--idle-timeout", type=float, default=5.0, help="stop after this long without SYNC [s]")
+    args = parser.parse_args(argv)
+    bus = open_bus(args.bus)
+    try:
+        driver = FswBusDriver(bus, Icd(), args.wheels)
+        axes = np.eye(3)[:, :args.wheels].T if args.wheels <= 3 else np.vstack(
+            [np.eye(3), np.ones((args.wheels - 3, 3)) / math.sqrt(3)])
+        responder = RateDampingResponder(driver, axes)
+        print("READY", flush=True)
+        while responder.cycle(args.idle_timeout):
+            if args.ticks and responder.cycles >= args.ticks:
+                break
+        print(f"cycles {responder.cycles}", flush=True)
+    finally:
+        bus.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(_responder_main())
