@@ -153,6 +153,7 @@ class Channel:
     description: str
     limits: Limits | None = None
     enum: tuple[str, ...] | None = None
+    no_value: float | int | None = None  # wire value meaning "no value" (default: NaN, or 0 for integers)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -162,6 +163,8 @@ class Channel:
             out["limits"] = {"yellow": list(self.limits.yellow), "red": list(self.limits.red)}
         if self.enum is not None:
             out["enum"] = list(self.enum)
+        if self.no_value is not None:
+            out["no_value"] = self.no_value
         return out
 
 
@@ -409,7 +412,7 @@ def _limits_from_dict(data: Mapping[str, Any] | None) -> Limits | None:
 def _channel_from_dict(data: Mapping[str, Any]) -> Channel:
     enum_names = tuple(data["enum"]) if "enum" in data else None
     return Channel(data["name"], data["type"], data["unit"], data["description"],
-                   _limits_from_dict(data.get("limits")), enum_names)
+                   _limits_from_dict(data.get("limits")), enum_names, data.get("no_value"))
 
 
 def _arg_from_dict(data: Mapping[str, Any]) -> Arg:
@@ -477,7 +480,7 @@ _GNC_CHANNELS: list[Channel] = [
     Channel("pointing_error_deg", "F32", "deg", "angle between boresight and target"),
     Channel("att_error_deg", "F32", "deg", "attitude error angle to the target attitude"),
     Channel("roll_error_deg", "F32", "deg", "roll error about the boresight"),
-    Channel("active_zone", "I8", "", "zone whose eps-layer the law is in (-1: none)"),
+    Channel("active_zone", "I8", "", "zone whose eps-layer the law is in (-1: none)", no_value=-1),
     Channel("zone_count", "U8", "", "number of keep-out zones in use"),
     *_indexed("margin_deg", N_ZONES_MAX, "F32", "deg",
               "signed separation from physical keep-out zone (negative inside; NaN unused)",

@@ -109,13 +109,15 @@ class GroundMonitor:
     """Receives telemetry on ``host:port``, archives raw + decoded, tracks gaps, keeps latest values.
 
     ``archive_dir=None`` keeps everything in memory only (tests, quick looks). ``port=0`` binds an
-    ephemeral port (read ``address``). Use as a context manager or call ``close()`` to flush the archive
+    ephemeral port (read ``address``); ``port=None`` opens no socket (feed ``process`` directly). ``write_decoded=False`` archives raw packets and events only
+    (the decoded JSONL of a 24 h soak is gigabytes; ``decode_archive`` rebuilds it from the raw file). Use as a context manager or call ``close()`` to flush the archive
     and write the summary.
     """
 
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, host: str = DEFAULT_HOST,
-                 port: int = DEFAULT_TM_PORT, archive_dir: str | Path | None = None,
-                 recv_buffer_bytes: int = 8 * 1024 * 1024, event_history: int = 20) -> None:
+                 port: int | None = DEFAULT_TM_PORT, archive_dir: str | Path | None = None,
+                 recv_buffer_bytes: int = 8 * 1024 * 1024, event_history: int = 20,
+                 write_decoded: bool = True) -> None:
         self.dictionary = dictionary
         self.stats = GroundStats()
         self.latest: dict[str, Any] = {}
@@ -129,20 +131,34 @@ class GroundMonitor:
         if self.archive_dir is not None:
             self.archive_dir.mkdir(parents=True, exist_ok=True)
             self._raw = open(self.archive_dir / RAW_ARCHIVE, "ab")
-            self._decoded = open(self.archive_dir / DECODED_ARCHIVE, "a", encoding="utf-8")
+            if write_decoded:  # long soaks may keep raw + events only and decode later (`ground decode`)
+                self._decoded = open(self.archive_dir / DECODED_ARCHIVE, "a", encoding="utf-8")
             self._events = open(self.archive_dir / EVENTS_ARCHIVE, "a", encoding="utf-8")
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        # A big receive buffer absorbs bursts when lockstep runs faster than real time.
-        try:
-            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, recv_buffer_bytes)
-        except OSError:
-            pass
-        self._sock.bind((host, port))
-        self._sock.setblocking(False)
+        self._sock: socket.socket | None = None
+        if port is not None:
+            self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            # A big receive buffer absorbs bursts when lockstep runs faster than real time.
+            try:
+                self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, recv_buffer_bytes)
+            except OSError:
+                pass
+            self._sock.bind((host, port))
+            self._sock.setblocking(False)
 
     @property
     def address(self) -> tuple[str, int]:
+        if self._sock is None:
+            raise RuntimeError("this GroundMonitor has no socket (created with port=None)")
         return self._sock.getsockname()
+
+    @property
+    def decoded_stream(self) -> IO[str] | None:
+        """Where decoded records go (the archive's JSONL by default)."""
+        return self._decoded
+
+    @decoded_stream.setter
+    def decoded_stream(self, stream: IO[str] | None) -> None:
+        self._decoded = stream
 
     # ---- receive ----
     def poll(self, timeout_s: float = 0.1) -> int:
@@ -263,7 +279,7 @@ class GroundMonitor:
     def close(self) -> None:
         if self._sock is not None:
             self._sock.close()
-            self._sock = None  # type: ignore[assignment]
+            self._sock = None
         for name in ("_raw", "_decoded", "_events"):
             stream = getattr(self, name)
             if stream is not None:
@@ -294,16 +310,66 @@ def read_raw_archive(path: str | Path) -> Iterator[tuple[float, bytes]]:
             yield rx_time_s, data
 
 
+def decode_archive(archive_dir: str | Path, dictionary: TelemetryDictionary = DICTIONARY
+                   ) -> Iterator[tuple[float, DecodedTm | None, bytes]]:
+    """Yield (rx_time_s, decoded packet or None if undecodable, raw bytes) from a raw archive."""
+    from fsw.telemetry import TelemetryDecodeError, decode_tm_packet
+
+    for rx_time_s, raw in read_raw_archive(Path(archive_dir) / RAW_ARCHIVE):
+        try:
+            yield rx_time_s, decode_tm_packet(dictionary, raw), raw
+        except (TelemetryDecodeError, ValueError):
+            yield rx_time_s, None, raw
+
+
+def read_channels(archive_dir: str | Path, packet_name: str = "GNC",
+                  dictionary: TelemetryDictionary = DICTIONARY) -> dict[str, Any]:
+    """Time series of one packet's channels from the raw archive, as numpy arrays keyed by channel.
+
+    Also holds ``time_s`` (onboard), ``rx_time_s`` (ground) and ``seq``. Enum channels are arrays of
+    names. For plots and summaries in the SIL run folder.
+    """
+    import numpy as np
+
+    packet = dictionary.packet(packet_name)
+    columns: dict[str, list[Any]] = {name: [] for name in ("time_s", "rx_time_s", "seq")}
+    columns.update({c.name: [] for c in packet.channels})
+    for rx_time_s, decoded, _ in decode_archive(archive_dir, dictionary):
+        if decoded is None or decoded.packet != packet_name:
+            continue
+        columns["time_s"].append(decoded.time_s)
+        columns["rx_time_s"].append(rx_time_s)
+        columns["seq"].append(decoded.seq_count)
+        for name, value in decoded.values.items():
+            columns[name].append(value)
+    return {name: np.asarray(values) for name, values in columns.items()}
+
+
+def read_events(archive_dir: str | Path, dictionary: TelemetryDictionary = DICTIONARY) -> list[dict[str, Any]]:
+    """Every event in the raw archive, decoded (dicts as in ``events.jsonl``)."""
+    events = []
+    for rx_time_s, decoded, _ in decode_archive(archive_dir, dictionary):
+        if decoded is not None and decoded.kind == "event":
+            record = decoded.to_json_dict()
+            record["rx_time_s"] = rx_time_s
+            events.append(record)
+    return events
+
+
 def run_ground_monitor(archive_dir: str, host: str = DEFAULT_HOST, port: int = DEFAULT_TM_PORT,
                        duration_s: float | None = None, stop_event: Any | None = None,
-                       dictionary_path: str | None = None, ready: Any | None = None) -> dict[str, Any]:
+                       dictionary_path: str | None = None, ready: Any | None = None,
+                       port_queue: Any | None = None, write_decoded: bool = True) -> dict[str, Any]:
     """Process entry point for the SIL orchestrator (``multiprocessing.Process(target=...)``).
 
     ``ready`` (optional multiprocessing Event) is set once the socket is bound, so the orchestrator
-    can start the flight software without losing the first packets.
+    can start the flight software without losing the first packets. With ``port=0`` the bound port
+    is put on ``port_queue`` (a multiprocessing Queue) before ``ready`` is set.
     """
     dictionary = TelemetryDictionary.load(dictionary_path) if dictionary_path else DICTIONARY
-    monitor = GroundMonitor(dictionary, host, port, archive_dir)
+    monitor = GroundMonitor(dictionary, host, port, archive_dir, write_decoded=write_decoded)
+    if port_queue is not None:
+        port_queue.put(monitor.address[1])
     if ready is not None:
         ready.set()
     return monitor.run(duration_s=duration_s, stop_event=stop_event).to_json_dict()
@@ -423,7 +489,7 @@ def add_cli(subparsers: Any) -> None:
     parser.add_argument("--dictionary", default=None, help="telemetry dictionary JSON (default: built in)")
     parser.add_argument("--no-live", action="store_true", help="no live table; print events as lines")
     parser.set_defaults(func=_cmd_monitor)
-    sub = parser.add_subparsers(dest="ground_command", metavar="{send}")
+    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode}")
     send = sub.add_parser("send", help="send one telecommand, e.g. `keepout ground send SET_MODE POINTING`",
                           epilog=_command_help(DICTIONARY), formatter_class=argparse.RawDescriptionHelpFormatter)
     send.add_argument("opcode", help="command name (or numeric opcode)")
@@ -437,6 +503,10 @@ def add_cli(subparsers: Any) -> None:
     send.add_argument("--no-check", action="store_true",
                       help="skip the dictionary range checks (test the flight-side validation)")
     send.set_defaults(func=_cmd_send)
+    decode = sub.add_parser("decode", help="rebuild the decoded JSONL and gap summary from a raw archive")
+    decode.add_argument("archive_dir", help="directory holding tm_raw.bin")
+    decode.add_argument("--out", default=None, help="output JSONL (default: ARCHIVE_DIR/tm_decoded.jsonl)")
+    decode.set_defaults(func=_cmd_decode)
 
 
 def _command_help(dictionary: TelemetryDictionary) -> str:
@@ -502,6 +572,30 @@ def _cmd_send(args: argparse.Namespace) -> int:
         return 1
     print(f"sent {dictionary.command(command).name} ({len(packet)} bytes) to "
           f"{args.tc_host}:{args.tc_port}: {packet.hex()}")
+    return 0
+
+
+def _cmd_decode(args: argparse.Namespace) -> int:
+    from fsw.dictionary import DictionaryError
+
+    archive = Path(args.archive_dir)
+    if not (archive / RAW_ARCHIVE).exists():
+        print(f"keepout ground decode: {archive / RAW_ARCHIVE} does not exist", file=sys.stderr)
+        return 2
+    try:
+        dictionary = _load_dictionary(args.dictionary)
+    except DictionaryError as exc:
+        print(f"keepout ground decode: {exc}", file=sys.stderr)
+        return 2
+    out_path = Path(args.out) if args.out else archive / DECODED_ARCHIVE
+    replay = GroundMonitor(dictionary, port=None)  # no socket, no archive: decode into one stream
+    with open(out_path, "w", encoding="utf-8") as out:
+        replay.decoded_stream = out
+        for rx_time_s, raw in read_raw_archive(archive / RAW_ARCHIVE):
+            replay.process(raw, rx_time_s)
+    summary = replay.summary()
+    print(f"decoded {summary['decoded']} of {summary['datagrams']} packets into {out_path}; "
+          f"{summary['decode_errors']} decode errors, {summary['missing_packets']} missing")
     return 0
 
 

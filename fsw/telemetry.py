@@ -214,6 +214,8 @@ _INT_LIMITS = {"U8": (0, 255), "I8": (-128, 127), "U16": (0, 65535), "I16": (-32
 
 
 def _default_value(channel: Channel) -> Any:
+    if channel.no_value is not None:
+        return channel.no_value
     if channel.type in ("F32", "F64"):
         return math.nan  # "no value yet" is visible on the ground, never a plausible 0
     if channel.type == "BOOL":
@@ -272,7 +274,8 @@ class TelemetrySender:
 
     # ---- channels ----
     def update(self, packet_name: str, values: Mapping[str, Any]) -> None:
-        """Store channel values without sending. Vector base names take a sequence (``q_est_NB``)."""
+        """Store channel values without sending. Vector base names take a sequence (``q_est_NB``);
+        ``None`` means "no value" (NaN for floats, 0/False otherwise)."""
         latest = self._packet_values(packet_name)
         index = self._index[packet_name]
         channels = self.dictionary.packet(packet_name).channels
@@ -280,11 +283,16 @@ class TelemetrySender:
         for name, value in values.items():
             slot = index.get(name)
             if slot is not None:
-                latest[slot] = _wire_value(channels[slot], value)
+                channel = channels[slot]
+                latest[slot] = _default_value(channel) if value is None else _wire_value(channel, value)
                 continue
             members = groups.get(name)
             if members is None:
                 raise DictionaryError(f"packet {packet_name} has no channel or vector {name!r}")
+            if value is None:  # "no value" (e.g. no target attitude outside QUATERNION mode)
+                for member in members:
+                    latest[index[member]] = _default_value(channels[index[member]])
+                continue
             components = list(value)
             if len(components) > len(members):
                 raise DictionaryError(f"{packet_name}.{name}: {len(components)} values for {len(members)} channels")

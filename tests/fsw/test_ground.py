@@ -19,6 +19,8 @@ from fsw.ground import (
     GroundMonitor,
     limit_state,
     main,
+    read_channels,
+    read_events,
     read_raw_archive,
     render_tables,
     run_ground_monitor,
@@ -157,21 +159,20 @@ def test_monitor_runs_until_stop_event_in_a_thread(tmp_path: Path) -> None:
     assert json.loads((tmp_path / SUMMARY_FILE).read_text())["datagrams"] == 5
 
 
-def test_run_ground_monitor_as_a_separate_process(tmp_path: Path) -> None:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:  # pick a free port for the child
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+def test_run_ground_monitor_as_a_separate_process_on_an_ephemeral_port(tmp_path: Path) -> None:
     ctx = multiprocessing.get_context("spawn")
-    ready, stop = ctx.Event(), ctx.Event()
+    ready, stop, port_queue = ctx.Event(), ctx.Event(), ctx.Queue()
     process = ctx.Process(target=run_ground_monitor,
-                          kwargs={"archive_dir": str(tmp_path), "port": port, "stop_event": stop, "ready": ready,
-                                  "duration_s": 30.0})
+                          kwargs={"archive_dir": str(tmp_path), "port": 0, "stop_event": stop, "ready": ready,
+                                  "port_queue": port_queue, "duration_s": 30.0, "write_decoded": False})
     process.start()
     try:
         assert ready.wait(20.0)
+        port = port_queue.get(timeout=5.0)
         tm = TelemetrySender(DICTIONARY, "127.0.0.1", port)
         for cycle in range(10):
-            tm.send_channels("GNC", {"cycle": cycle})
+            tm.send_channels("GNC", {"cycle": cycle, "pointing_error_deg": 10.0 - cycle})
+        tm.event("TARGET_REACHED", error_deg=0.01)
         tm.close()
         time.sleep(0.3)
         stop.set()
@@ -180,8 +181,18 @@ def test_run_ground_monitor_as_a_separate_process(tmp_path: Path) -> None:
         if process.is_alive():
             process.kill()
     assert process.exitcode == 0
-    assert len(list(read_raw_archive(tmp_path / RAW_ARCHIVE))) == 10
+    assert len(list(read_raw_archive(tmp_path / RAW_ARCHIVE))) == 11
+    assert not (tmp_path / DECODED_ARCHIVE).exists()  # raw + events only, as asked
     assert json.loads((tmp_path / SUMMARY_FILE).read_text())["missing_packets"] == 0
+    # The SIL reads channel time series and events back from the raw archive.
+    series = read_channels(tmp_path, "GNC")
+    assert list(series["cycle"]) == list(range(10)) and list(series["seq"]) == list(range(10))
+    assert series["pointing_error_deg"][-1] == 1.0 and series["mode"][0] == "SAFE"
+    assert [e["event"] for e in read_events(tmp_path)] == ["TARGET_REACHED"]
+    # `keepout ground decode` rebuilds the decoded JSONL from the raw archive.
+    assert main(["ground", "decode", str(tmp_path)]) == 0
+    lines = (tmp_path / DECODED_ARCHIVE).read_text().splitlines()
+    assert len(lines) == 11 and json.loads(lines[-1])["event"] == "TARGET_REACHED"
 
 
 def test_cli_monitor_with_duration(tmp_path: Path, capsys) -> None:

@@ -192,3 +192,13 @@ def test_send_errors_are_counted_not_raised() -> None:
     tm._sock.close()  # simulate a dead socket: sendto raises OSError
     tm.send_channels("HK", {"cycles": 1})
     assert tm.counters["send_errors"] == 1 and tm.counters["packets_sent"] == 0
+
+
+def test_none_means_no_value() -> None:
+    tm = TelemetrySender(DICTIONARY, port=None)
+    tm.update("GNC", {"q_target_NB": [1.0, 0.0, 0.0, 0.0], "eps": 0.2, "active_zone": 3})
+    values = decode_tm_packet(DICTIONARY, tm.send_channels(
+        "GNC", {"q_target_NB": None, "eps": None, "active_zone": None})).values
+    assert all(math.isnan(values[f"q_target_NB_{i}"]) for i in range(4))
+    assert math.isnan(values["eps"]) and values["active_zone"] == -1  # the dictionary's "no zone"
+    assert values["zone_count"] == 0
