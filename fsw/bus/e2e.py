@@ -59,7 +59,7 @@ def e2e_crc(data_id: int, payload_without_crc: bytes | bytearray) -> int:
 OK = "ok"
 OK_SOME_LOST = "ok_some_lost"      # counter jumped by 2..max_delta: data good, some frames lost
 REPEATED = "repeated"              # same counter as the last accepted frame (duplicate / stuck counter)
-WRONG_SEQUENCE = "wrong_sequence"  # counter jumped by more than max_delta (or went backwards)
+WRONG_SEQUENCE = "wrong_sequence"  # counter jumped forward by more than max_delta, or went backwards
 CRC_ERROR = "crc_error"
 TIMEOUT = "timeout"                # no valid frame within the message's E2ETimeoutMs
 BAD_LENGTH = "bad_length"          # DLC differs from the ICD
@@ -169,8 +169,12 @@ class E2EReceiver:
         delta = (counter - state.last_counter) & 0x0F
         if delta == 0:
             return REPEATED
-        # Resynchronise on the received counter even when the jump is too large, so that one lost
-        # burst costs one rejected frame (as profile 1's state machine recovers on the next frame).
+        if delta > 8:
+            # Counter went backwards: an old (delayed) frame. Rejected without moving the reference, so
+            # the fresh frames around it stay in sequence.
+            return WRONG_SEQUENCE
+        # A forward jump resynchronises on the received counter even when too large, so that one lost
+        # burst costs one rejected frame (profile 1's state machine recovers on the next frame).
         state.last_counter = counter
         if delta == 1:
             return OK

@@ -1,0 +1,240 @@
+"""Lockstep SIL over the bus: in-process stepping, determinism, timeouts, real time, two runs side by side."""
+from __future__ import annotations
+
+import itertools
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fsw.bus import FswBusDriver, Icd, open_bus
+from fsw.bus.transport import udp_endpoint_for_run
+from hil_sim.lockstep import RateDampingResponder, Simulator
+from hil_sim.params import SpacecraftParams, WorldParams
+from hil_sim.world import World
+
+ROOT = Path(__file__).resolve().parents[2]
+_channels = itertools.count()
+OMEGA0 = (0.02, -0.01, 0.015)
+
+
+@pytest.fixture(scope="module")
+def icd() -> Icd:
+    return Icd()
+
+
+def _params() -> WorldParams:
+    return WorldParams(spacecraft=SpacecraftParams(omega_BN_B0_rad_s=OMEGA0))
+
+
+def _in_process_pair(icd: Icd, seed: int = 3, **sim_kwargs):
+    channel = f"virtual:ls{next(_channels)}"
+    sim_bus, fsw_bus = open_bus(channel), open_bus(channel)
+    params = _params()
+    world = World(params, seed=seed)
+    sim = Simulator(world, sim_bus, icd, **sim_kwargs)
+    driver = FswBusDriver(fsw_bus, icd, world.n_wheels)
+    responder = RateDampingResponder(driver, [w.axis_B for w in params.spacecraft.wheels], 5.0)
+    return sim, driver, responder, (sim_bus, fsw_bus)
+
+
+def _close(buses) -> None:
+    for bus in buses:
+        bus.shutdown()
+
+
+def test_in_process_closed_loop_damps_the_rate(icd: Icd) -> None:
+    sim, driver, responder, buses = _in_process_pair(icd)
+    try:
+        for _ in range(100):
+            assert sim.step_in_process(responder.cycle)
+            inputs = responder.last_inputs
+            assert inputs.complete and inputs.frames_received == inputs.frames_expected
+        world = sim.world
+        assert world.t == pytest.approx(10.0)
+        assert np.linalg.norm(world.truth.omega_BN_B) < 0.1 * np.linalg.norm(OMEGA0)
+        assert sim.stats.cycle_done == 100 and sim.stats.cycle_done_timeouts == 0
+        assert sim.stats.wheel_commands == 100 * world.n_wheels
+        # 100 Hz IMU at 10 Hz GNC: 10 samples per tick once running; nothing but ok on either side
+        assert len(responder.last_inputs.imu_samples) == 10
+        bad = {c: n for name, counts in driver.counters.items() for c, n in counts.items()
+               if c not in ("ok",) and n}
+        assert bad == {}
+        assert all(n == 0 for c, n in sim.receiver.counters["CYCLE_DONE"].items() if c != "ok")
+    finally:
+        _close(buses)
+
+
+def test_lockstep_is_deterministic(icd: Icd) -> None:
+    def run() -> tuple[list, np.ndarray]:
+        log: list = []
+        sim, _, responder, buses = _in_process_pair(icd, seed=11,
+                                                    on_frame=lambda d, t, m: log.append((d, t, m.arbitration_id,
+                                                                                         bytes(m.data))))
+        try:
+            for _ in range(30):
+                sim.step_in_process(responder.cycle)
+            return log, sim.world.truth.q_NB
+        finally:
+            _close(buses)
+
+    log_a, q_a = run()
+    log_b, q_b = run()
+    assert len(log_a) > 30 * 15
+    assert log_a == log_b
+    assert np.array_equal(q_a, q_b)
+
+
+def test_missing_cycle_done_is_counted_and_the_world_steps_with_held_then_zero_torque(icd: Icd) -> None:
+    sim, driver, responder, buses = _in_process_pair(icd)
+    try:
+        for _ in range(5):
+            sim.step_in_process(responder.cycle)
+        held = sim.devices.wheel_torques(sim.t_s).copy()
+        assert np.any(held != 0)
+        t_before = sim.world.t
+        for _ in range(5):  # the flight software stops answering
+            sim.begin_tick()
+            assert sim.end_tick(wait_s=0.01) is False
+        assert sim.stats.cycle_done_timeouts == 5
+        assert sim.world.t == pytest.approx(t_before + 0.5)
+        # command timeout 0.3 s: torque held for 3 periods, then zero, and the status says why
+        assert np.all(sim.devices.wheel_torques(sim.t_s) == 0.0)
+        sim.begin_tick()
+        ticks = list(iter(lambda: driver.collect_tick(0.0), None))  # the backlog, oldest first
+        assert [i.tick for i in ticks] == list(range(5, 11))
+        inputs = ticks[-1]
+        assert all(w.fault & 2 for w in inputs.wheels)
+        assert all(w.torque_Nm == 0.0 for w in inputs.wheels)
+    finally:
+        _close(buses)
+
+
+def test_realtime_never_waits_for_the_flight_software(icd: Icd) -> None:
+    sim, _, _, buses = _in_process_pair(icd, gnc_period_s=0.02, dynamics_dt_s=0.01)
+    try:
+        start = time.monotonic()
+        sim.run_realtime(10)
+        elapsed = time.monotonic() - start
+        assert sim.stats.ticks == 10 and sim.stats.cycle_done_late == 10
+        assert 0.18 <= elapsed < 1.5  # paced by the clock (10 x 20 ms), not blocked by the silent FSW
+        assert sim.world.t == pytest.approx(0.2)
+    finally:
+        _close(buses)
+
+
+def test_realtime_applies_late_commands_when_they_arrive(icd: Icd) -> None:
+    """Fake clock: a command that arrives mid-period is applied from the dynamics step it arrived in."""
+    channel = f"virtual:rt{next(_channels)}"
+    sim_bus, fsw_bus = open_bus(channel), open_bus(channel)
+    try:
+        world = World(_params(), seed=1)
+        now = [0.0]
+        sim = Simulator(world, sim_bus, icd, gnc_period_s=0.1, dynamics_dt_s=0.01, clock=lambda: now[0])
+        driver = FswBusDriver(fsw_bus, icd, world.n_wheels)
+        sent = []
+
+        def fake_sleep(dt: float) -> None:
+            now[0] += dt
+            # The flight software answers tick 0 only after 45 ms of wall time.
+            if not sent and now[0] >= 0.045:
+                driver.collect_tick(0.0)
+                driver.send_wheel_torques(0, [0.01] * world.n_wheels)
+                driver.send_cycle_done(0)
+                sent.append(now[0])
+
+        applied = []
+        real_step = world.step
+        world.step = lambda dt, u: (applied.append(np.array(u)), real_step(dt, u))[1]
+        sim.run_realtime(1, sleep=fake_sleep)
+        first_nonzero = next(j for j, u in enumerate(applied) if np.any(u != 0))
+        assert first_nonzero == 5  # steps 0..4 ran before the command arrived (at 45-50 ms)
+        assert sim.stats.cycle_done_late == 0
+    finally:
+        _close((sim_bus, fsw_bus))
+
+
+# ------------------------------------------------------------------------------ multi-process lockstep
+def _start_responder(spec: str, n_wheels: int) -> subprocess.Popen:
+    proc = subprocess.Popen([sys.executable, "-m", "hil_sim.lockstep", "--bus", spec, "--wheels", str(n_wheels),
+                             "--idle-timeout", "3"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    line = proc.stdout.readline()
+    assert line.strip() == "READY", proc.stderr.read()
+    return proc
+
+
+def _run_side_by_side(icd: Icd, specs: list[str], ticks: int = 40) -> None:
+    """Two SIL runs at once, each: its own bus, world, simulator and responder process."""
+    procs, sims, buses = [], [], []
+    try:
+        for i, spec in enumerate(specs):
+            world = World(_params(), seed=20 + i)
+            procs.append(_start_responder(spec, world.n_wheels))
+            bus = open_bus(spec)
+            buses.append(bus)
+            sims.append(Simulator(world, bus, icd, cycle_done_timeout_s=2.0))
+        time.sleep(0.2)  # let the responders' sockets settle
+        threads = [threading.Thread(target=s.run_lockstep, args=(ticks,)) for s in sims]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(timeout=60)
+        for sim in sims:
+            assert sim.stats.ticks == ticks
+            assert sim.stats.cycle_done == ticks and sim.stats.cycle_done_timeouts == 0
+            assert sim.stats.stale_cycle_done == 0  # a foreign CYCLE_DONE would show here
+            counts = sim.receiver.counters
+            assert counts["_bus"]["unknown_id"] == 0
+            for name in ("CYCLE_DONE", "RW1_CMD"):
+                assert counts[name]["ok"] == ticks, (name, counts[name])
+                assert sum(counts[name].values()) == ticks, (name, counts[name])
+        for proc in procs:
+            out, err = proc.communicate(timeout=20)
+            assert f"cycles {ticks}" in out, err
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+        for bus in buses:
+            bus.shutdown()
+
+
+def test_two_lockstep_runs_side_by_side_on_udp_multicast(icd: Icd) -> None:
+    specs = []
+    for run in ("side-a", "side-b"):
+        group, port = udp_endpoint_for_run(f"{run}-{os.getpid()}")
+        specs.append(f"udp_multicast:{group}:{port}")
+    _run_side_by_side(icd, specs)
+
+
+@pytest.mark.socketcan
+def test_two_lockstep_runs_side_by_side_on_vcan0_and_vcan1(icd: Icd) -> None:
+    _run_side_by_side(icd, ["socketcan:vcan0", "socketcan:vcan1"])
+
+
+@pytest.mark.socketcan
+def test_lockstep_over_socketcan_with_in_process_fsw_thread(icd: Icd) -> None:
+    """Simulator and the real FswBusDriver on two sockets of vcan0 (flight side in a thread)."""
+    sim_bus, fsw_bus = open_bus("socketcan:vcan0"), open_bus("socketcan:vcan0")
+    try:
+        params = _params()
+        world = World(params, seed=5)
+        sim = Simulator(world, sim_bus, icd)
+        driver = FswBusDriver(fsw_bus, icd, world.n_wheels)
+        responder = RateDampingResponder(driver, [w.axis_B for w in params.spacecraft.wheels], 5.0)
+        fsw = threading.Thread(target=lambda: [responder.cycle(2.0) for _ in range(50)])
+        fsw.start()
+        sim.run_lockstep(50)
+        fsw.join(timeout=30)
+        assert sim.stats.cycle_done == 50 and sim.stats.cycle_done_timeouts == 0
+        assert driver.counters["IMU_RATE"]["ok"] >= 490
+        assert np.linalg.norm(world.truth.omega_BN_B) < np.linalg.norm(OMEGA0)
+    finally:
+        sim_bus.shutdown()
+        fsw_bus.shutdown()
