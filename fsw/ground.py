@@ -482,8 +482,12 @@ def add_cli(subparsers: Any) -> None:
         "ground", help="ground monitor: receive/archive/display telemetry; send telecommands",
         description="Receive, archive and display keepout telemetry; `ground send` sends a telecommand.",
     )
-    parser.add_argument("--host", default=DEFAULT_HOST, help="address to bind for telemetry (default loopback)")
-    parser.add_argument("--port", type=int, default=DEFAULT_TM_PORT, help="telemetry UDP port")
+    parser.add_argument("--config", default=None,
+                        help="mission YAML: take telemetry/telecommand addresses from flight_software.tmtc")
+    parser.add_argument("--host", default=None,
+                        help=f"address to bind for telemetry (default {DEFAULT_HOST} or the mission's)")
+    parser.add_argument("--port", type=int, default=None,
+                        help=f"telemetry UDP port (default {DEFAULT_TM_PORT} or the mission's)")
     parser.add_argument("--archive", default="ground_archive", help="archive directory (raw + decoded)")
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     parser.add_argument("--dictionary", default=None, help="telemetry dictionary JSON (default: built in)")
@@ -494,8 +498,10 @@ def add_cli(subparsers: Any) -> None:
                           epilog=_command_help(DICTIONARY), formatter_class=argparse.RawDescriptionHelpFormatter)
     send.add_argument("opcode", help="command name (or numeric opcode)")
     send.add_argument("args", nargs="*", help="command arguments in dictionary order")
-    send.add_argument("--host", dest="tc_host", default=DEFAULT_HOST, help="flight software TC address")
-    send.add_argument("--port", dest="tc_port", type=int, default=DEFAULT_TC_PORT, help="telecommand UDP port")
+    send.add_argument("--host", dest="tc_host", default=None,
+                      help=f"flight software TC address (default {DEFAULT_HOST} or the mission's)")
+    send.add_argument("--port", dest="tc_port", type=int, default=None,
+                      help=f"telecommand UDP port (default {DEFAULT_TC_PORT} or the mission's)")
     send.add_argument("--seq", type=int, default=0, help="TC sequence count to use (without --seq-file)")
     send.add_argument("--seq-file", default=None,
                       help="file holding the next TC sequence count (incremented per send), so that the "
@@ -528,18 +534,34 @@ def _load_dictionary(path: str | None) -> TelemetryDictionary:
     return TelemetryDictionary.load(path) if path else DICTIONARY
 
 
+def _mission_addresses(config_path: str | None) -> dict[str, Any]:
+    """Telemetry/telecommand addresses from a mission YAML (``fsw.config``), or the defaults."""
+    addresses = {"tm_host": DEFAULT_HOST, "tm_port": DEFAULT_TM_PORT, "tc_host": DEFAULT_HOST,
+                 "tc_port": DEFAULT_TC_PORT}
+    if config_path:
+        from fsw.config import load_fsw_config
+
+        tmtc = load_fsw_config(config_path).tmtc  # raises ConfigError naming the file and key
+        addresses.update(tm_host=tmtc.telemetry_host, tm_port=tmtc.telemetry_port,
+                         tc_host=tmtc.telecommand_bind_host, tc_port=tmtc.telecommand_port)
+    return addresses
+
+
 def _cmd_monitor(args: argparse.Namespace) -> int:
     from fsw.dictionary import DictionaryError
 
     try:
         dictionary = _load_dictionary(args.dictionary)
-    except DictionaryError as exc:
+        addresses = _mission_addresses(args.config)
+    except (DictionaryError, ValueError) as exc:
         print(f"keepout ground: {exc}", file=sys.stderr)
         return 2
+    host = args.host if args.host is not None else addresses["tm_host"]
+    port = args.port if args.port is not None else addresses["tm_port"]
     try:
-        monitor = GroundMonitor(dictionary, args.host, args.port, args.archive)
+        monitor = GroundMonitor(dictionary, host, port, args.archive)
     except OSError as exc:
-        print(f"keepout ground: cannot bind {args.host}:{args.port}: {exc}", file=sys.stderr)
+        print(f"keepout ground: cannot bind {host}:{port}: {exc}", file=sys.stderr)
         return 2
     print(f"keepout ground: telemetry on {monitor.address[0]}:{monitor.address[1]}, archive {args.archive}")
     monitor.echo_events = args.no_live
@@ -555,6 +577,9 @@ def _cmd_send(args: argparse.Namespace) -> int:
 
     try:
         dictionary = _load_dictionary(args.dictionary)
+        addresses = _mission_addresses(args.config)
+        tc_host = args.tc_host if args.tc_host is not None else addresses["tc_host"]
+        tc_port = args.tc_port if args.tc_port is not None else addresses["tc_port"]
         command: str | int = int(args.opcode, 0) if args.opcode[:1].isdigit() else args.opcode.upper()
         dictionary.command(command)  # unknown command: fail before touching the sequence file
         seq = args.seq
@@ -562,16 +587,15 @@ def _cmd_send(args: argparse.Namespace) -> int:
             from spacepackets.seqcount import CcsdsFileSeqCountProvider
 
             seq = CcsdsFileSeqCountProvider(Path(args.seq_file)).get_and_increment()
-        with CommandSender(dictionary, args.tc_host, args.tc_port, seq) as sender:
+        with CommandSender(dictionary, tc_host, tc_port, seq) as sender:
             packet = sender.send(command, *args.args, check_range=not args.no_check)
     except (ArgError, DictionaryError, ValueError) as exc:
         print(f"keepout ground send: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
-        print(f"keepout ground send: cannot send to {args.tc_host}:{args.tc_port}: {exc}", file=sys.stderr)
+        print(f"keepout ground send: cannot send to {tc_host}:{tc_port}: {exc}", file=sys.stderr)
         return 1
-    print(f"sent {dictionary.command(command).name} ({len(packet)} bytes) to "
-          f"{args.tc_host}:{args.tc_port}: {packet.hex()}")
+    print(f"sent {dictionary.command(command).name} ({len(packet)} bytes) to {tc_host}:{tc_port}: {packet.hex()}")
     return 0
 
 

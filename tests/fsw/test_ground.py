@@ -199,3 +199,25 @@ def test_cli_monitor_with_duration(tmp_path: Path, capsys) -> None:
     assert main(["ground", "--port", "0", "--duration", "0.3", "--no-live", "--archive", str(tmp_path)]) == 0
     assert "received 0 packets" in capsys.readouterr().out
     assert (tmp_path / SUMMARY_FILE).exists()
+
+
+def test_send_takes_the_telecommand_address_from_the_mission_config(tmp_path: Path) -> None:
+    dispatcher = CommandDispatcher(DICTIONARY, None, "127.0.0.1", 0)
+    calls: list[str] = []
+    dispatcher.register("NOOP", lambda: calls.append("NOOP"))
+    mission = tmp_path / "mission.yaml"
+    mission.write_text("flight_software:\n  tmtc:\n    telecommand_bind_host: 127.0.0.1\n"
+                       f"    telecommand_port: {dispatcher.address[1]}\n")
+    assert main(["ground", "--config", str(mission), "send", "NOOP"]) == 0
+    deadline = time.monotonic() + 3.0
+    while not calls and time.monotonic() < deadline:
+        dispatcher.poll(timeout_s=0.1)
+    dispatcher.close()
+    assert calls == ["NOOP"] and dispatcher.counters["accepted"] == 1
+
+
+def test_bad_mission_config_is_reported_not_raised(tmp_path: Path, capsys) -> None:
+    mission = tmp_path / "mission.yaml"
+    mission.write_text("flight_software:\n  tmtc:\n    telecommand_port: -5\n")
+    assert main(["ground", "--config", str(mission), "send", "NOOP"]) == 2
+    assert "telecommand_port" in capsys.readouterr().err
