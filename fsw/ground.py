@@ -124,6 +124,7 @@ class GroundMonitor:
         self.latest_time_s: float | None = None
         self.events: collections.deque[DecodedTm] = collections.deque(maxlen=event_history)
         self.echo_events = False  # print each event as a line (the CLI without the live table)
+        self.max_packets_per_poll = 5000
         self.archive_dir = Path(archive_dir) if archive_dir is not None else None
         self._raw: IO[bytes] | None = None
         self._decoded: IO[str] | None = None
@@ -169,10 +170,10 @@ class GroundMonitor:
         if not ready:
             return 0
         count = 0
-        while True:
+        while count < self.max_packets_per_poll:  # bounded, so a flood cannot starve stop/display
             try:
                 data = self._sock.recv(65536)
-            except (BlockingIOError, InterruptedError):
+            except OSError:  # includes BlockingIOError: nothing left
                 break
             self.process(data, time.time())
             count += 1

@@ -8,6 +8,8 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fsw.dictionary import DICTIONARY, EVENT_APID, GNC_APID, HK_APID, DictionaryError
 from fsw.telemetry import (
@@ -16,6 +18,7 @@ from fsw.telemetry import (
     TelemetrySender,
     crc16_ccitt,
     decode_tm_packet,
+    encode_event_packet,
 )
 
 
@@ -202,3 +205,35 @@ def test_none_means_no_value() -> None:
     assert all(math.isnan(values[f"q_target_NB_{i}"]) for i in range(4))
     assert math.isnan(values["eps"]) and values["active_zone"] == -1  # the dictionary's "no zone"
     assert values["zone_count"] == 0
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.data())
+def test_decoder_and_ground_survive_any_datagram(data: st.DataObject) -> None:
+    from fsw.ground import GroundMonitor
+
+    tm = TelemetrySender(DICTIONARY, port=None, clock=lambda: 1.0)
+    reason = "x" * data.draw(st.integers(0, 200))
+    event = encode_event_packet(DICTIONARY, DICTIONARY.event("CMD_REJECTED"), 0, 1.0,
+                                {"opcode": 3, "error": "FORMAT", "reason": reason[:120]})
+    valid = [tm.send_channels("GNC", {"cycle": 1}), tm.send_channels("HK"), event]
+    raw = bytearray(data.draw(st.sampled_from(valid)))
+    kind = data.draw(st.sampled_from(["truncate", "flip", "append", "random", "resync"]))
+    if kind == "truncate":
+        raw = raw[: data.draw(st.integers(0, len(raw) - 1))]
+    elif kind == "flip":
+        raw[data.draw(st.integers(0, len(raw) - 1))] ^= data.draw(st.integers(1, 255))
+    elif kind == "append":
+        raw += data.draw(st.binary(min_size=1, max_size=64))
+    elif kind == "random":
+        raw = bytearray(data.draw(st.binary(max_size=400)))
+    else:  # damage inside, then fix length and CRC so only the payload decoder can notice
+        raw[data.draw(st.integers(6, len(raw) - 3))] = data.draw(st.integers(0, 255))
+        raw[-2:] = struct.pack("!H", crc16_ccitt(bytes(raw[:-2])))
+    try:
+        decode_tm_packet(DICTIONARY, bytes(raw))
+    except TelemetryDecodeError:
+        pass
+    monitor = GroundMonitor(DICTIONARY, port=None)
+    monitor.process(bytes(raw), 0.0)
+    assert monitor.stats.datagrams == 1 and monitor.stats.decoded + monitor.stats.decode_errors == 1
