@@ -3,8 +3,10 @@
 ``keepout ground`` listens for telemetry (loopback by default), archives every datagram raw
 (``tm_raw.bin``: records of ``rx_time_s`` float64 + ``length`` u32 + bytes, big-endian) before decoding
 it, then writes the decoded packet to ``tm_decoded.jsonl`` (events also to ``events.jsonl``), checks the
-per-APID sequence count for gaps, and shows a live table of key channels (coloured by their dictionary
-limits) and the latest events. On exit ``ground_summary.json`` holds per-APID counts, gaps and errors.
+per-APID sequence count for gaps, limit-checks every channel that has dictionary limits (each
+GREEN/YELLOW/RED transition goes to ``limits.jsonl``), and shows a live table of key channels (coloured
+by their limits) and the latest events. On exit ``ground_summary.json`` holds per-APID counts, gaps,
+decode errors and per-channel limit statistics.
 
 ``keepout ground send SET_MODE POINTING`` sends one telecommand.
 
@@ -16,6 +18,7 @@ from __future__ import annotations
 import argparse
 import collections
 import json
+import math
 import select
 import socket
 import struct
@@ -44,6 +47,7 @@ RAW_RECORD = struct.Struct("!dI")  # rx time (s, UNIX), packet length (bytes)
 RAW_ARCHIVE = "tm_raw.bin"
 DECODED_ARCHIVE = "tm_decoded.jsonl"
 EVENTS_ARCHIVE = "events.jsonl"
+LIMITS_ARCHIVE = "limits.jsonl"  # every yellow/red limit transition seen by the ground
 SUMMARY_FILE = "ground_summary.json"
 SEQ_MODULO = 16384
 # A backwards jump larger than this is read as a flight-software restart, not as 16000 lost packets.
@@ -81,6 +85,24 @@ class ApidStats:
 
 
 @dataclass
+class LimitStats:
+    """Ground-side limit monitoring of one channel: current state, transitions, extreme values."""
+
+    state: str = "GREEN"
+    to_yellow: int = 0
+    to_red: int = 0
+    min_value: float = math.inf
+    max_value: float = -math.inf
+    first_red_time_s: float | None = None
+
+    def to_json_dict(self) -> dict[str, Any]:
+        return {"state": self.state, "to_yellow": self.to_yellow, "to_red": self.to_red,
+                "min": self.min_value if math.isfinite(self.min_value) else None,
+                "max": self.max_value if math.isfinite(self.max_value) else None,
+                "first_red_time_s": self.first_red_time_s}
+
+
+@dataclass
 class GroundStats:
     datagrams: int = 0
     bytes: int = 0
@@ -88,6 +110,7 @@ class GroundStats:
     decode_errors: int = 0
     per_apid: dict[int, ApidStats] = field(default_factory=dict)
     gaps: list[Gap] = field(default_factory=list)
+    limits: dict[str, LimitStats] = field(default_factory=dict)
 
     @property
     def missing(self) -> int:
@@ -102,6 +125,7 @@ class GroundStats:
                                           "last_seq": s.last_seq}
                          for apid, s in sorted(self.per_apid.items())},
             "gaps": [g.to_json_dict() for g in self.gaps[:1000]],
+            "limits": {name: stats.to_json_dict() for name, stats in self.limits.items()},
         }
 
 
@@ -129,12 +153,15 @@ class GroundMonitor:
         self._raw: IO[bytes] | None = None
         self._decoded: IO[str] | None = None
         self._events: IO[str] | None = None
+        self._limits: IO[str] | None = None
+        self._limited: dict[str, list[tuple[str, Any]]] = {}
         if self.archive_dir is not None:
             self.archive_dir.mkdir(parents=True, exist_ok=True)
             self._raw = open(self.archive_dir / RAW_ARCHIVE, "ab")
             if write_decoded:  # long soaks may keep raw + events only and decode later (`ground decode`)
                 self._decoded = open(self.archive_dir / DECODED_ARCHIVE, "a", encoding="utf-8")
             self._events = open(self.archive_dir / EVENTS_ARCHIVE, "a", encoding="utf-8")
+            self._limits = open(self.archive_dir / LIMITS_ARCHIVE, "a", encoding="utf-8")
         self._sock: socket.socket | None = None
         if port is not None:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -210,7 +237,39 @@ class GroundMonitor:
         else:
             self.latest.update(packet.values)
             self.latest_time_s = packet.time_s
+            self._check_limits(packet)
         return packet
+
+    def _check_limits(self, packet: DecodedTm) -> None:
+        """Track each limited channel's state; every YELLOW/RED transition goes to ``limits.jsonl``."""
+        for name, limits in self._limited_channels(packet.packet):
+            value = packet.values[name]
+            if value != value:  # NaN: no value this packet
+                continue
+            stats = self.stats.limits.setdefault(name, LimitStats())
+            stats.min_value = min(stats.min_value, value)
+            stats.max_value = max(stats.max_value, value)
+            state = limits.check(value).value
+            if state == stats.state:
+                continue
+            if state == "RED":
+                stats.to_red += 1
+                if stats.first_red_time_s is None:
+                    stats.first_red_time_s = packet.time_s
+            elif state == "YELLOW":
+                stats.to_yellow += 1
+            self._write(self._limits, {"time_s": packet.time_s, "channel": name, "from": stats.state,
+                                       "to": state, "value": value})
+            stats.state = state
+
+    def _limited_channels(self, packet_name: str) -> list[tuple[str, Any]]:
+        cached = self._limited.get(packet_name)
+        if cached is None:
+            packet = self.dictionary.packet(packet_name)
+            cached = [(c.name, c.limits) for c in packet.channels
+                      if c.limits is not None and c.type not in ("BOOL", "ENUM")]
+            self._limited[packet_name] = cached
+        return cached
 
     def _check_sequence(self, apid: int, seq: int, rx_time_s: float) -> Gap | None:
         stats = self.stats.per_apid.setdefault(apid, ApidStats())
@@ -270,7 +329,7 @@ class GroundMonitor:
         return self.stats
 
     def flush(self) -> None:
-        for stream in (self._raw, self._decoded, self._events):
+        for stream in (self._raw, self._decoded, self._events, self._limits):
             if stream is not None:
                 stream.flush()
 
@@ -281,7 +340,7 @@ class GroundMonitor:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
-        for name in ("_raw", "_decoded", "_events"):
+        for name in ("_raw", "_decoded", "_events", "_limits"):
             stream = getattr(self, name)
             if stream is not None:
                 stream.close()

@@ -8,12 +8,14 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 from rich.console import Console
 
 from fsw.dictionary import DICTIONARY, GNC_APID, HK_APID, LimitState
 from fsw.ground import (
     DECODED_ARCHIVE,
     EVENTS_ARCHIVE,
+    LIMITS_ARCHIVE,
     RAW_ARCHIVE,
     SUMMARY_FILE,
     GroundMonitor,
@@ -221,3 +223,31 @@ def test_bad_mission_config_is_reported_not_raised(tmp_path: Path, capsys) -> No
     mission.write_text("flight_software:\n  tmtc:\n    telecommand_port: -5\n")
     assert main(["ground", "--config", str(mission), "send", "NOOP"]) == 2
     assert "telecommand_port" in capsys.readouterr().err
+
+
+def test_limit_transitions_are_logged_and_summarised(tmp_path: Path) -> None:
+    monitor = GroundMonitor(DICTIONARY, port=None, archive_dir=tmp_path)
+    tm = TelemetrySender(DICTIONARY, port=None)
+    margins = [5.0, 1.5, -0.2, 0.5, 3.0, float("nan"), 4.0]
+    for i, margin in enumerate(margins):
+        monitor.process(tm.send_channels("GNC", {"margin_min_deg": margin}, time_s=float(i)), float(i))
+    monitor.close()
+    transitions = [json.loads(line) for line in (tmp_path / LIMITS_ARCHIVE).read_text().splitlines()
+                   if json.loads(line)["channel"] == "margin_min_deg"]
+    # 5.0 GREEN -> 1.5 YELLOW -> -0.2 RED -> 0.5 YELLOW -> 3.0 GREEN; NaN skipped; 4.0 stays GREEN
+    assert [(t["from"], t["to"], t["time_s"]) for t in transitions] == [
+        ("GREEN", "YELLOW", 1.0), ("YELLOW", "RED", 2.0), ("RED", "YELLOW", 3.0), ("YELLOW", "GREEN", 4.0)]
+    summary = json.loads((tmp_path / SUMMARY_FILE).read_text())["limits"]["margin_min_deg"]
+    assert summary["to_red"] == 1 and summary["to_yellow"] == 2 and summary["first_red_time_s"] == 2.0
+    assert summary["min"] == float(np.float32(-0.2)) and summary["max"] == 5.0 and summary["state"] == "GREEN"
+
+
+def test_live_display_renders_during_run(capsys) -> None:
+    monitor = GroundMonitor(DICTIONARY, "127.0.0.1", 0)
+    tm = TelemetrySender(DICTIONARY, "127.0.0.1", monitor.address[1])
+    tm.send_channels("GNC", {"mode": "QUATERNION", "att_error_deg": 12.5})
+    tm.event("TARGET_REACHED", error_deg=0.02)
+    tm.close()
+    monitor.run(duration_s=0.4, live=True, refresh_s=0.05)
+    out = capsys.readouterr().out
+    assert "keepout telemetry" in out and "QUATERNION" in out and "TARGET_REACHED" in out
