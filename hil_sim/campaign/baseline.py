@@ -81,8 +81,8 @@ class Comparison:
                          f"{m.ks_pvalue:8.3g} {m.mw_pvalue:8.3g} {m.baseline_median:11.4g} {m.new_median:11.4g}  "
                          + ("MOVED: " + "; ".join(m.reasons) if m.flagged else "ok"))
         if not self.same_inputs:
-            lines.append("note: campaign inputs differ from the baseline's (fingerprint): per-run differences "
-                         "are not meaningful, only the distribution tests count")
+            lines.append("note: the runs' seeds or dispersed values differ from the baseline's: per-run "
+                         "differences are not meaningful, only the distribution tests count")
         if self.new_failures:
             lines.append(f"new failures (passed in the baseline): runs {self.new_failures}")
         if self.fixed_runs:
@@ -105,9 +105,30 @@ def _beyond(old: np.ndarray, new: np.ndarray, tol: Tolerance) -> np.ndarray:
     return out & ~both_nan & ~same_inf
 
 
-def compare(baseline: pd.DataFrame, new: pd.DataFrame, policy: BaselinePolicy, *, same_inputs: bool) -> Comparison:
+def same_run_inputs(merged: pd.DataFrame, columns: list[str]) -> bool:
+    """True when every paired run had the same simulation seed and the same dispersed parameters."""
+    for col in ["sim_seed", *columns]:
+        old, new = merged[f"{col}_old"].to_numpy(), merged[f"{col}_new"].to_numpy()
+        if old.dtype.kind == "f" or new.dtype.kind == "f":
+            if not np.array_equal(old.astype(float), new.astype(float), equal_nan=True):
+                return False
+        elif not np.array_equal(old, new):
+            return False
+    return len(merged) > 0
+
+
+def compare(baseline: pd.DataFrame, new: pd.DataFrame, policy: BaselinePolicy,
+            *, same_inputs: bool | None = None) -> Comparison:
+    """Compare two results tables. ``same_inputs`` (default: decided from the tables) enables the paired,
+    per-run check; it holds when each paired run had the same seed and the same dispersed parameters, so
+    only the software or configuration under test differs."""
     metrics = sorted(c for c in set(baseline.columns) & set(new.columns) if c.startswith("m."))
     merged = baseline.merge(new, on="run", suffixes=("_old", "_new"))
+    if same_inputs is None:
+        params = sorted(c for c in set(baseline.columns) & set(new.columns) if c.startswith("p."))
+        same_params = set(c for c in baseline.columns if c.startswith("p.")) == \
+            set(c for c in new.columns if c.startswith("p."))
+        same_inputs = same_params and same_run_inputs(merged, params)
     out = []
     for col in metrics:
         name = col[2:]

@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import numpy as np
-import yaml
 
 from hil_sim.campaign import dispersions as dsp
 from hil_sim.campaign.execute import (STATUS_ERROR, STATUS_FAIL, Plan, RunRecord, execute_run,
@@ -63,7 +62,8 @@ def build_plan(campaign_path: str | Path, *, mode: str | None = None, runs: int 
     else:
         from hil_sim.yaml_loader import load_model
         base_model = load_model(base_path, model_class)
-    base_raw = yaml.safe_load(base_path.read_text(encoding="utf-8"))
+    from hil_sim.yaml_loader import load_marked
+    base_raw = load_marked(base_path).data
     nominal = dsp.nominal_values(campaign.dispersions, base_model)
     fn = run_function or resolve_run_function(MODE_RUN_FUNCTIONS[campaign.mode])
     plan = Plan(campaign=campaign, base_raw=base_raw, nominal=nominal, model_class=model_class,

@@ -130,8 +130,9 @@ def toy_run_clamping(mission: ToyMission, seed: int, mode: str, paths: Sequence[
 
 
 def toy_run_threshold(mission: ToyMission, seed: int, mode: str, paths: Sequence[str]) -> RunResult:
-    """Injected failure: the keep-out margin collapses when the disturbance exceeds 0.03."""
-    metrics, traj, t = simulate(mission, seed)
+    """Injected failure: the keep-out margin collapses when the disturbance exceeds 0.03 (the disturbance
+    has no other effect here, so it is the only cause)."""
+    metrics, traj, t = simulate(mission.model_copy(update={"disturbance": 0.0}), seed)
     if mission.disturbance > 0.03:
         metrics["min_margin_deg"] = -1.0 - mission.disturbance
     return RunResult(metrics=metrics, used=_used(mission, paths), trajectory=traj, sim_time_s=t)
@@ -140,7 +141,7 @@ def toy_run_threshold(mission: ToyMission, seed: int, mode: str, paths: Sequence
 TOY_MISSION_YAML = textwrap.dedent("""\
     schema_version: 1
     name: toy
-    duration_s: 200.0
+    duration_s: 80.0
     target_N: [1.0, 0.0, 0.0]
     zone_axis_N: [0.6, 0.8, 0.0]
     zone_half_angle_deg: 15.0
@@ -186,7 +187,7 @@ TOY_CAMPAIGN_YAML = textwrap.dedent("""\
 """)
 
 
-def write_toy(tmp: Path, runs: int = 12, settle_limit: float = 150.0, campaign_text: str | None = None) -> Path:
+def write_toy(tmp: Path, runs: int = 12, settle_limit: float = 60.0, campaign_text: str | None = None) -> Path:
     (tmp / "toy-mission.yaml").write_text(TOY_MISSION_YAML)
     path = tmp / "toy-campaign.yaml"
     path.write_text(campaign_text or TOY_CAMPAIGN_YAML.format(runs=runs, settle_limit=settle_limit))

@@ -1,0 +1,202 @@
+"""``keepout campaign run|rerun|baseline save|compare|shrink``.
+
+Top-level imports stay light: every ``keepout`` start imports this module to build the parser.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+DEFAULT_BASELINES = Path("config") / "campaigns" / "baselines"
+
+
+def add_cli(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("campaign", help="dispersed Monte Carlo campaigns: run, rerun, baselines, shrink",
+                              description="Dispersed campaigns of a mission (config/campaigns/*.yaml).")
+    sub = p.add_subparsers(dest="campaign_command", metavar="ACTION")
+
+    run = sub.add_parser("run", help="run a campaign (resumable)")
+    run.add_argument("campaign", help="campaign YAML, e.g. config/campaigns/regression.yaml")
+    run.add_argument("--runs", type=int, help="number of runs (default: the campaign's)")
+    run.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+    run.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786 (default: local pool)")
+    run.add_argument("--mode", choices=("fast", "sil"), help="execution mode (default: the campaign's)")
+    run.add_argument("--out", type=Path, help="output folder; an existing one is resumed (finished runs skipped)")
+    run.add_argument("--resume", action="store_true", help="resume the newest campaigns/<name>-* folder")
+    run.add_argument("--no-report", action="store_true", help="tables and JUnit only, no plots")
+    run.set_defaults(func=_cmd_run)
+
+    rerun = sub.add_parser("rerun", help="reproduce one run exactly and compare it with the stored one")
+    rerun.add_argument("campaign", help="a campaign output folder (or a campaign YAML: its newest folder)")
+    rerun.add_argument("--run", type=int, required=True, help="run index")
+    rerun.set_defaults(func=_cmd_rerun)
+
+    base = sub.add_parser("baseline", help="store a campaign's results as the baseline")
+    bsub = base.add_subparsers(dest="baseline_command", metavar="ACTION")
+    save = bsub.add_parser("save", help="save RESULTS_DIR as the baseline of its campaign")
+    save.add_argument("results", type=Path, help="campaign output folder")
+    save.add_argument("--to", type=Path, help=f"baseline folder (default: {DEFAULT_BASELINES}/<name>)")
+    save.set_defaults(func=_cmd_baseline_save)
+    base.set_defaults(func=lambda args: (base.print_help(), 2)[1])
+
+    cmp_ = sub.add_parser("compare", help="compare a campaign's results with its baseline")
+    cmp_.add_argument("results", type=Path, help="campaign output folder")
+    cmp_.add_argument("--baseline", type=Path, help=f"baseline folder (default: {DEFAULT_BASELINES}/<name>)")
+    cmp_.set_defaults(func=_cmd_compare)
+
+    shr = sub.add_parser("shrink", help="move a failing run's dispersions toward nominal while it still fails")
+    shr.add_argument("campaign", help="a campaign output folder (or a campaign YAML: its newest folder)")
+    shr.add_argument("--run", type=int, required=True, help="run index")
+    shr.add_argument("--max-evaluations", type=int, default=80)
+    shr.set_defaults(func=_cmd_shrink)
+    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
+
+
+# ---------------------------------------------------------------------------------------------
+
+def _console():
+    from rich.console import Console
+    return Console(stderr=True)
+
+
+def plan_from_results(results_dir: Path, **kw):
+    """Rebuild the plan of a campaign output folder from the inputs copied into it."""
+    from hil_sim.campaign.runner import PLAN_FILE, build_plan
+    from hil_sim.campaign.spec import load_campaign
+    meta = json.loads((results_dir / PLAN_FILE).read_text())
+    campaign = load_campaign(results_dir / "campaign.yaml").model_copy(
+        update={"base_mission": "mission.yaml", "runs": int(meta["runs"])})
+    plan, _ = build_plan(results_dir / "campaign.yaml", campaign=campaign, mode=meta["mode"], **kw)
+    if campaign.fingerprint() != meta["fingerprint"]:
+        raise RuntimeError(f"{results_dir}: campaign.yaml no longer matches the runs (fingerprint changed)")
+    return plan
+
+
+def _results_dir(arg: str) -> Path:
+    path = Path(arg)
+    if path.is_dir():
+        return path
+    from hil_sim.campaign.runner import latest_out_dir
+    from hil_sim.campaign.spec import load_campaign
+    found = latest_out_dir(load_campaign(path))
+    if found is None:
+        raise FileNotFoundError(f"no output folder of campaign {arg} under campaigns/; run it first")
+    return found
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from hil_sim.campaign.runner import (build_plan, default_out_dir, finalize, latest_out_dir, prepare_out_dir,
+                                         run_campaign)
+    from hil_sim.yaml_loader import ConfigError
+    console = _console()
+    try:
+        plan, base_path = build_plan(args.campaign, mode=args.mode, runs=args.runs)
+    except (ConfigError, FileNotFoundError, ValueError) as exc:
+        console.print(f"[red]campaign not started:[/red]\n{exc}")
+        return 2
+    out = args.out or (latest_out_dir(plan.campaign) if args.resume else None) or default_out_dir(plan.campaign)
+    prepare_out_dir(out, plan, Path(args.campaign), base_path)
+    where = f"Dask {args.scheduler}" if args.scheduler else f"{args.workers or 'all'} local workers"
+    console.print(f"campaign [bold]{plan.campaign.name}[/bold]: {plan.campaign.runs} runs, mode {plan.mode}, "
+                  f"{where} -> {out}")
+    outcome = _run_with_progress(plan, out, args.workers, args.scheduler, console)
+    if outcome.interrupted:
+        console.print(f"[yellow]interrupted: {len(outcome.records)} finished runs kept in {out}; "
+                      f"`keepout campaign run {args.campaign} --out {out}` resumes[/yellow]")
+    results = finalize(plan, out, outcome.records, report=not args.no_report)
+    verdict = results["verdict"]
+    console.print(("[green]" if verdict.passed else "[red]") + verdict.text())
+    console.print(f"results: {results['parquet']}, {results['csv']}, {results['junit']}"
+                  + (f", {results['report']['html']}" if "report" in results else ""))
+    if outcome.interrupted:
+        return 130
+    return 0 if verdict.passed else 1
+
+
+def _run_with_progress(plan, out, workers, scheduler, console):
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
+    from hil_sim.campaign.runner import run_campaign
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TextColumn("failures [red]{task.fields[failures]}"), TimeElapsedColumn(),
+                  TextColumn("ETA"), TimeRemainingColumn(), console=console, transient=False) as bar:
+        task = bar.add_task(plan.campaign.name, total=plan.campaign.runs, failures=0)
+
+        def update(progress, record):
+            bar.update(task, completed=progress.done, failures=progress.failures)
+
+        return run_campaign(plan, out, workers=workers, scheduler=scheduler, on_progress=update)
+
+
+def _cmd_rerun(args: argparse.Namespace) -> int:
+    from hil_sim.campaign import dispersions as dsp
+    from hil_sim.campaign.execute import execute_run
+    from hil_sim.campaign.runner import load_records
+    console = _console()
+    out = _results_dir(args.campaign)
+    plan = plan_from_results(out)
+    stored = {r.run: r for r in load_records(out)}.get(args.run)
+    record = execute_run(plan, args.run)
+    console.print(f"run {args.run}: {record.status}  metrics {record.metrics}")
+    if record.error:
+        console.print(record.error)
+    if stored is None:
+        console.print(f"(run {args.run} not stored in {out}: nothing to compare)")
+        return 0 if record.status == "pass" else 1
+    fields = ("status", "params", "values", "used", "metrics", "verdicts", "sim_seed")
+    new, old = record.to_json(), stored.to_json()
+    diffs = [f for f in fields if not dsp.same_value(old[f], new[f], rtol=0.0, atol=0.0)]
+    if diffs:
+        console.print(f"[red]NOT reproduced: {', '.join(diffs)} differ from the stored run[/red]")
+        for f in diffs:
+            console.print(f"  {f}: stored {old[f]}\n  {' ' * len(f)}  now    {new[f]}")
+        return 1
+    console.print(f"[green]reproduced exactly[/green] (same inputs, seeds, metrics and verdicts as in {out})")
+    return 0
+
+
+def _baseline_dir(results: Path, given: Path | None) -> Path:
+    if given:
+        return given
+    name = json.loads((results / "plan.json").read_text())["campaign"]
+    return DEFAULT_BASELINES / name
+
+
+def _cmd_baseline_save(args: argparse.Namespace) -> int:
+    from hil_sim.campaign.baseline import save_baseline
+    dest = save_baseline(args.results, _baseline_dir(args.results, args.to))
+    _console().print(f"baseline saved to {dest}")
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    import pandas as pd
+    from hil_sim.campaign.baseline import compare, load_baseline
+    from hil_sim.campaign.spec import load_campaign
+    base_df, meta = load_baseline(_baseline_dir(args.results, args.baseline))
+    campaign = load_campaign(args.results / "campaign.yaml")
+    new_df = pd.read_parquet(args.results / "results.parquet")
+    result = compare(base_df, new_df, campaign.baseline)
+    print(f"baseline: {meta.get('source')} ({meta.get('runs_in_table')} runs); new: {args.results} ({len(new_df)} runs)")
+    print(result.text())
+    return 1 if result.regressed else 0
+
+
+def _cmd_shrink(args: argparse.Namespace) -> int:
+    import yaml
+    from hil_sim.campaign.shrink import shrink_run, shrunk_mission
+    out = _results_dir(args.campaign)
+    plan = plan_from_results(out)
+    try:
+        result = shrink_run(plan, args.run, max_evaluations=args.max_evaluations)
+    except ValueError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    print(result.text(plan))
+    dest = out / f"shrink-run-{args.run:06d}.yaml"
+    dest.write_text("# smallest failing case found by `keepout campaign shrink`\n"
+                    + yaml.safe_dump(shrunk_mission(plan, result), sort_keys=False), encoding="utf-8")
+    print(f"mission of the smallest failing case: {dest}")
+    return 0
