@@ -201,12 +201,23 @@ def _wire_value(channel: Channel, value: Any) -> Any:
                 raise DictionaryError(f"channel {channel.name}: {value!r} not one of {list(channel.enum)}") from None
         if hasattr(value, "name") and isinstance(getattr(value, "name"), str) and value.name in channel.enum:
             return channel.enum.index(value.name)  # an enum.Enum member with a matching name
-        return min(max(int(value), 0), len(channel.enum) - 1)
+        low, high = 0, len(channel.enum) - 1
+    else:
+        low, high = _INT_LIMITS[t]
     number = float(value)
     if math.isnan(number):
         return 0
-    low, high = _INT_LIMITS[t]
     return int(min(max(number, low), high))
+
+
+def _convert(channel: Channel, value: Any) -> Any:
+    """Wire value of ``value`` for ``channel``; None is "no value"; a non-number names the channel."""
+    if value is None:
+        return _default_value(channel)
+    try:
+        return _wire_value(channel, value)
+    except (TypeError, ValueError) as exc:
+        raise DictionaryError(f"channel {channel.name} ({channel.type}): cannot use {value!r}: {exc}") from None
 
 
 _INT_LIMITS = {"U8": (0, 255), "I8": (-128, 127), "U16": (0, 65535), "I16": (-32768, 32767),
@@ -283,8 +294,7 @@ class TelemetrySender:
         for name, value in values.items():
             slot = index.get(name)
             if slot is not None:
-                channel = channels[slot]
-                latest[slot] = _default_value(channel) if value is None else _wire_value(channel, value)
+                latest[slot] = _convert(channels[slot], value)
                 continue
             members = groups.get(name)
             if members is None:
@@ -298,7 +308,7 @@ class TelemetrySender:
                 raise DictionaryError(f"{packet_name}.{name}: {len(components)} values for {len(members)} channels")
             for member, component in zip(members, components):
                 slot = index[member]
-                latest[slot] = _wire_value(channels[slot], component)
+                latest[slot] = _convert(channels[slot], component)
 
     def send_channels(self, packet_name: str, values: Mapping[str, Any] | None = None,
                       time_s: float | None = None) -> bytes:

@@ -118,6 +118,9 @@ def test_integers_saturate_and_floats_round_to_their_type() -> None:
     values = decode_tm_packet(DICTIONARY, tm.send_channels(
         "GNC", {"cycle": 2**40, "active_zone": 300, "zone_count": -4, "eps": 0.1})).values
     assert values["cycle"] == 2**32 - 1 and values["active_zone"] == 127 and values["zone_count"] == 0
+    values = decode_tm_packet(DICTIONARY, tm.send_channels(
+        "GNC", {"cycle": float("inf"), "mode": float("nan"), "safe_phase": 99})).values
+    assert values["cycle"] == 2**32 - 1 and values["mode"] == "SAFE" and values["safe_phase"] == "SUN_POINTING"
     assert values["eps"] == float(np.float32(0.1))
 
 
@@ -129,6 +132,10 @@ def test_programming_errors_are_loud() -> None:
         tm.send_channels("GNC", {"cycles": 1})  # an HK channel in the GNC packet
     with pytest.raises(DictionaryError, match="7 values for 6"):
         tm.send_channels("GNC", {"wheel_speed_rad_s": np.zeros(7)})
+    with pytest.raises(DictionaryError, match="channel eps .*'fast'"):
+        tm.send_channels("GNC", {"eps": "fast"})
+    with pytest.raises(DictionaryError, match="not one of"):
+        tm.send_channels("GNC", {"mode": "SPIN"})
     with pytest.raises(DictionaryError, match="unknown packet"):
         tm.send_channels("FAST", {})
     with pytest.raises(DictionaryError, match="missing arg"):
