@@ -569,7 +569,7 @@ def add_cli(subparsers: Any) -> None:
     send.add_argument("--no-check", action="store_true",
                       help="skip the dictionary range checks (test the flight-side validation)")
     send.set_defaults(func=_cmd_send)
-    decode = sub.add_parser("decode", help="rebuild the decoded JSONL and gap summary from a raw archive")
+    decode = sub.add_parser("decode", help="rebuild the decoded JSONL from a raw archive and report gaps")
     decode.add_argument("archive_dir", help="directory holding tm_raw.bin")
     decode.add_argument("--out", default=None, help="output JSONL (default: ARCHIVE_DIR/tm_decoded.jsonl)")
     decode.set_defaults(func=_cmd_decode)
