@@ -1,0 +1,546 @@
+"""The paper's assumptions as code: check a (target, zones, eps, kappa) set-up before flying it.
+
+``check_assumptions(target, zones, eps, kappa=None)`` returns an :class:`AssumptionReport`:
+
+* Assumption 1: for i != j, max_{a in U_i, b in U_j} a^T b <= cos(2 delta). delta is computed from the
+  smallest separation between every pair of zones: closed form for two cones, otherwise the minimum of
+  d_s over dense boundary samples of each zone against the other (``separation_batch``), refined by
+  alternating nearest-point projections (``nearest``), which never increases the distance.
+* eps interval: 0 < eps < min(eps_bar, 1 - cos delta) where eps_bar < d_s(x_d, U); so the upper end of
+  the admissible interval is ``eps_max = min(d_s(x_d, U), 1 - cos delta)`` (open).
+* x_d outside U; every kernel g_i strictly inside U_i and -g_i outside U_i; g_i != -x_d for the
+  star-shaped law (the gradient law's cones may have g_i = -x_d, as in the paper's S^3 study).
+* Assumption 2 (star-shaped law only): the sets R_i are pairwise disjoint, checked numerically on rays
+  from x_d (every point of S^n lies on exactly one half great circle from x_d to -x_d).
+* kappa_bar (star-shaped law only): on the geodesic G(x_d, -g_i) the closed-loop field is
+  P(x)u = lambda(x) P(x) x_d with lambda = k1/(eps kappa) (kappa d - q^-(eps - d)), d = d_s(x, U_i),
+  q^-(x) = x_d^T P(x) g_i / |P(x) x_d|^2 (paper, proof of the Fact for V_i). lambda > 0 on the whole
+  layer part of the geodesic iff kappa > kappa_bar_i = max q^-(eps - d)/d there. At kappa <= kappa_bar
+  the field vanishes on that geodesic: an undesired equilibrium, and it is *stable* where lambda
+  turns from negative (nearer x_d) to positive (farther): the report lists them.
+
+Every message names the zone indices and the numbers involved.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from numba import njit
+
+__all__ = ["AssumptionReport", "check_assumptions", "zone_pair_separation", "kappa_bar_for_zone", "r_sets_overlap"]
+
+
+@dataclass
+class AssumptionReport:
+    ok: bool
+    errors: list[str]
+    warnings: list[str]
+    delta: float | None  # rad; pi/2 for a single zone (the paper's upper end)
+    eps_max: float  # upper end (open) of the admissible eps interval
+    kappa_bar: float | None  # None unless the star-shaped law is checked
+    law: str = "star"
+    target_separation: float = float("nan")  # d_s(x_d, U)
+    pair_separations: dict = field(default_factory=dict)  # (i, j) -> min d_s(U_i, U_j)
+    kappa_bar_per_zone: list = field(default_factory=list)
+    undesired_equilibria: list = field(default_factory=list)  # dicts: zone, x, stable
+    notes: list[str] = field(default_factory=list)
+
+    def summary(self) -> str:
+        lines = [f"assumptions ({self.law} law): {'OK' if self.ok else 'VIOLATED'}"]
+        if self.delta is not None:
+            lines.append(f"  delta = {np.degrees(self.delta):.4f} deg, eps_max = {self.eps_max:.6g}")
+        if self.kappa_bar is not None:
+            lines.append(f"  kappa_bar = {self.kappa_bar:.6g}")
+        lines += [f"  error: {e}" for e in self.errors]
+        lines += [f"  warning: {w}" for w in self.warnings]
+        lines += [f"  note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------------------------
+# geometry helpers
+# ------------------------------------------------------------------------------------------------
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    return float(2.0 * np.arctan2(np.linalg.norm(a - b), np.linalg.norm(a + b)))
+
+
+def _ds(a: np.ndarray, b: np.ndarray) -> float:
+    return 0.5 * float(np.sum((a - b) ** 2))
+
+
+def _is_cone(zone) -> bool:
+    return getattr(zone, "half_angle", None) is not None
+
+
+def _signed(zone, x) -> float:
+    fn = getattr(zone, "signed_separation", None)
+    if fn is not None:
+        return float(fn(x))
+    return float(zone.separation(x)) if not zone.contains(x) else -0.0
+
+
+def _toward(g: np.ndarray, h: np.ndarray, angle: float) -> np.ndarray:
+    """The point at `angle` from g on the great circle from g toward h (any direction if h = -g)."""
+    w = h - g * (g @ h)
+    nw = float(np.linalg.norm(w))
+    if nw < 1e-12:
+        w = _tangent_basis(g)[0]
+    else:
+        w = w / nw
+    return np.cos(angle) * g + np.sin(angle) * w
+
+
+def zone_pair_separation(zi, zj, samples: int | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+    """(min d_s between U_i and U_j, a in U_i, b in U_j). 0 if they touch or overlap.
+
+    Cones: exact. Otherwise: if neither zone holds a point of the other (kernel, boundary samples), the
+    closest pair lies on the two boundaries; the closest pair of dense boundary samples is refined by
+    alternating nearest-point projections, each of which can only decrease the distance.
+    """
+    if _is_cone(zi) and _is_cone(zj):
+        gi, gj = np.asarray(zi.kernel, float), np.asarray(zj.kernel, float)
+        gap = _angle(gi, gj) - float(zi.half_angle) - float(zj.half_angle)
+        if gap <= 0.0:
+            return 0.0, gi, gj
+        # nearest points lie on the great circle through the two axes
+        a = _toward(gi, gj, float(zi.half_angle))
+        b = _toward(gj, gi, float(zj.half_angle))
+        return 1.0 - float(np.cos(gap)), a, b
+    dim = int(zi.dim)
+    num = samples if samples is not None else (4000 if dim == 3 else 12000)
+    Bi = np.asarray(zi.boundary(num), dtype=float)
+    Bj = np.asarray(zj.boundary(num), dtype=float)
+    for za, zb, pts in ((zi, zj, Bj), (zj, zi, Bi)):
+        for p in (np.asarray(zb.kernel, float), pts[0]):
+            if za.contains(p):
+                return 0.0, p, p
+    # closest pair of samples (chunked: the full matrix can be large)
+    best_dot, bi, bj = -2.0, 0, 0
+    for start in range(0, Bi.shape[0], 2000):
+        dots = Bi[start:start + 2000] @ Bj.T
+        k = int(np.argmax(dots))
+        r, c = divmod(k, dots.shape[1])
+        if dots[r, c] > best_dot:
+            best_dot, bi, bj = float(dots[r, c]), start + r, c
+    a, b = Bi[bi], Bj[bj]
+    dist = _ds(a, b)
+    for _ in range(30):
+        b2 = np.asarray(zj.nearest(a), dtype=float)
+        a2 = np.asarray(zi.nearest(b2), dtype=float)
+        d2 = _ds(a2, b2)
+        if not d2 < dist - 1e-16:
+            if _ds(a, b2) < dist:
+                b, dist = b2, _ds(a, b2)
+            break
+        a, b, dist = a2, b2, d2
+    if zj.contains(a) or zi.contains(b):
+        return 0.0, a, b
+    return dist, a, b
+
+
+def _tangent_basis(x_d: np.ndarray) -> np.ndarray:
+    """Orthonormal basis (n, n+1) of the tangent space at x_d."""
+    dim = x_d.shape[0]
+    q, _ = np.linalg.qr(np.column_stack([x_d, np.eye(dim)]))
+    return q[:, 1:dim].T
+
+
+def _ray_directions(x_d: np.ndarray, count: int) -> np.ndarray:
+    """Unit tangent directions at x_d, evenly spread (circle for S^2, Fibonacci sphere for S^3)."""
+    basis = _tangent_basis(x_d)
+    n = basis.shape[0]
+    if n == 2:
+        phi = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
+        coords = np.column_stack([np.cos(phi), np.sin(phi)])
+    elif n == 3:
+        k = np.arange(count) + 0.5
+        z = 1.0 - 2.0 * k / count
+        r = np.sqrt(1.0 - z * z)
+        phi = np.pi * (1.0 + 5.0**0.5) * k
+        coords = np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+    else:
+        rng = np.random.default_rng(0)
+        coords = rng.standard_normal((count, n))
+        coords /= np.linalg.norm(coords, axis=1, keepdims=True)
+    return coords @ basis
+
+
+@njit(cache=True)
+def _ray_windows(V, Bd, x_d, cos_eps, lo, hi):
+    """For each ray direction V[k]: smallest and largest t in [0, pi] within theta_eps of a sample Bd[l].
+
+    r_v(t)^T b = a_x cos t + a_v sin t = A cos(t - phi): within theta_eps for |t - phi| <= alpha,
+    alpha = arccos(cos_eps / A); the window may wrap past t = +-pi, hence the three shifts.
+    """
+    nb = Bd.shape[0]
+    dim = Bd.shape[1]
+    two_pi = 2.0 * np.pi
+    for k in range(V.shape[0]):
+        best_lo = np.inf
+        best_hi = -np.inf
+        for l in range(nb):
+            a_x = 0.0
+            a_v = 0.0
+            for c in range(dim):
+                a_x += Bd[l, c] * x_d[c]
+                a_v += Bd[l, c] * V[k, c]
+            A = np.sqrt(a_x * a_x + a_v * a_v)
+            if A < cos_eps or A == 0.0:
+                continue
+            r = cos_eps / A
+            alpha = np.arccos(r if r > -1.0 else -1.0)
+            phi = np.arctan2(a_v, a_x)
+            for shift in (-two_pi, 0.0, two_pi):
+                t_lo = phi + shift - alpha
+                t_hi = phi + shift + alpha
+                if t_lo < 0.0:
+                    t_lo = 0.0
+                if t_hi > np.pi:
+                    t_hi = np.pi
+                if t_lo <= t_hi:
+                    if t_lo < best_lo:
+                        best_lo = t_lo
+                    if t_hi > best_hi:
+                        best_hi = t_hi
+        lo[k] = best_lo
+        hi[k] = best_hi
+
+
+def r_sets_overlap(
+    x_d: np.ndarray, zones: Sequence, eps: float, directions: int | None = None, boundary_samples: int | None = None
+) -> tuple[list[tuple[int, int, np.ndarray]], dict]:
+    """Numerical test of Assumption 2. Returns (overlaps [(i, j, witness point)], info).
+
+    Every point of S^n other than +-x_d lies on one half great circle r_v(t) = cos t x_d + sin t v,
+    t in (0, pi), v a unit tangent at x_d. On such a ray, R_i (i in I_a, i.e. -x_d not in D_eps(U_i))
+    is the interval [t0_i, tmax_i(v)], t0_i the angle from x_d to D_eps(U_i) and tmax_i(v) the largest t
+    with r_v(t) in D_eps(U_i); for i not in I_a it is [tmin_i(v), pi) (geodesics from -x_d). The zone
+    interiors are not removed: R_j can only meet U_i after crossing the eps-layer in front of U_i, which
+    is in R_i, so this changes no verdict.
+
+    D_eps(U_i) along a ray: its far and near ends lie within theta_eps = arccos(1 - eps) of the zone
+    boundary, so they are found in closed form from dense boundary samples b: the ray is within
+    theta_eps of b for t in [phi - alpha, phi + alpha] with A cos(t - phi) = r_v(t)^T b. Resolution:
+    the direction grid and the boundary sample spacing (both reported in info).
+    """
+    dim = x_d.shape[0]
+    if directions is None:
+        directions = 3600 if dim == 3 else 4000
+    if boundary_samples is None:
+        boundary_samples = 3000 if dim == 3 else 6000
+    V = _ray_directions(x_d, directions)
+    theta_eps = float(np.arccos(1.0 - eps))
+    cos_eps = float(np.cos(theta_eps))
+    m = len(zones)
+    lo = np.full((m, V.shape[0]), np.inf)
+    hi = np.full((m, V.shape[0]), -np.inf)
+    spacing = 0.0
+    for i, zone in enumerate(zones):
+        Bd = np.asarray(zone.boundary(boundary_samples), dtype=float)
+        if Bd.shape[0] > 1:
+            nn = np.partition(Bd[: min(400, len(Bd))] @ Bd.T, -2, axis=1)[:, -2]  # nearest other sample
+            spacing = max(spacing, float(np.max(np.arccos(np.clip(nn, -1, 1)))))
+        _ray_windows(np.ascontiguousarray(V), np.ascontiguousarray(Bd), x_d, cos_eps, lo[i], hi[i])
+    intervals = np.empty((m, V.shape[0], 2))
+    for i, zone in enumerate(zones):
+        hit = hi[i] >= lo[i]
+        sep_target = float(zone.separation(x_d))
+        t0 = max(float(np.arccos(np.clip(1.0 - sep_target, -1.0, 1.0))) - theta_eps, 0.0)
+        if float(zone.separation(-x_d)) > eps:  # i in I_a
+            intervals[i, :, 0] = np.where(hit, t0, np.inf)
+            intervals[i, :, 1] = np.where(hit, hi[i], -np.inf)
+        else:
+            intervals[i, :, 0] = np.where(hit, lo[i], np.inf)
+            intervals[i, :, 1] = np.where(hit, np.pi, -np.inf)
+    overlaps = []
+    for i in range(m):
+        for j in range(i + 1, m):
+            start = np.maximum(intervals[i, :, 0], intervals[j, :, 0])
+            end = np.minimum(intervals[i, :, 1], intervals[j, :, 1])
+            both = np.isfinite(start) & np.isfinite(end) & (end >= start)
+            if both.any():
+                k = int(np.argmax(np.where(both, end - start, -1.0)))
+                t = 0.5 * (start[k] + end[k])
+                overlaps.append((i, j, np.cos(t) * x_d + np.sin(t) * V[k]))
+    info = {
+        "directions": int(V.shape[0]),
+        "direction_step_deg": float(np.degrees(2.0 * np.pi / V.shape[0])) if dim == 3 else float(np.degrees(np.sqrt(4 * np.pi / V.shape[0]))),
+        "boundary_spacing_deg": float(np.degrees(spacing)),
+    }
+    return overlaps, info
+
+
+def kappa_bar_for_zone(x_d: np.ndarray, zone, eps: float, samples: int = 4001) -> dict:
+    """kappa_bar_i = max over x in N_eps(U_i) on G(x_d, -g_i) of q^-(x)(eps - d)/d, d = d_s(x, U_i).
+
+    Returns a dict: kappa_bar (0 if the geodesic does not meet the layer, inf if it meets the zone),
+    the maximiser x, and the arrays along the geodesic (lam, d, q) for locating equilibria.
+    """
+    from scipy.optimize import minimize_scalar
+
+    from gnc.sphere import geodesic
+
+    g = np.asarray(zone.kernel, float)
+    out = {"kappa_bar": 0.0, "x": None, "lam": None, "d": None, "q": None, "hits_zone": False}
+    if _angle(x_d, -g) < 1e-12:
+        return out  # g = -x_d: the geodesic is the point x_d itself
+    lam = np.linspace(0.0, 1.0, samples)
+    X = geodesic(x_d, -g, lam)
+    # only points whose bounding-cap distance is within eps can be in the layer; the rest get +inf
+    axis, rho = zone.bounding_cap
+    reach = float(rho) + float(np.arccos(np.clip(1.0 - eps, -1.0, 1.0)))
+    near = X @ np.asarray(axis, float) >= (np.cos(reach) - 1e-12 if reach < np.pi else -2.0)
+    d = np.full(samples, np.inf)
+    if near.any():
+        d[near] = np.asarray(zone.separation_batch(X[near]), dtype=float)
+
+    def q_of(x):
+        Pxd = x_d - x * (x @ x_d) if x.ndim == 1 else x_d[None, :] - x * (x @ x_d)[:, None]
+        Pg = g - x * (x @ g) if x.ndim == 1 else g[None, :] - x * (x @ g)[:, None]
+        num = Pxd @ g if x.ndim == 1 else np.einsum("ij,j->i", Pxd, g)
+        den = Pxd @ Pxd if x.ndim == 1 else np.einsum("ij,ij->i", Pxd, Pxd)
+        del Pg
+        return num / np.maximum(den, 1e-300)
+
+    q = q_of(X)
+    out.update(lam=lam, d=d, q=q)
+    layer = (d <= eps) & (lam > 0.0)
+    if not layer.any():
+        return out
+    if (d[layer] <= 0.0).any():
+        out.update(kappa_bar=np.inf, x=X[layer][np.argmin(d[layer])], hits_zone=True)
+        return out
+    f = np.full(samples, -np.inf)
+    f[layer] = q[layer] * (eps - d[layer]) / d[layer]
+    k = int(np.argmax(f))
+    best, best_lam = float(f[k]), float(lam[k])
+    step = lam[1] - lam[0]
+    lo, hi = max(best_lam - step, 0.0), min(best_lam + step, 1.0)
+
+    def neg_f(s):
+        x = geodesic(x_d, -g, s)
+        dd = float(zone.separation(x))
+        if dd > eps or dd <= 0.0:
+            return -0.0 if dd > eps else -np.inf
+        return -float(q_of(x)) * (eps - dd) / dd
+
+    res = minimize_scalar(neg_f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-10})
+    if res.success and -res.fun > best:
+        best, best_lam = float(-res.fun), float(res.x)
+    out.update(kappa_bar=best, x=geodesic(x_d, -g, best_lam))
+    return out
+
+
+def _equilibria_on_geodesic(info: dict, eps: float, kappa: float, x_d: np.ndarray, g: np.ndarray) -> list[dict]:
+    """Sign changes of lambda = kappa d - q (eps - d) along G(x_d, -g_i) inside the layer."""
+    from gnc.sphere import geodesic
+
+    lam, d, q = info["lam"], info["d"], info["q"]
+    if lam is None:
+        return []
+    in_layer = d <= eps
+    lamb = np.ones_like(d)
+    lamb[in_layer] = kappa * d[in_layer] - q[in_layer] * (eps - d[in_layer])
+    found = []
+    sign = np.sign(lamb)
+    for k in np.flatnonzero(sign[:-1] * sign[1:] < 0):
+        # linear interpolation of the root; stable when lambda goes - -> + moving away from x_d
+        s = lam[k] + (lam[k + 1] - lam[k]) * lamb[k] / (lamb[k] - lamb[k + 1])
+        found.append({"x": geodesic(x_d, -g, s), "stable": bool(lamb[k] < 0 < lamb[k + 1]), "lam": float(s)})
+    return found
+
+
+# ------------------------------------------------------------------------------------------------
+# the report
+# ------------------------------------------------------------------------------------------------
+
+
+def _fmt(v: np.ndarray) -> str:
+    return "[" + ", ".join(f"{c:.4f}" for c in np.asarray(v, float)) + "]"
+
+
+def check_assumptions(
+    target,
+    zones: Sequence,
+    eps: float,
+    kappa: float | None = None,
+    *,
+    law: str | None = None,
+    check_r_sets: bool = True,
+) -> AssumptionReport:
+    """Check the paper's assumptions for (x_d, zones, eps[, kappa]).
+
+    law: "star" (StarShapedLaw) or "gradient" (GradientLaw, conic zones). Default: "gradient" when every
+    zone is a cone and no kappa is given, else "star". Assumption 2 and kappa_bar belong to the star law.
+    """
+    x_d = np.asarray(target, dtype=float)
+    if x_d.ndim != 1 or abs(np.linalg.norm(x_d) - 1.0) > 1e-6:
+        raise ValueError(f"target must be a unit vector, got {target!r}")
+    x_d = x_d / np.linalg.norm(x_d)
+    zones = list(zones)
+    if not zones:
+        raise ValueError("at least one zone is required")
+    for i, z in enumerate(zones):
+        if int(z.dim) != x_d.shape[0]:
+            raise ValueError(f"zone {i} lives in R^{z.dim}, the target in R^{x_d.shape[0]}")
+    eps = float(eps)
+    if law is None:
+        law = "gradient" if (kappa is None and all(_is_cone(z) for z in zones)) else "star"
+    if law not in ("star", "gradient"):
+        raise ValueError(f"law must be 'star' or 'gradient', got {law!r}")
+    if law == "gradient" and not all(_is_cone(z) for z in zones):
+        bad = [i for i, z in enumerate(zones) if not _is_cone(z)]
+        raise ValueError(f"the gradient law needs conic zones; zones {bad} are not cones")
+    errors: list[str] = []
+    warnings: list[str] = []
+    notes: list[str] = []
+
+    if not eps > 0.0:
+        errors.append(f"eps = {eps} must be > 0")
+
+    # -- x_d outside U, eps_bar ------------------------------------------------------------------
+    target_seps = [_signed(z, x_d) for z in zones]
+    for i, s in enumerate(target_seps):
+        if s <= 0.0:
+            errors.append(f"target x_d = {_fmt(x_d)} is inside zone {i} (signed separation {s:.6g})")
+    target_sep = max(min(target_seps), 0.0)
+    nearest_zone = int(np.argmin(target_seps))
+
+    # -- kernels -----------------------------------------------------------------------------------
+    for i, z in enumerate(zones):
+        g = np.asarray(z.kernel, float)
+        sg = _signed(z, g)
+        if not sg < 0.0:
+            errors.append(f"zone {i}: kernel g_{i} = {_fmt(g)} is not strictly inside the zone (signed separation {sg:.6g})")
+        if z.contains(-g):
+            errors.append(f"zone {i}: -g_{i} = {_fmt(-g)} lies in the zone, so g_{i} cannot be a kernel point (sigma(U_{i}))")
+        if _angle(g, -x_d) < 1e-9:
+            if law == "star":
+                errors.append(f"zone {i}: g_{i} = -x_d; the star-shaped law needs g_i != -x_d (geodesics G(x_d, g_i) undefined)")
+            else:
+                notes.append(f"zone {i}: g_{i} = -x_d (allowed for the gradient law's cones)")
+
+    # -- Assumption 1 --------------------------------------------------------------------------------
+    pair_seps = {}
+    delta = np.pi / 2.0
+    worst_pair = None
+    for i in range(len(zones)):
+        for j in range(i + 1, len(zones)):
+            dmin, a, b = zone_pair_separation(zones[i], zones[j])
+            pair_seps[(i, j)] = dmin
+            if dmin <= 0.0:
+                errors.append(f"Assumption 1: zones {i} and {j} touch or overlap (separation {dmin:.3g}, near {_fmt(a)})")
+                continue
+            d_ij = 0.5 * float(np.arccos(np.clip(1.0 - dmin, -1.0, 1.0)))
+            if d_ij < delta:
+                delta, worst_pair = d_ij, (i, j)
+    if any(v <= 0.0 for v in pair_seps.values()):
+        delta = 0.0
+    one_minus_cos_delta = 1.0 - float(np.cos(delta))
+    eps_max = min(target_sep, one_minus_cos_delta)
+    if len(zones) > 1 and worst_pair is not None:
+        notes.append(
+            f"Assumption 1: delta = {np.degrees(delta):.4f} deg (closest pair: zones {worst_pair[0]} and {worst_pair[1]}, "
+            f"min separation {pair_seps[worst_pair]:.6g}), 1 - cos(delta) = {one_minus_cos_delta:.6g}"
+        )
+
+    # -- eps interval --------------------------------------------------------------------------------
+    if eps >= target_sep and target_sep > 0.0:
+        errors.append(
+            f"eps = {eps:.6g} is not below eps_bar < d_s(x_d, U) = {target_sep:.6g} (zone {nearest_zone} is "
+            f"{np.degrees(np.arccos(1 - target_sep)):.3f} deg from x_d): x_d lies in the eps-layer, so the law "
+            "is not k1 x_d at the target and a spurious equilibrium appears near x_d"
+        )
+    if len(zones) > 1 and eps >= one_minus_cos_delta:
+        i, j = worst_pair if worst_pair is not None else (0, 1)
+        errors.append(
+            f"eps = {eps:.6g} is not below 1 - cos(delta) = {one_minus_cos_delta:.6g} (zones {i} and {j}): "
+            "their eps-dilations are not guaranteed disjoint"
+        )
+    if law == "gradient":
+        for i, z in enumerate(zones):
+            reach = float(z.half_angle) + float(np.arccos(np.clip(1.0 - eps, -1.0, 1.0)))
+            if reach >= np.pi:
+                errors.append(f"zone {i}: half-angle + eps-layer width = {np.degrees(reach):.3f} deg >= 180 deg")
+
+    report = AssumptionReport(
+        ok=False,
+        errors=errors,
+        warnings=warnings,
+        delta=delta,
+        eps_max=eps_max,
+        kappa_bar=None,
+        law=law,
+        target_separation=target_sep,
+        pair_separations=pair_seps,
+        notes=notes,
+    )
+    if law == "gradient":
+        notes.append("gradient law: Assumption 2 and kappa are not needed (Theorem for conic constraints)")
+        report.ok = not errors
+        return report
+
+    # -- Assumption 2 --------------------------------------------------------------------------------
+    if check_r_sets and len(zones) > 1 and eps > 0 and delta > 0:
+        overlaps, info = r_sets_overlap(x_d, zones, eps)
+        for i, j, w in overlaps:
+            errors.append(
+                f"Assumption 2: R_{i} and R_{j} overlap (e.g. at x = {_fmt(w)}); zones {i} and {j} shadow each other "
+                "as seen from x_d, so a trajectory can cycle between their layers"
+            )
+        notes.append(
+            f"Assumption 2 checked on {info['directions']} rays from x_d (about {info['direction_step_deg']:.2f} deg apart), "
+            f"boundary samples {info['boundary_spacing_deg']:.3f} deg apart"
+            + ("" if overlaps else ": R_i pairwise disjoint")
+        )
+
+    # -- kappa_bar -----------------------------------------------------------------------------------
+    kbars = []
+    for i, z in enumerate(zones):
+        info = kappa_bar_for_zone(x_d, z, eps)
+        kbars.append(info["kappa_bar"])
+        if info["hits_zone"]:
+            errors.append(
+                f"zone {i}: the geodesic from x_d to -g_{i} passes through the zone (at {_fmt(info['x'])}); "
+                "no kappa removes the undesired equilibria there"
+            )
+        if kappa is not None and info["lam"] is not None:
+            g = np.asarray(z.kernel, float)
+            for eq in _equilibria_on_geodesic(info, eps, float(kappa), x_d, g):
+                eq["zone"] = i
+                report.undesired_equilibria.append(eq)
+    target_in_layer = eps >= target_sep
+    if target_in_layer:
+        # q^- grows without bound as x -> x_d along the geodesic, so no kappa is sufficient
+        kbars = [np.inf if target_seps[i] <= eps else k for i, k in enumerate(kbars)]
+    report.kappa_bar_per_zone = kbars
+    report.kappa_bar = float(max(kbars)) if kbars else 0.0
+    stable = [e for e in report.undesired_equilibria if e["stable"]]
+    where = ""
+    if stable:
+        e = stable[0]
+        where = (
+            f"; stable undesired equilibrium at x = {_fmt(e['x'])} (zone {e['zone']}), "
+            f"{np.degrees(_angle(e['x'], x_d)):.3f} deg from x_d"
+        )
+    if kappa is not None and target_in_layer:
+        errors.append(
+            f"x_d is inside the eps-layer of zone {nearest_zone} (d_s(x_d, U) = {target_sep:.6g} <= eps = {eps:.6g}): "
+            f"no kappa is sufficient (kappa_bar = inf){where}"
+        )
+    elif kappa is not None and np.isfinite(report.kappa_bar):
+        if float(kappa) <= report.kappa_bar:
+            i = int(np.argmax(kbars))
+            errors.append(
+                f"kappa = {float(kappa):.6g} <= kappa_bar = {report.kappa_bar:.6g} (zone {i}, on the geodesic from x_d "
+                f"to -g_{i}): the field can vanish there and create a STABLE undesired equilibrium{where}; "
+                f"choose kappa > {report.kappa_bar:.6g}"
+            )
+    elif kappa is None and report.kappa_bar > 0:
+        warnings.append(f"kappa not given; it must exceed kappa_bar = {report.kappa_bar:.6g}")
+    report.ok = not errors
+    return report
