@@ -1,0 +1,468 @@
+"""Load-time physics checks of a mission: is the problem the flight software will face well posed?
+
+A schema-valid mission can still be impossible or outside the paper's guarantees. These checks run on
+the whole run, because the Sun, Moon and Earth zones move:
+
+* a target (initial or telecommanded) inside a keep-out zone (physical or as inflated for the law);
+* the initial attitude already inside a zone;
+* a zone whose kernel g_i is not strictly inside it (the law pushes away from g_i);
+* the paper's Assumption 1 (zones pairwise at least 2 delta apart) and the admissible eps interval
+  (0, min(eps_bar, 1 - cos delta)) at every sampled time, for the zones as the law sees them
+  (inflated by ``law.margin_deg``) and with the onboard ephemeris (`fsw.guidance.SkyEphemeris`);
+* kappa <= kappa_bar (StarShapedLaw: an undesired stable equilibrium may exist);
+* wheels too weak for the commanded rate limit: the angular acceleration they can give about the worst
+  body axis versus ``control.max_command_accel_deg_s2``, the wheel momentum headroom versus
+  J * rate limit, and the braking angle at the rate limit versus the margin.
+
+`gnc.checks.check_assumptions` does the paper's maths; this module supplies the zones over time and
+turns the results into messages with the times, zone names and numbers.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from hil_sim.mission import Mission
+
+MAX_SWEEP_SAMPLES = 240
+ZONE_MOTION_PER_SAMPLE_DEG = 0.5  # sample often enough that no zone centre moves more than this between checks
+
+
+@dataclass
+class Finding:
+    level: str  # "error" | "warning" | "info"
+    check: str  # short name of the check
+    message: str
+    numbers: dict[str, float] = field(default_factory=dict)
+
+    def __str__(self) -> str:
+        return f"{self.level.upper():7s} [{self.check}] {self.message}"
+
+
+@dataclass
+class PhysicsReport:
+    findings: list[Finding] = field(default_factory=list)
+    samples: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return not any(f.level == "error" for f in self.findings)
+
+    @property
+    def errors(self) -> list[Finding]:
+        return [f for f in self.findings if f.level == "error"]
+
+    @property
+    def warnings(self) -> list[Finding]:
+        return [f for f in self.findings if f.level == "warning"]
+
+    def add(self, level: str, check: str, message: str, **numbers: float) -> None:
+        self.findings.append(Finding(level, check, message, {k: float(v) for k, v in numbers.items()}))
+
+    def format(self) -> str:
+        lines = [str(f) for f in self.findings]
+        verdict = "PASS" if self.ok else "FAIL"
+        lines.append(f"{verdict}: {len(self.errors)} error(s), {len(self.warnings)} warning(s), "
+                     f"{self.samples} time sample(s) checked")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"ok": self.ok, "samples": self.samples,
+                "findings": [{"level": f.level, "check": f.check, "message": f.message, "numbers": f.numbers}
+                             for f in self.findings]}
+
+
+def d_s_to_deg(d_s: float) -> float:
+    """Spherical separation d_s = 1 - cos(angle) -> angle [deg] (sign kept)."""
+    return math.copysign(math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - abs(d_s))))), d_s)
+
+
+def signed_margin_deg(zone: Any, x: np.ndarray) -> float:
+    return d_s_to_deg(float(zone.signed_separation(np.asarray(x, dtype=float))))
+
+
+# ---------------------------------------------------------------------------------------------
+# The run's schedule: which mode and which target when
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class Segment:
+    t_start_s: float
+    t_end_s: float
+    mode: str
+    target: np.ndarray  # unit 3-vector (POINTING) or quaternion (QUATERNION)
+    source: str  # where the target comes from, for messages
+
+
+def schedule(mission: "Mission") -> list[Segment]:
+    """Piecewise-constant (mode, target) over the run from the initial config and the timeline."""
+    from hil_sim.mission import SetModeCommand, SetTargetCommand
+
+    fsw = mission.flight_software
+    mode = fsw.initial_mode
+    target_dir = np.asarray(fsw.pointing.target_N, dtype=float)
+    target_q = np.asarray(fsw.quaternion.target_q_NB, dtype=float)
+    src_dir, src_q = "flight_software.pointing.target_N", "flight_software.quaternion.target_q_NB"
+    segments: list[Segment] = []
+    t = 0.0
+
+    def close(until: float) -> None:
+        if until > t or not segments:
+            tgt, src = (target_q, src_q) if mode == "QUATERNION" else (target_dir, src_dir)
+            segments.append(Segment(t, until, mode, tgt.copy(), src))
+
+    for i, entry in enumerate(mission.timeline):
+        if isinstance(entry, SetModeCommand):
+            close(entry.t_s)
+            t, mode = entry.t_s, entry.mode
+        elif isinstance(entry, SetTargetCommand):
+            close(entry.t_s)
+            t = entry.t_s
+            direction = entry.target_direction_N()
+            if direction is not None:
+                target_dir, src_dir = direction, f"timeline[{i}]"
+            elif entry.q_target_NB is not None:
+                target_q, src_q = np.asarray(entry.q_target_NB, dtype=float), f"timeline[{i}]"
+    close(mission.duration_s)
+    return [s for s in segments if s.t_end_s > s.t_start_s or len(segments) == 1]
+
+
+# ---------------------------------------------------------------------------------------------
+# Zones as the flight software builds them
+# ---------------------------------------------------------------------------------------------
+
+class ZoneBuildError(ValueError):
+    """A zone description that gnc cannot turn into a star-shaped set about its centre (kernel)."""
+
+
+def _kernel_hint(name: str, exc: Exception) -> str:
+    return (f"zone '{name}': {exc}. The law needs a kernel point g strictly inside the zone from which "
+            "every boundary point is seen along a geodesic inside it: for a sky zone that point is the "
+            "body direction (the origin of the angular description), so the shape must contain the "
+            "origin strictly inside and be star-shaped about it")
+
+
+class SkyZones:
+    """Physical and law (inflated) sky zones of a mission at any time, with the onboard ephemeris."""
+
+    def __init__(self, mission: "Mission"):
+        from fsw.guidance import SkyEphemeris
+        from gnc import sky_zones
+
+        fsw = mission.flight_software
+        self.ephemeris = SkyEphemeris(fsw)
+        self.margin_deg = fsw.law.margin_deg
+        self.names: list[str] = []
+        self.bodies: list[str] = []
+        self._phys, self._law, self._fixed = [], [], []
+        for z in fsw.pointing.zones:
+            extra = (self.ephemeris.earth_angular_radius_deg
+                     if z.body == "earth" and z.add_body_angular_radius else 0.0)
+            self.names.append(z.name)
+            self.bodies.append(z.body)
+            try:
+                self._phys.append(sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra))
+                self._law.append(sky_zones.SkyZoneBuilder(z.geometry, self.margin_deg, extra))
+                self._phys[-1].build(np.array([0.0, 0.0, 1.0]))
+            except ValueError as exc:
+                raise ZoneBuildError(_kernel_hint(z.name, exc)) from None
+            self._fixed.append(np.asarray(z.direction_N, dtype=float) if z.body == "inertial" else None)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def centers(self, t_s: float) -> list[np.ndarray]:
+        dirs = self.ephemeris.directions(t_s) if any(f is None for f in self._fixed) else {}
+        return [f if f is not None else np.asarray(dirs[b], dtype=float) for f, b in zip(self._fixed, self.bodies)]
+
+    def physical(self, t_s: float) -> list:
+        return [b.build(c) for b, c in zip(self._phys, self.centers(t_s))]
+
+    def law(self, t_s: float) -> list:
+        return [b.build(c) for b, c in zip(self._law, self.centers(t_s))]
+
+    def max_rate_deg_s(self, t_s: float, dt_s: float = 60.0) -> float:
+        """Fastest apparent motion of a zone centre [deg/s] around t."""
+        a, b = self.centers(t_s), self.centers(t_s + dt_s)
+        rates = [math.degrees(math.acos(float(np.clip(x @ y, -1, 1)))) / dt_s for x, y in zip(a, b)]
+        return max(rates, default=0.0)
+
+
+def s3_zones(mission: "Mission") -> tuple[list[str], list, list]:
+    """(names, physical zones, law zones inflated by margin) on S^3, as fsw.guidance builds them."""
+    m = math.radians(mission.flight_software.law.margin_deg)
+    names, phys, law = [], [], []
+    for zc in mission.flight_software.quaternion.zones:
+        try:
+            _append_s3_zone(zc, m, names, phys, law)
+        except ValueError as exc:
+            raise ZoneBuildError(_kernel_hint(zc.name, exc)) from None
+    return names, phys, law
+
+
+def _append_s3_zone(zc, margin_rad: float, names: list, phys: list, law: list) -> None:
+    from gnc import zones as gz
+
+    centers = [np.asarray(zc.center_q, dtype=float)]
+    if zc.antipodal_copy:
+        centers.append(-centers[0])
+    for k, c in enumerate(centers):
+        names.append(zc.name + ("" if k == 0 else " (antipode)"))
+        if zc.shape == "cone":
+            ha = math.radians(zc.half_angle_deg)
+            phys.append(gz.ConicZone(c, ha))
+            law.append(gz.ConicZone(c, ha + margin_rad))
+        else:
+            # margin applied per principal direction in angle, as fsw.guidance does
+            a = np.asarray(zc.semi_axes, dtype=float)
+            a_infl = np.tan(np.minimum(np.arctan(a) + margin_rad, math.radians(89.0)))
+            phys.append(gz.StarZone.superellipsoid(c, None, a, zc.exponent))
+            law.append(gz.StarZone.superellipsoid(c, None, a_infl, zc.exponent))
+
+
+# ---------------------------------------------------------------------------------------------
+# The checks
+# ---------------------------------------------------------------------------------------------
+
+def check_mission(mission: "Mission", step_s: float | None = None) -> PhysicsReport:
+    """Run every physics check on a validated mission; never raises for a bad mission, reports it."""
+    report = PhysicsReport()
+    segments = schedule(mission)
+    modes = {s.mode for s in segments}
+    fsw = mission.flight_software
+    if "POINTING" in modes and fsw.pointing.zones:
+        try:
+            _check_pointing(mission, segments, report, step_s)
+        except ZoneBuildError as exc:
+            report.add("error", "kernel", str(exc))
+    if "QUATERNION" in modes and fsw.quaternion.zones:
+        try:
+            _check_quaternion(mission, segments, report)
+        except ZoneBuildError as exc:
+            report.add("error", "kernel", str(exc))
+    _check_wheels(mission, report)
+    if not report.findings:
+        report.add("info", "summary", "no problems found")
+    return report
+
+
+def _eps_in_use(mission: "Mission", eps_max: float) -> float:
+    law = mission.flight_software.law
+    if law.eps == "auto":
+        return min(law.eps_fraction * eps_max, law.eps_max_used)
+    return float(law.eps)
+
+
+def _check_assumptions_at(mission, target, zones, names, kappa, t_s, where, report, seen, law_name="star") -> float:
+    """Check the law's assumptions at one time; return the upper end of the admissible eps interval."""
+    from gnc.checks import check_assumptions
+
+    law = mission.flight_software.law
+    # first the eps interval alone (cheap), then the full check with the eps the flight software would use
+    probe = check_assumptions(target, zones, 1e-9, kappa=None, law=law_name, check_r_sets=False)
+    eps_max = float(probe.eps_max)
+    eps = _eps_in_use(mission, eps_max) if eps_max > 0 else 1e-9
+    rep = check_assumptions(target, zones, eps, kappa=kappa if law_name == "star" else None, law=law_name)
+    for msg in rep.errors:
+        key = (where, "assumption", _strip_numbers(msg))
+        if key not in seen:
+            seen.add(key)
+            report.add("error", "assumptions", f"t = {t_s:.0f} s, {where}: {msg} (zones: {_named(names)})",
+                       t_s=t_s, eps=eps, eps_max=eps_max)
+    if law.eps == "auto" and not eps_max > 0 and (where, "eps") not in seen:
+        seen.add((where, "eps"))
+        report.add("error", "eps", f"t = {t_s:.0f} s, {where}: no admissible eps exists (eps_max = {eps_max:.4g})",
+                   t_s=t_s, eps_max=eps_max)
+    if rep.kappa_bar is not None and math.isfinite(float(rep.kappa_bar)) and kappa is not None \
+            and kappa <= float(rep.kappa_bar) and (where, "kappa") not in seen:
+        seen.add((where, "kappa"))
+        report.add("error", "kappa", f"t = {t_s:.0f} s, {where}: kappa = {kappa:.4g} <= kappa_bar = "
+                   f"{float(rep.kappa_bar):.4g} (eps = {eps:.4g}): an undesired stable equilibrium can exist; "
+                   "raise law.kappa", t_s=t_s, kappa=kappa, kappa_bar=float(rep.kappa_bar))
+    for msg in rep.warnings:
+        key = (where, "warning", _strip_numbers(msg))
+        if key not in seen:
+            seen.add(key)
+            report.add("warning", "assumptions", f"t = {t_s:.0f} s, {where}: {msg}", t_s=t_s)
+    return eps_max
+
+
+def _strip_numbers(text: str) -> str:
+    import re
+    return re.sub(r"[-+]?\d[\d.eE+-]*", "#", text)
+
+
+def _named(names: list[str]) -> str:
+    return ", ".join(f"{i}={n}" for i, n in enumerate(names))
+
+
+def _sweep_times(segment: Segment, sky: SkyZones, step_s: float | None) -> np.ndarray:
+    span = segment.t_end_s - segment.t_start_s
+    if step_s is None:
+        rate = sky.max_rate_deg_s(segment.t_start_s)
+        step_s = ZONE_MOTION_PER_SAMPLE_DEG / rate if rate > 0 else span
+    count = int(min(MAX_SWEEP_SAMPLES, max(1, math.ceil(span / max(step_s, 1e-3))))) + 1
+    return np.linspace(segment.t_start_s, segment.t_end_s, count)
+
+
+def _check_pointing(mission, segments, report, step_s) -> None:
+    sky = SkyZones(mission)
+    fsw = mission.flight_software
+    kappa = fsw.law.kappa
+    seen: set = set()
+    worst_eps_max = math.inf
+    # the initial boresight (truth) must not start inside a physical zone
+    from gnc.attitude import quat_rotate
+    y0 = np.asarray(quat_rotate(np.asarray(mission.initial_state.q_NB), np.asarray(mission.spacecraft.instrument_boresight_B)))
+    for name, zone in zip(sky.names, sky.physical(0.0)):
+        m = signed_margin_deg(zone, y0)
+        if m <= 0:
+            report.add("error", "initial-state", f"the instrument boresight starts inside zone '{name}' "
+                       f"(signed margin {m:.2f} deg)", margin_deg=m)
+    for seg in (s for s in segments if s.mode == "POINTING"):
+        times = _sweep_times(seg, sky, step_s)
+        report.samples += len(times)
+        for t in times:
+            phys, law_zones = sky.physical(float(t)), sky.law(float(t))
+            for name, zp, zl in zip(sky.names, phys, law_zones):
+                _kernel_check(name, zp, report, seen)
+                m_phys, m_law = signed_margin_deg(zp, seg.target), signed_margin_deg(zl, seg.target)
+                if m_law <= 0 and (seg.source, name) not in seen:
+                    seen.add((seg.source, name))
+                    what = "inside" if m_phys <= 0 else f"within the {sky.margin_deg:g} deg law margin of"
+                    report.add("error", "target", f"t = {t:.0f} s: the target from {seg.source} is {what} zone "
+                               f"'{name}' (margin {m_phys:.2f} deg to the physical zone, {m_law:.2f} deg to "
+                               "the inflated one); the flight software would reject it", t_s=float(t),
+                               margin_deg=m_phys)
+            eps_max = _check_assumptions_at(mission, seg.target, law_zones, sky.names, kappa, float(t),
+                                            f"POINTING target from {seg.source}", report, seen)
+            if math.isfinite(eps_max):
+                worst_eps_max = min(worst_eps_max, eps_max)
+    if math.isfinite(worst_eps_max):
+        eps = _eps_in_use(mission, worst_eps_max)
+        report.add("info", "eps", f"POINTING: smallest admissible eps upper bound over the run {worst_eps_max:.4g}; "
+                   f"eps in use {eps:.4g}", eps_max=worst_eps_max, eps=eps)
+
+
+def _kernel_check(name: str, zone, report: PhysicsReport, seen: set) -> None:
+    if ("kernel", name) in seen:
+        return
+    seen.add(("kernel", name))
+    g = np.asarray(zone.kernel, dtype=float)
+    s = float(zone.signed_separation(g))
+    if not (zone.contains(g) and s < 0):
+        report.add("error", "kernel", f"zone '{name}': its kernel g is not strictly inside the zone (signed "
+                   f"separation {s:.3g}); the law steers away from g, so g must be an interior point from which "
+                   "the zone is star-shaped", signed_separation=s)
+
+
+def _check_quaternion(mission, segments, report) -> None:
+    fsw = mission.flight_software
+    names, phys, law_zones = s3_zones(mission)
+    all_cones = all(z.shape == "cone" for z in fsw.quaternion.zones)
+    gradient = fsw.quaternion.law == "gradient" or (fsw.quaternion.law == "auto" and all_cones)
+    kappa = None if gradient else fsw.law.kappa
+    seen: set = set()
+    for name, zone in zip(names, phys):
+        _kernel_check(name, zone, report, seen)
+    q0 = np.asarray(mission.initial_state.q_NB, dtype=float)
+    for seg in (s for s in segments if s.mode == "QUATERNION"):
+        report.samples += 1
+        # the flight software lifts the attitude into the target's hemisphere on entry (fsw.guidance)
+        x0 = q0 if float(q0 @ seg.target) >= 0 else -q0
+        for name, zp, zl in zip(names, phys, law_zones):
+            m_phys, m_law = signed_margin_deg(zp, seg.target), signed_margin_deg(zl, seg.target)
+            if m_law <= 0:
+                report.add("error", "target", f"the attitude target from {seg.source} is "
+                           f"{'inside' if m_phys <= 0 else 'within the law margin of'} S^3 zone '{name}' "
+                           f"(margin {m_phys:.2f} deg on S^3)", margin_deg=m_phys)
+            if seg.t_start_s == 0.0 and signed_margin_deg(zp, x0) <= 0:
+                report.add("error", "initial-state", f"the initial attitude is inside S^3 zone '{name}'")
+        eps_max = _check_assumptions_at(mission, seg.target, law_zones, names, kappa, seg.t_start_s,
+                                        f"QUATERNION target from {seg.source}", report, seen,
+                                        law_name="gradient" if gradient else "star")
+        if math.isfinite(eps_max):
+            report.add("info", "eps", f"QUATERNION ({'GradientLaw' if gradient else 'StarShapedLaw'}): eps upper "
+                       f"bound {eps_max:.4g}, eps in use {_eps_in_use(mission, eps_max):.4g}", eps_max=eps_max)
+
+
+def wheel_authority(axes_B: np.ndarray, limits: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Largest magnitude along each unit direction d that minimum-norm allocation can produce.
+
+    The flight software allocates w = W^+ v and scales the whole vector down until every |w_i| <= limit_i,
+    so along d the reachable magnitude is min_i limit_i / |(W^+ d)_i|.
+    """
+    W = np.asarray(axes_B, dtype=float).T  # 3 x n
+    per_unit = np.abs(directions @ np.linalg.pinv(W).T)  # (m, n): |W^+ d| per wheel
+    with np.errstate(divide="ignore"):
+        return np.min(np.where(per_unit > 1e-12, limits[None, :] / per_unit, np.inf), axis=1)
+
+
+def _fibonacci_sphere(count: int) -> np.ndarray:
+    k = np.arange(count) + 0.5
+    z = 1 - 2 * k / count
+    phi = math.pi * (1 + 5 ** 0.5) * k
+    r = np.sqrt(1 - z * z)
+    return np.stack((r * np.cos(phi), r * np.sin(phi), z), axis=1)
+
+
+def _check_wheels(mission, report) -> None:
+    sc = mission.spacecraft
+    fsw = mission.flight_software
+    J = np.asarray(sc.inertia_B_kgm2, dtype=float)
+    axes = np.asarray([w.axis_B for w in sc.wheels])
+    d = _fibonacci_sphere(2000)
+    torque = wheel_authority(axes, np.array([w.max_torque_Nm for w in sc.wheels]), d)
+    Jd = np.einsum("ij,mj->mi", J, d)
+    inertia_along = np.einsum("mi,mi->m", d, Jd)
+    # the body acceleration along d needs torque J d alpha (gyroscopic terms are small at these rates)
+    accel = torque / np.linalg.norm(Jd, axis=1)
+    worst = int(np.argmin(accel))
+    accel_avail_deg_s2 = math.degrees(float(accel[worst]))
+    accel_cmd = fsw.control.max_command_accel_deg_s2
+    rate_limit = fsw.spacecraft.max_rate_deg_s
+    axis = np.round(d[worst], 3).tolist()
+    if accel_avail_deg_s2 < accel_cmd:
+        report.add("error", "wheels", f"the wheels can accelerate the body at only {accel_avail_deg_s2:.4g} deg/s^2 "
+                   f"about body axis {axis}, below the commanded-rate slew limit control.max_command_accel_deg_s2 "
+                   f"= {accel_cmd:g}: the rate loop saturates and lags the law", accel_avail_deg_s2=accel_avail_deg_s2,
+                   accel_cmd_deg_s2=accel_cmd)
+    speeds = mission.initial_state.wheel_speeds_rad_s or [0.0] * len(sc.wheels)
+    headroom = np.array([w.Js_kgm2 * max(0.0, mission.requirements.max_wheel_speed_fraction * w.max_speed_rad_s
+                                         - abs(s)) for w, s in zip(sc.wheels, speeds)])
+    # body momentum J omega along d must come from the wheels: reachable |omega| = h(J d)/|J d|
+    momentum = wheel_authority(axes, headroom, Jd / np.linalg.norm(Jd, axis=1, keepdims=True))
+    rate_avail = momentum / np.linalg.norm(Jd, axis=1)
+    worst_m = int(np.argmin(rate_avail))
+    rate_avail_deg_s = math.degrees(float(rate_avail[worst_m]))
+    if rate_avail_deg_s < rate_limit:
+        report.add("error", "wheels", f"wheel momentum (up to {mission.requirements.max_wheel_speed_fraction:g} of "
+                   f"max speed) allows only {rate_avail_deg_s:.4g} deg/s about body axis "
+                   f"{np.round(d[worst_m], 3).tolist()}, below the rate limit spacecraft.max_rate_deg_s = {rate_limit:g}",
+                   rate_avail_deg_s=rate_avail_deg_s, rate_limit_deg_s=rate_limit)
+    effective_accel = min(accel_avail_deg_s2, accel_cmd)
+    braking_deg = rate_limit ** 2 / (2 * effective_accel)
+    margin = fsw.law.margin_deg
+    if braking_deg > margin:
+        report.add("warning", "wheels", f"braking from the rate limit {rate_limit:g} deg/s at {effective_accel:.3g} "
+                   f"deg/s^2 takes {braking_deg:.2f} deg, more than law.margin_deg = {margin:g}: the eps-layer must "
+                   "absorb the rest, or the boresight may overshoot into a physical zone", braking_deg=braking_deg)
+    report.add("info", "wheels", f"worst-axis authority: {accel_avail_deg_s2:.4g} deg/s^2 (commanded "
+               f"{accel_cmd:g}), {rate_avail_deg_s:.4g} deg/s momentum-limited rate (limit {rate_limit:g}), braking "
+               f"angle {braking_deg:.2f} deg", accel_avail_deg_s2=accel_avail_deg_s2, rate_avail_deg_s=rate_avail_deg_s,
+               braking_deg=braking_deg)
+    if len(fsw.spacecraft.wheels) == len(sc.wheels):
+        for i, (wk, wt) in enumerate(zip(fsw.spacecraft.wheels, sc.wheels)):
+            err = math.degrees(math.acos(float(np.clip(np.dot(wk.axis_B, wt.axis_B), -1, 1))))
+            if err > 1.0:
+                report.add("warning", "knowledge", f"wheel {i}: the flight software's axis is {err:.1f} deg from the "
+                           "true axis", axis_error_deg=err)
+    b_err = math.degrees(math.acos(float(np.clip(np.dot(fsw.pointing.boresight_B, sc.instrument_boresight_B), -1, 1))))
+    if b_err > 0.05:
+        report.add("warning", "knowledge", f"flight_software.pointing.boresight_B is {b_err:.2f} deg from the true "
+                   "spacecraft.instrument_boresight_B: this misalignment eats into the keep-out margin",
+                   boresight_error_deg=b_err)
