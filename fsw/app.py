@@ -23,7 +23,7 @@ from fsw.control import RateController
 from fsw.estimation import AttitudeEstimator
 from fsw.executive import Executive
 from fsw.fdir import Fdir, FdirInputs
-from fsw.guidance import Guidance
+from fsw.guidance import AssumptionChecker, Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
 _CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
@@ -83,6 +83,8 @@ class FlightSoftware:
             config.rates.gnc_rate_hz, config.rates.housekeeping_rate_hz, config.rates.slip_event_throttle_s,
             gnc_task=self._gnc_task, hk_task=self.housekeeping, on_slip=self._on_slip, clock=clock,
         )
+        self.checker = AssumptionChecker(config.law.assumption_check)
+        self._last_check_t = -math.inf
         self._corrupt_prev = {"IMU": 0, "STAR_TRACKER": 0}
         self._st_was_valid = True
         self._st_outage_start = 0.0
@@ -188,8 +190,9 @@ class FlightSoftware:
 
     # ------------------------------------------------------------------------------------ cycles
     def run_cycle(self, inputs) -> CycleRecord:
-        """One GNC cycle (timed by the executive when called through run_lockstep/run_realtime)."""
-        self._gnc_task(inputs, self.executive.slipped_last)
+        """One tick of the executive: the GNC cycle, and the housekeeping group when it is due."""
+        tick = int(inputs.tick) if hasattr(inputs, "tick") else self.cycle
+        self.executive.run_tick(inputs, tick, self.period_s)
         return self.last
 
     def _gnc_task(self, inputs, slipped_before: bool) -> None:
@@ -244,15 +247,11 @@ class FlightSoftware:
 
         # ---- estimation (propagate across every IMU sample of the tick)
         est = self.estimator
+        q_st = (np.asarray(st.q_NS, dtype=float) / np.linalg.norm(st.q_NS)) if st_fresh else None
         if imu_samples:
-            n = len(imu_samples)
-            status = None
-            for i, s in enumerate(imu_samples):
-                last = i == n - 1
-                status = est.step(dt / n, s.omega_BN_B, (st.q_NS / np.linalg.norm(st.q_NS)) if (last and st_fresh) else None,
-                                  st_latency if last else 0.0)
+            status = est.step_samples(dt, np.array([smp.omega_BN_B for smp in imu_samples]), q_st, st_latency)
         else:
-            status = est.step(dt, None, (st.q_NS / np.linalg.norm(st.q_NS)) if st_fresh else None, st_latency)
+            status = est.step(dt, None, q_st, st_latency)
         self._st_events(st, st_fresh)
 
         # ---- guidance and control
@@ -383,13 +382,17 @@ class FlightSoftware:
     def housekeeping(self) -> None:
         """Housekeeping rate group: assumption checks (throttled), heartbeat, HK telemetry."""
         gd = self.guidance
-        period_cycles = max(1, round(self.cfg.law.check_period_s / self.period_s))
-        if gd.mode in ("POINTING", "QUATERNION") and (gd.checks_dirty or self.cycle % period_cycles < self.executive.hk_divider):
-            try:
-                gd.run_assumption_check()
-            except Exception as exc:  # noqa: BLE001 - a check failure must not stop the flight software
-                self._event("ASSUMPTION_VIOLATED", reason=f"check failed: {type(exc).__name__}: {exc}"[:110])
-                gd._checks_dirty = False
+        result = self.checker.poll()
+        if result is not None:
+            gd.apply_check_result(result)
+        if gd.mode in ("POINTING", "QUATERNION"):
+            due = self.t_s - self._last_check_t >= self.cfg.law.check_period_s
+            if (gd.checks_dirty or due) and not self.checker.busy:
+                if self.checker.submit(gd.assumption_snapshot()):
+                    gd.mark_checked()
+                    self._last_check_t = self.t_s
+                    if self.checker.mode == "inline":
+                        gd.apply_check_result(self.checker.poll())
         try:
             self.driver.send_heartbeat(MODES.index(gd.mode), self.cycle)
         except Exception:  # noqa: BLE001
@@ -438,9 +441,11 @@ class FlightSoftware:
     def _send_hk_tm(self) -> None:
         values = self.hk_values()
         try:
-            import psutil
+            if getattr(self, "_proc", None) is None:
+                import psutil
 
-            values["rss_mb"] = psutil.Process().memory_info().rss / 1e6
+                self._proc = psutil.Process()
+            values["rss_mb"] = self._proc.memory_info().rss / 1e6
         except Exception:  # noqa: BLE001
             pass
         try:
@@ -464,3 +469,4 @@ class FlightSoftware:
 
     def shutdown(self) -> None:
         self._event("FSW_STOPPED", cycles=self.cycle)
+        self.checker.close()

@@ -232,7 +232,8 @@ class LawConfig(_Strict):
     eps_max_used: float = Field(0.15, gt=0.0, le=1.0, description="Upper cap on eps whatever the check allows (keeps the avoidance layer thin).")
     margin_deg: float = Field(3.0, ge=0.0, le=30.0, description="The law avoids physical zones inflated by this margin [deg]; see fsw.guidance for how to choose it.")
     merge_gap_deg: float = Field(2.0, ge=0.0, le=30.0, description="Two (inflated) zones whose bounding caps are closer than this gap are replaced by one conservative cone containing both (Assumption 1 would force a uselessly thin eps) [deg].")
-    check_period_s: float = Field(1.0, gt=0.0, le=60.0, description="How often the full assumption check (gnc.checks) is re-run while zones move [s]; it is re-run at once on target/gain/zone changes.")
+    check_period_s: float = Field(10.0, gt=0.0, le=3600.0, description="How often the full assumption check (gnc.checks, incl. the numerical Assumption 2 test) is re-run while zones move [s]; it is re-submitted at once on target/gain/mode/zone-merge changes.")
+    assumption_check: Literal["process", "inline", "off"] = Field("process", description="Where the full check runs: 'process' (a worker process, so the seconds it can take never delay a GNC cycle; results only feed telemetry/events), 'inline' (in the housekeeping group; deterministic, for tests), 'off'. The per-cycle eps bound never depends on it.")
 
 
 # -------------------------------------------------------------------------------------------- modes

@@ -31,16 +31,24 @@ class ControlOutput:
     omega_cmd_shaped_BN_B: np.ndarray
 
 
-def allocate_min_norm(G: np.ndarray, active: np.ndarray, torque_B_Nm: np.ndarray, max_torque_Nm: np.ndarray) -> tuple[np.ndarray, float]:
+def allocation_matrix(G: np.ndarray, active: np.ndarray) -> np.ndarray:
+    """(n, 3) map from body torque to wheel motor torques: -pinv(G_active), zero rows for isolated wheels."""
+    M = np.zeros((G.shape[1], 3))
+    idx = np.flatnonzero(active)
+    if idx.size:
+        M[idx] = -np.linalg.pinv(G[:, idx])
+    return M
+
+
+def allocate_min_norm(G: np.ndarray, active: np.ndarray, torque_B_Nm: np.ndarray, max_torque_Nm: np.ndarray,
+                      M: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Wheel motor torques that produce body torque ``torque_B_Nm`` (reaction, -G tau_w), min norm,
     uniformly scaled into the limits. Returns (tau_w (n,), scale in (0, 1])."""
-    n = G.shape[1]
-    tau = np.zeros(n)
-    idx = np.flatnonzero(active)
-    if idx.size == 0:
-        return tau, 0.0
-    Ga = G[:, idx]
-    tau[idx] = -np.linalg.pinv(Ga) @ torque_B_Nm
+    if not np.any(active):
+        return np.zeros(G.shape[1]), 0.0
+    if M is None:
+        M = allocation_matrix(G, active)
+    tau = M @ torque_B_Nm
     ratio = float(np.max(np.abs(tau) / max_torque_Nm))
     scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
     return tau * scale, scale
@@ -61,6 +69,7 @@ class RateController:
         self.ff = cfg.control.feedforward_command_rate
         self.max_accel = math.radians(cfg.control.max_command_accel_deg_s2)
         self.active = np.ones(self.n, dtype=bool)
+        self.M = allocation_matrix(self.G, self.active)
         self.reset()
 
     def reset(self) -> None:
@@ -76,6 +85,7 @@ class RateController:
         if np.linalg.matrix_rank(self.G[:, trial], tol=1e-6) < 3:
             return False
         self.active = trial
+        self.M = allocation_matrix(self.G, self.active)
         return True
 
     @property
@@ -101,6 +111,8 @@ class RateController:
         self._omega_cmd_prev = shaped
         w = np.asarray(omega_BN_B, dtype=float)
         h_w = self.G @ (self.Js * self.wheel_speed)
-        torque = self.J @ (self.kp * (shaped - w) + cmd_dot) + np.cross(w, self.J @ w + h_w)
-        tau_w, scale = allocate_min_norm(self.G, self.active, torque, self.max_torque)
+        h = self.J @ w + h_w
+        gyro = np.array([w[1] * h[2] - w[2] * h[1], w[2] * h[0] - w[0] * h[2], w[0] * h[1] - w[1] * h[0]])
+        torque = self.J @ (self.kp * (shaped - w) + cmd_dot) + gyro
+        tau_w, scale = allocate_min_norm(self.G, self.active, torque, self.max_torque, self.M)
         return ControlOutput(torque, tau_w, scale, shaped)

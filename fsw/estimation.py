@@ -85,6 +85,14 @@ def mekf_propagate(q, bias, P, omega_meas, dt, sig_v, sig_u):
 
 
 @njit(cache=True)
+def mekf_propagate_many(q, bias, P, omegas, dt, sig_v, sig_u):
+    """Propagate through consecutive gyro samples omegas (n, 3), each held for ``dt`` [s]."""
+    for k in range(omegas.shape[0]):
+        q, P = mekf_propagate(q, bias, P, omegas[k], dt, sig_v, sig_u)
+    return q, P
+
+
+@njit(cache=True)
 def mekf_innovation(q, q_meas):
     """Small-angle innovation dtheta_B [rad] = 2 vec(q_est^* (x) q_meas), sign-fixed (double cover)."""
     qc = q.copy()
@@ -106,8 +114,8 @@ def mekf_innovation(q, q_meas):
 @njit(cache=True)
 def mekf_update(q, bias, P, dtheta, sigma_rad):
     """Fuse one attitude measurement given its innovation (H = [I 0], R = sigma^2 I)."""
-    S = P[0:3, 0:3] + np.eye(3) * sigma_rad * sigma_rad
-    K = P[:, 0:3] @ np.linalg.inv(S)
+    S = np.ascontiguousarray(P[0:3, 0:3]) + np.eye(3) * sigma_rad * sigma_rad
+    K = np.ascontiguousarray(P[:, 0:3]) @ np.linalg.inv(S)
     dx = K @ dtheta
     IKH = np.eye(6)
     IKH[:, 0:3] -= K
@@ -208,6 +216,16 @@ class AttitudeEstimator:
             coasting_s=self.coasting_s,
             cov_trace_deg2=self.cov_trace_deg2,
         )
+
+    def step_samples(self, dt_s: float, omegas_B: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float = 0.0) -> EstimatorStatus:
+        """Like `step` for a tick with several gyro samples (n, 3), each held for dt_s / n."""
+        omegas = np.ascontiguousarray(omegas_B, dtype=float)
+        n = omegas.shape[0]
+        if n > 1 and self.initialized:
+            sub = dt_s / n
+            self.q_NB, self.P = mekf_propagate_many(self.q_NB, self.bias_B, self.P, omegas[:-1], sub, self.sig_v, self.sig_u)
+            return self.step(sub, omegas[-1], q_NS, st_latency_s)
+        return self.step(dt_s, omegas[-1] if n else None, q_NS, st_latency_s)
 
     @property
     def cov_trace_deg2(self) -> float:

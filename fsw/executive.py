@@ -113,7 +113,7 @@ class Executive:
             group.last_slip_event_t = now
             self.on_slip(group.name, 1e3 * exec_s, group.slips)
 
-    def _run_tick(self, inputs, tick: int, budget_s: float) -> float:
+    def run_tick(self, inputs, tick: int, budget_s: float) -> float:
         """GNC (and HK when due) for one tick; returns the end time on self.clock."""
         t0 = self.clock()
         self.gnc_task(inputs, self.slipped_last)
@@ -149,7 +149,7 @@ class Executive:
             if self.last_tick is not None and tick > self.last_tick + 1:
                 self._slip(self.gnc, 0.0, tick - self.last_tick - 1)
             self.last_tick = tick
-            self._run_tick(inputs, tick, self.period_s)
+            self.run_tick(inputs, tick, self.period_s)
             n += 1
         return n
 
@@ -179,7 +179,7 @@ class Executive:
                     sleep(remaining - spin_s)
             self.jitter.record(now - start_sched)
             inputs = collect()
-            end = self._run_tick(inputs, k, P - (now - start_sched))
+            end = self.run_tick(inputs, k, P - (now - start_sched))
             n += 1
             # Skip start times already in the past: each one is a slipped cycle.
             k_next = k + 1

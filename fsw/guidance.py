@@ -64,9 +64,10 @@ from gnc.attitude import (
     quat_to_dcm_nb,
     quaternion_rate_command_nb,
 )
-from gnc.ephemeris import EARTH_RADIUS_KM, julian_date_tdb, moon_direction_N, sun_direction_from_spacecraft_N
+from gnc.ephemeris import EARTH_RADIUS_KM, julian_date_tdb, moon_position_N_km, sun_position_N_km
 
 ZONE_REBUILD_TOL_DEG = 0.01
+EPHEMERIS_NODE_S = 10.0
 _MU_EARTH_KM3_S2 = 398600.4418
 _BODY_CODES = {"sun": "SUN", "moon": "MOON", "earth": "EARTH", "inertial": "INERTIAL"}
 
@@ -101,19 +102,117 @@ class SkyEphemeris:
         self.p_hat = node
         self.q_hat = np.array([-math.sin(raan) * math.cos(i), math.cos(raan) * math.cos(i), math.sin(i)])
         self.earth_angular_radius_deg = math.degrees(math.asin(EARTH_RADIUS_KM / o.radius_km))
+        self._nodes: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def position_N_km(self, t_s: float) -> np.ndarray:
         u = self.u0 + self.n_rad_s * t_s
         return self.radius_km * (math.cos(u) * self.p_hat + math.sin(u) * self.q_hat)
 
+    def _geocentric(self, node: int) -> tuple[np.ndarray, np.ndarray]:
+        if node not in self._nodes:
+            if len(self._nodes) > 4:
+                self._nodes.clear()
+            jd = self.jd0 + node * EPHEMERIS_NODE_S / 86400.0
+            self._nodes[node] = (np.asarray(sun_position_N_km(jd), dtype=float), np.asarray(moon_position_N_km(jd), dtype=float))
+        return self._nodes[node]
+
     def directions(self, t_s: float) -> dict[str, np.ndarray]:
-        jd = self.jd0 + t_s / 86400.0
+        """Unit vectors from the spacecraft to the Sun, Moon and Earth centre in N.
+
+        The analytic series are evaluated every EPHEMERIS_NODE_S seconds and interpolated linearly in
+        between (error < 1e-6 deg for the Moon over 10 s, far below the series' own 0.3 deg); the
+        spacecraft position (parallax) is evaluated every call.
+        """
+        k = math.floor(t_s / EPHEMERIS_NODE_S)
+        f = t_s / EPHEMERIS_NODE_S - k
+        s0, m0 = self._geocentric(k)
+        s1, m1 = self._geocentric(k + 1)
         r = self.position_N_km(t_s)
-        return {
-            "sun": np.asarray(sun_direction_from_spacecraft_N(jd, r), dtype=float),
-            "moon": np.asarray(moon_direction_N(jd, r), dtype=float),
-            "earth": -r / np.linalg.norm(r),
-        }
+        sun = s0 + f * (s1 - s0) - r
+        moon = m0 + f * (m1 - m0) - r
+        return {"sun": sun / np.linalg.norm(sun), "moon": moon / np.linalg.norm(moon), "earth": -r / np.linalg.norm(r)}
+
+
+@dataclass
+class CheckResult:
+    ok: bool
+    errors: list[str]
+    eps_max: float
+    kappa_bar: float | None
+    duration_s: float
+
+
+def run_full_check(target, zones, eps, kappa, law) -> CheckResult:
+    """gnc.checks.check_assumptions as a plain function (picklable: runs in the worker process)."""
+    import time as _time
+
+    from gnc.checks import check_assumptions
+
+    t0 = _time.perf_counter()
+    rep = check_assumptions(target, zones, eps, kappa=kappa, law=law)
+    eps_max = float(rep.eps_max) if rep.eps_max is not None and math.isfinite(rep.eps_max) else float("inf")
+    return CheckResult(bool(rep.ok), [str(e) for e in rep.errors], eps_max, rep.kappa_bar, _time.perf_counter() - t0)
+
+
+class AssumptionChecker:
+    """Runs the full assumption check away from the GNC cycle.
+
+    mode 'process': one worker process (fork); `submit` hands it a snapshot, `poll` returns the result
+    once finished (never blocks). mode 'inline': `submit` runs it at once (deterministic, tests).
+    mode 'off': never checks. At most one check is in flight.
+    """
+
+    def __init__(self, mode: str = "process"):
+        self.mode = mode
+        self._pool = None
+        self._future = None
+        self._inline_result: CheckResult | None = None
+        self.submitted = 0
+        self.completed = 0
+        self.failures = 0
+        self.last_duration_s = float("nan")
+
+    @property
+    def busy(self) -> bool:
+        return self._future is not None and not self._future.done()
+
+    def submit(self, snapshot) -> bool:
+        if self.mode == "off" or snapshot is None or self.busy:
+            return False
+        self.submitted += 1
+        if self.mode == "inline":
+            self._inline_result = run_full_check(*snapshot)
+            return True
+        if self._pool is None:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"))
+        self._future = self._pool.submit(run_full_check, *snapshot)
+        return True
+
+    def poll(self) -> CheckResult | None:
+        if self._inline_result is not None:
+            res, self._inline_result = self._inline_result, None
+            self.completed += 1
+            self.last_duration_s = res.duration_s
+            return res
+        if self._future is None or not self._future.done():
+            return None
+        fut, self._future = self._future, None
+        try:
+            res = fut.result()
+        except Exception as exc:  # noqa: BLE001 - a failing check is reported, never fatal
+            self.failures += 1
+            return CheckResult(False, [f"check failed: {type(exc).__name__}: {exc}"], float("inf"), None, float("nan"))
+        self.completed += 1
+        self.last_duration_s = res.duration_s
+        return res
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
 
 
 @dataclass
@@ -271,7 +370,7 @@ class Guidance:
             self.slots.append(
                 _SkySlot(
                     i, z.name, z.body,
-                    sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra),
+                    sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra, fast=True),
                     sky_zones.SkyZoneBuilder(z.geometry, margin + ZONE_REBUILD_TOL_DEG, extra),
                     fixed,
                 )
@@ -388,30 +487,32 @@ class Guidance:
                 rebuilt = True
         return rebuilt
 
-    def run_assumption_check(self) -> None:
-        """Full check of the paper's assumptions (gnc.checks) for the current mode; housekeeping rate."""
-        from gnc.checks import check_assumptions
-
+    def assumption_snapshot(self):
+        """(target, zones, eps, kappa, law) the full check should look at now, or None (no zones)."""
+        eps = getattr(self, "_current_eps", float("nan"))
+        eps = eps if math.isfinite(eps) else 0.01
         if self.mode == "POINTING" and self._sky_law_zones:
-            target, zones, kappa = self._sky_target, self._sky_law_zones, self.kappa
-        elif self.mode == "QUATERNION" and self.s3_law_zones:
-            target, zones = self.q_target, self.s3_law_zones
-            kappa = None if self.s3_use_gradient else self.kappa
-        else:
-            self.eps_max_checked, self.assumptions_ok, self.check_errors = float("inf"), True, []
-            self._checks_dirty = False
+            return (np.array(self._sky_target), list(self._sky_law_zones), eps, self.kappa, "star")
+        if self.mode == "QUATERNION" and self.s3_law_zones:
+            law = "gradient" if self.s3_use_gradient else "star"
+            return (self.q_target.copy(), list(self.s3_law_zones), eps, None if law == "gradient" else self.kappa, law)
+        return None
+
+    def apply_check_result(self, result: "CheckResult | None") -> None:
+        """Take a finished check: telemetry flag, events on a new violation. Never changes the law:
+        the per-cycle eps bound (`ZoneGeometry.fast_eps_max`) is already conservative."""
+        if result is None:
+            self.assumptions_ok, self.check_errors, self.eps_max_checked = True, [], float("inf")
             return
-        eps = self._current_eps if math.isfinite(getattr(self, "_current_eps", float("nan"))) else 0.01
-        rep = check_assumptions(target, zones, eps, kappa=kappa)
-        ok_before = self.assumptions_ok
-        self.assumptions_ok = bool(rep.ok)
-        self.check_errors = list(rep.errors)
-        self.eps_max_checked = float(rep.eps_max) if rep.eps_max is not None and math.isfinite(rep.eps_max) else float("inf")
-        if getattr(self, "_current_eps", 0.0) >= self.eps_max_checked:
-            self._sky_law_key = None  # the cached law's eps is no longer admissible: rebuild next cycle
-            self._s3_law = None
-        if not rep.ok and (ok_before or self._checks_dirty):
-            self.events("ASSUMPTION_VIOLATED", reason="; ".join(rep.errors)[:110] or "check failed")
+        was_ok = self.assumptions_ok
+        self.assumptions_ok = result.ok
+        self.check_errors = result.errors
+        self.eps_max_checked = result.eps_max
+        if not result.ok and (was_ok or result.errors != getattr(self, "_last_reported", None)):
+            self.events("ASSUMPTION_VIOLATED", reason=("; ".join(result.errors) or "check failed")[:110])
+            self._last_reported = result.errors
+
+    def mark_checked(self) -> None:
         self._checks_dirty = False
 
     @property
@@ -461,7 +562,7 @@ class Guidance:
                     self._checks_dirty = True
                 self._sky_groups = groups
                 self._sky_law_zones = merged
-                eps_max = min(ZoneGeometry.fast_eps_max(self.target_N, merged), self.eps_max_checked)
+                eps_max = ZoneGeometry.fast_eps_max(self.target_N, merged)
                 target = self.target_N
                 eps = self._eps_for(max(eps_max, 1e-5))
                 target, occ = ZoneGeometry.retreat_target(self.target_N, merged, eps)
@@ -471,7 +572,7 @@ class Guidance:
                     self._occulted = occ
                     self._checks_dirty = True
                 if occ >= 0:
-                    eps_max = min(ZoneGeometry.fast_eps_max(target, merged), self.eps_max_checked)
+                    eps_max = ZoneGeometry.fast_eps_max(target, merged)
                     eps = self._eps_for(max(eps_max, 1e-5))
                 self._sky_target = target
                 self._sky_eps, self._sky_eps_max = eps, eps_max
@@ -522,7 +623,8 @@ class Guidance:
         r_B = R.T @ ref_N
         a = self.roll_axis_B - (self.roll_axis_B @ b) * b
         r = r_B - (r_B @ b) * b
-        return math.atan2(float(b @ np.cross(a, r)), float(a @ r))
+        axr = (a[1] * r[2] - a[2] * r[1], a[2] * r[0] - a[0] * r[2], a[0] * r[1] - a[1] * r[0])
+        return math.atan2(b[0] * axr[0] + b[1] * axr[1] + b[2] * axr[2], float(a @ r))
 
     def _quaternion(self, t_s: float, q: np.ndarray) -> GuidanceOutput:
         xd = self.q_target
@@ -534,7 +636,7 @@ class Guidance:
         out = GuidanceOutput(np.zeros(3), "QUATERNION", q_target_NB=xd.copy())
         if self.s3_law_zones:
             if self._s3_law is None:
-                eps_max = min(ZoneGeometry.fast_eps_max(xd, self.s3_law_zones), self.eps_max_checked)
+                eps_max = ZoneGeometry.fast_eps_max(xd, self.s3_law_zones)
                 eps = self._eps_for(max(eps_max, 1e-5))
                 self._s3_eps, self._s3_eps_max = eps, eps_max
                 self._current_eps = eps

@@ -182,13 +182,6 @@ def inflated_radial_profile_deg(shape: Any, margin_deg: float, rays: int = _RAYS
     return phi, np.maximum(out, base)
 
 
-def _tangent_basis_and_radii(center_N: np.ndarray, shape: Any, profile_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    basis = sky_frame(center_N, float(_shape_get(shape, "orientation_deg", 0.0) or 0.0))
-    if np.any(profile_deg >= 89.5):
-        raise ValueError("inflated zone reaches 89.5 deg from its centre; reduce the margin or the shape")
-    return basis, np.tan(np.radians(profile_deg))
-
-
 def superellipse_zone(center_N: np.ndarray, semi_axes_deg: Sequence[float], exponent: float = 2.0, orientation_deg: float = 0.0, margin_deg: float = 0.0):
     shape = {"shape": "superellipse", "semi_axes_deg": list(semi_axes_deg), "exponent": exponent, "orientation_deg": orientation_deg}
     return build_sky_zone(shape, center_N, margin_deg)
@@ -200,25 +193,40 @@ def polygon_zone(center_N: np.ndarray, vertices_deg: Sequence[Sequence[float]], 
 
 
 class SkyZoneBuilder:
-    """Builds one shape's zone for moving centres; the (inflated) radial profile is computed once."""
+    """Builds one shape's zone for moving centres; the (inflated) radial profile is computed once.
 
-    def __init__(self, shape: Any, margin_deg: float = 0.0, extra_radius_deg: float = 0.0):
+    Exact zones (``fast=False`` and no margin) use `StarZone.superellipsoid` / `StarZone.polygon`; this is
+    what the simulator uses to judge the requirement. Inflated zones, and all star shapes when
+    ``fast=True`` (the flight software, where separation is evaluated every cycle), are polygons whose
+    vertices sit on the radial profile at ``rays`` equally spaced azimuths, pushed out so the polygon
+    contains the profile curve (the chord between two vertices never cuts inside the neighbouring
+    samples): the error is conservative and below 0.01 % of the radius at the default 360 rays.
+    """
+
+    def __init__(self, shape: Any, margin_deg: float = 0.0, extra_radius_deg: float = 0.0, *, fast: bool = False, rays: int = 360):
         self.shape = shape
         self.kind = _shape_get(shape, "shape")
         self.margin_deg = float(margin_deg)
         self.orientation_deg = float(_shape_get(shape, "orientation_deg", 0.0) or 0.0)
         self.extra_radius_deg = float(extra_radius_deg)
+        self.exact = not fast and self.margin_deg == 0.0 and self.extra_radius_deg == 0.0
         if self.kind == "cone":
             self.half_angle_deg = float(_shape_get(shape, "half_angle_deg"))
             self.profile_deg = None
+            return
+        total = self.margin_deg + self.extra_radius_deg
+        if total > 0:
+            self.phi, prof = inflated_radial_profile_deg(shape, total, rays=rays, boundary_samples=4 * rays)
         else:
-            total = self.margin_deg + self.extra_radius_deg
-            self.phi, prof = inflated_radial_profile_deg(shape, total) if total > 0 else radial_profile_deg(shape)
-            self.profile_deg = prof
-            self.radii_tan = np.tan(np.radians(prof))
-            if np.any(prof >= 89.5):
-                raise ValueError("zone reaches 89.5 deg from its centre; reduce the margin or the shape")
-            self.max_radius_deg = float(prof.max())
+            self.phi, prof = radial_profile_deg(shape, np.linspace(0.0, 2 * math.pi, rays, endpoint=False))
+        if np.any(prof >= 89.0):
+            raise ValueError("zone reaches 89 deg from its centre; reduce the margin or the shape")
+        self.profile_deg = prof
+        r = np.tan(np.radians(prof))
+        # vertex radius: enclose the neighbours' samples as well (conservative chord)
+        r_v = np.maximum(np.maximum(r, np.roll(r, 1)), np.roll(r, -1)) / math.cos(math.pi / rays)
+        self.vertices_tan = np.stack((r_v * np.cos(self.phi), r_v * np.sin(self.phi)), axis=1)
+        self.max_radius_deg = float(np.degrees(np.arctan(r_v.max())))
 
     def build(self, center_N: np.ndarray, extra_radius_deg: float | None = None):
         """The zone about ``center_N`` (N frame). ``extra_radius_deg`` re-inflates (cones only, cheap)."""
@@ -226,18 +234,18 @@ class SkyZoneBuilder:
         if self.kind == "cone":
             extra = self.extra_radius_deg if extra_radius_deg is None else extra_radius_deg
             return cone_zone(c, self.half_angle_deg + extra, self.margin_deg)
-        basis = sky_frame(c, self.orientation_deg)
-        if self.margin_deg == 0.0 and self.extra_radius_deg == 0.0:
+        basis = sky_frame(c, self.orientation_deg).T  # gnc.zones wants the plane basis as columns (3, 2)
+        if self.exact:
             if self.kind == "superellipse":
                 A = [math.tan(math.radians(a)) for a in _shape_get(self.shape, "semi_axes_deg")]
                 return _zones.StarZone.superellipsoid(c, basis, np.asarray(A), float(_shape_get(self.shape, "exponent", 2.0)))
             return _zones.StarZone.polygon(c, basis, _polygon_tangent_vertices(_shape_get(self.shape, "vertices_deg")))
-        return _zones.StarZone.radial(c, basis, self.radii_tan)
+        return _zones.StarZone.polygon(c, basis, self.vertices_tan)
 
 
-def build_sky_zone(shape: Any, center_N: np.ndarray, margin_deg: float = 0.0, extra_radius_deg: float = 0.0):
+def build_sky_zone(shape: Any, center_N: np.ndarray, margin_deg: float = 0.0, extra_radius_deg: float = 0.0, *, fast: bool = False):
     """One zone from a shape description (mapping or object with the config keys) about ``center_N``."""
-    return SkyZoneBuilder(shape, margin_deg, extra_radius_deg).build(center_N)
+    return SkyZoneBuilder(shape, margin_deg, extra_radius_deg, fast=fast).build(center_N)
 
 
 def cap_of(zone: Any) -> tuple[np.ndarray, float]:
