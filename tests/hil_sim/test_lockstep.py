@@ -160,9 +160,9 @@ def test_realtime_applies_late_commands_when_they_arrive(icd: Icd) -> None:
 
 
 # ------------------------------------------------------------------------------ multi-process lockstep
-def _start_responder(spec: str, n_wheels: int) -> subprocess.Popen:
+def _start_responder(spec: str, n_wheels: int, ticks: int) -> subprocess.Popen:
     proc = subprocess.Popen([sys.executable, "-m", "hil_sim.lockstep", "--bus", spec, "--wheels", str(n_wheels),
-                             "--idle-timeout", "3"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             "--ticks", str(ticks), "--idle-timeout", "30"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
     line = proc.stdout.readline()
     assert line.strip() == "READY", proc.stderr.read()
@@ -173,9 +173,10 @@ def _run_side_by_side(icd: Icd, specs: list[str], ticks: int = 40) -> None:
     """Two SIL runs at once, each: its own bus, world, simulator and responder process."""
     procs, sims, buses = [], [], []
     try:
-        for i, spec in enumerate(specs):
-            world = World(_params(), seed=20 + i)
-            procs.append(_start_responder(spec, world.n_wheels))
+        worlds = [World(_params(), seed=20 + i) for i in range(len(specs))]
+        for spec, world in zip(specs, worlds):
+            procs.append(_start_responder(spec, world.n_wheels, ticks))
+        for spec, world in zip(specs, worlds):
             bus = open_bus(spec)
             buses.append(bus)
             sims.append(Simulator(world, bus, icd, cycle_done_timeout_s=2.0))
@@ -184,7 +185,7 @@ def _run_side_by_side(icd: Icd, specs: list[str], ticks: int = 40) -> None:
         for t in threads:
             t.start()
         for t in threads:
-            t.join(timeout=60)
+            t.join(timeout=300)
         for sim in sims:
             assert sim.stats.ticks == ticks
             assert sim.stats.cycle_done == ticks and sim.stats.cycle_done_timeouts == 0
