@@ -122,7 +122,7 @@ class TruthEphemeris:
         return sun.reshape(t.shape + (3,)), moon.reshape(t.shape + (3,))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def spline_eval(coeffs, t0_s, h_s, t_s, out):
     """Evaluate the (n-1, 4, 3) spline at t_s into out[0:3] (km)."""
     x = (t_s - t0_s) / h_s

@@ -39,7 +39,7 @@ def orbit_elements_array(params: OrbitParams) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def orbit_position_N_km(elements, t_s, out):
     """Position at t (s since epoch) into out[0:3]; Kepler's equation by Newton to 1e-14 rad."""
     a = elements[0]
@@ -47,7 +47,7 @@ def orbit_position_N_km(elements, t_s, out):
     M = elements[3] + elements[2] * t_s
     M -= 2.0 * math.pi * math.floor(M / (2.0 * math.pi))
     E = M if e < 0.8 else math.pi
-    for _ in range(30):
+    for _ in range(30 if e > 0.0 else 0):
         f = E - e * math.sin(E) - M
         dE = f / (1.0 - e * math.cos(E))
         E -= dE

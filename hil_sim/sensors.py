@@ -88,7 +88,7 @@ def sensor_frame_basis_S(boresight_S: np.ndarray) -> np.ndarray:
     return np.stack([e1, e2, b])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def gyro_sample_batch(X, BIAS, P, NORMALS, dt_since_s, OUT, SAT):
     """Gyro samples for all runs. BIAS (M,3) updated in place; NORMALS (M,6): [:3] bias walk, [3:] ARW."""
     M = X.shape[0]
@@ -112,7 +112,7 @@ def gyro_sample_batch(X, BIAS, P, NORMALS, dt_since_s, OUT, SAT):
         SAT[m] = any_sat
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _qmul(p0, p1, p2, p3, q0, q1, q2, q3):
     return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
             p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
@@ -120,7 +120,7 @@ def _qmul(p0, p1, p2, p3, q0, q1, q2, q3):
             p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def star_tracker_sample_batch(X, P, BASIS_S, SUN_N, MOON_N, NORMALS, Q_OUT, VALID, BLIND):
     """Star-tracker samples for all runs. BASIS_S (M,3,3) rows = error axes in S; SUN_N, MOON_N (M,3) unit
     directions from the spacecraft; NORMALS (M,3). Q_OUT holds the previous output and is overwritten only

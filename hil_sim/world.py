@@ -60,6 +60,27 @@ def _shared_ephemeris(epoch_tdb_jd: float, spacing_s: float) -> TruthEphemeris:
     return TruthEphemeris(epoch_tdb_jd, spacing_s)
 
 
+class NormalStream:
+    """Standard normals from one model's Generator, drawn in blocks: numpy's per-call overhead (~2 us)
+    would otherwise dominate a 1-run world. Deterministic: the block size is fixed, so the numbers a
+    model sees depend only on its seed and its own call sequence."""
+
+    BLOCK = 4096
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+        self._buf = np.empty(0)
+        self._pos = 0
+
+    def take(self, n: int) -> np.ndarray:
+        if self._pos + n > self._buf.size:
+            self._buf = self.rng.standard_normal(max(self.BLOCK, n))
+            self._pos = 0
+        out = self._buf[self._pos:self._pos + n]
+        self._pos += n
+        return out
+
+
 def model_generator(seed: int | None, key: int, own_seed: int | None) -> np.random.Generator:
     """The generator of one model: its own seed if set, else child ``key`` of the world seed."""
     if own_seed is not None:
@@ -67,16 +88,17 @@ def model_generator(seed: int | None, key: int, own_seed: int | None) -> np.rand
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(key,)))
 
 
-@njit(cache=True)
-def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
-                       t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
-    dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS)
+@njit(cache=True, error_model="numpy")
+def _world_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
+                     t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX, m_begin, m_end):
+    """Dynamics of runs [m_begin, m_end), then their orbit position and Sun/Moon/Earth directions at t_end_s."""
+    dyn.dynamics_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS, m_begin, m_end)
     sun = np.empty(3)
     moon = np.empty(3)
     r = np.empty(3)
     spline_eval(sun_c, eph_t0, eph_h, t_end_s, sun)
     spline_eval(moon_c, eph_t0, eph_h, t_end_s, moon)
-    for m in range(X.shape[0]):
+    for m in range(m_begin, m_end):
         orbit_position_N_km(ORB[m], t_end_s, r)
         rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
         s0, s1, s2 = sun[0] - r[0], sun[1] - r[1], sun[2] - r[2]
@@ -88,6 +110,13 @@ def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
             AUX[m, AUX_EARTH + j] = -r[j] / rn
         AUX[m, AUX_SUN], AUX[m, AUX_SUN + 1], AUX[m, AUX_SUN + 2] = s0 / sn, s1 / sn, s2 / sn
         AUX[m, AUX_MOON], AUX[m, AUX_MOON + 1], AUX[m, AUX_MOON + 2] = m0 / mn, m1 / mn, m2 / mn
+
+
+@njit(cache=True, error_model="numpy")
+def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
+                       t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
+    _world_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
+                     t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX, 0, X.shape[0])
 
 
 class WorldBatch:
@@ -130,10 +159,14 @@ class WorldBatch:
         self.rng_imu = model_generator(seed, SEED_KEY_IMU, p0.imu.seed)
         self.rng_star_tracker = model_generator(seed, SEED_KEY_STAR_TRACKER, p0.star_tracker.seed)
 
+        self.normals_disturbance = NormalStream(self.rng_disturbance)
+        self.normals_imu = NormalStream(self.rng_imu)
+        self.normals_star_tracker = NormalStream(self.rng_star_tracker)
+
         self.GYRO_P = sen.pack_gyro([p.imu for p in params])
         turn_on = np.array([p.imu.bias_turn_on_std_rad_s for p in params])[:, None]
         self.BIAS = (np.array([p.imu.bias_B_rad_s for p in params])
-                     + turn_on * self.rng_imu.standard_normal((M, 3)))
+                     + turn_on * self.normals_imu.take(M * 3).reshape(M, 3))
         self.imu_period_s = np.array([1.0 / p.imu.rate_hz for p in params])
         self._t_last_imu: float | None = None
         self.GYRO_OUT = np.zeros((M, 3))
@@ -162,7 +195,7 @@ class WorldBatch:
         if t_end >= eph.t_end_s or t_end < eph.t_start_s:
             eph.ensure(min(self._t, t_end), t_end)
         if self._has_random_disturbance and n_sub > 0:
-            normals = self.rng_disturbance.standard_normal((n_sub, self.n_runs, 3))
+            normals = self.normals_disturbance.take(n_sub * self.n_runs * 3).reshape(n_sub, self.n_runs, 3)
         else:
             normals = self._no_normals
         _world_step_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_cmd, normals,
@@ -188,13 +221,13 @@ class WorldBatch:
         """Gyro outputs (M,3) rad/s and saturation flags (M,) at the current time."""
         dt_since = self.imu_period_s[0] if self._t_last_imu is None else self._t - self._t_last_imu
         self._t_last_imu = self._t
-        normals = self.rng_imu.standard_normal((self.n_runs, 6))
+        normals = self.normals_imu.take(self.n_runs * 6).reshape(self.n_runs, 6)
         sen.gyro_sample_batch(self.X, self.BIAS, self.GYRO_P, normals, dt_since, self.GYRO_OUT, self.GYRO_SAT)
         return self.GYRO_OUT, self.GYRO_SAT
 
     def star_tracker_sample_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """q_NS (M,4), valid (M,), blind_source (M,) at the current time."""
-        normals = self.rng_star_tracker.standard_normal((self.n_runs, 3))
+        normals = self.normals_star_tracker.take(self.n_runs * 3).reshape(self.n_runs, 3)
         sen.star_tracker_sample_batch(self.X, self.ST_P, self.ST_BASIS, self.AUX[:, AUX_SUN:AUX_SUN + 3],
                                       self.AUX[:, AUX_MOON:AUX_MOON + 3], normals, self.ST_Q, self.ST_VALID,
                                       self.ST_BLIND)
@@ -261,6 +294,8 @@ class World:
         self.imu_period_s = float(self.batch.imu_period_s[0])
         self.star_tracker_period_s = float(self.batch.star_tracker_period_s[0])
         self._u = np.zeros((1, self.n_wheels))
+        self._last_dt = -1.0
+        self._last_n_sub = 1
 
     @property
     def t(self) -> float:
@@ -268,16 +303,19 @@ class World:
 
     def step(self, dt_s: float, wheel_torque_cmd_Nm: np.ndarray | Sequence[float]) -> None:
         """Advance truth by dt_s seconds (RK4 sub-steps <= max_integration_step_s), motor torques (N,) N m held."""
-        b = self.batch
         u = self._u
-        cmd = np.asarray(wheel_torque_cmd_Nm, dtype=np.float64)
-        if cmd.shape != (self.n_wheels,):
-            raise ValueError(f"step: wheel_torque_cmd_Nm must have shape ({self.n_wheels},), got {cmd.shape}")
-        u[0] = cmd
+        try:
+            u[0] = wheel_torque_cmd_Nm
+        except ValueError as exc:
+            raise ValueError(f"step: wheel_torque_cmd_Nm must have {self.n_wheels} values, "
+                             f"got {wheel_torque_cmd_Nm!r}") from exc
         if not (math.isfinite(u.sum()) and dt_s > 0.0):
-            raise ValueError(f"step: need dt_s > 0 and finite torques, got dt_s={dt_s!r}, cmd={cmd!r}")
-        n_sub = max(1, math.ceil(dt_s / b.max_step_s - 1e-9))
-        b._advance(dt_s, u, n_sub)
+            raise ValueError(f"step: need dt_s > 0 and finite torques, got dt_s={dt_s!r}, "
+                             f"wheel_torque_cmd_Nm={wheel_torque_cmd_Nm!r}")
+        if dt_s != self._last_dt:
+            self._last_dt = dt_s
+            self._last_n_sub = max(1, math.ceil(dt_s / self.batch.max_step_s - 1e-9))
+        self.batch._advance(dt_s, u, self._last_n_sub)
 
     def imu_sample(self) -> sen.ImuSample:
         omega, sat = self.batch.imu_sample_arrays()
