@@ -96,7 +96,22 @@ class FlightSoftware:
         self._start_wall = time.monotonic()
         if dispatcher is not None:
             self._register_commands(dispatcher)
+        self._warm_up()
         self._event("FSW_STARTED", gnc_rate_hz=config.rates.gnc_rate_hz)
+
+    def _warm_up(self) -> None:
+        """Load the compiled kernels and start the check worker now, so the first cycle is not late."""
+        q = np.array([1.0, 0.0, 0.0, 0.0])
+        scratch = AttitudeEstimator(self.cfg.estimator, np.asarray(self.cfg.spacecraft.star_tracker_q_BS))
+        scratch.step(self.period_s, np.zeros(3), q)
+        scratch.step_samples(self.period_s, np.zeros((2, 3)), q)
+        scratch.step(self.period_s, np.zeros(3), np.array([0.99, 0.1, 0.0, 0.0]) / np.linalg.norm([0.99, 0.1]))
+        Guidance(self.cfg).step(0.0, self.period_s, q, np.zeros(3))
+        for mode in ("POINTING", "QUATERNION"):
+            g = Guidance(self.cfg)
+            g.set_mode(mode)
+            g.step(0.0, self.period_s, q, np.zeros(3))
+        self.checker.start()
 
     # ------------------------------------------------------------------------------------ events
     def _event(self, name: str, /, **args) -> None:

@@ -176,6 +176,16 @@ class AssumptionChecker:
     def busy(self) -> bool:
         return self._future is not None and not self._future.done()
 
+    def start(self) -> None:
+        """Start the worker process now (forking later, mid-mission, would delay a cycle)."""
+        if self.mode != "process" or self._pool is not None:
+            return
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"))
+        self._pool.submit(math.sqrt, 1.0).result()  # the pool forks its worker on the first submit
+
     def submit(self, snapshot) -> bool:
         if self.mode == "off" or snapshot is None or self.busy:
             return False
@@ -183,11 +193,7 @@ class AssumptionChecker:
         if self.mode == "inline":
             self._inline_result = run_full_check(*snapshot)
             return True
-        if self._pool is None:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor
-
-            self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"))
+        self.start()
         self._future = self._pool.submit(run_full_check, *snapshot)
         return True
 

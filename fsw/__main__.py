@@ -1,0 +1,95 @@
+"""Flight-software process entry: ``python -m fsw --config MISSION.yaml --bus SPEC``.
+
+``--config`` is a mission YAML with the FswConfig under ``flight_software:`` or a bare FswConfig YAML.
+``--bus`` is a bus spec (``auto``, ``socketcan:vcan0``, ``udp_multicast[:group:port]``, ``virtual[:ch]``).
+The tick source comes from ``rates.tick_source`` unless ``--lockstep`` / ``--realtime`` overrides it.
+A lockstep run ends when no SYNC arrives for ``rates.lockstep_timeout_s`` (the simulator finished);
+a real-time run ends after ``--duration-s`` or on SIGINT/SIGTERM.
+
+Exit codes: 0 normal end, 2 bad configuration or arguments, 3 bus unavailable, 1 unexpected failure.
+"""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m fsw", description="keepout flight software")
+    p.add_argument("--config", required=True, help="mission YAML (key flight_software:) or bare FswConfig YAML")
+    p.add_argument("--bus", default="auto", help="bus spec: auto | socketcan:vcan0 | udp_multicast[:group:port] | virtual[:channel]")
+    p.add_argument("--run-id", default=None, help="run id for per-run UDP multicast endpoints (bus 'auto')")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--lockstep", action="store_true", help="tick on simulator SYNC frames")
+    mode.add_argument("--realtime", action="store_true", help="tick on the monotonic clock")
+    p.add_argument("--duration-s", type=float, default=None, help="real time: stop after this many seconds")
+    p.add_argument("--max-ticks", type=int, default=None, help="lockstep: stop after this many ticks")
+    p.add_argument("--tm-port", type=int, default=None, help="override tmtc.telemetry_port")
+    p.add_argument("--tc-port", type=int, default=None, help="override tmtc.telecommand_port (0: ephemeral)")
+    p.add_argument("--dbc", default=None, help="ICD DBC file (default config/icd/keepout.dbc)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    from fsw.config import ConfigError, load_fsw_config
+
+    try:
+        cfg = load_fsw_config(args.config)
+    except ConfigError as exc:
+        print(f"fsw: {exc}", file=sys.stderr)
+        return 2
+    from fsw.app import FlightSoftware
+    from fsw.bus import BusSpecError, BusUnavailableError, FswBusDriver, Icd, open_bus
+    from fsw.dictionary import DICTIONARY
+    from fsw.telecommand import CommandDispatcher
+    from fsw.telemetry import TelemetrySender
+
+    try:
+        bus = open_bus(args.bus, args.run_id)
+    except BusSpecError as exc:
+        print(f"fsw: --bus {args.bus!r}: {exc}", file=sys.stderr)
+        return 2
+    except BusUnavailableError as exc:
+        print(f"fsw: bus unavailable: {exc}", file=sys.stderr)
+        return 3
+    tm_cfg = cfg.tmtc
+    tm_port = tm_cfg.telemetry_port if args.tm_port is None else args.tm_port
+    tc_port = tm_cfg.telecommand_port if args.tc_port is None else args.tc_port
+    icd = Icd(args.dbc) if args.dbc else Icd()
+    driver = FswBusDriver(bus, icd, len(cfg.spacecraft.wheels))
+    telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port)
+    try:
+        dispatcher = CommandDispatcher(DICTIONARY, telemetry, host=tm_cfg.telecommand_bind_host, port=tc_port)
+    except OSError as exc:
+        print(f"fsw: cannot bind the telecommand socket {tm_cfg.telecommand_bind_host}:{tc_port}: {exc}", file=sys.stderr)
+        return 2
+    fsw = FlightSoftware(cfg, driver, telemetry, dispatcher)
+
+    def _stop(signum, frame):  # noqa: ARG001
+        fsw.stop()
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+    realtime = args.realtime or (not args.lockstep and cfg.rates.tick_source == "clock")
+    code = 0
+    try:
+        if realtime:
+            fsw.run_realtime(args.duration_s)
+        else:
+            fsw.run_lockstep(args.max_ticks)
+    except Exception as exc:  # noqa: BLE001 - report, then exit non-zero
+        telemetry.event("FATAL_ERROR", reason=f"{type(exc).__name__}: {exc}"[:110])
+        print(f"fsw: fatal: {type(exc).__name__}: {exc}", file=sys.stderr)
+        code = 1
+    finally:
+        fsw.shutdown()
+        dispatcher.close()
+        telemetry.close()
+        bus.shutdown()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
