@@ -67,6 +67,9 @@ OUT_OF_RANGE = "out_of_range"      # CRC good but a signal outside its ICD range
 UNKNOWN_ID = "unknown_id"          # identifier not in the ICD (or extended/remote/error frame)
 
 DELIVERED = frozenset({OK, OK_SOME_LOST})
+# A counter this many steps behind the reference is taken for a delayed old frame (see _sequence); with a
+# 4-bit counter a larger backwards step cannot be told from a forward jump, which resynchronises.
+OLD_FRAME_WINDOW = 3
 FRAME_CLASSES = (OK, OK_SOME_LOST, REPEATED, WRONG_SEQUENCE, CRC_ERROR, BAD_LENGTH, OUT_OF_RANGE)
 ALL_CLASSES = FRAME_CLASSES + (TIMEOUT,)
 BUS_KEY = "_bus"  # counters for frames that cannot be attributed to an ICD message
@@ -163,15 +166,16 @@ class E2EReceiver:
 
     def _sequence(self, spec: Any, counter: int) -> str:
         state = self._state[spec.name]
-        if state.last_counter is None:
+        if state.last_counter is None or state.timed_out:
+            # First frame, or first after a timeout: nothing to compare with, (re)start the sequence.
             state.last_counter = counter
             return OK
         delta = (counter - state.last_counter) & 0x0F
         if delta == 0:
             return REPEATED
-        if delta > 8:
-            # Counter went backwards: an old (delayed) frame. Rejected without moving the reference, so
-            # the fresh frames around it stay in sequence.
+        if delta >= 16 - OLD_FRAME_WINDOW:
+            # Counter 1..3 behind: an old (delayed) frame. Rejected without moving the reference, so the
+            # fresh frames around it stay in sequence.
             return WRONG_SEQUENCE
         # A forward jump resynchronises on the received counter even when too large, so that one lost
         # burst costs one rejected frame (profile 1's state machine recovers on the next frame).

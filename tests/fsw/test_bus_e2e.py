@@ -138,3 +138,13 @@ def test_timeout_counted_once_per_silence_and_rearmed(icd: Icd) -> None:
     assert "IMU_RATE" not in rx.check_timeouts(5.0)
     rx.check_timeouts(10.0)
     assert rx.counters["IMU_RATE"][TIMEOUT] == 2
+
+
+def test_first_frame_after_a_timeout_restarts_the_sequence(icd: Icd) -> None:
+    rx = _receiver(icd)
+    assert rx.classify(icd.encode("SYNC", dict(tick=1, frames_following=0, period_ms=100), 3), 0.0).status == OK
+    rx.check_timeouts(10.0)
+    # counter 9 after 3 would be a wrong sequence, but the link was declared lost: fresh start
+    assert rx.classify(icd.encode("SYNC", dict(tick=2, frames_following=0, period_ms=100), 9), 10.0).status == OK
+    assert rx.classify(icd.encode("SYNC", dict(tick=3, frames_following=0, period_ms=100), 10), 10.0).status == OK
+    assert rx.counters["SYNC"][TIMEOUT] == 1
