@@ -5,8 +5,8 @@ by a margin) and by the simulator (truth ephemeris, physical zones, to judge the
 
 Local sky frame at a centre direction ``c_N`` (the body direction, e.g. the Sun from the spacecraft):
 ``x`` points to celestial north projected on the tangent plane (the N-frame +z), ``y`` to the east
-(``z_N x c``), so (x, y, c) is right-handed. ``orientation_deg`` rotates the shape about ``c`` from x
-towards y. At the celestial poles, where north is undefined, N-frame +x replaces +z.
+(``z_N x c``, increasing right ascension). ``orientation_deg`` is a position angle: it rotates the shape
+about ``c`` from north through east, as in astronomy (so (x, y, c) is left-handed: the sky seen from inside). At the celestial poles, where north is undefined, N-frame +x replaces +z.
 
 Shapes (angles in degrees, measured from ``c``):
 
