@@ -38,7 +38,7 @@ UnitQuat = Annotated[list[float], Field(min_length=4, max_length=4,
                                         description="unit quaternion, scalar first [eta, q1, q2, q3]"),
                      AfterValidator(lambda v: _unit_quaternion(v))]
 
-BUS_PATTERN = r"^(auto|socketcan:[A-Za-z0-9_]+|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?)$"
+BUS_PATTERN = r"^(auto|socketcan(:[A-Za-z0-9_]+)?|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?)$"
 
 
 class _Model(BaseModel):
@@ -259,8 +259,8 @@ class Mission(_Model):
     epoch_utc: datetime = Field(description="UTC time at t = 0, ISO 8601 with a zone, e.g. 2026-03-20T12:00:00Z")
     duration_s: float = Field(gt=0, le=10 * 86400, description="simulated duration [s]")
     seed: int = Field(0, ge=0, le=2**32 - 1, description="seed of every random process in the truth models")
-    bus: str = Field("auto", pattern=BUS_PATTERN, description="auto | socketcan:vcan0 | "
-                     "udp_multicast[:group:port] | virtual[:channel]")
+    bus: str = Field("auto", pattern=BUS_PATTERN, description="auto (socketcan on vcan0 when it exists, else "
+                     "udp_multicast) | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL]")
     tmtc_ports: Literal["auto", "fixed"] = Field(
         "auto", description="auto: the SIL picks free UDP ports for telemetry and telecommands for each run "
         "(parallel runs never collide) and writes them into the config it saves; fixed: use "

@@ -1,0 +1,560 @@
+"""The SIL orchestrator: simulator, flight software and ground monitor as three processes on one bus.
+
+``run_sil(RunOptions(...))``:
+
+1. loads the mission (every problem as file:line:col) and runs the physics checks: a bad mission never
+   starts a run;
+2. creates ``runs/<name>-<timestamp>/`` and writes the config actually used (bus, ports, clock and
+   duration overrides applied) with its sha256;
+3. starts the ground monitor (its own process: archives every telemetry packet, raw and decoded), then
+   the flight software (``python -m fsw --config mission.yaml --bus SPEC``, its own process and
+   session), and waits for the flight software's FSW_STARTED event to reach the ground, so its bus is
+   open before the first SYNC;
+4. runs the simulator in this process: devices on the bus (`hil_sim.lockstep.Simulator`), lockstep by
+   default (each tick waits for the flight software's CYCLE_DONE) or paced to the clock; the ground's
+   telecommand timeline is released at its simulated times, just before the SYNC of the tick it falls
+   in (so lockstep runs stay deterministic); truth is recorded every tick and every frame goes to a
+   candump log;
+5. stops the flight software, lets the last telemetry drain, stops the ground, and writes
+   ``summary.json`` (requirements judged on truth) and the plots, also after Ctrl-C (with what was
+   recorded).
+
+Exit code: 0 all requirements pass, 1 a requirement failed, 2 the mission was rejected, 3 the run
+could not start, 130 interrupted (the summary is still written).
+"""
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import json
+import math
+import multiprocessing as mp
+import os
+import queue
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_MISSION = ROOT / "config" / "missions" / "demo-pointing.yaml"
+MODELINE = "# yaml-language-server: $schema=../../config/schema/mission.schema.json"
+
+EXIT_PASS, EXIT_FAIL, EXIT_REJECTED, EXIT_NOT_STARTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+CONFIG_FILE = "mission.yaml"
+TRUTH_FILE = "truth.npz"
+CANDUMP_FILE = "bus.candump.log"
+SIM_STATS_FILE = "simulator.json"
+GROUND_DIR = "ground"
+FSW_LOG = "fsw.log"
+
+
+class MissionRejected(Exception):
+    """The mission failed validation or the physics checks (the message says why, with positions)."""
+
+
+class RunNotStarted(RuntimeError):
+    """A process of the SIL could not be started (the message says which and why)."""
+
+
+@dataclass
+class RunOptions:
+    mission: Path = DEFAULT_MISSION
+    bus: str | None = None  # override the mission's bus
+    duration_s: float | None = None  # override the mission's duration
+    realtime: bool = False
+    out_root: Path = Path("runs")
+    progress: bool = True
+    skip_physics_checks: bool = False
+    fsw_start_timeout_s: float = 180.0  # first start compiles numba kernels
+    cycle_done_timeout_s: float = 5.0
+
+
+@dataclass
+class RunResult:
+    run_dir: Path
+    exit_code: int
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------------------------------------
+# Preparation
+# ---------------------------------------------------------------------------------------------
+
+def prepare(options: RunOptions):
+    """Load + check the mission; return (mission, physics report). Raises MissionRejected."""
+    from hil_sim.mission import load_mission
+    from hil_sim.physics_checks import check_mission
+    from hil_sim.yaml_loader import ConfigError
+
+    try:
+        mission = load_mission(options.mission)
+    except ConfigError as exc:
+        raise MissionRejected(str(exc)) from None
+    updates: dict[str, Any] = {}
+    if options.bus is not None:
+        updates["bus"] = options.bus
+    if options.duration_s is not None:
+        updates["duration_s"] = float(options.duration_s)
+    if updates:
+        data = mission.model_dump(mode="json")
+        data.update(updates)
+        data["timeline"] = [e for e in data["timeline"] if e["t_s"] <= data["duration_s"]]
+        try:
+            mission = type(mission).model_validate(data)
+        except Exception as exc:  # pydantic ValidationError: bad override value
+            raise MissionRejected(f"command-line override rejected: {exc}") from None
+    report = None
+    if not options.skip_physics_checks:
+        report = check_mission(mission)
+        if not report.ok:
+            raise MissionRejected(f"{options.mission}: physics checks failed:\n{report.format()}")
+    return mission, report
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _config_used(mission, *, bus_spec: str, tm_port: int | None, tc_port: int | None, realtime: bool) -> dict:
+    data = mission.model_dump(mode="json")
+    data["bus"] = bus_spec
+    fsw = data["flight_software"]
+    fsw["rates"]["tick_source"] = "clock" if realtime else "sync"
+    if tm_port is not None:
+        fsw["tmtc"]["telemetry_port"] = tm_port
+    if tc_port is not None:
+        fsw["tmtc"]["telecommand_port"] = tc_port
+    return data
+
+
+def write_config(run_dir: Path, data: dict, source: Path) -> str:
+    """Write the config used (YAML) and its sha256; keep a copy of the source file. Returns the hash."""
+    text = (f"{MODELINE}\n# config used by this run (from {source}), with the run's bus, ports, clock and "
+            f"duration applied\n" + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=110))
+    path = run_dir / CONFIG_FILE
+    path.write_text(text, encoding="utf-8")
+    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
+    (run_dir / (CONFIG_FILE + ".sha256")).write_text(f"{digest}  {CONFIG_FILE}\n")
+    shutil.copyfile(source, run_dir / "mission.source.yaml")
+    return digest
+
+
+# ---------------------------------------------------------------------------------------------
+# The ground process
+# ---------------------------------------------------------------------------------------------
+
+STATUS_CHANNELS = ("mode", "pointing_error_deg", "att_error_deg", "margin_min_deg", "active_zone", "cycle")
+
+
+def ground_process(archive_dir: str, port: int, port_queue, ready, fsw_started, stop_event, status_queue) -> None:
+    """Entry point of the ground process: archive telemetry until told to stop.
+
+    Ctrl-C is ignored here: the orchestrator stops the ground last, after the flight software, so
+    the final packets are archived.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from fsw.ground import GroundMonitor
+
+    monitor = GroundMonitor(port=port, archive_dir=archive_dir)
+    port_queue.put(monitor.address[1])
+    ready.set()
+    last_status = 0.0
+    try:
+        while not stop_event.is_set():
+            monitor.poll(0.05)
+            if not fsw_started.is_set() and any(e.event == "FSW_STARTED" for e in monitor.events
+                                                if getattr(e, "kind", "") == "event"):
+                fsw_started.set()
+            now = time.monotonic()
+            if now - last_status > 0.25:
+                last_status = now
+                monitor.flush()
+                snapshot = {k: monitor.latest.get(k) for k in STATUS_CHANNELS}
+                try:
+                    status_queue.put_nowait(snapshot)
+                except queue.Full:
+                    pass
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline and monitor.poll(0.1):
+            pass  # drain what is still in flight
+    finally:
+        monitor.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# Truth recording and the telecommand timeline
+# ---------------------------------------------------------------------------------------------
+
+class TruthRecorder:
+    """Truth at every tick, kept in preallocated arrays (cheap in the loop), saved as an .npz."""
+
+    def __init__(self, n_ticks: int, n_wheels: int):
+        n = n_ticks + 1
+        self.n = 0
+        self.t_s = np.zeros(n)
+        self.q_NB = np.zeros((n, 4))
+        self.omega_BN_B = np.zeros((n, 3))
+        self.wheel_speed_rad_s = np.zeros((n, n_wheels))
+        self.wheel_torque_Nm = np.zeros((n, n_wheels))
+        self.sun_N = np.zeros((n, 3))
+        self.moon_N = np.zeros((n, 3))
+        self.earth_N = np.zeros((n, 3))
+        self.r_sc_N_km = np.zeros((n, 3))
+        self.cycle_done = np.zeros(n, dtype=bool)
+
+    def record(self, world, torque_Nm: np.ndarray, cycle_done: bool) -> None:
+        if self.n >= len(self.t_s):
+            return
+        truth = world.truth
+        i = self.n
+        self.t_s[i] = truth.t
+        self.q_NB[i] = truth.q_NB
+        self.omega_BN_B[i] = truth.omega_BN_B
+        self.wheel_speed_rad_s[i] = truth.wheel_speeds_rad_s
+        self.wheel_torque_Nm[i] = torque_Nm
+        self.sun_N[i] = truth.sun_N
+        self.moon_N[i] = truth.moon_N
+        self.earth_N[i] = truth.earth_N
+        self.r_sc_N_km[i] = truth.r_sc_N_km
+        self.cycle_done[i] = cycle_done
+        self.n += 1
+
+    def save(self, path: Path) -> None:
+        n = self.n
+        np.savez_compressed(path, t_s=self.t_s[:n], q_NB=self.q_NB[:n], omega_BN_B=self.omega_BN_B[:n],
+                            wheel_speed_rad_s=self.wheel_speed_rad_s[:n], wheel_torque_Nm=self.wheel_torque_Nm[:n],
+                            sun_N=self.sun_N[:n], moon_N=self.moon_N[:n], earth_N=self.earth_N[:n], r_sc_N_km=self.r_sc_N_km[:n],
+                            cycle_done=self.cycle_done[:n])
+
+
+class CandumpLog:
+    """Every frame the simulator sends or receives, in candump's log format (``candump -l``), which
+    ``cantools decode`` and ``canplayer`` read. Timestamps are simulated seconds."""
+
+    def __init__(self, path: Path, channel: str):
+        self._file = open(path, "w", encoding="ascii", buffering=1 << 16)
+        self.channel = channel.replace(":", "_") or "can0"
+        self.frames = 0
+
+    def __call__(self, direction: str, t_s: float, msg) -> None:
+        ident = f"{msg.arbitration_id:08X}" if msg.is_extended_id else f"{msg.arbitration_id:03X}"
+        self._file.write(f"({t_s:.6f}) {self.channel} {ident}#{bytes(msg.data).hex().upper()}\n")
+        self.frames += 1
+
+    def close(self) -> None:
+        self._file.close()
+
+
+class Timeline:
+    """Releases the mission's telecommands at their simulated times through the ground's CommandSender."""
+
+    def __init__(self, mission, sender):
+        self.entries = list(mission.timeline)
+        self.sender = sender
+        law = mission.flight_software.law
+        self.gains = {"k1": law.k1, "kappa": law.kappa, "eps": 0.0 if law.eps == "auto" else float(law.eps),
+                      "rate_limit_deg_s": mission.flight_software.spacecraft.max_rate_deg_s}
+        self.sent: list[dict[str, Any]] = []
+        self.errors: list[str] = []
+
+    def release(self, t_s: float) -> None:
+        while self.entries and self.entries[0].t_s <= t_s + 1e-9:
+            entry = self.entries.pop(0)
+            name, args = self._encode(entry)
+            try:
+                self.sender.send(name, **args)
+                self.sent.append({"t_s": t_s, "scheduled_t_s": entry.t_s, "command": name, "args": args})
+            except Exception as exc:  # an unsendable command is reported, the run goes on
+                self.errors.append(f"t = {t_s:.1f} s: {name} not sent: {exc}")
+
+    def _encode(self, entry) -> tuple[str, dict[str, Any]]:
+        from hil_sim.mission import SetGainsCommand, SetModeCommand, SetTargetCommand
+
+        if isinstance(entry, SetModeCommand):
+            return "SET_MODE", {"mode": entry.mode}
+        if isinstance(entry, SetTargetCommand):
+            direction = entry.target_direction_N()
+            if direction is not None:
+                c = [float(v) for v in direction]
+                return "SET_TARGET", {"kind": "DIRECTION", "c0": c[0], "c1": c[1], "c2": c[2], "c3": 0.0}
+            q = [float(v) for v in entry.q_target_NB]
+            return "SET_TARGET", {"kind": "QUATERNION", "c0": q[0], "c1": q[1], "c2": q[2], "c3": q[3]}
+        if isinstance(entry, SetGainsCommand):
+            for key in self.gains:
+                value = getattr(entry, key)
+                if value is not None:
+                    self.gains[key] = float(value)
+            return "SET_GAINS", dict(self.gains)
+        return entry.command, {}
+
+
+# ---------------------------------------------------------------------------------------------
+# The run
+# ---------------------------------------------------------------------------------------------
+
+def _run_dir(out_root: Path, name: str) -> Path:
+    stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    path = out_root / f"{name}-{stamp}"
+    k = 1
+    while path.exists():
+        k += 1
+        path = out_root / f"{name}-{stamp}-{k}"
+    path.mkdir(parents=True)
+    return path
+
+
+class _Progress:
+    """rich progress bar with simulated time, speed and key channels (truth and the FSW's view)."""
+
+    def __init__(self, enabled: bool, duration_s: float, bus_note: str):
+        self.enabled = enabled
+        self.status: dict[str, Any] = {}
+        self._last = 0.0
+        if not enabled:
+            return
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        self.progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
+                                 TextColumn("t={task.completed:7.1f}/{task.total:.0f} s"),
+                                 TextColumn("{task.fields[speed]}"), TimeElapsedColumn(),
+                                 TextColumn("{task.fields[channels]}"), refresh_per_second=5)
+        self.progress.start()
+        self.progress.console.print(f"bus: {bus_note}")
+        self.task = self.progress.add_task("SIL", total=duration_s, speed="", channels="")
+
+    def update(self, t_s: float, wall_s: float, truth_error_deg: float, status_queue) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if now - self._last < 0.2:
+            return
+        self._last = now
+        try:
+            while True:
+                self.status = status_queue.get_nowait()
+        except (queue.Empty, OSError, ValueError):
+            pass
+        s = self.status
+        fsw = ""
+        if s:
+            fsw = (f"FSW {s.get('mode') or '-'} err {_fmt(s.get('pointing_error_deg'))} deg "
+                   f"margin {_fmt(s.get('margin_min_deg'))} deg zone {s.get('active_zone')}")
+        speed = f"x{t_s / wall_s:5.1f}" if wall_s > 0 else ""
+        self.progress.update(self.task, completed=t_s, speed=speed,
+                             channels=f"truth err {truth_error_deg:7.3f} deg | {fsw}")
+
+    def stop(self) -> None:
+        if self.enabled:
+            self.progress.stop()
+
+
+def _fmt(value: Any) -> str:
+    try:
+        return f"{float(value):.3f}"
+    except (TypeError, ValueError):
+        return "-"
+
+
+def run_sil(options: RunOptions) -> RunResult:
+    """Run one SIL mission end to end (see the module docstring). Raises MissionRejected, RunNotStarted."""
+    from fsw.bus.icd import Icd
+    from fsw.bus.transport import open_bus, resolve_spec
+    from hil_sim.lockstep import Simulator
+    from hil_sim.mission import world_params
+    from hil_sim.world import World
+
+    mission, report = prepare(options)
+    run_dir = _run_dir(Path(options.out_root), mission.name)
+    if report is not None:
+        (run_dir / "physics_checks.txt").write_text(report.format() + "\n")
+    info = resolve_spec(mission.bus, run_id=run_dir.name)
+    fixed_ports = mission.tmtc_ports == "fixed"
+    tmtc = mission.flight_software.tmtc
+
+    ctx = mp.get_context("spawn")
+    port_queue, status_queue = ctx.Queue(), ctx.Queue(maxsize=4)
+    ready, fsw_started, stop_event = ctx.Event(), ctx.Event(), ctx.Event()
+    ground_dir = run_dir / GROUND_DIR
+    ground = ctx.Process(target=ground_process, name="keepout-ground",
+                         args=(str(ground_dir), tmtc.telemetry_port if fixed_ports else 0, port_queue, ready,
+                               fsw_started, stop_event, status_queue))
+    fsw_proc: subprocess.Popen | None = None
+    bus = None
+    candump = None
+    recorder = None
+    sim = None
+    timeline = None
+    interrupted = False
+    started_wall = time.monotonic()
+    progress = _Progress(False, 0.0, "")
+    try:
+        ground.start()
+        if not ready.wait(60.0):
+            raise RunNotStarted("the ground monitor did not start within 60 s")
+        tm_port = port_queue.get(timeout=10.0)
+        tc_port = tmtc.telecommand_port if fixed_ports else _free_udp_port()
+        data = _config_used(mission, bus_spec=info.spec, tm_port=tm_port, tc_port=tc_port,
+                            realtime=options.realtime)
+        config_hash = write_config(run_dir, data, Path(options.mission))
+
+        # Open the simulator's end of the bus before the flight software starts sending.
+        bus = open_bus(info.spec, run_id=run_dir.name)
+        fsw_log = open(run_dir / FSW_LOG, "w")
+        fsw_proc = subprocess.Popen(
+            [sys.executable, "-m", "fsw", "--config", str(run_dir / CONFIG_FILE), "--bus", info.spec],
+            stdout=fsw_log, stderr=subprocess.STDOUT, cwd=str(ROOT), start_new_session=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        deadline = time.monotonic() + options.fsw_start_timeout_s
+        while not fsw_started.wait(0.2):
+            if fsw_proc.poll() is not None:
+                raise RunNotStarted(f"the flight software exited with code {fsw_proc.returncode} before it "
+                                    f"started; see {run_dir / FSW_LOG}:\n" + _tail(run_dir / FSW_LOG))
+            if time.monotonic() > deadline:
+                raise RunNotStarted(f"no FSW_STARTED event from the flight software within "
+                                    f"{options.fsw_start_timeout_s:.0f} s; see {run_dir / FSW_LOG}")
+
+        from fsw.ground import CommandSender
+
+        sender = CommandSender(host=tmtc.telecommand_bind_host if tmtc.telecommand_bind_host != "0.0.0.0"
+                               else "127.0.0.1", port=tc_port)
+        timeline = Timeline(mission, sender)
+        world = World(world_params(mission), seed=mission.seed)
+        candump = CandumpLog(run_dir / CANDUMP_FILE, info.channel if info.interface == "socketcan" else "vcan0")
+        gnc_period = 1.0 / mission.flight_software.rates.gnc_rate_hz
+        sim = Simulator(world, bus, Icd(), gnc_period_s=gnc_period,
+                        dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz, faults=mission.faults,
+                        fault_seed=mission.seed, cycle_done_timeout_s=options.cycle_done_timeout_s,
+                        on_frame=candump)
+        n_ticks = int(round(mission.duration_s / gnc_period))
+        recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels))
+        recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)
+        progress = _Progress(options.progress, mission.duration_s, info.note)
+        boresight_B = np.asarray(mission.spacecraft.instrument_boresight_B)
+        error_of = _truth_error_function(mission, boresight_B)
+        started_wall = time.monotonic()
+        for _ in range(n_ticks):
+            timeline.release(sim.t_s)
+            if options.realtime:
+                before = sim.stats.cycle_done_late
+                sim.run_realtime(1)
+                done = sim.stats.cycle_done_late == before
+            else:
+                sim.begin_tick()
+                done = sim.end_tick()
+            recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
+            if fsw_proc.poll() is not None:
+                raise RunNotStarted(f"the flight software exited (code {fsw_proc.returncode}) at t = "
+                                    f"{sim.t_s:.1f} s; see {run_dir / FSW_LOG}:\n" + _tail(run_dir / FSW_LOG))
+            progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s), status_queue)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        wall_s = time.monotonic() - started_wall
+        progress.stop()
+        _stop_fsw(fsw_proc)
+        stop_event.set()
+        if ground.is_alive() or ground.exitcode is None:
+            ground.join(timeout=15.0)
+            if ground.is_alive():
+                ground.terminate()
+                ground.join(timeout=5.0)
+        if bus is not None:
+            bus.shutdown()
+        if candump is not None:
+            candump.close()
+        if recorder is not None:
+            recorder.save(run_dir / TRUTH_FILE)
+        if sim is not None:
+            stats = {**sim.stats.__dict__, "bus": info.spec, "bus_note": info.note, "wall_s": wall_s,
+                     "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
+                     "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
+                     "faults_injected": [list(map(_plain, e)) if isinstance(e, tuple) else _plain(e)
+                                         for e in getattr(sim.injector, "log", [])],
+                     "telecommands": timeline.sent if timeline else [],
+                     "telecommand_errors": timeline.errors if timeline else []}
+            (run_dir / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n")
+    # Anything that reached here has a run folder with what was recorded: judge it.
+    from hil_sim.plots import write_plots
+    from hil_sim.summary import write_summary
+
+    summary, series = write_summary(run_dir, mission, interrupted=interrupted)
+    try:
+        write_plots(run_dir, mission, series)
+    except Exception as exc:  # plots are a view: a failure must not hide the summary
+        (run_dir / "plots_error.txt").write_text(f"{type(exc).__name__}: {exc}\n")
+    code = EXIT_INTERRUPTED if interrupted else (EXIT_PASS if summary["pass"] else EXIT_FAIL)
+    return RunResult(run_dir, code, summary)
+
+
+def _truth_error_function(mission, boresight_B: np.ndarray):
+    """Truth pointing/attitude error [deg] against the current target, for the progress bar."""
+    from gnc.attitude import attitude_error_angle, quat_rotate
+    from hil_sim.physics_checks import schedule
+
+    segments = schedule(mission)
+
+    def error(truth, t_s: float) -> float:
+        seg = segments[-1]
+        for s in segments:
+            if s.t_start_s <= t_s < s.t_end_s:
+                seg = s
+                break
+        if seg.mode == "QUATERNION":
+            return math.degrees(attitude_error_angle(truth.q_NB, seg.target))
+        if seg.mode == "POINTING":
+            y = quat_rotate(truth.q_NB, boresight_B)
+            return math.degrees(math.acos(max(-1.0, min(1.0, float(y @ seg.target)))))
+        return float("nan")
+
+    return error
+
+
+def _stop_fsw(proc: subprocess.Popen | None) -> None:
+    """Ask the flight software to stop (SIGINT: it sends FSW_STOPPED), then insist."""
+    if proc is None or proc.poll() is not None:
+        return
+    for sig, wait in ((signal.SIGINT, 10.0), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        try:
+            proc.send_signal(sig)
+        except ProcessLookupError:
+            return
+        try:
+            proc.wait(timeout=wait)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+
+
+def _tail(path: Path, lines: int = 20) -> str:
+    try:
+        return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+    except OSError:
+        return ""
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (np.floating,)):
+        return float(value)
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if hasattr(value, "__dict__") and not isinstance(value, type):
+        return _plain(vars(value))
+    return value

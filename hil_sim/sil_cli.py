@@ -1,0 +1,49 @@
+"""``keepout sil run [MISSION]``: run one mission in the SIL and judge it (see hil_sim.sil)."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def add_cli(subparsers: argparse._SubParsersAction) -> None:
+    sil = subparsers.add_parser("sil", help="software-in-the-loop runs", description="Software-in-the-loop runs.")
+    sub = sil.add_subparsers(dest="sil_command", metavar="SUBCOMMAND")
+    sil.set_defaults(func=lambda args: (sil.print_help(), 2)[1])
+    run = sub.add_parser(
+        "run", help="run a mission: simulator, flight software and ground monitor on one bus",
+        description="Run a mission: simulator (devices on the bus), flight software and ground monitor as three "
+                    "processes on one bus; writes runs/<name>-<timestamp>/ with the config used, telemetry "
+                    "archive, events, candump log, summary.json and plots. Exit code 0 when every requirement "
+                    "passes, 1 when one fails, 2 when the mission is rejected, 3 when the run cannot start, "
+                    "130 on Ctrl-C (what was recorded is still summarised).")
+    run.add_argument("mission", nargs="?", type=Path, default=None,
+                     help="mission YAML (default: config/missions/demo-pointing.yaml)")
+    run.add_argument("--realtime", action="store_true", help="pace the simulator to the clock (default: lockstep)")
+    run.add_argument("--bus", default=None,
+                     help="override the mission's bus: auto | socketcan[:IFACE] | udp_multicast[:GROUP:PORT]")
+    run.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+                     help="override the simulated duration [s]")
+    run.add_argument("--out", type=Path, default=Path("runs"), help="parent folder of run folders (default: runs)")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar (CI logs)")
+    run.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from hil_sim.sil import (DEFAULT_MISSION, EXIT_NOT_STARTED, EXIT_REJECTED, MissionRejected, RunNotStarted,
+                             RunOptions, run_sil)
+    from hil_sim.summary import format_summary
+
+    options = RunOptions(mission=args.mission or DEFAULT_MISSION, bus=args.bus, duration_s=args.duration,
+                         realtime=args.realtime, out_root=args.out,
+                         progress=not args.no_progress and sys.stdout.isatty())
+    try:
+        result = run_sil(options)
+    except MissionRejected as exc:
+        print(f"mission rejected, no run started:\n{exc}", file=sys.stderr)
+        return EXIT_REJECTED
+    except RunNotStarted as exc:
+        print(f"run could not start: {exc}", file=sys.stderr)
+        return EXIT_NOT_STARTED
+    print(format_summary(result.summary))
+    return result.exit_code

@@ -1,0 +1,365 @@
+"""Judge a SIL run against the mission's requirements and write ``summary.json``.
+
+Truth (``truth.npz``, recorded by the simulator every GNC tick) decides the physical requirements; the
+ground archive (the flight software's own telemetry) supplies what only the flight software knows:
+cycle slips and FDIR events.
+
+Requirements (``Mission.requirements``):
+
+* keep-out, per zone: the minimum signed margin [deg] of the instrument boresight (truth attitude and
+  true boresight) to the PHYSICAL zone (no law margin), built with `gnc.sky_zones` around the truth Sun,
+  Moon and Earth directions as they moved, must exceed ``min_keepout_margin_deg``. S^3 (forbidden
+  attitude) zones are judged on the truth quaternion lifted as the flight software lifts it (sign in
+  the target's hemisphere when a target is set, continuous afterwards);
+* settling: each commanded target is reached and held within ``settling_tolerance_deg`` by the end of
+  the time it is commanded (optionally within ``max_settling_time_s``);
+* final pointing (or attitude) error, truth, at the end of the run;
+* peak wheel speed as a fraction of each wheel's limit;
+* cycle slips: the flight software's GNC slip counter plus ticks the simulator saw unanswered;
+* FDIR: the expected FDIR trips occurred; no more unexpected ones than allowed.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hil_sim.physics_checks import d_s_to_deg, schedule
+
+ZONE_REBUILD_DEG = 0.01  # rebuild a moving zone when its centre moved more than this
+EARTH_RADIUS_KM = 6378.137
+
+
+@dataclass
+class ZoneSeries:
+    name: str
+    kind: str  # "sky" or "attitude"
+    margin_deg: np.ndarray  # per truth sample, signed
+    boundary_history: list  # [(t_s, boundary points (m, 3))] for sky zones (plots)
+
+
+def load_truth(run_dir: Path) -> dict[str, np.ndarray]:
+    with np.load(run_dir / "truth.npz") as data:
+        return {k: data[k] for k in data.files}
+
+
+def boresight_N(q_NB: np.ndarray, b_B: np.ndarray) -> np.ndarray:
+    """Rows: R(q_NB) b_B for every quaternion row (scalar first)."""
+    from gnc.attitude import quat_to_dcm
+
+    return np.einsum("nij,j->ni", np.stack([quat_to_dcm(q) for q in q_NB]), b_B) if len(q_NB) else np.zeros((0, 3))
+
+
+def _signed_margins(zone, X: np.ndarray) -> np.ndarray:
+    d = np.asarray(zone.separation_batch(X), dtype=float)
+    out = np.degrees(np.arccos(np.clip(1.0 - d, -1.0, 1.0)))
+    inside = d <= 0.0
+    for i in np.nonzero(inside)[0]:
+        out[i] = d_s_to_deg(float(zone.signed_separation(X[i])))
+    return out
+
+
+def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> list[ZoneSeries]:
+    """Signed margins of the boresight to each physical sky zone, with the truth ephemeris."""
+    from gnc import sky_zones
+
+    out = []
+    t = truth["t_s"]
+    for z in mission.flight_software.pointing.zones:
+        if z.body == "inertial":
+            centers = np.repeat(np.asarray(z.direction_N, dtype=float)[None, :], len(t), axis=0)
+        else:
+            centers = truth[f"{z.body}_N"]
+        extra = 0.0
+        if z.body == "earth" and z.add_body_angular_radius and len(t):
+            r = float(np.linalg.norm(truth["r_sc_N_km"][0]))
+            extra = math.degrees(math.asin(min(1.0, EARTH_RADIUS_KM / r)))
+        builder = sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra)
+        margins = np.empty(len(t))
+        history = []
+        start = 0
+        cos_tol = math.cos(math.radians(ZONE_REBUILD_DEG))
+        while start < len(t):
+            c0 = centers[start] / np.linalg.norm(centers[start])
+            moved = (centers[start:] @ c0) / np.linalg.norm(centers[start:], axis=1) < cos_tol
+            stop = start + (int(np.argmax(moved)) if moved.any() else len(t) - start)
+            stop = max(stop, start + 1)
+            zone = builder.build(c0)
+            margins[start:stop] = _signed_margins(zone, y_N[start:stop])
+            if not history or t[start] - history[-1][0] >= 30.0:
+                history.append((float(t[start]), np.asarray(zone.boundary(180))))
+            start = stop
+        out.append(ZoneSeries(z.name, "sky", margins, history))
+    return out
+
+
+def lifted_quaternions(mission, truth: dict[str, np.ndarray]) -> np.ndarray:
+    """The truth attitude as the flight software's law sees it on S^3 (see fsw.guidance 'Double cover')."""
+    q = np.array(truth["q_NB"], dtype=float)
+    if not len(q):
+        return q
+    t = truth["t_s"]
+    starts = [(s.t_start_s, s.target) for s in schedule(mission) if s.mode == "QUATERNION"]
+    out = np.empty_like(q)
+    prev = None
+    k = 0
+    for i in range(len(q)):
+        x = q[i]
+        target = None
+        while k < len(starts) and t[i] >= starts[k][0] - 1e-9:
+            target = starts[k][1]
+            k += 1
+        if target is not None:
+            if float(x @ target) < 0:  # a new target: lift into its hemisphere
+                x = -x
+        elif prev is not None and float(x @ prev) < 0:  # otherwise keep the sign continuous
+            x = -x
+        out[i] = x
+        prev = x
+    return out
+
+
+def attitude_zone_series(mission, q_lift: np.ndarray) -> list[ZoneSeries]:
+    from hil_sim.physics_checks import s3_zones
+
+    names, phys, _ = s3_zones(mission)
+    return [ZoneSeries(n, "attitude", _signed_margins(z, q_lift) if len(q_lift) else np.zeros(0), [])
+            for n, z in zip(names, phys)]
+
+
+def error_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> tuple[np.ndarray, list]:
+    """Truth error [deg] to the target active at each sample (pointing angle or attitude angle)."""
+    from gnc.attitude import attitude_error_angle
+
+    t = truth["t_s"]
+    err = np.full(len(t), np.nan)
+    segments = schedule(mission)
+    for s in segments:
+        sel = (t >= s.t_start_s - 1e-6) & (t < s.t_end_s - 1e-6) if s is not segments[-1] else (t >= s.t_start_s - 1e-6)
+        if s.mode == "POINTING":
+            err[sel] = np.degrees(np.arccos(np.clip(y_N[sel] @ s.target, -1.0, 1.0)))
+        elif s.mode == "QUATERNION":
+            err[sel] = [math.degrees(attitude_error_angle(q, s.target)) for q in truth["q_NB"][sel]]
+    return err, segments
+
+
+def settling(mission, t: np.ndarray, err: np.ndarray, segments) -> list[dict[str, Any]]:
+    """Per commanded target: when it was first commanded, when the error entered the tolerance for good."""
+    tol = mission.requirements.settling_tolerance_deg
+    spans: list[dict[str, Any]] = []
+    for s in segments:
+        if s.mode not in ("POINTING", "QUATERNION"):
+            continue
+        if spans and spans[-1]["mode"] == s.mode and np.allclose(spans[-1]["target"], s.target) \
+                and abs(spans[-1]["t_end_s"] - s.t_start_s) < 1e-9:
+            spans[-1]["t_end_s"] = s.t_end_s  # same target re-commanded (e.g. mode restored): one span
+            continue
+        spans.append({"mode": s.mode, "target": s.target, "source": s.source, "t_start_s": s.t_start_s,
+                      "t_end_s": s.t_end_s})
+    out = []
+    for k, span in enumerate(spans):
+        last = k == len(spans) - 1
+        # a span owns [start, end); the sample at its end already belongs to the next target
+        sel = (t >= span["t_start_s"] - 1e-6) & ((t < span["t_end_s"] - 1e-6) | last)
+        ts, es = t[sel], err[sel]
+        settled_at = None
+        if len(es) and np.isfinite(es[-1]) and es[-1] < tol:
+            above = np.nonzero(~(es < tol))[0]
+            settled_at = float(ts[above[-1] + 1]) if len(above) else float(ts[0])
+        out.append({"target_from": span["source"], "mode": span["mode"], "commanded_at_s": span["t_start_s"],
+                    "until_s": span["t_end_s"], "settled_at_s": settled_at,
+                    "settling_time_s": None if settled_at is None else settled_at - span["t_start_s"],
+                    "final_error_deg": float(es[-1]) if len(es) else None})
+    return out
+
+
+def _ground_events(run_dir: Path) -> list[dict[str, Any]]:
+    path = run_dir / "ground" / "events.jsonl"
+    if not path.exists():
+        return []
+    events = []
+    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+        try:
+            events.append(json.loads(line))
+        except ValueError:
+            continue
+    return events
+
+
+def _hk_last(run_dir: Path, names: tuple[str, ...]) -> dict[str, Any]:
+    """Last value of housekeeping channels from the decoded ground archive."""
+    path = run_dir / "ground" / "tm_decoded.jsonl"
+    last: dict[str, Any] = {}
+    if not path.exists():
+        return last
+    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+        try:
+            rec = json.loads(line)
+        except ValueError:
+            continue
+        values = rec.get("values") or {}
+        if rec.get("packet") == "HK":
+            for n in names:
+                if n in values:
+                    last[n] = values[n]
+    return last
+
+
+def _event_name(e: dict[str, Any]) -> str:
+    return str(e.get("name") or e.get("event") or "")
+
+
+def _event_args(e: dict[str, Any]) -> dict[str, Any]:
+    return e.get("args") or e.get("values") or {}
+
+
+def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(summary dict for JSON, series for plots)."""
+    run_dir = Path(run_dir)
+    req = mission.requirements
+    truth = load_truth(run_dir)
+    t = truth["t_s"]
+    b_B = np.asarray(mission.spacecraft.instrument_boresight_B, dtype=float)
+    y_N = boresight_N(truth["q_NB"], b_B)
+    zones = sky_zone_series(mission, truth, y_N) if mission.flight_software.pointing.zones else []
+    q_lift = lifted_quaternions(mission, truth)
+    if mission.flight_software.quaternion.zones:
+        zones += attitude_zone_series(mission, q_lift)
+    err, segments = error_series(mission, truth, y_N)
+    settle = settling(mission, t, err, segments)
+    results: list[dict[str, Any]] = []
+
+    def requirement(name: str, value: Any, limit: Any, passed: bool, detail: str = "") -> None:
+        results.append({"name": name, "value": value, "limit": limit, "pass": bool(passed), "detail": detail})
+
+    if len(t) < 2:
+        requirement("truth recorded", int(len(t)), ">= 2 samples", False, "the run produced no truth samples")
+    for z in zones:
+        if len(z.margin_deg):
+            i = int(np.argmin(z.margin_deg))
+            requirement(f"keep-out margin {z.name}", round(float(z.margin_deg[i]), 4),
+                        f"> {req.min_keepout_margin_deg}", float(z.margin_deg[i]) > req.min_keepout_margin_deg,
+                        f"minimum signed margin to the physical {z.kind} zone at t = {t[i]:.1f} s [deg]")
+    for s in settle:
+        ok = s["settled_at_s"] is not None
+        limit = f"< {req.settling_tolerance_deg} deg by {s['until_s']:.0f} s"
+        if req.max_settling_time_s is not None:
+            ok = ok and s["settling_time_s"] <= req.max_settling_time_s
+            limit += f", within {req.max_settling_time_s} s"
+        requirement(f"settling ({s['target_from']})", s["settling_time_s"], limit, ok,
+                    f"target commanded at {s['commanded_at_s']:.1f} s; final error {s['final_error_deg']:.4f} deg"
+                    if s["final_error_deg"] is not None else "no samples")
+    if len(t):
+        final = float(err[-1])
+        requirement("final pointing error", round(final, 5), f"< {req.max_final_pointing_error_deg}",
+                    math.isfinite(final) and final < req.max_final_pointing_error_deg,
+                    "truth error to the active target at the end [deg]")
+        limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
+        frac = np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]
+        peak = float(frac.max())
+        w = int(np.argmax(frac.max(axis=0)))
+        requirement("peak wheel speed", round(peak, 4), f"<= {req.max_wheel_speed_fraction}",
+                    peak <= req.max_wheel_speed_fraction,
+                    f"wheel {w + 1}: {float(np.abs(truth['wheel_speed_rad_s'][:, w]).max()):.1f} rad/s of "
+                    f"{limits[w]:.0f} rad/s")
+    sim_stats = _read_json(run_dir / "simulator.json")
+    hk = _hk_last(run_dir, ("slips_gnc", "cycles", "fdir_trips", "bus_crc_errors", "bus_alive_errors",
+                            "bus_timeouts", "tc_accepted", "tc_rejected"))
+    missed = int(sim_stats.get("cycle_done_timeouts", 0)) + int(sim_stats.get("cycle_done_late", 0))
+    if "slips_gnc" in hk:
+        slips = int(hk["slips_gnc"]) + missed
+        requirement("cycle slips", slips, f"<= {req.max_cycle_slips}", slips <= req.max_cycle_slips,
+                    f"flight software GNC slips {int(hk['slips_gnc'])} + ticks without CYCLE_DONE {missed}")
+    else:
+        requirement("cycle slips", None, f"<= {req.max_cycle_slips}", False,
+                    "no housekeeping telemetry reached the ground: slips unknown")
+    events = _ground_events(run_dir)
+    trips = [str(_event_args(e).get("monitor", "?")) for e in events if _event_name(e) == "FDIR_TRIPPED"]
+    expected = list(req.expected_fdir_events)
+    missing = [m for m in expected if m not in trips]
+    unexpected = [m for m in trips if m not in expected]
+    requirement("expected FDIR events", sorted(set(trips) & set(expected)), expected, not missing,
+                f"missing: {missing}" if missing else "all occurred")
+    requirement("unexpected FDIR events", len(unexpected), f"<= {req.max_unexpected_fdir_events}",
+                len(unexpected) <= req.max_unexpected_fdir_events, ", ".join(unexpected) or "none")
+    ground = _read_json(run_dir / "ground" / "ground_summary.json")
+    wall = float(sim_stats.get("wall_s", 0.0) or 0.0)
+    sim_s = float(sim_stats.get("sim_s", 0.0) or 0.0)
+    summary = {
+        "mission": mission.name,
+        "run_dir": str(run_dir),
+        "config_sha256": _read_text(run_dir / "mission.yaml.sha256").split(" ")[0],
+        "bus": sim_stats.get("bus"),
+        "interrupted": interrupted,
+        "simulated_s": sim_s,
+        "wall_s": wall,
+        "speed_x_realtime": sim_s / wall if wall > 0 else None,
+        "pass": all(r["pass"] for r in results) and not interrupted,
+        "requirements": results,
+        "zones": {z.name: {"kind": z.kind, "min_margin_deg": float(z.margin_deg.min()) if len(z.margin_deg) else None}
+                  for z in zones},
+        "settling": settle,
+        "fdir_trips": trips,
+        "events": {"total": len(events), "by_name": _count(_event_name(e) for e in events)},
+        "housekeeping_last": hk,
+        "telemetry": ground,
+        "simulator": {k: sim_stats.get(k) for k in ("ticks", "frames_sent", "cycle_done", "cycle_done_timeouts",
+                                                      "cycle_done_late", "wheel_commands", "candump_frames")},
+    }
+    series = {"t_s": t, "error_deg": err, "zones": zones, "y_N": y_N, "q_lift": q_lift, "truth": truth,
+              "segments": segments}
+    return summary, series
+
+
+def write_summary(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Evaluate and write summary.json; returns (summary, series for the plots)."""
+    summary, series = evaluate(run_dir, mission, interrupted=interrupted)
+    (Path(run_dir) / "summary.json").write_text(json.dumps(summary, indent=1, default=_json_default) + "\n")
+    return summary, series
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    lines = [f"{'requirement':38s} {'value':>14s}  {'limit':28s} result"]
+    for r in summary["requirements"]:
+        value = r["value"]
+        text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        lines.append(f"{r['name'][:38]:38s} {text[:14]:>14s}  {str(r['limit'])[:28]:28s} "
+                     f"{'PASS' if r['pass'] else 'FAIL'}")
+    speed = summary.get("speed_x_realtime")
+    verdict = "PASS" if summary["pass"] else ("INTERRUPTED" if summary["interrupted"] else "FAIL")
+    lines.append(f"{verdict}: {summary['mission']} ({summary['simulated_s']:.1f} s simulated in "
+                 f"{summary['wall_s']:.1f} s wall{f', x{speed:.1f}' if speed else ''}) -> {summary['run_dir']}")
+    return "\n".join(lines)
+
+
+def _count(names) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for n in names:
+        out[n] = out.get(n, 0) + 1
+    return out
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_text().strip()
+    except OSError:
+        return ""
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    return str(value)
