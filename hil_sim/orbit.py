@@ -41,10 +41,17 @@ def orbit_elements_array(params: OrbitParams) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy")
 def orbit_position_N_km(elements, t_s, out):
-    """Position at t (s since epoch) into out[0:3]; Kepler's equation by Newton to 1e-14 rad."""
-    a = elements[0]
-    e = elements[1]
-    M = elements[3] + elements[2] * t_s
+    """Position at t (s since epoch) into out[0:3] for one packed element set (see orbit_elements_array)."""
+    orbit_position_row_N_km(elements.reshape(1, elements.shape[0]), 0, t_s, out)
+
+
+@njit(cache=True, error_model="numpy")
+def orbit_position_row_N_km(ORB, m, t_s, out):
+    """Position of run m (row m of the packed elements ORB) at t into out[0:3]; Kepler's equation by Newton
+    to 1e-14 rad (skipped for a circular orbit, where E = M)."""
+    a = ORB[m, 0]
+    e = ORB[m, 1]
+    M = ORB[m, 3] + ORB[m, 2] * t_s
     M -= 2.0 * math.pi * math.floor(M / (2.0 * math.pi))
     E = M if e < 0.8 else math.pi
     for _ in range(30 if e > 0.0 else 0):
@@ -56,7 +63,7 @@ def orbit_position_N_km(elements, t_s, out):
     xp = a * (math.cos(E) - e)
     yp = a * math.sqrt(1.0 - e * e) * math.sin(E)
     for j in range(3):
-        out[j] = elements[4 + 3 * j] * xp + elements[4 + 3 * j + 1] * yp
+        out[j] = ORB[m, 4 + 3 * j] * xp + ORB[m, 4 + 3 * j + 1] * yp
 
 
 class KeplerOrbit:

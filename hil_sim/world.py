@@ -25,7 +25,7 @@ from gnc.ephemeris import julian_date_tdb, parse_utc
 from hil_sim import dynamics as dyn
 from hil_sim import sensors as sen
 from hil_sim.ephemeris_truth import TruthEphemeris, spline_eval
-from hil_sim.orbit import orbit_elements_array, orbit_position_N_km
+from hil_sim.orbit import orbit_elements_array, orbit_position_row_N_km
 from hil_sim.params import WHEEL_FAILURE_MODES, WorldParams
 
 # spawn_key of each model's generator under the world seed (fixed: adding a model never shifts the others)
@@ -99,7 +99,7 @@ def _world_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLI
     spline_eval(sun_c, eph_t0, eph_h, t_end_s, sun)
     spline_eval(moon_c, eph_t0, eph_h, t_end_s, moon)
     for m in range(m_begin, m_end):
-        orbit_position_N_km(ORB[m], t_end_s, r)
+        orbit_position_row_N_km(ORB, m, t_end_s, r)
         rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
         s0, s1, s2 = sun[0] - r[0], sun[1] - r[1], sun[2] - r[2]
         sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
