@@ -104,15 +104,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=1000, help="runs in the batch cases")
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--quick", action="store_true", help="short run (1 repeat... for smoke checks)")
+    parser.add_argument("--quick", action="store_true", help="shorter runs, 2 repeats (smoke check)")
     args = parser.parse_args(argv)
     repeats = 2 if args.quick else args.repeats
     load_before = os.getloadavg()
     cases = {
-        "single 100Hz": ("single", lambda: bench_single(20.0 if args.quick else 60.0, 100.0, repeats)),
-        "single 10Hz-GNC": ("single", lambda: bench_single(20.0 if args.quick else 120.0, 10.0, repeats)),
-        "batch 100Hz": ("batch", lambda: bench_batch(args.runs, 0.5 if args.quick else 2.0, 100.0, repeats)),
-        "batch 10Hz-GNC": ("batch", lambda: bench_batch(args.runs, 1.0 if args.quick else 4.0, 10.0, repeats)),
+        "single 100Hz": ("single", lambda: bench_single(60.0 if args.quick else 300.0, 100.0, repeats)),
+        "single 10Hz-GNC": ("single", lambda: bench_single(300.0 if args.quick else 1800.0, 10.0, repeats)),
+        "batch 100Hz": ("batch", lambda: bench_batch(args.runs, 1.0 if args.quick else 5.0, 100.0, repeats)),
+        "batch 10Hz-GNC": ("batch", lambda: bench_batch(args.runs, 2.0 if args.quick else 10.0, 10.0, repeats)),
     }
     results = {}
     for name, (kind, fn) in cases.items():
