@@ -224,7 +224,12 @@ class AttitudeEstimator:
         if n > 1 and self.initialized:
             sub = dt_s / n
             self.q_NB, self.P = mekf_propagate_many(self.q_NB, self.bias_B, self.P, omegas[:-1], sub, self.sig_v, self.sig_u)
-            return self.step(sub, omegas[-1], q_NS, st_latency_s)
+            status = self.step(sub, omegas[-1], q_NS, st_latency_s)
+            if not status.star_tracker_used:
+                self.coasting_s += dt_s - sub  # step() counted only the last sub-interval
+                status.coasting_s = self.coasting_s
+            status.cov_trace_deg2 = self.cov_trace_deg2
+            return status
         return self.step(dt_s, omegas[-1] if n else None, q_NS, st_latency_s)
 
     @property
