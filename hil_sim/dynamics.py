@@ -172,7 +172,7 @@ def dynamics_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
     """Advance runs m_begin <= m < m_end by n_sub RK4 steps of dt_sub seconds, U_CMD[m] held.
 
     X (M,7+N) state, updated in place; D (M,3) Gauss-Markov disturbance state (N m), updated;
-    TEMP (M,N) wheel temperatures (deg C), updated; NORMALS (n_sub,M,3) standard normals for the random
+    TEMP (M,N) wheel temperatures (deg C), updated; NORMALS flat (n_sub*M*3,) standard normals for the random
     disturbance (ignored where its std is 0); U_APPLIED (M,N) out: motor torque actually applied on the last
     sub-step; FLAGS (M,N) out: fault bits (stuck, no torque, speed limit, saturated).
     """
@@ -224,7 +224,7 @@ def dynamics_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
                 FLAGS[m, i] = flags
             if std > 0.0:
                 for j in range(3):
-                    D[m, j] = a * D[m, j] + b * NORMALS[s, m, j]
+                    D[m, j] = a * D[m, j] + b * NORMALS[(s * X.shape[0] + m) * 3 + j]
             for j in range(3):
                 tau[j] = B[m, B_TAU_CONST + j] + D[m, j]
             _rk4_run(x, dt_sub, u_motor, tau, G, W, B, m, k1, k2, k3, k4, xt, u_net)

@@ -90,7 +90,7 @@ def sensor_frame_basis_S(boresight_S: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy")
 def gyro_sample_batch(X, BIAS, P, NORMALS, dt_since_s, OUT, SAT):
-    """Gyro samples for all runs. BIAS (M,3) updated in place; NORMALS (M,6): [:3] bias walk, [3:] ARW."""
+    """Gyro samples for all runs. BIAS (M,3) updated in place; NORMALS flat (M*6,): per run 3 bias-walk then 3 ARW normals."""
     M = X.shape[0]
     sq = math.sqrt(max(dt_since_s, 0.0))
     for m in range(M):
@@ -98,8 +98,8 @@ def gyro_sample_batch(X, BIAS, P, NORMALS, dt_since_s, OUT, SAT):
         q = P[m, G_QUANT]
         any_sat = False
         for j in range(3):
-            BIAS[m, j] += P[m, G_RRW] * sq * NORMALS[m, j]
-            w = (1.0 + P[m, G_SF + j]) * X[m, 4 + j] + BIAS[m, j] + P[m, G_ARW_STD] * NORMALS[m, 3 + j]
+            BIAS[m, j] += P[m, G_RRW] * sq * NORMALS[6 * m + j]
+            w = (1.0 + P[m, G_SF + j]) * X[m, 4 + j] + BIAS[m, j] + P[m, G_ARW_STD] * NORMALS[6 * m + 3 + j]
             if w > sat_lim:
                 w = sat_lim
                 any_sat = True
@@ -121,9 +121,10 @@ def _qmul(p0, p1, p2, p3, q0, q1, q2, q3):
 
 
 @njit(cache=True, error_model="numpy")
-def star_tracker_sample_batch(X, P, BASIS_S, SUN_N, MOON_N, NORMALS, Q_OUT, VALID, BLIND):
-    """Star-tracker samples for all runs. BASIS_S (M,3,3) rows = error axes in S; SUN_N, MOON_N (M,3) unit
-    directions from the spacecraft; NORMALS (M,3). Q_OUT holds the previous output and is overwritten only
+def star_tracker_sample_batch(X, P, BASIS_S, DIRS, sun_col, moon_col, NORMALS, Q_OUT, VALID, BLIND):
+    """Star-tracker samples for all runs. BASIS_S (M,3,3) rows = error axes in S; DIRS[m, sun_col:sun_col+3]
+    and DIRS[m, moon_col:moon_col+3] the unit Sun and Moon directions from the spacecraft in N;
+    NORMALS flat (M*3,). Q_OUT holds the previous output and is overwritten only
     when valid."""
     M = X.shape[0]
     for m in range(M):
@@ -138,9 +139,9 @@ def star_tracker_sample_batch(X, P, BASIS_S, SUN_N, MOON_N, NORMALS, Q_OUT, VALI
         ny = by + q0 * ty + (q3 * tx - q1 * tz)
         nz = bz + q0 * tz + (q1 * ty - q2 * tx)
         blind = BLIND_NONE
-        if nx * SUN_N[m, 0] + ny * SUN_N[m, 1] + nz * SUN_N[m, 2] > P[m, S_COS_SUN]:
+        if nx * DIRS[m, sun_col] + ny * DIRS[m, sun_col + 1] + nz * DIRS[m, sun_col + 2] > P[m, S_COS_SUN]:
             blind = BLIND_SUN
-        elif nx * MOON_N[m, 0] + ny * MOON_N[m, 1] + nz * MOON_N[m, 2] > P[m, S_COS_MOON]:
+        elif nx * DIRS[m, moon_col] + ny * DIRS[m, moon_col + 1] + nz * DIRS[m, moon_col + 2] > P[m, S_COS_MOON]:
             blind = BLIND_MOON
         else:
             rate = math.sqrt(X[m, 4] ** 2 + X[m, 5] ** 2 + X[m, 6] ** 2)
@@ -151,9 +152,9 @@ def star_tracker_sample_batch(X, P, BASIS_S, SUN_N, MOON_N, NORMALS, Q_OUT, VALI
         if blind != BLIND_NONE:
             continue
         # error rotation vector in S: cross-boresight axes e1, e2 and about-boresight axis b
-        c1 = P[m, S_CROSS] * NORMALS[m, 0]
-        c2 = P[m, S_CROSS] * NORMALS[m, 1]
-        c3 = P[m, S_ABOUT] * NORMALS[m, 2]
+        c1 = P[m, S_CROSS] * NORMALS[3 * m + 0]
+        c2 = P[m, S_CROSS] * NORMALS[3 * m + 1]
+        c3 = P[m, S_ABOUT] * NORMALS[3 * m + 2]
         ex = c1 * BASIS_S[m, 0, 0] + c2 * BASIS_S[m, 1, 0] + c3 * BASIS_S[m, 2, 0]
         ey = c1 * BASIS_S[m, 0, 1] + c2 * BASIS_S[m, 1, 1] + c3 * BASIS_S[m, 2, 1]
         ez = c1 * BASIS_S[m, 0, 2] + c2 * BASIS_S[m, 1, 2] + c3 * BASIS_S[m, 2, 2]
