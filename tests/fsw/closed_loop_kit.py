@@ -173,3 +173,38 @@ class BusLoop:
         self.fsw.checker.close()
         self.sim_bus.shutdown()
         self.fsw_bus.shutdown()
+
+
+def slew_geometry(epoch_utc: str, beta_deg: float = 32.0, offset_deg: float = 3.0, half_span_deg: float = 60.0):
+    """Start and target boresight directions for a 2*half_span slew whose straight path passes
+    ``offset_deg`` from the Sun centre, on the side of the Moon, heading at ``beta_deg`` from the
+    Sun-Moon direction. Returns (y0_N, yd_N, sun_N, moon_N) from the onboard ephemeris (geocentric)."""
+    from gnc.ephemeris import julian_date_tdb, moon_direction_N, sun_direction_N
+
+    jd = julian_date_tdb(epoch_utc)
+    s = sun_direction_N(jd)
+    m = moon_direction_N(jd)
+    tm = m - (m @ s) * s
+    tm /= np.linalg.norm(tm)
+    beta = math.radians(beta_deg)
+    t = math.cos(beta) * tm + math.sin(beta) * np.cross(s, tm)
+    n = np.cross(s, t)
+    side = 1.0 if m @ n > 0 else -1.0
+    off = math.radians(offset_deg)
+    c0 = math.cos(off) * s + math.sin(off) * side * n
+    t0 = t - (t @ c0) * c0
+    t0 /= np.linalg.norm(t0)
+    h = math.radians(half_span_deg)
+    return math.cos(h) * c0 - math.sin(h) * t0, math.cos(h) * c0 + math.sin(h) * t0, s, m
+
+
+def attitude_with_boresight(y_N: np.ndarray, b_B=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """A q_NB that puts body axis b_B on y_N (shortest rotation), scalar first."""
+    from scipy.spatial.transform import Rotation
+
+    b = np.asarray(b_B, dtype=float)
+    axis = np.cross(b, y_N)
+    s = np.linalg.norm(axis)
+    ang = math.atan2(s, float(b @ y_N))
+    rot = Rotation.from_rotvec(axis / s * ang) if s > 1e-12 else Rotation.identity()
+    return np.roll(rot.as_quat(), 1)

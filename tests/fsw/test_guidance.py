@@ -1,0 +1,223 @@
+"""Guidance: rate maps (checked by numerical differentiation with scipy), scaling, roll, zones moving
+with the ephemeris, merging near new moon, target rejection/retreat, double cover, SAFE phases."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fsw.config import FswConfig
+from fsw.guidance import Guidance, ZoneGeometry, signed_margin_deg
+from gnc import sky_zones as sz
+from gnc.ephemeris import julian_date_tdb, moon_direction_N, sun_direction_N
+
+
+def _rot(q):
+    return Rotation.from_quat(np.roll(np.asarray(q, dtype=float), -1))
+
+
+def _q(rot):
+    return np.roll(rot.as_quat(), 1)
+
+
+def _propagate(q, omega_B, dt):
+    """q_NB after rotating with body rate omega_B for dt (scipy: R(t+dt) = R(t) exp(omega dt))."""
+    return _q(_rot(q) * Rotation.from_rotvec(np.asarray(omega_B) * dt))
+
+
+def _events():
+    log = []
+    return log, (lambda name, **args: log.append((name, args)))
+
+
+def _cfg(**data) -> FswConfig:
+    return FswConfig.model_validate(data)
+
+
+def test_pointing_map_gives_ydot_equal_to_projected_u() -> None:
+    cfg = _cfg(initial_mode="POINTING", law={"k1": 0.1}, spacecraft={"max_rate_deg_s": 20.0},
+               pointing={"target_N": [0.0, 1.0, 0.2], "roll_gain_1_s": 0.0})
+    g = Guidance(cfg)
+    q = _q(Rotation.from_euler("xyz", [20, -40, 10], degrees=True))
+    out = g.step(0.0, 0.1, q, np.zeros(3))
+    b = np.asarray(cfg.pointing.boresight_B)
+    y = _rot(q).apply(b)
+    dt = 1e-6
+    y2 = _rot(_propagate(q, out.omega_cmd_BN_B, dt)).apply(b)
+    ydot = (y2 - y) / dt
+    u = 0.1 * np.asarray(cfg.pointing.target_N)
+    np.testing.assert_allclose(ydot, u - (u @ y) * y, atol=1e-6)
+    assert abs(out.omega_cmd_BN_B @ b) < 1e-12  # no roll from the law
+
+
+def test_rate_command_is_saturated_without_changing_direction() -> None:
+    cfg = _cfg(initial_mode="POINTING", law={"k1": 5.0}, spacecraft={"max_rate_deg_s": 0.5},
+               pointing={"target_N": [0.0, 1.0, 0.0], "roll_gain_1_s": 0.0})
+    q = _q(Rotation.from_euler("y", -90, degrees=True))  # boresight +z -> -x... far from the target
+    out = Guidance(cfg).step(0.0, 0.1, q, np.zeros(3))
+    fast = Guidance(_cfg(initial_mode="POINTING", law={"k1": 5.0}, spacecraft={"max_rate_deg_s": 20.0},
+                         pointing={"target_N": [0.0, 1.0, 0.0], "roll_gain_1_s": 0.0})).step(0.0, 0.1, q, np.zeros(3))
+    assert math.degrees(np.linalg.norm(out.omega_cmd_BN_B)) == pytest.approx(0.5)
+    np.testing.assert_allclose(out.omega_cmd_BN_B / np.linalg.norm(out.omega_cmd_BN_B),
+                               fast.omega_cmd_BN_B / np.linalg.norm(fast.omega_cmd_BN_B), atol=1e-12)
+
+
+def test_roll_law_turns_about_the_boresight_only_and_converges() -> None:
+    cfg = _cfg(initial_mode="POINTING", pointing={"target_N": [0.0, 0.0, 1.0], "roll_axis_B": [1, 0, 0],
+                                                  "roll_reference_N": [1.0, 0.0, 0.0], "roll_gain_1_s": 0.5})
+    g = Guidance(cfg)
+    q = _q(Rotation.from_euler("z", 70, degrees=True))  # boresight on target, rolled 70 deg
+    out = g.step(0.0, 0.1, q, np.zeros(3))
+    assert out.roll_error_deg == pytest.approx(-70.0, abs=1e-6)
+    for k in range(2000):  # roll rate saturates at half the rate limit (0.5 deg/s): ~140 s + decay
+        out = g.step(0.1 * k, 0.1, q, np.zeros(3))
+        q = _propagate(q, out.omega_cmd_BN_B, 0.1)
+    assert abs(out.roll_error_deg) < 0.01
+    assert out.pointing_error_deg < 1e-6  # the roll never moved the boresight
+
+
+def _epoch_cfg(epoch, zones, target_N, margin=3.0, **extra):
+    return _cfg(epoch_utc=epoch, initial_mode="POINTING", law={"margin_deg": margin, "k1": 0.1},
+                spacecraft={"max_rate_deg_s": 2.0},
+                pointing={"target_N": list(target_N), "zones": zones, "roll_gain_1_s": 0.0}, **extra)
+
+
+SUN_STAR = {"name": "sun", "body": "sun", "geometry": {"shape": "superellipse", "semi_axes_deg": [25, 12], "exponent": 0.7}}
+MOON_CONE = {"name": "moon", "body": "moon", "geometry": {"shape": "cone", "half_angle_deg": 12}}
+
+
+def test_kinematic_closed_loop_avoids_the_inflated_zones_and_converges() -> None:
+    """Perfect kinematics (scipy integration of the rate command): the boresight never enters the
+    inflated zones, so the physical margin stays >= margin_deg, and it reaches the target."""
+    from closed_loop_kit import attitude_with_boresight, slew_geometry
+
+    epoch = "2030-03-29T12:00:00+00:00"
+    y0, yd, _, _ = slew_geometry(epoch)
+    cfg = _epoch_cfg(epoch, [SUN_STAR, MOON_CONE], yd)
+    g = Guidance(cfg)
+    q = attitude_with_boresight(y0)
+    min_margin = 90.0
+    for k in range(4000):
+        out = g.step(0.1 * k, 0.1, q, np.zeros(3))
+        min_margin = min(min_margin, out.margin_min_deg)
+        q = _propagate(q, out.omega_cmd_BN_B, 0.1)
+    assert out.pointing_error_deg < 0.01
+    assert min_margin > 3.0 - 0.05  # never inside the inflated zone (up to the 10 Hz sampling)
+    assert min_margin < 8.0  # and the path really went around the Sun zone
+
+
+def test_zones_move_with_the_ephemeris() -> None:
+    cfg = _epoch_cfg("2030-03-29T12:00:00+00:00", [MOON_CONE], [1.0, 0.0, 0.0])
+    g = Guidance(cfg)
+    q = np.array([1.0, 0, 0, 0])
+    g.step(0.0, 0.1, q, np.zeros(3))
+    c0 = g.slots[0].center_N.copy()
+    g.step(3600.0, 0.1, q, np.zeros(3))
+    moved = math.degrees(math.acos(c0 @ g.slots[0].center_N))
+    assert 0.3 < moved < 0.8  # the Moon moves about 0.5 deg per hour
+    jd = julian_date_tdb("2030-03-29T13:00:00+00:00")
+    r_sc = g.ephem.position_N_km(3600.0)
+    ref = moon_direction_N(jd, r_sc)
+    assert math.degrees(math.acos(ref @ g.slots[0].center_N)) < 1e-3
+
+
+def test_sun_and_moon_near_new_moon_are_merged_with_an_event() -> None:
+    log, ev = _events()
+    cfg = _epoch_cfg("2030-04-02T12:00:00+00:00", [SUN_STAR, MOON_CONE], [0.0, 0.0, 1.0])
+    g = Guidance(cfg, events=ev)
+    out = g.step(0.0, 0.1, np.array([1.0, 0, 0, 0]), np.zeros(3))
+    assert out.zones_merged
+    assert [n for n, _ in log].count("ZONES_MERGED") == 1
+    merged = g._sky_law_zones
+    assert len(merged) == 1
+    for slot in g.slots:  # the merged cone contains both inflated zones
+        pts = slot.law.boundary(300)
+        assert all(merged[0].separation(p) < 1e-9 for p in pts)
+
+
+def test_target_inside_a_zone_is_refused_and_a_moving_zone_pushes_the_target_out() -> None:
+    cfg = _epoch_cfg("2030-03-29T12:00:00+00:00", [MOON_CONE], [0.0, 0.0, 1.0])
+    g = Guidance(cfg)
+    q = np.array([1.0, 0, 0, 0])
+    g.step(0.0, 0.1, q, np.zeros(3))
+    moon = g.slots[0].center_N
+    hit = g.target_violation("DIRECTION", moon)
+    assert hit is not None and hit[0] == 0 and hit[1] < -10.0
+    # 14 deg from the Moon: outside the physical 12 deg cone but inside the 3 deg margin: refused
+    frame = sz.sky_frame(moon)
+    near = math.cos(math.radians(14)) * moon + math.sin(math.radians(14)) * frame[0]
+    assert g.target_violation("DIRECTION", near) is not None
+    far = math.cos(math.radians(40)) * moon + math.sin(math.radians(40)) * frame[0]
+    assert g.target_violation("DIRECTION", far) is None
+    # If the zone moves onto an accepted target, guidance steers to a substitute outside the layer.
+    log, ev = _events()
+    g2 = Guidance(_epoch_cfg("2030-03-29T12:00:00+00:00", [MOON_CONE], list(near)), events=ev)
+    out = g2.step(0.0, 0.1, q, np.zeros(3))
+    sub = g2._sky_target
+    assert g2.slots[0].law.separation(sub) > out.eps
+    assert any(n == "ASSUMPTION_VIOLATED" for n, _ in log)
+
+
+QUAT_ZONES = [{"shape": "cone", "name": f"c{i}", "center_q": c, "half_angle_deg": 15.0}
+              for i, c in enumerate([[0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1], [0, -1, 0, 0], [0, 0, -1, 0],
+                                     [0, 0, 0, -1], [-1, 0, 0, 0]])]
+
+
+def test_quaternion_map_and_double_cover() -> None:
+    cfg = _cfg(initial_mode="QUATERNION", law={"k1": 0.1, "margin_deg": 2.0}, spacecraft={"max_rate_deg_s": 20.0},
+               quaternion={"target_q_NB": [1, 0, 0, 0], "zones": QUAT_ZONES})
+    g = Guidance(cfg)
+    assert g.s3_use_gradient  # all cones -> GradientLaw
+    q = _q(Rotation.from_rotvec(np.radians([40, -30, 20])))
+    out = g.step(0.0, 0.1, q, np.zeros(3))
+    # qdot = P(q) u with u from the law: compare with a numerical derivative of the propagated q
+    dt = 1e-6
+    qdot = (_propagate(q, out.omega_cmd_BN_B, dt) - q) / dt
+    u = 0.1 * np.asarray(g._s3_law.control(q))
+    np.testing.assert_allclose(qdot, u - (u @ q) * q, atol=1e-5)
+    # the estimator may hand over -q next cycle (same attitude): the lift keeps the command continuous
+    out2 = g.step(0.1, 0.1, -q, np.zeros(3))
+    np.testing.assert_allclose(out2.omega_cmd_BN_B, out.omega_cmd_BN_B, atol=1e-12)
+    # entry from the far sheet picks the target hemisphere: same command as from +q
+    g3 = Guidance(cfg)
+    np.testing.assert_allclose(g3.step(0.0, 0.1, -q, np.zeros(3)).omega_cmd_BN_B, out.omega_cmd_BN_B, atol=1e-12)
+
+
+def test_safe_mode_damps_then_points_the_sun_axis() -> None:
+    log, ev = _events()
+    cfg = _cfg(initial_mode="SAFE", safe={"sun_axis_B": [0, 0, -1], "damping_exit_rate_deg_s": 0.05})
+    g = Guidance(cfg, events=ev)
+    q = np.array([1.0, 0, 0, 0])
+    out = g.step(0.0, 0.1, q, np.radians([0.5, 0, 0]))
+    assert out.safe_phase == "RATE_DAMPING" and np.all(out.omega_cmd_BN_B == 0)
+    for k in range(11):
+        out = g.step(0.1 * k, 0.1, q, np.radians([0.01, 0, 0]))
+    assert ("SAFE_PHASE_CHANGED", {"phase": "SUN_ACQUISITION"}) in log
+    for k in range(3000):
+        out = g.step(0.1 * k, 0.1, q, np.zeros(3))
+        q = _propagate(q, out.omega_cmd_BN_B, 0.1)
+    sun_axis_N = _rot(q).apply([0, 0, -1])
+    assert math.degrees(math.acos(sun_axis_N @ out.sun_N)) < 0.1
+    assert out.safe_phase == "SUN_POINTING"
+
+
+def test_fast_eps_bound_is_below_the_exact_check() -> None:
+    from gnc.checks import check_assumptions
+
+    a = sz.cone_zone(np.array([1.0, 0, 0]), 20.0)
+    b = sz.cone_zone(np.array([0.0, 1.0, 0]), 30.0)
+    x_d = np.array([0.0, 0.0, 1.0])
+    fast = ZoneGeometry.fast_eps_max(x_d, [a, b])
+    exact = check_assumptions(x_d, [a, b], 0.01).eps_max
+    assert 0 < fast <= exact + 1e-12
+    assert fast == pytest.approx(1 - math.cos(math.radians(20.0)), rel=1e-9)  # delta = (90-20-30)/2
+
+
+def test_signed_margin_is_in_degrees() -> None:
+    z = sz.cone_zone(np.array([1.0, 0, 0]), 10.0)
+    p = np.array([math.cos(math.radians(25)), math.sin(math.radians(25)), 0.0])
+    assert signed_margin_deg(z, p) == pytest.approx(15.0)
+    p = np.array([math.cos(math.radians(4)), math.sin(math.radians(4)), 0.0])
+    assert signed_margin_deg(z, p) == pytest.approx(-6.0)
