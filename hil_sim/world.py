@@ -273,6 +273,11 @@ class WorldBatch:
     def wheel_currents_A(self) -> np.ndarray:
         return self.U_APPLIED / self.W[:, :, dyn.W_KT]
 
+    def wheel_status_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(speed rad/s, applied motor torque N m, current A, temperature deg C, fault bits), each (M, N)."""
+        return (self.X[:, 7:].copy(), self.U_APPLIED.copy(), self.wheel_currents_A(), self.TEMP.copy(),
+                self.FLAGS.copy())
+
     # ------------------------------------------------------------------------------------------ faults
     def set_wheel_failure(self, wheel: int, mode: str, run: int = 0) -> None:
         """Change wheel ``wheel`` of run ``run`` to ``none``, ``stuck`` (seizes: momentum goes to the hub,
@@ -330,10 +335,9 @@ class World:
         return sen.StarTrackerSample(q[0].copy(), bool(valid[0]), int(blind[0]))
 
     def wheel_status(self) -> list[WheelStatus]:
-        b = self.batch
-        cur = b.wheel_currents_A()[0]
-        return [WheelStatus(float(b.X[0, 7 + i]), float(b.U_APPLIED[0, i]), float(cur[i]), float(b.TEMP[0, i]),
-                            int(b.FLAGS[0, i])) for i in range(self.n_wheels)]
+        speed, torque, current, temp, fault = self.batch.wheel_status_arrays()
+        return [WheelStatus(float(speed[0, i]), float(torque[0, i]), float(current[0, i]), float(temp[0, i]),
+                            int(fault[0, i])) for i in range(self.n_wheels)]
 
     @property
     def truth(self) -> Truth:

@@ -274,3 +274,15 @@ def test_bad_inputs_raise_clear_errors():
         WheelParams(axis_B=(1.0, 1.0, 0.0))
     with pytest.raises(ValueError, match="positive definite"):
         SpacecraftParams(inertia_B_kgm2=((0.01, 0, 0), (0, 0.01, 0), (0, 0, 0.01)))
+
+
+def test_winding_temperature_follows_first_order_thermal_model():
+    """dT/dt = (i^2 R - (T - T_amb) / R_th) / C_th with i = u / k_t: after one time constant R_th C_th the rise
+    is (1 - 1/e) of i^2 R R_th."""
+    world = _single_wheel_world(max_torque_Nm=0.1, max_speed_rad_s=1e6, motor_constant_Nm_per_A=0.05,
+                                winding_resistance_ohm=1.5, thermal_resistance_K_per_W=2.0,
+                                thermal_capacity_J_per_K=50.0, ambient_temp_C=10.0)
+    for _ in range(1000):  # tau = 100 s
+        world.step(0.1, [0.1])
+    rise = (0.1 / 0.05) ** 2 * 1.5 * 2.0
+    assert world.wheel_status()[0].temp_C == pytest.approx(10.0 + rise * (1 - math.exp(-1.0)), rel=1e-6)
