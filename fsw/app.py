@@ -27,6 +27,9 @@ from fsw.guidance import AssumptionChecker, Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
 _CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
+# RWn_STATUS fault bits (config/icd/keepout.dbc): 1 overspeed, 2 command timeout, 4 drive fault.
+WHEEL_OVERSPEED = 0x01
+WHEEL_FAULT_MASK = 0x02 | 0x04
 
 
 class _NullTelemetry:
@@ -291,8 +294,11 @@ class FlightSoftware:
             st_missing=not st_fresh,
             st_corrupt_frames=corrupt["STAR_TRACKER"],
             innovation_deg=status.innovation_deg if status is not None else None,
-            wheel_fault=[(w is None) or bool(w.fault) for w in wheels],
-            wheel_speed_ratio=[abs(s) / m if np.isfinite(s) else float("nan") for s, m in zip(speeds, self.control.max_speed)],
+            wheel_fault=[(w is None) or bool(int(w.fault) & WHEEL_FAULT_MASK) for w in wheels],
+            wheel_speed_ratio=[
+                max(abs(s) / m, 1.0 if (w is not None and int(w.fault) & WHEEL_OVERSPEED) else 0.0) if np.isfinite(s) else float("nan")
+                for s, m, w in zip(speeds, self.control.max_speed, wheels)
+            ],
             wheel_speed_rad_s=[float(s) for s in speeds],
             margins_deg=g.margins_deg if g.mode != "SAFE" else [],
             zone_bodies=g.zone_bodies,

@@ -98,7 +98,9 @@ class DirectLoop:
             st = StarTrackerSample(np.asarray(s.q_NS, dtype=float), bool(s.valid), int(s.blind_source), t)
         wheels = []
         for i, ws in enumerate(w.wheel_status()):
-            fault = self.wheel_fault_override.get(i, ws.fault)
+            # world bits (1 stuck, 2 no torque, 4 speed limit) -> ICD bits (1 overspeed, 4 drive fault)
+            fault = (1 if ws.fault & 4 else 0) | (4 if ws.fault & 3 else 0)
+            fault = self.wheel_fault_override.get(i, fault)
             wheels.append(WheelStatus(ws.speed_rad_s, ws.torque_Nm, ws.current_A, ws.temp_C, fault, t))
         imu = [] if self.drop_imu else self._imu_batch
         return TickInputs(self.tick, t, self.period_s, imu[-1] if imu else None, st, wheels, list(imu))
