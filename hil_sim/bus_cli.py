@@ -8,7 +8,7 @@
       ``cantools decode config/icd/keepout.dbc < FILE`` decodes.
 
 The same DBC works with cantools' own monitor on a real interface:
-  cantools monitor config/icd/keepout.dbc -c vcan0            (socketcan is cantools' default)
+  cantools monitor config/icd/keepout.dbc -i socketcan -c vcan0
   cantools monitor config/icd/keepout.dbc -i udp_multicast -c GROUP --bus-kwargs port=PORT fd=False
 (a SIL run prints its bus spec; with ``auto`` it says which transport it chose).
 """

@@ -42,6 +42,8 @@ class MessageSpec:
     signals: tuple[str, ...]  # application signals (without the E2E ones)
     ranges: Mapping[str, tuple[float, float]]
     db_message: Any  # cantools Message
+    # ranges widened by half an LSB: the DBC limits are physical values the raw grid may not hit exactly
+    accept_bounds: Mapping[str, tuple[float, float]] = None  # type: ignore[assignment]
 
 
 def _attribute(message: Any, name: str, default: Any) -> Any:
@@ -97,11 +99,13 @@ class Icd:
         if data_id <= 0:
             raise IcdError(f"{where}: E2EDataID attribute must be set (1..65535)")
         timeout_ms = int(_attribute(message, "E2ETimeoutMs", 3 * cycle_ms)) or 3 * cycle_ms
-        ranges = {}
+        ranges, accept = {}, {}
         for s in message.signals:
             lo = s.minimum if s.minimum is not None else -math.inf
             hi = s.maximum if s.maximum is not None else math.inf
             ranges[s.name] = (lo, hi)
+            slack = 0.5 * abs(s.scale)
+            accept[s.name] = (lo - slack, hi + slack)
         return MessageSpec(
             name=message.name,
             frame_id=message.frame_id,
@@ -114,6 +118,7 @@ class Icd:
             signals=tuple(s.name for s in message.signals if s.name not in (E2E_CRC_SIGNAL, E2E_COUNTER_SIGNAL)),
             ranges=ranges,
             db_message=message,
+            accept_bounds=accept,
         )
 
     # ------------------------------------------------------------------------------- queries
@@ -151,7 +156,8 @@ class Icd:
         message = spec.db_message
         payload = message.encode(values, scaling=True, padding=False, strict=True)
         values[E2E_CRC_SIGNAL] = e2e_crc(spec.data_id, payload[1:])
-        data = message.encode(values, scaling=True, padding=False, strict=True)
+        # Values were range-checked by the first encode; only the CRC (0..255 by construction) changed.
+        data = message.encode(values, scaling=True, padding=False, strict=False)
         return can.Message(arbitration_id=spec.frame_id, data=data, is_extended_id=False, is_fd=False)
 
     def decode_checked(self, spec: MessageSpec, data: bytes) -> dict[str, float] | None:
@@ -161,11 +167,10 @@ class Icd:
                                             allow_excess=False)
         except (cantools.database.DecodeError, ValueError, KeyError):
             return None
+        bounds = spec.accept_bounds
         for signal, value in values.items():
-            lo, hi = spec.ranges[signal]
-            # Half an LSB of slack: the DBC limits are physical values that the raw grid may not hit exactly.
-            slack = 0.5 * abs(spec.db_message.get_signal_by_name(signal).scale)
-            if not (lo - slack <= value <= hi + slack):
+            lo, hi = bounds[signal]
+            if not (lo <= value <= hi):
                 return None
         return values
 
