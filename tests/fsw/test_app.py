@@ -1,0 +1,135 @@
+"""FlightSoftware application: telecommand handlers, telemetry content, housekeeping, process entry."""
+from __future__ import annotations
+
+import math
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from closed_loop_kit import BusLoop, fsw_config_for
+from fsw.dictionary import DICTIONARY, FDIR_STATES, MODES
+from fsw.telecommand import CommandDispatcher, encode_command
+from fsw.telemetry import TelemetrySender, decode_tm_packet
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def loop():
+    from hil_sim.params import WorldParams
+    from hil_sim.world import World
+
+    wp = WorldParams()
+    cfg = fsw_config_for(wp, initial_mode="SAFE", law={"assumption_check": "inline"},
+                         quaternion={"target_q_NB": [1, 0, 0, 0],
+                                     "zones": [{"shape": "cone", "name": "x", "center_q": [0, 1, 0, 0], "half_angle_deg": 20.0}]})
+    tm = TelemetrySender(DICTIONARY, port=None)
+    tc = CommandDispatcher(DICTIONARY, tm, port=None)
+    lp = BusLoop(cfg, World(wp, seed=0), telemetry=tm, dispatcher=tc)
+    lp.tm, lp.tc = tm, tc
+    yield lp
+    lp.close()
+
+
+def _send(lp, name, args=(), seq=[0]):
+    seq[0] += 1
+    return lp.tc.handle_datagram(encode_command(DICTIONARY, name, args, seq_count=seq[0]))
+
+
+def _names(lp):
+    return [e.name for e in lp.tm.recent_events]
+
+
+def test_commands_change_mode_gains_target_and_counters(loop) -> None:
+    loop.run(3)
+    assert _send(loop, "NOOP").accepted
+    assert _send(loop, "SET_MODE", {"mode": "QUATERNION"}).accepted
+    assert loop.fsw.mode == "QUATERNION" and "MODE_CHANGED" in _names(loop)
+    assert _send(loop, "SET_GAINS", {"k1": 0.3, "kappa": 2.0, "eps": 0.0, "rate_limit_deg_s": 0.5}).accepted
+    g = loop.fsw.guidance
+    assert (g.k1, g.kappa, g.eps_cfg) == (0.3, 2.0, "auto") and g.max_rate_rad_s == pytest.approx(math.radians(0.5))
+    # a quaternion target inside the S^3 zone (10 deg from its centre) is refused
+    q_bad = [math.sin(math.radians(10)), math.cos(math.radians(10)), 0.0, 0.0]
+    res = _send(loop, "SET_TARGET", {"kind": "QUATERNION", "c0": q_bad[0], "c1": q_bad[1], "c2": 0.0, "c3": 0.0})
+    assert not res.accepted and "TARGET_REJECTED" in _names(loop)
+    q_ok = [math.cos(0.2), 0.0, math.sin(0.2), 0.0]
+    assert _send(loop, "SET_TARGET", {"kind": "QUATERNION", "c0": q_ok[0], "c1": 0.0, "c2": q_ok[2], "c3": 0.0}).accepted
+    np.testing.assert_allclose(g.q_target, q_ok, atol=1e-12)
+    # not a unit vector: validation error
+    assert not _send(loop, "SET_TARGET", {"kind": "DIRECTION", "c0": 0.5, "c1": 0.0, "c2": 0.0}).accepted
+    loop.fsw.executive.gnc.slips = 7
+    assert _send(loop, "RESET_COUNTERS").accepted
+    assert loop.fsw.executive.gnc.slips == 0 and loop.tc.counters["accepted"] == 1  # the reset itself
+    assert "COUNTERS_RESET" in _names(loop)
+
+
+def test_gnc_and_housekeeping_telemetry(loop) -> None:
+    loop.run(25)
+    gnc = loop.tm.latest("GNC")
+    assert gnc["cycle"] == 24 and MODES[gnc["mode"]] == "SAFE"
+    q = np.array([gnc[f"q_est_NB_{i}"] for i in range(4)])
+    truth = loop.world.truth.q_NB
+    assert min(np.linalg.norm(q - truth), np.linalg.norm(q + truth)) < 1e-3
+    assert gnc["st_valid"] and gnc["imu_valid"] and gnc["exec_time_ms"] > 0
+    assert math.isnan(gnc["wheel_speed_rad_s_5"])  # 4 wheels: unused slots are NaN
+    hk = loop.tm.latest("HK")
+    assert hk["cycles"] >= 20 and hk["bus_rx_ok"] > 100 and hk["bus_crc_errors"] == 0
+    assert hk["exec_max_ms_gnc"] >= hk["exec_mean_ms_gnc"] > 0
+    assert FDIR_STATES[hk["fdir_imu_stale"]] == "NOMINAL"
+    # one GNC packet per cycle, one HK packet per second (3 in 2.5 s: ticks 0, 10, 20)
+    assert loop.tm.sequence_count(DICTIONARY.packet("GNC").apid) == 25
+    assert loop.tm.sequence_count(DICTIONARY.packet("HK").apid) == 3
+
+
+def _free_udp_port() -> tuple[socket.socket, int]:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    s.settimeout(0.2)
+    return s, s.getsockname()[1]
+
+
+def test_process_entry_runs_and_stops_when_the_simulator_is_silent(tmp_path) -> None:
+    rx, port = _free_udp_port()
+    cfg = {"flight_software": {"rates": {"lockstep_timeout_s": 0.5}, "law": {"assumption_check": "off"},
+                               "tmtc": {"telemetry_port": port, "telecommand_port": 0}}}
+    path = tmp_path / "mission.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    proc = subprocess.run([sys.executable, "-m", "fsw", "--config", str(path), "--bus", "virtual:entry", "--lockstep"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    events = []
+    while True:
+        try:
+            data = rx.recv(65536)
+        except socket.timeout:
+            break
+        pkt = decode_tm_packet(DICTIONARY, data)
+        if pkt.kind == "event":
+            events.append(pkt.event)
+    rx.close()
+    assert events[0] == "FSW_STARTED" and events[-1] == "FSW_STOPPED"
+
+
+def test_process_entry_reports_a_bad_config_with_the_key(tmp_path) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump({"flight_software": {"rates": {"gnc_rate_hz": 500}}}))
+    proc = subprocess.run([sys.executable, "-m", "fsw", "--config", str(path), "--bus", "virtual:x"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "flight_software.rates.gnc_rate_hz" in proc.stderr and "bad.yaml" in proc.stderr
+
+
+def test_realtime_loop_on_the_clock(loop) -> None:
+    """Real time on the monotonic clock for 1 s with no simulator: cycles on schedule, IMU stale
+    detected (no frames), timing measured."""
+    n = loop.fsw.run_realtime(duration_s=1.0)
+    assert n >= 9
+    ex = loop.fsw.executive
+    assert len(ex.jitter.recent) == n and ex.gnc.cycles == n
+    assert loop.fsw.fdir.stale_counts["IMU"] == n
