@@ -88,6 +88,8 @@ def model_generator(seed: int | None, key: int, own_seed: int | None) -> np.rand
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(key,)))
 
 
+# numba's on-disk cache of a kernel is keyed on its own module's source file only: after editing dynamics.py,
+# orbit.py or ephemeris_truth.py in place, delete hil_sim/__pycache__/*.nbi/*.nbc so these kernels recompile.
 @njit(cache=True, error_model="numpy")
 def _world_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
                      t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX, m_begin, m_end):
