@@ -263,12 +263,12 @@ def simulate(study: Study, rng_seed: int = 0) -> RunResult:
         xs[k + 1] = state(q)
     wall = time.perf_counter() - t0
     t = np.arange(steps + 1) * dt
-    signed = _signed_separation_history(study.zones, xs)
+    signed = signed_separation_history(study.zones, xs)
     ds_target = 0.5 * np.sum((xs - study.target) ** 2, axis=2)
     return RunResult(t, xs, signed, ds_target, wall)
 
 
-def _signed_separation_history(zones: list, xs: np.ndarray) -> np.ndarray:
+def signed_separation_history(zones: list, xs: np.ndarray) -> np.ndarray:
     """min_i signed d_s(x, U_i) for every recorded state, exactly, with few exact evaluations.
 
     Branch and bound: outside a zone's bounding cap, 1 - cos(angle to the cap) is a lower bound of
