@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -123,6 +124,8 @@ def open_bus(spec: str = "auto", run_id: str | int | None = None, *, info_out: l
     info = resolve_spec(spec, run_id)
     if info_out is not None:
         info_out.append(info)
+    if (spec or "auto").strip().lower() == "auto":
+        print(f"bus: {info.note}", file=sys.stderr)  # the contract: auto says which transport it chose
     if info.interface == "socketcan":
         if not interface_present(info.channel):
             raise BusUnavailableError(vcan_hint(info.channel))

@@ -164,3 +164,39 @@ def test_probability_is_seeded(icd, params) -> None:
     a = run_with_faults(icd, params, [fault], ticks=15)[0].injector.log
     b = run_with_faults(icd, params, [fault], ticks=15)[0].injector.log
     assert a == b and 10 < len(a) < 60
+
+
+# ------------------------------------------------------------------------------ simulator-side robustness
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def shared_world(params) -> World:
+    return World(params, seed=1)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(frames=st.lists(st.tuples(st.one_of(st.integers(0, 0x7FF), st.sampled_from([0x20, 0x21, 0x22, 0x23, 0x70])),
+                                 st.binary(min_size=0, max_size=8), st.booleans()), min_size=1, max_size=40))
+def test_random_frames_never_move_the_wheels(icd, shared_world, frames) -> None:
+    """Garbage from the flight-software side: only the simulator's classification counters change."""
+    import can
+
+    channel = f"virtual:hypsim{next(_channels)}"
+    sim_bus, garbage = open_bus(channel), open_bus(channel)
+    try:
+        sim = Simulator(shared_world, sim_bus, icd)
+        for fid, data, ext in frames:
+            garbage.send(can.Message(arbitration_id=fid, data=data, is_extended_id=ext))
+        sim.poll(sim.t_s)
+    finally:
+        sim_bus.shutdown()
+        garbage.shutdown()
+    counts = sim.receiver.counters
+    delivered = sum(c["ok"] + c["ok_some_lost"] for n, c in counts.items() if n != "_bus")
+    assert sum(n for c in counts.values() for k, n in c.items() if k != "timeout") == len(frames)
+    if delivered == 0:
+        assert all(w.last_cmd_t is None for w in sim.devices.wheels)
+        assert np.all(sim.devices.wheel_torques(sim.t_s) == 0.0)
+        assert sim.stats.cycle_done == 0 and sim.stats.wheel_commands == 0
