@@ -8,7 +8,8 @@ Randomness: one ``numpy.random.Generator`` per model (disturbance, IMU, star tra
 ``SeedSequence(seed, spawn_key=(k,))`` - the k-th spawned child of the world seed - unless that model's
 params carry their own ``seed``. So the same seed gives bit-identical outputs, and changing one model's seed
 (or how often one sensor is sampled) never changes another model's numbers. In a batch each model's
-generator draws for all runs at once (run m's noise depends on the batch seed and M, not on run m alone).
+generator draws for all runs at once (run m's noise depends on the batch seed and M, not on run m alone), and a
+model's own ``seed`` override is taken from the first run's params.
 
 Time: ``t`` is seconds since ``params.epoch_utc``; the ephemerides run on TDB = UTC + 69.184 s.
 """
