@@ -23,6 +23,8 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
     run.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786 (default: local pool)")
     run.add_argument("--mode", choices=("fast", "sil"), help="execution mode (default: the campaign's)")
+    run.add_argument("--duration", type=float, help="shorten every run to this many simulated seconds "
+                     "(commands and faults after it are dropped), e.g. for CI")
     run.add_argument("--out", type=Path, help="output folder; an existing one is resumed (finished runs skipped)")
     run.add_argument("--resume", action="store_true", help="resume the newest campaigns/<name>-* folder")
     run.add_argument("--no-report", action="store_true", help="tables and JUnit only, no plots")
@@ -92,7 +94,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from hil_sim.yaml_loader import ConfigError
     console = _console()
     try:
-        plan, base_path = build_plan(args.campaign, mode=args.mode, runs=args.runs)
+        campaign = None
+        if args.duration is not None:
+            from hil_sim.campaign.spec import load_campaign
+            campaign = load_campaign(args.campaign).model_copy(update={"duration_s": args.duration})
+        plan, base_path = build_plan(args.campaign, mode=args.mode, runs=args.runs, campaign=campaign)
     except (ConfigError, FileNotFoundError, ValueError) as exc:
         console.print(f"[red]campaign not started:[/red]\n{exc}")
         return 2

@@ -419,7 +419,12 @@ def nominal_values(dispersions: Sequence[Dispersion], mission_model: Any) -> dic
             out[disp.name] = read_path(mission_model, loc)
         except DispersionError as exc:
             raise DispersionError(f"dispersion '{disp.name}': {exc}") from None
-    paths = [d.path for d in dispersions]
+        for extra in disp.also_paths:
+            try:
+                read_path(mission_model, parse_path(extra))
+            except DispersionError as exc:
+                raise DispersionError(f"dispersion '{disp.name}' also_paths: {exc}") from None
+    paths = [p for d in dispersions for p in (d.path, *d.also_paths)]
     dupes = sorted({p for p in paths if paths.count(p) > 1})
     if dupes:
         raise DispersionError(f"several dispersions write the same path: {dupes}")

@@ -92,7 +92,13 @@ class Plan:
                 for d in self.campaign.dispersions}
 
     def values(self, params: dict[str, dict[str, float]]) -> dict[str, Any]:
-        return {d.path: dsp.realize(d, params[d.name], self.nominal[d.name]) for d in self.campaign.dispersions}
+        """Value to write at each path (a dispersion's ``also_paths`` get the same value)."""
+        out: dict[str, Any] = {}
+        for d in self.campaign.dispersions:
+            value = dsp.realize(d, params[d.name], self.nominal[d.name])
+            for path in (d.path, *d.also_paths):
+                out[path] = value
+        return out
 
     def mission(self, params: dict[str, dict[str, float]], sim_seed: int) -> tuple[dict[str, Any], Any]:
         """Raw dispersed mission dict and its validated model."""
@@ -100,7 +106,11 @@ class Plan:
         if self.seed_path:
             dsp.write_path(raw, dsp.parse_path(self.seed_path), int(sim_seed))
         if self.campaign.duration_s is not None:
-            raw["duration_s"] = float(self.campaign.duration_s)
+            end = float(self.campaign.duration_s)
+            raw["duration_s"] = end
+            for key, time_key in (("timeline", "t_s"), ("faults", "start_s")):
+                if isinstance(raw.get(key), list):
+                    raw[key] = [e for e in raw[key] if not (isinstance(e, dict) and float(e.get(time_key, 0)) > end)]
         return raw, validate_mission(self.model_class, raw)
 
 

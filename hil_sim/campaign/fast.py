@@ -147,6 +147,28 @@ def _signed_margins_deg(zone_cfgs: Sequence[Any], rec: _Recording, y_N: np.ndarr
     return out
 
 
+_S3_STRIDE = 5  # S^3 star-zone separations are costly: every 5th tick (0.5 s at 10 Hz) is enough here
+
+
+def _s3_physical_zones(cfg: Any) -> list[tuple[Any, str]]:
+    """The forbidden-attitude zones on S^3 as configured (no margin), like fsw.guidance builds them."""
+    from gnc import zones as gz
+    if getattr(cfg, "quaternion", None) is None:
+        return []
+    out = []
+    for zc in cfg.quaternion.zones:
+        centers = [np.asarray(zc.center_q, dtype=float)]
+        if zc.antipodal_copy:
+            centers.append(-centers[0])
+        for c in centers:
+            if zc.shape == "cone":
+                out.append((gz.ConicZone(c, math.radians(zc.half_angle_deg)), zc.name))
+            else:
+                out.append((gz.StarZone.superellipsoid(c, None, np.asarray(zc.semi_axes, dtype=float),
+                                                       zc.exponent), zc.name))
+    return out
+
+
 def _settling(t: np.ndarray, err_deg: np.ndarray, t_command: float, tol_deg: float) -> float:
     """Time after ``t_command`` from which the error stays below ``tol_deg`` (inf: never)."""
     after = t >= t_command - 1e-9
@@ -178,6 +200,14 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
     channel = f"virtual:campaign{os.getpid()}x{next(_channel_ids)}"
     sim_bus, fsw_bus = open_bus(channel), open_bus(channel)
     cfg = mission.flight_software
+    if cfg.law.assumption_check != "off":
+        # The full assumption check (gnc.checks) only feeds events and telemetry, never the control (the
+        # per-cycle eps bound does not depend on it). In 'process' mode it answers after a wall-clock
+        # delay, so its events would land on different ticks from run to run (no exact rerun), and it
+        # forks a process per run; 'inline' is deterministic but costs ~1.5 s of CPU per check. The
+        # campaign judges keep-out on truth instead, so fast mode switches it off: the GNC is unchanged.
+        cfg = cfg.model_copy(update={"law": cfg.law.model_copy(update={"assumption_check": "off"})})
+    fsw = None
     try:
         sim = Simulator(world, sim_bus, icd, gnc_period_s=cfg.gnc_period_s, faults=mission.faults,
                         fault_seed=seed)
@@ -216,6 +246,8 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
                          events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events
                                  if _severity(n) in FDIR_SEVERITIES][:200])
     finally:
+        if fsw is not None:
+            fsw.shutdown()
         sim_bus.shutdown()
         fsw_bus.shutdown()
 
@@ -263,13 +295,26 @@ def _judge(mission, rec, sent_commands, telemetry, sim, fsw, zone_cfgs) -> tuple
         metrics["min_margin_deg"] = float(margins.min())
     else:
         metrics["min_margin_deg"] = math.inf
-    # pointing / attitude error to the last commanded target
+    s3_zones = _s3_physical_zones(mission.flight_software)
+    if s3_zones:  # forbidden attitudes: margin on S^3 (an S^3 angle is half the rotation angle)
+        s3 = np.array([[float(z.signed_separation(x)) for z, _ in s3_zones] for x in q[::_S3_STRIDE]])
+        s3_deg = np.where(s3 >= 0, 1.0, -1.0) * np.degrees(np.arccos(np.clip(1.0 - np.abs(s3), -1.0, 1.0)))
+        for i, (_, name) in enumerate(s3_zones):
+            metrics[f"margin_{name}_deg"] = min(metrics.get(f"margin_{name}_deg", math.inf), float(s3_deg[:, i].min()))
+        metrics["min_margin_deg"] = min(metrics["min_margin_deg"], float(s3_deg.min()))
+    # pointing / attitude error to the last commanded target (or the configured one)
     targets = [(tc, a) for tc, name, a in sent_commands if name == "SET_TARGET"]
     t_cmd = targets[-1][0] if targets else 0.0
+    q_t = None
     if targets and str(targets[-1][1]["kind"]) == "QUATERNION":
         a = targets[-1][1]
         q_t = np.array([a["c0"], a["c1"], a["c2"], a["c3"]], dtype=float)
+    elif not targets and mission.flight_software.initial_mode == "QUATERNION":
+        q_t = np.asarray(mission.flight_software.quaternion.target_q_NB, dtype=float)
+    if q_t is not None:
         err = np.degrees(2.0 * np.arccos(np.clip(np.abs(q @ (q_t / np.linalg.norm(q_t))), -1.0, 1.0)))
+        traj["q_NB"] = q[:: max(1, int(math.ceil(n / MAX_TRAJECTORY_POINTS)))]
+        traj["target_q_NB"] = q_t / np.linalg.norm(q_t)
     else:
         if targets:
             a = targets[-1][1]

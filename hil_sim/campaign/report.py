@@ -161,6 +161,44 @@ def plot_scatter(df: pd.DataFrame, criterion: Criterion, path: Path) -> Path | N
     return path
 
 
+def _ra_dec(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    v = np.atleast_2d(v)
+    ra = np.arctan2(v[:, 1], v[:, 0])  # already in [-pi, pi] as the Mollweide axes want
+    dec = np.arcsin(np.clip(v[:, 2], -1.0, 1.0))
+    return ra, dec
+
+
+def plot_basin(campaign: Campaign, records: Sequence[RunRecord], starts: dict[int, np.ndarray],
+               sample_traj: dict[str, np.ndarray], path: Path) -> Path | None:
+    """Where the runs started (initial boresight, Mollweide RA/Dec) and whether they passed: the basin."""
+    ok = [r for r in records if r.run in starts]
+    if len(ok) < 2:
+        return None
+    plt = _plt()
+    fig = plt.figure(figsize=(10, 5.4))
+    ax = fig.add_subplot(111, projection="mollweide")
+    for key in sorted(sample_traj):
+        if key.startswith("zone_") and sample_traj[key].ndim == 2 and sample_traj[key].shape[1] == 3:
+            ra, dec = _ra_dec(sample_traj[key])
+            ax.scatter(ra, dec, s=2, color="#c44e52")
+    passed = np.array([r.status == "pass" for r in ok])
+    ra, dec = _ra_dec(np.array([starts[r.run] for r in ok]))
+    ax.scatter(ra[passed], dec[passed], s=12, color="#4c72b0", label=f"converged ({int(passed.sum())})")
+    ax.scatter(ra[~passed], dec[~passed], s=22, color="#c44e52", marker="x",
+               label=f"failed ({int((~passed).sum())})")
+    if "target" in sample_traj and np.asarray(sample_traj["target"]).shape == (3,):
+        tra, tdec = _ra_dec(np.asarray(sample_traj["target"]))
+        ax.scatter(tra, tdec, s=120, marker="*", color="k", label="target")
+    ax.grid(alpha=0.4)
+    ax.legend(loc="lower right", fontsize=8)
+    ax.set_title(f"{campaign.name}: initial boresight (RA/Dec) of {len(ok)} runs; zones in red at the end "
+                 "of one run", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def _stats(df: pd.DataFrame, campaign: Campaign) -> list[tuple[str, str, str, str, str, str, str]]:
     rows = []
     for c in campaign.criteria:
@@ -177,7 +215,8 @@ def _stats(df: pd.DataFrame, campaign: Campaign) -> list[tuple[str, str, str, st
 
 
 def write_report(campaign: Campaign, df: pd.DataFrame, records: Sequence[RunRecord], verdict: Verdict,
-                 trajectories: dict[int, dict[str, np.ndarray]], out_dir: Path) -> dict[str, Path]:
+                 trajectories: dict[int, dict[str, np.ndarray]], out_dir: Path,
+                 starts: dict[int, np.ndarray] | None = None) -> dict[str, Path]:
     """Write ``report/*.png``, ``report.md`` and ``report.html`` into ``out_dir``; return the paths."""
     rep = out_dir / "report"
     rep.mkdir(parents=True, exist_ok=True)
@@ -193,6 +232,11 @@ def write_report(campaign: Campaign, df: pd.DataFrame, records: Sequence[RunReco
     p = plot_scatter(df, campaign.criteria[0], rep / f"scatter_{campaign.criteria[0].metric}.png")
     if p:
         plots.append((f"{campaign.criteria[0].metric} against the dispersed parameters", p))
+    if starts:
+        sample = next((t for t in trajectories.values() if t), {})
+        p = plot_basin(campaign, records, starts, sample, rep / "basin.png")
+        if p:
+            plots.append(("basin: where runs start and whether they pass", p))
 
     stats = _stats(df, campaign)
     failing = [r for r in sorted(records, key=lambda r: r.run) if r.status != "pass"]

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import numpy as np
+import yaml
 
 from hil_sim.campaign import dispersions as dsp
 from hil_sim.campaign.execute import (STATUS_ERROR, STATUS_FAIL, Plan, RunRecord, execute_run,
@@ -108,10 +109,13 @@ def prepare_out_dir(out_dir: Path, plan: Plan, campaign_path: Path, base_path: P
         meta["runs"] = max(int(old.get("runs", 0)), meta["runs"])
     meta["created_utc"] = datetime.now(timezone.utc).isoformat()
     _atomic_write(meta_path, json.dumps(meta, indent=2))
-    for src, name in ((campaign_path, "campaign.yaml"), (base_path, "mission.yaml")):
-        dst = out_dir / name
-        if not dst.exists():
-            shutil.copyfile(src, dst)
+    if not (out_dir / "mission.yaml").exists():
+        shutil.copyfile(base_path, out_dir / "mission.yaml")
+    # The campaign as run (command-line overrides applied), pointing at the mission copy beside it, so
+    # `rerun` and `shrink` rebuild exactly this plan from the folder alone.
+    effective = plan.campaign.model_copy(update={"base_mission": "mission.yaml"}).model_dump(mode="json")
+    _atomic_write(out_dir / "campaign.yaml", f"# campaign as run, from {campaign_path}\n"
+                  + yaml.safe_dump(effective, sort_keys=False))
 
 
 def finished_runs(out_dir: Path) -> set[int]:
@@ -273,6 +277,13 @@ def finalize(plan: Plan, out_dir: Path, records: list[RunRecord] | None = None, 
         from hil_sim.campaign.report import worst_runs, write_report
         worst = worst_runs(plan.campaign, records)
         trajectories = {r.run: load_trajectory(out_dir, r.run) for r in worst}
-        out["report"] = write_report(plan.campaign, df, records, verdict, trajectories, out_dir)
+        starts = None
+        if any(d.path == "initial_state.q_NB" for d in plan.campaign.dispersions):
+            starts = {}  # the basin picture needs every run's starting boresight
+            for r in records:
+                traj = load_trajectory(out_dir, r.run)
+                if "boresight_N" in traj and len(traj["boresight_N"]):
+                    starts[r.run] = traj["boresight_N"][0]
+        out["report"] = write_report(plan.campaign, df, records, verdict, trajectories, out_dir, starts)
     (out_dir / "verdict.txt").write_text(verdict.text() + "\n", encoding="utf-8")
     return out

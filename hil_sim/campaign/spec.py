@@ -79,6 +79,8 @@ class _Dispersion(_Model):
                       description="column name in the results table; also keys this dispersion's own seed, "
                       "so adding or removing another dispersion never changes this one's draws")
     path: str = Field(min_length=1, description=PATH_DESCRIPTION)
+    also_paths: list[str] = Field(default_factory=list, description="the same value is written at these paths "
+                                  "too, e.g. flight_software.epoch_utc next to epoch_utc")
 
 
 class ScalarDispersion(_Dispersion):
@@ -243,7 +245,8 @@ class Campaign(_Model):
     runs: int = Field(ge=1, le=1_000_000)
     master_seed: int = Field(ge=0, le=2**63 - 1, description="root of numpy.random.SeedSequence")
     mode: Literal["fast", "sil"] = "fast"
-    duration_s: float | None = Field(None, gt=0, description="overrides the mission's duration_s")
+    duration_s: float | None = Field(None, gt=0, description="overrides the mission's duration_s; timeline "
+                                     "commands and faults after the new end are dropped")
     dispersions: list[Dispersion] = Field(default_factory=list)
     criteria: list[Criterion] = Field(min_length=1)
     verdict: Verdict = Field(default_factory=Verdict)
@@ -259,9 +262,9 @@ class Campaign(_Model):
         return self
 
     def fingerprint(self) -> str:
-        """Hash of everything that determines the runs' inputs (not ``runs``: extending a campaign
-        with more runs keeps the finished ones valid)."""
-        data = self.model_dump(mode="json", exclude={"runs", "description", "verdict", "baseline"})
+        """Hash of everything that determines the runs' inputs except the base mission's file name (its
+        content is hashed separately) and ``runs`` (extending a campaign keeps finished runs valid)."""
+        data = self.model_dump(mode="json", exclude={"runs", "description", "verdict", "baseline", "base_mission"})
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
 
 
