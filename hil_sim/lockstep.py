@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
 import can
@@ -51,7 +51,6 @@ class SimStats:
     heartbeats: int = 0
     realtime_overruns: int = 0     # real time: the simulator itself fell behind the clock
     max_lateness_s: float = 0.0
-    extra: dict = field(default_factory=dict)
 
 
 class Simulator:
