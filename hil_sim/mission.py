@@ -22,6 +22,7 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
 
 from fsw.config import FswConfig
+from fsw.dictionary import FDIR_MONITORS
 
 if TYPE_CHECKING:
     from hil_sim.params import WorldParams
@@ -38,6 +39,7 @@ UnitQuat = Annotated[list[float], Field(min_length=4, max_length=4,
                                         description="unit quaternion, scalar first [eta, q1, q2, q3]"),
                      AfterValidator(lambda v: _unit_quaternion(v))]
 
+FdirMonitor = Literal[FDIR_MONITORS]  # type: ignore[valid-type]  (the telemetry dictionary's monitors)
 BUS_PATTERN = r"^(auto|socketcan(:[A-Za-z0-9_]+)?|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?)$"
 
 
@@ -242,8 +244,11 @@ class Requirements(_Model):
     max_final_pointing_error_deg: float = Field(0.05, gt=0, le=180, description="truth error at the end [deg]")
     max_wheel_speed_fraction: float = Field(0.9, gt=0, le=1, description="peak |wheel speed| / its limit")
     max_cycle_slips: int = Field(0, ge=0)
-    expected_fdir_events: list[str] = Field([], description="FDIR event names that MUST occur (fault runs)")
-    max_unexpected_fdir_events: int = Field(0, ge=0, description="FDIR events not in expected_fdir_events")
+    expected_fdir_events: list[FdirMonitor] = Field(
+        [], description="FDIR monitors that MUST trip during the run (the 'monitor' of FDIR_TRIPPED events, "
+        "e.g. IMU_STALE): fault scenarios")
+    max_unexpected_fdir_events: int = Field(0, ge=0, description="FDIR_TRIPPED events of monitors not listed in "
+                                            "expected_fdir_events")
 
 
 class Simulation(_Model):

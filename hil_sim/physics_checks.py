@@ -140,10 +140,13 @@ class ZoneBuildError(ValueError):
 
 
 def _kernel_hint(name: str, exc: Exception) -> str:
-    return (f"zone '{name}': {exc}. The law needs a kernel point g strictly inside the zone from which "
-            "every boundary point is seen along a geodesic inside it: for a sky zone that point is the "
-            "body direction (the origin of the angular description), so the shape must contain the "
-            "origin strictly inside and be star-shaped about it")
+    text = f"zone '{name}' cannot be built: {exc}"
+    if any(word in str(exc).lower() for word in ("star", "vert", "centre", "center", "kernel", "inside")):
+        text += (". The law needs a kernel point g strictly inside the zone from which every boundary point "
+                 "is seen along a geodesic inside it: for a sky zone that point is the body direction (the "
+                 "origin of the angular description), so the shape must contain the origin strictly inside "
+                 "and be star-shaped about it")
+    return text
 
 
 class SkyZones:

@@ -25,6 +25,16 @@ def _ra_dec_deg(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ra, dec
 
 
+def _cut_ra(samples: list[np.ndarray]) -> float:
+    """RA [deg] in the widest empty gap of everything drawn: the map wraps there, not through a zone."""
+    ra = np.sort(np.concatenate([r[np.isfinite(r)] for r in samples if len(r)]) % 360.0)
+    if len(ra) < 2:
+        return 180.0
+    gaps = np.diff(np.concatenate([ra, ra[:1] + 360.0]))
+    k = int(np.argmax(gaps))
+    return float((ra[k] + gaps[k] / 2.0) % 360.0)
+
+
 def _break_wraps(ra: np.ndarray, dec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Insert NaNs where the RA wraps through 0/360 so lines do not cross the whole map."""
     if len(ra) < 2:
@@ -38,6 +48,7 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     from hil_sim.summary import evaluate
 
@@ -55,24 +66,30 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
     if sky_zones or mission.flight_software.pointing.zones or any(s.mode == "POINTING" for s in series["segments"]):
         fig, ax = plt.subplots(figsize=(10, 5.5))
         colors = plt.cm.tab10.colors
+        path_ra, path_dec = _ra_dec_deg(series["y_N"])
+        targets = [s.target for s in series["segments"] if s.mode == "POINTING"]
+        cut = _cut_ra([path_ra] + [_ra_dec_deg(pts)[0] for z in sky_zones for _, pts in z.boundary_history]
+                      + [_ra_dec_deg(x)[0] for x in targets])
+        unwrap = lambda ra: (ra - cut) % 360.0 + cut  # noqa: E731  (values in [cut, cut + 360))
         for k, z in enumerate(sky_zones):
             n = len(z.boundary_history)
             for j, (tz, pts) in enumerate(z.boundary_history):
-                ra, dec = _break_wraps(*_ra_dec_deg(np.vstack([pts, pts[:1]])))
+                ra, dec = _ra_dec_deg(np.vstack([pts, pts[:1]]))
+                ra, dec = _break_wraps(unwrap(ra), dec)
                 alpha = 0.25 + 0.75 * (j + 1) / n
                 ax.plot(ra, dec, color=colors[k % 10], alpha=alpha, lw=1.2,
                         label=f"zone {z.name} (as it moved)" if j == n - 1 else None)
-        ra, dec = _ra_dec_deg(series["y_N"])
-        sc = ax.scatter(ra, dec, c=t, s=3, cmap="viridis", zorder=3)
+        sc = ax.scatter(unwrap(path_ra), path_dec, c=t, s=3, cmap="viridis", zorder=3)
         fig.colorbar(sc, ax=ax, label="time [s]")
         for s in series["segments"]:
             if s.mode == "POINTING":
                 tra, tdec = _ra_dec_deg(s.target)
-                ax.plot(tra, tdec, marker="*", ms=14, color="k", ls="none", zorder=4)
-                ax.annotate(f"target @{s.t_start_s:.0f} s", (tra[0], tdec[0]), textcoords="offset points",
+                ax.plot(unwrap(tra), tdec, marker="*", ms=14, color="k", ls="none", zorder=4)
+                ax.annotate(f"target @{s.t_start_s:.0f} s", (unwrap(tra)[0], tdec[0]), textcoords="offset points",
                             xytext=(6, 6), fontsize=8)
-        ax.plot(*_ra_dec_deg(series["y_N"][0]), marker="o", color="k", ls="none", label="start")
-        ax.set_xlim(360, 0)  # sky maps: RA increases to the left
+        ax.plot(unwrap(path_ra[:1]), path_dec[:1], marker="o", color="k", ls="none", label="start")
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v % 360:.0f}"))
+        ax.set_xlim(cut + 360.0, cut)  # sky maps: RA increases to the left
         ax.set_ylim(-90, 90)
         ax.set_xlabel("right ascension [deg]")
         ax.set_ylabel("declination [deg]")

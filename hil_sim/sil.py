@@ -477,7 +477,7 @@ def run_sil(options: RunOptions) -> RunResult:
         if recorder is not None:
             recorder.save(run_dir / TRUTH_FILE)
         if sim is not None:
-            stats = {**sim.stats.__dict__, "bus": info.spec, "bus_note": info.note, "wall_s": wall_s,
+            stats = {**sim.stats.__dict__, "clock": "realtime" if options.realtime else "lockstep", "bus": info.spec, "bus_note": info.note, "wall_s": wall_s,
                      "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
                      "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
                      "faults_injected": [list(map(_plain, e)) if isinstance(e, tuple) else _plain(e)
