@@ -309,6 +309,37 @@ def _signed(zone, x) -> float:
 # ----------------------------------------------------------------------------------------------
 
 
+@njit(cache=True)
+def _star_screen(x, cap_axes, cap_cos, flags):
+    """-1 if x is not a unit vector; else the number of zones whose bounding cap is within eps (flags set)."""
+    n2 = 0.0
+    for k in range(x.shape[0]):
+        n2 += x[k] * x[k]
+    if not abs(n2 - 1.0) <= 2.0 * 1e-6:
+        return -1
+    count = 0
+    for i in range(cap_axes.shape[0]):
+        c = 0.0
+        for k in range(x.shape[0]):
+            c += x[k] * cap_axes[i, k]
+        if c >= cap_cos[i]:
+            flags[i] = 1
+            count += 1
+        else:
+            flags[i] = 0
+    return count
+
+
+@njit(cache=True)
+def _blend(p, q, a):
+    """a p - (1 - a) q, one compiled call (cheaper than four numpy temporaries on 4-vectors)."""
+    out = np.empty(p.shape[0])
+    b = 1.0 - a
+    for k in range(p.shape[0]):
+        out[k] = a * p[k] - b * q[k]
+    return out
+
+
 class StarShapedLaw:
     """The paper's law for star-shaped zones (eq. n-sphere-control-law).
 
@@ -329,28 +360,42 @@ class StarShapedLaw:
         self._kernels = np.ascontiguousarray([np.asarray(z.kernel, dtype=float) for z in self.zones])
         self._cap_axes, self._cap_cos = _cap_skip_cosines(self.zones, self.eps, self.dim)
         self._separations = [zone.separation for zone in self.zones]  # bound methods, looked up once
+        self._flags = np.empty(len(self.zones), dtype=np.uint8)
+        self._k1_target = self.k1 * self.target
+        self._k1_kernels_over_kappa = [np.ascontiguousarray((self.k1 / self.kappa) * g) for g in self._kernels]
 
     def _nearest_layer(self, x: np.ndarray) -> tuple[int, float]:
-        """(index, d_s(x, U_i)) of the nearest zone whose eps-layer holds x, or (-1, inf)."""
+        """(index, d_s(x, U_i)) of the nearest zone whose eps-layer holds x, or (-1, inf).
+
+        x must already be a float64 array of the right shape; the unit-norm check happens here, fused
+        with the bounding-cap screen in one compiled call (per-call overhead matters at ~10 us budgets).
+        """
+        flags = self._flags  # scratch, reused: a law instance is not meant to be shared between threads
+        status = _star_screen(x, self._cap_axes, self._cap_cos, flags)
+        if status < 0:
+            raise ValueError(f"state x must be a unit vector on S^{self.dim - 1}, |x|^2 = {float(x @ x)!r}")
         best_i, best_d = -1, np.inf
-        candidates = np.flatnonzero(self._cap_axes @ x >= self._cap_cos)
-        for i in candidates:
-            d = self._separations[i](x)
-            if d < best_d:
-                best_i, best_d = int(i), d
+        if status > 0:
+            for i in range(len(self._separations)):
+                if flags[i]:
+                    d = self._separations[i](x)
+                    if d < best_d:
+                        best_i, best_d = i, d
         if best_d > self.eps:
             return -1, np.inf
         return best_i, float(best_d)
 
     def _u(self, i: int, d: float) -> np.ndarray:
         if i < 0:
-            return self.k1 * self.target
-        a = d / self.eps
-        return (self.k1 * a) * self.target - (self.k1 * (1.0 - a) / self.kappa) * self._kernels[i]
+            return self._k1_target.copy()
+        # k1 [(d/eps) x_d - (1/kappa)(1 - d/eps) g_i] with k1 and k1/kappa folded into the vectors
+        return _blend(self._k1_target, self._k1_kernels_over_kappa[i], d / self.eps)
 
     def control(self, x) -> np.ndarray:
         """u(x), shape (n+1,)."""
-        x = _check_state(x, self.dim)
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape != (self.dim,):
+            raise ValueError(f"state x must have shape ({self.dim},), got {x.shape}")
         return self._u(*self._nearest_layer(x))
 
     def control_and_zone(self, x) -> tuple[np.ndarray, int | None]:

@@ -166,39 +166,49 @@ def s2_star_initial() -> np.ndarray:
     ])
 
 
-def build_studies(quick: bool = False) -> list[Study]:
-    """The three studies plus the literal (rejected) reading of study 2. quick: shorter horizons."""
+def build_studies(quick: bool = False, only: list[str] | None = None) -> list[Study]:
+    """The three studies plus the literal (rejected) reading of study 2. quick: shorter horizons.
+
+    only: keys to build (default all); each study runs check_assumptions, which takes a few seconds.
+    """
     from gnc.checks import check_assumptions
     from gnc.laws import GradientLaw, StarShapedLaw
 
+    def wanted(key: str) -> bool:
+        return not only or key in only
+
     studies = []
-    x_d, zones, p = s3_cones_setup()
-    studies.append(Study(
-        "s3_cones", "S^3, seven cones, gradient law", x_d, zones, GradientLaw(x_d, zones, p["k1"], p["eps"]),
-        s3_cones_initial(), "quaternion", 0.01, 20.0 if quick else 30.0, {**p, "law": "GradientLaw"},
-        report=check_assumptions(x_d, zones, p["eps"], law="gradient"),
-    ))
-    x_d, zones, p = s3_star_setup()
-    studies.append(Study(
-        "s3_star", "S^3, superellipsoid star zone (tangent plane at g1), star-shaped law", x_d, zones,
-        StarShapedLaw(x_d, zones, p["k1"], p["kappa"], p["eps"]), s3_star_initial(), "quaternion", 0.01,
-        14.0 if quick else 25.0, {**p, "law": "StarShapedLaw"},
-        report=check_assumptions(x_d, zones, p["eps"], p["kappa"]),
-    ))
-    x_d, zones, p = s3_star_setup(literal=True)
-    studies.append(Study(
-        "s3_star_literal", "S^3, superellipsoid read literally (p4 = 0): rejected by check_assumptions", x_d,
-        zones, StarShapedLaw(x_d, zones, p["k1"], p["kappa"], p["eps"]), s3_star_initial()[:4], "quaternion",
-        0.01, 10.0 if quick else 25.0, {**p, "law": "StarShapedLaw"},
-        report=check_assumptions(x_d, zones, p["eps"], p["kappa"]), expect_convergence=False,
-    ))
-    x_d, zones, p = s2_star_setup()
-    studies.append(Study(
-        "s2_star", "S^2, four non-convex star zones, star-shaped law, pointing map on SO(3)", x_d, zones,
-        StarShapedLaw(x_d, zones, p["k1"], p["kappa"], p["eps"]), s2_star_initial(), "pointing", 0.005,
-        12.0 if quick else 20.0, {**p, "law": "StarShapedLaw", "boresight_B": [0.0, 0.0, 1.0]},
-        report=check_assumptions(x_d, zones, p["eps"], p["kappa"]),
-    ))
+    if wanted("s3_cones"):
+        x_d, zones, p = s3_cones_setup()
+        studies.append(Study(
+            "s3_cones", "S^3, seven cones, gradient law", x_d, zones, GradientLaw(x_d, zones, p["k1"], p["eps"]),
+            s3_cones_initial(), "quaternion", 0.01, 20.0 if quick else 30.0, {**p, "law": "GradientLaw"},
+            report=check_assumptions(x_d, zones, p["eps"], law="gradient"),
+        ))
+    if wanted("s3_star"):
+        x_d, zones, p = s3_star_setup()
+        studies.append(Study(
+            "s3_star", "S^3, superellipsoid star zone (tangent plane at g1), star-shaped law", x_d, zones,
+            StarShapedLaw(x_d, zones, p["k1"], p["kappa"], p["eps"]), s3_star_initial(), "quaternion", 0.01,
+            14.0 if quick else 25.0, {**p, "law": "StarShapedLaw"},
+            report=check_assumptions(x_d, zones, p["eps"], p["kappa"]),
+        ))
+    if wanted("s3_star_literal"):
+        x_d, zones, p = s3_star_setup(literal=True)
+        studies.append(Study(
+            "s3_star_literal", "S^3, superellipsoid read literally (p4 = 0): rejected by check_assumptions", x_d,
+            zones, StarShapedLaw(x_d, zones, p["k1"], p["kappa"], p["eps"]), s3_star_initial()[:4], "quaternion",
+            0.01, 10.0 if quick else 25.0, {**p, "law": "StarShapedLaw"},
+            report=check_assumptions(x_d, zones, p["eps"], p["kappa"]), expect_convergence=False,
+        ))
+    if wanted("s2_star"):
+        x_d, zones, p = s2_star_setup()
+        studies.append(Study(
+            "s2_star", "S^2, four non-convex star zones, star-shaped law, pointing map on SO(3)", x_d, zones,
+            StarShapedLaw(x_d, zones, p["k1"], p["kappa"], p["eps"]), s2_star_initial(), "pointing", 0.005,
+            12.0 if quick else 20.0, {**p, "law": "StarShapedLaw", "boresight_B": [0.0, 0.0, 1.0]},
+            report=check_assumptions(x_d, zones, p["eps"], p["kappa"]),
+        ))
     return studies
 
 
@@ -541,9 +551,7 @@ def plot_s3(study: Study, res: RunResult, out: Path, extra: tuple[Study, RunResu
 
 
 def run_studies(out: Path | None, quick: bool = False, figures: bool = True, only: list[str] | None = None) -> dict:
-    studies = build_studies(quick=quick)
-    if only:
-        studies = [s for s in studies if s.key in only]
+    studies = build_studies(quick=quick, only=only)
     results: dict = {"converged_threshold_ds": CONVERGED_DS, "studies": {}}
     sims = {}
     for st in studies:
