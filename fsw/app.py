@@ -103,17 +103,28 @@ class FlightSoftware:
         self._event("FSW_STARTED", gnc_rate_hz=config.rates.gnc_rate_hz)
 
     def _warm_up(self) -> None:
-        """Load the compiled kernels and start the check worker now, so the first cycle is not late."""
+        """Load the compiled kernels and start the check worker now, so the first cycle is not late.
+
+        Runs the estimator on a scratch instance and every guidance mode once on the real zones (events
+        muted), then restores the initial mode.
+        """
         q = np.array([1.0, 0.0, 0.0, 0.0])
         scratch = AttitudeEstimator(self.cfg.estimator, np.asarray(self.cfg.spacecraft.star_tracker_q_BS))
         scratch.step(self.period_s, np.zeros(3), q)
         scratch.step_samples(self.period_s, np.zeros((2, 3)), q)
         scratch.step(self.period_s, np.zeros(3), np.array([0.99, 0.1, 0.0, 0.0]) / np.linalg.norm([0.99, 0.1]))
-        Guidance(self.cfg).step(0.0, self.period_s, q, np.zeros(3))
-        for mode in ("POINTING", "QUATERNION"):
-            g = Guidance(self.cfg)
-            g.set_mode(mode)
-            g.step(0.0, self.period_s, q, np.zeros(3))
+        g = self.guidance
+        events, g.events = g.events, (lambda name, **args: None)
+        try:
+            for mode in ("SAFE", "POINTING", "QUATERNION"):
+                g.set_mode(mode)
+                g.step(0.0, self.period_s, q, np.zeros(3))
+        finally:
+            g.set_mode(self.cfg.initial_mode)
+            g.events = events
+            g._sky_law_key = None
+            g._sky_groups = []
+            g._occulted = -1
         self.checker.start()
 
     # ------------------------------------------------------------------------------------ events
