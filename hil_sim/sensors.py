@@ -90,8 +90,8 @@ def sensor_frame_basis_S(boresight_S: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy")
 def gyro_sample_batch(X, BIAS, P, NORMALS, dt_since_s, OUT, SAT):
-    """Gyro samples for all runs. BIAS (M,3) updated in place; NORMALS flat (M*6,): per run 3 bias-walk then 3 ARW normals."""
-    M = X.shape[0]
+    """Gyro samples for all runs. X (7+N, M) dynamics state (run axis last, see hil_sim.dynamics); OUT (M,3). BIAS (M,3) updated in place; NORMALS flat (M*6,): per run 3 bias-walk then 3 ARW normals."""
+    M = X.shape[1]
     sq = math.sqrt(max(dt_since_s, 0.0))
     for m in range(M):
         sat_lim = P[m, G_SAT]
@@ -99,7 +99,7 @@ def gyro_sample_batch(X, BIAS, P, NORMALS, dt_since_s, OUT, SAT):
         any_sat = False
         for j in range(3):
             BIAS[m, j] += P[m, G_RRW] * sq * NORMALS[6 * m + j]
-            w = (1.0 + P[m, G_SF + j]) * X[m, 4 + j] + BIAS[m, j] + P[m, G_ARW_STD] * NORMALS[6 * m + 3 + j]
+            w = (1.0 + P[m, G_SF + j]) * X[4 + j, m] + BIAS[m, j] + P[m, G_ARW_STD] * NORMALS[6 * m + 3 + j]
             if w > sat_lim:
                 w = sat_lim
                 any_sat = True
@@ -122,13 +122,13 @@ def _qmul(p0, p1, p2, p3, q0, q1, q2, q3):
 
 @njit(cache=True, error_model="numpy")
 def star_tracker_sample_batch(X, P, BASIS_S, DIRS, sun_col, moon_col, NORMALS, Q_OUT, VALID, BLIND):
-    """Star-tracker samples for all runs. BASIS_S (M,3,3) rows = error axes in S; DIRS[m, sun_col:sun_col+3]
+    """Star-tracker samples for all runs. X (7+N, M) dynamics state; BASIS_S (M,3,3) rows = error axes in S; DIRS[m, sun_col:sun_col+3]
     and DIRS[m, moon_col:moon_col+3] the unit Sun and Moon directions from the spacecraft in N;
     NORMALS flat (M*3,). Q_OUT holds the previous output and is overwritten only
     when valid."""
-    M = X.shape[0]
+    M = X.shape[1]
     for m in range(M):
-        q0, q1, q2, q3 = X[m, 0], X[m, 1], X[m, 2], X[m, 3]
+        q0, q1, q2, q3 = X[0, m], X[1, m], X[2, m], X[3, m]
         # boresight in N = R_NB b_B
         bx, by, bz = P[m, S_BORESIGHT_B], P[m, S_BORESIGHT_B + 1], P[m, S_BORESIGHT_B + 2]
         # v_N = v + 2 q0 (qv x v) + 2 qv x (qv x v)
@@ -144,7 +144,7 @@ def star_tracker_sample_batch(X, P, BASIS_S, DIRS, sun_col, moon_col, NORMALS, Q
         elif nx * DIRS[m, moon_col] + ny * DIRS[m, moon_col + 1] + nz * DIRS[m, moon_col + 2] > P[m, S_COS_MOON]:
             blind = BLIND_MOON
         else:
-            rate = math.sqrt(X[m, 4] ** 2 + X[m, 5] ** 2 + X[m, 6] ** 2)
+            rate = math.sqrt(X[4, m] ** 2 + X[5, m] ** 2 + X[6, m] ** 2)
             if rate > P[m, S_MAX_RATE]:
                 blind = BLIND_RATE
         BLIND[m] = blind

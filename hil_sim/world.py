@@ -92,16 +92,22 @@ def model_generator(seed: int | None, key: int, own_seed: int | None) -> np.rand
 # numba's on-disk cache of a kernel is keyed on its own module's source file only: after editing dynamics.py,
 # orbit.py or ephemeris_truth.py in place, delete hil_sim/__pycache__/*.nbi/*.nbc so these kernels recompile.
 @njit(cache=True, error_model="numpy")
-def _world_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
-                     t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX, m_begin, m_end):
-    """Dynamics of runs [m_begin, m_end), then their orbit position and Sun/Moon/Earth directions at t_end_s."""
-    dyn.dynamics_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS, m_begin, m_end)
+def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS, DECAY, GM, HAS_COULOMB,
+                       t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
+    """Step all runs (dynamics), then their orbit positions and Sun/Moon/Earth directions at t_end_s.
+    Returns False (and changes nothing) if any torque command is NaN or infinite."""
+    for m in range(U_CMD.shape[0]):
+        for i in range(U_CMD.shape[1]):
+            if not math.isfinite(U_CMD[m, i]):
+                return False
+    dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
+                            DECAY, GM, HAS_COULOMB)
     sun = np.empty(3)
     moon = np.empty(3)
     r = np.empty(3)
     spline_eval(sun_c, eph_t0, eph_h, t_end_s, sun)
     spline_eval(moon_c, eph_t0, eph_h, t_end_s, moon)
-    for m in range(m_begin, m_end):
+    for m in range(X.shape[1]):
         orbit_position_row_N_km(ORB, m, t_end_s, r)
         rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
         s0, s1, s2 = sun[0] - r[0], sun[1] - r[1], sun[2] - r[2]
@@ -113,18 +119,6 @@ def _world_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLI
             AUX[m, AUX_EARTH + j] = -r[j] / rn
         AUX[m, AUX_SUN], AUX[m, AUX_SUN + 1], AUX[m, AUX_SUN + 2] = s0 / sn, s1 / sn, s2 / sn
         AUX[m, AUX_MOON], AUX[m, AUX_MOON + 1], AUX[m, AUX_MOON + 2] = m0 / mn, m1 / mn, m2 / mn
-
-
-@njit(cache=True, error_model="numpy")
-def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
-                       t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
-    """Step all runs; returns False (and changes nothing) if any torque command is NaN or infinite."""
-    for m in range(U_CMD.shape[0]):
-        for i in range(U_CMD.shape[1]):
-            if not math.isfinite(U_CMD[m, i]):
-                return False
-    _world_step_runs(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
-                     t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX, 0, X.shape[0])
     return True
 
 
@@ -150,18 +144,20 @@ class WorldBatch:
         self.max_step_s = np.array([p.max_integration_step_s for p in params]).min()
 
         self.G, self.W, self.B, self.X = dyn.pack_spacecraft([p.spacecraft for p in params])
-        self.n_wheels = N = self.G.shape[1]
-        self.D = np.zeros((M, 3))
-        self.TEMP = self.W[:, :, dyn.W_TAMB].copy()
-        self.U_APPLIED = np.zeros((M, N))
-        self.FLAGS = np.zeros((M, N), dtype=np.int64)
-        for m in range(M):
-            for i in range(N):
-                mode = int(self.W[m, i, dyn.W_MODE])
-                self.FLAGS[m, i] = {dyn.MODE_STUCK: dyn.FAULT_STUCK, dyn.MODE_NO_TORQUE: dyn.FAULT_NO_TORQUE}.get(mode, 0)
+        # Dynamics arrays have the run axis LAST (see hil_sim.dynamics): X (7+N, M), TEMP/U_APPLIED/FLAGS (N, M).
+        self.n_wheels = N = self.G.shape[0]
+        self.D = np.zeros((3, M))
+        self.TEMP = self.W[dyn.W_TAMB].copy()
+        self.U_APPLIED = np.zeros((N, M))
+        self.FLAGS = np.zeros((N, M), dtype=np.int64)
+        mode = self.W[dyn.W_MODE]
+        self.FLAGS[mode == dyn.MODE_STUCK] = dyn.FAULT_STUCK
+        self.FLAGS[mode == dyn.MODE_NO_TORQUE] = dyn.FAULT_NO_TORQUE
+        self._coef_dt = -1.0
+        self._coef: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.ORB = np.stack([orbit_elements_array(p.orbit) for p in params])
         self.AUX = np.zeros((M, 12))
-        self._has_random_disturbance = bool(np.any(self.B[:, dyn.B_DIST_STD] > 0.0))
+        self._has_random_disturbance = bool(np.any(self.B[dyn.B_DIST_STD] > 0.0))
         self._no_normals = np.zeros(M * 3)
 
         self.rng_disturbance = model_generator(seed, SEED_KEY_DISTURBANCE, p0.spacecraft.disturbance.seed)
@@ -207,10 +203,14 @@ class WorldBatch:
             normals = self.normals_disturbance.take(n_sub * self.n_runs * 3)
         else:
             normals = self._no_normals
-        if not _world_step_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_cmd, normals,
-                                  dt_s / n_sub if n_sub else 0.0, n_sub, self.U_APPLIED, self.FLAGS, t_end,
-                                  self.ORB, eph.sun_coeffs, eph.moon_coeffs, eph.t0_s, eph.node_spacing_s,
-                                  self.AUX):
+        dt_sub = dt_s / n_sub if n_sub else 0.0
+        if dt_sub != self._coef_dt:
+            self._coef = dyn.step_coefficients(self.W, self.B, dt_sub)
+            self._coef_dt = dt_sub
+        decay, gm, has_coulomb = self._coef
+        if not _world_step_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_cmd, normals, dt_sub, n_sub,
+                                  self.U_APPLIED, self.FLAGS, decay, gm, has_coulomb, t_end, self.ORB,
+                                  eph.sun_coeffs, eph.moon_coeffs, eph.t0_s, eph.node_spacing_s, self.AUX):
             raise ValueError(f"step: wheel_torque_cmd_Nm must be finite, got {u_cmd.tolist()!r}")
         self._t = t_end
 
@@ -244,15 +244,15 @@ class WorldBatch:
     # ------------------------------------------------------------------------------------------- truth
     @property
     def q_NB(self) -> np.ndarray:
-        return self.X[:, 0:4]
+        return self.X[0:4].T
 
     @property
     def omega_BN_B(self) -> np.ndarray:
-        return self.X[:, 4:7]
+        return self.X[4:7].T
 
     @property
     def wheel_speeds_rad_s(self) -> np.ndarray:
-        return self.X[:, 7:]
+        return self.X[7:].T
 
     @property
     def sun_N(self) -> np.ndarray:
@@ -274,12 +274,13 @@ class WorldBatch:
         return dyn.angular_momentum_N(self.X, self.G, self.W, self.B)
 
     def wheel_currents_A(self) -> np.ndarray:
-        return self.U_APPLIED / self.W[:, :, dyn.W_KT]
+        """Motor currents (M, N), A."""
+        return (self.U_APPLIED / self.W[dyn.W_KT]).T
 
     def wheel_status_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(speed rad/s, applied motor torque N m, current A, temperature deg C, fault bits), each (M, N)."""
-        return (self.X[:, 7:].copy(), self.U_APPLIED.copy(), self.wheel_currents_A(), self.TEMP.copy(),
-                self.FLAGS.copy())
+        return (self.X[7:].T.copy(), self.U_APPLIED.T.copy(), self.wheel_currents_A(), self.TEMP.T.copy(),
+                self.FLAGS.T.copy())
 
     # ------------------------------------------------------------------------------------------ faults
     def set_wheel_failure(self, wheel: int, mode: str, run: int = 0) -> None:
@@ -292,8 +293,9 @@ class WorldBatch:
         if mode == "stuck":
             dyn.seize_wheel(self.X, self.G, self.W, self.B, run, wheel)
         else:
-            self.W[run, wheel, dyn.W_MODE] = dyn._MODE_CODES[mode]
+            self.W[dyn.W_MODE, wheel, run] = dyn._MODE_CODES[mode]
             dyn.update_free_inertia(self.G, self.W, self.B, run)
+        self._coef_dt = -1.0  # W changed: recompute the per-step coefficients
 
 
 class World:
@@ -306,7 +308,7 @@ class World:
         self.n_wheels = self.batch.n_wheels
         self.imu_period_s = float(self.batch.imu_period_s[0])
         self.star_tracker_period_s = float(self.batch.star_tracker_period_s[0])
-        self._u = np.zeros((1, self.n_wheels))
+        self._u = np.zeros((1, self.n_wheels))  # (M, N) command layout, as WorldBatch.step takes it
         self._last_dt = -1.0
         self._last_n_sub = 1
 
@@ -345,9 +347,9 @@ class World:
     @property
     def truth(self) -> Truth:
         b = self.batch
-        return Truth(b._t, b.X[0, 0:4].copy(), b.X[0, 4:7].copy(), b.X[0, 7:].copy(), b.sun_N[0].copy(),
+        return Truth(b._t, b.X[0:4, 0].copy(), b.X[4:7, 0].copy(), b.X[7:, 0].copy(), b.sun_N[0].copy(),
                      b.moon_N[0].copy(), b.earth_N[0].copy(), b.r_sc_N_km[0].copy(),
-                     b.B[0, dyn.B_TAU_CONST:dyn.B_TAU_CONST + 3] + b.D[0])
+                     b.B[dyn.B_TAU_CONST:dyn.B_TAU_CONST + 3, 0] + b.D[:, 0])
 
     def angular_momentum_N(self) -> np.ndarray:
         """Total inertial angular momentum, N m s (3,)."""

@@ -259,7 +259,7 @@ def test_batch_equals_individual_worlds():
         for m, w in enumerate(singles):
             w.step(0.1, cmds[k, m])
     for m, w in enumerate(singles):
-        np.testing.assert_array_equal(batch.X[m], w.batch.X[0])
+        np.testing.assert_array_equal(batch.X[:, m], w.batch.X[:, 0])
 
 
 def test_bad_inputs_raise_clear_errors():
