@@ -278,7 +278,8 @@ def finalize(plan: Plan, out_dir: Path, records: list[RunRecord] | None = None, 
         worst = worst_runs(plan.campaign, records)
         trajectories = {r.run: load_trajectory(out_dir, r.run) for r in worst}
         starts = None
-        if any(d.path == "initial_state.q_NB" for d in plan.campaign.dispersions):
+        if any(d.path == "initial_state.q_NB" and getattr(d, "kind", "") == "attitude"
+               and getattr(d, "max_angle_deg", 0) is None for d in plan.campaign.dispersions):
             starts = {}  # the basin picture needs every run's starting boresight
             for r in records:
                 traj = load_trajectory(out_dir, r.run)
