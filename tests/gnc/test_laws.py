@@ -271,6 +271,11 @@ def test_bad_inputs_are_rejected():
         law.control([1.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="unit vectors; row 1"):
         law.control_batch([[1.0, 0, 0, 0], [2.0, 0, 0, 0]])
+    star = StarShapedLaw(E4[0], cones[:6], k1=1.0, kappa=1.0, eps=0.1)
+    with pytest.raises(ValueError, match="unit vector"):
+        star.control([0.5, 0.5, 0.0, 0.0])
+    with pytest.raises(ValueError, match="shape"):
+        star.control([1.0, 0.0, 0.0])
     with pytest.raises(TypeError, match="StarShapedLaw"):
         GradientLaw(np.array([0, 0, 1.0]), s2_star_zones(), k1=1.0, eps=0.01)
     with pytest.raises(ValueError, match="eps"):
