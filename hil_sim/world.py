@@ -84,9 +84,11 @@ class NormalStream:
 
 def model_generator(seed: int | None, key: int, own_seed: int | None) -> np.random.Generator:
     """The generator of one model: its own seed if set, else child ``key`` of the world seed."""
+    # SFC64: a statistically strong generator ~20 % faster than the default PCG64 at drawing normals,
+    # which matters for 1,000-run batches sampling gyros at 100 Hz.
     if own_seed is not None:
-        return np.random.default_rng(np.random.SeedSequence(own_seed))
-    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(key,)))
+        return np.random.Generator(np.random.SFC64(np.random.SeedSequence(own_seed)))
+    return np.random.Generator(np.random.SFC64(np.random.SeedSequence(seed, spawn_key=(key,))))
 
 
 # numba's on-disk cache of a kernel is keyed on its own module's source file only: after editing dynamics.py,
@@ -109,16 +111,16 @@ def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
     spline_eval(moon_c, eph_t0, eph_h, t_end_s, moon)
     for m in range(X.shape[1]):
         orbit_position_row_N_km(ORB, m, t_end_s, r)
-        rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+        rn = 1.0 / math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
         s0, s1, s2 = sun[0] - r[0], sun[1] - r[1], sun[2] - r[2]
-        sn = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+        sn = 1.0 / math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
         m0, m1, m2 = moon[0] - r[0], moon[1] - r[1], moon[2] - r[2]
-        mn = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+        mn = 1.0 / math.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
         for j in range(3):
             AUX[m, AUX_R_SC + j] = r[j]
-            AUX[m, AUX_EARTH + j] = -r[j] / rn
-        AUX[m, AUX_SUN], AUX[m, AUX_SUN + 1], AUX[m, AUX_SUN + 2] = s0 / sn, s1 / sn, s2 / sn
-        AUX[m, AUX_MOON], AUX[m, AUX_MOON + 1], AUX[m, AUX_MOON + 2] = m0 / mn, m1 / mn, m2 / mn
+            AUX[m, AUX_EARTH + j] = -r[j] * rn
+        AUX[m, AUX_SUN], AUX[m, AUX_SUN + 1], AUX[m, AUX_SUN + 2] = s0 * sn, s1 * sn, s2 * sn
+        AUX[m, AUX_MOON], AUX[m, AUX_MOON + 1], AUX[m, AUX_MOON + 2] = m0 * mn, m1 * mn, m2 * mn
     return True
 
 
