@@ -151,3 +151,21 @@ def test_batch_is_deterministic():
         outs.append((b.X.copy(), b.imu_sample_arrays()[0].copy(), b.star_tracker_sample_arrays()[0].copy()))
     for x, y in zip(*outs):
         np.testing.assert_array_equal(x, y)
+
+
+def test_truth_ephemeris_works_offline(monkeypatch):
+    """No IERS table, leap-second file or ephemeris may be downloaded: block every socket and build a fresh
+    table (an epoch no other test uses, so nothing comes from the cache)."""
+    import socket
+
+    from hil_sim.ephemeris_truth import TruthEphemeris
+
+    def refuse(*args, **kwargs):
+        raise OSError("network access attempted while computing the truth ephemeris")
+
+    monkeypatch.setattr(socket.socket, "connect", refuse)
+    monkeypatch.setattr(socket, "create_connection", refuse)
+    eph = TruthEphemeris(2463912.25, 3600.0)  # 2034-03
+    sun, moon = eph.positions_N_km(np.array([0.0, 86400.0]))
+    assert np.all(np.isfinite(sun)) and np.all(np.isfinite(moon))
+    assert 1.45e8 < np.linalg.norm(sun[0]) < 1.53e8 and 3.5e5 < np.linalg.norm(moon[0]) < 4.1e5
