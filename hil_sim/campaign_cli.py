@@ -52,6 +52,8 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
     shr.add_argument("campaign", help="a campaign output folder (or a campaign YAML: its newest folder)")
     shr.add_argument("--run", type=int, required=True, help="run index")
     shr.add_argument("--max-evaluations", type=int, default=80)
+    shr.add_argument("--criterion", action="append", help="shrink while this criterion fails (repeatable; "
+                     "default: the criteria the run failed)")
     shr.set_defaults(func=_cmd_shrink)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
@@ -196,7 +198,8 @@ def _cmd_shrink(args: argparse.Namespace) -> int:
     out = _results_dir(args.campaign)
     plan = plan_from_results(out)
     try:
-        result = shrink_run(plan, args.run, max_evaluations=args.max_evaluations)
+        result = shrink_run(plan, args.run, max_evaluations=args.max_evaluations,
+                            criteria=set(args.criterion) if args.criterion else None)
     except ValueError as exc:
         print(exc, file=sys.stderr)
         return 2

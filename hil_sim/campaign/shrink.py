@@ -58,13 +58,22 @@ def _interpolate(plan: Plan, drawn: Params, fractions: dict[str, float]) -> Para
     return out
 
 
-def shrink_run(plan: Plan, index: int, *, bisect_steps: int = 6, max_evaluations: int = 80) -> ShrinkResult:
-    """Shrink run ``index`` of the plan's campaign; raises ValueError when that run passes."""
+def shrink_run(plan: Plan, index: int, *, bisect_steps: int = 6, max_evaluations: int = 80,
+               criteria: set[str] | None = None) -> ShrinkResult:
+    """Shrink run ``index`` of the plan's campaign while it still fails one of ``criteria`` (default: the
+    criteria it failed as drawn). Raises ValueError when that run passes them."""
     drawn = plan.draw(index)
     original = evaluate(plan, index, drawn)
-    if original.status == STATUS_PASS:
-        raise ValueError(f"run {index} passes: nothing to shrink")
-    target = set(failed_criteria(plan, original))
+    failed = set(failed_criteria(plan, original))
+    if criteria:
+        unknown = criteria - {c.name for c in plan.campaign.criteria}
+        if unknown:
+            raise ValueError(f"unknown criteria {sorted(unknown)}; the campaign has "
+                             f"{[c.name for c in plan.campaign.criteria]}")
+    target = (failed & criteria) if criteria else failed
+    if original.status == STATUS_PASS or (criteria and not target and original.status != STATUS_ERROR):
+        raise ValueError(f"run {index} passes{' ' + ', '.join(sorted(criteria)) if criteria else ''}: "
+                         "nothing to shrink")
     evals = 1
     trace: list[str] = []
 
