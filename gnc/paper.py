@@ -205,8 +205,8 @@ def build_studies(quick: bool = False, only: list[str] | None = None) -> list[St
         x_d, zones, p = s2_star_setup()
         studies.append(Study(
             "s2_star", "S^2, four non-convex star zones, star-shaped law, pointing map on SO(3)", x_d, zones,
-            StarShapedLaw(x_d, zones, p["k1"], p["kappa"], p["eps"]), s2_star_initial(), "pointing", 0.005,
-            12.0 if quick else 20.0, {**p, "law": "StarShapedLaw", "boresight_B": [0.0, 0.0, 1.0]},
+            StarShapedLaw(x_d, zones, p["k1"], p["kappa"], p["eps"]), s2_star_initial(), "pointing",
+            0.01 if quick else 0.005, 12.0 if quick else 20.0, {**p, "law": "StarShapedLaw", "boresight_B": [0.0, 0.0, 1.0]},
             report=check_assumptions(x_d, zones, p["eps"], p["kappa"]),
         ))
     return studies

@@ -110,7 +110,7 @@ def test_target_inside_zone():
 def test_kernel_antipodal_to_target_only_matters_for_star_law():
     zones = seven_cones()
     assert check_assumptions(E4[0], zones, 0.125, law="gradient").ok
-    rep = check_assumptions(E4[0], zones, 0.125, kappa=1.0)
+    rep = check_assumptions(E4[0], zones, 0.125, kappa=1.0, check_r_sets=False)
     assert not rep.ok and any("zone 6" in e and "g_i != -x_d" in e for e in rep.errors)
 
 
@@ -286,7 +286,7 @@ def test_kappa_trap_reported_and_real():
     starts = np.array([sph(165, 180), sph(170, 176), sph(160, 185), sph(175, 190), sph(158, 178), sph(168, 195)])
     # kappa = 1 <= kappa_bar: every trajectory stops at the reported equilibrium, far from x_d
     trapped = StarShapedLaw(X_D_TRAP, [zone], k1=1.0, kappa=1.0, eps=EPS_TRAP)
-    Xf = rk4(trapped.velocity_batch, starts.copy(), 0.01, 3000)
+    Xf = rk4(trapped.velocity_batch, starts.copy(), 0.02, 1500)
     assert np.all(np.degrees(np.arccos(np.clip(Xf @ x_star, -1, 1))) < 0.01)
     assert np.all(np.linalg.norm(trapped.velocity_batch(Xf), axis=1) < 1e-8)
     assert np.all(np.degrees(np.arccos(Xf @ X_D_TRAP)) > 60.0)
@@ -294,7 +294,7 @@ def test_kappa_trap_reported_and_real():
     kappa = 1.2 * rep.kappa_bar
     assert check_assumptions(X_D_TRAP, [zone], EPS_TRAP, kappa=kappa).ok
     free = StarShapedLaw(X_D_TRAP, [zone], k1=1.0, kappa=kappa, eps=EPS_TRAP)
-    Xf, hist = rk4(free.velocity_batch, starts.copy(), 0.01, 3000, record=True)
+    Xf, hist = rk4(free.velocity_batch, starts.copy(), 0.02, 1500, record=True)
     assert np.all(0.5 * np.sum((Xf - X_D_TRAP) ** 2, axis=1) < 1e-8)
     assert zone.signed_separation_batch(hist.reshape(-1, 3)).min() > 0.0
 
