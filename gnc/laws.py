@@ -315,7 +315,7 @@ def _star_screen(x, cap_axes, cap_cos, flags):
     n2 = 0.0
     for k in range(x.shape[0]):
         n2 += x[k] * x[k]
-    if not abs(n2 - 1.0) <= 2.0 * 1e-6:
+    if not abs(n2 - 1.0) <= 2.0 * _UNIT_TOL:
         return -1
     count = 0
     for i in range(cap_axes.shape[0]):
