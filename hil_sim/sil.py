@@ -48,6 +48,7 @@ ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_MISSION = ROOT / "config" / "missions" / "demo-pointing.yaml"
 MODELINE = "# yaml-language-server: $schema=../../config/schema/mission.schema.json"
 
+LOCKSTEP_TIMEOUT_S = 60.0  # flight software: end of run when no SYNC for this long
 EXIT_PASS, EXIT_FAIL, EXIT_REJECTED, EXIT_NOT_STARTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 CONFIG_FILE = "mission.yaml"
@@ -76,7 +77,8 @@ class RunOptions:
     progress: bool = True
     skip_physics_checks: bool = False
     fsw_start_timeout_s: float = 180.0  # first start compiles numba kernels
-    cycle_done_timeout_s: float = 5.0
+    cycle_done_timeout_s: float = 30.0  # lockstep: a tick unanswered this long counts as missed
+    max_consecutive_missed: int = 3  # then the flight software is taken as hung and the run ends
 
 
 @dataclass
@@ -132,6 +134,9 @@ def _config_used(mission, *, bus_spec: str, tm_port: int | None, tc_port: int | 
     data["bus"] = bus_spec
     fsw = data["flight_software"]
     fsw["rates"]["tick_source"] = "clock" if realtime else "sync"
+    # a loaded host can stall the simulator for seconds (other runs, plotting): the flight software
+    # should not take that for the end of the run
+    fsw["rates"]["lockstep_timeout_s"] = max(fsw["rates"]["lockstep_timeout_s"], LOCKSTEP_TIMEOUT_S)
     if tm_port is not None:
         fsw["tmtc"]["telemetry_port"] = tm_port
     if tc_port is not None:
@@ -171,8 +176,9 @@ def ground_process(archive_dir: str, port: int, port_queue, ready, fsw_started, 
     port_queue.put(monitor.address[1])
     ready.set()
     last_status = 0.0
+    parent = os.getppid()
     try:
-        while not stop_event.is_set():
+        while not stop_event.is_set() and os.getppid() == parent:  # an orphaned ground stops by itself
             monitor.poll(0.05)
             if not fsw_started.is_set() and any(e.event == "FSW_STARTED" for e in monitor.events
                                                 if getattr(e, "kind", "") == "event"):
@@ -397,6 +403,7 @@ def run_sil(options: RunOptions) -> RunResult:
     sim = None
     timeline = None
     interrupted = False
+    abort_reason = ""
     started_wall = time.monotonic()
     progress = _Progress(False, 0.0, "")
     try:
@@ -409,8 +416,25 @@ def run_sil(options: RunOptions) -> RunResult:
                             realtime=options.realtime)
         config_hash = write_config(run_dir, data, Path(options.mission))
 
-        # Open the simulator's end of the bus before the flight software starts sending.
+        # Open the simulator's end of the bus and build the world (astropy ephemeris nodes take a few
+        # seconds) before the flight software starts: it waits only lockstep_timeout_s for SYNC(0).
         bus = open_bus(info.spec, run_id=run_dir.name)
+        from fsw.ground import CommandSender
+
+        sender = CommandSender(host=tmtc.telecommand_bind_host if tmtc.telecommand_bind_host != "0.0.0.0"
+                               else "127.0.0.1", port=tc_port)
+        timeline = Timeline(mission, sender)
+        world = World(world_params(mission), seed=mission.seed)
+        world.truth  # noqa: B018  (evaluates the ephemeris at t = 0 now, not during the first tick)
+        candump = CandumpLog(run_dir / CANDUMP_FILE, info.channel if info.interface == "socketcan" else "vcan0")
+        gnc_period = 1.0 / mission.flight_software.rates.gnc_rate_hz
+        sim = Simulator(world, bus, Icd(), gnc_period_s=gnc_period,
+                        dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz, faults=mission.faults,
+                        fault_seed=mission.seed, cycle_done_timeout_s=options.cycle_done_timeout_s,
+                        on_frame=candump)
+        n_ticks = int(round(mission.duration_s / gnc_period))
+        recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels))
+        recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)
         fsw_log = open(run_dir / FSW_LOG, "w")
         fsw_proc = subprocess.Popen(
             [sys.executable, "-m", "fsw", "--config", str(run_dir / CONFIG_FILE), "--bus", info.spec],
@@ -425,25 +449,11 @@ def run_sil(options: RunOptions) -> RunResult:
                 raise RunNotStarted(f"no FSW_STARTED event from the flight software within "
                                     f"{options.fsw_start_timeout_s:.0f} s; see {run_dir / FSW_LOG}")
 
-        from fsw.ground import CommandSender
-
-        sender = CommandSender(host=tmtc.telecommand_bind_host if tmtc.telecommand_bind_host != "0.0.0.0"
-                               else "127.0.0.1", port=tc_port)
-        timeline = Timeline(mission, sender)
-        world = World(world_params(mission), seed=mission.seed)
-        candump = CandumpLog(run_dir / CANDUMP_FILE, info.channel if info.interface == "socketcan" else "vcan0")
-        gnc_period = 1.0 / mission.flight_software.rates.gnc_rate_hz
-        sim = Simulator(world, bus, Icd(), gnc_period_s=gnc_period,
-                        dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz, faults=mission.faults,
-                        fault_seed=mission.seed, cycle_done_timeout_s=options.cycle_done_timeout_s,
-                        on_frame=candump)
-        n_ticks = int(round(mission.duration_s / gnc_period))
-        recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels))
-        recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)
         progress = _Progress(options.progress, mission.duration_s, info.note)
         boresight_B = np.asarray(mission.spacecraft.instrument_boresight_B)
         error_of = _truth_error_function(mission, boresight_B)
         started_wall = time.monotonic()
+        missed_in_row = 0
         for _ in range(n_ticks):
             timeline.release(sim.t_s)
             if options.realtime:
@@ -454,6 +464,11 @@ def run_sil(options: RunOptions) -> RunResult:
                 sim.begin_tick()
                 done = sim.end_tick()
             recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
+            missed_in_row = 0 if done else missed_in_row + 1
+            if missed_in_row >= options.max_consecutive_missed:
+                abort_reason = (f"the flight software answered none of the last {missed_in_row} ticks "
+                                f"(t = {sim.t_s:.1f} s): run ended early")
+                break
             if fsw_proc.poll() is not None:
                 raise RunNotStarted(f"the flight software exited (code {fsw_proc.returncode}) at t = "
                                     f"{sim.t_s:.1f} s; see {run_dir / FSW_LOG}:\n" + _tail(run_dir / FSW_LOG))
@@ -461,6 +476,8 @@ def run_sil(options: RunOptions) -> RunResult:
     except KeyboardInterrupt:
         interrupted = True
     finally:
+        # a second Ctrl-C must not cut the orderly shutdown short
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
         wall_s = time.monotonic() - started_wall
         progress.stop()
         _stop_fsw(fsw_proc)
@@ -477,7 +494,7 @@ def run_sil(options: RunOptions) -> RunResult:
         if recorder is not None:
             recorder.save(run_dir / TRUTH_FILE)
         if sim is not None:
-            stats = {**sim.stats.__dict__, "clock": "realtime" if options.realtime else "lockstep", "bus": info.spec, "bus_note": info.note, "wall_s": wall_s,
+            stats = {**sim.stats.__dict__, "aborted": abort_reason, "clock": "realtime" if options.realtime else "lockstep", "bus": info.spec, "bus_note": info.note, "wall_s": wall_s,
                      "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
                      "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
                      "faults_injected": [list(map(_plain, e)) if isinstance(e, tuple) else _plain(e)
@@ -485,6 +502,7 @@ def run_sil(options: RunOptions) -> RunResult:
                      "telecommands": timeline.sent if timeline else [],
                      "telecommand_errors": timeline.errors if timeline else []}
             (run_dir / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n")
+        signal.signal(signal.SIGINT, previous)
     # Anything that reached here has a run folder with what was recorded: judge it.
     from hil_sim.plots import write_plots
     from hil_sim.summary import write_summary

@@ -44,8 +44,17 @@ class ZoneSeries:
     boundary_history: list  # [(t_s, boundary points (m, 3))] for sky zones (plots)
 
 
+TRUTH_KEYS = {"t_s": (0,), "q_NB": (0, 4), "omega_BN_B": (0, 3), "wheel_speed_rad_s": (0, 0),
+              "wheel_torque_Nm": (0, 0), "sun_N": (0, 3), "moon_N": (0, 3), "earth_N": (0, 3), "r_sc_N_km": (0, 3),
+              "cycle_done": (0,)}
+
+
 def load_truth(run_dir: Path) -> dict[str, np.ndarray]:
-    with np.load(run_dir / "truth.npz") as data:
+    """The simulator's truth record; empty arrays when the run stopped before recording anything."""
+    path = Path(run_dir) / "truth.npz"
+    if not path.exists():
+        return {k: np.zeros(shape) for k, shape in TRUTH_KEYS.items()}
+    with np.load(path) as data:
         return {k: data[k] for k in data.files}
 
 
@@ -238,8 +247,11 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict
     def requirement(name: str, value: Any, limit: Any, passed: bool, detail: str = "") -> None:
         results.append({"name": name, "value": value, "limit": limit, "pass": bool(passed), "detail": detail})
 
+    sim_stats = _read_json(run_dir / "simulator.json")
     if len(t) < 2:
         requirement("truth recorded", int(len(t)), ">= 2 samples", False, "the run produced no truth samples")
+    if sim_stats.get("aborted"):
+        requirement("run completed", False, True, False, str(sim_stats["aborted"]))
     for z in zones:
         if len(z.margin_deg):
             i = int(np.argmin(z.margin_deg))
@@ -268,7 +280,6 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict
                     peak <= req.max_wheel_speed_fraction,
                     f"wheel {w + 1}: {float(np.abs(truth['wheel_speed_rad_s'][:, w]).max()):.1f} rad/s of "
                     f"{limits[w]:.0f} rad/s")
-    sim_stats = _read_json(run_dir / "simulator.json")
     hk = _hk_last(run_dir, ("slips_gnc", "cycles", "fdir_trips", "bus_crc_errors", "bus_alive_errors",
                             "bus_timeouts", "tc_accepted", "tc_rejected"))
     missed = int(sim_stats.get("cycle_done_timeouts", 0)) + int(sim_stats.get("cycle_done_late", 0))
