@@ -161,34 +161,26 @@ def _axpy(out, x, a, k):
 
 
 @njit(cache=True, error_model="numpy")
-def _wheel_electronics(X, U_CMD, W, u_motor, U_APPLIED, FLAGS):
-    """Motor torque each driver applies for the coming step. U_CMD is (M, N) as the caller gives it."""
+def _wheel_electronics(X, u_cmd, W, u_motor, U_APPLIED, FLAGS):
+    """Motor torque each driver applies for the coming step, from the held command u_cmd (N, M).
+    Written with conditional expressions only, so the loop over runs vectorises."""
     N, M = u_motor.shape
     for i in range(N):
         for m in range(M):
-            u = U_CMD[m, i]
+            cmd = u_cmd[i, m]
             lim = W[W_MAX_TQ, i, m]
-            flags = 0
-            if u > lim:
-                u = lim
-                flags = FAULT_TORQUE_SATURATED
-            elif u < -lim:
-                u = -lim
-                flags = FAULT_TORQUE_SATURATED
+            u = min(max(cmd, -lim), lim)
             mode = W[W_MODE, i, m]
             Om = X[7 + i, m]
-            if mode == MODE_STUCK:
-                u = 0.0
-                flags |= FAULT_STUCK
-            elif mode == MODE_NO_TORQUE:
-                u = 0.0
-                flags |= FAULT_NO_TORQUE
-            elif abs(Om) >= W[W_MAX_SPEED, i, m] and u * Om > 0.0:
-                u = 0.0
-                flags |= FAULT_SPEED_LIMIT
+            over = (abs(Om) >= W[W_MAX_SPEED, i, m]) and (u * Om > 0.0)
+            healthy = mode == MODE_HEALTHY
+            u = u if (healthy and not over) else 0.0
             u_motor[i, m] = u
             U_APPLIED[i, m] = u
-            FLAGS[i, m] = flags
+            FLAGS[i, m] = ((FAULT_TORQUE_SATURATED if abs(cmd) > lim else 0)
+                           | (FAULT_STUCK if mode == MODE_STUCK else 0)
+                           | (FAULT_NO_TORQUE if mode == MODE_NO_TORQUE else 0)
+                           | (FAULT_SPEED_LIMIT if (healthy and over) else 0))
 
 
 def step_coefficients(W: np.ndarray, B: np.ndarray, dt_sub: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -229,12 +221,16 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
     u_net = np.empty((N, M))
     u_motor = np.empty((N, M))
     tau = np.empty((3, M))
+    u_cmd = np.empty((N, M))  # the command is held: transpose it once, not every sub-step
+    for i in range(N):
+        for m in range(M):
+            u_cmd[i, m] = U_CMD[m, i]
     any_random = False
     for m in range(M):
         if GM[1, m] > 0.0:
             any_random = True
     for s in range(n_sub):
-        _wheel_electronics(X, U_CMD, W, u_motor, U_APPLIED, FLAGS)
+        _wheel_electronics(X, u_cmd, W, u_motor, U_APPLIED, FLAGS)
         if any_random:
             for m in range(M):
                 for j in range(3):
