@@ -147,6 +147,18 @@ def test_assumption_2_shadowing_zones():
     w = np.array([float(v) for v in hits[0].split("x = [")[1].split("]")[0].split(",")])
     t_w = np.degrees(np.arccos(w @ x_d))
     assert 69.0 < t_w < 76.0
+    # check the witness against the definition directly (printed to 4 decimals, so allow 1e-3 slack):
+    # some point of D_eps(U_i) lies beyond w on the half great circle from x_d through w, and w is no
+    # nearer to x_d than D_eps(U_i) is
+    v = w - x_d * (w @ x_d)
+    v /= np.linalg.norm(v)
+    t = np.radians(np.linspace(t_w, 179.0, 4000))
+    ray = np.cos(t)[:, None] * x_d + np.sin(t)[:, None] * v
+    theta_eps = np.arccos(1 - eps)
+    for zone in shadowing:
+        assert zone.separation_batch(ray).min() <= eps + 1e-3
+        near_edge = np.arccos(1 - zone.separation(x_d)) - theta_eps
+        assert np.radians(t_w) >= near_edge - 1e-3
     # turned away by 90 deg of azimuth the shadows are disjoint
     rep2 = check_assumptions(x_d, [a, ConicZone(sph(105, 90), np.radians(30))], eps, kappa=1.0)
     assert rep2.ok, rep2.summary()
