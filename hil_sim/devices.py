@@ -117,7 +117,7 @@ class ImuNode:
 
     icd: Icd
     rate_hz: float
-    latency_s: float = 0.001
+    latency_s: float = 0.0
     sender: E2ESender | None = None
     samples: int = 0
 
@@ -189,9 +189,13 @@ class StarTrackerNode:
 
 @dataclass
 class DeviceTiming:
-    """Device behaviour not in the truth parameters: latencies [s] and the wheels' command timeout [s]."""
+    """Device behaviour not in the truth parameters: latencies [s] and the wheels' command timeout [s].
 
-    imu_latency_s: float = 0.001
+    The IMU's default latency is 0: a real gyro's (~1 ms) is below the dynamics step, and with 0 the
+    frames of tick k are exactly the samples of (t_{k-1}, t_k], the times the flight-side driver assigns.
+    """
+
+    imu_latency_s: float = 0.0
     star_tracker_latency_s: float = 0.05
     wheel_cmd_timeout_s: float = 0.3
 
