@@ -126,7 +126,8 @@ def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
 
 class WorldBatch:
     """M runs stepped together. All runs share the epoch and the number of wheels; any other parameter may
-    differ per run (dispersions). Array outputs have a leading run axis."""
+    differ per run (dispersions). Outputs and properties have a leading run axis (M, ...); the dynamics
+    arrays X (7+N, M), G, W, B, D, TEMP, U_APPLIED, FLAGS keep the run axis last (see hil_sim.dynamics)."""
 
     def __init__(self, params: Sequence[WorldParams], seed: int | None = 0) -> None:
         params = list(params)
@@ -223,6 +224,9 @@ class WorldBatch:
             raise ValueError(f"step: dt_s must be > 0, got {dt_s!r}")
         u = np.asarray(wheel_torque_cmd_Nm, dtype=np.float64)
         if u.shape != (self.n_runs, self.n_wheels):
+            if u.size != self.n_runs * self.n_wheels:
+                raise ValueError(f"step: wheel_torque_cmd_Nm must have shape ({self.n_runs}, {self.n_wheels}) "
+                                 f"(runs, wheels), got {u.shape}")
             u = u.reshape(self.n_runs, self.n_wheels)
         n_sub = max(1, math.ceil(dt_s / self.max_step_s - 1e-9))
         self._advance(dt_s, u, n_sub)
