@@ -15,8 +15,9 @@ Three ways to drive it, sharing that code:
   * ``run_lockstep(n)``: multi-process SIL (flight software in another process on a real bus);
   * in-process (campaigns' fast mode): ``begin_tick()``; run the FSW cycle on a ``virtual`` bus in the
     same thread; ``end_tick(wait_s=0)``. No threads, no sleeps;
-  * ``run_realtime(n)``: SYNC paced to the monotonic clock; never waits for the flight software;
-    commands are applied at the dynamics step during which they arrive ("late commands applied late").
+  * ``run_realtime(n)``: SYNC paced to the monotonic clock; never waits for the flight software; sensor
+    frames go out at their own due times between SYNCs; commands are applied at the dynamics step during
+    which they arrive ("late commands applied late").
 
 Lockstep runs are deterministic: no wall-clock value enters the frames or the world.
 """
@@ -213,6 +214,14 @@ class Simulator:
         elif frame.frame_id == self._heartbeat_id:
             self.stats.heartbeats += 1
 
+    def _publish_due(self, t_s: float) -> None:
+        """Real time: sensor frames go out when due (between SYNCs), as on the hardware bus."""
+        due = self.devices.frames_due(t_s)
+        if self.injector:
+            due = self.injector.release(t_s, "tx") + self.injector.process(due, t_s, extras=False)
+        for msg in due:
+            self._send(msg, t_s)
+
     def _send(self, msg: can.Message, t_s: float) -> None:
         self.bus.send(msg)
         self.stats.frames_sent += 1
@@ -253,6 +262,8 @@ class Simulator:
                 if lateness > self.dt_s:
                     self.stats.realtime_overruns += 1
             self.poll(self._sub_t(j))
+            if j:
+                self._publish_due(self._sub_t(j))
 
         for _ in range(n_ticks):
             pace(0)

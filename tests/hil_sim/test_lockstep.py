@@ -240,3 +240,24 @@ def test_lockstep_over_socketcan_with_in_process_fsw_thread(icd: Icd) -> None:
     finally:
         sim_bus.shutdown()
         fsw_bus.shutdown()
+
+
+def test_realtime_sensor_frames_go_out_at_their_own_rate(icd: Icd) -> None:
+    """Between SYNCs the IMU frames are spread over the period (fake clock), not sent in a burst."""
+    channel = f"virtual:rtimu{next(_channels)}"
+    sim_bus, rx_bus = open_bus(channel), open_bus(channel)
+    try:
+        world = World(_params(), seed=1)
+        now = [0.0]
+        log: list = []
+        sim = Simulator(world, sim_bus, icd, gnc_period_s=0.1, dynamics_dt_s=0.01, clock=lambda: now[0],
+                        on_frame=lambda d, t, m: log.append((t, m.arbitration_id)) if d == "tx" else None)
+        sim.run_realtime(3, sleep=lambda dt: now.__setitem__(0, now[0] + dt))
+        imu_id = icd.spec("IMU_RATE").frame_id
+        imu_times = sorted({round(t, 6) for t, fid in log if fid == imu_id})
+        # one IMU frame every 10 ms of simulated (= wall) time, from the first tick on
+        assert imu_times[:25] == pytest.approx([0.01 * k for k in range(25)])
+        sync_times = [t for t, fid in log if fid == icd.spec("SYNC").frame_id]
+        assert sync_times == pytest.approx([0.0, 0.1, 0.2])
+    finally:
+        _close((sim_bus, rx_bus))
