@@ -44,7 +44,10 @@ by the lag error; the requirement is judged on the physical zones, so choose
   with the defaults (1 deg/s, 1 rad/s, 0.05 N m on 10 kg m^2) that is ~1.0 deg + ~0.3 deg before
   the law's own layer even starts to act. Measured in tests/fsw/test_closed_loop.py (slew past a Sun
   star zone and a Moon cone): the smallest physical margin reached with margin_deg = M is reported there;
-* ``ZONE_REBUILD_TOL_DEG`` (0.01 deg) for the zone rebuild tolerance.
+* nothing for the zone rebuild tolerance: zones are rebuilt only when their centre has moved by
+  ``ZONE_REBUILD_TOL_DEG`` (0.1 deg; in LEO the Earth moves 0.06 deg/s, so about every 2 s instead of
+  every cycle), and the law's zones carry that tolerance as extra inflation, while the physical margins
+  are corrected by the drift since the build (moving a set by d changes a distance by at most d).
 
 A margin of 2-3 deg is adequate for the default spacecraft at 1 deg/s; scale the tracking term with
 omega_max^2 / alpha for faster slews or weaker wheels. ``KEEP_OUT_MARGIN_LOW`` (yellow limit) tells
@@ -66,7 +69,9 @@ from gnc.attitude import (
 )
 from gnc.ephemeris import EARTH_RADIUS_KM, julian_date_tdb, moon_position_N_km, sun_position_N_km
 
-ZONE_REBUILD_TOL_DEG = 0.01
+ZONE_REBUILD_TOL_DEG = 0.1  # extra inflation of the law's zones covering their motion between rebuilds
+LAW_REBUILD_TRIGGER_DEG = 0.08
+PHYS_REBUILD_TOL_DEG = 0.5
 EPHEMERIS_NODE_S = 10.0
 _MU_EARTH_KM3_S2 = 398600.4418
 _BODY_CODES = {"sun": "SUN", "moon": "MOON", "earth": "EARTH", "inertial": "INERTIAL"}
@@ -74,6 +79,10 @@ _BODY_CODES = {"sun": "SUN", "moon": "MOON", "earth": "EARTH", "inertial": "INER
 
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    return math.degrees(math.acos(max(-1.0, min(1.0, float(a[0] * b[0] + a[1] * b[1] + a[2] * b[2])))))
 
 
 def d_s_to_deg(d_s: float) -> float:
@@ -231,6 +240,7 @@ class _SkySlot:
     fixed_center: np.ndarray | None
     center_N: np.ndarray | None = None
     built_center: np.ndarray | None = None
+    built_center_law: np.ndarray | None = None
     phys: object | None = None
     law: object | None = None
 
@@ -478,20 +488,40 @@ class Guidance:
 
     # ------------------------------------------------------------------------------------ zones
     def _update_sky(self, t_s: float) -> bool:
-        """Recompute zone centres; rebuild zones that moved more than the tolerance. True if any rebuilt."""
+        """Recompute zone centres; rebuild zones that moved too far. True if a law zone was rebuilt.
+
+        Law zones (inflated by the extra ZONE_REBUILD_TOL_DEG) are rebuilt when their centre has moved
+        by LAW_REBUILD_TRIGGER_DEG; physical zones (margin telemetry, FDIR) after PHYS_REBUILD_TOL_DEG,
+        their margins corrected by the drift meanwhile. At most one zone is rebuilt per cycle (the
+        largest drift first), which keeps the cycle time flat; the slack between trigger and inflation
+        covers the cycles a pending rebuild may wait.
+        """
         dirs = self.ephem.directions(t_s) if self.slots else {}
         self._dirs = dirs
-        rebuilt = False
-        cos_tol = math.cos(math.radians(ZONE_REBUILD_TOL_DEG))
+        worst, worst_kind, worst_slot = 0.0, None, None
+        first = False
         for s in self.slots:
             c = s.fixed_center if s.fixed_center is not None else dirs[s.body]
             s.center_N = c
-            if s.built_center is None or float(c @ s.built_center) < cos_tol:
-                s.phys = s.builder_phys.build(c)
-                s.law = s.builder_law.build(c)
-                s.built_center = c.copy()
-                rebuilt = True
-        return rebuilt
+            if s.built_center is None:
+                s.phys, s.law = s.builder_phys.build(c), s.builder_law.build(c)
+                s.built_center, s.built_center_law = c.copy(), c.copy()
+                first = True
+                continue
+            law_drift = _angle_deg(c, s.built_center_law) / LAW_REBUILD_TRIGGER_DEG
+            phys_drift = _angle_deg(c, s.built_center) / PHYS_REBUILD_TOL_DEG
+            for drift, kind in ((law_drift, "law"), (phys_drift, "phys")):
+                if drift >= 1.0 and drift > worst:
+                    worst, worst_kind, worst_slot = drift, kind, s
+        if worst_slot is not None:
+            c = worst_slot.center_N
+            if worst_kind == "law":
+                worst_slot.law = worst_slot.builder_law.build(c)
+                worst_slot.built_center_law = c.copy()
+            else:
+                worst_slot.phys = worst_slot.builder_phys.build(c)
+                worst_slot.built_center = c.copy()
+        return first or worst_kind == "law"
 
     def assumption_snapshot(self):
         """(target, zones, eps, kappa, law) the full check should look at now, or None (no zones)."""
@@ -549,7 +579,10 @@ class Guidance:
         return self._safe(t_s, dt_s, q, omega_BN_B)
 
     def _sky_margins(self, y_N: np.ndarray) -> tuple[list[float], float]:
-        margins = [signed_margin_deg(s.phys, y_N) for s in self.slots]
+        """Signed physical margins [deg], conservative: minus the zone's drift since it was built."""
+        margins = []
+        for s in self.slots:
+            margins.append(signed_margin_deg(s.phys, y_N) - _angle_deg(s.center_N, s.built_center))
         return margins, (min(margins) if margins else float("nan"))
 
     def _pointing(self, t_s: float, q: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
@@ -585,10 +618,10 @@ class Guidance:
                 self._current_eps = eps
                 self._sky_law = _make_star_law(target, merged, 1.0, self.kappa, eps)
                 self._sky_law_key = True
-            u = self.k1 * np.asarray(self._sky_law.control(y), dtype=float)
+            u_law, zone = self._sky_law.control_and_zone(y)
+            u = self.k1 * np.asarray(u_law, dtype=float)
             out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
-            diag_zone = self._active_zone(y)
-            out.active_zone = diag_zone
+            out.active_zone = -1 if zone is None else self._sky_groups[zone][0]
             out.margins_deg, out.margin_min_deg = self._sky_margins(y)
             out.zones_merged = any(len(g) > 1 for g in self._sky_groups)
             out.zone_count = len(self.slots)
@@ -602,13 +635,6 @@ class Guidance:
         out.pointing_error_deg = math.degrees(math.acos(max(-1.0, min(1.0, float(y @ self.target_N)))))
         out.roll_error_deg = math.degrees(roll_err)
         return out
-
-    def _active_zone(self, y: np.ndarray) -> int:
-        """Index (configured zone numbering) of the zone whose eps-layer contains y, or -1."""
-        for gi, z in enumerate(self._sky_law_zones):
-            if float(z.separation(y)) < self._sky_eps:
-                return self._sky_groups[gi][0]
-        return -1
 
     def _report_merge(self, old: list[list[int]], new: list[list[int]]) -> None:
         old_pairs = {(g[0], j) for g in old for j in g[1:]}
@@ -650,13 +676,10 @@ class Guidance:
                     self._s3_law = _make_gradient_law(xd, self.s3_law_zones, 1.0, eps)
                 else:
                     self._s3_law = _make_star_law(xd, self.s3_law_zones, 1.0, self.kappa, eps)
-            u = self.k1 * np.asarray(self._s3_law.control(x), dtype=float)
+            u_law, zone = self._s3_law.control_and_zone(x)
+            u = self.k1 * np.asarray(u_law, dtype=float)
             out.eps, out.eps_max = self._s3_eps, self._s3_eps_max
-            out.active_zone = -1
-            for i, z in enumerate(self.s3_law_zones):
-                if float(z.separation(x)) < self._s3_eps:
-                    out.active_zone = i
-                    break
+            out.active_zone = -1 if zone is None else int(zone)
             margins = [signed_margin_deg(z, x) for z in self.s3_phys]
             out.margins_deg, out.margin_min_deg = margins, min(margins)
             out.zone_count = len(self.s3_phys)

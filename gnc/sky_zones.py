@@ -55,16 +55,20 @@ _RAYS = 360  # angular resolution of radial profiles (1 deg of azimuth)
 
 def sky_frame(center_N: np.ndarray, orientation_deg: float = 0.0) -> np.ndarray:
     """Local tangent basis at ``center_N``: rows (x, y) of shape (2, 3), x = north rotated by orientation."""
-    c = np.asarray(center_N, dtype=float)
-    c = c / np.linalg.norm(c)
-    ref = np.array([0.0, 0.0, 1.0]) if abs(c[2]) < 0.999999 else np.array([1.0, 0.0, 0.0])
-    east = np.cross(ref, c)
-    east /= np.linalg.norm(east)
-    north = np.cross(c, east)
+    cx, cy, cz = (float(v) for v in center_N)
+    n = math.sqrt(cx * cx + cy * cy + cz * cz)
+    cx, cy, cz = cx / n, cy / n, cz / n
+    if abs(cz) < 0.999999:  # east = z_N x c
+        ex, ey, ez = -cy, cx, 0.0
+    else:  # at a pole: east = x_N x c
+        ex, ey, ez = 0.0, -cz, cy
+    en = math.sqrt(ex * ex + ey * ey + ez * ez)
+    ex, ey, ez = ex / en, ey / en, ez / en
+    nx, ny, nz = cy * ez - cz * ey, cz * ex - cx * ez, cx * ey - cy * ex  # north = c x east
     th = math.radians(orientation_deg)
-    x = math.cos(th) * north + math.sin(th) * east
-    y = -math.sin(th) * north + math.cos(th) * east
-    return np.stack((x, y))
+    ct, st = math.cos(th), math.sin(th)
+    return np.array([[ct * nx + st * ex, ct * ny + st * ey, ct * nz + st * ez],
+                     [-st * nx + ct * ex, -st * ny + ct * ey, -st * nz + ct * ez]])
 
 
 def _center(center_N: np.ndarray) -> np.ndarray:
