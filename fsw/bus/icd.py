@@ -146,19 +146,36 @@ class Icd:
     def encode(self, name: str, signals: Mapping[str, float], counter: int) -> can.Message:
         """Build the frame ``name`` with alive counter ``counter`` (0..15) and its E2E CRC.
 
-        Raises ``cantools`` EncodeError (a ValueError) naming the signal when a value is outside its
-        DBC range or a signal is missing: a sender bug must not be silently clipped onto the bus.
+        Raises ``cantools`` EncodeError naming the signal when a value is outside its DBC range, NaN, or
+        missing: a sender bug must not be silently clipped onto the bus.
         """
         spec = self.spec(name)
         values = dict(signals)
         values[E2E_COUNTER_SIGNAL] = counter & 0x0F
         values[E2E_CRC_SIGNAL] = 0
+        self._check_ranges(spec, values)
         message = spec.db_message
-        payload = message.encode(values, scaling=True, padding=False, strict=True)
+        payload = message.encode(values, scaling=True, padding=False, strict=False)
         values[E2E_CRC_SIGNAL] = e2e_crc(spec.data_id, payload[1:])
-        # Values were range-checked by the first encode; only the CRC (0..255 by construction) changed.
         data = message.encode(values, scaling=True, padding=False, strict=False)
         return can.Message(arbitration_id=spec.frame_id, data=data, is_extended_id=False, is_fd=False)
+
+    @staticmethod
+    def _check_ranges(spec: MessageSpec, values: Mapping[str, float]) -> None:
+        """The DBC's [min|max] of every signal, enforced before encoding (cantools' strict mode does the
+        same; this precomputed check is cheaper and names the message, signal and allowed range)."""
+        for signal, (lo, hi) in spec.ranges.items():
+            try:
+                value = values[signal]
+            except KeyError:
+                raise cantools.database.EncodeError(
+                    f"message {spec.name}: signal {signal!r} missing; needs {sorted(spec.ranges)}") from None
+            if not lo <= value <= hi:  # also rejects NaN
+                raise cantools.database.EncodeError(
+                    f"message {spec.name}: signal {signal!r} = {value!r} outside its ICD range [{lo}, {hi}]")
+        if len(values) != len(spec.ranges):
+            unknown = sorted(set(values) - set(spec.ranges))
+            raise cantools.database.EncodeError(f"message {spec.name}: unknown signal(s) {unknown}")
 
     def decode_checked(self, spec: MessageSpec, data: bytes) -> dict[str, float] | None:
         """Decode ``data`` through cantools; None if the length is wrong or a signal is out of range."""

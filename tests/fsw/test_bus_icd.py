@@ -107,3 +107,16 @@ def test_dbc_without_e2e_signals_is_rejected(tmp_path: Path) -> None:
         Icd(overlap)
     with pytest.raises(IcdError, match="not found"):
         Icd(tmp_path / "missing.dbc")
+
+
+def test_nan_missing_and_unknown_signals_are_refused(icd: Icd) -> None:
+    good = dict(omega_x=0.0, omega_y=0.0, omega_z=0.0, saturated=0)
+    with pytest.raises(cantools.database.EncodeError, match="omega_y"):
+        icd.encode("IMU_RATE", dict(good, omega_y=float("nan")), 0)
+    with pytest.raises(cantools.database.EncodeError, match="missing"):
+        icd.encode("IMU_RATE", {k: v for k, v in good.items() if k != "omega_z"}, 0)
+    with pytest.raises(cantools.database.EncodeError, match="unknown"):
+        icd.encode("IMU_RATE", dict(good, spin=1.0), 0)
+    lo, hi = icd.signal_range("IMU_RATE", "omega_x")
+    for edge in (lo, hi):  # the range ends themselves are valid
+        assert icd.encode("IMU_RATE", dict(good, omega_x=edge), 0).dlc == 8
