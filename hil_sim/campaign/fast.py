@@ -129,7 +129,13 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
                 fsw.run_cycle(inputs)
             done = sim.end_tick(wait_s=0.0)
             truth.record(world, np.asarray([w.torque_Nm for w in world.wheel_status()]), done)
-        metrics, trajectory = _judge(mission, truth, telemetry, sim)
+        n = truth.n
+        record = {"t_s": truth.t_s[:n], "q_NB": truth.q_NB[:n], "omega_BN_B": truth.omega_BN_B[:n],
+                  "wheel_speed_rad_s": truth.wheel_speed_rad_s[:n], "sun_N": truth.sun_N[:n],
+                  "moon_N": truth.moon_N[:n], "earth_N": truth.earth_N[:n], "r_sc_N_km": truth.r_sc_N_km[:n]}
+        trips = [str(a.get("monitor", "?")) for _, name, a in telemetry.events if name == "FDIR_TRIPPED"]
+        rejected = sum(1 for _, name, _ in telemetry.events if name in ("CMD_REJECTED", "TARGET_REJECTED"))
+        metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected)
         used = _read_back(paths, mission, world, initial, fsw, timeline.sent, sim)
         return RunResult(metrics=metrics, used=used, trajectory=trajectory, sim_time_s=float(truth.t_s[truth.n - 1]),
                          events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events if n == "FDIR_TRIPPED"][:200])
@@ -151,14 +157,14 @@ def _icd():
     return _ICD
 
 
-def _judge(mission, rec, telemetry, sim) -> tuple[dict[str, float], dict[str, np.ndarray]]:
-    """Metrics judged on truth with the SIL's own functions (hil_sim.summary), so fast and sil agree."""
+def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycle_slips: float,
+          rejected_commands: int = 0) -> tuple[dict[str, float], dict[str, np.ndarray]]:
+    """A run's metrics, judged on truth with the SIL's own functions (``hil_sim.summary``), so the fast and
+    sil modes agree. ``truth``: the arrays of ``hil_sim.sil.TruthRecorder``; ``fdir_trips``: the monitor of
+    every FDIR_TRIPPED event; ``cycle_slips``: lockstep ticks the flight software never answered."""
     from hil_sim import summary
-    n = rec.n
-    truth = {"t_s": rec.t_s[:n], "q_NB": rec.q_NB[:n], "omega_BN_B": rec.omega_BN_B[:n],
-             "wheel_speed_rad_s": rec.wheel_speed_rad_s[:n], "sun_N": rec.sun_N[:n], "moon_N": rec.moon_N[:n],
-             "earth_N": rec.earth_N[:n], "r_sc_N_km": rec.r_sc_N_km[:n]}
     t = truth["t_s"]
+    n = len(t)
     req = mission.requirements
     b_B = np.asarray(mission.spacecraft.instrument_boresight_B, dtype=float)
     y_N = summary.boresight_N(truth["q_NB"], b_B)
@@ -178,13 +184,11 @@ def _judge(mission, rec, telemetry, sim) -> tuple[dict[str, float], dict[str, np
     limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
     metrics["peak_wheel_speed_fraction"] = float(np.max(np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]))
     # lockstep: a slip is a tick the flight software never answered with CYCLE_DONE (as the SIL counts)
-    metrics["cycle_slips"] = float(sim.stats.cycle_done_timeouts)
-    trips = [str(a.get("monitor", "?")) for _, name, a in telemetry.events if name == "FDIR_TRIPPED"]
+    metrics["cycle_slips"] = float(cycle_slips)
     expected = list(req.expected_fdir_events)
-    metrics["unexpected_fdir_events"] = float(sum(1 for m in trips if m not in expected))
-    metrics["missing_expected_fdir_events"] = float(sum(1 for m in expected if m not in trips))
-    metrics["rejected_commands"] = float(sum(1 for _, name, _ in telemetry.events
-                                             if name in ("CMD_REJECTED", "TARGET_REJECTED")))
+    metrics["unexpected_fdir_events"] = float(sum(1 for m in fdir_trips if m not in expected))
+    metrics["missing_expected_fdir_events"] = float(sum(1 for m in expected if m not in fdir_trips))
+    metrics["rejected_commands"] = float(rejected_commands)
     # trajectory for the report (decimated)
     step = max(1, int(math.ceil(n / MAX_TRAJECTORY_POINTS)))
     traj: dict[str, np.ndarray] = {"t_s": t[::step], "boresight_N": y_N[::step], "error_deg": err[::step],

@@ -15,6 +15,7 @@ import os
 import shutil
 import time
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -161,11 +162,18 @@ def _sha256(path: Path) -> str:
 # Backends (same two calls for both)
 # ---------------------------------------------------------------------------------------------
 
+def _ignore_sigint() -> None:
+    # Ctrl-C is the driver's to handle: it cancels what is pending and stops the workers itself.
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 class _LocalBackend:
     def __init__(self, workers: int):
         import multiprocessing
         # forkserver: workers start clean (no threads or open sockets inherited from the driver).
-        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("forkserver"))
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("forkserver"),
+                                        initializer=_ignore_sigint)
 
     def submit(self, fn: Callable, *args: Any) -> Any:
         return self.pool.submit(fn, *args)
@@ -175,7 +183,10 @@ class _LocalBackend:
         return as_completed(futures)
 
     def close(self, cancel: bool = False) -> None:
-        self.pool.shutdown(wait=not cancel, cancel_futures=cancel)
+        if cancel:  # do not wait for the runs in progress: their results would be thrown away anyway
+            for proc in list(getattr(self.pool, "_processes", {}).values()):
+                proc.terminate()
+        self.pool.shutdown(wait=True, cancel_futures=cancel)
 
 
 class _DaskBackend:
@@ -191,7 +202,9 @@ class _DaskBackend:
         from distributed import as_completed
         return as_completed(futures)
 
-    def close(self, cancel: bool = False) -> None:
+    def close(self, cancel: bool = False, futures: list[Any] = ()) -> None:
+        if cancel and futures:
+            self.client.cancel(list(futures))
         if self.own_client:
             self.client.close()
 
@@ -249,12 +262,15 @@ def run_campaign(plan: Plan, out_dir: Path, *, workers: int | None = None, sched
                 progress.errors += record.status == STATUS_ERROR
                 if on_progress:
                     on_progress(progress, record)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, BrokenProcessPool):
             interrupted = True
             for f in futures:
                 f.cancel()
         finally:
-            backend.close(cancel=interrupted)
+            if isinstance(backend, _DaskBackend):
+                backend.close(cancel=interrupted, futures=futures)
+            else:
+                backend.close(cancel=interrupted)
     return Outcome(out_dir=out_dir, records=load_records(out_dir), interrupted=interrupted,
                    wall_s=time.perf_counter() - start, executed=progress.done - progress.skipped)
 

@@ -59,3 +59,31 @@ def test_rerun_reproduces_a_run_exactly(campaign_dir, capsys):
     out, _ = campaign_dir
     assert main(["campaign", "rerun", str(out), "--run", "1"]) == 0
     assert "reproduced exactly" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_the_campaign_and_keeps_finished_runs(tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "interrupted"
+    proc = subprocess.Popen([sys.executable, "-m", "hil_sim", "campaign", "run", str(REGRESSION), "--runs", "8",
+                             "--workers", "1", "--duration", "5", "--out", str(out), "--no-report"],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 240
+        while not list((out / "runs").glob("run-*.json")) and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.stdout.read()
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGINT)
+        output, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, output
+    kept = sorted(out.glob("runs/run-*.json"))
+    assert 1 <= len(kept) < 8 and "interrupted" in output
+    # the finished runs were tabulated, and the folder resumes
+    assert len(pd.read_parquet(out / "results.parquet")) == len(kept)
