@@ -32,7 +32,7 @@ import numpy as np
 
 from hil_sim.physics_checks import d_s_to_deg, schedule
 
-ZONE_REBUILD_DEG = 0.01  # rebuild a moving zone when its centre moved more than this
+ZONE_REBUILD_DEG = 0.001  # rebuild a moving star zone when its centre moved more than this (margin error bound)
 EARTH_RADIUS_KM = 6378.137
 
 
@@ -90,6 +90,14 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> l
             r = float(np.linalg.norm(truth["r_sc_N_km"][0]))
             extra = math.degrees(math.asin(min(1.0, EARTH_RADIUS_KM / r)))
         builder = sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra)
+        if z.geometry.shape == "cone":  # exact at every sample: angle to the centre minus the half-angle
+            c = centers / np.linalg.norm(centers, axis=1, keepdims=True)
+            margins = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", y_N, c), -1.0, 1.0))) \
+                - (z.geometry.half_angle_deg + extra)
+            history = [(float(t[k]), np.asarray(builder.build(c[k]).boundary(180)))
+                       for k in range(0, len(t), max(1, int(30.0 / max(t[1] - t[0], 1e-9))) if len(t) > 1 else 1)]
+            out.append(ZoneSeries(z.name, "sky", margins, history))
+            continue
         margins = np.empty(len(t))
         history = []
         start = 0
