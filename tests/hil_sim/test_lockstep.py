@@ -261,3 +261,21 @@ def test_realtime_sensor_frames_go_out_at_their_own_rate(icd: Icd) -> None:
         assert sync_times == pytest.approx([0.0, 0.1, 0.2])
     finally:
         _close((sim_bus, rx_bus))
+
+
+def test_simulator_rejects_inconsistent_periods_and_phase_misuse(icd: Icd) -> None:
+    bus = open_bus(f"virtual:bad{next(_channels)}")
+    try:
+        world = World(_params(), seed=1)
+        with pytest.raises(ValueError, match="whole multiple"):
+            Simulator(world, bus, icd, gnc_period_s=0.105, dynamics_dt_s=0.01)
+        with pytest.raises(ValueError, match="period_ms"):
+            Simulator(world, bus, icd, gnc_period_s=5.0, dynamics_dt_s=0.01)
+        sim = Simulator(world, bus, icd)
+        with pytest.raises(RuntimeError, match="without begin_tick"):
+            sim.end_tick(0.0)
+        sim.begin_tick()
+        with pytest.raises(RuntimeError, match="twice"):
+            sim.begin_tick()
+    finally:
+        bus.shutdown()
