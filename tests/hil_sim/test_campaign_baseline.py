@@ -11,7 +11,7 @@ from hil_sim.campaign.spec import BaselinePolicy, Tolerance
 
 from campaign_kit import TOY_MISSION_YAML, toy_plan, write_toy
 
-RUNS = 16
+RUNS = 10
 
 
 def _campaign(tmp_path, name, mission_text=TOY_MISSION_YAML):

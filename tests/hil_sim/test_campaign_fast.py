@@ -87,3 +87,20 @@ def test_ctrl_c_stops_the_campaign_and_keeps_finished_runs(tmp_path):
     assert 1 <= len(kept) < 8 and "interrupted" in output
     # the finished runs were tabulated, and the folder resumes
     assert len(pd.read_parquet(out / "results.parquet")) == len(kept)
+
+
+@pytest.mark.slow
+def test_sil_mode_runs_the_three_process_sil_per_run(tmp_path):
+    """One dispersed run as a full SIL (simulator, flight software and ground processes over its own
+    udp_multicast group), judged like fast mode; its dispersions read back from the SIL's config."""
+    from hil_sim.campaign.execute import execute_run
+    from hil_sim.campaign.runner import build_plan
+    from hil_sim.campaign.spec import load_campaign
+
+    campaign = load_campaign(REGRESSION).model_copy(update={"duration_s": 15.0, "mode": "sil"})
+    plan, _ = build_plan(REGRESSION, campaign=campaign, runs=1)
+    record = execute_run(plan, 0)
+    assert record.status in ("pass", "fail"), record.error
+    assert record.sim_time_s == pytest.approx(15.0, abs=0.2)
+    assert set(record.used) == set(record.values)
+    assert record.metrics["min_margin_deg"] > 0
