@@ -76,17 +76,18 @@ def plot_distribution(df: pd.DataFrame, criterion: Criterion, path: Path) -> Pat
     return path
 
 
-def _sphere_axes(ax) -> None:
-    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 37), np.linspace(0, np.pi, 19))
-    ax.plot_wireframe(np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color="0.85", lw=0.4)
-    ax.set_box_aspect((1, 1, 1))
-    ax.set_xlim(-1, 1), ax.set_ylim(-1, 1), ax.set_zlim(-1, 1)
-    ax.set_xlabel("x_N"), ax.set_ylabel("y_N"), ax.set_zlabel("z_N")
+def _sky_line(ax, v: np.ndarray, **kw) -> None:
+    """A path on the sphere as RA/Dec on Mollweide axes, split where it wraps at RA = 180 deg."""
+    ra, dec = _ra_dec(v)
+    breaks = np.nonzero(np.abs(np.diff(ra)) > np.pi)[0] + 1
+    label = kw.pop("label", None)
+    for k, (a, b) in enumerate(zip(np.split(ra, breaks), np.split(dec, breaks))):
+        ax.plot(a, b, label=label if k == 0 else None, **kw)
 
 
 def plot_worst_trajectories(campaign: Campaign, worst: Sequence[RunRecord],
                             trajectories: dict[int, dict[str, np.ndarray]], path: Path) -> Path | None:
-    """Boresight (or the given S^2 path) of the worst runs on the unit sphere with their zones."""
+    """Boresight paths of the worst runs on the sky (Mollweide RA/Dec) with their keep-out zones."""
     shown = [(r, trajectories.get(r.run, {})) for r in worst]
     shown = [(r, t) for r, t in shown if _sphere_path(t) is not None]
     if not shown:
@@ -94,29 +95,29 @@ def plot_worst_trajectories(campaign: Campaign, worst: Sequence[RunRecord],
     plt = _plt()
     cols = min(len(shown), 2)
     rows = int(math.ceil(len(shown) / cols))
-    fig = plt.figure(figsize=(5.2 * cols, 4.8 * rows))
+    fig = plt.figure(figsize=(6.4 * cols, 3.6 * rows))
     c = campaign.criteria[0]
     for k, (rec, traj) in enumerate(shown):
-        ax = fig.add_subplot(rows, cols, k + 1, projection="3d")
-        _sphere_axes(ax)
+        ax = fig.add_subplot(rows, cols, k + 1, projection="mollweide")
         for key in sorted(traj):
             if key.startswith("zone_") and traj[key].ndim == 2 and traj[key].shape[1] == 3:
-                b = traj[key]
-                ax.plot(b[:, 0], b[:, 1], b[:, 2], color="#c44e52", lw=1.5)
+                _sky_line(ax, np.vstack([traj[key], traj[key][:1]]), color="#c44e52", lw=1.4,
+                          label="keep-out zone" if key == "zone_0" else None)
         x = _sphere_path(traj)
-        centre = x.mean(axis=0)
-        if np.linalg.norm(centre) > 1e-6:  # look at the path from outside the sphere
-            centre = centre / np.linalg.norm(centre)
-            ax.view_init(elev=np.degrees(np.arcsin(np.clip(centre[2], -1, 1))),
-                         azim=np.degrees(np.arctan2(centre[1], centre[0])))
-        ax.plot(x[:, 0], x[:, 1], x[:, 2], color="#4c72b0", lw=1.6)
-        ax.scatter(*x[0], color="#55a868", s=25, label="start")
+        _sky_line(ax, x, color="#4c72b0", lw=1.6, label="boresight")
+        ra, dec = _ra_dec(x[0])
+        ax.scatter(ra, dec, color="#55a868", s=25, zorder=3, label="start")
         if "target" in traj and np.asarray(traj["target"]).shape == (3,):
-            ax.scatter(*traj["target"], color="k", marker="*", s=60, label="target")
+            ra, dec = _ra_dec(np.asarray(traj["target"]))
+            ax.scatter(ra, dec, color="k", marker="*", s=70, zorder=3, label="final target")
+        ax.grid(alpha=0.4)
+        ax.tick_params(labelsize=7)
         value = rec.metrics.get(c.metric, math.nan)
         ax.set_title(f"run {rec.run} [{rec.status}] {c.metric} = {value:.3g}", fontsize=9)
         if k == 0:
-            ax.legend(fontsize=7, loc="upper left")
+            ax.legend(fontsize=7, loc="lower right")
+    fig.suptitle("worst runs: instrument boresight on the sky (RA/Dec, Mollweide), zones at the end of the run",
+                 fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
