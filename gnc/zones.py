@@ -286,10 +286,12 @@ class StarZone(Zone):
         zone = cls(c, B, "superellipsoid")
         zone.semi_axes = a
         zone.exponent = q
-        mode = 0 if q <= 2.0 else 1
-        e = 2.0 / q if mode == 0 else 1.0
-        zone._geom = np.ascontiguousarray(np.concatenate([[q, e, float(mode)], c, B.ravel(), a]))
-        zone._samples, zone._cells, zone._cell_start = _se.build_cells(zone._geom, zone.dim, n, resolution)
+        zone._stats = np.zeros(4, dtype=np.int64)  # search effort of the last nearest() call
+        zone._geom = _se.make_geom(q, c, B, a)
+        zone._samples, zone._cells, zone._supers, zone._grid, zone._cell_of = _se.build_cells(
+            zone._geom, zone.dim, n, resolution)
+        zone._plane = np.ascontiguousarray(np.append(zone.plane_normal, zone.plane_offset))
+        zone._se_args = (zone._geom, zone._samples, zone._cells, zone._supers, zone._grid, zone._cell_of, zone._plane)
         return zone
 
     @classmethod
@@ -382,7 +384,7 @@ class StarZone(Zone):
     def contains(self, x: ArrayLike) -> bool:
         arr = self._check_x(x)
         if self.shape == "superellipsoid":
-            return bool(_se.contains_point(arr, self._geom, self.plane_normal, self.plane_offset, self.dim, self.n))
+            return bool(_se.contains_point(arr, self._geom, self._plane))
         if self.shape == "polygon":
             return bool(_poly.contains_point(arr, self.vertices, self.center_point, self.basis,
                                              self.plane_normal, self.plane_offset))
@@ -393,7 +395,7 @@ class StarZone(Zone):
         if self.shape == "superellipsoid":
             w = np.empty(self.n)
             b = np.empty(self.dim)
-            _se.boundary_max(arr, self._geom, self._samples, self._cells, self._cell_start, self.dim, self.n, w, b)
+            _se.boundary_max(arr, *self._se_args[:-1], w, b, self._stats)
             return 0.5 * float(np.sum((arr - b) ** 2)), b
         if self.shape == "polygon":
             b = np.empty(3)
@@ -404,19 +406,16 @@ class StarZone(Zone):
     def signed_separation(self, x: ArrayLike) -> float:
         arr = self._check_x(x)
         if self.shape == "superellipsoid":
-            d = _se.separation_to_boundary(arr, self._geom, self._samples, self._cells, self._cell_start,
-                                           self.dim, self.n)
-        else:
-            d = self._nearest_and_distance(arr)[0]
+            return _se.signed_separation_one(arr, *self._se_args, False)
+        d = self._nearest_and_distance(arr)[0]
         return -d if self.contains(arr) else d
 
     def separation(self, x: ArrayLike) -> float:
         arr = self._check_x(x)
+        if self.shape == "superellipsoid":
+            return _se.signed_separation_one(arr, *self._se_args, True)
         if self.contains(arr):
             return 0.0
-        if self.shape == "superellipsoid":
-            return _se.separation_to_boundary(arr, self._geom, self._samples, self._cells, self._cell_start,
-                                              self.dim, self.n)
         return self._nearest_and_distance(arr)[0]
 
     def nearest(self, x: ArrayLike) -> NDArray[np.float64]:
@@ -425,8 +424,7 @@ class StarZone(Zone):
     def signed_separation_batch(self, X: ArrayLike) -> NDArray[np.float64]:
         arr = self._check_batch(X)
         if self.shape == "superellipsoid":
-            return _se.signed_separation_batch(arr, self._geom, self._samples, self._cells, self._cell_start,
-                                               self.plane_normal, self.plane_offset, self.dim, self.n, False)
+            return _se.signed_separation_batch(arr, *self._se_args, False)
         if self.shape == "polygon":
             return _poly.signed_separation_batch(arr, self._edges, self.vertices, self.center_point, self.basis,
                                                  self.plane_normal, self.plane_offset, False)
@@ -435,8 +433,7 @@ class StarZone(Zone):
     def separation_batch(self, X: ArrayLike) -> NDArray[np.float64]:
         arr = self._check_batch(X)
         if self.shape == "superellipsoid":
-            return _se.signed_separation_batch(arr, self._geom, self._samples, self._cells, self._cell_start,
-                                               self.plane_normal, self.plane_offset, self.dim, self.n, True)
+            return _se.signed_separation_batch(arr, *self._se_args, True)
         if self.shape == "polygon":
             return _poly.signed_separation_batch(arr, self._edges, self.vertices, self.center_point, self.basis,
                                                  self.plane_normal, self.plane_offset, True)
