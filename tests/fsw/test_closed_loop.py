@@ -60,7 +60,7 @@ def test_pointing_slew_past_sun_star_zone_and_moon_cone_through_the_bus() -> Non
     margins, errors = [], []
     try:
         zones = None
-        for k in range(2600):
+        for k in range(2300):
             loop.step()
             tr = world.truth
             if k % 300 == 0:  # the Sun and Moon move < 0.02 deg in 30 s
@@ -76,7 +76,7 @@ def test_pointing_slew_past_sun_star_zone_and_moon_cone_through_the_bus() -> Non
     assert np.all(margins > 0.0), "the boresight entered a physical keep-out zone"
     assert margins[:, 0].min() < 15.0  # the slew really passed the Sun zone
     settle = next(i for i in range(len(errors)) if max(errors[i:]) < 0.05)
-    assert settle * cfg.gnc_period_s < 240.0
+    assert settle * cfg.gnc_period_s < 210.0
     assert loop.sim.stats.cycle_done_timeouts == 0
     assert loop.fsw.executive.gnc.slips == 0 or loop.fsw.executive.gnc.slips <= 2  # host hiccups only
 
