@@ -340,11 +340,11 @@ class _Progress:
         self.progress.console.print(f"bus: {bus_note}")
         self.task = self.progress.add_task("SIL", total=duration_s, speed="", channels="")
 
-    def update(self, t_s: float, wall_s: float, truth_error_deg: float, status_queue) -> None:
+    def update(self, t_s: float, wall_s: float, truth_error_deg: float, status_queue, force: bool = False) -> None:
         if not self.enabled:
             return
         now = time.monotonic()
-        if now - self._last < 0.2:
+        if now - self._last < 0.2 and not force:
             return
         self._last = now
         try:
@@ -473,6 +473,8 @@ def run_sil(options: RunOptions) -> RunResult:
                 raise RunNotStarted(f"the flight software exited (code {fsw_proc.returncode}) at t = "
                                     f"{sim.t_s:.1f} s; see {run_dir / FSW_LOG}:\n" + _tail(run_dir / FSW_LOG))
             progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s), status_queue)
+        progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s), status_queue,
+                        force=True)
     except KeyboardInterrupt:
         interrupted = True
     finally:
