@@ -5,7 +5,8 @@ series for the Moon) is far too slow to call every 10 ms, so it is evaluated onc
 (``node_spacing_s``, default 1 h) and the geocentric GCRS positions are interpolated with a cubic spline.
 Interpolation error (tests/hil_sim/test_world.py): < 1e-7 rad (0.02 arcsec) for the Moon with 1 h nodes,
 much less for the Sun; astropy's own built-in Moon is good to ~10 arcsec, the Sun to ~1 arcsec. The grid is
-extended lazily as the run advances and shared between worlds with the same epoch (campaigns).
+extended lazily as the run advances and shared between worlds with the same epoch (campaigns). Each block of
+96 nodes is fitted on its own, so the numbers a run sees never depend on what ran before it in the process.
 
 IERS: GCRS positions of bodies need no Earth-orientation data, and we pass TDB times directly, so no IERS
 table or leap-second download is ever attempted (``iers.conf.auto_download`` is switched off here anyway).
@@ -71,6 +72,17 @@ def _spline_coefficients(values: np.ndarray, h: float) -> np.ndarray:
     return np.ascontiguousarray(np.transpose(spline.c, (1, 0, 2)))
 
 
+@lru_cache(maxsize=256)
+def _block_coefficients(epoch_tdb_jd: float, node_spacing_s: float, block: int,
+                        block_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Spline segments of one block: nodes block*B .. (block+1)*B, each block fitted on its own (with two
+    extra nodes each side so the not-a-knot end conditions stay outside), so a block's coefficients never
+    depend on which other blocks exist: a run gives the same numbers whatever ran before it."""
+    sun, moon = _astropy_nodes(epoch_tdb_jd, node_spacing_s, block * block_nodes - 2, block_nodes + 5)
+    return (_spline_coefficients(sun, node_spacing_s)[2:2 + block_nodes],
+            _spline_coefficients(moon, node_spacing_s)[2:2 + block_nodes])
+
+
 class TruthEphemeris:
     """Geocentric Sun and Moon positions (km, GCRS) as functions of t (s since ``epoch_tdb_jd``)."""
 
@@ -80,45 +92,54 @@ class TruthEphemeris:
     def __init__(self, epoch_tdb_jd: float, node_spacing_s: float = 3600.0) -> None:
         self.epoch_tdb_jd = float(epoch_tdb_jd)
         self.node_spacing_s = float(node_spacing_s)
+        self._lock = threading.Lock()
+        self._blocks = (0, 0)  # [first, last) block covered
         self.t_start_s = 0.0
         self.t_end_s = -1.0
-        self.sun_coeffs = np.zeros((0, 4, 3))
-        self.moon_coeffs = np.zeros((0, 4, 3))
         self.ensure(0.0, 1.0)
 
     def ensure(self, t_min_s: float, t_max_s: float) -> None:
-        """Make the table cover [t_min_s, t_max_s] (extends by whole blocks; cheap when already covered)."""
+        """Make the table cover [t_min_s, t_max_s] (extends by whole blocks; cheap when already covered).
+        The table is swapped in one assignment, so a reader always sees a consistent (t0, sun, moon) set."""
         if self.t_start_s <= t_min_s and t_max_s < self.t_end_s:
             return
-        h = self.node_spacing_s
-        lo_block = math.floor(min(t_min_s, self.t_start_s if self.t_end_s > 0 else t_min_s) / h / self.BLOCK_NODES)
-        hi_block = math.floor(max(t_max_s, self.t_end_s) / h / self.BLOCK_NODES) + 1
-        # One node of margin each side keeps the spline's not-a-knot end conditions away from the span used.
-        first = lo_block * self.BLOCK_NODES - 2
-        count = (hi_block - lo_block) * self.BLOCK_NODES + 5
-        suns, moons = [], []
-        for b in range(lo_block, hi_block):
-            s, m = _astropy_nodes(self.epoch_tdb_jd, h, b * self.BLOCK_NODES - 2, self.BLOCK_NODES + 5)
-            suns.append(s if not suns else s[5:])
-            moons.append(m if not moons else m[5:])
-        sun = np.concatenate(suns)[:count]
-        moon = np.concatenate(moons)[:count]
-        self.sun_coeffs = _spline_coefficients(sun, h)
-        self.moon_coeffs = _spline_coefficients(moon, h)
-        self.t0_s = first * h  # time of node 0
-        self.t_start_s = (first + 2) * h
-        self.t_end_s = (first + count - 3) * h
+        with self._lock:
+            span = self.node_spacing_s * self.BLOCK_NODES
+            first, last = self._blocks
+            lo = math.floor(t_min_s / span)
+            hi = math.floor(t_max_s / span) + 1
+            if last > first:
+                lo, hi = min(lo, first), max(hi, last)
+            blocks = [_block_coefficients(self.epoch_tdb_jd, self.node_spacing_s, b, self.BLOCK_NODES)
+                      for b in range(lo, hi)]
+            self.table = (lo * span, np.ascontiguousarray(np.concatenate([s for s, _ in blocks])),
+                          np.ascontiguousarray(np.concatenate([m for _, m in blocks])))
+            self._blocks = (lo, hi)
+            self.t_start_s, self.t_end_s = lo * span, hi * span
+
+    @property
+    def t0_s(self) -> float:
+        return self.table[0]
+
+    @property
+    def sun_coeffs(self) -> np.ndarray:
+        return self.table[1]
+
+    @property
+    def moon_coeffs(self) -> np.ndarray:
+        return self.table[2]
 
     def positions_N_km(self, t_s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Sun and Moon geocentric positions at t (s since epoch), shape (..., 3) each."""
         t = np.asarray(t_s, dtype=float)
         self.ensure(float(t.min()), float(t.max()))
+        t0, sun_c, moon_c = self.table
         flat = t.reshape(-1)
         sun = np.empty((flat.size, 3))
         moon = np.empty((flat.size, 3))
         for k in range(flat.size):
-            spline_eval(self.sun_coeffs, self.t0_s, self.node_spacing_s, flat[k], sun[k])
-            spline_eval(self.moon_coeffs, self.t0_s, self.node_spacing_s, flat[k], moon[k])
+            spline_eval(sun_c, t0, self.node_spacing_s, flat[k], sun[k])
+            spline_eval(moon_c, t0, self.node_spacing_s, flat[k], moon[k])
         return sun.reshape(t.shape + (3,)), moon.reshape(t.shape + (3,))
 
 

@@ -211,9 +211,10 @@ class WorldBatch:
             self._coef = dyn.step_coefficients(self.W, self.B, dt_sub)
             self._coef_dt = dt_sub
         decay, gm, has_coulomb = self._coef
+        eph_t0, sun_c, moon_c = eph.table  # one read: consistent even if another thread extends the table
         if not _world_step_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_cmd, normals, dt_sub, n_sub,
                                   self.U_APPLIED, self.FLAGS, decay, gm, has_coulomb, t_end, self.ORB,
-                                  eph.sun_coeffs, eph.moon_coeffs, eph.t0_s, eph.node_spacing_s, self.AUX):
+                                  sun_c, moon_c, eph_t0, eph.node_spacing_s, self.AUX):
             raise ValueError(f"step: wheel_torque_cmd_Nm must be finite, got {u_cmd.tolist()!r}")
         self._t = t_end
 

@@ -169,3 +169,16 @@ def test_truth_ephemeris_works_offline(monkeypatch):
     sun, moon = eph.positions_N_km(np.array([0.0, 86400.0]))
     assert np.all(np.isfinite(sun)) and np.all(np.isfinite(moon))
     assert 1.45e8 < np.linalg.norm(sun[0]) < 1.53e8 and 3.5e5 < np.linalg.norm(moon[0]) < 4.1e5
+
+
+def test_truth_ephemeris_values_do_not_depend_on_history():
+    """Determinism across runs sharing the cached table: extending it must not change values already used."""
+    from hil_sim.ephemeris_truth import TruthEphemeris
+
+    t = np.array([1.0, 2.5 * 86400.0, 3.99 * 86400.0])
+    short = TruthEphemeris(2462001.5, 3600.0)
+    before = short.positions_N_km(t)
+    short.ensure(-5 * 86400.0, 30 * 86400.0)  # what a long run (or an earlier one) would do
+    after = short.positions_N_km(t)
+    np.testing.assert_array_equal(before[0], after[0])
+    np.testing.assert_array_equal(before[1], after[1])
