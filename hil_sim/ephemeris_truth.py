@@ -4,8 +4,8 @@ astropy (``solar_system_ephemeris.set('builtin')``: ERFA epv00 for the Earth/Sun
 series for the Moon) is far too slow to call every 10 ms, so it is evaluated once on a grid of TDB epochs
 (``node_spacing_s``, default 1 h) and the geocentric GCRS positions are interpolated with a cubic spline.
 Interpolation error (tests/hil_sim/test_world.py bounds it by 1e-7 rad; measured over 20 days at 1 h nodes:
-Moon 8e-11 rad, Sun 4e-12 rad), negligible next to astropy's own built-in accuracy; astropy's own built-in Moon is good to ~10 arcsec, the Sun to ~1 arcsec. The grid is
-extended lazily as the run advances and shared between worlds with the same epoch (campaigns). Each block of
+Moon 8e-11 rad, Sun 4e-12 rad), negligible next to astropy's own built-in accuracy (Moon ~10 arcsec,
+Sun ~1 arcsec). The grid is extended lazily as the run advances and shared between worlds with the same epoch (campaigns). Each block of
 96 nodes is fitted on its own, so the numbers a run sees never depend on what ran before it in the process.
 
 IERS: GCRS positions of bodies need no Earth-orientation data, and we pass TDB times directly, so no IERS
