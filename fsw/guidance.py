@@ -26,7 +26,11 @@ hemisphere (q . x_d >= 0, the shorter rotation); afterwards the sign is kept con
 its guarantees apply to the lifted path, there is no chattering at q . x_d = 0, and no unwinding is forced
 unless the zones demand it. A zone's physical set of attitudes is both +U and -U; a zone that must be
 avoided on both sheets sets ``antipodal_copy: true`` (the default is false so that the paper's S^3
-problems are reproduced exactly).
+problems are reproduced exactly). Consequence for the paper's seven-cone example: with this lift the cone
+at -x_d is never approached and the cones at +-e2..e4 (the 180 deg rotations) lie on the lifted start's
+far boundary, so the example converges without touching them; a zone that really stands between the
+start and the target (tests/fsw/test_closed_loop.py, the paper's S^3 star zone with its antipodal copy)
+is gone around by the StarShapedLaw.
 
 Keep-out margin: how to choose ``law.margin_deg``. The law guarantees d_s(y, U_infl) > 0 only for the
 kinematic system ydot = P(y)u. The real loop lags it, so the boresight can cross into the inflated layer
@@ -37,20 +41,33 @@ by the lag error; the requirement is judged on the physical zones, so choose
 * ephemeris: Moon 0.3 deg (gnc.ephemeris, max), Sun 0.01 deg, Earth (onboard orbit) as good as the orbit;
 * estimation: 3 sigma of the attitude estimate, sqrt(cov_trace) (~0.01 deg with a star tracker; grows
   while coasting: the estimator's coasting time bounds it);
-* tracking overshoot: when the law turns the rate command at the eps-layer, the rate loop needs
-  ``omega_max / rate_bandwidth`` seconds to follow and the wheels decelerate at most at
-  ``alpha = tau_max_eff / J``; the boresight travels about
-  ``omega_max^2 / (2 alpha) + omega_max / rate_bandwidth`` (rad) past the point where the command turned;
-  with the defaults (1 deg/s, 1 rad/s, 0.05 N m on 10 kg m^2) that is ~1.0 deg + ~0.3 deg before
-  the law's own layer even starts to act. Measured in tests/fsw/test_closed_loop.py (slew past a Sun
-  star zone and a Moon cone): the smallest physical margin reached with margin_deg = M is reported there;
+* tracking overshoot: when the law turns the rate command in the eps-layer, the rate loop needs about
+  ``1 / rate_bandwidth`` seconds to follow and the wheels decelerate at most at ``alpha = tau_eff / J``,
+  so the boresight can run past the kinematic path by at most about
+  ``omega_max^2 / (2 alpha) + omega_max / rate_bandwidth`` (rad): ~1 deg + ~1 deg for 1 deg/s, 1 rad/s,
+  0.5 deg/s^2. That bound is pessimistic because the law turns gradually across its layer. Measured
+  (bench/fsw.py margin study; 120 deg slew at 1 deg/s past a star-shaped Sun zone and a Moon cone,
+  hil_sim spacecraft 20/25/15 kg m^2, four 0.2 N m wheels, noisy gyro and star tracker, 10 Hz):
+
+      margin_deg   kinematic-law minimum   real-loop minimum   consumed by the loop
+         0.0              2.68 deg             2.69 deg              0.0 deg
+         1.0              3.39                 3.36                  0.03
+         2.0              4.09                 3.86                  0.23
+         3.0              4.78                 4.42                  0.35
+         5.0              6.14                 5.50                  0.64
+
+  (the kinematic law itself stays ~2.7 deg outside the inflated boundary here; a grazing path can come
+  arbitrarily close, so the law's standoff must not be counted on);
 * nothing for the zone rebuild tolerance: zones are rebuilt only when their centre has moved by
   ``ZONE_REBUILD_TOL_DEG`` (0.1 deg; in LEO the Earth moves 0.06 deg/s, so about every 2 s instead of
   every cycle), and the law's zones carry that tolerance as extra inflation, while the physical margins
   are corrected by the drift since the build (moving a set by d changes a distance by at most d).
 
-A margin of 2-3 deg is adequate for the default spacecraft at 1 deg/s; scale the tracking term with
-omega_max^2 / alpha for faster slews or weaker wheels. ``KEEP_OUT_MARGIN_LOW`` (yellow limit) tells
+Rule: margin_deg = 0.3 (Moon ephemeris) + 3 sigma attitude (sqrt(cov_trace), longest expected coast)
++ the larger of the measured loop consumption and half the overshoot bound above, rounded up; 2-3 deg for
+the default spacecraft at 1 deg/s. Re-measure with ``bench/fsw.py --skip-cycle --skip-realtime`` after
+changing the rate limit, k1, the rate bandwidth or the wheels; the tracking term grows with
+omega_max^2 / alpha. ``KEEP_OUT_MARGIN_LOW`` (yellow limit) tells
 operations when the loop eats more of the margin than budgeted.
 """
 from __future__ import annotations
