@@ -110,6 +110,7 @@ def test_kepler_orbit_two_body_invariants():
     h = 1e-3
     for tk in t[::40]:
         v = (orbit.position_N_km(tk + h) - orbit.position_N_km(tk - h)) / (2 * h)
+        np.testing.assert_allclose(orbit.velocity_N_km_s(tk), v, rtol=0, atol=1e-6)
         rk = orbit.position_N_km(tk)
         assert v @ v == pytest.approx(p.mu_km3_s2 * (2 / np.linalg.norm(rk) - 1 / 12000.0), rel=1e-7)
         hvec = np.cross(rk, v)
