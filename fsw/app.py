@@ -297,15 +297,21 @@ class FlightSoftware:
             self._bus_tx_errors = getattr(self, "_bus_tx_errors", 0) + 1
             self._event("FATAL_ERROR", reason=f"bus send failed: {type(exc).__name__}: {exc}"[:110])
 
-        # ---- FDIR
+        # ---- FDIR (sensor monitors are armed once the sensor has been heard from: a flight software
+        # started before its devices must not trip on silence)
         corrupt = self._corrupt_deltas()
+        self._imu_seen = getattr(self, "_imu_seen", False) or imu is not None
+        self._st_seen = getattr(self, "_st_seen", False) or st_fresh
+        seen = getattr(self, "_wheel_seen", [False] * self.n_wheels)
+        self._wheel_seen = [a or (w is not None) for a, w in zip(seen, wheels)]
         fin = FdirInputs(
-            imu_missing=imu is None,
+            imu_missing=imu is None and self._imu_seen,
             imu_corrupt_frames=corrupt["IMU"],
-            st_missing=not st_fresh,
+            st_missing=(not st_fresh) and self._st_seen,
             st_corrupt_frames=corrupt["STAR_TRACKER"],
             innovation_deg=status.innovation_deg if status is not None else None,
-            wheel_fault=[(w is None) or bool(int(w.fault) & WHEEL_FAULT_MASK) for w in wheels],
+            wheel_fault=[(w is None and armed) or (w is not None and bool(int(w.fault) & WHEEL_FAULT_MASK))
+                         for w, armed in zip(wheels, self._wheel_seen)],
             wheel_speed_ratio=[
                 max(abs(s) / m, 1.0 if (w is not None and int(w.fault) & WHEEL_OVERSPEED) else 0.0) if np.isfinite(s) else float("nan")
                 for s, m, w in zip(speeds, self.control.max_speed, wheels)

@@ -126,10 +126,14 @@ def test_process_entry_reports_a_bad_config_with_the_key(tmp_path) -> None:
 
 
 def test_realtime_loop_on_the_clock(loop) -> None:
-    """Real time on the monotonic clock for 1 s with no simulator: cycles on schedule, IMU stale
-    detected (no frames), timing measured."""
+    """Real time on the monotonic clock for 1 s with the simulator silent: cycles on schedule, timing
+    measured; the IMU monitor trips once the IMU has been heard from and then goes quiet, never before."""
     n = loop.fsw.run_realtime(duration_s=1.0)
     assert n >= 9
     ex = loop.fsw.executive
     assert len(ex.jitter.recent) == n and ex.gnc.cycles == n
-    assert loop.fsw.fdir.stale_counts["IMU"] == n
+    assert loop.fsw.fdir.stale_counts["IMU"] == 0 and loop.fsw.mode == "SAFE"  # not armed: never heard
+    loop.run(3)  # a few lockstep ticks: the IMU is heard
+    loop.fsw.run_realtime(duration_s=1.0)
+    assert loop.fsw.fdir.stale_counts["IMU"] >= 9
+    assert any(e.name == "FDIR_TRIPPED" and e.args["monitor"] == "IMU_STALE" for e in loop.tm.recent_events)
