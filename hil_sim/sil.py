@@ -76,7 +76,7 @@ class RunOptions:
     out_root: Path = Path("runs")
     progress: bool = True
     skip_physics_checks: bool = False
-    fsw_start_timeout_s: float = 180.0  # first start compiles numba kernels
+    fsw_start_timeout_s: float = 600.0  # the first start on a fresh machine compiles (and caches) numba kernels
     cycle_done_timeout_s: float = 30.0  # lockstep: a tick unanswered this long counts as missed
     max_consecutive_missed: int = 3  # then the flight software is taken as hung and the run ends
 
@@ -472,7 +472,9 @@ def run_sil(options: RunOptions) -> RunResult:
             if fsw_proc.poll() is not None:
                 raise RunNotStarted(f"the flight software exited (code {fsw_proc.returncode}) at t = "
                                     f"{sim.t_s:.1f} s; see {run_dir / FSW_LOG}:\n" + _tail(run_dir / FSW_LOG))
-            progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s), status_queue)
+            if progress.enabled:
+                progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s),
+                                status_queue)
         progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s), status_queue,
                         force=True)
     except KeyboardInterrupt:
