@@ -200,3 +200,10 @@ def test_random_frames_never_move_the_wheels(icd, shared_world, frames) -> None:
         assert all(w.last_cmd_t is None for w in sim.devices.wheels)
         assert np.all(sim.devices.wheel_torques(sim.t_s) == 0.0)
         assert sim.stats.cycle_done == 0 and sim.stats.wheel_commands == 0
+
+
+def test_lost_sync_costs_one_cycle(icd, params) -> None:
+    sim, driver, inputs = run_with_faults(icd, params, [FaultSpec("drop", "SYNC", **window(5, 5))], ticks=12)
+    assert sim.stats.cycle_done_timeouts == 1 and sim.stats.cycle_done == 11
+    assert only(driver.counters, "SYNC") == {"ok_some_lost": 1}
+    assert [i.tick for i in inputs] == [0, 1, 2, 3, 4, 4, 6, 7, 8, 9, 10, 11]  # tick 5 never started
