@@ -231,7 +231,7 @@ class LawConfig(_Strict):
     eps_fraction: float = Field(0.5, gt=0.0, lt=1.0, description="With eps='auto': eps = eps_fraction * eps_max from gnc.checks.")
     eps_max_used: float = Field(0.15, gt=0.0, le=1.0, description="Upper cap on eps whatever the check allows (keeps the avoidance layer thin).")
     margin_deg: float = Field(3.0, ge=0.0, le=30.0, description="The law avoids physical zones inflated by this margin [deg]; see fsw.guidance for how to choose it.")
-    merge_gap_deg: float = Field(2.0, ge=0.0, le=30.0, description="Two (inflated) zones whose bounding caps are closer than this gap are replaced by one conservative cone containing both (Assumption 1 would force a uselessly thin eps) [deg].")
+    merge_gap_deg: float = Field(4.0, ge=0.0, le=30.0, description="Two (inflated) zones whose bounding caps are closer than this gap [deg] are replaced by one conservative cone containing both, with an event. Assumption 1 ties eps to the gap (eps < 1 - cos(gap/2)), so a small gap forces an eps-layer too thin for the loop to turn in; merging trades sky area for a usable layer.")
     check_period_s: float = Field(10.0, gt=0.0, le=3600.0, description="How often the full assumption check (gnc.checks, incl. the numerical Assumption 2 test) is re-run while zones move [s]; it is re-submitted at once on target/gain/mode/zone-merge changes.")
     assumption_check: Literal["process", "inline", "off"] = Field("process", description="Where the full check runs: 'process' (a worker process, so the seconds it can take never delay a GNC cycle; results only feed telemetry/events), 'inline' (in the housekeeping group; deterministic, for tests), 'off'. The per-cycle eps bound never depends on it.")
 
