@@ -104,3 +104,31 @@ def test_sil_mode_runs_the_three_process_sil_per_run(tmp_path):
     assert record.sim_time_s == pytest.approx(15.0, abs=0.2)
     assert set(record.used) == set(record.values)
     assert record.metrics["min_margin_deg"] > 0
+
+
+def test_baseline_save_and_compare_through_the_cli(campaign_dir, tmp_path, capsys):
+    out, _ = campaign_dir
+    base = tmp_path / "baseline"
+    assert main(["campaign", "baseline", "save", str(out), "--to", str(base)]) == 0
+    assert main(["campaign", "compare", str(out), "--baseline", str(base)]) == 0
+    assert "no regression beyond tolerance" in capsys.readouterr().out
+    # a moved metric in the new results is flagged (exit 1)
+    df = pd.read_parquet(out / "results.parquet")
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    for name in ("plan.json", "campaign.yaml"):
+        (moved / name).write_text((out / name).read_text())
+    df.assign(**{"m.min_margin_deg": df["m.min_margin_deg"] - 1.0}).to_parquet(moved / "results.parquet")
+    assert main(["campaign", "compare", str(moved), "--baseline", str(base)]) == 1
+    assert "MOVED" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_shrink_through_the_cli_writes_the_smallest_failing_mission(campaign_dir, capsys):
+    out, _ = campaign_dir
+    assert main(["campaign", "shrink", str(out), "--run", "0", "--criterion", "settling",
+                 "--max-evaluations", "4"]) == 0
+    text = capsys.readouterr().out
+    assert "smallest failing case" in text
+    from hil_sim.mission import load_mission
+    assert load_mission(out / "shrink-run-000000.yaml").duration_s == 25.0
