@@ -320,14 +320,20 @@ def main() -> int:
 
     group, port = udp_endpoint_for_run(f"bench-{os.getpid()}")
     udp = f"udp_multicast:{group}:{port}"
-    results["udp_multicast"] = {"transport": transport_figures(udp, n_lat, n_thr),
+    results["host_cpus"] = os.cpu_count()
+    results["udp_multicast"] = {"host_loadavg_1min": os.getloadavg()[0],
+                                "transport": transport_figures(udp, n_lat, n_thr),
                                 "lockstep": lockstep_rate(udp, ticks),
                                 "lockstep_real_fsw": _real_fsw(udp, ticks)}
     results["virtual"] = {"lockstep": lockstep_rate(f"virtual:bench{os.getpid()}", ticks)}
+    load_before = os.getloadavg()[0]
     if Path("/sys/class/net/vcan0").exists():
         results["socketcan"] = socketcan_part(args.quick)
     else:
         results["socketcan"] = _vm_part(args.quick)
+    if results["socketcan"]:
+        # The vcan-vm guest runs on one host CPU: other work on the host slows it directly.
+        results["socketcan"]["host_loadavg_1min"] = [load_before, os.getloadavg()[0]]
     results["receiver_fuzz"] = receiver_fuzz(n_fuzz)
     print_report(results)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
@@ -348,7 +354,10 @@ def print_report(r: dict) -> None:
         print(f"  total {load['bits_per_cycle_worst']:.0f} bits/cycle worst ({load['bits_per_cycle_nominal']:.0f} "
               f"unstuffed) -> load {load['load_worst_pct']:.2f} % worst, {load['load_nominal_pct']:.2f} % unstuffed "
               f"(goal < 30 %)")
-    print(f"\n{'transport':<16}{'p50 us':>9}{'p99 us':>9}{'max us':>9}{'lost':>6}{'frames/s':>11}"
+    print(f"\nhost: {r.get('host_cpus')} CPUs; 1-min load average during udp_multicast "
+          f"{r['udp_multicast'].get('host_loadavg_1min', float('nan')):.1f}, during socketcan (vcan-vm) "
+          f"{(r.get('socketcan') or {}).get('host_loadavg_1min', '-')}")
+    print(f"{'transport':<16}{'p50 us':>9}{'p99 us':>9}{'max us':>9}{'lost':>6}{'frames/s':>11}"
           f"{'lockstep cyc/s':>16}")
     for name in ("socketcan", "udp_multicast", "virtual"):
         part = r.get(name)
