@@ -294,13 +294,13 @@ def finalize(plan: Plan, out_dir: Path, records: list[RunRecord] | None = None, 
         worst = worst_runs(plan.campaign, records)
         trajectories = {r.run: load_trajectory(out_dir, r.run) for r in worst}
         starts = None
-        if any(d.path == "initial_state.q_NB" and getattr(d, "kind", "") == "attitude"
-               and getattr(d, "max_angle_deg", 0) is None for d in plan.campaign.dispersions):
-            starts = {}  # the basin picture needs every run's starting boresight
+        if any(getattr(d, "kind", "") == "attitude" and d.max_angle_deg is None for d in plan.campaign.dispersions):
+            starts = {}  # initial attitudes uniform on SO(3): the basin picture needs every run's start
             for r in records:
                 traj = load_trajectory(out_dir, r.run)
-                if "boresight_N" in traj and len(traj["boresight_N"]):
-                    starts[r.run] = traj["boresight_N"][0]
+                path = traj.get("boresight_N", traj.get("x"))
+                if path is not None and path.ndim == 2 and path.shape[1] == 3 and len(path):
+                    starts[r.run] = path[0]
         out["report"] = write_report(plan.campaign, df, records, verdict, trajectories, out_dir, starts)
     (out_dir / "verdict.txt").write_text(verdict.text() + "\n", encoding="utf-8")
     return out

@@ -85,7 +85,8 @@ def test_finalize_writes_tables_junit_and_report(tmp_path):
     assert (df_parquet["v.keep_out"] == (df_parquet["m.min_margin_deg"] > 0)).all()
     xmlschema.XMLSchema(JUNIT_XSD).validate(files["junit"])
     report = files["report"]
-    for key in ("markdown", "html", "distribution_keep_out", "worst_trajectories", "scatter_min_margin_deg"):
+    for key in ("markdown", "html", "distribution_keep_out", "worst_trajectories", "scatter_min_margin_deg",
+                "basin"):
         assert report[key].exists() and report[key].stat().st_size > 0
     md = report["markdown"].read_text()
     assert "Verdict:" in md and "report/worst_trajectories.png" in md
