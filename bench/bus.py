@@ -175,14 +175,19 @@ def lockstep_rate(spec: str, ticks: int) -> dict:
     time.sleep(0.3)
     sim = Simulator(world, bus, icd, cycle_done_timeout_s=2.0)
     sim.run_lockstep(10)  # warm-up
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     sim.run_lockstep(ticks)
-    elapsed = time.perf_counter() - t0
-    proc.wait(timeout=60)
+    elapsed, sim_cpu = time.perf_counter() - t0, time.process_time() - cpu0
+    out, _ = proc.communicate(timeout=60)
     bus.shutdown()
+    fields = out.split()
+    fsw_cpu_per_cycle = float(fields[fields.index("cpu_s") + 1]) / int(fields[fields.index("cycles") + 1])
+    cpu_per_tick = sim_cpu / ticks + fsw_cpu_per_cycle
     return {"spec": spec, "mode": "two processes", "ticks": ticks, "cycles_per_s": ticks / elapsed,
             "frames_per_tick": sim.stats.frames_sent / sim.stats.ticks,
-            "cycle_done_timeouts": sim.stats.cycle_done_timeouts}
+            "cycle_done_timeouts": sim.stats.cycle_done_timeouts,
+            # CPU time of both processes per tick: the loop's rate on an otherwise idle CPU is 1 / this
+            "cpu_ms_per_tick": 1e3 * cpu_per_tick, "cycles_per_cpu_s": 1.0 / cpu_per_tick}
 
 
 def lockstep_rate_real_fsw(spec: str, ticks: int, mission_path: Path) -> dict:
@@ -357,7 +362,7 @@ def print_report(r: dict) -> None:
           f"{r['udp_multicast'].get('host_loadavg_1min', float('nan')):.1f}, during socketcan (vcan-vm) "
           f"{(r.get('socketcan') or {}).get('host_loadavg_1min', '-')}")
     print(f"{'transport':<16}{'p50 us':>9}{'p99 us':>9}{'max us':>9}{'lost':>6}{'frames/s':>11}"
-          f"{'lockstep cyc/s':>16}")
+          f"{'lockstep cyc/s':>16}{'cyc/CPU-s':>11}")
     for name in ("socketcan", "udp_multicast", "virtual"):
         part = r.get(name)
         if not part:
@@ -370,7 +375,8 @@ def print_report(r: dict) -> None:
             return fmt.format(t[key]) if key in t else "-"
 
         print(f"{name:<16}{f('latency_p50_us'):>9}{f('latency_p99_us'):>9}{f('latency_max_us'):>9}"
-              f"{f('latency_lost'):>6}{f('frames_per_s'):>11}{ls.get('cycles_per_s', float('nan')):>16.0f}")
+              f"{f('latency_lost'):>6}{f('frames_per_s'):>11}{ls.get('cycles_per_s', float('nan')):>16.0f}"
+              f"{ls.get('cycles_per_cpu_s', float('nan')):>11.0f}")
     for name in ("socketcan", "udp_multicast"):
         real = (r.get(name) or {}).get("lockstep_real_fsw")
         if real:
