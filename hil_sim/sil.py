@@ -376,7 +376,7 @@ def _fmt(value: Any) -> str:
 def run_sil(options: RunOptions) -> RunResult:
     """Run one SIL mission end to end (see the module docstring). Raises MissionRejected, RunNotStarted."""
     from fsw.bus.icd import Icd
-    from fsw.bus.transport import open_bus, resolve_spec
+    from fsw.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
     from hil_sim.lockstep import Simulator
     from hil_sim.mission import world_params
     from hil_sim.world import World
@@ -385,7 +385,10 @@ def run_sil(options: RunOptions) -> RunResult:
     run_dir = _run_dir(Path(options.out_root), mission.name)
     if report is not None:
         (run_dir / "physics_checks.txt").write_text(report.format() + "\n")
-    info = resolve_spec(mission.bus, run_id=run_dir.name)
+    try:
+        info = resolve_spec(mission.bus, run_id=run_dir.name)
+    except BusSpecError as exc:
+        raise MissionRejected(f"bus {mission.bus!r}: {exc}") from None
     fixed_ports = mission.tmtc_ports == "fixed"
     tmtc = mission.flight_software.tmtc
 
@@ -418,7 +421,10 @@ def run_sil(options: RunOptions) -> RunResult:
 
         # Open the simulator's end of the bus and build the world (astropy ephemeris nodes take a few
         # seconds) before the flight software starts: it waits only lockstep_timeout_s for SYNC(0).
-        bus = open_bus(info.spec, run_id=run_dir.name)
+        try:
+            bus = open_bus(info.spec, run_id=run_dir.name)
+        except (BusUnavailableError, OSError) as exc:
+            raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
         from fsw.ground import CommandSender
 
         sender = CommandSender(host=tmtc.telecommand_bind_host if tmtc.telecommand_bind_host != "0.0.0.0"
