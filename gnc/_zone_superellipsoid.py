@@ -25,16 +25,17 @@ with a 10 % safety factor. For a query x:
    cos(max(0, angle(x, axis) - rho)); the samples of every cell whose bound beats the best sample
    found so far are scored (the most promising cell first). Skipped cells provably cannot hold a
    value above the best sample.
-2. the global maximum lies within angle h of a sample whose value is then at least
-   cos(arccos(best sample) + h); among the scored samples above that threshold, the discrete local
-   maxima of the sample grid (8-neighbourhood) are the candidates.
-3. from the candidates, best first, a safeguarded Riemannian Newton ascent on S^(n-1) (analytic
-   gradient and Hessian; Newton along negative-curvature eigen-directions and trust-length steps
-   along flat or positive ones, which matters on the flat ridges that run along the fins into the
-   cusps) runs while the candidate's covering bound cos(max(0, arccos(v) - h)) can still beat the
-   best refined value. A run stops when a Newton step predicts a gain below 1e-14 (the local maximum
-   is then within 2e-14, even for the degenerate maxima next to fins), or early when it shows that
-   its local maximum cannot beat the best value (f + 2 * gain < best).
+2. a safeguarded Riemannian Newton ascent on S^(n-1) from the best sample (analytic gradient and
+   Hessian; Newton along negative-curvature eigen-directions and trust-length steps along flat or
+   positive ones, which matters on the flat ridges that run along the fins into the cusps). A run
+   stops when a Newton step predicts a gain below 1e-14 (the local maximum is then within 2e-14,
+   even for the degenerate maxima next to fins).
+3. the global maximum lies within angle h of a sample whose value is then at least
+   cos(arccos(best) + h); among the scored samples above that threshold, the discrete local maxima
+   of the sample grid (8-neighbourhood; branch-free when the cell's 8 neighbour cells were scored)
+   are the further candidates. Best first, each gets a Newton ascent while its covering bound
+   cos(max(0, arccos(v) - h)) can still beat the best value; a run stops early once a short Newton
+   step shows that its local maximum cannot beat the best (f + 2 * gain < best).
 
 The separation is |x - b|^2 / 2 at the best boundary point b (no cancellation near the boundary).
 Residual risk, stated honestly: a local maximum whose basin of attraction is narrower than the sample
@@ -42,7 +43,7 @@ spacing (about 2 degrees on the paper's zone) could be missed; the tests compare
 over a million-point parameterisation with polishing, including cusp tips and fins, to 1e-9.
 
 Geometry vector layout (float64, see make_geom): [q, e, mode, c (dim), B diag(a) row-major, B row-major, a].
-Sample rows: [w (n), b (dim)]. Cell rows: [axis (dim), cos rho, sin rho, cos h, sin h].
+Samples: a (2N, dim) array, boundary points b in rows [0, N), their w in rows [N, 2N). Cell rows: [axis (dim), cos rho, sin rho, cos h, sin h].
 """
 from __future__ import annotations
 
@@ -431,29 +432,57 @@ def newton_ascent(x, geom, w0, dim, n, w_out, wk, target):
     return f, its
 
 
-@njit(cache=True)
-def _cell_coords(P, n, m, sc):
-    """(face, bi, bj) of cell P (n = 3); cells are numbered face, super-cell, cell-in-super."""
-    m2 = m * m
-    face = P // m2
-    r = P - face * m2
-    ms = m // sc
-    sc2 = sc * sc
-    S = r // sc2
-    t = r - S * sc2
-    SI = S // ms
-    SJ = S - SI * ms
-    ti = t // sc
-    tj = t - ti * sc
-    return face, SI * sc + ti, SJ * sc + tj
+@njit(cache=True, inline="always")
+def _beaten(idx, v, vals, evaluated, cell_of):
+    # vals of unevaluated cells are stale: only trust a neighbour whose cell was scored
+    return vals[idx] > v and evaluated[cell_of[idx]]
 
 
-@njit(cache=True)
-def _cell_index(face, bi, bj, m, sc):
-    ms = m // sc
-    SI = bi // sc
-    SJ = bj // sc
-    return face * m * m + (SI * ms + SJ) * sc * sc + (bi - SI * sc) * sc + (bj - SJ * sc)
+@njit(cache=True, inline="always")
+def _is_local_max_face(j, i, jj, v, vals, evaluated, cell_of, G, i0, j0, k):
+    """_is_local_max for n = 3, with the sample's row i and column jj on its face and its cell's first
+    row i0 and column j0 (cell size k) known."""
+    if i > 0 and i < G - 1 and jj > 0 and jj < G - 1:
+        # Interior of the face (the common case). Most samples tested are beaten by a neighbour, so
+        # find the largest of the 8 neighbour values first (straight-line code); when it lies in the
+        # sample's own cell (scored, so its value is valid) no table look-up is needed.
+        a = j - G
+        c = j + G
+        di, dj = -1, -1
+        mv = vals[a - 1]
+        if vals[a] > mv:
+            di, dj, mv = -1, 0, vals[a]
+        if vals[a + 1] > mv:
+            di, dj, mv = -1, 1, vals[a + 1]
+        if vals[j - 1] > mv:
+            di, dj, mv = 0, -1, vals[j - 1]
+        if vals[j + 1] > mv:
+            di, dj, mv = 0, 1, vals[j + 1]
+        if vals[c - 1] > mv:
+            di, dj, mv = 1, -1, vals[c - 1]
+        if vals[c] > mv:
+            di, dj, mv = 1, 0, vals[c]
+        if vals[c + 1] > mv:
+            di, dj, mv = 1, 1, vals[c + 1]
+        if mv <= v:
+            return True
+        ii = i + di
+        jn = jj + dj
+        if ii >= i0 and ii < i0 + k and jn >= j0 and jn < j0 + k:
+            return False
+        if evaluated[cell_of[j + di * G + dj]]:
+            return False
+    for di in range(-1, 2):
+        ii = i + di
+        if ii < 0 or ii >= G:
+            continue
+        for dj in range(-1, 2):
+            jn = jj + dj
+            if jn < 0 or jn >= G or (di == 0 and dj == 0):
+                continue
+            if _beaten(j + di * G + dj, v, vals, evaluated, cell_of):
+                return False
+    return True
 
 
 @njit(cache=True)
@@ -504,7 +533,7 @@ def _eval_cell(x, samples, P, n, dim, G, k, grid, vals):
         for j in range(P * k, P * k + k):
             v = 0.0
             for i in range(dim):
-                v += x[i] * samples[j, n + i]
+                v += x[i] * samples[j, i]
             vals[j] = v
             if v > best:
                 best = v
@@ -513,7 +542,7 @@ def _eval_cell(x, samples, P, n, dim, G, k, grid, vals):
     for ii in range(k):
         base = first + ii * G
         for j in range(base, base + k):
-            v = x[0] * samples[j, 3] + x[1] * samples[j, 4] + x[2] * samples[j, 5] + x[3] * samples[j, 6]
+            v = x[0] * samples[j, 0] + x[1] * samples[j, 1] + x[2] * samples[j, 2] + x[3] * samples[j, 3]
             vals[j] = v
             if v > best:
                 best = v
@@ -535,7 +564,7 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
     per_super = sc if n == 2 else sc * sc
     M = cells.shape[0]
     Ms = supers.shape[0]
-    N = samples.shape[0]
+    N = samples.shape[0] // 2
     kk = k if n == 2 else k * k
     # 1. cap bounds of the super-cells
     ubs = np.empty(Ms)
@@ -554,6 +583,7 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
     vals = np.empty(N)
     ubc = np.empty(per_super)
     best_sample = -2.0
+    best_cell = 0
     n_cells = 0
     for r in range(Ms):
         if r == 0:
@@ -589,16 +619,44 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
             cell_best[P] = _eval_cell(x, samples, P, n, dim, G, k, grid, vals)
             if cell_best[P] > best_sample:
                 best_sample = cell_best[P]
-    # 3. discrete local maxima that could still beat the best sample (within the covering radius)
+                best_cell = P
+    # 3. Newton ascent from the best sample (necessarily a discrete local maximum): its value f1 >=
+    #    best sample tightens the candidate threshold below
+    best_j = 0
+    bv = -3.0
+    if n == 2:
+        for j in range(best_cell * k, best_cell * k + k):
+            if vals[j] > bv:
+                bv = vals[j]
+                best_j = j
+    else:
+        first = grid[4 + best_cell]
+        for ii in range(k):
+            for j in range(first + ii * G, first + ii * G + k):
+                if vals[j] > bv:
+                    bv = vals[j]
+                    best_j = j
+    w_try = np.empty(n)
+    wk = np.empty(_WORK)
+    best, its = newton_ascent(x, geom, samples[N + best_j, :n], dim, n, w_try, wk, -2.0)
+    if best < best_sample:  # an ascent cannot end lower; guard against a failed step sequence
+        best = best_sample
+        for t in range(n):
+            w_try[t] = samples[N + best_j, t]
+    for t in range(n):
+        w_best[t] = w_try[t]
+    n_newton = 1
+    n_iter = its
+    # 4. other discrete local maxima that could still beat it: the global maximum lies within angle h
+    #    of a sample v, so cos(arccos(v) - h) > best, i.e. v > cos(arccos(best) + h)
     cand = np.empty(64, dtype=np.int64)
     cand_val = np.empty(64)
     ncand = 0
-    bs = min(best_sample, 1.0)
+    bs = min(best, 1.0)
     sbs = math.sqrt(max(0.0, 1.0 - bs * bs))
     for P in range(M):
         if not evaluated[P]:
             continue
-        # v can beat best_sample within angle h only if arccos(v) - h < arccos(best_sample)
         thr = bs * cells[P, dim + 2] - sbs * cells[P, dim + 3]
         if cell_best[P] < thr:
             continue
@@ -616,11 +674,30 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
                     ncand += 1
         else:
             first = grid[4 + P]
+            r0 = first % (G * G)
+            i0 = r0 // G
+            j0 = r0 - i0 * G
+            # all 8 neighbour cells on the face and scored: every neighbour value of every sample of
+            # this cell is valid, and the local-maximum test is a branch-free max of 8 values
+            ring = True
+            for q in range(8):
+                cq = grid[4 + M + 8 * P + q]
+                if cq < 0 or not evaluated[cq]:
+                    ring = False
             for ii in range(k):
                 base = first + ii * G
-                for j in range(base, base + k):
+                for t in range(k):
+                    j = base + t
                     v = vals[j]
-                    if v >= thr and _is_local_max(j, v, vals, evaluated, cell_of, n, G):
+                    if v < thr:
+                        continue
+                    if ring:
+                        mv = max(max(max(vals[j - G - 1], vals[j - G]), max(vals[j - G + 1], vals[j - 1])),
+                                 max(max(vals[j + 1], vals[j + G - 1]), max(vals[j + G], vals[j + G + 1])))
+                        is_max = mv <= v
+                    else:
+                        is_max = _is_local_max_face(j, i0 + ii, j0 + t, v, vals, evaluated, cell_of, G, i0, j0, k)
+                    if is_max:
                         if ncand == cand.shape[0]:
                             cand = np.concatenate((cand, np.empty(ncand, dtype=np.int64)))
                             cand_val = np.concatenate((cand_val, np.empty(ncand)))
@@ -628,25 +705,22 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
                         cand_val[ncand] = -v
                         ncand += 1
     order = np.argsort(cand_val[:ncand])
-    # 4. Newton ascent from the candidates, best first, while their covering bound can still win
-    best = -2.0
-    w_try = np.empty(n)
-    wk = np.empty(_WORK)
-    n_newton = 0
-    n_iter = 0
+    # 5. Newton ascent from those candidates, best first, while their covering bound can still win
     for r in range(ncand):
         j = cand[order[r]]
+        if j == best_j:
+            continue
         v = min(vals[j], 1.0)
         P = cell_of[j]
         if _cap_bound(v, cells[P, dim + 2], cells[P, dim + 3]) <= best:
             continue
-        f, its = newton_ascent(x, geom, samples[j, :n], dim, n, w_try, wk, best)
+        f, its = newton_ascent(x, geom, samples[N + j, :n], dim, n, w_try, wk, best)
         n_newton += 1
         n_iter += its
         if f < v:  # an ascent cannot end lower; guard against a failed step sequence
             f = v
             for t in range(n):
-                w_try[t] = samples[j, t]
+                w_try[t] = samples[N + j, t]
         if f > best:
             best = f
             for t in range(n):
@@ -690,9 +764,45 @@ def contains_point(x, geom, plane):
     return acc <= 1.0
 
 
+def pack(geom, samples, cells, supers, grid, cell_of, plane):
+    """Pack a zone's search data into the 4 arrays the entry points take (numba's per-argument
+    dispatch cost is ~0.1 us): fdata = [geom, plane], samples, caps = [super-cells padded to the cell
+    width; cells], idata = [grid, cell_of]."""
+    pad = np.zeros((supers.shape[0], cells.shape[1]))
+    pad[:, :supers.shape[1]] = supers
+    return (np.ascontiguousarray(np.concatenate([geom, plane])), samples,
+            np.ascontiguousarray(np.vstack([pad, cells])),
+            np.ascontiguousarray(np.concatenate([grid, cell_of.astype(np.int64)])))
+
+
 @njit(cache=True)
-def signed_separation_one(x, geom, samples, cells, supers, grid, cell_of, plane, clamp):
+def _unpack(x, fdata, samples, caps, idata):
+    dim = x.shape[0]
+    n = dim - 1
+    N = samples.shape[0] // 2
+    M = (idata.shape[0] - 4 - N) // 9
+    Ms = caps.shape[0] - M
+    plane = fdata[3 + dim + 2 * dim * n + n:]
+    return fdata, caps[Ms:], caps[:Ms], idata[:4 + 9 * M], idata[4 + 9 * M:], plane
+
+
+@njit(cache=True)
+def nearest_packed(x, fdata, samples, caps, idata, w_best, b_best, stats):
+    """boundary_max on packed data."""
+    geom, cells, supers, grid, cell_of, plane = _unpack(x, fdata, samples, caps, idata)
+    return boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best, stats)
+
+
+@njit(cache=True)
+def contains_packed(x, fdata, samples, caps, idata):
+    geom, cells, supers, grid, cell_of, plane = _unpack(x, fdata, samples, caps, idata)
+    return contains_point(x, geom, plane)
+
+
+@njit(cache=True)
+def signed_separation_one(x, fdata, samples, caps, idata, clamp):
     """Signed separation of one x (negative inside); clamp=True gives 0 inside without searching."""
+    geom, cells, supers, grid, cell_of, plane = _unpack(x, fdata, samples, caps, idata)
     dim = x.shape[0]
     inside = contains_point(x, geom, plane)
     if inside and clamp:
@@ -710,12 +820,12 @@ def signed_separation_one(x, geom, samples, cells, supers, grid, cell_of, plane,
 
 
 @njit(cache=True)
-def signed_separation_batch(X, geom, samples, cells, supers, grid, cell_of, plane, clamp):
+def signed_separation_batch(X, fdata, samples, caps, idata, clamp):
     """signed_separation_one for each row of X."""
     m = X.shape[0]
     out = np.empty(m)
     for r in range(m):
-        out[r] = signed_separation_one(X[r], geom, samples, cells, supers, grid, cell_of, plane, clamp)
+        out[r] = signed_separation_one(X[r], fdata, samples, caps, idata, clamp)
     return out
 
 
@@ -783,8 +893,9 @@ def _cell_grids(n: int, m: int, k: int, sc: int, sub: int):
 
 
 def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] | None = None):
-    """Precompute samples (N, n + dim) in grid order, cells (M, dim + 4), super-cells (Ms, dim + 2),
-    grid = [G, k, m, sc, first sample of each cell (M)] (samples per circle / cube-face edge, samples
+    """Precompute samples (2N, dim) in grid order (rows [0, N): boundary points b; rows [N, 2N): their
+    w in the first n columns; scoring reads only the compact b block), cells (M, dim + 4), super-cells (Ms, dim + 2),
+    grid = [G, k, m, sc, first sample of each cell (M), 8 neighbour cells of each cell (8M)] (samples per circle / cube-face edge, samples
     per cell edge, cells per circle / face edge, cells per super-cell edge) and cell_of (N,), the cell
     of every sample."""
     sub = 4
@@ -801,7 +912,7 @@ def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] 
     else:
         raise ValueError(f"superellipsoid zones are implemented for S^2 and S^3 (n = 2, 3), got n = {n}")
     G = m * k
-    samples = np.empty((N, n + dim))
+    samples = np.zeros((2 * N, dim))
     cell_of = np.empty(N, dtype=np.int32)
     cells = np.empty((M, dim + 4))
     dense_of = [None] * M
@@ -819,9 +930,10 @@ def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] 
         h = min(np.pi, 1.1 * h + 1e-9)
         cells[P] = np.concatenate([axis, [np.cos(rho), np.sin(rho), np.cos(h), np.sin(h)]])
         dense_of[P] = bd
-        rows = np.hstack([ws, bs])
+        rows = np.hstack([bs, ws, np.zeros((len(ws), dim - n))])  # [b (dim), w (n), pad]
         if n == 2:
-            samples[P * k:(P + 1) * k] = rows
+            samples[P * k:(P + 1) * k] = rows[:, :dim]
+            samples[N + P * k:N + (P + 1) * k] = rows[:, dim:]
             cell_of[P * k:(P + 1) * k] = P
         else:
             face, rem = divmod(P, m * m)
@@ -829,10 +941,11 @@ def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] 
             SI, SJ = divmod(S, m // sc)
             ti, tj = divmod(t, sc)
             bi, bj = SI * sc + ti, SJ * sc + tj
-            blk = rows.reshape(k, k, n + dim)
+            blk = rows.reshape(k, k, 2 * dim)
             for a in range(k):
                 base = face * G * G + (bi * k + a) * G + bj * k
-                samples[base:base + k] = blk[a]
+                samples[base:base + k] = blk[a, :, :dim]
+                samples[N + base:N + base + k] = blk[a, :, dim:]
                 cell_of[base:base + k] = P
     per_super = sc if n == 2 else sc * sc
     supers = np.empty((M // per_super, dim + 2))
@@ -850,6 +963,25 @@ def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] 
             SI, SJ = divmod(S, m // sc)
             ti, tj = divmod(t, sc)
             first[P] = face * G * G + (SI * sc + ti) * k * G + (SJ * sc + tj) * k
-    grid = np.concatenate([np.array([G, k, m, sc], dtype=np.int64), first])
+    # the 8 neighbour cells of every cell on the same cube face (-1 across a face edge; unused on S^1)
+    adj = -np.ones((M, 8), dtype=np.int64)
+    if n == 3:
+        for P in range(M):
+            face, rem = divmod(P, m * m)
+            S, t = divmod(rem, sc * sc)
+            SI, SJ = divmod(S, m // sc)
+            ti, tj = divmod(t, sc)
+            bi, bj = SI * sc + ti, SJ * sc + tj
+            q = 0
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    if di == 0 and dj == 0:
+                        continue
+                    ni, nj = bi + di, bj + dj
+                    if 0 <= ni < m and 0 <= nj < m:
+                        adj[P, q] = (face * m * m + ((ni // sc) * (m // sc) + nj // sc) * sc * sc
+                                     + (ni % sc) * sc + nj % sc)
+                    q += 1
+    grid = np.concatenate([np.array([G, k, m, sc], dtype=np.int64), first, adj.ravel()])
     return (np.ascontiguousarray(samples), np.ascontiguousarray(cells), np.ascontiguousarray(supers),
             grid, cell_of)

@@ -40,6 +40,7 @@ import math
 from typing import Callable
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from gnc import _zone_polygon as _poly
@@ -125,6 +126,22 @@ class Zone:
 
 
 # ----------------------------------------------------------------------------------------------
+@njit(cache=True)
+def _cone_signed(x, g, half_angle, clamp):
+    """Signed separation to the cap {x^T g >= cos(half_angle)}; theta from the atan2 form (accurate
+    at 0 and pi), 1 - cos(delta) as 2 sin^2(delta / 2) (no cancellation next to the boundary)."""
+    dm = 0.0
+    dp = 0.0
+    for i in range(x.shape[0]):
+        dm += (x[i] - g[i]) ** 2
+        dp += (x[i] + g[i]) ** 2
+    delta = 2.0 * math.atan2(math.sqrt(dm), math.sqrt(dp)) - half_angle
+    value = 2.0 * math.sin(0.5 * delta) ** 2
+    if delta > 0.0:
+        return value
+    return 0.0 if clamp else -value
+
+
 class ConicZone(Zone):
     """U = {x in S^n : x^T g >= cos(xi)}: the cap of half angle xi (rad, 0 < xi < pi) about axis g.
 
@@ -160,13 +177,10 @@ class ConicZone(Zone):
         return 2.0 * math.atan2(float(np.linalg.norm(x - g)), float(np.linalg.norm(x + g)))
 
     def signed_separation(self, x: ArrayLike) -> float:
-        delta = self._theta(self._check_x(x)) - self.half_angle
-        value = 2.0 * math.sin(0.5 * delta) ** 2
-        return value if delta > 0.0 else -value
+        return _cone_signed(self._check_x(x), self._axis, self.half_angle, False)
 
     def separation(self, x: ArrayLike) -> float:
-        delta = self._theta(self._check_x(x)) - self.half_angle
-        return 2.0 * math.sin(0.5 * delta) ** 2 if delta > 0.0 else 0.0
+        return _cone_signed(self._check_x(x), self._axis, self.half_angle, True)
 
     def contains(self, x: ArrayLike) -> bool:
         return self._theta(self._check_x(x)) <= self.half_angle
@@ -291,7 +305,8 @@ class StarZone(Zone):
         zone._samples, zone._cells, zone._supers, zone._grid, zone._cell_of = _se.build_cells(
             zone._geom, zone.dim, n, resolution)
         zone._plane = np.ascontiguousarray(np.append(zone.plane_normal, zone.plane_offset))
-        zone._se_args = (zone._geom, zone._samples, zone._cells, zone._supers, zone._grid, zone._cell_of, zone._plane)
+        zone._se_args = _se.pack(zone._geom, zone._samples, zone._cells, zone._supers, zone._grid, zone._cell_of,
+                                 zone._plane)
         return zone
 
     @classmethod
@@ -384,7 +399,7 @@ class StarZone(Zone):
     def contains(self, x: ArrayLike) -> bool:
         arr = self._check_x(x)
         if self.shape == "superellipsoid":
-            return bool(_se.contains_point(arr, self._geom, self._plane))
+            return bool(_se.contains_packed(arr, *self._se_args))
         if self.shape == "polygon":
             return bool(_poly.contains_point(arr, self.vertices, self.center_point, self.basis,
                                              self.plane_normal, self.plane_offset))
@@ -395,7 +410,7 @@ class StarZone(Zone):
         if self.shape == "superellipsoid":
             w = np.empty(self.n)
             b = np.empty(self.dim)
-            _se.boundary_max(arr, *self._se_args[:-1], w, b, self._stats)
+            _se.nearest_packed(arr, *self._se_args, w, b, self._stats)
             return 0.5 * float(np.sum((arr - b) ** 2)), b
         if self.shape == "polygon":
             b = np.empty(3)

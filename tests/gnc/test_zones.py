@@ -59,9 +59,11 @@ class BruteSuperellipsoid:
         p = self.B.T @ (x * np.linalg.norm(foot) / (x @ nu) - self.c)
         return float(np.sum(np.abs(p / self.a) ** self.q)) <= 1.0
 
-    def distance(self, x, starts=10):
+    def distance(self, x, starts=8):
         f = self.P @ x
-        top = np.argpartition(-f, 3000)[:3000]
+        top = np.flatnonzero(f >= f.max() - 0.02)  # cheaper than a full argpartition of 1e6 values
+        if len(top) > 3000:
+            top = top[np.argpartition(-f[top], 3000)[:3000]]
         top = top[np.argsort(-f[top])]
         # greedy choice of up to `starts` well separated (in w) best samples
         free = np.ones(len(top), dtype=bool)
@@ -214,7 +216,7 @@ def test_s3_literal_plane_not_tangent_matches_brute_force():
 def test_s2_superellipse_matches_brute_force(q, axes):
     center = np.array([0.3, -0.5, 0.8])
     zone = StarZone.superellipsoid(center, None, axes, q)
-    brute = BruteSuperellipsoid(zone.center_point, zone.basis, np.array(axes), q, 1_000_000)
+    brute = BruteSuperellipsoid(zone.center_point, zone.basis, np.array(axes), q, 500_000)
     rng = np.random.default_rng(int(q * 100))
     pts = list(sample_uniform(3, 10, rng)) + _near_boundary_points(brute, zone.kernel, rng, 15)
     _check_against_brute(zone, brute, pts)
