@@ -311,8 +311,16 @@ class ZoneGeometry:
         self.merge_gap_rad = math.radians(merge_gap_deg)
         self.groups: list[list[int]] = []
 
-    def merge(self, zones: list) -> tuple[list, list[list[int]]]:
-        """Group zones whose bounding caps are closer than the merge gap; a group becomes one cone."""
+    MAX_MERGED_RADIUS_RAD = math.radians(80.0)
+
+    def merge(self, zones: list, keep_outside: list[np.ndarray] = ()) -> tuple[list, list[list[int]]]:
+        """Group zones whose bounding caps are closer than the merge gap; a group becomes one cone.
+
+        A pair is not merged when the enclosing cone would exceed 80 deg or would swallow a point of
+        ``keep_outside`` (the current boresight, the target): a cone grown around the spacecraft's own
+        pointing would leave the law nowhere to go. Such pairs stay separate (thin eps-layer, reported
+        by the assumption check) and the margin has to carry them.
+        """
         n = len(zones)
         caps = [sky_zones.cap_of(z) for z in zones]
         parent = list(range(n))
@@ -326,8 +334,13 @@ class ZoneGeometry:
         for i in range(n):
             for j in range(i + 1, n):
                 d = math.acos(max(-1.0, min(1.0, float(caps[i][0] @ caps[j][0]))))
-                if d - caps[i][1] - caps[j][1] < self.merge_gap_rad:
-                    parent[find(i)] = find(j)
+                if d - caps[i][1] - caps[j][1] >= self.merge_gap_rad:
+                    continue
+                members = [k for k in range(n) if find(k) in (find(i), find(j))]
+                cone = sky_zones.enclosing_cone([caps[k] for k in members])
+                if cone.bounding_cap[1] > self.MAX_MERGED_RADIUS_RAD or any(cone.contains(p) for p in keep_outside):
+                    continue
+                parent[find(i)] = find(j)
         groups: dict[int, list[int]] = {}
         for i in range(n):
             groups.setdefault(find(i), []).append(i)
@@ -354,7 +367,9 @@ class ZoneGeometry:
     @staticmethod
     def retreat_target(target: np.ndarray, zones: list, eps: float) -> tuple[np.ndarray, int]:
         """If the target lies in a zone's eps-layer, move it away from that zone's kernel along the
-        geodesic until it is 1.5 eps outside (returns the substitute target and the zone index, or -1)."""
+        geodesic until it is 1.5 eps outside that zone and outside every other zone's layer (returns
+        the substitute target and the zone index, or -1). When no such point exists within 180 deg the
+        farthest point reached is returned (the assumption check then reports the violation)."""
         for i, z in enumerate(zones):
             if float(z.separation(target)) > eps:
                 continue
@@ -368,7 +383,7 @@ class ZoneGeometry:
             for k in range(1, 721):
                 s = math.radians(0.25 * k)
                 x = math.cos(s) * target + math.sin(s) * t
-                if float(z.separation(x)) > 1.5 * eps:
+                if float(z.separation(x)) > 1.5 * eps and all(float(o.separation(x)) > eps for o in zones):
                     break
             return x, i
         return target, -1
@@ -561,9 +576,8 @@ class Guidance:
         self.assumptions_ok = result.ok
         self.check_errors = result.errors
         self.eps_max_checked = result.eps_max
-        if not result.ok and (was_ok or result.errors != getattr(self, "_last_reported", None)):
+        if not result.ok and was_ok:  # on the transition only: the flag stays in telemetry meanwhile
             self.events("ASSUMPTION_VIOLATED", reason=("; ".join(result.errors) or "check failed")[:110])
-            self._last_reported = result.errors
 
     def mark_checked(self) -> None:
         self._checks_dirty = False
@@ -612,7 +626,7 @@ class Guidance:
         if self.slots:
             if rebuilt or self._sky_law_key is None:
                 zones = [s.law for s in self.slots]
-                merged, groups = self.sky_geometry.merge(zones)
+                merged, groups = self.sky_geometry.merge(zones, keep_outside=[y, self.target_N])
                 if groups != self._sky_groups:
                     self._report_merge(self._sky_groups, groups)
                     self._checks_dirty = True
