@@ -422,6 +422,8 @@ def test_radial_lobed_zone_against_brute_force():
         x = x / np.linalg.norm(x)
         assert zs.signed_separation(x) == pytest.approx(zone.signed_separation(x), abs=2e-4)
     assert zone.contains(zone.kernel)
+    axis, half = zone.bounding_cap
+    assert np.all(np.arccos(np.clip(P[::50] @ axis, -1, 1)) <= half)
 
 
 # ------------------------------------------------------------------------------------------------
