@@ -97,6 +97,17 @@ def contains_point(x, vertices, c, B, plane_normal, plane_offset):
 
 
 @njit(cache=True)
+def signed_separation_one(x, edges, vertices, c, B, plane_normal, plane_offset, clamp):
+    """Signed separation of one x (negative inside); clamp=True gives 0 inside."""
+    inside = contains_point(x, vertices, c, B, plane_normal, plane_offset)
+    if inside and clamp:
+        return 0.0
+    b = np.empty(3)
+    d = nearest_on_boundary(x, edges, b)
+    return -d if inside else d
+
+
+@njit(cache=True)
 def signed_separation_batch(X, edges, vertices, c, B, plane_normal, plane_offset, clamp):
     m = X.shape[0]
     out = np.empty(m)

@@ -342,6 +342,8 @@ class StarZone(Zone):
         m /= np.linalg.norm(m, axis=1, keepdims=True)
         zone.vertices_sphere = P
         zone._edges = np.ascontiguousarray(np.hstack([P, Pn, m]))
+        zone._poly_args = (zone._edges, zone.vertices, np.ascontiguousarray(c), np.ascontiguousarray(B),
+                           zone.plane_normal, zone.plane_offset)
         return zone
 
     @classmethod
@@ -422,6 +424,8 @@ class StarZone(Zone):
         arr = self._check_x(x)
         if self.shape == "superellipsoid":
             return _se.signed_separation_one(arr, *self._se_args, False)
+        if self.shape == "polygon":
+            return _poly.signed_separation_one(arr, *self._poly_args, False)
         d = self._nearest_and_distance(arr)[0]
         return -d if self.contains(arr) else d
 
@@ -429,6 +433,8 @@ class StarZone(Zone):
         arr = self._check_x(x)
         if self.shape == "superellipsoid":
             return _se.signed_separation_one(arr, *self._se_args, True)
+        if self.shape == "polygon":
+            return _poly.signed_separation_one(arr, *self._poly_args, True)
         if self.contains(arr):
             return 0.0
         return self._nearest_and_distance(arr)[0]
