@@ -171,10 +171,12 @@ class Simulator:
             if k in self._done_ticks:
                 self._done_ticks.discard(k)
                 return True
-            remaining = deadline - time.monotonic()
-            msg = self.bus.recv(timeout=max(0.0, remaining))
+            msg = self.bus.recv(timeout=0.0)  # clock reads only when the queue is empty (see driver)
             if msg is None:
-                return False
+                remaining = deadline - time.monotonic()
+                msg = self.bus.recv(timeout=remaining) if remaining > 0.0 else None
+                if msg is None:
+                    return False
             self._handle_rx(msg, self.t_s)
 
     def poll(self, t_s: float) -> int:

@@ -208,10 +208,16 @@ class FswBusDriver:
     def _receive(self, deadline: float) -> ReceivedFrame | None:
         """Next classified frame before ``deadline`` (own echoes skipped); None on timeout."""
         while True:
-            remaining = deadline - time.monotonic()
-            msg = self.bus.recv(timeout=max(0.0, remaining))
+            # Frames come in bursts after SYNC: try without waiting first, and read the clock only when
+            # the queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest).
+            msg = self.bus.recv(timeout=0.0)
             if msg is None:
-                return None
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    return None
+                msg = self.bus.recv(timeout=remaining)
+                if msg is None:
+                    return None
             # Lockstep: frames are stamped with the simulation time of the tick, never the host clock.
             now = self.t_tick
             frame = self.receiver.classify(msg, now)
