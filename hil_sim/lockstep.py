@@ -51,6 +51,7 @@ class SimStats:
     wheel_commands: int = 0
     heartbeats: int = 0
     realtime_overruns: int = 0     # real time: the simulator itself fell behind the clock
+    tx_errors: int = 0             # frames the bus refused (transmit queue full, bus error)
     max_lateness_s: float = 0.0
 
 
@@ -225,7 +226,11 @@ class Simulator:
             self._send(msg, t_s)
 
     def _send(self, msg: can.Message, t_s: float) -> None:
-        self.bus.send(msg)
+        try:
+            self.bus.send(msg, timeout=0.05)
+        except can.CanError:  # transmit queue full / bus error: counted, the run goes on
+            self.stats.tx_errors += 1
+            return
         self.stats.frames_sent += 1
         if self.on_frame is not None:
             self.on_frame("tx", t_s, msg)

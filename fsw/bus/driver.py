@@ -23,6 +23,7 @@ from fsw.bus.icd import E2ESender, Icd
 
 FSW_NODE = "FSW"
 MAX_WHEELS = 6
+TX_TIMEOUT_S = 0.05  # how long a send may wait for room in the transmit queue
 
 
 @dataclass(frozen=True)
@@ -135,6 +136,7 @@ class FswBusDriver:
         self.period_s = 0.0
         self.last_tick: int | None = None
         self.incomplete_ticks = 0
+        self.tx_errors = 0
         self._supervision_started = False
 
     # ------------------------------------------------------------------------------------ counters
@@ -292,6 +294,13 @@ class FswBusDriver:
         self._st_half.clear()
 
     # ------------------------------------------------------------------------------------- sending
+    def _send(self, msg: can.Message) -> None:
+        # A full transmit queue or a bus error is a fault to count (FDIR sees it), not a crash.
+        try:
+            self.bus.send(msg, timeout=TX_TIMEOUT_S)
+        except can.CanError:
+            self.tx_errors += 1
+
     def send_wheel_torques(self, tick: int, torques_Nm: Sequence[float]) -> None:
         """Send RW1_CMD..RWn_CMD for ``tick``. Values are limited to the ICD range (+-1.638 N m);
         NaN is sent as 0 (the allocation upstream must saturate first; this only keeps the bus valid)."""
@@ -301,10 +310,10 @@ class FswBusDriver:
             name = f"RW{i}_CMD"
             lo, hi = self.icd.signal_range(name, "torque_cmd")
             value = 0.0 if not np.isfinite(tau) else min(max(float(tau), lo), hi)
-            self.bus.send(self._sender.frame(name, {"torque_cmd": value, "tick_lsb": tick & 0xFFFF}))
+            self._send(self._sender.frame(name, {"torque_cmd": value, "tick_lsb": tick & 0xFFFF}))
 
     def send_cycle_done(self, tick: int) -> None:
-        self.bus.send(self._sender.frame("CYCLE_DONE", {"tick": tick & 0xFFFFFFFF}))
+        self._send(self._sender.frame("CYCLE_DONE", {"tick": tick & 0xFFFFFFFF}))
 
     def send_heartbeat(self, mode: int, cycle: int) -> None:
-        self.bus.send(self._sender.frame("FSW_HEARTBEAT", {"mode": int(mode) & 0x0F, "cycle": cycle & 0xFFFFFFFF}))
+        self._send(self._sender.frame("FSW_HEARTBEAT", {"mode": int(mode) & 0x0F, "cycle": cycle & 0xFFFFFFFF}))

@@ -157,3 +157,17 @@ def test_random_frames_only_touch_classification_counters(icd: Icd, frames) -> N
     finally:
         sim.shutdown()
         fsw.shutdown()
+
+
+def test_transmit_errors_are_counted_not_raised(icd: Icd, buses) -> None:
+    class RefusingBus:
+        def send(self, msg, timeout=None):
+            raise can.CanOperationError("Transmit buffer full")
+
+        def recv(self, timeout=None):
+            return None
+
+    drv = FswBusDriver(RefusingBus(), icd, n_wheels=3)
+    drv.send_wheel_torques(1, [0.0, 0.0, 0.0])
+    drv.send_cycle_done(1)
+    assert drv.tx_errors == 4
