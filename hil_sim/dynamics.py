@@ -183,6 +183,11 @@ def _wheel_electronics(X, u_cmd, W, u_motor, U_APPLIED, FLAGS):
                            | (FAULT_SPEED_LIMIT if (healthy and over) else 0))
 
 
+def work_shape(n_wheels: int, n_runs: int) -> tuple[int, int]:
+    """Shape of the scratch array ``dynamics_step_batch`` needs."""
+    return 5 * (7 + n_wheels) + 9 + 3 * n_wheels, n_runs
+
+
 def step_coefficients(W: np.ndarray, B: np.ndarray, dt_sub: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-sub-step constants for ``dynamics_step_batch`` (computed once per dt_sub, not per call):
     winding temperature decay exp(-dt / (R_th C_th)) (N, M) (0 where R_th = 0); Gauss-Markov coefficients
@@ -200,28 +205,31 @@ def step_coefficients(W: np.ndarray, B: np.ndarray, dt_sub: float) -> tuple[np.n
 
 @njit(cache=True, error_model="numpy")
 def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
-                        DECAY, GM, HAS_COULOMB):
+                        DECAY, GM, HAS_COULOMB, WORK):
     """Advance every run by n_sub RK4 steps of dt_sub seconds, the torque command U_CMD[m] (M, N) held.
 
     X (7+N, M) state, updated in place; D (3, M) Gauss-Markov disturbance state (N m), updated;
     TEMP (N, M) wheel temperatures (deg C), updated; NORMALS flat (n_sub*M*3,) standard normals for the random
     disturbance (ignored where its std is 0); U_APPLIED (N, M) out: motor torque actually applied on the last
     sub-step; FLAGS (N, M) out: fault bits (stuck, no torque, speed limit, saturated); DECAY, GM, HAS_COULOMB
-    from ``step_coefficients(W, B, dt_sub)``.
+    from ``step_coefficients(W, B, dt_sub)``; WORK scratch of ``work_shape(N, M)`` (kept by the caller so a
+    100 Hz step does not allocate).
     """
     K, M = X.shape
     N = G.shape[0]
-    k1 = np.empty((K, M))
-    k2 = np.empty((K, M))
-    k3 = np.empty((K, M))
-    k4 = np.empty((K, M))
-    xt = np.empty((K, M))
-    h = np.empty((3, M))
-    r = np.empty((3, M))
-    u_net = np.empty((N, M))
-    u_motor = np.empty((N, M))
-    tau = np.empty((3, M))
-    u_cmd = np.empty((N, M))  # the command is held: transpose it once, not every sub-step
+    k1 = WORK[0:K]
+    k2 = WORK[K:2 * K]
+    k3 = WORK[2 * K:3 * K]
+    k4 = WORK[3 * K:4 * K]
+    xt = WORK[4 * K:5 * K]
+    o = 5 * K
+    h = WORK[o:o + 3]
+    r = WORK[o + 3:o + 6]
+    tau = WORK[o + 6:o + 9]
+    o += 9
+    u_net = WORK[o:o + N]
+    u_motor = WORK[o + N:o + 2 * N]
+    u_cmd = WORK[o + 2 * N:o + 3 * N]  # the command is held: transpose it once, not every sub-step
     for i in range(N):
         for m in range(M):
             u_cmd[i, m] = U_CMD[m, i]

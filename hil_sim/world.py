@@ -95,7 +95,7 @@ def model_generator(seed: int | None, key: int, own_seed: int | None) -> np.rand
 # orbit.py or ephemeris_truth.py in place, delete hil_sim/__pycache__/*.nbi/*.nbc so these kernels recompile.
 @njit(cache=True, error_model="numpy")
 def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS, DECAY, GM, HAS_COULOMB,
-                       t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
+                       WORK, t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
     """Step all runs (dynamics), then their orbit positions and Sun/Moon/Earth directions at t_end_s.
     Returns False (and changes nothing) if any torque command is NaN or infinite."""
     for m in range(U_CMD.shape[0]):
@@ -103,7 +103,7 @@ def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
             if not math.isfinite(U_CMD[m, i]):
                 return False
     dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
-                            DECAY, GM, HAS_COULOMB)
+                            DECAY, GM, HAS_COULOMB, WORK)
     sun = np.empty(3)
     moon = np.empty(3)
     r = np.empty(3)
@@ -158,6 +158,7 @@ class WorldBatch:
         self.FLAGS[mode == dyn.MODE_NO_TORQUE] = dyn.FAULT_NO_TORQUE
         self._coef_dt = -1.0
         self._coef: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._work = np.empty(dyn.work_shape(N, M))
         self.ORB = np.stack([orbit_elements_array(p.orbit) for p in params])
         self.AUX = np.zeros((M, 12))
         self._has_random_disturbance = bool(np.any(self.B[dyn.B_DIST_STD] > 0.0))
@@ -213,7 +214,7 @@ class WorldBatch:
         decay, gm, has_coulomb = self._coef
         eph_t0, sun_c, moon_c = eph.table  # one read: consistent even if another thread extends the table
         if not _world_step_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_cmd, normals, dt_sub, n_sub,
-                                  self.U_APPLIED, self.FLAGS, decay, gm, has_coulomb, t_end, self.ORB,
+                                  self.U_APPLIED, self.FLAGS, decay, gm, has_coulomb, self._work, t_end, self.ORB,
                                   sun_c, moon_c, eph_t0, eph.node_spacing_s, self.AUX):
             raise ValueError(f"step: wheel_torque_cmd_Nm must be finite, got {u_cmd.tolist()!r}")
         self._t = t_end
