@@ -213,7 +213,7 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
     disturbance (ignored where its std is 0); U_APPLIED (N, M) out: motor torque actually applied on the last
     sub-step; FLAGS (N, M) out: fault bits (stuck, no torque, speed limit, saturated); DECAY, GM, HAS_COULOMB
     from ``step_coefficients(W, B, dt_sub)``; WORK scratch of ``work_shape(N, M)`` (kept by the caller so a
-    100 Hz step does not allocate).
+    100 Hz step does not allocate). Returns False, having changed nothing, if a command is NaN or infinite.
     """
     K, M = X.shape
     N = G.shape[0]
@@ -230,9 +230,13 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
     u_net = WORK[o:o + N]
     u_motor = WORK[o + N:o + 2 * N]
     u_cmd = WORK[o + 2 * N:o + 3 * N]  # the command is held: transpose it once, not every sub-step
+    nan_if_bad = 0.0  # x * 0 is 0 for finite x and NaN for NaN or inf: one branch-free pass checks them all
     for i in range(N):
         for m in range(M):
             u_cmd[i, m] = U_CMD[m, i]
+            nan_if_bad += U_CMD[m, i] * 0.0
+    if nan_if_bad != 0.0 or not math.isfinite(nan_if_bad):
+        return False
     any_random = False
     for m in range(M):
         if GM[1, m] > 0.0:
@@ -270,6 +274,7 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
                 cur = u_motor[i, m] / W[W_KT, i, m]
                 t_ss = W[W_TAMB, i, m] + cur * cur * W[W_RES, i, m] * W[W_RTH, i, m]
                 TEMP[i, m] = t_ss + (TEMP[i, m] - t_ss) * DECAY[i, m]
+    return True
 
 
 def angular_momentum_B(X: np.ndarray, G: np.ndarray, W: np.ndarray, B: np.ndarray) -> np.ndarray:

@@ -45,7 +45,7 @@ def orbit_position_N_km(elements, t_s, out):
     orbit_position_row_N_km(elements.reshape(1, elements.shape[0]), 0, t_s, out)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def orbit_position_row_N_km(ORB, m, t_s, out):
     """Position of run m (row m of the packed elements ORB) at t into out[0:3]; Kepler's equation by Newton
     to 1e-14 rad (skipped for a circular orbit, where E = M)."""

@@ -98,12 +98,9 @@ def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
                        WORK, t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
     """Step all runs (dynamics), then their orbit positions and Sun/Moon/Earth directions at t_end_s.
     Returns False (and changes nothing) if any torque command is NaN or infinite."""
-    for m in range(U_CMD.shape[0]):
-        for i in range(U_CMD.shape[1]):
-            if not math.isfinite(U_CMD[m, i]):
-                return False
-    dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
-                            DECAY, GM, HAS_COULOMB, WORK)
+    if not dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
+                                   DECAY, GM, HAS_COULOMB, WORK):
+        return False
     sun = np.empty(3)
     moon = np.empty(3)
     r = np.empty(3)
