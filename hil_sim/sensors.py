@@ -27,8 +27,8 @@ from numba import njit
 from hil_sim.params import ImuParams, StarTrackerParams
 
 # Gyro parameter layout P[m, :]
-G_SF, G_SAT, G_QUANT, G_ARW_STD, G_RRW = 0, 3, 4, 5, 6
-G_FIELDS = 7
+G_SF, G_SAT, G_QUANT, G_ARW_STD, G_RRW, G_INV_QUANT = 0, 3, 4, 5, 6, 7
+G_FIELDS = 8
 # Star tracker parameter layout P[m, :]
 S_Q_BS, S_BORESIGHT_B, S_CROSS, S_ABOUT, S_COS_SUN, S_COS_MOON, S_MAX_RATE = 0, 4, 7, 8, 9, 10, 11
 S_FIELDS = 12
@@ -55,6 +55,7 @@ def pack_gyro(params: Sequence[ImuParams]) -> np.ndarray:
         P[m, G_SF:G_SF + 3] = np.asarray(p.scale_factor_ppm) * 1e-6
         P[m, G_SAT] = p.saturation_rad_s
         P[m, G_QUANT] = p.quantisation_rad_s
+        P[m, G_INV_QUANT] = 1.0 / p.quantisation_rad_s if p.quantisation_rad_s > 0.0 else 0.0
         P[m, G_ARW_STD] = p.angle_random_walk_rad_per_sqrt_s * math.sqrt(p.rate_hz)
         P[m, G_RRW] = p.bias_random_walk_rad_s_per_sqrt_s
     return P
@@ -107,7 +108,7 @@ def gyro_sample_batch(X, BIAS, P, NORMALS, dt_since_s, OUT, SAT):
                 w = -sat_lim
                 any_sat = True
             if q > 0.0:
-                w = q * math.floor(w / q + 0.5)
+                w = q * math.floor(w * P[m, G_INV_QUANT] + 0.5)
             OUT[m, j] = w
         SAT[m] = any_sat
 
