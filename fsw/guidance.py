@@ -180,6 +180,16 @@ def run_full_check(target, zones, eps, kappa, law) -> CheckResult:
     return CheckResult(bool(rep.ok), [str(e) for e in rep.errors], eps_max, rep.kappa_bar, _time.perf_counter() - t0)
 
 
+def _background_priority() -> None:
+    """Worker initializer: lowest CPU priority, so the check never preempts the GNC cycle."""
+    import os
+
+    try:
+        os.nice(19)
+    except OSError:
+        pass
+
+
 class AssumptionChecker:
     """Runs the full assumption check away from the GNC cycle.
 
@@ -209,7 +219,8 @@ class AssumptionChecker:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
-        self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"))
+        self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"),
+                                         initializer=_background_priority)
         self._pool.submit(math.sqrt, 1.0).result()  # the pool forks its worker on the first submit
 
     def submit(self, snapshot) -> bool:
