@@ -181,9 +181,12 @@ def run_full_check(target, zones, eps, kappa, law) -> CheckResult:
 
 
 def _background_priority() -> None:
-    """Worker initializer: lowest CPU priority, so the check never preempts the GNC cycle."""
+    """Worker initializer: lowest CPU priority, so the check never preempts the GNC cycle; Ctrl-C on the
+    terminal's process group is for the flight software to handle (it stops the worker in `close`)."""
     import os
+    import signal
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         os.nice(19)
     except OSError:
@@ -254,7 +257,14 @@ class AssumptionChecker:
 
     def close(self) -> None:
         if self._pool is not None:
+            # A check in progress can take seconds; the flight software must not wait for it, nor leave
+            # the worker running after it exits.
+            workers = list((getattr(self._pool, "_processes", None) or {}).values())
             self._pool.shutdown(wait=False, cancel_futures=True)
+            for worker in workers:
+                worker.terminate()
+            for worker in workers:
+                worker.join(timeout=2.0)
             self._pool = None
 
 

@@ -221,3 +221,23 @@ def test_signed_margin_is_in_degrees() -> None:
     assert signed_margin_deg(z, p) == pytest.approx(15.0)
     p = np.array([math.cos(math.radians(4)), math.sin(math.radians(4)), 0.0])
     assert signed_margin_deg(z, p) == pytest.approx(-6.0)
+
+
+def test_assumption_checker_close_stops_a_busy_worker_at_once():
+    """Ctrl-C of a SIL run: the flight software must not wait for, nor leave behind, a check in progress."""
+    import time as _time
+
+    import psutil
+
+    from fsw.guidance import AssumptionChecker
+
+    checker = AssumptionChecker("process")
+    checker.start()
+    checker._pool.submit(_time.sleep, 30.0)  # a check that would outlive the flight software
+    workers = psutil.Process().children()
+    assert workers, "the checker should run its own worker process"
+    t0 = _time.monotonic()
+    checker.close()
+    gone, alive = psutil.wait_procs(workers, timeout=5.0)
+    assert not alive
+    assert _time.monotonic() - t0 < 5.0
