@@ -301,7 +301,8 @@ class FlightSoftware:
         # started before its devices must not trip on silence)
         corrupt = self._corrupt_deltas()
         self._imu_seen = getattr(self, "_imu_seen", False) or imu is not None
-        self._st_seen = getattr(self, "_st_seen", False) or st_fresh
+        # a tracker that answers but is blind (Sun/Moon/rate) has been heard: its silence is then a fault
+        self._st_seen = getattr(self, "_st_seen", False) or st is not None
         seen = getattr(self, "_wheel_seen", [False] * self.n_wheels)
         self._wheel_seen = [a or (w is not None) for a, w in zip(seen, wheels)]
         fin = FdirInputs(

@@ -119,6 +119,8 @@ class EstimatorConfig(_Strict):
     initial_bias_sigma_deg_s: float = Field(0.05, gt=0.0, le=10.0, description="Initial gyro bias 1-sigma per axis [deg/s].")
     star_tracker_max_age_s: float = Field(0.5, gt=0.0, le=10.0, description="A star-tracker sample older than this is stale and not used [s].")
     innovation_gate_deg: float = Field(1.0, gt=0.0, le=180.0, description="Innovations larger than this are rejected (not fused) and reported to FDIR [deg].")
+    acquisition_delay_s: float = Field(10.0, gt=0.0, le=3600.0, description="With no attitude fix for this long (star tracker never valid, e.g. blinded by the Sun at start), rotate about the instrument boresight to bring the star tracker out of its exclusion zone [s].")
+    acquisition_rate_deg_s: float = Field(0.5, gt=0.0, le=5.0, description="Rate of the star-tracker acquisition rotation about the instrument boresight [deg/s]: the instrument direction does not move, the tracker sweeps a circle that no exclusion cone can cover.")
 
 
 # ----------------------------------------------------------------------------------- keep-out zones

@@ -193,6 +193,22 @@ def _background_priority() -> None:
         pass
 
 
+def _acquisition_rate_B(cfg, boresight_B: np.ndarray) -> np.ndarray:
+    """Body rate [rad/s] that sweeps the star tracker out of any exclusion cone without moving the instrument.
+
+    About the instrument boresight the tracker's boresight traces a circle; when the two are (nearly)
+    parallel that circle degenerates, so rotate about the body axis most perpendicular to the tracker instead.
+    """
+    from gnc.attitude import quat_rotate
+
+    st_B = quat_rotate(np.asarray(cfg.spacecraft.star_tracker_q_BS, dtype=float), np.array([0.0, 0.0, 1.0]))
+    axis = np.asarray(boresight_B, dtype=float)
+    if abs(float(axis @ st_B)) > math.cos(math.radians(60.0)):
+        axis = np.eye(3)[int(np.argmin(np.abs(st_B)))]
+        axis = axis - (axis @ st_B) * st_B
+    return math.radians(cfg.estimator.acquisition_rate_deg_s) * axis / np.linalg.norm(axis)
+
+
 class AssumptionChecker:
     """Runs the full assumption check away from the GNC cycle.
 
@@ -431,6 +447,8 @@ class Guidance:
         self.roll_ref_N = np.asarray(p.roll_reference_N, dtype=float)
         self.q_target = np.asarray(cfg.quaternion.target_q_NB, dtype=float)
         self.sun_axis_B = np.asarray(cfg.safe.sun_axis_B, dtype=float)
+        self.no_fix_s = 0.0
+        self.acquisition_omega_B = _acquisition_rate_B(cfg, self.b_B)
         margin = cfg.law.margin_deg
         self.slots: list[_SkySlot] = []
         for i, z in enumerate(p.zones):
@@ -618,11 +636,16 @@ class Guidance:
     def step(self, t_s: float, dt_s: float, q_NB: np.ndarray | None, omega_BN_B: np.ndarray) -> GuidanceOutput:
         self.last_t_s = t_s
         if q_NB is None:
-            # no attitude knowledge: only rate damping is possible, whatever the mode
-            out = GuidanceOutput(np.zeros(3), self.mode, safe_phase="RATE_DAMPING" if self.mode == "SAFE" else "NONE")
+            # No attitude knowledge: rate damping, then (if the star tracker stays silent or blind) the
+            # acquisition rotation, which never moves the instrument boresight.
+            self.no_fix_s += dt_s
+            acquiring = self.no_fix_s >= self.cfg.estimator.acquisition_delay_s
+            out = GuidanceOutput(self.acquisition_omega_B.copy() if acquiring else np.zeros(3), self.mode,
+                                 safe_phase="RATE_DAMPING" if self.mode == "SAFE" else "NONE")
             if self.slots:
                 self._update_sky(t_s)
             return out
+        self.no_fix_s = 0.0
         q = np.ascontiguousarray(q_NB, dtype=float)
         if self.mode == "POINTING":
             return self._pointing(t_s, q, omega_BN_B)

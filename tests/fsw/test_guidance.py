@@ -241,3 +241,23 @@ def test_assumption_checker_close_stops_a_busy_worker_at_once():
     gone, alive = psutil.wait_procs(workers, timeout=5.0)
     assert not alive
     assert _time.monotonic() - t0 < 5.0
+
+
+def test_without_attitude_fix_the_tracker_is_swept_out_of_its_exclusion_without_moving_the_instrument() -> None:
+    """Star tracker blind from the start (it began 30.1 deg from the Sun with a 30 deg exclusion in a
+    campaign run): after the delay the FSW rotates about the instrument boresight at the configured rate."""
+    cfg = _cfg(initial_mode="POINTING", spacecraft={"star_tracker_q_BS": [0.7071068, 0.7071068, 0.0, 0.0]},
+               estimator={"acquisition_delay_s": 2.0, "acquisition_rate_deg_s": 0.5})
+    g = Guidance(cfg)
+    outs = [g.step(0.1 * k, 0.1, None, np.zeros(3)).omega_cmd_BN_B for k in range(40)]
+    assert all(np.all(o == 0.0) for o in outs[:19])  # rate damping only until the delay
+    b = np.asarray(cfg.pointing.boresight_B)
+    st_B = _rot(np.array(cfg.spacecraft.star_tracker_q_BS)).apply([0.0, 0.0, 1.0])
+    late = outs[-1]
+    assert np.linalg.norm(late) == pytest.approx(math.radians(0.5))
+    assert np.linalg.norm(np.cross(late, b)) < 1e-12  # about the instrument boresight: it stays put
+    # the tracker's boresight sweeps a great circle (it moves at the full rate), so no cone can hold it
+    assert np.linalg.norm(np.cross(late, st_B)) == pytest.approx(math.radians(0.5))
+    q = np.array([0.9, 0.1, -0.2, 0.3]) / np.linalg.norm([0.9, 0.1, -0.2, 0.3])
+    g.step(4.0, 0.1, q, np.zeros(3))
+    assert g.no_fix_s == 0.0  # a fix ends the acquisition
