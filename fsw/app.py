@@ -72,6 +72,9 @@ class FlightSoftware:
         self.cfg = config
         self.driver = driver
         self.telemetry = telemetry if telemetry is not None else _NullTelemetry()
+        if hasattr(self.telemetry, "clock"):
+            # every packet, including the dispatcher's command events, carries onboard time
+            self.telemetry.clock = lambda: self.t_s
         self.dispatcher = dispatcher
         self.clock = clock
         self.n_wheels = len(config.spacecraft.wheels)

@@ -234,7 +234,7 @@ def test_assumption_checker_close_stops_a_busy_worker_at_once():
     checker = AssumptionChecker("process")
     checker.start()
     checker._pool.submit(_time.sleep, 30.0)  # a check that would outlive the flight software
-    workers = psutil.Process().children()
+    workers = [psutil.Process(p.pid) for p in checker._pool._processes.values()]
     assert workers, "the checker should run its own worker process"
     t0 = _time.monotonic()
     checker.close()
