@@ -81,6 +81,8 @@ class Executive:
     ``on_slip(group, exec_ms, total)`` is called (throttled) to emit the warning event.
     """
 
+    STOP_POLL_S = 1.0  # longest a stop request waits for a blocking lockstep receive [s]
+
     def __init__(self, gnc_rate_hz: float, hk_rate_hz: float, slip_event_throttle_s: float,
                  gnc_task: Callable[..., object], hk_task: Callable[[], object],
                  on_slip: Callable[[str, float, int], object] | None = None,
@@ -138,13 +140,25 @@ class Executive:
         excuse (returns True to keep waiting). Returns the number of ticks run."""
         n = 0
         self.stop_requested = False
+        # Wait in slices so that stop() (SIGINT/SIGTERM) ends the loop within a slice even when the
+        # timeout is long (the SIL allows a minute for the simulator's first SYNC): an orderly stop is what
+        # sends FSW_STOPPED and ends the background check worker.
+        slice_s = min(timeout_s, self.STOP_POLL_S) if timeout_s > 0.0 else 0.0
+        waited = 0.0
         while not self.stop_requested and (max_ticks is None or n < max_ticks):
-            inputs = collect(timeout_s)
+            inputs = collect(slice_s)
             if inputs is None:
+                waited += slice_s
+                if self.stop_requested:
+                    break
+                if waited < timeout_s:
+                    continue
+                waited = 0.0
                 self.timeouts += 1
                 if on_timeout is not None and on_timeout():
                     continue
                 break
+            waited = 0.0
             tick = int(inputs.tick)
             if self.last_tick is not None and tick > self.last_tick + 1:
                 self._slip(self.gnc, 0.0, tick - self.last_tick - 1)

@@ -187,6 +187,9 @@ def _background_priority() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # a forked worker inherits the flight software's SIGTERM handler (stop the executive): `close` must
+    # be able to end it
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     try:
         os.nice(19)
     except OSError:
@@ -281,6 +284,8 @@ class AssumptionChecker:
                 worker.terminate()
             for worker in workers:
                 worker.join(timeout=2.0)
+                if worker.is_alive():
+                    worker.kill()
             self._pool = None
 
 

@@ -88,3 +88,37 @@ def test_reset_counters() -> None:
     assert ex.gnc.slips == 1
     ex.reset_counters()
     assert ex.gnc.slips == 0 and ex.gnc.exec_max_ms == 0.0 and ex.gnc.cycles == 0
+
+
+def test_stop_ends_a_long_lockstep_wait_within_a_poll_slice() -> None:
+    """SIGINT while waiting for SYNC with a one-minute timeout: the loop ends within STOP_POLL_S, so the
+    flight software can still shut down in order (FSW_STOPPED, background worker ended)."""
+    import threading
+    import time as _time
+
+    from fsw.executive import Executive
+
+    calls = []
+
+    def collect(timeout_s: float):
+        calls.append(timeout_s)
+        _time.sleep(timeout_s)
+        return None
+
+    ex = Executive(10.0, 1.0, 10.0, gnc_task=lambda *a: None, hk_task=lambda: None)
+    threading.Timer(0.3, ex.stop).start()
+    t0 = _time.monotonic()
+    ticks = ex.run_lockstep(collect, timeout_s=60.0)
+    assert ticks == 0
+    assert _time.monotonic() - t0 < 0.3 + ex.STOP_POLL_S + 0.5
+    assert ex.timeouts == 0  # a stop is not a simulator timeout
+    assert all(t <= ex.STOP_POLL_S for t in calls)
+
+
+def test_a_real_lockstep_timeout_is_still_counted_after_the_slices_add_up() -> None:
+    from fsw.executive import Executive
+
+    ex = Executive(10.0, 1.0, 10.0, gnc_task=lambda *a: None, hk_task=lambda: None)
+    ex.STOP_POLL_S = 0.01
+    assert ex.run_lockstep(lambda t: None, timeout_s=0.05) == 0
+    assert ex.timeouts == 1
