@@ -204,7 +204,36 @@ def _gradient_u_batch_kernel(X, x_d, axes, d_lo, d_hi, k1, out, active):
         active[j] = _gradient_u_kernel(X[j], x_d, axes, d_lo, d_hi, k1, out[j])
 
 
-class GradientLaw:
+class _SphereLaw:
+    """What both laws derive from u(x): the closed-loop velocity and the diagnosis.
+
+    Subclasses provide ``dim``, ``target``, ``zones``, ``control``, ``control_batch`` and
+    ``control_and_zone``."""
+
+    def velocity(self, x) -> np.ndarray:
+        """xdot = P(x) u(x)."""
+        x = _check_state(x, self.dim)
+        return _project(x, self.control(x))
+
+    def velocity_batch(self, X) -> np.ndarray:
+        X = _check_batch(X, self.dim)
+        return _project(X, self.control_batch(X))
+
+    def diagnose(self, x) -> LawDiagnosis:
+        x = _check_state(x, self.dim)
+        u, active = self.control_and_zone(x)
+        seps = np.array([_signed(zone, x) for zone in self.zones])
+        return LawDiagnosis(
+            active_zone=active,
+            separation_to_unsafe=float(max(seps.min(), 0.0)),
+            separation_to_target=0.5 * float(np.sum((x - self.target) ** 2)),
+            zone_separations=seps,
+            u=u,
+            velocity=_project(x, u),
+        )
+
+
+class GradientLaw(_SphereLaw):
     """u = -grad W, the paper's navigation-function law for conic zones (eq. negative_gradient_control_law).
 
     target: x_d (unit, R^(n+1)); zones: ``ConicZone`` objects (``kernel`` g_i and ``half_angle`` xi_i in rad);
@@ -268,11 +297,6 @@ class GradientLaw:
         i = _gradient_u_kernel(x, self.target, self._axes, self._d_lo, self._d_hi, self.k1, out)
         return out, (None if i < 0 else int(i))
 
-    def velocity(self, x) -> np.ndarray:
-        """xdot = P(x) u(x)."""
-        x = _check_state(x, self.dim)
-        return _project(x, self.control(x))
-
     def control_batch(self, X) -> np.ndarray:
         """u for every row of X, shape (m, n+1) -> (m, n+1) (one compiled loop, no Python per row)."""
         X = _check_batch(X, self.dim)
@@ -281,22 +305,6 @@ class GradientLaw:
         _gradient_u_batch_kernel(X, self.target, self._axes, self._d_lo, self._d_hi, self.k1, out, active)
         return out
 
-    def velocity_batch(self, X) -> np.ndarray:
-        X = _check_batch(X, self.dim)
-        return _project(X, self.control_batch(X))
-
-    def diagnose(self, x) -> LawDiagnosis:
-        x = _check_state(x, self.dim)
-        u, active = self.control_and_zone(x)
-        seps = np.array([_signed(zone, x) for zone in self.zones])
-        return LawDiagnosis(
-            active_zone=active,
-            separation_to_unsafe=float(max(seps.min(), 0.0)),
-            separation_to_target=0.5 * float(np.sum((x - self.target) ** 2)),
-            zone_separations=seps,
-            u=u,
-            velocity=_project(x, u),
-        )
 
 
 def _signed(zone, x) -> float:
@@ -340,7 +348,7 @@ def _blend(p, q, a):
     return out
 
 
-class StarShapedLaw:
+class StarShapedLaw(_SphereLaw):
     """The paper's law for star-shaped zones (eq. n-sphere-control-law).
 
     target: x_d; zones: any gnc zones (``kernel`` g_i must be in sigma(U_i) and interior, g_i != -x_d:
@@ -403,10 +411,6 @@ class StarShapedLaw:
         i, d = self._nearest_layer(x)
         return self._u(i, d), (None if i < 0 else i)
 
-    def velocity(self, x) -> np.ndarray:
-        x = _check_state(x, self.dim)
-        return _project(x, self.control(x))
-
     def layer_separations(self, X) -> tuple[np.ndarray, np.ndarray]:
         """(active index per row, -1 outside every layer; d_s to that zone, inf outside) for a batch."""
         X = _check_batch(X, self.dim)
@@ -437,19 +441,3 @@ class StarShapedLaw:
         rep = np.where(active, (1.0 - a) / self.kappa, 0.0)
         return self.k1 * (a[:, None] * self.target[None, :] - rep[:, None] * g)
 
-    def velocity_batch(self, X) -> np.ndarray:
-        X = _check_batch(X, self.dim)
-        return _project(X, self.control_batch(X))
-
-    def diagnose(self, x) -> LawDiagnosis:
-        x = _check_state(x, self.dim)
-        u, active = self.control_and_zone(x)
-        seps = np.array([_signed(zone, x) for zone in self.zones])
-        return LawDiagnosis(
-            active_zone=active,
-            separation_to_unsafe=float(max(seps.min(), 0.0)),
-            separation_to_target=0.5 * float(np.sum((x - self.target) ** 2)),
-            zone_separations=seps,
-            u=u,
-            velocity=_project(x, u),
-        )
