@@ -179,7 +179,7 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     spans = summary.settling(mission, t, err, segments)
     # the slowest commanded target (inf when one never settled within its span)
     metrics["settling_time_s"] = max((math.inf if s["settling_time_s"] is None else float(s["settling_time_s"])
-                                      for s in spans), default=math.nan)
+                                      for s in spans if s["judged"]), default=math.nan)
     metrics["final_error_deg"] = float(err[-1])
     limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
     metrics["peak_wheel_speed_fraction"] = float(np.max(np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]))
