@@ -112,8 +112,8 @@ class WheelNode:
 
 
 @dataclass
-class ImuNode:
-    """Gyro node: one IMU_RATE frame per sample, ``latency_s`` after the sample."""
+class _SampledNode:
+    """A sensor node that samples at its own rate and publishes ``latency_s`` after each sample."""
 
     icd: Icd
     rate_hz: float
@@ -125,13 +125,27 @@ class ImuNode:
         self.sender = self.sender or E2ESender(self.icd)
         self.period_s = 1.0 / self.rate_hz
         self.next_due_s = 0.0
+
+    def _sample_due(self, t_s: float) -> bool:
+        """True (and the next due time advanced past ``t_s``) when a sample is due at ``t_s``."""
+        if t_s + _EPS_S < self.next_due_s:
+            return False
+        self.next_due_s += self.period_s * max(1, math.floor((t_s - self.next_due_s + _EPS_S) / self.period_s) + 1)
+        return True
+
+
+@dataclass
+class ImuNode(_SampledNode):
+    """Gyro node: one IMU_RATE frame per sample, ``latency_s`` after the sample."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
         self._range = self.icd.signal_range("IMU_RATE", "omega_x")
 
     def poll(self, world: WorldLike, t_s: float) -> list[PendingFrame]:
         """Sample if a sample is due at ``t_s`` (world at t_s); returns the frame(s) to publish later."""
-        if t_s + _EPS_S < self.next_due_s:
+        if not self._sample_due(t_s):
             return []
-        self.next_due_s += self.period_s * max(1, math.floor((t_s - self.next_due_s + _EPS_S) / self.period_s) + 1)
         sample = world.imu_sample()
         omega = np.asarray(sample.omega_BN_B, dtype=float)
         saturated = bool(sample.saturated)
@@ -146,25 +160,18 @@ class ImuNode:
 
 
 @dataclass
-class StarTrackerNode:
+class StarTrackerNode(_SampledNode):
     """Star tracker node: ST_QUAT_A + ST_QUAT_B per sample, ``latency_s`` after the exposure."""
 
-    icd: Icd
-    rate_hz: float
     latency_s: float = 0.05
-    sender: E2ESender | None = None
-    samples: int = 0
 
     def __post_init__(self) -> None:
-        self.sender = self.sender or E2ESender(self.icd)
-        self.period_s = 1.0 / self.rate_hz
-        self.next_due_s = 0.0
+        super().__post_init__()
         self._seq = 0
 
     def poll(self, world: WorldLike, t_s: float) -> list[PendingFrame]:
-        if t_s + _EPS_S < self.next_due_s:
+        if not self._sample_due(t_s):
             return []
-        self.next_due_s += self.period_s * max(1, math.floor((t_s - self.next_due_s + _EPS_S) / self.period_s) + 1)
         sample = world.star_tracker_sample()
         q = np.asarray(sample.q_NS, dtype=float)
         if q[0] < 0:  # same rotation, canonical sign (keeps the scalar part non-negative)
