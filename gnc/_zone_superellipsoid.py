@@ -68,6 +68,16 @@ def make_geom(q: float, c: np.ndarray, B: np.ndarray, a: np.ndarray) -> np.ndarr
 
 
 @njit(cache=True, inline="always")
+def _best_first(r, best):
+    """Visit order that takes index ``best`` first, then the others in order (r = 0, 1, ...)."""
+    if r == 0:
+        return best
+    if r <= best:
+        return r - 1
+    return r
+
+
+@njit(cache=True, inline="always")
 def _pow(aw, e, mode):
     """aw ** e, by repeated squaring when e is a small integer (mode 2): pow() dominates otherwise."""
     if mode != 2:
@@ -586,12 +596,7 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
     best_cell = 0
     n_cells = 0
     for r in range(Ms):
-        if r == 0:
-            S = top
-        elif r <= top:
-            S = r - 1
-        else:
-            S = r
+        S = _best_first(r, top)
         if ubs[S] <= best_sample:
             continue
         P0 = S * per_super
@@ -605,12 +610,7 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
             if ubc[t] > ubc[tbest]:
                 tbest = t
         for rr in range(per_super):
-            if rr == 0:
-                t = tbest
-            elif rr <= tbest:
-                t = rr - 1
-            else:
-                t = rr
+            t = _best_first(rr, tbest)
             if ubc[t] <= best_sample:
                 continue
             P = P0 + t
