@@ -137,3 +137,44 @@ def test_realtime_loop_on_the_clock(loop) -> None:
     loop.fsw.run_realtime(duration_s=1.0)
     assert loop.fsw.fdir.stale_counts["IMU"] >= 9
     assert any(e.name == "FDIR_TRIPPED" and e.args["monitor"] == "IMU_STALE" for e in loop.tm.recent_events)
+
+
+def test_periodic_assumption_check_keeps_to_its_cpu_budget(loop, monkeypatch) -> None:
+    """In lockstep the onboard check period passes in a fraction of a host second: after a check that
+    took d seconds of CPU, the next periodic one waits d (1/fraction - 1) host seconds, so the background
+    check cannot starve the simulator and the flight software of CPU."""
+    from fsw.guidance import CheckResult
+
+    class StubChecker:
+        mode, busy = "process", False
+
+        def __init__(self):
+            self.submitted, self.pending = 0, None
+
+        def submit(self, snapshot):
+            self.submitted += 1
+            self.pending = CheckResult(True, [], float("inf"), None, duration_s=1.0)
+            return True
+
+        def poll(self):
+            res, self.pending = self.pending, None
+            return res
+
+        def close(self):
+            pass
+
+    fsw = loop.fsw
+    assert _send(loop, "SET_MODE", {"mode": "QUATERNION"}).accepted
+    fsw.checker = StubChecker()
+    fsw.cfg = fsw.cfg.model_copy(update={"law": fsw.cfg.law.model_copy(update={"check_period_s": 1.0,
+                                                                                  "check_max_cpu_fraction": 0.5})})
+    now = [1000.0]
+    monkeypatch.setattr("fsw.app.time.monotonic", lambda: now[0])
+    loop.run(30)  # 3 onboard seconds: the first check goes, its 1 s result arrives, the budget then binds
+    assert fsw.checker.submitted == 1
+    now[0] += 0.9  # budget after a 1 s check at 50 %: 1 s of host time
+    loop.run(20)
+    assert fsw.checker.submitted == 1
+    now[0] += 0.2
+    loop.run(20)
+    assert fsw.checker.submitted == 2
