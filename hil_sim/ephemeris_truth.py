@@ -5,8 +5,11 @@ series for the Moon) is far too slow to call every 10 ms, so it is evaluated onc
 (``node_spacing_s``, default 1 h) and the geocentric GCRS positions are interpolated with a cubic spline.
 Interpolation error (tests/hil_sim/test_world.py bounds it by 1e-7 rad; measured over 20 days at 1 h nodes:
 Moon 8e-11 rad, Sun 4e-12 rad), negligible next to astropy's own built-in accuracy (Moon ~10 arcsec,
-Sun ~1 arcsec). The grid is extended lazily as the run advances and shared between worlds with the same epoch (campaigns). Each block of
-96 nodes is fitted on its own, so the numbers a run sees never depend on what ran before it in the process.
+Sun ~1 arcsec). The grid is extended lazily as the run advances. Its nodes lie on one absolute TDB grid
+(multiples of the node spacing since J2000), not on each run's epoch, so worlds with different epochs
+(a campaign dispersing the epoch by hours) share the same fitted blocks: a worker calls astropy once
+per block, not once per run. Each block of 96 nodes is fitted on its own, so the numbers a run sees
+never depend on what ran before it in the process.
 
 IERS: GCRS positions of bodies need no Earth-orientation data, and we pass TDB times directly, so no IERS
 table or leap-second download is ever attempted (``iers.conf.auto_download`` is switched off here anyway).
@@ -31,9 +34,13 @@ def _configure_astropy_offline() -> None:
     iers.conf.auto_max_age = None
 
 
+GRID_ORIGIN_TDB_JD = 2451545.0  # J2000: node k of every table is at this epoch + k * node spacing
+
+
 @lru_cache(maxsize=64)
-def _astropy_nodes(epoch_tdb_jd: float, node_spacing_s: float, first: int, count: int) -> tuple[np.ndarray, np.ndarray]:
-    """Sun and Moon geocentric GCRS positions (km), shape (count, 3) each, at t = (first..first+count-1)*h."""
+def _astropy_nodes(node_spacing_s: float, first: int, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sun and Moon geocentric GCRS positions (km), shape (count, 3) each, at the absolute grid nodes
+    GRID_ORIGIN_TDB_JD + (first..first+count-1) * h."""
     _configure_astropy_offline()
     from astropy.coordinates import get_body, solar_system_ephemeris
     from astropy.time import Time
@@ -42,7 +49,7 @@ def _astropy_nodes(epoch_tdb_jd: float, node_spacing_s: float, first: int, count
     with _ASTROPY_LOCK, warnings.catch_warnings():
         warnings.simplefilter("ignore")  # ERFA "dubious year" notes concern UTC, which we never use
         with solar_system_ephemeris.set("builtin"):
-            times = Time(epoch_tdb_jd, offsets_day, format="jd", scale="tdb")
+            times = Time(GRID_ORIGIN_TDB_JD, offsets_day, format="jd", scale="tdb")
             sun = get_body("sun", times).cartesian.xyz.to_value("km").T
             moon = get_body("moon", times).cartesian.xyz.to_value("km").T
     return np.ascontiguousarray(sun), np.ascontiguousarray(moon)
@@ -73,12 +80,12 @@ def _spline_coefficients(values: np.ndarray, h: float) -> np.ndarray:
 
 
 @lru_cache(maxsize=256)
-def _block_coefficients(epoch_tdb_jd: float, node_spacing_s: float, block: int,
-                        block_nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """Spline segments of one block: nodes block*B .. (block+1)*B, each block fitted on its own (with two
-    extra nodes each side so the not-a-knot end conditions stay outside), so a block's coefficients never
-    depend on which other blocks exist: a run gives the same numbers whatever ran before it."""
-    sun, moon = _astropy_nodes(epoch_tdb_jd, node_spacing_s, block * block_nodes - 2, block_nodes + 5)
+def _block_coefficients(node_spacing_s: float, block: int, block_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Spline segments of one block of the absolute grid: nodes block*B .. (block+1)*B, each block fitted
+    on its own (with two extra nodes each side so the not-a-knot end conditions stay outside), so a
+    block's coefficients never depend on which other blocks exist: a run gives the same numbers whatever
+    ran before it."""
+    sun, moon = _astropy_nodes(node_spacing_s, block * block_nodes - 2, block_nodes + 5)
     return (_spline_coefficients(sun, node_spacing_s)[2:2 + block_nodes],
             _spline_coefficients(moon, node_spacing_s)[2:2 + block_nodes])
 
@@ -92,6 +99,9 @@ class TruthEphemeris:
     def __init__(self, epoch_tdb_jd: float, node_spacing_s: float = 3600.0) -> None:
         self.epoch_tdb_jd = float(epoch_tdb_jd)
         self.node_spacing_s = float(node_spacing_s)
+        # the epoch on the absolute grid's time axis (s since GRID_ORIGIN_TDB_JD); tables are kept in
+        # the run's own time (s since epoch_tdb_jd), so only this one subtraction sees the large number
+        self._epoch_on_grid_s = (self.epoch_tdb_jd - GRID_ORIGIN_TDB_JD) * 86400.0
         self._lock = threading.Lock()
         self._blocks = (0, 0)  # [first, last) block covered
         self.t_start_s = 0.0
@@ -105,17 +115,18 @@ class TruthEphemeris:
             return
         with self._lock:
             span = self.node_spacing_s * self.BLOCK_NODES
+            shift = self._epoch_on_grid_s
             first, last = self._blocks
-            lo = math.floor(t_min_s / span)
-            hi = math.floor(t_max_s / span) + 1
+            lo = math.floor((t_min_s + shift) / span)
+            hi = math.floor((t_max_s + shift) / span) + 1
             if last > first:
                 lo, hi = min(lo, first), max(hi, last)
-            blocks = [_block_coefficients(self.epoch_tdb_jd, self.node_spacing_s, b, self.BLOCK_NODES)
-                      for b in range(lo, hi)]
-            self.table = (lo * span, np.ascontiguousarray(np.concatenate([s for s, _ in blocks])),
+            blocks = [_block_coefficients(self.node_spacing_s, b, self.BLOCK_NODES) for b in range(lo, hi)]
+            t0 = lo * span - shift
+            self.table = (t0, np.ascontiguousarray(np.concatenate([s for s, _ in blocks])),
                           np.ascontiguousarray(np.concatenate([m for _, m in blocks])))
             self._blocks = (lo, hi)
-            self.t_start_s, self.t_end_s = lo * span, hi * span
+            self.t_start_s, self.t_end_s = t0, t0 + (hi - lo) * span
 
     @property
     def t0_s(self) -> float:

@@ -183,3 +183,21 @@ def test_truth_ephemeris_values_do_not_depend_on_history():
     after = short.positions_N_km(t)
     np.testing.assert_array_equal(before[0], after[0])
     np.testing.assert_array_equal(before[1], after[1])
+
+
+def test_truth_ephemeris_epochs_share_one_absolute_grid():
+    """Campaigns disperse the epoch by hours: a second epoch in the same blocks must reuse the fitted
+    blocks (no astropy call) and give the same positions at the same absolute instant."""
+    from hil_sim.ephemeris_truth import TruthEphemeris, _astropy_nodes
+
+    a = TruthEphemeris(2462100.25, 3600.0)
+    misses = _astropy_nodes.cache_info().misses
+    shift_s = 5.5 * 3600.0 + 17.0
+    b = TruthEphemeris(2462100.25 + shift_s / 86400.0, 3600.0)
+    t_b = np.array([0.0, 123.4, 600.0])
+    sun_b, moon_b = b.positions_N_km(t_b)
+    assert _astropy_nodes.cache_info().misses == misses
+    sun_a, moon_a = a.positions_N_km(t_b + shift_s)
+    # same spline segments; only the epoch's float rounding (~40 us of time) differs
+    np.testing.assert_allclose(sun_b, sun_a, rtol=1e-10)
+    np.testing.assert_allclose(moon_b, moon_a, rtol=1e-9)
