@@ -47,6 +47,7 @@ class RatesConfig(_Strict):
         "'clock': real time, cycles paced by the monotonic clock with the newest sensor samples.",
     )
     lockstep_timeout_s: float = Field(5.0, gt=0.0, le=600.0, description="Lockstep: how long to wait for a SYNC tick before declaring the simulator gone [s].")
+    realtime_priority: int = Field(0, ge=0, le=99, description="Real time only: SCHED_FIFO priority of the executive thread (1..99; 0 = the host's normal scheduler), with memory locked (mlockall) and the garbage collector's start-up objects frozen, so other work on the host cannot stretch a cycle. Needs root or CAP_SYS_NICE; when refused, the flight software runs best effort and says so in an event.")
     slip_event_throttle_s: float = Field(10.0, ge=0.0, le=3600.0, description="Minimum interval between two cycle-slip warning events per rate group [s]; every slip is still counted.")
 
     @model_validator(mode="after")

@@ -178,3 +178,29 @@ def test_periodic_assumption_check_keeps_to_its_cpu_budget(loop, monkeypatch) ->
     now[0] += 0.2
     loop.run(20)
     assert fsw.checker.submitted == 2
+
+
+def test_enter_realtime_gets_sched_fifo_or_says_why_not() -> None:
+    """In its own process (SCHED_FIFO must not leak into the test run): the policy is FIFO when the host
+    grants it, and otherwise the flight software reports that it runs best effort."""
+    code = ("import os, gc; from fsw.app import enter_realtime; ev = enter_realtime(7); "
+            "print(repr(ev)); print(os.sched_getscheduler(0) == os.SCHED_FIFO, gc.get_freeze_count() > 0)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert out.returncode == 0, out.stderr
+    events_line, state_line = out.stdout.strip().splitlines()[-2:]
+    events = eval(events_line)  # noqa: S307 - our own repr of a list of tuples
+    fifo, frozen = state_line.split()
+    assert frozen == "True"
+    names = [name for name, _ in events]
+    if fifo == "True":
+        assert names[0] == "RT_SCHEDULING" and "priority 7" in events[0][1]
+    else:
+        assert names == ["RT_SCHEDULING_UNAVAILABLE"]
+
+
+def test_enter_realtime_without_priority_only_freezes_the_heap() -> None:
+    code = ("import os, gc; from fsw.app import enter_realtime; "
+            "print(enter_realtime(0), os.sched_getscheduler(0) == os.SCHED_OTHER, gc.get_freeze_count() > 0)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["[]", "True", "True"]
