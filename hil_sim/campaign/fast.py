@@ -95,7 +95,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
     initial = world.truth
     icd = _icd()
     channel = f"virtual:campaign{os.getpid()}x{next(_channel_ids)}"
-    sim_bus, fsw_bus = open_bus(channel), open_bus(channel)
+    sim_bus, fsw_bus = open_bus(channel, light=True), open_bus(channel, light=True)
     cfg = mission.flight_software
     if cfg.law.assumption_check != "off":
         # The full assumption check (gnc.checks) only feeds events and telemetry, never the control (the

@@ -118,3 +118,45 @@ def test_vcan0_and_vcan1_are_separate_buses() -> None:
     finally:
         for bus in (a0, b0, b1):
             bus.shutdown()
+
+
+def _frame(i: int) -> can.Message:
+    return can.Message(arbitration_id=0x40 + i, data=bytes([i, 2, 3, 4, 5, 6, 7, 8]), is_extended_id=False)
+
+
+def test_light_virtual_bus_delivers_like_the_virtual_bus() -> None:
+    """LightVirtualBus (campaign fast mode) is a VirtualBus: it shares the channel with plain virtual buses
+    and delivers what they would (a copy per receiver, stamped, is_rx set, in order)."""
+    from can.interfaces.virtual import VirtualBus, channels
+
+    light = open_bus("virtual:light-test", light=True)
+    plain = open_bus("virtual:light-test")
+    other = transport.LightVirtualBus(channel="light-test")
+    assert isinstance(light, VirtualBus) and type(plain) is VirtualBus
+    try:
+        sent = [_frame(i) for i in range(5)]
+        before = time.time()
+        for m in sent:
+            light.send(m)
+        sent[0].data[0] = 99  # a copy was delivered: later changes by the sender do not show
+        for rx in (plain, other):
+            got = [rx.recv(timeout=0.0) for _ in range(5)]
+            assert rx.recv(timeout=0.0) is None
+            for m, g in zip(sent, got):
+                assert g is not m and g.arbitration_id == m.arbitration_id and not g.is_extended_id
+                assert g.is_rx and g.channel == "light-test" and before <= g.timestamp <= time.time()
+            assert [bytes(g.data) for g in got] == [bytes([i, 2, 3, 4, 5, 6, 7, 8]) for i in range(5)]
+        assert light.recv(timeout=0.0) is None  # no own echo
+        plain.send(_frame(7))
+        assert light.recv(timeout=0.5).arbitration_id == 0x47 and other.recv(timeout=0.0).arbitration_id == 0x47
+        t0 = time.monotonic()
+        assert light.recv(timeout=0.05) is None and time.monotonic() - t0 >= 0.04
+        light.set_filters([{"can_id": 0x41, "can_mask": 0x7FF}])
+        for i in range(3):
+            plain.send(_frame(i))
+        # (as BusABC.recv does: a non-matching frame costs a call when timeout=0, so allow some time)
+        assert light.recv(timeout=0.5).arbitration_id == 0x41 and light.recv(timeout=0.05) is None
+    finally:
+        for bus in (light, plain, other):
+            bus.shutdown()
+    assert "light-test" not in channels
