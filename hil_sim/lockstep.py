@@ -277,7 +277,13 @@ class Simulator:
             awaited = self.tick
             self.begin_tick()
             self._advance_period(paced=lambda j: pace(j) if j else self.poll(self._sub_t(0)))
-            # CYCLE_DONE(k) must have arrived before tick k+1 begins; anything later is late.
+            # CYCLE_DONE(k) must have arrived before tick k+1 begins; anything later is late. The last
+            # poll above was one dynamics step before that: wait for the tick's end and take what came.
+            end = start + self.tick * self.period_s
+            now = self.clock()
+            if end > now:
+                sleep(end - now)
+            self.poll(self.t_s)
             if awaited in self._done_ticks:
                 self._done_ticks.discard(awaited)
             else:

@@ -5,7 +5,10 @@ Two ways to read the bus:
     device frames of tick k; times are simulation times t_k = k * period (from SYNC), so runs are
     deterministic whatever the host load;
   * real time (:meth:`FswBusDriver.collect_latest`): take whatever has arrived, newest sample of each
-    kind with its age on the monotonic clock.
+    kind with its age on the monotonic clock. The flight software's cycles are not aligned with the
+    simulator's SYNC frames then, so the driver answers the newest SYNC it has seen: after a real-time
+    cycle's wheel commands it sends CYCLE_DONE(k) for that SYNC k (once per SYNC), and the commands
+    carry k in ``tick_lsb``. The simulator can then tell a cycle that kept up from a late one.
 
 Only frames the E2E receiver delivers (ok / ok_some_lost) reach these samples.
 """
@@ -132,6 +135,9 @@ class FswBusDriver:
         self._wheels_rx: list[float | None] = [None] * n_wheels
         self._wheels_new = [False] * n_wheels
         self._pending_sync: dict | None = None  # a SYNC seen while finishing the previous tick
+        self._realtime = False  # set by collect_latest: frames answer the newest SYNC seen (module docstring)
+        self._rt_sync_tick: int | None = None  # newest SYNC tick received in real time
+        self._rt_done_tick: int | None = None  # SYNC tick last answered with CYCLE_DONE
         self.t_tick = 0.0
         self.period_s = 0.0
         self.last_tick: int | None = None
@@ -157,6 +163,7 @@ class FswBusDriver:
         in-process fast mode. Late frames of a tick are used at the next tick, as received.
         """
         deadline = time.monotonic() + max(0.0, timeout_s)
+        self._realtime = False
         sync = self._pending_sync
         self._pending_sync = None
         while sync is None:
@@ -238,6 +245,7 @@ class FswBusDriver:
     def collect_latest(self) -> LatestInputs:
         """Drain the bus without blocking and return the newest valid samples with their ages [s]."""
         self._imu_batch = []
+        self._realtime = True
         self._start_supervision(self.clock())
         while True:
             msg = self.bus.recv(timeout=0.0)
@@ -246,6 +254,8 @@ class FswBusDriver:
             now = self.clock()
             frame = self.receiver.classify(msg, now)
             if frame is not None:
+                if frame.frame_id == self._sync_id and frame.delivered:
+                    self._rt_sync_tick = int(frame.signals["tick"])
                 self._apply(frame, now)
         now = self.clock()
         self.receiver.check_timeouts(now)
@@ -306,14 +316,30 @@ class FswBusDriver:
         NaN is sent as 0 (the allocation upstream must saturate first; this only keeps the bus valid)."""
         if len(torques_Nm) != self.n_wheels:
             raise ValueError(f"send_wheel_torques: expected {self.n_wheels} torques, got {len(torques_Nm)}")
+        if self._realtime and self._rt_sync_tick is not None:
+            tick = self._rt_sync_tick  # the application's cycle count means nothing to the simulator
         for i, tau in enumerate(torques_Nm, start=1):
             name = f"RW{i}_CMD"
             lo, hi = self.icd.signal_range(name, "torque_cmd")
             value = 0.0 if not np.isfinite(tau) else min(max(float(tau), lo), hi)
             self._send(self._sender.frame(name, {"torque_cmd": value, "tick_lsb": tick & 0xFFFF}))
+        if self._realtime:
+            self._answer_latest_sync()
 
     def send_cycle_done(self, tick: int) -> None:
+        """CYCLE_DONE(tick) (lockstep). In real time it answers the newest SYNC seen instead (see
+        the module docstring), at most once per SYNC."""
+        if self._realtime:
+            self._answer_latest_sync()
+            return
         self._send(self._sender.frame("CYCLE_DONE", {"tick": tick & 0xFFFFFFFF}))
+
+    def _answer_latest_sync(self) -> None:
+        k = self._rt_sync_tick
+        if k is None or k == self._rt_done_tick:
+            return  # no SYNC yet, or this one was answered by an earlier cycle
+        self._rt_done_tick = k
+        self._send(self._sender.frame("CYCLE_DONE", {"tick": k & 0xFFFFFFFF}))
 
     def send_heartbeat(self, mode: int, cycle: int) -> None:
         self._send(self._sender.frame("FSW_HEARTBEAT", {"mode": int(mode) & 0x0F, "cycle": cycle & 0xFFFFFFFF}))

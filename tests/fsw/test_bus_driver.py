@@ -171,3 +171,52 @@ def test_transmit_errors_are_counted_not_raised(icd: Icd, buses) -> None:
     drv.send_wheel_torques(1, [0.0, 0.0, 0.0])
     drv.send_cycle_done(1)
     assert drv.tx_errors == 4
+
+
+def test_realtime_cycle_done_answers_the_newest_sync_and_a_late_cycle_still_counts() -> None:
+    """Real time, the flight software (its own clock) and the simulator (SYNC paced on the clock) in two
+    threads on a virtual bus: the driver answers each SYNC with CYCLE_DONE(k), so cycles that keep up
+    are not counted late; a cycle that overruns is."""
+    import threading
+    import time
+
+    from closed_loop_kit import BusLoop, fsw_config_for
+
+    from hil_sim.params import WorldParams
+    from hil_sim.world import World
+
+    wp = WorldParams()
+    cfg = fsw_config_for(wp, initial_mode="SAFE", law={"assumption_check": "off"})
+    loop = BusLoop(cfg, World(wp, seed=0))
+    try:
+        period = cfg.gnc_period_s
+
+        def run(n_ticks: int, overrun_at: int | None = None) -> tuple[int, int]:
+            before_late, before_done = loop.sim.stats.cycle_done_late, loop.sim.stats.cycle_done
+            before_ticks = loop.sim.stats.ticks
+            fsw = threading.Thread(target=loop.fsw.run_realtime, kwargs={"duration_s": (n_ticks + 3) * period})
+            cycles = loop.fsw.cycle
+            fsw.start()
+            # SYNCs start half a period after a flight-software cycle, so each cycle falls mid-tick: with
+            # the two clocks in phase, a cycle just before SYNC(k+1) answers SYNC(k) a moment too late
+            # (the phase of a real system is arbitrary; this test is about what the counter means)
+            deadline = time.monotonic() + 10.0
+            while loop.fsw.cycle == cycles and time.monotonic() < deadline:
+                time.sleep(0.001)
+            time.sleep(0.5 * period)
+
+            def on_tick(sim) -> None:
+                if overrun_at is not None and sim.stats.ticks == before_ticks + overrun_at:
+                    loop.fsw.inject_overrun_s = 2.5 * period
+
+            loop.sim.run_realtime(n_ticks, on_tick=on_tick)
+            loop.fsw.stop()
+            fsw.join(timeout=10.0)
+            return loop.sim.stats.cycle_done_late - before_late, loop.sim.stats.cycle_done - before_done
+
+        late, done = run(20)
+        assert done >= 19 and late <= 1, (late, done)  # before the fix: late == 20, done == 0
+        late, done = run(20, overrun_at=10)
+        assert 2 <= late <= 6, late  # the overrunning cycle's tick and the ones it covered
+    finally:
+        loop.close()
