@@ -147,11 +147,15 @@ class ImuNode(_SampledNode):
         if not self._sample_due(t_s):
             return []
         sample = world.imu_sample()
-        omega = np.asarray(sample.omega_BN_B, dtype=float)
-        saturated = bool(sample.saturated)
+        return self.frames_for(sample.omega_BN_B, sample.saturated, t_s)
+
+    def frames_for(self, omega_BN_B: Any, saturated: bool, t_s: float) -> list[PendingFrame]:
+        """The frame(s) of a gyro sample taken at ``t_s`` (``poll`` once the sample is due)."""
+        saturated = bool(saturated)
         values = {}
-        for axis, w in zip("xyz", omega):
-            values[f"omega_{axis}"], clipped = _clamp(float(w), *self._range)
+        lo, hi = self._range
+        for key, w in zip(("omega_x", "omega_y", "omega_z"), np.asarray(omega_BN_B, dtype=float).tolist()):
+            values[key], clipped = _clamp(w, lo, hi)
             saturated |= clipped
         values["saturated"] = int(saturated)
         self.samples += 1
@@ -173,14 +177,18 @@ class StarTrackerNode(_SampledNode):
         if not self._sample_due(t_s):
             return []
         sample = world.star_tracker_sample()
-        q = np.asarray(sample.q_NS, dtype=float)
+        return self.frames_for(sample.q_NS, sample.valid, sample.blind_source, t_s)
+
+    def frames_for(self, q_NS: Any, valid: bool, blind_source: int, t_s: float) -> list[PendingFrame]:
+        """The frames of a star-tracker sample taken at ``t_s`` (``poll`` once the sample is due)."""
+        q = np.asarray(q_NS, dtype=float)
         if q[0] < 0:  # same rotation, canonical sign (keeps the scalar part non-negative)
             q = -q
         seq = self._seq
         self._seq = (self._seq + 1) & 0x0F
         self.samples += 1
-        a = {"q_w": float(np.clip(q[0], -1, 1)), "q_x": float(np.clip(q[1], -1, 1)), "valid": int(sample.valid),
-             "blind_source": int(sample.blind_source), "sample_seq": seq}
+        a = {"q_w": float(np.clip(q[0], -1, 1)), "q_x": float(np.clip(q[1], -1, 1)), "valid": int(valid),
+             "blind_source": int(blind_source), "sample_seq": seq}
         b_static = {"q_y": float(np.clip(q[2], -1, 1)), "q_z": float(np.clip(q[3], -1, 1)), "sample_seq": seq}
         t_sample = t_s
         sender = self.sender
@@ -242,6 +250,25 @@ class Devices:
         """Called with the world at ``t_s`` (after each dynamics step): sensors sample when due."""
         self.pending.extend(self.imu.poll(world, t_s))
         self.pending.extend(self.star_tracker.poll(world, t_s))
+
+    def step_world(self, world: Any, dt_s: float, times_s: Sequence[float]) -> None:
+        """``world.step(dt_s, wheel_torques(times_s[j]))`` then ``sample_sensors(world, times_s[j + 1])``
+        for each step j, through the world's one-call ``advance_sampled`` (the same numbers and frames)."""
+        steps = len(times_s) - 1
+        first = [w.torque_at(times_s[0]) for w in self.wheels]
+        if first == [w.torque_at(times_s[-2]) for w in self.wheels]:
+            # a wheel's command only changes here by timing out, once: same at both ends, same throughout
+            u = np.tile(first, (steps, 1))
+        else:
+            u = np.array([[w.torque_at(t) for w in self.wheels] for t in times_s[:-1]])
+        imu_due = [self.imu._sample_due(t) for t in times_s[1:]]
+        st_due = [self.star_tracker._sample_due(t) for t in times_s[1:]]
+        gyro, sat, q, valid, blind = world.advance_sampled(dt_s, u, imu_due, st_due)
+        for j in range(steps):
+            if imu_due[j]:
+                self.pending.extend(self.imu.frames_for(gyro[j], sat[j], times_s[j + 1]))
+            if st_due[j]:
+                self.pending.extend(self.star_tracker.frames_for(q[j], valid[j], blind[j], times_s[j + 1]))
 
     def frames_due(self, t_s: float) -> list[can.Message]:
         """Sensor frames whose transmission time has come by ``t_s``, oldest first, built at ``t_s``."""

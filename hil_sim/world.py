@@ -81,6 +81,17 @@ class NormalStream:
         self._pos += n
         return out
 
+    def take_rows(self, n: int, k: int) -> np.ndarray:
+        """(k, n): the numbers of k successive ``take(n)`` calls (one slice when no refill falls inside)."""
+        if k and self._pos + n * k <= self._buf.size:
+            out = self._buf[self._pos:self._pos + n * k].reshape(k, n)
+            self._pos += n * k
+            return out
+        rows = np.empty((k, n))
+        for i in range(k):
+            rows[i] = self.take(n)
+        return rows
+
 
 def model_generator(seed: int | None, key: int, own_seed: int | None) -> np.random.Generator:
     """The generator of one model: its own seed if set, else child ``key`` of the world seed."""
@@ -119,6 +130,31 @@ def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
         AUX[m, AUX_SUN], AUX[m, AUX_SUN + 1], AUX[m, AUX_SUN + 2] = s0 * sn, s1 * sn, s2 * sn
         AUX[m, AUX_MOON], AUX[m, AUX_MOON + 1], AUX[m, AUX_MOON + 2] = m0 * mn, m1 * mn, m2 * mn
     return True
+
+
+@njit(cache=True, error_model="numpy")
+def _world_period_kernel(X, D, TEMP, G, W, B, U_SEQ, NORMALS_SEQ, dt_sub, n_sub, U_APPLIED, FLAGS, DECAY, GM,
+                         HAS_COULOMB, WORK, T_END, ORB, sun_c, moon_c, eph_t0, eph_h, AUX,
+                         IMU_DUE, IMU_DT, IMU_NORMALS, BIAS, GYRO_P, GYRO_SEQ, SAT_SEQ,
+                         ST_DUE, ST_P, ST_BASIS, ST_NORMALS, ST_Q, ST_VALID, ST_BLIND, ST_Q_SEQ, ST_VALID_SEQ,
+                         ST_BLIND_SEQ):
+    """J steps of ``_world_step_kernel`` (U_SEQ[j], NORMALS_SEQ[j], ending at T_END[j]), each followed by a
+    gyro sample where IMU_DUE[j] and a star-tracker sample where ST_DUE[j] (normals in the order the
+    one-call-per-step path draws them). One compiled call per GNC period instead of ~2 per dynamics step.
+    Returns the number of steps done (< J: U_SEQ[j] not finite, nothing of step j applied)."""
+    for j in range(U_SEQ.shape[0]):
+        if not _world_step_kernel(X, D, TEMP, G, W, B, U_SEQ[j], NORMALS_SEQ[j], dt_sub, n_sub, U_APPLIED, FLAGS,
+                                  DECAY, GM, HAS_COULOMB, WORK, T_END[j], ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
+            return j
+        if IMU_DUE[j]:
+            sen.gyro_sample_batch(X, BIAS, GYRO_P, IMU_NORMALS[j], IMU_DT[j], GYRO_SEQ[j], SAT_SEQ[j])
+        if ST_DUE[j]:
+            sen.star_tracker_sample_batch(X, ST_P, ST_BASIS, AUX, AUX_SUN, AUX_MOON, ST_NORMALS[j], ST_Q, ST_VALID,
+                                          ST_BLIND)
+            ST_Q_SEQ[j] = ST_Q
+            ST_VALID_SEQ[j] = ST_VALID
+            ST_BLIND_SEQ[j] = ST_BLIND
+    return U_SEQ.shape[0]
 
 
 class WorldBatch:
@@ -186,6 +222,7 @@ class WorldBatch:
         self.ST_VALID = np.zeros(M, dtype=np.bool_)
         self.ST_BLIND = np.zeros(M, dtype=np.int64)
 
+        self._period_out: tuple[np.ndarray, ...] | None = None
         self._t = 0.0
         self._advance(0.0, np.zeros((M, N)), 0)
 
@@ -215,6 +252,72 @@ class WorldBatch:
                                   sun_c, moon_c, eph_t0, eph.node_spacing_s, self.AUX):
             raise ValueError(f"step: wheel_torque_cmd_Nm must be finite, got {u_cmd.tolist()!r}")
         self._t = t_end
+
+    def advance_sampled(self, dt_s: float, n_sub: int, u_seq: np.ndarray, imu_due: np.ndarray,
+                        st_due: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """J = len(u_seq) steps of dt_s (n_sub RK4 sub-steps each), commands u_seq[j] (M, N), each step
+        followed by ``imu_sample_arrays()`` where imu_due[j] and ``star_tracker_sample_arrays()`` where
+        st_due[j]: the same numbers, bit for bit, as those calls one by one, in one compiled call.
+        Returns gyro (J, M, 3), saturated (J, M), star-tracker q (J, M, 4), valid (J, M), blind (J, M);
+        rows where the sensor was not due are left unset."""
+        J, M = len(u_seq), self.n_runs
+        t_end = np.empty(J)
+        t = self._t
+        imu_dt = np.zeros(J)
+        t_last_imu = self._t_last_imu
+        for j in range(J):
+            t = t + dt_s  # the same accumulation as j calls of _advance
+            t_end[j] = t
+            if imu_due[j]:
+                imu_dt[j] = self.imu_period_s[0] if t_last_imu is None else t - t_last_imu
+                t_last_imu = t
+        eph = self.ephemeris
+        if t_end[-1] >= eph.t_end_s or self._t < eph.t_start_s:
+            eph.ensure(self._t, t_end[-1])
+        if self._has_random_disturbance and n_sub > 0:
+            normals = self.normals_disturbance.take_rows(n_sub * M * 3, J)
+        else:
+            normals = np.broadcast_to(self._no_normals, (J, self._no_normals.size))
+        imu_normals = self._sampled_normals(self.normals_imu, M * 6, imu_due)
+        st_normals = self._sampled_normals(self.normals_star_tracker, M * 3, st_due)
+        dt_sub = dt_s / n_sub if n_sub else 0.0
+        if dt_sub != self._coef_dt:
+            self._coef = dyn.step_coefficients(self.W, self.B, dt_sub)
+            self._coef_dt = dt_sub
+        decay, gm, has_coulomb = self._coef
+        eph_t0, sun_c, moon_c = eph.table
+        if self._period_out is None or self._period_out[0].shape[0] != J:
+            # outputs reused from period to period (callers copy what they keep, as with GYRO_OUT)
+            self._period_out = (np.zeros((J, M, 3)), np.zeros((J, M), dtype=np.bool_), np.zeros((J, M, 4)),
+                                np.zeros((J, M), dtype=np.bool_), np.zeros((J, M), np.int64))
+        gyro, sat, st_q, st_valid, st_blind = self._period_out
+        done = _world_period_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_seq, normals, dt_sub, n_sub,
+                                    self.U_APPLIED, self.FLAGS, decay, gm, has_coulomb, self._work, t_end, self.ORB,
+                                    sun_c, moon_c, eph_t0, eph.node_spacing_s, self.AUX,
+                                    imu_due, imu_dt, imu_normals, self.BIAS, self.GYRO_P, gyro, sat,
+                                    st_due, self.ST_P, self.ST_BASIS, st_normals, self.ST_Q, self.ST_VALID,
+                                    self.ST_BLIND, st_q, st_valid, st_blind)
+        if done:
+            self._t = float(t_end[done - 1])
+            last_imu = np.flatnonzero(imu_due[:done])
+            if last_imu.size:
+                self._t_last_imu = float(t_end[last_imu[-1]])
+            if imu_due[done - 1]:
+                self.GYRO_OUT[:], self.GYRO_SAT[:] = gyro[done - 1], sat[done - 1]
+        if done < J:
+            raise ValueError(f"step: wheel_torque_cmd_Nm must be finite, got {u_seq[done].tolist()!r}")
+        return gyro, sat, st_q, st_valid, st_blind
+
+    @staticmethod
+    def _sampled_normals(stream: NormalStream, n: int, due: np.ndarray) -> np.ndarray:
+        """(J, n) normals: row j from the stream where due[j] (in order), else zeros."""
+        k = int(np.count_nonzero(due))
+        if k == len(due):
+            return stream.take_rows(n, k)
+        rows = np.zeros((len(due), n))
+        if k:
+            rows[due] = stream.take_rows(n, k)
+        return rows
 
     def step(self, dt_s: float, wheel_torque_cmd_Nm: np.ndarray) -> None:
         """Advance all runs by dt_s (split into equal RK4 sub-steps <= max_integration_step_s) with the motor
@@ -335,6 +438,25 @@ class World:
             self._last_dt = dt_s
             self._last_n_sub = max(1, math.ceil(dt_s / self.batch.max_step_s - 1e-9))
         self.batch._advance(dt_s, u, self._last_n_sub)
+
+    def advance_sampled(self, dt_s: float, wheel_torque_cmds_Nm: np.ndarray, imu_due: Sequence[bool],
+                        st_due: Sequence[bool]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """J steps of ``step(dt_s, wheel_torque_cmds_Nm[j])`` (J, N), each followed by ``imu_sample()``
+        where imu_due[j] and ``star_tracker_sample()`` where st_due[j], in one compiled call (the same
+        numbers). Returns gyro (J, 3), saturated (J,), star-tracker q_NS (J, 4), valid (J,), blind (J,);
+        rows where a sensor was not due are unset."""
+        u = np.ascontiguousarray(wheel_torque_cmds_Nm, dtype=np.float64)
+        if u.ndim != 2 or u.shape[1] != self.n_wheels or not u.shape[0]:
+            raise ValueError(f"advance_sampled: commands must have shape (steps, {self.n_wheels}), got {u.shape}")
+        if not dt_s > 0.0:
+            raise ValueError(f"step: dt_s must be > 0, got {dt_s!r}")
+        if dt_s != self._last_dt:
+            self._last_dt = dt_s
+            self._last_n_sub = max(1, math.ceil(dt_s / self.batch.max_step_s - 1e-9))
+        gyro, sat, q, valid, blind = self.batch.advance_sampled(
+            dt_s, self._last_n_sub, u.reshape(u.shape[0], 1, self.n_wheels), np.asarray(imu_due, dtype=np.bool_),
+            np.asarray(st_due, dtype=np.bool_))
+        return gyro[:, 0], sat[:, 0], q[:, 0], valid[:, 0], blind[:, 0]
 
     def imu_sample(self) -> sen.ImuSample:
         omega, sat = self.batch.imu_sample_arrays()

@@ -279,3 +279,28 @@ def test_simulator_rejects_inconsistent_periods_and_phase_misuse(icd: Icd) -> No
             sim.begin_tick()
     finally:
         bus.shutdown()
+
+
+def test_one_call_period_gives_the_frames_and_state_of_the_step_loop(icd: Icd) -> None:
+    """Unpaced ticks step the world and sample the sensors in one compiled call per period; the paced
+    (real-time) loop does it step by step: the same frames, bit for bit, and the same world."""
+    results = []
+    for paced in (None, lambda j: None):
+        sim, driver, _, buses = _in_process_pair(icd, seed=11)
+        try:
+            sent = []
+            sim.on_frame = lambda d, t, m: sent.append((d, t, m.arbitration_id, bytes(m.data))) if d == "tx" else None
+            for k in range(25):
+                sim.begin_tick()
+                inputs = driver.collect_tick(0.0)
+                driver.send_wheel_torques(inputs.tick, [0.002 * (k % 5) - 0.004] * sim.n_wheels)
+                driver.send_cycle_done(inputs.tick)
+                sim._receive_until_done(sim.tick, time.monotonic())
+                sim._advance_period(paced=paced)
+            results.append((sent, sim.world.truth, sim.world.t))
+        finally:
+            _close(buses)
+    (a, ta, t_a), (b, tb, t_b) = results
+    assert len(a) > 25 * 10 and a == b and t_a == t_b
+    for x, y in zip(ta, tb):
+        np.testing.assert_array_equal(x, y)

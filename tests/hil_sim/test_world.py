@@ -201,3 +201,34 @@ def test_truth_ephemeris_epochs_share_one_absolute_grid():
     # same spline segments; only the epoch's float rounding (~40 us of time) differs
     np.testing.assert_allclose(sun_b, sun_a, rtol=1e-10)
     np.testing.assert_allclose(moon_b, moon_a, rtol=1e-9)
+
+
+def test_advance_sampled_is_bit_identical_to_step_and_sample_calls():
+    """The simulator's one-call GNC period (fast mode) must give exactly what step() + imu_sample() +
+    star_tracker_sample() one by one give: state, time, every sensor value, and the random streams after
+    (including a refill of a stream's block inside a period)."""
+    a, b = World(_noisy_params(), seed=4), World(_noisy_params(), seed=4)
+    rng = np.random.default_rng(5)
+    imu_due = np.ones(10, dtype=bool)
+    imu_due[[3, 7]] = False  # a sensor not due at some steps
+    st_due = np.zeros(10, dtype=bool)
+    st_due[[4, 9]] = True
+    for period in range(120):  # 120 x 8 IMU samples x 6 normals crosses the 4096-number block of its stream
+        u = rng.uniform(-0.05, 0.05, (10, a.n_wheels))
+        gyro, sat, q, valid, blind = a.advance_sampled(0.01, u, imu_due, st_due)
+        for j in range(10):
+            b.step(0.01, u[j])
+            if imu_due[j]:
+                s = b.imu_sample()
+                np.testing.assert_array_equal(gyro[j], s.omega_BN_B)
+                assert bool(sat[j]) == s.saturated
+            if st_due[j]:
+                s = b.star_tracker_sample()
+                np.testing.assert_array_equal(q[j], s.q_NS)
+                assert (bool(valid[j]), int(blind[j])) == (s.valid, s.blind_source)
+    assert a.t == b.t
+    for x, y in zip(a.truth, b.truth):
+        np.testing.assert_array_equal(x, y)
+    np.testing.assert_array_equal(a.imu_sample().omega_BN_B, b.imu_sample().omega_BN_B)
+    with pytest.raises(ValueError, match="finite"):
+        a.advance_sampled(0.01, np.full((10, a.n_wheels), np.nan), imu_due, st_due)
