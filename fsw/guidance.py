@@ -94,8 +94,13 @@ _MU_EARTH_KM3_S2 = 398600.4418
 _BODY_CODES = {"sun": "SUN", "moon": "MOON", "earth": "EARTH", "inertial": "INERTIAL"}
 
 
+def _norm(v: np.ndarray) -> float:
+    # np.linalg.norm of a real 1-D array is sqrt(v.dot(v)): the same number, without its ~3 us of checks
+    return math.sqrt(v.dot(v))
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
+    return v / _norm(v)
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -156,7 +161,7 @@ class SkyEphemeris:
         r = self.position_N_km(t_s)
         sun = s0 + f * (s1 - s0) - r
         moon = m0 + f * (m1 - m0) - r
-        return {"sun": sun / np.linalg.norm(sun), "moon": moon / np.linalg.norm(moon), "earth": -r / np.linalg.norm(r)}
+        return {"sun": sun / _norm(sun), "moon": moon / _norm(moon), "earth": -r / _norm(r)}
 
 
 @dataclass
@@ -329,7 +334,7 @@ class GuidanceOutput:
 
 
 def _saturate(omega: np.ndarray, max_rate_rad_s: float) -> np.ndarray:
-    n = float(np.linalg.norm(omega))
+    n = _norm(np.asarray(omega, dtype=float))
     return omega * (max_rate_rad_s / n) if n > max_rate_rad_s else omega
 
 

@@ -149,7 +149,8 @@ class E2EReceiver:
         if len(data) != spec.dlc:
             counts[BAD_LENGTH] += 1
             return ReceivedFrame(name, frame_id, BAD_LENGTH, now_s)
-        if crc8_sae_j1850(data[1:], crc=spec.crc_seed) != data[0]:  # = e2e_crc(spec.data_id, data[1:])
+        codec = spec.codec
+        if (codec.crc(data) if codec is not None else e2e_crc(spec.data_id, data[1:])) != data[0]:
             counts[CRC_ERROR] += 1
             return ReceivedFrame(name, frame_id, CRC_ERROR, now_s)
         signals = self.icd.decode_checked(spec, data)

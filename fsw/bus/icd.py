@@ -21,6 +21,7 @@ from typing import Any, Mapping
 import can
 import cantools
 
+from fsw.bus.e2e import _TABLE as _CRC_TABLE
 from fsw.bus.e2e import crc8_sae_j1850, e2e_crc
 
 DEFAULT_DBC_PATH = Path(__file__).resolve().parents[2] / "config" / "icd" / "keepout.dbc"
@@ -58,34 +59,72 @@ class _MessageCodec:
     """Encoder/decoder of one message with only little-endian integer signals (see the module docstring).
 
     Scaling per conversion class, as cantools does it: identity ``round(v)`` / ``raw``; linear
-    ``round((v - offset) / scale)`` / ``raw * scale + offset``. Integer-linear conversions (cantools
-    divides exactly when it can) keep cantools' own ``numeric_scaled_to_raw``.
+    ``round((v - offset) / scale)`` / ``raw * scale + offset``; other conversions (integer-linear:
+    cantools divides exactly when it can) call cantools' own conversion object. The four functions are
+    generated as Python source from the signal table (one straight-line function per message: a frame
+    costs a few microseconds, and a loop over a signal table would double that).
     """
 
-    IDENTITY, LINEAR, OTHER = 0, 1, 2
-
-    def __init__(self, message: Any) -> None:
+    def __init__(self, message: Any, accept_bounds: Mapping[str, tuple[float, float]], crc_seed: int) -> None:
         self.length = message.length
-        fields = []
-        for sig in message.signals:
+        ns: dict[str, Any] = {"_T": _CRC_TABLE}
+        app = [s for s in message.signals if s.name not in (E2E_CRC_SIGNAL, E2E_COUNTER_SIGNAL)]
+        pack = [f"def pack(signals, counter):",
+                f"    if len(signals) != {len(app)}:",
+                "        return None",
+                "    word = (counter & 15) << 8",
+                "    try:"]
+        unpack = ["def unpack(data):", "    w = int.from_bytes(data, 'little')"]
+        checked = ["def unpack_checked(data):", "    w = int.from_bytes(data, 'little')"]
+        for i, sig in enumerate(message.signals):
             conv = sig.conversion
+            if type(conv).__name__ == "NamedSignalConversion":
+                conv = conv._conversion  # numbers only (decode_choices=False): its numeric conversion
             kind = type(conv).__name__
-            if kind == "NamedSignalConversion":
-                conv, kind = conv._conversion, type(conv._conversion).__name__
-            code = {"IdentityConversion": self.IDENTITY, "LinearConversion": self.LINEAR}.get(kind, self.OTHER)
-            lo = -(1 << (sig.length - 1)) if sig.is_signed else 0
-            hi = (1 << (sig.length - 1)) - 1 if sig.is_signed else (1 << sig.length) - 1
-            fields.append((sig.name, sig.start, (1 << sig.length) - 1, sig.is_signed, 1 << (sig.length - 1),
-                           1 << sig.length, code, conv.scale, conv.offset, conv, lo, hi))
-        self.fields = tuple(fields)
-        # application signals (all but the E2E ones) with their DBC [min, max] for the range check
-        self.application = tuple(
-            (name, start, mask, code, scale, offset, conv, lo, hi,
-             sig.minimum if sig.minimum is not None else -math.inf,
-             sig.maximum if sig.maximum is not None else math.inf)
-            for (name, start, mask, _s, _h, _f, code, scale, offset, conv, lo, hi), sig in zip(fields, message.signals)
-            if name not in (E2E_CRC_SIGNAL, E2E_COUNTER_SIGNAL))
-        self.n_application = len(self.application)
+            ns[f"scale{i}"], ns[f"offset{i}"], ns[f"conv{i}"] = conv.scale, conv.offset, conv
+            ns[f"alo{i}"], ns[f"ahi{i}"] = accept_bounds[sig.name]
+            mask, half = (1 << sig.length) - 1, 1 << (sig.length - 1)
+            read = [f"    r = (w >> {sig.start}) & {mask}"]
+            if sig.is_signed:
+                read.append(f"    if r & {half}:\n        r -= {1 << sig.length}")
+            if kind == "IdentityConversion":
+                read.append(f"    v{i} = r")
+            elif kind == "LinearConversion":
+                read.append(f"    v{i} = r * scale{i} + offset{i}")
+            else:
+                read.append(f"    v{i} = conv{i}.raw_to_scaled(r, False)")
+            unpack += read
+            checked += read + [f"    if not (alo{i} <= v{i} <= ahi{i}):", "        return None"]
+            if sig.name not in (E2E_CRC_SIGNAL, E2E_COUNTER_SIGNAL):
+                ns[f"vmin{i}"] = sig.minimum if sig.minimum is not None else -math.inf
+                ns[f"vmax{i}"] = sig.maximum if sig.maximum is not None else math.inf
+                lo = -half if sig.is_signed else 0
+                hi = half - 1 if sig.is_signed else mask
+                raw = {"IdentityConversion": "round(v)", "LinearConversion": f"round((v - offset{i}) / scale{i})"}.get(
+                    kind, f"conv{i}.numeric_scaled_to_raw(v)")
+                pack += [f"        v = signals[{sig.name!r}]",
+                         f"        if not (vmin{i} <= v <= vmax{i}) or not isinstance(v, (int, float)):",
+                         "            return None",
+                         f"        r = {raw}",
+                         f"        if not ({lo} <= r <= {hi}):",
+                         "            return None",
+                         f"        word |= (r & {mask}) << {sig.start}"]
+        pack += ["    except (KeyError, TypeError):", "        return None", "    return word"]
+        result = "    return {" + ", ".join(f"{s.name!r}: v{i}" for i, s in enumerate(message.signals)) + "}"
+        unpack.append(result)
+        checked.append(result)
+        crc = ["def crc(data):", f"    c = _T[{crc_seed} ^ data[1]]"]
+        crc += [f"    c = _T[c ^ data[{k}]]" for k in range(2, message.length)]
+        crc.append("    return c ^ 255")
+        exec(compile("\n".join(pack + unpack + checked + crc) + "\n", f"<codec {message.name}>", "exec"), ns)
+        self.pack = ns["pack"]
+        self.pack.__doc__ = """(signals, counter) -> the frame with alive counter ``counter`` and a zero CRC
+        byte as a little-endian integer; None when anything is off (a value missing, outside its DBC
+        range, not a plain number, or its raw value not fitting its bits; an unknown signal): the caller
+        then takes the checked cantools path, which raises the error that names it."""
+        self.unpack = ns["unpack"]  # (data) -> {signal: value} as cantools decodes it (scaling, no choices)
+        self.unpack_checked = ns["unpack_checked"]  # the same, None if a value is outside accept_bounds
+        self.crc = ns["crc"]  # (frame bytes) -> E2E CRC over bytes 1.. (= e2e_crc(data_id, data[1:]))
 
     @staticmethod
     def supports(message: Any) -> bool:
@@ -93,50 +132,9 @@ class _MessageCodec:
         crc, counter = names.get(E2E_CRC_SIGNAL), names.get(E2E_COUNTER_SIGNAL)
         if crc is None or counter is None or (crc.start, crc.length, counter.start, counter.length) != (0, 8, 8, 4):
             return False
-        return (not message.is_multiplexed() and message.length <= 8 and all(
+        return (not message.is_multiplexed() and 2 <= message.length <= 8 and all(
             s.byte_order == "little_endian" and not s.is_float and not s.conversion.is_float
             for s in message.signals))
-
-    def pack(self, signals: Mapping[str, Any], counter: int) -> int | None:
-        """The frame with alive counter ``counter`` and a zero CRC byte, as a little-endian integer; None
-        when anything is off (a value missing, outside its DBC range, not a plain number, or its raw value
-        not fitting its bits; an unknown signal): the caller then takes the checked cantools path, which
-        raises the error that names it."""
-        if len(signals) != self.n_application:
-            return None
-        word = (counter & 0x0F) << 8  # E2E_Counter in bits 8..11; E2E_CRC (byte 0) stays 0
-        try:
-            for name, start, mask, code, scale, offset, conv, lo, hi, vmin, vmax in self.application:
-                v = signals[name]
-                if not (vmin <= v <= vmax) or not isinstance(v, (int, float)):  # NaN fails too
-                    return None
-                if code == 0:
-                    raw = round(v)
-                elif code == 1:
-                    raw = round((v - offset) / scale)
-                else:
-                    raw = conv.numeric_scaled_to_raw(v)
-                if not lo <= raw <= hi:
-                    return None
-                word |= (raw & mask) << start
-        except (KeyError, TypeError):
-            return None
-        return word
-
-    def unpack(self, data: bytes) -> dict[str, Any]:
-        word = int.from_bytes(data, "little")
-        out = {}
-        for name, start, mask, signed, half, full, code, scale, offset, conv, _lo, _hi in self.fields:
-            raw = (word >> start) & mask
-            if signed and raw & half:
-                raw -= full
-            if code == 0:
-                out[name] = raw
-            elif code == 1:
-                out[name] = raw * scale + offset
-            else:
-                out[name] = conv.raw_to_scaled(raw, False)
-        return out
 
 
 def _attribute(message: Any, name: str, default: Any) -> Any:
@@ -192,6 +190,7 @@ class Icd:
         if data_id <= 0:
             raise IcdError(f"{where}: E2EDataID attribute must be set (1..65535)")
         timeout_ms = int(_attribute(message, "E2ETimeoutMs", 3 * cycle_ms)) or 3 * cycle_ms
+        seed = crc8_sae_j1850((data_id & 0xFF, (data_id >> 8) & 0xFF), final_xor=False)
         ranges, accept = {}, {}
         for s in message.signals:
             lo = s.minimum if s.minimum is not None else -math.inf
@@ -212,8 +211,8 @@ class Icd:
             ranges=ranges,
             db_message=message,
             accept_bounds=accept,
-            codec=_MessageCodec(message) if _MessageCodec.supports(message) else None,
-            crc_seed=crc8_sae_j1850((data_id & 0xFF, (data_id >> 8) & 0xFF), final_xor=False),
+            codec=_MessageCodec(message, accept, seed) if _MessageCodec.supports(message) else None,
+            crc_seed=seed,
         )
 
     # ------------------------------------------------------------------------------- queries
@@ -248,7 +247,7 @@ class Icd:
         word = spec.codec.pack(signals, counter) if spec.codec is not None else None
         if word is not None:  # the compiled codec checked the ranges itself
             data = bytearray(word.to_bytes(spec.dlc, "little"))
-            data[0] = crc8_sae_j1850(memoryview(data)[1:], crc=spec.crc_seed)
+            data[0] = spec.codec.crc(data)
         else:
             values = dict(signals)
             values[E2E_COUNTER_SIGNAL] = counter & 0x0F
@@ -280,7 +279,7 @@ class Icd:
     def decode_checked(self, spec: MessageSpec, data: bytes) -> dict[str, float] | None:
         """Decode ``data``; None if the length is wrong or a signal is out of range."""
         if spec.codec is not None and len(data) == spec.dlc:
-            values = spec.codec.unpack(data)
+            return spec.codec.unpack_checked(data)
         else:
             try:
                 values = spec.db_message.decode(data, decode_choices=False, scaling=True, allow_truncated=False,

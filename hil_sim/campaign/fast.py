@@ -62,6 +62,37 @@ class _EventRecorder:
             self.counters[k] = 0
 
 
+class _TruthRows:
+    """The truth ``hil_sim.sil.TruthRecorder`` keeps, for judging only: the world's state column and its
+    Sun/Moon/Earth row copied as they are each tick (the SIL recorder builds a ``World.truth`` first)."""
+
+    def __init__(self, n_ticks: int, world: Any) -> None:
+        from hil_sim.world import AUX_EARTH, AUX_MOON, AUX_R_SC, AUX_SUN
+
+        self.batch = world.batch
+        self.n = 0
+        self.t_s = np.zeros(n_ticks + 1)
+        self.X = np.zeros((n_ticks + 1, self.batch.X.shape[0]))
+        self.AUX = np.zeros((n_ticks + 1, self.batch.AUX.shape[1]))
+        self._cols = {"r_sc_N_km": AUX_R_SC, "sun_N": AUX_SUN, "moon_N": AUX_MOON, "earth_N": AUX_EARTH}
+
+    def record(self) -> None:
+        if self.n < len(self.t_s):
+            b, i = self.batch, self.n
+            self.t_s[i] = b.t
+            self.X[i] = b.X[:, 0]
+            self.AUX[i] = b.AUX[0]
+            self.n += 1
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        n = self.n
+        out = {"t_s": self.t_s[:n], "q_NB": self.X[:n, 0:4], "omega_BN_B": self.X[:n, 4:7],
+               "wheel_speed_rad_s": self.X[:n, 7:]}
+        for name, col in self._cols.items():
+            out[name] = self.AUX[:n, col:col + 3]
+        return {k: np.ascontiguousarray(v) for k, v in out.items()}
+
+
 class _InProcessSender:
     """The ground's command sender for the SIL ``Timeline``, delivering into the flight software's
     dispatcher in this process: the same CCSDS TC packets, encoded with the same dictionary."""
@@ -87,7 +118,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
     from fsw.telecommand import CommandDispatcher
     from hil_sim.lockstep import Simulator
     from hil_sim.mission import world_params
-    from hil_sim.sil import Timeline, TruthRecorder
+    from hil_sim.sil import Timeline
     from hil_sim.world import World
 
     params = world_params(mission)
@@ -118,8 +149,8 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         sender = _InProcessSender(dispatcher)
         timeline = Timeline(mission, sender)
         n_ticks = int(round(mission.duration_s / cfg.gnc_period_s))
-        truth = TruthRecorder(n_ticks, world.n_wheels)
-        truth.record(world, np.zeros(world.n_wheels), True)
+        truth = _TruthRows(n_ticks, world)
+        truth.record()
         for _ in range(n_ticks):
             telemetry.now = sim.t_s
             timeline.release(sim.t_s)
@@ -127,17 +158,14 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
             inputs = driver.collect_tick(0.0)
             if inputs is not None:
                 fsw.run_cycle(inputs)
-            done = sim.end_tick(wait_s=0.0)
-            truth.record(world, np.asarray([w.torque_Nm for w in world.wheel_status()]), done)
-        n = truth.n
-        record = {"t_s": truth.t_s[:n], "q_NB": truth.q_NB[:n], "omega_BN_B": truth.omega_BN_B[:n],
-                  "wheel_speed_rad_s": truth.wheel_speed_rad_s[:n], "sun_N": truth.sun_N[:n],
-                  "moon_N": truth.moon_N[:n], "earth_N": truth.earth_N[:n], "r_sc_N_km": truth.r_sc_N_km[:n]}
+            sim.end_tick(wait_s=0.0)
+            truth.record()
+        record = truth.arrays()
         trips = [str(a.get("monitor", "?")) for _, name, a in telemetry.events if name == "FDIR_TRIPPED"]
         rejected = sum(1 for _, name, _ in telemetry.events if name in ("CMD_REJECTED", "TARGET_REJECTED"))
         metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected)
         used = _read_back(paths, mission, world, initial, fsw, timeline.sent, sim)
-        return RunResult(metrics=metrics, used=used, trajectory=trajectory, sim_time_s=float(truth.t_s[truth.n - 1]),
+        return RunResult(metrics=metrics, used=used, trajectory=trajectory, sim_time_s=float(record["t_s"][-1]),
                          events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events if n == "FDIR_TRIPPED"][:200])
     finally:
         if fsw is not None:

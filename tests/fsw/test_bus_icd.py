@@ -172,3 +172,6 @@ def test_compiled_codec_is_bit_exact_with_cantools_for_every_message(icd: Icd) -
             assert list(got) == list(ref), spec.name
             for k in ref:
                 assert got[k] == ref[k] and type(got[k]) is type(ref[k]), (spec.name, k, got[k], ref[k])
+            # and the receiver's checked decode: None exactly when a value is outside its accepted range
+            in_range = all(spec.accept_bounds[k][0] <= v <= spec.accept_bounds[k][1] for k, v in ref.items())
+            assert icd.decode_checked(spec, data) == (ref if in_range else None), spec.name
