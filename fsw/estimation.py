@@ -197,7 +197,7 @@ class AttitudeEstimator:
             else:
                 dtheta = mekf_innovation(self.q_NB, q_meas)
                 innov_deg = math.degrees(math.sqrt(float(dtheta @ dtheta)))
-                sigma_pred_deg = math.degrees(math.sqrt(float(np.trace(self.P[0:3, 0:3])) + 3 * self.sig_st**2))
+                sigma_pred_deg = math.degrees(math.sqrt(self._attitude_trace() + 3 * self.sig_st**2))
                 if innov_deg > max(self.cfg.innovation_gate_deg, 4.0 * sigma_pred_deg):
                     rejected = True
                 else:
@@ -232,6 +232,12 @@ class AttitudeEstimator:
             return status
         return self.step(dt_s, omegas[-1] if n else None, q_NS, st_latency_s)
 
+    def _attitude_trace(self) -> float:
+        # = float(np.trace(self.P[0:3, 0:3])) (same summation order), without numpy's call overhead
+        P = self.P
+        return float(P[0, 0]) + float(P[1, 1]) + float(P[2, 2])
+
     @property
     def cov_trace_deg2(self) -> float:
-        return float(np.degrees(np.degrees(np.trace(self.P[0:3, 0:3])))) if self.initialized else float("nan")
+        # math.degrees is np.degrees (x * (180 / pi), the same constant) for a float
+        return math.degrees(math.degrees(self._attitude_trace())) if self.initialized else float("nan")

@@ -76,6 +76,7 @@ class WheelNode:
         self.name = f"RW{self.index}"
         self.cmd_name = f"RW{self.index}_CMD"
         self.status_name = f"RW{self.index}_STATUS"
+        self._status_ranges: tuple[tuple[float, float], ...] | None = None
 
     def on_command(self, signals: dict, t_s: float) -> None:
         """A valid RWn_CMD (already E2E-checked) arrived at simulation time ``t_s``."""
@@ -101,9 +102,13 @@ class WheelNode:
         if self.last_cmd_t is not None and self.timed_out(t_s):
             fault |= FAULT_CMD_TIMEOUT
         values = {"fault": fault}
-        for signal, value in (("speed", status.speed_rad_s), ("torque", status.torque_Nm),
-                              ("current", status.current_A), ("temp", status.temp_C)):
-            lo, hi = self.icd.signal_range(self.status_name, signal)
+        ranges = self._status_ranges
+        if ranges is None:
+            ranges = self._status_ranges = tuple(self.icd.signal_range(self.status_name, signal)
+                                                 for signal in ("speed", "torque", "current", "temp"))
+        for signal, value, (lo, hi) in zip(("speed", "torque", "current", "temp"),
+                                           (status.speed_rad_s, status.torque_Nm, status.current_A, status.temp_C),
+                                           ranges):
             values[signal], clipped = _clamp(float(value), lo, hi)
             if clipped and signal == "speed":
                 values["fault"] |= FAULT_OVERSPEED
@@ -152,12 +157,14 @@ class ImuNode(_SampledNode):
     def frames_for(self, omega_BN_B: Any, saturated: bool, t_s: float) -> list[PendingFrame]:
         """The frame(s) of a gyro sample taken at ``t_s`` (``poll`` once the sample is due)."""
         saturated = bool(saturated)
-        values = {}
         lo, hi = self._range
-        for key, w in zip(("omega_x", "omega_y", "omega_z"), np.asarray(omega_BN_B, dtype=float).tolist()):
-            values[key], clipped = _clamp(w, lo, hi)
-            saturated |= clipped
-        values["saturated"] = int(saturated)
+        w = np.asarray(omega_BN_B, dtype=float).tolist()
+        for j in range(3):  # _clamp, inlined (10 samples per tick)
+            if w[j] < lo:
+                w[j], saturated = lo, True
+            elif w[j] > hi:
+                w[j], saturated = hi, True
+        values = {"omega_x": w[0], "omega_y": w[1], "omega_z": w[2], "saturated": int(saturated)}
         self.samples += 1
         sender = self.sender
         return [PendingFrame(t_s + self.latency_s, "IMU", lambda t_tx, v=values: sender.frame("IMU_RATE", v))]
@@ -187,9 +194,9 @@ class StarTrackerNode(_SampledNode):
         seq = self._seq
         self._seq = (self._seq + 1) & 0x0F
         self.samples += 1
-        a = {"q_w": float(np.clip(q[0], -1, 1)), "q_x": float(np.clip(q[1], -1, 1)), "valid": int(valid),
-             "blind_source": int(blind_source), "sample_seq": seq}
-        b_static = {"q_y": float(np.clip(q[2], -1, 1)), "q_z": float(np.clip(q[3], -1, 1)), "sample_seq": seq}
+        qw, qx, qy, qz = (min(max(c, -1.0), 1.0) for c in q.tolist())  # np.clip to [-1, 1], on floats
+        a = {"q_w": qw, "q_x": qx, "valid": int(valid), "blind_source": int(blind_source), "sample_seq": seq}
+        b_static = {"q_y": qy, "q_z": qz, "sample_seq": seq}
         t_sample = t_s
         sender = self.sender
 

@@ -467,9 +467,11 @@ class World:
         return sen.StarTrackerSample(q[0].copy(), bool(valid[0]), int(blind[0]))
 
     def wheel_status(self) -> list[WheelStatus]:
-        speed, torque, current, temp, fault = self.batch.wheel_status_arrays()
-        return [WheelStatus(float(speed[0, i]), float(torque[0, i]), float(current[0, i]), float(temp[0, i]),
-                            int(fault[0, i])) for i in range(self.n_wheels)]
+        b = self.batch  # run 0's columns of WorldBatch.wheel_status_arrays, read directly (once per tick)
+        applied = b.U_APPLIED[:, 0]
+        return [WheelStatus(*row) for row in zip(b.X[7:, 0].tolist(), applied.tolist(),
+                                                  (applied / b.W[dyn.W_KT, :, 0]).tolist(), b.TEMP[:, 0].tolist(),
+                                                  b.FLAGS[:, 0].tolist())]
 
     @property
     def truth(self) -> Truth:

@@ -14,9 +14,10 @@ Only frames the E2E receiver delivers (ok / ok_some_lost) reach these samples.
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import can
 import numpy as np
@@ -29,9 +30,10 @@ MAX_WHEELS = 6
 TX_TIMEOUT_S = 0.05  # how long a send may wait for room in the transmit queue
 
 
-@dataclass(frozen=True)
-class ImuSample:
-    """One gyro sample: omega_BN_B [rad/s] in body axes; ``t`` its time [s] (sim time in lockstep)."""
+class ImuSample(NamedTuple):
+    """One gyro sample: omega_BN_B [rad/s] in body axes; ``t`` its time [s] (sim time in lockstep).
+    (The sample types are NamedTuples, immutable like frozen dataclasses and built ~4x faster: a tick
+    makes about twenty of them.)"""
 
     omega_BN_B: np.ndarray
     saturated: bool
@@ -39,8 +41,7 @@ class ImuSample:
     valid: bool = True
 
 
-@dataclass(frozen=True)
-class StarTrackerSample:
+class StarTrackerSample(NamedTuple):
     """Star tracker attitude q_NS (scalar first, as transmitted: not renormalised), valid flag,
     blind source (0 none, 1 sun, 2 moon, 3 rate) and time of validity ``t`` [s] (exposure time)."""
 
@@ -50,8 +51,7 @@ class StarTrackerSample:
     t: float
 
 
-@dataclass(frozen=True)
-class WheelStatus:
+class WheelStatus(NamedTuple):
     """Reaction wheel report: speed [rad/s], applied torque [N m], motor current [A], temperature [degC],
     fault bit flags (1 overspeed, 2 command timeout, 4 drive fault), report time ``t`` [s]."""
 
@@ -123,6 +123,7 @@ class FswBusDriver:
         self._device_ids = frozenset(icd.by_id) - own - {icd.spec("SYNC").frame_id}
         self._sync_id = icd.spec("SYNC").frame_id
         self._wheel_index = {icd.spec(f"RW{i}_STATUS").frame_id: i - 1 for i in range(1, n_wheels + 1)}
+        self._cmd_ranges = [(f"RW{i}_CMD", *icd.signal_range(f"RW{i}_CMD", "torque_cmd")) for i in range(1, n_wheels + 1)]
         self._st_half: dict[str, tuple[int, dict, float]] = {}
         # newest samples (real time and lockstep alike)
         self._imu: ImuSample | None = None
@@ -318,11 +319,11 @@ class FswBusDriver:
             raise ValueError(f"send_wheel_torques: expected {self.n_wheels} torques, got {len(torques_Nm)}")
         if self._realtime and self._rt_sync_tick is not None:
             tick = self._rt_sync_tick  # the application's cycle count means nothing to the simulator
-        for i, tau in enumerate(torques_Nm, start=1):
-            name = f"RW{i}_CMD"
-            lo, hi = self.icd.signal_range(name, "torque_cmd")
-            value = 0.0 if not np.isfinite(tau) else min(max(float(tau), lo), hi)
-            self._send(self._sender.frame(name, {"torque_cmd": value, "tick_lsb": tick & 0xFFFF}))
+        tick_lsb = tick & 0xFFFF
+        for (name, lo, hi), tau in zip(self._cmd_ranges, torques_Nm):
+            tau = float(tau)
+            value = 0.0 if not math.isfinite(tau) else min(max(tau, lo), hi)
+            self._send(self._sender.frame(name, {"torque_cmd": value, "tick_lsb": tick_lsb}))
         if self._realtime:
             self._answer_latest_sync()
 

@@ -124,6 +124,9 @@ class E2EReceiver:
         self.counters = {name: {c: 0 for c in ALL_CLASSES} for name in names}
         self.counters[BUS_KEY] = {UNKNOWN_ID: 0, "own_echo": 0, "error_frame": 0}
         self._state = {name: _SequenceState(last_ok_t=self.start_t) for name in names}
+        # frame id -> what classify needs for that message (ignored ids are not in it: they take the full path)
+        self._fast = {m.frame_id: (m, self.counters[m.name], self._state[m.name], m.codec)
+                      for m in self.icd.messages.values() if m.frame_id not in self.ignore_ids}
 
     # ----------------------------------------------------------------------------------- frames
     def classify(self, msg: "can.Message", now_s: float) -> ReceivedFrame | None:
@@ -132,6 +135,12 @@ class E2EReceiver:
         Returns None for the node's own echoed frames, else the classification (with decoded signals
         only when delivered).
         """
+        try:  # fast path: a plain data frame of a watched ICD message (attributes as can.Message has them)
+            entry = self._fast.get(msg.arbitration_id)
+            if entry is not None and not (msg.is_error_frame or msg.is_extended_id or msg.is_remote_frame):
+                return self._classify_known(entry, msg, now_s)
+        except AttributeError:
+            pass
         frame_id = int(getattr(msg, "arbitration_id", -1))
         if getattr(msg, "is_error_frame", False):
             self.counters[BUS_KEY]["error_frame"] += 1
@@ -162,6 +171,30 @@ class E2EReceiver:
         counts[status] += 1
         if status in DELIVERED:
             state = self._state[name]
+            state.last_ok_t = now_s
+            state.timed_out = False
+            return ReceivedFrame(name, frame_id, status, now_s, counter, signals)
+        return ReceivedFrame(name, frame_id, status, now_s, counter)
+
+    def _classify_known(self, entry: tuple, msg: "can.Message", now_s: float) -> ReceivedFrame:
+        """``classify`` for a data frame whose id is a (not ignored) ICD message: the same steps."""
+        spec, counts, state, codec = entry
+        name, frame_id = spec.name, spec.frame_id
+        data = bytes(msg.data) if msg.data is not None else b""
+        if len(data) != spec.dlc:
+            counts[BAD_LENGTH] += 1
+            return ReceivedFrame(name, frame_id, BAD_LENGTH, now_s)
+        if (codec.crc(data) if codec is not None else e2e_crc(spec.data_id, data[1:])) != data[0]:
+            counts[CRC_ERROR] += 1
+            return ReceivedFrame(name, frame_id, CRC_ERROR, now_s)
+        signals = codec.unpack_checked(data) if codec is not None else self.icd.decode_checked(spec, data)
+        if signals is None:
+            counts[OUT_OF_RANGE] += 1
+            return ReceivedFrame(name, frame_id, OUT_OF_RANGE, now_s)
+        counter = int(signals["E2E_Counter"])
+        status = self._sequence(spec, counter)
+        counts[status] += 1
+        if status in DELIVERED:
             state.last_ok_t = now_s
             state.timed_out = False
             return ReceivedFrame(name, frame_id, status, now_s, counter, signals)

@@ -175,3 +175,15 @@ def test_compiled_codec_is_bit_exact_with_cantools_for_every_message(icd: Icd) -
             # and the receiver's checked decode: None exactly when a value is outside its accepted range
             in_range = all(spec.accept_bounds[k][0] <= v <= spec.accept_bounds[k][1] for k, v in ref.items())
             assert icd.decode_checked(spec, data) == (ref if in_range else None), spec.name
+
+
+def test_encoded_frames_are_plain_classic_data_frames(icd: Icd) -> None:
+    """Icd builds its can.Message slot by slot (speed): every slot as the keyword constructor sets it."""
+    import can
+
+    msg = icd.encode("SYNC", {"tick": 7, "frames_following": 3, "period_ms": 100}, 1)
+    ref = can.Message(arbitration_id=msg.arbitration_id, data=bytes(msg.data), is_extended_id=False, is_fd=False)
+    for slot in can.Message.__slots__:
+        if slot != "__weakref__":
+            assert getattr(msg, slot) == getattr(ref, slot), slot
+    assert type(msg.data) is bytearray and msg.dlc == icd.spec("SYNC").dlc
