@@ -14,6 +14,13 @@ limit w_max (spacecraft.max_rate_deg_s) and command acceleration limit a_max
 (control.max_command_accel_deg_s2): a trapezoidal rate profile. Goal: ratio <= 1.3 and the minimum
 signed margin to every physical zone > 0.
 
+What geometry allows: "short" is the shortest boresight path that keeps law.margin_deg from every zone
+(the zones as the law sees them, onboard ephemeris at the command time; a visibility graph on the
+sphere), "short/" its ratio to the great circle, and "lb" = eigen-axis time over that path / T_eigen, the
+best ratio any law could reach at these limits. ratio - lb is what the law and the loop cost.
+The paper's assumptions are checked at each slew's target with the eps the configuration gives
+(gnc.checks, as `keepout config check` does for a mission's own targets): "ok", eps and kappa_bar.
+
     .venv/bin/python bench/slew.py [--quick]
 
 Prints a table and writes bench/results/slew.json.
@@ -23,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import statistics
 import sys
 import time
@@ -66,6 +74,125 @@ def eigen_axis_time_s(theta_deg: float, rate_deg_s: float, accel_deg_s2: float) 
     return 2.0 * math.sqrt(theta_deg / accel_deg_s2)
 
 
+def _polygon(zone, margin_deg: float, vertices: int = 240) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices at signed margin margin_deg on rays from the kernel, and inward edge normals.
+
+    The zones here are convex (a cone, a superellipse with exponent >= 1) and so is their margin_deg
+    neighbourhood; the vertices lie on its boundary, so the polygon is inscribed in it and a path around
+    the polygon is never longer than one around the zone: the length below is a lower bound.
+    """
+    g = np.asarray(zone.kernel, dtype=float)
+    e1 = np.cross(g, [0.0, 0.0, 1.0] if abs(g[2]) < 0.9 else [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(g, e1)
+    want = 1.0 - math.cos(math.radians(margin_deg))
+    pts = []
+    for phi in 2.0 * math.pi * np.arange(vertices) / vertices:
+        t = math.cos(phi) * e1 + math.sin(phi) * e2
+        lo, hi = 0.0, math.pi - 1e-6
+        for _ in range(40):  # bisection on the ray: the zone is star-shaped about its kernel
+            mid = 0.5 * (lo + hi)
+            if zone.signed_separation(math.cos(mid) * g + math.sin(mid) * t) >= want:
+                hi = mid
+            else:
+                lo = mid
+        pts.append(math.cos(lo) * g + math.sin(lo) * t)
+    P = np.array(pts)
+    N = np.cross(P, np.roll(P, -1, axis=0))
+    N /= np.linalg.norm(N, axis=1)[:, None]
+    return P, (N if float((N @ g).mean()) > 0 else -N)
+
+
+def _arc(a: np.ndarray, b: np.ndarray, step_deg: float = 0.25) -> np.ndarray:
+    ang = math.acos(max(-1.0, min(1.0, float(a @ b))))
+    s = np.linspace(0.0, 1.0, max(3, int(math.degrees(ang) / step_deg) + 2))[1:-1]
+    return (np.sin((1 - s) * ang)[:, None] * a + np.sin(s * ang)[:, None] * b) / math.sin(ang)
+
+
+def shortest_safe_path_deg(start: np.ndarray, end: np.ndarray, zones: list, margin_deg: float) -> float:
+    """Length [deg] of the shortest path from start to end keeping margin_deg from every (convex) zone.
+
+    Visibility graph: start, end and the polygon vertices; besides the polygon sides, only tangent
+    segments can be on a shortest path (a vertex whose two neighbours lie on the same side of the
+    segment's great circle), so only those are tested for crossing a polygon.
+    """
+    import heapq
+
+    polys = [_polygon(z, margin_deg) for z in zones]
+    nodes = [start, end] + [v for P, _ in polys for v in P]
+    first = np.cumsum([2] + [len(P) for P, _ in polys])
+    owner = {}
+    for k, (P, _) in enumerate(polys):
+        for i in range(len(P)):
+            owner[first[k] + i] = (k, i)
+
+    def tangent(node: int, normal: np.ndarray) -> bool:
+        if node not in owner:
+            return True
+        k, i = owner[node]
+        P = polys[k][0]
+        return (P[i - 1] @ normal) * (P[(i + 1) % len(P)] @ normal) >= 0.0
+
+    def free(a: np.ndarray, b: np.ndarray) -> bool:
+        X = _arc(a, b)
+        return not any(np.any(np.all(X @ N.T > 1e-12, axis=1)) for _, N in polys)
+
+    adj: dict[int, list] = {i: [] for i in range(len(nodes))}
+
+    def link(i: int, j: int, check: bool = True) -> None:
+        a, b = nodes[i], nodes[j]
+        n = np.cross(a, b)
+        if check and not (tangent(i, n) and tangent(j, n) and free(a, b)):
+            return
+        L = math.acos(max(-1.0, min(1.0, float(a @ b))))
+        adj[i].append((j, L))
+        adj[j].append((i, L))
+
+    link(0, 1)
+    for j in range(2, len(nodes)):
+        link(0, j)
+        link(1, j)
+    for k, (P, _) in enumerate(polys):
+        for i in range(len(P)):
+            link(first[k] + i, first[k] + (i + 1) % len(P), check=False)
+        for k2 in range(k + 1, len(polys)):
+            for i in range(len(P)):
+                for j in range(len(polys[k2][0])):
+                    link(first[k] + i, first[k2] + j)
+    dist = {0: 0.0}
+    heap = [(0.0, 0)]
+    while heap:
+        d, i = heapq.heappop(heap)
+        if i == 1:
+            return math.degrees(d)
+        if d > dist.get(i, math.inf):
+            continue
+        for j, L in adj[i]:
+            if d + L < dist.get(j, math.inf):
+                dist[j] = d + L
+                heapq.heappush(heap, (d + L, j))
+    return math.inf
+
+
+def what_geometry_allows(mission, t_s: float) -> dict:
+    """Shortest safe path and the paper's assumptions at the slew's target (zones at time t_s)."""
+    from gnc.checks import check_assumptions
+    from hil_sim.physics_checks import SkyZones
+
+    fsw = mission.flight_software
+    sky = SkyZones(mission)
+    start = np.asarray(fsw.pointing.target_N, dtype=float)
+    target = np.asarray(mission.timeline[0].target_N, dtype=float)
+    short = shortest_safe_path_deg(start, target, sky.physical(t_s), fsw.law.margin_deg)
+    zones = sky.law(t_s)
+    eps_max = float(check_assumptions(target, zones, 1e-9, kappa=None, law="star", check_r_sets=False).eps_max)
+    law = fsw.law
+    eps = min(law.eps_fraction * eps_max, law.eps_max_used) if law.eps == "auto" else float(law.eps)
+    rep = check_assumptions(target, zones, eps, kappa=law.kappa, law="star")
+    return {"shortest_path_deg": short, "eps": eps, "eps_max": eps_max, "kappa": law.kappa,
+            "kappa_bar": float(rep.kappa_bar), "assumptions_ok": bool(rep.ok), "assumption_errors": list(rep.errors)}
+
+
 def slew_mission(base: dict, start, end) -> dict:
     data = json.loads(json.dumps(base, default=str))
     a, b = unit(*start), unit(*end)
@@ -106,20 +233,35 @@ def main(argv: list[str] | None = None) -> int:
         sel = (tr["t_s"] >= 5.0) & (tr["t_s"] <= 5.0 + settle) if math.isfinite(settle) else tr["t_s"] >= 5.0
         y = tr["boresight_N"][sel]
         path_deg = float(np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", y[:-1], y[1:]), -1, 1))).sum())
+        geo = what_geometry_allows(mission, 5.0)
+        fsw = mission.flight_software
+        t_short = eigen_axis_time_s(geo["shortest_path_deg"], fsw.spacecraft.max_rate_deg_s,
+                                    fsw.control.max_command_accel_deg_s2)
         rows.append({"slew": label, "angle_deg": theta, "eigen_axis_s": t_eig, "settling_s": settle,
                      "path_deg": path_deg, "path_ratio": path_deg / theta,
+                     "shortest_path_deg": geo["shortest_path_deg"],
+                     "shortest_path_ratio": geo["shortest_path_deg"] / theta, "ratio_lower_bound": t_short / t_eig,
+                     "eps": geo["eps"], "eps_max": geo["eps_max"], "kappa": geo["kappa"], "kappa_bar": geo["kappa_bar"],
+                     "assumptions_ok": geo["assumptions_ok"], "assumption_errors": geo["assumption_errors"],
                      "ratio": settle / t_eig if math.isfinite(settle) else math.inf,
                      "margins_deg": margins, "final_error_deg": m["final_error_deg"], "wall_s": wall,
                      "sim_s": result.sim_time_s})
-    print(f"{'slew':38s} {'angle':>6s} {'path':>6s} {'path/':>6s} {'T_eig':>6s} {'settle':>6s} {'ratio':>6s}"
-          f"  margins [deg]")
+    print(f"{'slew':38s} {'angle':>6s} {'path':>6s} {'path/':>6s} {'short/':>6s} {'T_eig':>6s} {'settle':>6s} "
+          f"{'ratio':>6s} {'lb':>6s} {'eps':>6s} {'ok':>3s}  margins [deg]")
     for r in rows:
         margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
         print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['path_deg']:6.1f} {r['path_ratio']:6.3f} "
-              f"{r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f}  {margins}")
+              f"{r['shortest_path_ratio']:6.3f} {r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f} "
+              f"{r['ratio_lower_bound']:6.3f} {r['eps']:6.4f} {'yes' if r['assumptions_ok'] else 'NO':>3s}  {margins}")
     ratios = [r["ratio"] for r in rows]
     min_margin = min(min(r["margins_deg"].values()) for r in rows)
+    yaml_law = base["flight_software"]["law"]
     summary = {"median_ratio": statistics.median(ratios), "max_ratio": max(ratios), "min_margin_deg": min_margin,
+               "max_ratio_lower_bound": max(r["ratio_lower_bound"] for r in rows),
+               "assumptions_ok": all(r["assumptions_ok"] for r in rows),
+               "law": yaml_law, "control": base["flight_software"]["control"],
+               "max_rate_deg_s": base["flight_software"]["spacecraft"]["max_rate_deg_s"],
+               "load_average": list(os.getloadavg()),
                "goal_ratio_le": 1.3, "goal_margin_gt": 0.0,
                "ratio_goal_met": max(ratios) <= 1.3, "margin_goal_met": min_margin > 0.0}
     print(f"median ratio {summary['median_ratio']:.3f}, max {summary['max_ratio']:.3f} (goal <= 1.3); "
