@@ -21,13 +21,16 @@ best ratio any law could reach at these limits. ratio - lb is what the law and t
 The paper's assumptions are checked at each slew's target with the eps the configuration gives
 (gnc.checks, as `keepout config check` does for a mission's own targets): "ok", eps and kappa_bar.
 
-    .venv/bin/python bench/slew.py [--quick]
+    .venv/bin/python bench/slew.py [--quick] [--pursuit]
+
+--pursuit also runs a proposed guidance change as an in-process prototype (see pursuit_prototype).
 
 Prints a table and writes bench/results/slew.json.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -109,8 +112,9 @@ def _arc(a: np.ndarray, b: np.ndarray, step_deg: float = 0.25) -> np.ndarray:
     return (np.sin((1 - s) * ang)[:, None] * a + np.sin(s * ang)[:, None] * b) / math.sin(ang)
 
 
-def shortest_safe_path_deg(start: np.ndarray, end: np.ndarray, zones: list, margin_deg: float) -> float:
-    """Length [deg] of the shortest path from start to end keeping margin_deg from every (convex) zone.
+def shortest_safe_path(start: np.ndarray, end: np.ndarray, zones: list, margin_deg: float) -> tuple[float, np.ndarray]:
+    """(length [deg], vertices) of the shortest path from start to end keeping margin_deg from every
+    (convex) zone; (inf, start) when there is none.
 
     Visibility graph: start, end and the polygon vertices; besides the polygon sides, only tangent
     segments can be on a shortest path (a vertex whose two neighbours lie on the same side of the
@@ -159,19 +163,23 @@ def shortest_safe_path_deg(start: np.ndarray, end: np.ndarray, zones: list, marg
             for i in range(len(P)):
                 for j in range(len(polys[k2][0])):
                     link(first[k] + i, first[k2] + j)
-    dist = {0: 0.0}
+    dist, prev = {0: 0.0}, {0: -1}
     heap = [(0.0, 0)]
     while heap:
         d, i = heapq.heappop(heap)
         if i == 1:
-            return math.degrees(d)
+            path = []
+            while i >= 0:
+                path.append(nodes[i])
+                i = prev[i]
+            return math.degrees(d), np.array(path[::-1])
         if d > dist.get(i, math.inf):
             continue
         for j, L in adj[i]:
             if d + L < dist.get(j, math.inf):
-                dist[j] = d + L
+                dist[j], prev[j] = d + L, i
                 heapq.heappush(heap, (d + L, j))
-    return math.inf
+    return math.inf, start[None, :]
 
 
 def what_geometry_allows(mission, t_s: float) -> dict:
@@ -183,7 +191,7 @@ def what_geometry_allows(mission, t_s: float) -> dict:
     sky = SkyZones(mission)
     start = np.asarray(fsw.pointing.target_N, dtype=float)
     target = np.asarray(mission.timeline[0].target_N, dtype=float)
-    short = shortest_safe_path_deg(start, target, sky.physical(t_s), fsw.law.margin_deg)
+    short, _ = shortest_safe_path(start, target, sky.physical(t_s), fsw.law.margin_deg)
     zones = sky.law(t_s)
     eps_max = float(check_assumptions(target, zones, 1e-9, kappa=None, law="star", check_r_sets=False).eps_max)
     law = fsw.law
@@ -191,6 +199,57 @@ def what_geometry_allows(mission, t_s: float) -> dict:
     rep = check_assumptions(target, zones, eps, kappa=law.kappa, law="star")
     return {"shortest_path_deg": short, "eps": eps, "eps_max": eps_max, "kappa": law.kappa,
             "kappa_bar": float(rep.kappa_bar), "assumptions_ok": bool(rep.ok), "assumption_errors": list(rep.errors)}
+
+
+PURSUIT_STANDOFF_DEG = 2.0  # the guide path keeps law.margin_deg + this from the physical zones
+PURSUIT_AHEAD_DEG = 6.0     # carrot distance: beyond the braking distance w^2 / (2 a) = 3.3 deg, so no slowing
+
+
+@contextlib.contextmanager
+def pursuit_prototype(standoff_deg: float = PURSUIT_STANDOFF_DEG, ahead_deg: float = PURSUIT_AHEAD_DEG):
+    """A proposed guidance change, NOT in the flight software: pure pursuit along the shortest safe path.
+
+    On SET_TARGET the shortest path to the target keeping margin_deg + standoff_deg from the zones is
+    planned (onboard ephemeris); every cycle the law's x_d is the path point ahead_deg beyond the one
+    nearest the boresight, the real target once it is within ahead_deg. The star-shaped law still runs
+    on the inflated zones with its eps chosen for that x_d, so its repulsion keeps the inflated zones
+    invariant whatever x_d is, and the last leg is the paper's law with the real target. Patched into
+    fsw.guidance.Guidance in this process only (the fast mode runs the flight software in-process).
+    """
+    import fsw.guidance as fg
+    from gnc.attitude import quat_to_dcm_nb
+
+    set_target, step = fg.Guidance.set_target_direction, fg.Guidance.step
+
+    def set_final(self, target_N):
+        self._pursuit_final = np.asarray(target_N, dtype=float) / np.linalg.norm(target_N)
+        self._pursuit_path = None
+        set_target(self, target_N)
+
+    def pursue(self, t_s, dt_s, q_NB, omega_BN_B):
+        final = getattr(self, "_pursuit_final", None)
+        if final is not None and q_NB is not None and self.mode == "POINTING" and self.slots:
+            y = quat_to_dcm_nb(np.asarray(q_NB, dtype=float)) @ self.b_B
+            if self._pursuit_path is None:
+                self._update_sky(t_s)
+                _, vertices = shortest_safe_path(y, final, [z.phys for z in self.slots],
+                                                 self.cfg.law.margin_deg + standoff_deg)
+                dense = [vertices[0]] + [p for a, b in zip(vertices[:-1], vertices[1:])
+                                         for p in list(_arc(a, b, 0.5)) + [b]]
+                self._pursuit_path = np.array(dense)
+            path = self._pursuit_path
+            i = int(np.argmax(path @ y))
+            far = np.flatnonzero(path[i:] @ y < math.cos(math.radians(ahead_deg)))
+            goal = final if far.size == 0 else path[i + far[0]]
+            if not np.allclose(goal, self.target_N):
+                set_target(self, goal)
+        return step(self, t_s, dt_s, q_NB, omega_BN_B)
+
+    fg.Guidance.set_target_direction, fg.Guidance.step = set_final, pursue
+    try:
+        yield
+    finally:
+        fg.Guidance.set_target_direction, fg.Guidance.step = set_target, step
 
 
 def slew_mission(base: dict, start, end) -> dict:
@@ -208,15 +267,10 @@ def slew_mission(base: dict, start, end) -> dict:
     return data, theta, t_eig
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="only the first two slews")
-    args = parser.parse_args(argv)
+def run_slews(base: dict, slews: list, geometry: bool = True) -> list[dict]:
     from hil_sim.campaign.fast import run_fast
     from hil_sim.mission import Mission
 
-    base = yaml.safe_load((ROOT / "config" / "missions" / "demo-pointing.yaml").read_text())
-    slews = SLEWS[:2] if args.quick else SLEWS
     rows = []
     for label, start, end in slews:
         data, theta, t_eig = slew_mission(base, start, end)
@@ -233,19 +287,36 @@ def main(argv: list[str] | None = None) -> int:
         sel = (tr["t_s"] >= 5.0) & (tr["t_s"] <= 5.0 + settle) if math.isfinite(settle) else tr["t_s"] >= 5.0
         y = tr["boresight_N"][sel]
         path_deg = float(np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", y[:-1], y[1:]), -1, 1))).sum())
-        geo = what_geometry_allows(mission, 5.0)
-        fsw = mission.flight_software
-        t_short = eigen_axis_time_s(geo["shortest_path_deg"], fsw.spacecraft.max_rate_deg_s,
-                                    fsw.control.max_command_accel_deg_s2)
-        rows.append({"slew": label, "angle_deg": theta, "eigen_axis_s": t_eig, "settling_s": settle,
-                     "path_deg": path_deg, "path_ratio": path_deg / theta,
-                     "shortest_path_deg": geo["shortest_path_deg"],
-                     "shortest_path_ratio": geo["shortest_path_deg"] / theta, "ratio_lower_bound": t_short / t_eig,
-                     "eps": geo["eps"], "eps_max": geo["eps_max"], "kappa": geo["kappa"], "kappa_bar": geo["kappa_bar"],
-                     "assumptions_ok": geo["assumptions_ok"], "assumption_errors": geo["assumption_errors"],
-                     "ratio": settle / t_eig if math.isfinite(settle) else math.inf,
-                     "margins_deg": margins, "final_error_deg": m["final_error_deg"], "wall_s": wall,
-                     "sim_s": result.sim_time_s})
+        row = {"slew": label, "angle_deg": theta, "eigen_axis_s": t_eig, "settling_s": settle,
+               "path_deg": path_deg, "path_ratio": path_deg / theta,
+               "ratio": settle / t_eig if math.isfinite(settle) else math.inf,
+               "margins_deg": margins, "final_error_deg": m["final_error_deg"], "wall_s": wall,
+               "sim_s": result.sim_time_s}
+        if geometry:
+            geo = what_geometry_allows(mission, 5.0)
+            fsw = mission.flight_software
+            t_short = eigen_axis_time_s(geo["shortest_path_deg"], fsw.spacecraft.max_rate_deg_s,
+                                        fsw.control.max_command_accel_deg_s2)
+            row.update({"shortest_path_deg": geo["shortest_path_deg"],
+                        "shortest_path_ratio": geo["shortest_path_deg"] / theta, "ratio_lower_bound": t_short / t_eig,
+                        "eps": geo["eps"], "eps_max": geo["eps_max"], "kappa": geo["kappa"],
+                        "kappa_bar": geo["kappa_bar"], "assumptions_ok": geo["assumptions_ok"],
+                        "assumption_errors": geo["assumption_errors"]})
+        rows.append(row)
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="only the first two slews")
+    parser.add_argument("--pursuit", action="store_true",
+                        help="also run the proposed pure-pursuit guidance (a prototype patched in-process; "
+                             "see pursuit_prototype) and record it under 'pursuit_prototype'")
+    args = parser.parse_args(argv)
+
+    base = yaml.safe_load((ROOT / "config" / "missions" / "demo-pointing.yaml").read_text())
+    slews = SLEWS[:2] if args.quick else SLEWS
+    rows = run_slews(base, slews)
     print(f"{'slew':38s} {'angle':>6s} {'path':>6s} {'path/':>6s} {'short/':>6s} {'T_eig':>6s} {'settle':>6s} "
           f"{'ratio':>6s} {'lb':>6s} {'eps':>6s} {'ok':>3s}  margins [deg]")
     for r in rows:
@@ -266,9 +337,22 @@ def main(argv: list[str] | None = None) -> int:
                "ratio_goal_met": max(ratios) <= 1.3, "margin_goal_met": min_margin > 0.0}
     print(f"median ratio {summary['median_ratio']:.3f}, max {summary['max_ratio']:.3f} (goal <= 1.3); "
           f"smallest margin {min_margin:.2f} deg (goal > 0)")
+    report = {"rows": rows, "summary": summary}
+    if args.pursuit:
+        with pursuit_prototype():
+            proto = run_slews(base, slews, geometry=False)
+        print(f"\nprototype (not flight software): pure pursuit {PURSUIT_AHEAD_DEG:g} deg ahead on the shortest path "
+              f"kept {PURSUIT_STANDOFF_DEG:g} deg outside the inflated zones")
+        for r in proto:
+            margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
+            print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['path_deg']:6.1f} {r['path_ratio']:6.3f} "
+                  f"{r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f}  {margins}")
+        report["pursuit_prototype"] = {"standoff_deg": PURSUIT_STANDOFF_DEG, "ahead_deg": PURSUIT_AHEAD_DEG,
+                                       "rows": proto, "max_ratio": max(r["ratio"] for r in proto),
+                                       "min_margin_deg": min(min(r["margins_deg"].values()) for r in proto)}
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "slew.json").write_text(json.dumps({"rows": rows, "summary": summary}, indent=1) + "\n")
+    (out / "slew.json").write_text(json.dumps(report, indent=1) + "\n")
     return 0
 
 
