@@ -204,3 +204,17 @@ def test_enter_realtime_without_priority_only_freezes_the_heap() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["[]", "True", "True"]
+
+
+def test_cycle_loops_freeze_the_start_up_heap_before_the_first_cycle(loop, monkeypatch) -> None:
+    """A full GC pass over the start-up heap takes 0.1-0.2 s: it must not land inside a cycle."""
+    calls = []
+    monkeypatch.setattr("fsw.app.freeze_heap", lambda: calls.append("freeze"))
+    monkeypatch.setattr(loop.fsw.executive, "run_lockstep", lambda *a, **k: calls.append("cycles") or 0)
+    monkeypatch.setattr(loop.fsw.executive, "run_realtime", lambda *a, **k: calls.append("cycles") or 0)
+    loop.fsw.run_lockstep(max_ticks=1)
+    assert calls == ["freeze", "cycles"]
+    calls.clear()
+    monkeypatch.setattr("fsw.app.enter_realtime", lambda priority: calls.append("freeze") or [])
+    loop.fsw.run_realtime(0.1)
+    assert calls == ["freeze", "cycles"]
