@@ -223,6 +223,7 @@ class WorldBatch:
         self.ST_BLIND = np.zeros(M, dtype=np.int64)
 
         self._period_out: tuple[np.ndarray, ...] | None = None
+        self._no_normals_rows = np.zeros((0, M * 3))
         self._t = 0.0
         self._advance(0.0, np.zeros((M, N)), 0)
 
@@ -277,7 +278,9 @@ class WorldBatch:
         if self._has_random_disturbance and n_sub > 0:
             normals = self.normals_disturbance.take_rows(n_sub * M * 3, J)
         else:
-            normals = np.broadcast_to(self._no_normals, (J, self._no_normals.size))
+            normals = self._no_normals_rows
+            if normals.shape[0] != J:
+                normals = self._no_normals_rows = np.zeros((J, self._no_normals.size))
         imu_normals = self._sampled_normals(self.normals_imu, M * 6, imu_due)
         st_normals = self._sampled_normals(self.normals_star_tracker, M * 3, st_due)
         dt_sub = dt_s / n_sub if n_sub else 0.0
@@ -299,9 +302,12 @@ class WorldBatch:
                                     self.ST_BLIND, st_q, st_valid, st_blind)
         if done:
             self._t = float(t_end[done - 1])
-            last_imu = np.flatnonzero(imu_due[:done])
-            if last_imu.size:
-                self._t_last_imu = float(t_end[last_imu[-1]])
+            if done == J:
+                self._t_last_imu = t_last_imu
+            else:
+                last_imu = np.flatnonzero(imu_due[:done])
+                if last_imu.size:
+                    self._t_last_imu = float(t_end[last_imu[-1]])
             if imu_due[done - 1]:
                 self.GYRO_OUT[:], self.GYRO_SAT[:] = gyro[done - 1], sat[done - 1]
         if done < J:
