@@ -363,14 +363,19 @@ class ZoneGeometry:
     def merge(self, zones: list, keep_outside: list[np.ndarray] = ()) -> tuple[list, list[list[int]]]:
         """Group zones whose bounding caps are closer than the merge gap; a group becomes one cone.
 
-        A pair is not merged when the enclosing cone would exceed 80 deg or would swallow a point of
-        ``keep_outside`` (the current boresight, the target): a cone grown around the spacecraft's own
-        pointing would leave the law nowhere to go. Such pairs stay separate (thin eps-layer, reported
-        by the assumption check) and the margin has to carry them.
+        When the enclosing cone would exceed 80 deg or would swallow a point of ``keep_outside`` (the
+        current boresight, the target: a cone grown around the spacecraft's own pointing would leave the
+        law nowhere to go), a pair of single zones is bridged instead: one star polygon containing both
+        caps and nothing much else (`gnc.sky_zones.bridge_zone`), which leaves the notch between them
+        free. Only when that too fails (it would contain a keep-out point, or reach 80 deg from its
+        kernel) do the zones stay separate (thin eps-layer, reported by the assumption check) and the
+        margin has to carry them. The 24 h soak found that case as a real keep-out violation when the
+        Earth zone swept across the Moon zone with the boresight between them.
         """
         n = len(zones)
         caps = [sky_zones.cap_of(z) for z in zones]
         parent = list(range(n))
+        bridges: dict[tuple[int, int], object] = {}
 
         def find(i: int) -> int:
             while parent[i] != i:
@@ -385,16 +390,26 @@ class ZoneGeometry:
                     continue
                 members = [k for k in range(n) if find(k) in (find(i), find(j))]
                 cone = sky_zones.enclosing_cone([caps[k] for k in members])
-                if cone.bounding_cap[1] > self.MAX_MERGED_RADIUS_RAD or any(cone.contains(p) for p in keep_outside):
+                if cone.bounding_cap[1] <= self.MAX_MERGED_RADIUS_RAD and not any(cone.contains(p) for p in keep_outside):
+                    parent[find(i)] = find(j)
                     continue
-                parent[find(i)] = find(j)
+                if len(members) == 2 and self.dim == 3:
+                    bridge = sky_zones.bridge_zone(caps[i], caps[j])
+                    if bridge is not None and not any(bridge.contains(p) for p in keep_outside):
+                        parent[find(i)] = find(j)
+                        bridges[(i, j)] = bridge
         groups: dict[int, list[int]] = {}
         for i in range(n):
             groups.setdefault(find(i), []).append(i)
         out_groups = sorted(groups.values(), key=lambda g: g[0])
         merged = []
         for g in out_groups:
-            merged.append(zones[g[0]] if len(g) == 1 else sky_zones.enclosing_cone([caps[i] for i in g]))
+            if len(g) == 1:
+                merged.append(zones[g[0]])
+            elif len(g) == 2 and (g[0], g[1]) in bridges:
+                merged.append(bridges[(g[0], g[1])])
+            else:
+                merged.append(sky_zones.enclosing_cone([caps[i] for i in g]))
         return merged, out_groups
 
     @staticmethod

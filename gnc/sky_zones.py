@@ -291,3 +291,56 @@ def enclosing_cone(caps: Sequence[tuple[np.ndarray, float]]):
         a /= np.linalg.norm(a)
         r = R
     return _zones.ConicZone(a, r)
+
+
+def bridge_zone(cap_a: tuple[np.ndarray, float], cap_b: tuple[np.ndarray, float], *,
+                overlap_rad: float = math.radians(1.0), vertices: int = 180,
+                max_reach_rad: float = math.radians(80.0)):
+    """A star polygon containing two nearby caps (axis, half-angle rad), or None when none fits.
+
+    The conservative replacement for two zones too close for Assumption 1 when their enclosing cone
+    would swallow the boresight or the target (the spacecraft pointing into the notch between them): the
+    caps are grown until they overlap by ``overlap_rad``; a cap smaller than a hemisphere is geodesically
+    convex, so their union is star-shaped about any point g of the overlap (each geodesic from g leaves
+    each cap once, within pi). g is the middle of the overlap on the arc between the axes. Seen from g in
+    the tangent plane, the union's radius along direction phi is tan of the farther exit angle, which is
+    closed-form per cap; the polygon puts vertex k at the largest radius within one vertex spacing w of
+    phi_k, divided by cos(w/2): any point of an edge is then at least as far out as the union along its
+    ray, so the polygon contains the union. Returns None if the union reaches ``max_reach_rad`` from g
+    (the central projection needs < 90 deg; beyond 80 the polygon degenerates).
+    """
+    a, ra = np.asarray(cap_a[0], dtype=float), float(cap_a[1])
+    b, rb = np.asarray(cap_b[0], dtype=float), float(cap_b[1])
+    d = math.acos(max(-1.0, min(1.0, float(a @ b))))
+    if d < 1e-9 or ra + rb >= math.pi:
+        return None
+    grow = max(0.0, 0.5 * (d - ra - rb + overlap_rad))
+    ra, rb = ra + grow, rb + grow
+    if max(ra, rb) >= 0.5 * math.pi:
+        return None
+    # middle of the overlap [d - rb, ra] on the arc from a towards b (clamped for a cap inside the other)
+    s = 0.5 * (max(d - rb, 0.0) + min(ra, d))
+    e_ab = b - (a @ b) * a
+    e_ab /= np.linalg.norm(e_ab)
+    g = math.cos(s) * a + math.sin(s) * e_ab
+    e1 = b - (g @ b) * g
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(g, e1)
+    fine = 8
+    phi = np.linspace(0.0, 2.0 * math.pi, vertices * fine, endpoint=False)
+    u = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
+    exit_angle = np.zeros_like(phi)
+    for axis, radius in ((a, ra), (b, rb)):
+        A, B = float(g @ axis), u @ axis
+        R = np.hypot(A, B)
+        exit_angle = np.maximum(exit_angle, np.arctan2(B, A) + np.arccos(np.clip(math.cos(radius) / R, -1.0, 1.0)))
+    if float(exit_angle.max()) >= max_reach_rad:
+        return None
+    rho = np.tan(exit_angle)
+    # largest radius within +-w of each vertex direction (the fine samples are w / fine apart; the small
+    # factor covers the curvature between fine samples)
+    window = np.max([np.roll(rho, k) for k in range(-fine, fine + 1)], axis=0)[::fine]
+    w = 2.0 * math.pi / vertices
+    radius_k = window * (1.0 + 1e-3) / math.cos(0.5 * w)
+    plane = np.column_stack([radius_k * np.cos(phi[::fine]), radius_k * np.sin(phi[::fine])])
+    return _zones.StarZone.polygon(g, np.column_stack([e1, e2]), plane)

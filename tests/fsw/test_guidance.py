@@ -261,3 +261,54 @@ def test_without_attitude_fix_the_tracker_is_swept_out_of_its_exclusion_without_
     q = np.array([0.9, 0.1, -0.2, 0.3]) / np.linalg.norm([0.9, 0.1, -0.2, 0.3])
     g.step(4.0, 0.1, q, np.zeros(3))
     assert g.no_fix_s == 0.0  # a fix ends the acquisition
+
+
+def _rot_toward(a: np.ndarray, b: np.ndarray, angle_rad: float) -> np.ndarray:
+    e = b - (a @ b) * a
+    e /= np.linalg.norm(e)
+    return math.cos(angle_rad) * a + math.sin(angle_rad) * e
+
+
+def test_overlapping_zones_around_the_boresight_are_bridged_and_the_law_keeps_out_of_both() -> None:
+    """Earth and Moon zones overlapping with the boresight in the notch beside their overlap: the
+    enclosing cone would swallow the boresight, so the pair becomes one star polygon that contains both
+    zones and leaves the boresight outside; the law on it then steers past both to a target beyond."""
+    from gnc.laws import StarShapedLaw
+    from gnc.zones import ConicZone
+
+    a = np.array([1.0, 0.0, 0.0])
+    b = _rot_toward(a, np.array([0.0, 1.0, 0.0]), math.radians(30.0))  # caps of 18 and 15 deg overlap by 3
+    za, zb = ConicZone(a, math.radians(18.0)), ConicZone(b, math.radians(15.0))
+    mid = _rot_toward(a, b, math.radians(16.0))
+    y0 = _rot_toward(mid, np.array([0.0, 0.0, 1.0]), math.radians(16.0))  # in the notch, outside both
+    assert za.separation(y0) > 0 and zb.separation(y0) > 0
+    assert sz.enclosing_cone([za.bounding_cap, zb.bounding_cap]).contains(y0)
+    target = _rot_toward(mid, np.array([0.0, 0.0, -1.0]), math.radians(40.0))  # across the pair
+
+    merged, groups = ZoneGeometry(3, merge_gap_deg=4.0).merge([za, zb], keep_outside=[y0, target])
+    assert groups == [[0, 1]] and len(merged) == 1
+    bridge = merged[0]
+    assert not bridge.contains(y0) and not bridge.contains(target)
+    for zone in (za, zb):  # the bridge holds both zones
+        assert all(bridge.separation(p) < 1e-9 for p in zone.boundary(720))
+
+    eps = 0.5 * ZoneGeometry.fast_eps_max(target, merged)
+    law = StarShapedLaw(target, merged, k1=1.0, kappa=1.0, eps=eps)
+    y, worst = y0.copy(), math.inf
+    for _ in range(6000):
+        y = y + 0.01 * np.asarray(law.control(y))
+        y /= np.linalg.norm(y)
+        worst = min(worst, za.signed_separation(y), zb.signed_separation(y))
+    assert worst > 0.0
+    assert math.degrees(math.acos(min(1.0, float(y @ target)))) < 0.5
+
+
+def test_without_a_bridge_the_pair_would_stay_separate_with_no_admissible_layer() -> None:
+    """The case the bridge exists for: overlapping zones left separate admit no eps (Assumption 1)."""
+    from gnc.zones import ConicZone
+
+    a = np.array([1.0, 0.0, 0.0])
+    b = _rot_toward(a, np.array([0.0, 1.0, 0.0]), math.radians(30.0))
+    zones = [ConicZone(a, math.radians(18.0)), ConicZone(b, math.radians(15.0))]
+    target = _rot_toward(a, np.array([0.0, 0.0, -1.0]), math.radians(60.0))
+    assert ZoneGeometry.fast_eps_max(target, zones) == 0.0

@@ -126,3 +126,38 @@ def test_bad_shapes_are_rejected_with_a_clear_message() -> None:
         sz.polygon_zone(np.array([1.0, 0, 0]), [[1, 0], [0, 1]])
     with pytest.raises(ValueError, match="non-zero"):
         sz.cone_zone(np.zeros(3), 10.0)
+
+
+def test_bridge_zone_contains_both_caps_and_is_star_shaped_about_their_overlap() -> None:
+    import math
+
+    from gnc.sky_zones import bridge_zone
+    from gnc.zones import ConicZone
+
+    rng = np.random.default_rng(3)
+    built = 0
+    for _ in range(25):
+        a = rng.standard_normal(3)
+        a /= np.linalg.norm(a)
+        ra, rb = np.radians(rng.uniform(5.0, 25.0, 2))
+        d = ra + rb + math.radians(rng.uniform(-10.0, 4.0))  # overlapping, touching or a few deg apart
+        p = np.cross(a, rng.standard_normal(3))
+        p /= np.linalg.norm(p)
+        b = math.cos(d) * a + math.sin(d) * p
+        zone = bridge_zone((a, ra), (b, rb))
+        assert zone is not None
+        built += 1
+        for cap in (ConicZone(a, ra), ConicZone(b, rb)):
+            assert cap.contains(zone.kernel) or cap.separation(zone.kernel) < math.radians(4.0)
+            assert all(zone.separation(x) < 1e-9 for x in cap.boundary(600)[::3])
+        # not a blanket: far from both caps stays free
+        far = -(a + b) / np.linalg.norm(a + b)
+        assert zone.separation(far) > 0.5
+    assert built == 25
+
+
+def test_bridge_zone_refuses_caps_it_cannot_cover_from_one_kernel() -> None:
+    from gnc.sky_zones import bridge_zone
+
+    a, b = np.array([1.0, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0])
+    assert bridge_zone((a, np.radians(60.0)), (b, np.radians(60.0))) is None
