@@ -132,6 +132,7 @@ def main(argv=None) -> int:
     t_wall = time.perf_counter()
     seq = 0
     rss_before_trace = None
+    notable, last_event = [], None  # warnings and worse, with onboard time (the deque keeps only the latest)
     for k in range(ticks):
         if k == trace_start and not args.no_tracemalloc:
             rss_before_trace = rss_mb()  # RSS growth is judged before tracing adds its own memory
@@ -141,6 +142,12 @@ def main(argv=None) -> int:
             seq += 1
             v = targets[seq % 2]
             tc.handle_datagram(encode_command(DICTIONARY, "SET_TARGET", {"kind": "DIRECTION", "c0": v[0], "c1": v[1], "c2": v[2]}, seq_count=seq))
+        if k % 50 == 0 and tm.recent_events and tm.recent_events[-1] is not last_event:
+            fresh = list(tm.recent_events)
+            start = next((i + 1 for i in range(len(fresh) - 1, -1, -1) if fresh[i] is last_event), 0)
+            notable += [{"t_s": round(k * cfg.gnc_period_s, 1), "event": e.name, "message": e.message}
+                        for e in fresh[start:] if e.severity.name in ("WARNING_LO", "WARNING_HI", "FATAL")]
+            last_event = fresh[-1]
         if k % sample_every == 0:
             rss.append((k * cfg.gnc_period_s / 3600, rss_mb()))
             qn_est.append(abs(float(np.linalg.norm(fsw.estimator.q_NB)) - 1.0))
@@ -179,6 +186,7 @@ def main(argv=None) -> int:
         "fdir_trips": fsw.fdir.trips, "final_mode": fsw.mode, "targets_commanded": seq,
         "tc_accepted": tc.counters["accepted"], "tc_rejected": tc.counters["rejected"],
         "loadavg_end": os.getloadavg(),
+        "notable_events": notable[:500],
         "fdir_trips_by_monitor": {},
         "events_by_name": {},
     }
@@ -198,6 +206,8 @@ def main(argv=None) -> int:
         ("TM packets sent / received / lost", f"{result['tm']['sent']} / {rx.received} / {rx.lost}"),
         ("bus CRC / alive / timeouts", f"{counters['bus_crc_errors']} / {counters['bus_alive_errors']} / {counters['bus_timeouts']}"),
         ("FDIR trips, final mode", f"{result['fdir_trips']} {result['fdir_trips_by_monitor']}, {result['final_mode']}"),
+        ("warning/fatal events (first 500 kept in JSON)",
+         ", ".join(f"{n} {sum(1 for e in notable if e['event'] == n)}" for n in sorted({e['event'] for e in notable})) or "none"),
         ("targets commanded (accepted/rejected)", f"{seq} ({tc.counters['accepted']}/{tc.counters['rejected']})"),
     ]
     width = max(len(r[0]) for r in rows)
