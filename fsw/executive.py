@@ -81,7 +81,7 @@ class Executive:
     ``on_slip(group, exec_ms, total)`` is called (throttled) to emit the warning event.
     """
 
-    STOP_POLL_S = 1.0  # longest a stop request waits for a blocking lockstep receive [s]
+    STOP_POLL_S = 0.2  # longest a stop request waits for a blocking lockstep receive [s]; a wake-up this often costs nothing
 
     def __init__(self, gnc_rate_hz: float, hk_rate_hz: float, slip_event_throttle_s: float,
                  gnc_task: Callable[..., object], hk_task: Callable[[], object],
