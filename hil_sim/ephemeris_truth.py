@@ -17,9 +17,13 @@ table or leap-second download is ever attempted (``iers.conf.auto_download`` is 
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 import threading
 import warnings
 from functools import lru_cache
+from importlib import metadata
+from pathlib import Path
 
 import numpy as np
 from numba import njit
@@ -37,10 +41,51 @@ def _configure_astropy_offline() -> None:
 GRID_ORIGIN_TDB_JD = 2451545.0  # J2000: node k of every table is at this epoch + k * node spacing
 
 
+# Node blocks are also kept on disk (one small .npy per block), so a new process (each campaign worker,
+# each SIL run) does not pay ~1.5 s of astropy import and evaluation for the same nodes again. A file holds
+# exactly the float64 numbers astropy gave, keyed by the astropy and pyerfa versions: a run's numbers
+# are the same whether they come from the file or from astropy. KEEPOUT_EPHEMERIS_CACHE: another folder,
+# or "off".
+CACHE_ENV = "KEEPOUT_EPHEMERIS_CACHE"
+
+
+def _cache_file(node_spacing_s: float, first: int, count: int) -> Path | None:
+    setting = os.environ.get(CACHE_ENV, "")
+    if setting.lower() == "off":
+        return None
+    folder = Path(setting) if setting else Path(__file__).resolve().parent / "__pycache__" / "truth_ephemeris"
+    try:
+        versions = f"astropy{metadata.version('astropy')}-erfa{metadata.version('pyerfa')}"
+    except metadata.PackageNotFoundError:
+        return None
+    return folder / f"nodes-{versions}-h{node_spacing_s!r}-k{first}-n{count}.npy"
+
+
 @lru_cache(maxsize=64)
 def _astropy_nodes(node_spacing_s: float, first: int, count: int) -> tuple[np.ndarray, np.ndarray]:
     """Sun and Moon geocentric GCRS positions (km), shape (count, 3) each, at the absolute grid nodes
-    GRID_ORIGIN_TDB_JD + (first..first+count-1) * h."""
+    GRID_ORIGIN_TDB_JD + (first..first+count-1) * h (from the disk cache when there, see CACHE_ENV)."""
+    path = _cache_file(node_spacing_s, first, count)
+    if path is not None:
+        try:
+            both = np.load(path, allow_pickle=False)
+            if both.shape == (2, count, 3) and both.dtype == np.float64:
+                return np.ascontiguousarray(both[0]), np.ascontiguousarray(both[1])
+        except (OSError, ValueError):
+            pass  # absent or unreadable: compute it
+    sun, moon = _compute_nodes(node_spacing_s, first, count)
+    if path is not None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".tmp", delete=False) as tmp:
+                np.save(tmp, np.stack([sun, moon]), allow_pickle=False)
+            os.replace(tmp.name, path)  # atomic: a concurrent reader sees the whole file or none
+        except OSError:
+            pass  # a read-only tree: no cache, same numbers
+    return sun, moon
+
+
+def _compute_nodes(node_spacing_s: float, first: int, count: int) -> tuple[np.ndarray, np.ndarray]:
     _configure_astropy_offline()
     from astropy.coordinates import get_body, solar_system_ephemeris
     from astropy.time import Time

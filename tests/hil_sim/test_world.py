@@ -166,6 +166,7 @@ def test_truth_ephemeris_works_offline(monkeypatch):
 
     monkeypatch.setattr(socket.socket, "connect", refuse)
     monkeypatch.setattr(socket, "create_connection", refuse)
+    monkeypatch.setenv("KEEPOUT_EPHEMERIS_CACHE", "off")  # astropy itself, not the nodes kept on disk
     eph = TruthEphemeris(2463912.25, 3600.0)  # 2034-03
     sun, moon = eph.positions_N_km(np.array([0.0, 86400.0]))
     assert np.all(np.isfinite(sun)) and np.all(np.isfinite(moon))
@@ -232,3 +233,27 @@ def test_advance_sampled_is_bit_identical_to_step_and_sample_calls():
     np.testing.assert_array_equal(a.imu_sample().omega_BN_B, b.imu_sample().omega_BN_B)
     with pytest.raises(ValueError, match="finite"):
         a.advance_sampled(0.01, np.full((10, a.n_wheels), np.nan), imu_due, st_due)
+
+
+def test_truth_ephemeris_nodes_kept_on_disk_are_astropy_s_numbers(tmp_path, monkeypatch):
+    """A new process reads the node blocks an earlier one computed (no astropy), the very same numbers."""
+    import pytest as _pytest
+
+    from hil_sim import ephemeris_truth as et
+
+    monkeypatch.setenv(et.CACHE_ENV, str(tmp_path))
+    args = (3600.0, 190001, 9)  # nodes no other test asks for
+    et._astropy_nodes.cache_clear()
+    computed = et._astropy_nodes(*args)
+    assert len(list(tmp_path.glob("nodes-*.npy"))) == 1
+    et._astropy_nodes.cache_clear()  # as in a new process
+    monkeypatch.setattr(et, "_compute_nodes", lambda *a: _pytest.fail("astropy evaluated again"))
+    loaded = et._astropy_nodes(*args)
+    for a, b in zip(computed, loaded):
+        np.testing.assert_array_equal(a, b)
+    et._astropy_nodes.cache_clear()
+    next(tmp_path.glob("nodes-*.npy")).write_bytes(b"garbage")  # a damaged file is recomputed
+    monkeypatch.undo()
+    monkeypatch.setenv(et.CACHE_ENV, str(tmp_path))
+    for a, b in zip(computed, et._astropy_nodes(*args)):
+        np.testing.assert_array_equal(a, b)
