@@ -107,3 +107,17 @@ def test_resuming_into_a_folder_of_another_campaign_is_refused(tmp_path):
     plan.campaign = other
     with pytest.raises(CampaignMismatch, match="fingerprint"):
         prepare_out_dir(out, plan, path, base)
+
+
+def test_forkserver_preload_names_modules_that_exist_and_start_no_thread() -> None:
+    """The forkserver silently skips a preload module it cannot import (the workers would then import it
+    each on their own again), and must not inherit threads (the reason for the forkserver)."""
+    import importlib
+    import threading
+
+    from hil_sim.campaign.runner import _FORKSERVER_PRELOAD
+
+    before = threading.active_count()
+    for name in _FORKSERVER_PRELOAD:
+        importlib.import_module(name)
+    assert threading.active_count() == before
