@@ -143,7 +143,7 @@ class BusLoop:
 
     _channel = 0
 
-    def __init__(self, cfg, world, faults=(), telemetry=None, dispatcher=None):
+    def __init__(self, cfg, world, faults=(), telemetry=None, dispatcher=None, clock=None):
         from fsw.app import FlightSoftware
         from fsw.bus import FswBusDriver, Icd, open_bus
         from hil_sim.lockstep import Simulator
@@ -154,7 +154,8 @@ class BusLoop:
         self.sim_bus, self.fsw_bus = open_bus(name), open_bus(name)
         self.sim = Simulator(world, self.sim_bus, self.icd, gnc_period_s=cfg.gnc_period_s, faults=faults)
         self.driver = FswBusDriver(self.fsw_bus, self.icd, len(cfg.spacecraft.wheels))
-        self.fsw = FlightSoftware(cfg, self.driver, telemetry, dispatcher)
+        extra = {} if clock is None else {"clock": clock}
+        self.fsw = FlightSoftware(cfg, self.driver, telemetry, dispatcher, **extra)
         self.world = world
 
     def step(self) -> bool:

@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -55,7 +56,12 @@ def test_pointing_slew_past_sun_star_zone_and_moon_cone_through_the_bus() -> Non
         wp, initial_mode="POINTING", law={"margin_deg": margin, "k1": 0.1},
         pointing={"boresight_B": list(B_B), "target_N": list(yd), "zones": [
             {"name": "sun", "body": "sun", "geometry": SUN_STAR}, {"name": "moon", "body": "moon", "geometry": MOON_CONE}]})
-    loop = BusLoop(cfg, world)
+    # Execution time on this thread's CPU clock: a cycle's own work, not the time other processes on a
+    # shared test host held the CPU; the start-up heap is frozen as the flight loops do (fsw.app.freeze_heap).
+    from fsw.app import freeze_heap
+
+    freeze_heap()
+    loop = BusLoop(cfg, world, clock=time.thread_time)
     judges = [sky_zones.SkyZoneBuilder(SUN_STAR), sky_zones.SkyZoneBuilder(MOON_CONE)]  # exact physical shapes
     margins, errors = [], []
     try:
@@ -78,7 +84,7 @@ def test_pointing_slew_past_sun_star_zone_and_moon_cone_through_the_bus() -> Non
     settle = next(i for i in range(len(errors)) if max(errors[i:]) < 0.05)
     assert settle * cfg.gnc_period_s < 210.0
     assert loop.sim.stats.cycle_done_timeouts == 0
-    assert loop.fsw.executive.gnc.slips == 0 or loop.fsw.executive.gnc.slips <= 2  # host hiccups only
+    assert loop.fsw.executive.gnc.slips == 0
 
 
 G7 = [[0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1], [0, -1, 0, 0], [0, 0, -1, 0], [0, 0, 0, -1], [-1, 0, 0, 0]]
