@@ -152,29 +152,7 @@ class E2EReceiver:
         if spec is None or spec.name not in self.counters:
             self.counters[BUS_KEY][UNKNOWN_ID] += 1
             return ReceivedFrame(None, frame_id, UNKNOWN_ID, now_s)
-        name = spec.name
-        counts = self.counters[name]
-        data = bytes(msg.data) if msg.data is not None else b""
-        if len(data) != spec.dlc:
-            counts[BAD_LENGTH] += 1
-            return ReceivedFrame(name, frame_id, BAD_LENGTH, now_s)
-        codec = spec.codec
-        if (codec.crc(data) if codec is not None else e2e_crc(spec.data_id, data[1:])) != data[0]:
-            counts[CRC_ERROR] += 1
-            return ReceivedFrame(name, frame_id, CRC_ERROR, now_s)
-        signals = self.icd.decode_checked(spec, data)
-        if signals is None:
-            counts[OUT_OF_RANGE] += 1
-            return ReceivedFrame(name, frame_id, OUT_OF_RANGE, now_s)
-        counter = int(signals["E2E_Counter"])
-        status = self._sequence(spec, counter)
-        counts[status] += 1
-        if status in DELIVERED:
-            state = self._state[name]
-            state.last_ok_t = now_s
-            state.timed_out = False
-            return ReceivedFrame(name, frame_id, status, now_s, counter, signals)
-        return ReceivedFrame(name, frame_id, status, now_s, counter)
+        return self._classify_known(self._fast[frame_id], msg, now_s)
 
     def _classify_known(self, entry: tuple, msg: "can.Message", now_s: float) -> ReceivedFrame:
         """``classify`` for a data frame whose id is a (not ignored) ICD message: the same steps."""
