@@ -365,52 +365,49 @@ class ZoneGeometry:
 
         When the enclosing cone would exceed 80 deg or would swallow a point of ``keep_outside`` (the
         current boresight, the target: a cone grown around the spacecraft's own pointing would leave the
-        law nowhere to go), a pair of single zones is bridged instead: one star polygon containing both
-        caps and nothing much else (`gnc.sky_zones.bridge_zone`), which leaves the notch between them
-        free. Only when that too fails (it would contain a keep-out point, or reach 80 deg from its
-        kernel) do the zones stay separate (thin eps-layer, reported by the assumption check) and the
-        margin has to carry them. The 24 h soak found that case as a real keep-out violation when the
-        Earth zone swept across the Moon zone with the boresight between them.
+        law nowhere to go), the two sides are bridged instead: one star polygon containing both caps and
+        little else (`gnc.sky_zones.bridge_zone`), which leaves the notch between them free. A group
+        already merged takes part through its enclosing cone (Sun and Moon merged near new moon, then
+        the Earth zone sweeping by). Only when that too fails (the bridge would contain a keep-out point,
+        or reach 80 deg from its kernel) do the zones stay separate (thin eps-layer, reported by the
+        assumption check) and the margin has to carry them. The 24 h soak found that case as a real
+        keep-out violation when the Earth zone swept across the Moon zone with the boresight between them.
         """
-        n = len(zones)
+        # groups of zone indices, each with its shape and bounding cap; pairs of groups closer than the
+        # gap merge until none is left (judged on the merged shapes: a cone grown around Sun and Moon can
+        # reach the Earth zone although neither of them does)
+        groups = [[i] for i in range(len(zones))]
+        shapes = list(zones)
         caps = [sky_zones.cap_of(z) for z in zones]
-        parent = list(range(n))
-        bridges: dict[tuple[int, int], object] = {}
-
-        def find(i: int) -> int:
-            while parent[i] != i:
-                parent[i] = parent[parent[i]]
-                i = parent[i]
-            return i
-
-        for i in range(n):
-            for j in range(i + 1, n):
-                d = math.acos(max(-1.0, min(1.0, float(caps[i][0] @ caps[j][0]))))
-                if d - caps[i][1] - caps[j][1] >= self.merge_gap_rad:
-                    continue
-                members = [k for k in range(n) if find(k) in (find(i), find(j))]
-                cone = sky_zones.enclosing_cone([caps[k] for k in members])
-                if cone.bounding_cap[1] <= self.MAX_MERGED_RADIUS_RAD and not any(cone.contains(p) for p in keep_outside):
-                    parent[find(i)] = find(j)
-                    continue
-                if len(members) == 2 and self.dim == 3:
-                    bridge = sky_zones.bridge_zone(caps[i], caps[j])
-                    if bridge is not None and not any(bridge.contains(p) for p in keep_outside):
-                        parent[find(i)] = find(j)
-                        bridges[(i, j)] = bridge
-        groups: dict[int, list[int]] = {}
-        for i in range(n):
-            groups.setdefault(find(i), []).append(i)
-        out_groups = sorted(groups.values(), key=lambda g: g[0])
-        merged = []
-        for g in out_groups:
-            if len(g) == 1:
-                merged.append(zones[g[0]])
-            elif len(g) == 2 and (g[0], g[1]) in bridges:
-                merged.append(bridges[(g[0], g[1])])
-            else:
-                merged.append(sky_zones.enclosing_cone([caps[i] for i in g]))
-        return merged, out_groups
+        refused: set[tuple[tuple[int, ...], tuple[int, ...]]] = set()
+        merged_any = True
+        while merged_any:
+            merged_any = False
+            for gi in range(len(groups)):
+                for gj in range(gi + 1, len(groups)):
+                    pair = (tuple(groups[gi]), tuple(groups[gj]))
+                    (ai, ri), (aj, rj) = caps[gi], caps[gj]
+                    d = math.acos(max(-1.0, min(1.0, float(ai @ aj))))
+                    if pair in refused or d - ri - rj >= self.merge_gap_rad:
+                        continue
+                    members = sorted(groups[gi] + groups[gj])
+                    shape = sky_zones.enclosing_cone([sky_zones.cap_of(zones[k]) for k in members])
+                    if shape.bounding_cap[1] > self.MAX_MERGED_RADIUS_RAD or any(shape.contains(p) for p in keep_outside):
+                        shape = sky_zones.bridge_zone(caps[gi], caps[gj]) if self.dim == 3 else None
+                        if shape is None or any(shape.contains(p) for p in keep_outside):
+                            refused.add(pair)
+                            continue
+                    for k in (gj, gi):
+                        del groups[k], shapes[k], caps[k]
+                    groups.append(members)
+                    shapes.append(shape)
+                    caps.append(sky_zones.cap_of(shape))
+                    merged_any = True
+                    break
+                if merged_any:
+                    break
+        order = sorted(range(len(groups)), key=lambda k: groups[k][0])
+        return [shapes[k] for k in order], [groups[k] for k in order]
 
     @staticmethod
     def fast_eps_max(target: np.ndarray, zones: list) -> float:

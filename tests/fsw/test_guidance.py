@@ -312,3 +312,28 @@ def test_without_a_bridge_the_pair_would_stay_separate_with_no_admissible_layer(
     zones = [ConicZone(a, math.radians(18.0)), ConicZone(b, math.radians(15.0))]
     target = _rot_toward(a, np.array([0.0, 0.0, -1.0]), math.radians(60.0))
     assert ZoneGeometry.fast_eps_max(target, zones) == 0.0
+
+
+def test_a_merged_pair_and_a_third_zone_around_the_boresight_are_bridged() -> None:
+    """Sun and Moon merged into one cone (near new moon), then the Earth zone overlapping that cone with
+    the boresight in the notch: the merged cone and the Earth cap are bridged as two sides."""
+    from gnc.zones import ConicZone
+
+    a = np.array([1.0, 0.0, 0.0])
+    b = _rot_toward(a, np.array([0.0, 0.0, 1.0]), math.radians(20.0))  # 8 + 10 deg caps, 2 deg apart
+    mid_ab = _rot_toward(a, b, math.radians(10.0))
+    cone_ab = sz.enclosing_cone([(a, math.radians(8.0)), (b, math.radians(10.0))])
+    c = _rot_toward(cone_ab.axis, np.array([0.0, 1.0, 0.0]), cone_ab.half_angle + math.radians(12.0))
+    zones = [ConicZone(a, math.radians(8.0)), ConicZone(b, math.radians(10.0)), ConicZone(c, math.radians(15.0))]
+    # boresight beside the overlap of the merged cone and the Earth cap, outside all three
+    mid = _rot_toward(cone_ab.axis, c, cone_ab.half_angle - math.radians(1.5))
+    y0 = _rot_toward(mid, np.array([0.0, 0.0, -1.0]), math.radians(14.0))
+    assert all(z.separation(y0) > 0 for z in zones) and not cone_ab.contains(y0)
+    assert sz.enclosing_cone([cone_ab.bounding_cap, zones[2].bounding_cap]).contains(y0)
+    target = -mid_ab
+
+    merged, groups = ZoneGeometry(3, merge_gap_deg=4.0).merge(zones, keep_outside=[y0, target])
+    assert groups == [[0, 1, 2]] and len(merged) == 1
+    assert not merged[0].contains(y0)
+    for zone in zones:
+        assert all(merged[0].separation(p) < 1e-9 for p in zone.boundary(360))
