@@ -11,7 +11,7 @@ config/missions/demo-pointing.yaml, shortened with --duration. Two figures per r
 Transports: udp_multicast on this host; socketcan:vcan0 inside ../shared/tools/vcan-vm (the host
 kernel has no CAN), by re-running this script in the VM with --bus socketcan:vcan0.
 
-    .venv/bin/python bench/sil.py [--duration 120] [--repeat 3] [--bus udp_multicast] [--vm]
+    .venv/bin/python bench/sil.py [--duration 600] [--repeat 3] [--bus udp_multicast] [--vm]
 
 Prints a table (medians) and writes bench/results/sil.json (sil-socketcan.json for the VM run).
 """
@@ -50,7 +50,7 @@ def one_run(bus: str, duration: float, out: Path) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--duration", type=float, default=120.0, help="simulated seconds per run")
+    parser.add_argument("--duration", type=float, default=600.0, help="simulated seconds per run (600: the whole demo)")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--bus", default="udp_multicast")
     parser.add_argument("--vm", action="store_true", help="run the socketcan:vcan0 variant inside vcan-vm")
