@@ -338,7 +338,9 @@ def _star_screen(x, cap_axes, cap_cos, flags):
     return count
 
 
-@njit(cache=True)
+# Compiled eagerly (explicit signature): it first runs when a state enters an eps-layer, which in flight
+# is mid-slew; a lazy compile there cost one 0.1 s GNC cycle (a slip) on a machine without numba's cache.
+@njit("float64[:](float64[:], float64[:], float64)", cache=True)
 def _blend(p, q, a):
     """a p - (1 - a) q, one compiled call (cheaper than four numpy temporaries on 4-vectors)."""
     out = np.empty(p.shape[0])
