@@ -214,7 +214,7 @@ def _acquisition_rate_B(cfg, boresight_B: np.ndarray) -> np.ndarray:
     if abs(float(axis @ st_B)) > math.cos(math.radians(60.0)):
         axis = np.eye(3)[int(np.argmin(np.abs(st_B)))]
         axis = axis - (axis @ st_B) * st_B
-    return math.radians(cfg.estimator.acquisition_rate_deg_s) * axis / np.linalg.norm(axis)
+    return math.radians(cfg.estimator.acquisition_rate_deg_s) * axis / _norm(axis)
 
 
 class AssumptionChecker:
@@ -376,38 +376,38 @@ class ZoneGeometry:
         # groups of zone indices, each with its shape and bounding cap; pairs of groups closer than the
         # gap merge until none is left (judged on the merged shapes: a cone grown around Sun and Moon can
         # reach the Earth zone although neither of them does)
-        groups = [[i] for i in range(len(zones))]
-        shapes = list(zones)
-        caps = [sky_zones.cap_of(z) for z in zones]
+        zone_caps = [sky_zones.cap_of(z) for z in zones]
+        groups, shapes, caps = [[i] for i in range(len(zones))], list(zones), list(zone_caps)
         refused: set[tuple[tuple[int, ...], tuple[int, ...]]] = set()
-        merged_any = True
-        while merged_any:
-            merged_any = False
-            for gi in range(len(groups)):
-                for gj in range(gi + 1, len(groups)):
-                    pair = (tuple(groups[gi]), tuple(groups[gj]))
-                    (ai, ri), (aj, rj) = caps[gi], caps[gj]
-                    d = math.acos(max(-1.0, min(1.0, float(ai @ aj))))
-                    if pair in refused or d - ri - rj >= self.merge_gap_rad:
-                        continue
-                    members = sorted(groups[gi] + groups[gj])
-                    shape = sky_zones.enclosing_cone([sky_zones.cap_of(zones[k]) for k in members])
-                    if shape.bounding_cap[1] > self.MAX_MERGED_RADIUS_RAD or any(shape.contains(p) for p in keep_outside):
-                        shape = sky_zones.bridge_zone(caps[gi], caps[gj]) if self.dim == 3 else None
-                        if shape is None or any(shape.contains(p) for p in keep_outside):
-                            refused.add(pair)
-                            continue
-                    for k in (gj, gi):
-                        del groups[k], shapes[k], caps[k]
-                    groups.append(members)
-                    shapes.append(shape)
-                    caps.append(sky_zones.cap_of(shape))
-                    merged_any = True
-                    break
-                if merged_any:
-                    break
+        while (found := self._first_merge(groups, caps, zone_caps, keep_outside, refused)) is not None:
+            gi, gj, shape = found
+            members = sorted(groups[gi] + groups[gj])
+            for k in (gj, gi):
+                del groups[k], shapes[k], caps[k]
+            groups.append(members)
+            shapes.append(shape)
+            caps.append(sky_zones.cap_of(shape))
         order = sorted(range(len(groups)), key=lambda k: groups[k][0])
         return [shapes[k] for k in order], [groups[k] for k in order]
+
+    def _first_merge(self, groups, caps, zone_caps, keep_outside, refused):
+        """(gi, gj, merged shape) for the first pair of groups to merge, or None. A pair that can be
+        neither coned nor bridged is remembered in ``refused``."""
+        for gi in range(len(groups)):
+            for gj in range(gi + 1, len(groups)):
+                pair = (tuple(groups[gi]), tuple(groups[gj]))
+                (ai, ri), (aj, rj) = caps[gi], caps[gj]
+                d = math.acos(max(-1.0, min(1.0, float(ai @ aj))))
+                if pair in refused or d - ri - rj >= self.merge_gap_rad:
+                    continue
+                shape = sky_zones.enclosing_cone([zone_caps[k] for k in groups[gi] + groups[gj]])
+                if shape.bounding_cap[1] > self.MAX_MERGED_RADIUS_RAD or any(shape.contains(p) for p in keep_outside):
+                    shape = sky_zones.bridge_zone(caps[gi], caps[gj]) if self.dim == 3 else None
+                    if shape is None or any(shape.contains(p) for p in keep_outside):
+                        refused.add(pair)
+                        continue
+                return gi, gj, shape
+        return None
 
     @staticmethod
     def fast_eps_max(target: np.ndarray, zones: list) -> float:

@@ -1,6 +1,7 @@
 """FlightSoftware application: telecommand handlers, telemetry content, housekeeping, process entry."""
 from __future__ import annotations
 
+import ast
 import math
 import socket
 import subprocess
@@ -188,7 +189,7 @@ def test_enter_realtime_gets_sched_fifo_or_says_why_not() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert out.returncode == 0, out.stderr
     events_line, state_line = out.stdout.strip().splitlines()[-2:]
-    events = eval(events_line)  # noqa: S307 - our own repr of a list of tuples
+    events = ast.literal_eval(events_line)
     fifo, frozen = state_line.split()
     assert frozen == "True"
     names = [name for name, _ in events]
