@@ -1,6 +1,6 @@
 """Soak: N simulated hours of flight software in lockstep with the hil_sim world, through the bus.
 
-    .venv/bin/python bench/soak.py                 # 24 simulated hours (the goal; ~1.5-2 h wall here)
+    .venv/bin/python bench/soak.py                 # 24 simulated hours (the goal; ~30 min wall here at SCHED_FIFO)
     .venv/bin/python bench/soak.py --hours 1
 
 Everything runs in one process on a ``virtual`` CAN bus (hil_sim.lockstep.Simulator in-process mode):
