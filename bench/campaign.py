@@ -135,13 +135,34 @@ def _tick_breakdown(duration: float) -> dict:
     return out
 
 
+def _print_breakdown(breakdown: dict) -> None:
+    cpu = breakdown["cpu_ms_per_tick"]
+    print("\none run in-process (the second, caches warm), per GNC tick [ms]:")
+    print(f"  {'phase':44s} {'wall':>8s} {'cpu':>8s}")
+    for k, v in cpu.items():
+        if k in ("sim_s_per_cpu_s",):
+            continue
+        wall = breakdown.get(k)
+        name = ("    " + k.split(".", 1)[1]) if "." in k else k
+        print(f"  {name:44s} {'' if wall is None else f'{wall:8.3f}':>8s} {v:8.3f}")
+    goal_ms = 1e3 * 0.1 * os.cpu_count() / GOAL_SIM_S_PER_WALL_S
+    print(f"  ({breakdown['ticks']} ticks, {breakdown['sim_s_per_wall_s']:.1f} sim-s/wall-s, "
+          f"{cpu['sim_s_per_cpu_s']:.1f} sim-s per CPU-s in this process; the goal needs <= {goal_ms:.3f} ms "
+          f"per 0.1 s tick on each of {os.cpu_count()} cores)")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=4, help="runs per measurement (default 4)")
     ap.add_argument("--duration", type=float, default=None, help="shorten runs (default: the mission's 600 s)")
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2], help="LocalCluster sizes (default 1 2)")
     ap.add_argument("--no-dask", action="store_true")
+    ap.add_argument("--breakdown-only", action="store_true",
+                    help="only the per-tick breakdown of one in-process run (prints, writes no JSON)")
     args = ap.parse_args(argv)
+    if args.breakdown_only:
+        _print_breakdown(_tick_breakdown(min(args.duration or 120.0, 120.0)))
+        return 0
 
     rows = [_measure("local pool, 2 workers", args.runs, args.duration, workers=2)]
     if not args.no_dask:
@@ -160,19 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{r['backend']:32s} {r['runs']:4d} {r['wall_s']:8.1f} {r['runs_per_min']:9.2f} "
               f"{r['sim_s_per_wall_s']:13.1f} {r['median_run_wall_s']:13.1f} {r['median_run_sim_s_per_wall_s']:10.1f}")
     print(f"goal: >= {GOAL_SIM_S_PER_WALL_S:.0f} sim-s/wall-s in total")
-    cpu = breakdown["cpu_ms_per_tick"]
-    print("\none run in-process (the second, caches warm), per GNC tick [ms]:")
-    print(f"  {'phase':44s} {'wall':>8s} {'cpu':>8s}")
-    for k, v in cpu.items():
-        if k in ("sim_s_per_cpu_s",):
-            continue
-        wall = breakdown.get(k)
-        name = ("    " + k.split(".", 1)[1]) if "." in k else k
-        print(f"  {name:44s} {'' if wall is None else f'{wall:8.3f}':>8s} {v:8.3f}")
-    goal_ms = 1e3 * 0.1 * os.cpu_count() / GOAL_SIM_S_PER_WALL_S
-    print(f"  ({breakdown['ticks']} ticks, {breakdown['sim_s_per_wall_s']:.1f} sim-s/wall-s, "
-          f"{cpu['sim_s_per_cpu_s']:.1f} sim-s per CPU-s in this process; the goal needs <= {goal_ms:.3f} ms "
-          f"per 0.1 s tick on each of {os.cpu_count()} cores)")
+    _print_breakdown(breakdown)
 
     result = {"bench": "campaign", "campaign": str(CAMPAIGN.relative_to(ROOT)), "runs_per_row": args.runs,
               "duration_s": args.duration, "cores": os.cpu_count(), "load_avg_1min": os.getloadavg()[0],

@@ -127,6 +127,49 @@ def mekf_update(q, bias, P, dtheta, sigma_rad):
     return qn, bias + dx[3:6], Pn
 
 
+@njit("Tuple((f8[::1], f8[::1], f8[:, ::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8,"
+      " f8[::1], f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8, f8[:, ::1])", cache=True)
+def _mekf_cycle(q, bias, P, prior, prior_dt, omega_meas, dt, sig_v, sig_u, initialized, has_st, q_NS, q_SB,
+                st_latency, max_age, gate_deg, sig_st, P0):
+    """One estimator cycle in one compiled call (``AttitudeEstimator.step`` after propagating through the
+    gyro samples ``prior`` (k, 3), each held ``prior_dt``): the same steps and expressions as the Python
+    version this replaced (tests/fsw/test_estimation.py compares them). ``P0``: the covariance a first
+    star-tracker fix initialises. Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
+    if initialized and prior.shape[0] > 0:
+        q, P = mekf_propagate_many(q, bias, P, prior, prior_dt, sig_v, sig_u)
+    used = False
+    rejected = False
+    innov_deg = np.nan
+    if initialized:
+        q, P = mekf_propagate(q, bias, P, omega_meas, dt, sig_v, sig_u)
+    omega = omega_meas - bias
+    if has_st:
+        q_meas = quat_multiply_nb(q_NS, q_SB)
+        if 0.0 < st_latency < max_age:
+            q_meas = quat_multiply_nb(q_meas, _rotvec_quat(omega * st_latency))
+        if not initialized:
+            q = q_meas / math.sqrt(q_meas[0] ** 2 + q_meas[1] ** 2 + q_meas[2] ** 2 + q_meas[3] ** 2)
+            P = P0.copy()
+            initialized = True
+            used = True
+            innov_deg = 0.0
+        else:
+            dtheta = mekf_innovation(q, q_meas)
+            innov_deg = math.degrees(math.sqrt(dtheta[0] * dtheta[0] + dtheta[1] * dtheta[1] + dtheta[2] * dtheta[2]))
+            trace = P[0, 0] + P[1, 1] + P[2, 2]
+            sigma_pred_deg = math.degrees(math.sqrt(trace + 3 * sig_st ** 2))
+            if innov_deg > max(gate_deg, 4.0 * sigma_pred_deg):
+                rejected = True
+            else:
+                q, bias, P = mekf_update(q, bias, P, dtheta, sig_st)
+                used = True
+    return q, bias, P, omega, initialized, used, rejected, innov_deg
+
+
+_NO_SAMPLES = np.zeros((0, 3))
+_NO_QUATERNION = np.array([1.0, 0.0, 0.0, 0.0])
+
+
 @dataclass
 class EstimatorStatus:
     initialized: bool
@@ -174,35 +217,21 @@ class AttitudeEstimator:
         ``q_NS`` None (blinded, stale, invalid) coasts. ``st_latency_s`` is how old the star-tracker
         sample is with respect to the end of the propagation.
         """
+        return self._cycle(dt_s, _NO_SAMPLES, 0.0, omega_meas_B, q_NS, st_latency_s)
+
+    def _cycle(self, dt_s: float, prior: np.ndarray, prior_dt_s: float, omega_meas_B: np.ndarray | None,
+               q_NS: np.ndarray | None, st_latency_s: float) -> EstimatorStatus:
         if omega_meas_B is not None:
             omega_meas = np.ascontiguousarray(omega_meas_B, dtype=float)
         else:
             omega_meas = self.omega_BN_B + self.bias_B
-        used = False
-        rejected = False
-        innov_deg = float("nan")
-        if self.initialized:
-            self.q_NB, self.P = mekf_propagate(self.q_NB, self.bias_B, self.P, omega_meas, dt_s, self.sig_v, self.sig_u)
-        self.omega_BN_B = omega_meas - self.bias_B
-        if q_NS is not None:
-            q_meas = self.measured_q_NB(q_NS)
-            if 0.0 < st_latency_s < self.cfg.star_tracker_max_age_s:
-                q_meas = quat_multiply_nb(q_meas, _rotvec_quat(self.omega_BN_B * st_latency_s))
-            if not self.initialized:
-                self.q_NB = q_meas / np.linalg.norm(q_meas)
-                self.P = self._initial_P()
-                self.initialized = True
-                used = True
-                innov_deg = 0.0
-            else:
-                dtheta = mekf_innovation(self.q_NB, q_meas)
-                innov_deg = math.degrees(math.sqrt(float(dtheta @ dtheta)))
-                sigma_pred_deg = math.degrees(math.sqrt(self._attitude_trace() + 3 * self.sig_st**2))
-                if innov_deg > max(self.cfg.innovation_gate_deg, 4.0 * sigma_pred_deg):
-                    rejected = True
-                else:
-                    self.q_NB, self.bias_B, self.P = mekf_update(self.q_NB, self.bias_B, self.P, dtheta, self.sig_st)
-                    used = True
+        has_st = q_NS is not None
+        P0 = self._initial_P() if has_st and not self.initialized else self.P
+        (self.q_NB, self.bias_B, self.P, self.omega_BN_B, self.initialized, used, rejected, innov_deg) = _mekf_cycle(
+            self.q_NB, self.bias_B, self.P, prior, float(prior_dt_s), omega_meas, float(dt_s), self.sig_v, self.sig_u,
+            self.initialized, has_st, np.ascontiguousarray(q_NS, dtype=float) if has_st else _NO_QUATERNION,
+            np.ascontiguousarray(self.q_SB, dtype=float), float(st_latency_s), self.cfg.star_tracker_max_age_s,
+            self.cfg.innovation_gate_deg, self.sig_st, P0)
         if used:
             self.coasting_s = 0.0
         else:
@@ -223,8 +252,7 @@ class AttitudeEstimator:
         n = omegas.shape[0]
         if n > 1 and self.initialized:
             sub = dt_s / n
-            self.q_NB, self.P = mekf_propagate_many(self.q_NB, self.bias_B, self.P, omegas[:-1], sub, self.sig_v, self.sig_u)
-            status = self.step(sub, omegas[-1], q_NS, st_latency_s)
+            status = self._cycle(sub, omegas[:-1], sub, omegas[-1], q_NS, st_latency_s)
             if not status.star_tracker_used:
                 self.coasting_s += dt_s - sub  # step() counted only the last sub-interval
                 status.coasting_s = self.coasting_s

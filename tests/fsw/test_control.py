@@ -101,3 +101,50 @@ def test_command_slew_rate_limit_and_feed_forward() -> None:
     # body rate equal to the (previous) shaped command: torque = J (kp * 0.1 deg/s + 1 deg/s^2) about x
     expected = J @ np.radians([1.0 * 0.1 + 1.0, 0, 0])
     np.testing.assert_allclose(out2.torque_cmd_B_Nm, expected, rtol=1e-9)
+
+
+def _reference_step(ctrl: RateController, prev_cmd, dt, cmd, omega, speeds):
+    """The numpy rate loop the compiled ``_rate_loop`` replaced (as it was), for comparison."""
+    ws = np.asarray(speeds, dtype=float)
+    wheel_speed = np.where(np.isfinite(ws), ws, ctrl.wheel_speed)
+    prev = np.asarray(omega, dtype=float) if prev_cmd is None else prev_cmd
+    step = cmd - prev
+    max_step = ctrl.max_accel * dt
+    norm = float(np.linalg.norm(step))
+    if norm > max_step:
+        step *= max_step / norm
+    shaped = prev + step
+    cmd_dot = step / dt if (ctrl.ff and prev_cmd is not None) else np.zeros(3)
+    w = np.asarray(omega, dtype=float)
+    h = ctrl.J @ w + ctrl.G @ (ctrl.Js * wheel_speed)
+    torque = ctrl.J @ (ctrl.kp * (shaped - w) + cmd_dot) + np.cross(w, h)
+    tau, scale = allocate_min_norm(ctrl.G, ctrl.active, torque, ctrl.max_torque, ctrl.M)
+    return torque, tau, scale, shaped
+
+
+@pytest.mark.parametrize("isolate", [None, 2])
+def test_compiled_rate_loop_matches_the_numpy_reference(isolate) -> None:
+    rng = np.random.default_rng(7)
+    ctrl = RateController(FswConfig(control={"max_command_accel_deg_s2": 0.5}))
+    if isolate is not None:
+        assert ctrl.isolate(isolate)
+    prev = None
+    saturated = limited = 0
+    for k in range(300):
+        cmd = rng.normal(scale=0.05 if k % 3 else 2.0, size=3)
+        omega = rng.normal(scale=0.05, size=3)
+        speeds = rng.normal(scale=200.0, size=4)
+        if k % 7 == 0:
+            speeds[rng.integers(4)] = np.nan  # a missing wheel report keeps the last speed
+        ref = _reference_step(ctrl, prev, 0.1, cmd, omega, speeds)
+        out = ctrl.step(0.1, cmd, omega, speeds)
+        np.testing.assert_allclose(out.torque_cmd_B_Nm, ref[0], rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(out.wheel_torque_cmd_Nm, ref[1], rtol=1e-12, atol=1e-15)
+        assert out.torque_scale == pytest.approx(ref[2], rel=1e-12)
+        np.testing.assert_allclose(out.omega_cmd_shaped_BN_B, ref[3], rtol=1e-12, atol=1e-15)
+        prev = ref[3]
+        saturated += ref[2] < 1.0
+        limited += not np.allclose(ref[3], cmd)
+    assert saturated > 10 and limited > 10  # both limiters were exercised
+    if isolate is not None:
+        assert np.all(out.wheel_torque_cmd_Nm[isolate] == 0.0)
