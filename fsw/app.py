@@ -32,6 +32,11 @@ WHEEL_OVERSPEED = 0x01
 WHEEL_FAULT_MASK = 0x02 | 0x04
 
 
+def _norm(v: list[float]) -> float:
+    """Euclidean norm of a short list of floats (numpy's call overhead is most of a 3-vector's norm)."""
+    return math.sqrt(sum(x * x for x in v))
+
+
 class _NullTelemetry:
     """Stand-in when no telemetry sender is given (bench, some tests): records events only."""
 
@@ -142,6 +147,8 @@ class FlightSoftware:
         self._last_check_t = -math.inf
         self._check_budget_free_at = -math.inf  # host monotonic time from which a periodic check may start
         self._corrupt_prev = {"IMU": 0, "STAR_TRACKER": 0}
+        self._corrupt_src: dict | None = None
+        self._corrupt_dicts: dict[str, list[dict]] = {}
         self._st_was_valid = True
         self._st_outage_start = 0.0
         self._target_reached = False
@@ -318,8 +325,7 @@ class FlightSoftware:
                 st_latency = max(0.0, float(inputs.t) - float(st.t))
             if st_latency > self.cfg.estimator.star_tracker_max_age_s:
                 st_fresh = False
-            q = np.asarray(st.q_NS, dtype=float)
-            nq = float(np.linalg.norm(q))
+            nq = _norm(np.asarray(st.q_NS, dtype=float).tolist())
             if not (0.9 < nq < 1.1):
                 st_fresh = False
         wheels = list(inputs.wheels)
@@ -329,7 +335,7 @@ class FlightSoftware:
 
         # ---- estimation (propagate across every IMU sample of the tick)
         est = self.estimator
-        q_st = (np.asarray(st.q_NS, dtype=float) / np.linalg.norm(st.q_NS)) if st_fresh else None
+        q_st = (np.asarray(st.q_NS, dtype=float) / nq) if st_fresh else None
         if imu_samples:
             status = est.step_samples(dt, np.array([smp.omega_BN_B for smp in imu_samples]), q_st, st_latency)
         else:
@@ -340,7 +346,8 @@ class FlightSoftware:
         q_est = est.q_NB if est.initialized else None
         omega = est.omega_BN_B
         g = self.guidance.step(self.t_s, dt, q_est, omega)
-        speeds = np.array([w.speed_rad_s if w is not None else np.nan for w in wheels])
+        speed_list = [float(w.speed_rad_s) if w is not None else math.nan for w in wheels]
+        speeds = np.array(speed_list)
         ctrl = self.control.step(dt, g.omega_cmd_BN_B, omega, speeds)
         try:
             self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm.tolist())
@@ -367,10 +374,10 @@ class FlightSoftware:
             wheel_fault=[(w is None and armed) or (w is not None and bool(int(w.fault) & WHEEL_FAULT_MASK))
                          for w, armed in zip(wheels, self._wheel_seen)],
             wheel_speed_ratio=[
-                max(abs(s) / m, 1.0 if (w is not None and int(w.fault) & WHEEL_OVERSPEED) else 0.0) if np.isfinite(s) else float("nan")
-                for s, m, w in zip(speeds, self.control.max_speed, wheels)
+                max(abs(s) / m, 1.0 if (w is not None and int(w.fault) & WHEEL_OVERSPEED) else 0.0) if math.isfinite(s) else math.nan
+                for s, m, w in zip(speed_list, self.control.max_speed.tolist(), wheels)
             ],
-            wheel_speed_rad_s=[float(s) for s in speeds],
+            wheel_speed_rad_s=speed_list,
             margins_deg=g.margins_deg if g.mode != "SAFE" else [],
             zone_bodies=g.zone_bodies,
             slipped=slipped_before,
@@ -388,7 +395,7 @@ class FlightSoftware:
         self.last = CycleRecord(self.t_s, g.mode, est.q_NB.copy(), g.omega_cmd_BN_B, ctrl.wheel_torque_cmd_Nm,
                                 g.margins_deg, g.margin_min_deg, g.pointing_error_deg, g.att_error_deg, exec_ms)
         if self.cycle % self.cfg.tmtc.gnc_packet_every_n_cycles == 0:
-            self._send_gnc_tm(g, ctrl, speeds, imu is not None, st, st_fresh, status, exec_ms)
+            self._send_gnc_tm(g, ctrl, speed_list, imu is not None, st, st_fresh, status, exec_ms)
         self.cycle += 1
 
     def _st_events(self, st, st_fresh: bool) -> None:
@@ -402,12 +409,18 @@ class FlightSoftware:
 
     def _corrupt_deltas(self) -> dict[str, int]:
         counters = self.driver.counters
-        totals = {
-            "IMU": sum(counters.get("IMU_RATE", {}).get(c, 0) for c in _CORRUPT_CLASSES),
-            "STAR_TRACKER": sum(counters.get(m, {}).get(c, 0) for m in ("ST_QUAT_A", "ST_QUAT_B") for c in _CORRUPT_CLASSES),
-        }
-        out = {k: max(0, totals[k] - self._corrupt_prev[k]) for k in totals}
-        self._corrupt_prev = totals
+        if counters is not self._corrupt_src:
+            # the per-message counter dicts live as long as the receiver: look them up once
+            self._corrupt_src = counters
+            self._corrupt_dicts = {
+                "IMU": [counters[m] for m in ("IMU_RATE",) if m in counters],
+                "STAR_TRACKER": [counters[m] for m in ("ST_QUAT_A", "ST_QUAT_B") if m in counters],
+            }
+        out = {}
+        for sensor, dicts in self._corrupt_dicts.items():
+            total = sum(c.get(k, 0) for c in dicts for k in _CORRUPT_CLASSES)
+            out[sensor] = max(0, total - self._corrupt_prev[sensor])
+            self._corrupt_prev[sensor] = total
         return out
 
     def _execute(self, action) -> None:
@@ -426,8 +439,8 @@ class FlightSoftware:
         est = self.estimator
         nw = self.n_wheels
         margins = list(g.margins_deg)[:6] + [float("nan")] * (6 - min(6, len(g.margins_deg)))
-        wheel_speed = [float(s) for s in speeds] + [float("nan")] * (6 - nw)
-        wheel_tau = [float(x) for x in ctrl.wheel_torque_cmd_Nm] + [0.0] * (6 - nw)
+        wheel_speed = list(speeds) + [math.nan] * (6 - nw)
+        wheel_tau = ctrl.wheel_torque_cmd_Nm.tolist() + [0.0] * (6 - nw)
         values = {
             "cycle": self.cycle,
             "mode": g.mode,
@@ -435,9 +448,9 @@ class FlightSoftware:
             "q_est_NB": est.q_NB,
             "omega_est_BN_B": est.omega_BN_B,
             "omega_cmd_BN_B": g.omega_cmd_BN_B,
-            "rate_norm_deg_s": math.degrees(float(np.linalg.norm(est.omega_BN_B))),
+            "rate_norm_deg_s": math.degrees(_norm(est.omega_BN_B.tolist())),
             "bias_est_B": est.bias_B,
-            "cov_trace": float(np.trace(est.P[0:3, 0:3])) if est.initialized else float("nan"),
+            "cov_trace": est._attitude_trace() if est.initialized else math.nan,
             "st_age_s": est.coasting_s,
             "boresight_N": g.boresight_N,
             "target_N": g.target_N,
