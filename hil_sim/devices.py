@@ -138,6 +138,19 @@ class _SampledNode:
         self.next_due_s += self.period_s * max(1, math.floor((t_s - self.next_due_s + _EPS_S) / self.period_s) + 1)
         return True
 
+    def due_flags(self, times_s: Sequence[float]) -> list[bool]:
+        """``[self._sample_due(t) for t in times_s]`` (the same state changes), in one call per period."""
+        out = []
+        nxt, period = self.next_due_s, self.period_s
+        for t_s in times_s:
+            if t_s + _EPS_S < nxt:
+                out.append(False)
+            else:
+                nxt += period * max(1, math.floor((t_s - nxt + _EPS_S) / period) + 1)
+                out.append(True)
+        self.next_due_s = nxt
+        return out
+
 
 @dataclass
 class ImuNode(_SampledNode):
@@ -158,7 +171,7 @@ class ImuNode(_SampledNode):
         """The frame(s) of a gyro sample taken at ``t_s`` (``poll`` once the sample is due)."""
         saturated = bool(saturated)
         lo, hi = self._range
-        w = np.asarray(omega_BN_B, dtype=float).tolist()
+        w = list(omega_BN_B) if type(omega_BN_B) is list else np.asarray(omega_BN_B, dtype=float).tolist()
         for j in range(3):  # _clamp, inlined (10 samples per tick)
             if w[j] < lo:
                 w[j], saturated = lo, True
@@ -265,15 +278,18 @@ class Devices:
         first = [w.torque_at(times_s[0]) for w in self.wheels]
         if first == [w.torque_at(times_s[-2]) for w in self.wheels]:
             # a wheel's command only changes here by timing out, once: same at both ends, same throughout
-            u = np.tile(first, (steps, 1))
+            u = np.empty((steps, len(first)))
+            u[:] = first
         else:
             u = np.array([[w.torque_at(t) for w in self.wheels] for t in times_s[:-1]])
-        imu_due = [self.imu._sample_due(t) for t in times_s[1:]]
-        st_due = [self.star_tracker._sample_due(t) for t in times_s[1:]]
+        sample_times = times_s[1:]
+        imu_due = self.imu.due_flags(sample_times)
+        st_due = self.star_tracker.due_flags(sample_times)
         gyro, sat, q, valid, blind = world.advance_sampled(dt_s, u, imu_due, st_due)
+        gyro_rows, sat_rows = gyro.tolist(), sat.tolist()  # plain floats for the frames (one conversion)
         for j in range(steps):
             if imu_due[j]:
-                self.pending.extend(self.imu.frames_for(gyro[j], sat[j], times_s[j + 1]))
+                self.pending.extend(self.imu.frames_for(gyro_rows[j], sat_rows[j], times_s[j + 1]))
             if st_due[j]:
                 self.pending.extend(self.star_tracker.frames_for(q[j], valid[j], blind[j], times_s[j + 1]))
 

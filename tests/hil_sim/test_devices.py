@@ -122,3 +122,21 @@ def test_too_many_wheels_for_the_icd(icd: Icd) -> None:
     world.n_wheels = 7
     with pytest.raises(ValueError, match="RW1..RW6"):
         Devices.for_world(world, icd)
+
+
+@pytest.mark.parametrize("rate_hz", [100.0, 30.0, 7.0])
+def test_due_flags_of_a_period_match_one_sample_due_call_per_step(icd: Icd, rate_hz: float) -> None:
+    batch, single = ImuNode(icd, rate_hz), ImuNode(icd, rate_hz)
+    rng = np.random.default_rng(2)
+    t, flags, ref = 0.0, [], []
+    for _ in range(200):
+        steps = [t + j * 0.01 for j in range(1, 11)]
+        if rng.random() < 0.1:
+            steps = [s + 0.05 for s in steps]  # a gap: several periods skipped at once
+        t = steps[-1]
+        flags += batch.due_flags(steps)
+        ref += [single._sample_due(s) for s in steps]
+        assert batch.next_due_s == single.next_due_s
+    assert flags == ref and any(flags)
+    if rate_hz < 100.0:
+        assert not all(flags)  # slower than the dynamics steps: some steps sample nothing
