@@ -116,6 +116,7 @@ class E2EReceiver:
     start_t: float = 0.0
     counters: dict[str, dict[str, int]] = field(init=False)
     _state: dict[str, _SequenceState] = field(init=False)
+    _watched: list | None = field(init=False, default=None, repr=False)
 
     def __post_init__(self) -> None:
         self.ignore_ids = frozenset(self.ignore_ids)
@@ -208,16 +209,17 @@ class E2EReceiver:
         frame arrives. Returns the names of the messages currently timed out.
         """
         stale = []
-        for name in self.watch:
-            spec = self.icd.messages[name]
-            if spec.timeout_s <= 0:
-                continue
-            state = self._state[name]
+        watched = self._watched
+        if watched is None:  # called every tick: the lookups are done once
+            watched = self._watched = [(name, self._state[name], self.icd.messages[name].timeout_s + 1e-9,
+                                        self.counters[name]) for name in self.watch
+                                       if self.icd.messages[name].timeout_s > 0]
+        for name, state, limit, counts in watched:
             last = state.last_ok_t if state.last_ok_t is not None else self.start_t
-            if now_s - last > spec.timeout_s + 1e-9:
+            if now_s - last > limit:
                 if not state.timed_out:
                     state.timed_out = True
-                    self.counters[name][TIMEOUT] += 1
+                    counts[TIMEOUT] += 1
                 stale.append(name)
         return stale
 

@@ -86,6 +86,35 @@ def test_gnc_and_housekeeping_telemetry(loop) -> None:
     # one GNC packet per cycle, one HK packet per second (3 in 2.5 s: ticks 0, 10, 20)
     assert loop.tm.sequence_count(DICTIONARY.packet("GNC").apid) == 25
     assert loop.tm.sequence_count(DICTIONARY.packet("HK").apid) == 3
+    # the bus totals are sums over the driver's per-message E2E counters (now, not at the last HK packet)
+    counts, hk_now = loop.fsw.driver.counters, loop.fsw.hk_values()
+    assert hk_now["bus_rx_ok"] == sum(c["ok"] + c["ok_some_lost"] for n, c in counts.items() if not n.startswith("_"))
+    assert hk_now["bus_alive_errors"] == sum(c["wrong_sequence"] + c["ok_some_lost"]
+                                         for n, c in counts.items() if not n.startswith("_"))
+    import psutil  # the RSS channel reads /proc itself; psutil is the independent reference
+    assert abs(hk["rss_mb"] - psutil.Process().memory_info().rss / 1e6) < 50.0 and hk["rss_mb"] > 10.0
+
+
+def test_resident_size_is_what_psutil_reports_also_in_a_forked_child() -> None:
+    import os
+
+    import psutil
+
+    from fsw.app import _resident_bytes
+
+    assert abs(_resident_bytes() - psutil.Process().memory_info().rss) < 4 << 20
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child must read its own /proc entry, not the descriptor its parent opened
+        try:
+            block = bytearray(64 << 20)
+            block[::4096] = b"1" * len(block[::4096])
+            ok = abs(_resident_bytes() - psutil.Process().memory_info().rss) < 4 << 20
+            os.write(write, b"1" if ok else b"0")
+        finally:
+            os._exit(0)
+    os.waitpid(pid, 0)
+    assert os.read(read, 1) == b"1"
 
 
 def _free_udp_port() -> tuple[socket.socket, int]:
