@@ -235,9 +235,17 @@ class LawConfig(_Strict):
     eps_max_used: float = Field(0.15, gt=0.0, le=1.0, description="Upper cap on eps whatever the check allows (keeps the avoidance layer thin).")
     margin_deg: float = Field(3.0, ge=0.0, le=30.0, description="The law avoids physical zones inflated by this margin [deg]; see fsw.guidance for how to choose it.")
     merge_gap_deg: float = Field(4.0, ge=0.0, le=30.0, description="Two (inflated) zones whose bounding caps are closer than this gap [deg] are replaced by one conservative cone containing both, with an event. Assumption 1 ties eps to the gap (eps < 1 - cos(gap/2)), so a small gap forces an eps-layer too thin for the loop to turn in; merging trades sky area for a usable layer.")
+    retreat_standoff_deg: float = Field(3.0, gt=0.0, le=30.0, description="When the target is unusable (in a zone's eps-layer, or between two zones about to merge around the spacecraft), the law steers to the nearest direction at least this far [deg] outside every (inflated) zone instead. It keeps a parked boresight clear of a zone sweeping towards it and must be at least half of merge_gap_deg, so the substitute never lies in a gap about to merge.")
     check_period_s: float = Field(10.0, gt=0.0, le=3600.0, description="How often the full assumption check (gnc.checks, incl. the numerical Assumption 2 test) is re-run while zones move [s]; it is re-submitted at once on target/gain/mode/zone-merge changes.")
     check_max_cpu_fraction: float = Field(0.1, gt=0.0, le=1.0, description="CPU budget of the periodic full check in 'process' mode: after a check that took d seconds, the next periodic one waits at least d (1/fraction - 1) seconds of host time, whatever check_period_s says. It binds in lockstep runs faster than real time; checks after a target/gain/mode/zone change are not delayed.")
     assumption_check: Literal["process", "inline", "off"] = Field("process", description="Where the full check runs: 'process' (a worker process, so the seconds it can take never delay a GNC cycle; results only feed telemetry/events), 'inline' (in the housekeeping group; deterministic, for tests), 'off'. The per-cycle eps bound never depends on it.")
+
+    @model_validator(mode="after")
+    def _standoff_clears_merge_gap(self) -> "LawConfig":
+        if self.retreat_standoff_deg < 0.5 * self.merge_gap_deg:
+            raise ValueError(f"retreat_standoff_deg ({self.retreat_standoff_deg:g}) must be at least half of merge_gap_deg "
+                             f"({self.merge_gap_deg:g}): a substitute target closer than that to two zones could sit in a gap about to merge")
+        return self
 
 
 # -------------------------------------------------------------------------------------------- modes

@@ -357,21 +357,27 @@ class ZoneGeometry:
         self.dim = dim
         self.merge_gap_rad = math.radians(merge_gap_deg)
         self.groups: list[list[int]] = []
+        self.pending: list = []  # shapes of pairs that could not merge because the boresight is between them
 
     MAX_MERGED_RADIUS_RAD = math.radians(80.0)
 
-    def merge(self, zones: list, keep_outside: list[np.ndarray] = ()) -> tuple[list, list[list[int]]]:
+    def merge(self, zones: list, keep_outside: list[np.ndarray] = (),
+              keep_merged: list[list[int]] = ()) -> tuple[list, list[list[int]]]:
         """Group zones whose bounding caps are closer than the merge gap; a group becomes one cone.
 
         When the enclosing cone would exceed 80 deg or would swallow a point of ``keep_outside`` (the
-        current boresight, the target: a cone grown around the spacecraft's own pointing would leave the
-        law nowhere to go), the two sides are bridged instead: one star polygon containing both caps and
-        little else (`gnc.sky_zones.bridge_zone`), which leaves the notch between them free. A group
-        already merged takes part through its enclosing cone (Sun and Moon merged near new moon, then
-        the Earth zone sweeping by). Only when that too fails (the bridge would contain a keep-out point,
-        or reach 80 deg from its kernel) do the zones stay separate (thin eps-layer, reported by the
-        assumption check) and the margin has to carry them. The 24 h soak found that case as a real
-        keep-out violation when the Earth zone swept across the Moon zone with the boresight between them.
+        current boresight: a cone grown around the spacecraft's own pointing would leave the law nowhere
+        to go), the two sides are bridged instead: one star polygon containing both caps and little else
+        (`gnc.sky_zones.bridge_zone`), which leaves the notch between them free. A group already merged
+        takes part through its enclosing cone (Sun and Moon merged near new moon, then the Earth zone
+        sweeping by). A pair that belonged to one group of ``keep_merged`` (the previous grouping) stays
+        merged even when its shape has grown over the boresight: splitting it would leave two zones too
+        close for Assumption 1 around the spacecraft, while inside the merged zone the law pushes the
+        boresight straight out of it. A new pair whose shapes would both swallow the boresight stays
+        separate and its would-be shape is kept in ``self.pending``: the spacecraft sits in the closing
+        gap between the two zones and has to leave it (`retreat_target` avoids pending shapes) before the
+        pair can merge. The 24 h soak found that case as a keep-out violation when the Earth zone swept
+        towards the Moon zone with the boresight parked between them.
         """
         # groups of zone indices, each with its shape and bounding cap; pairs of groups closer than the
         # gap merge until none is left (judged on the merged shapes: a cone grown around Sun and Moon can
@@ -379,7 +385,9 @@ class ZoneGeometry:
         zone_caps = [sky_zones.cap_of(z) for z in zones]
         groups, shapes, caps = [[i] for i in range(len(zones))], list(zones), list(zone_caps)
         refused: set[tuple[tuple[int, ...], tuple[int, ...]]] = set()
-        while (found := self._first_merge(groups, caps, zone_caps, keep_outside, refused)) is not None:
+        self.pending = []
+        previous = [set(g) for g in keep_merged]
+        while (found := self._first_merge(groups, caps, zone_caps, keep_outside, refused, previous)) is not None:
             gi, gj, shape = found
             members = sorted(groups[gi] + groups[gj])
             for k in (gj, gi):
@@ -390,9 +398,10 @@ class ZoneGeometry:
         order = sorted(range(len(groups)), key=lambda k: groups[k][0])
         return [shapes[k] for k in order], [groups[k] for k in order]
 
-    def _first_merge(self, groups, caps, zone_caps, keep_outside, refused):
+    def _first_merge(self, groups, caps, zone_caps, keep_outside, refused, previous):
         """(gi, gj, merged shape) for the first pair of groups to merge, or None. A pair that can be
-        neither coned nor bridged is remembered in ``refused``."""
+        neither coned nor bridged is remembered in ``refused`` (and its shape in ``self.pending`` when a
+        keep-out point was what stopped it)."""
         for gi in range(len(groups)):
             for gj in range(gi + 1, len(groups)):
                 pair = (tuple(groups[gi]), tuple(groups[gj]))
@@ -400,11 +409,16 @@ class ZoneGeometry:
                 d = math.acos(max(-1.0, min(1.0, float(ai @ aj))))
                 if pair in refused or d - ri - rj >= self.merge_gap_rad:
                     continue
+                sticky = any(set(pair[0] + pair[1]) <= g for g in previous)
+                avoid = () if sticky else keep_outside
                 shape = sky_zones.enclosing_cone([zone_caps[k] for k in groups[gi] + groups[gj]])
-                if shape.bounding_cap[1] > self.MAX_MERGED_RADIUS_RAD or any(shape.contains(p) for p in keep_outside):
+                if shape.bounding_cap[1] > self.MAX_MERGED_RADIUS_RAD or any(shape.contains(p) for p in avoid):
+                    cone = shape if shape.bounding_cap[1] <= self.MAX_MERGED_RADIUS_RAD else None
                     shape = sky_zones.bridge_zone(caps[gi], caps[gj]) if self.dim == 3 else None
-                    if shape is None or any(shape.contains(p) for p in keep_outside):
+                    if shape is None or any(shape.contains(p) for p in avoid):
                         refused.add(pair)
+                        if shape is not None or cone is not None:
+                            self.pending.append(shape if shape is not None else cone)
                         continue
                 return gi, gj, shape
         return None
@@ -423,29 +437,51 @@ class ZoneGeometry:
             bound = min(bound, float(z.separation(target)))
         return bound
 
+    RETREAT_RING_STEP_DEG = 0.5
+    RETREAT_AZIMUTHS = 48
+
     @staticmethod
-    def retreat_target(target: np.ndarray, zones: list, eps: float) -> tuple[np.ndarray, int]:
-        """If the target lies in a zone's eps-layer, move it away from that zone's kernel along the
-        geodesic until it is 1.5 eps outside that zone and outside every other zone's layer (returns
-        the substitute target and the zone index, or -1). When no such point exists within 180 deg the
-        farthest point reached is returned (the assumption check then reports the violation)."""
-        for i, z in enumerate(zones):
-            if float(z.separation(target)) > eps:
-                continue
-            g = np.asarray(z.kernel, dtype=float)
-            t = target - g
-            t = t - (t @ target) * target
-            if np.linalg.norm(t) < 1e-9:
-                t = np.roll(target, 1) - (np.roll(target, 1) @ target) * target
-            t /= np.linalg.norm(t)
-            x = target
-            for k in range(1, 721):
-                s = math.radians(0.25 * k)
-                x = math.cos(s) * target + math.sin(s) * t
-                if float(z.separation(x)) > 1.5 * eps and all(float(o.separation(x)) > eps for o in zones):
-                    break
-            return x, i
-        return target, -1
+    def retreat_target(target: np.ndarray, zones: list, eps: float, standoff_deg: float,
+                       avoid: list = (), near: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+        """Substitute law target when ``target`` is unusable: (direction, index of the zone whose
+        eps-layer holds it, len(zones) + k for the k-th ``avoid`` shape, or -1 when it is usable).
+
+        The target is unusable inside a zone's eps-layer (the paper needs x_d outside every layer) or
+        inside an ``avoid`` shape (a pair of zones about to merge around the spacecraft). The substitute is
+        the nearest direction at least ``standoff_deg`` outside every zone and every avoid shape: rings
+        around the target, the first ring with a free direction, on it the one nearest ``near`` (the
+        boresight, so the spacecraft does not cross the sky for an equally good point). The standoff keeps
+        a parked boresight clear of a zone sweeping towards it (the Earth from low orbit moves 0.06 deg/s)
+        and out of every gap narrower than twice the standoff, so out of gaps about to merge. When nothing
+        within 180 deg is free, the farthest ring's first direction is returned (the assumption check then
+        reports the violation).
+        """
+        occ = next((i for i, z in enumerate(zones) if float(z.separation(target)) <= eps), -1)
+        if occ < 0:
+            occ = next((len(zones) + k for k, z in enumerate(avoid) if z.contains(target)), -1)
+        if occ < 0:
+            return target, -1
+        d_free = max(1.0 - math.cos(math.radians(standoff_deg)), 1.5 * eps)
+        e1 = np.roll(target, 1) - (np.roll(target, 1) @ target) * target
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(target, e1)
+        az = np.linspace(0.0, 2.0 * math.pi, ZoneGeometry.RETREAT_AZIMUTHS, endpoint=False)
+        ring_dirs = np.cos(az)[:, None] * e1 + np.sin(az)[:, None] * e2
+        step = math.radians(ZoneGeometry.RETREAT_RING_STEP_DEG)
+        rings = int(math.pi / step)
+        P = target
+        for first in range(1, rings + 1, 12):  # 12 rings a batch: one separation_batch call per zone
+            r = step * np.arange(first, min(first + 12, rings + 1))
+            P = (np.cos(r)[:, None, None] * target + np.sin(r)[:, None, None] * ring_dirs).reshape(-1, 3)
+            free = np.ones(len(P), dtype=bool)
+            for z in list(zones) + list(avoid):
+                free &= z.separation_batch(P) > d_free
+            if free.any():
+                ring = int(np.flatnonzero(free)[0]) // len(az)
+                cand = np.flatnonzero(free[ring * len(az):(ring + 1) * len(az)]) + ring * len(az)
+                pick = cand[int(np.argmax(P[cand] @ near))] if near is not None else cand[0]
+                return P[pick] / np.linalg.norm(P[pick]), occ
+        return P[-1] / np.linalg.norm(P[-1]), occ
 
 
 class Guidance:
@@ -692,18 +728,21 @@ class Guidance:
         if self.slots:
             if rebuilt or self._sky_law_key is None:
                 zones = [s.law for s in self.slots]
-                merged, groups = self.sky_geometry.merge(zones, keep_outside=[y, self.target_N])
+                geometry = self.sky_geometry
+                merged, groups = geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
                 if groups != self._sky_groups:
                     self._report_merge(self._sky_groups, groups)
                     self._checks_dirty = True
                 self._sky_groups = groups
                 self._sky_law_zones = merged
                 eps_max = ZoneGeometry.fast_eps_max(self.target_N, merged)
-                target = self.target_N
                 eps = self._eps_for(max(eps_max, 1e-5))
-                target, occ = ZoneGeometry.retreat_target(self.target_N, merged, eps)
+                target, occ = ZoneGeometry.retreat_target(self.target_N, merged, eps, self.cfg.law.retreat_standoff_deg,
+                                                          avoid=geometry.pending, near=y)
                 if occ != self._occulted:
-                    if occ >= 0:
+                    if occ >= len(merged):
+                        self.events("ASSUMPTION_VIOLATED", reason="target between two zones closing around the boresight: steering out of the gap")
+                    elif occ >= 0:
                         self.events("ASSUMPTION_VIOLATED", reason=f"target in the eps-layer of zone {occ}: steering to the nearest safe direction")
                     self._occulted = occ
                     self._checks_dirty = True

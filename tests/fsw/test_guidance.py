@@ -337,3 +337,81 @@ def test_a_merged_pair_and_a_third_zone_around_the_boresight_are_bridged() -> No
     assert not merged[0].contains(y0)
     for zone in zones:
         assert all(merged[0].separation(p) < 1e-9 for p in zone.boundary(360))
+
+
+def _arc_point(a: np.ndarray, b: np.ndarray, angle_deg: float) -> np.ndarray:
+    return _rot_toward(a, b, math.radians(angle_deg))
+
+
+def test_retreat_target_is_the_nearest_direction_clear_of_every_zone_by_the_standoff() -> None:
+    from gnc.zones import ConicZone
+
+    a = np.array([1.0, 0.0, 0.0])
+    zones = [ConicZone(a, math.radians(20.0)), ConicZone(_arc_point(a, np.array([0.0, 1.0, 0.0]), 45.0), math.radians(15.0))]
+    target = _arc_point(a, np.array([0.0, 0.3, 1.0]), 15.0)  # 5 deg inside the first zone
+    x, occ = ZoneGeometry.retreat_target(target, zones, 1e-4, standoff_deg=3.0, near=target)
+    assert occ == 0
+    margins = [math.degrees(math.acos(1.0 - z.separation(x))) for z in zones]
+    assert min(margins) >= 3.0 - 1e-9
+    # nearest: 5 deg to the boundary plus the 3 deg standoff, within one ring step (0.5 deg)
+    moved = math.degrees(math.acos(min(1.0, float(x @ target))))
+    assert 8.0 - 1e-6 <= moved <= 8.0 + ZoneGeometry.RETREAT_RING_STEP_DEG
+    # a usable target is kept
+    free = _arc_point(a, np.array([0.0, 0.0, 1.0]), 60.0)
+    x2, occ2 = ZoneGeometry.retreat_target(free, zones, 1e-4, standoff_deg=3.0)
+    assert occ2 == -1 and np.array_equal(x2, free)
+
+
+def test_retreat_target_leaves_a_gap_about_to_merge_around_the_spacecraft() -> None:
+    """Two zones 3 deg apart with the boresight (and target) in the neck between them: the pair cannot
+    merge (both its cone and its bridge would swallow the boresight), so its would-be shape is pending and
+    the substitute target lies clear of it, out of the gap."""
+    from gnc.zones import ConicZone
+
+    a = np.array([1.0, 0.0, 0.0])
+    b = _arc_point(a, np.array([0.0, 1.0, 0.0]), 33.0)
+    zones = [ConicZone(a, math.radians(15.0)), ConicZone(b, math.radians(15.0))]
+    y = _arc_point(a, b, 16.5)  # the middle of the 3 deg neck
+    geometry = ZoneGeometry(3, merge_gap_deg=4.0)
+    merged, groups = geometry.merge(zones, keep_outside=[y])
+    assert groups == [[0], [1]] and len(geometry.pending) == 1 and geometry.pending[0].contains(y)
+    x, occ = ZoneGeometry.retreat_target(y, merged, 1e-6, standoff_deg=3.0, avoid=geometry.pending, near=y)
+    assert occ == len(merged)
+    assert not geometry.pending[0].contains(x)
+    assert min(math.degrees(math.acos(1.0 - z.separation(x))) for z in zones) >= 3.0
+    # once the boresight is out, the pair merges; a merged pair stays merged when its shape later grows
+    # over the boresight (keep_merged), instead of splitting into two zones too close for the law
+    merged2, groups2 = geometry.merge(zones, keep_outside=[x])
+    assert groups2 == [[0, 1]] and not geometry.pending
+    inside = merged2[0].kernel
+    assert geometry.merge(zones, keep_outside=[inside])[1] == [[0], [1]]
+    assert geometry.merge(zones, keep_outside=[inside], keep_merged=groups2)[1] == [[0, 1]]
+
+
+def test_a_zone_sweeping_towards_another_never_traps_the_boresight_between_them() -> None:
+    """The case the 24 h soak found: a large Earth zone (78 deg, as from low orbit) sweeps at 0.06 deg/s
+    towards a Moon cone, over the commanded target, with the spacecraft parked in the gap between them.
+    The pair is too large to merge, so the gap closes to nothing; the boresight has to leave it sideways
+    in time. Kinematic loop (perfect rate tracking at the rate limit, 10 Hz) on the flight guidance: the
+    physical margin stays positive and the law keeps out of the 3 deg inflation (before the fix, the
+    substitute target crept along the Earth's edge into the neck and the margin reached -0.36 deg)."""
+    moon = np.array([1.0, 0.0, 0.0])
+    toward = np.array([0.0, 1.0, 0.0])
+    target = _rot_toward(_arc_point(moon, toward, 20.0), np.array([0.0, 0.0, 1.0]), math.radians(0.3))
+    cfg = _cfg(initial_mode="POINTING", law={"k1": 0.3, "margin_deg": 3.0, "eps_max_used": 0.035, "assumption_check": "off"},
+               spacecraft={"max_rate_deg_s": 1.0},
+               pointing={"target_N": list(target), "roll_gain_1_s": 0.0, "zones": [
+                   {"name": "moon", "body": "inertial", "direction_N": list(moon), "geometry": {"shape": "cone", "half_angle_deg": 12.0}},
+                   {"name": "earth", "body": "earth", "add_body_angular_radius": False,
+                    "geometry": {"shape": "cone", "half_angle_deg": 78.0}}]})
+    log, events = _events()
+    g = Guidance(cfg, events)
+    g.ephem.directions = lambda t: {"earth": _arc_point(moon, toward, 106.0 - 0.06 * t)}
+    q = _q(Rotation.align_vectors([target], [cfg.pointing.boresight_B])[0])
+    worst, dt = math.inf, 0.1
+    for k in range(int(500 / dt)):
+        out = g.step(k * dt, dt, q, np.zeros(3))
+        worst = min(worst, out.margin_min_deg)
+        q = _propagate(q, out.omega_cmd_BN_B, dt)
+    assert worst > 2.5, f"keep-out margin reached {worst:.3f} deg"
+    assert ("ASSUMPTION_VIOLATED", {"reason": "target in the eps-layer of zone 1: steering to the nearest safe direction"}) in log
