@@ -112,12 +112,20 @@ def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
     if not dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
                                    DECAY, GM, HAS_COULOMB, WORK):
         return False
+    _aux_at(t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _aux_at(t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
+    """AUX rows at t_end_s: every run's orbit position and its Sun/Moon/Earth directions (nothing in the
+    dynamics reads them: only the star tracker and the recorded truth)."""
     sun = np.empty(3)
     moon = np.empty(3)
     r = np.empty(3)
     spline_eval(sun_c, eph_t0, eph_h, t_end_s, sun)
     spline_eval(moon_c, eph_t0, eph_h, t_end_s, moon)
-    for m in range(X.shape[1]):
+    for m in range(AUX.shape[0]):
         orbit_position_row_N_km(ORB, m, t_end_s, r)
         rn = 1.0 / math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
         s0, s1, s2 = sun[0] - r[0], sun[1] - r[1], sun[2] - r[2]
@@ -129,7 +137,6 @@ def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
             AUX[m, AUX_EARTH + j] = -r[j] * rn
         AUX[m, AUX_SUN], AUX[m, AUX_SUN + 1], AUX[m, AUX_SUN + 2] = s0 * sn, s1 * sn, s2 * sn
         AUX[m, AUX_MOON], AUX[m, AUX_MOON + 1], AUX[m, AUX_MOON + 2] = m0 * mn, m1 * mn, m2 * mn
-    return True
 
 
 @njit(cache=True, error_model="numpy")
@@ -142,10 +149,19 @@ def _world_period_kernel(X, D, TEMP, G, W, B, U_SEQ, NORMALS_SEQ, dt_sub, n_sub,
     gyro sample where IMU_DUE[j] and a star-tracker sample where ST_DUE[j] (normals in the order the
     one-call-per-step path draws them). One compiled call per GNC period instead of ~2 per dynamics step.
     Returns the number of steps done (< J: U_SEQ[j] not finite, nothing of step j applied)."""
-    for j in range(U_SEQ.shape[0]):
-        if not _world_step_kernel(X, D, TEMP, G, W, B, U_SEQ[j], NORMALS_SEQ[j], dt_sub, n_sub, U_APPLIED, FLAGS,
-                                  DECAY, GM, HAS_COULOMB, WORK, T_END[j], ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
+    # AUX (orbit, Sun/Moon/Earth directions) only where it is read: at star-tracker samples and at the end
+    # of the period (or of the last step done); the same values as evaluating it after every step.
+    J = U_SEQ.shape[0]
+    aux_step = -1
+    for j in range(J):
+        if not dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_SEQ[j], NORMALS_SEQ[j], dt_sub, n_sub, U_APPLIED,
+                                       FLAGS, DECAY, GM, HAS_COULOMB, WORK):
+            if j > 0 and aux_step != j - 1:
+                _aux_at(T_END[j - 1], ORB, sun_c, moon_c, eph_t0, eph_h, AUX)
             return j
+        if ST_DUE[j] or j == J - 1:
+            _aux_at(T_END[j], ORB, sun_c, moon_c, eph_t0, eph_h, AUX)
+            aux_step = j
         if IMU_DUE[j]:
             sen.gyro_sample_batch(X, BIAS, GYRO_P, IMU_NORMALS[j], IMU_DT[j], GYRO_SEQ[j], SAT_SEQ[j])
         if ST_DUE[j]:
@@ -154,7 +170,7 @@ def _world_period_kernel(X, D, TEMP, G, W, B, U_SEQ, NORMALS_SEQ, dt_sub, n_sub,
             ST_Q_SEQ[j] = ST_Q
             ST_VALID_SEQ[j] = ST_VALID
             ST_BLIND_SEQ[j] = ST_BLIND
-    return U_SEQ.shape[0]
+    return J
 
 
 class WorldBatch:

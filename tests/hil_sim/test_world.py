@@ -233,6 +233,23 @@ def test_advance_sampled_is_bit_identical_to_step_and_sample_calls():
     np.testing.assert_array_equal(a.imu_sample().omega_BN_B, b.imu_sample().omega_BN_B)
     with pytest.raises(ValueError, match="finite"):
         a.advance_sampled(0.01, np.full((10, a.n_wheels), np.nan), imu_due, st_due)
+    # a bad command mid-period: the steps before it are done, and the truth (also the Sun/Moon/Earth
+    # directions, evaluated only where read inside a period) is that of the last step done (fresh worlds:
+    # a refused period has drawn its random numbers already)
+    a, b = World(_noisy_params(), seed=4), World(_noisy_params(), seed=4)
+    u = rng.uniform(-0.05, 0.05, (10, a.n_wheels))
+    u[6] = np.inf
+    with pytest.raises(ValueError, match="finite"):
+        a.advance_sampled(0.01, u, imu_due, st_due)
+    for j in range(6):
+        b.step(0.01, u[j])
+        if imu_due[j]:
+            b.imu_sample()
+        if st_due[j]:
+            b.star_tracker_sample()
+    assert a.t == b.t
+    for x, y in zip(a.truth, b.truth):
+        np.testing.assert_array_equal(x, y)
 
 
 def test_truth_ephemeris_nodes_kept_on_disk_are_astropy_s_numbers(tmp_path, monkeypatch):
