@@ -32,6 +32,7 @@ import can
 
 from fsw.bus.e2e import E2EReceiver
 from fsw.bus.icd import E2ESender, Icd
+from fsw.bus.transport import send_batch
 from hil_sim.devices import Devices, DeviceTiming, WorldLike
 from hil_sim.faults import FaultInjector
 
@@ -98,6 +99,11 @@ class Simulator:
         self._cmd_index = {self.icd.spec(f"RW{i}_CMD").frame_id: i - 1 for i in range(1, self.n_wheels + 1)}
         self._cycle_done_id = self.icd.spec("CYCLE_DONE").frame_id
         self._heartbeat_id = self.icd.spec("FSW_HEARTBEAT").frame_id
+        # Lockstep waits wake only for CYCLE_DONE where the bus can filter wake-ups (socketcan): the wheel
+        # commands before it queue without a context switch each (see _receive_until_done).
+        self._wait_for = getattr(bus, "wait_for", None)
+        if self._wait_for is not None:
+            bus.watch([self._cycle_done_id])
         self.tick = 0
         self.t0_s = float(world.t)
         self.stats = SimStats()
@@ -129,8 +135,8 @@ class Simulator:
                                                 "frames_following": min(following, 255),
                                                 "period_ms": self.period_ms})
         out = self.injector.process([sync], t, extras=False) if self.injector else [sync]
-        for msg in out + frames:
-            self._send(msg, t)
+        # one burst: the flight software wakes once with the whole tick queued, not once per frame
+        self._send_all(out + frames, t)
         self._tick_open = True
         self._awaiting = self.tick
         return len(out) + len(frames)
@@ -145,7 +151,7 @@ class Simulator:
             raise RuntimeError("end_tick() without begin_tick()")
         k = self.tick
         wait = self.cycle_done_timeout_s if wait_s is None else wait_s
-        done = self._receive_until_done(k, time.monotonic() + max(0.0, wait))
+        done = self._receive_until_done(k, max(0.0, wait))
         if not done:
             self.stats.cycle_done_timeouts += 1
         self._advance_period(paced=None)
@@ -169,17 +175,34 @@ class Simulator:
         self._tick_open = False
 
     # ---------------------------------------------------------------------------------- receiving
-    def _receive_until_done(self, k: int, deadline: float) -> bool:
+    def _receive_until_done(self, k: int, wait_s: float) -> bool:
         for msg in self.injector.release(self.t_s, "rx"):  # flight-software frames delayed by a fault
             self._classify(msg, self.t_s)
+        # With a doorbell (socketcan) the first wait needs no look at the queue: this tick's frames come
+        # after this tick's SYNC, which has just been sent.
+        wait_first = self._wait_for is not None
+        deadline = None  # the clock is read once the queue is empty (in the vcan-vm guest a read costs ~15 us)
         while True:
             if k in self._done_ticks:
                 self._done_ticks.discard(k)
                 return True
-            msg = self.bus.recv(timeout=0.0)  # clock reads only when the queue is empty (see driver)
+            msg = None if wait_first else self.bus.recv(timeout=0.0)  # clock reads only when it is empty
+            wait_first = False
             if msg is None:
-                remaining = deadline - time.monotonic()
-                msg = self.bus.recv(timeout=remaining) if remaining > 0.0 else None
+                now = time.monotonic()
+                if deadline is None:
+                    deadline = now + wait_s
+                remaining = deadline - now
+                if remaining <= 0.0:
+                    return False
+                if self._wait_for is None:
+                    msg = self.bus.recv(timeout=remaining)
+                elif self._wait_for(remaining):
+                    # CYCLE_DONE rang: it and the commands sent before it are queued (or arriving: the
+                    # kernel may deliver to the doorbell socket first), so this returns at once
+                    msg = self.bus.recv(timeout=remaining)
+                else:
+                    msg = self.bus.recv(timeout=0.0)  # no CYCLE_DONE in time: take what did come
                 if msg is None:
                     return False
             self._handle_rx(msg, self.t_s)
@@ -226,18 +249,22 @@ class Simulator:
         due = self.devices.frames_due(t_s)
         if self.injector:
             due = self.injector.release(t_s, "tx") + self.injector.process(due, t_s, extras=False)
-        for msg in due:
-            self._send(msg, t_s)
+        self._send_all(due, t_s)
 
-    def _send(self, msg: can.Message, t_s: float) -> None:
-        try:
-            self.bus.send(msg, timeout=0.05)
-        except can.CanError:  # transmit queue full / bus error: counted, the run goes on
-            self.stats.tx_errors += 1
-            return
-        self.stats.frames_sent += 1
-        if self.on_frame is not None:
-            self.on_frame("tx", t_s, msg)
+    def _send_all(self, msgs: list[can.Message], t_s: float) -> None:
+        """Send ``msgs`` in order (one system call on socketcan); a refused frame (transmit queue full,
+        bus error) is counted and skipped, the run goes on."""
+        i = 0
+        while i < len(msgs):
+            n = send_batch(self.bus, msgs[i:], timeout=0.05)
+            self.stats.frames_sent += n
+            if self.on_frame is not None:
+                for msg in msgs[i:i + n]:
+                    self.on_frame("tx", t_s, msg)
+            i += n
+            if i < len(msgs):
+                self.stats.tx_errors += 1
+                i += 1
 
     # -------------------------------------------------------------------------------------- loops
     def step_in_process(self, fsw_cycle: Callable[[], Any]) -> bool:

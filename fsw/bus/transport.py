@@ -1,7 +1,9 @@
 """Transports: one spec string picks the python-can interface underneath.
 
 Specs:
-  ``socketcan:IFACE``               SocketCAN (``socketcan`` alone means vcan0). The real thing.
+  ``socketcan:IFACE``               SocketCAN (``socketcan`` alone means vcan0). The real thing, opened
+                                    as :class:`fsw.bus.socketcan_batch.BatchSocketcanBus` (python-can's
+                                    bus with batched reads/writes: few system calls per frame).
   ``udp_multicast[:GROUP:PORT]``     python-can's multi-process interface, for kernels without CAN.
                                     Without GROUP/PORT they are derived from the run id, so two SIL
                                     runs never hear each other (receivers bind the port, so the port
@@ -136,7 +138,9 @@ def open_bus(spec: str = "auto", run_id: str | int | None = None, *, info_out: l
     if info.interface == "socketcan":
         if not interface_present(info.channel):
             raise BusUnavailableError(vcan_hint(info.channel))
-        return can.Bus(interface="socketcan", channel=info.channel, receive_own_messages=False, fd=False)
+        from fsw.bus.socketcan_batch import BatchSocketcanBus
+
+        return BatchSocketcanBus(channel=info.channel, receive_own_messages=False, fd=False)
     if info.interface == "udp_multicast":
         # fd=False: classic CAN frames only, as on the spacecraft bus.
         return can.Bus(interface="udp_multicast", channel=info.channel, port=info.port, fd=False)
@@ -151,6 +155,20 @@ def drain(bus: can.BusABC) -> int:
     while bus.recv(timeout=0.0) is not None:
         count += 1
     return count
+
+
+def send_batch(bus: can.BusABC, msgs: list[can.Message], timeout: float | None = None) -> int:
+    """Send ``msgs`` in order, in one system call where the bus can (socketcan), else one by one. Returns
+    how many, from the first, were sent: fewer when frame [n] was refused (CanError); the rest is unsent."""
+    batch = getattr(bus, "send_batch", None)
+    if batch is not None:
+        return int(batch(msgs, timeout))
+    for i, msg in enumerate(msgs):
+        try:
+            bus.send(msg, timeout)
+        except can.CanError:
+            return i
+    return len(msgs)
 
 
 def _copy_message(msg: can.Message) -> can.Message:

@@ -160,3 +160,120 @@ def test_light_virtual_bus_delivers_like_the_virtual_bus() -> None:
         for bus in (light, plain, other):
             bus.shutdown()
     assert "light-test" not in channels
+
+
+# ---------------------------------------------------------------------------------------------------
+# BatchSocketcanBus: what open_bus gives for socketcan (batched reads and writes, doorbell wake-ups)
+# ---------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("msg", [
+    can.Message(arbitration_id=0x7FF, data=b"\x01\x02\x03", is_extended_id=False),
+    can.Message(arbitration_id=0x123, data=b"", is_extended_id=False),
+    can.Message(arbitration_id=0x1ABCDE, data=bytes(range(8)), is_extended_id=True),
+    can.Message(arbitration_id=0x10, is_remote_frame=True, dlc=4, is_extended_id=False),
+    can.Message(arbitration_id=0x20, is_error_frame=True, data=b"\x00\x04", is_extended_id=False),
+])
+def test_classic_frame_bytes_are_python_cans(msg: can.Message) -> None:
+    from can.interfaces.socketcan.socketcan import build_can_frame
+
+    from fsw.bus.socketcan_batch import classic_frame
+
+    assert classic_frame(msg) == build_can_frame(msg)
+
+
+def _burst(n: int, base: int = 0x100) -> list[can.Message]:
+    return [can.Message(arbitration_id=base + i % 0x80, data=bytes([i & 0xFF, i >> 8, 3, 4, 5, 6, 7, 8][:1 + i % 8]),
+                        is_extended_id=False) for i in range(n)]
+
+
+def _read(bus: can.BusABC, n: int, timeout: float = 2.0) -> list[can.Message]:
+    out = []
+    deadline = time.monotonic() + timeout
+    while len(out) < n and time.monotonic() < deadline:
+        msg = bus.recv(timeout=0.2)
+        if msg is not None:
+            out.append(msg)
+    return out
+
+
+@pytest.mark.socketcan
+def test_socketcan_batch_send_delivers_every_frame_in_order_to_both_bus_kinds() -> None:
+    """A burst larger than one sendmmsg (BATCH) reaches a batch bus and python-can's own bus alike."""
+    from fsw.bus.socketcan_batch import BATCH, BatchSocketcanBus
+
+    a, b = open_bus("socketcan:vcan0"), open_bus("socketcan:vcan0")
+    plain = can.Bus(interface="socketcan", channel="vcan0")
+    try:
+        assert isinstance(a, BatchSocketcanBus)
+        sent = _burst(BATCH + 36)
+        assert transport.send_batch(a, sent) == len(sent)
+        got = {}
+        for bus in (b, plain):
+            got[bus] = _read(bus, len(sent))
+            assert [(m.arbitration_id, bytes(m.data), m.dlc) for m in got[bus]] == \
+                   [(m.arbitration_id, bytes(m.data), m.dlc) for m in sent]
+            stamps = [m.timestamp for m in got[bus]]
+            assert stamps == sorted(stamps) and abs(stamps[0] - time.time()) < 60.0  # kernel times, in order
+
+        def flags(m: can.Message) -> tuple:
+            return m.is_rx, m.is_fd, m.is_extended_id, m.is_remote_frame, m.is_error_frame, m.channel
+
+        assert [flags(m) for m in got[b]] == [flags(m) for m in got[plain]]  # as python-can reads them
+        assert [round(m.timestamp, 6) for m in got[b]] == [round(m.timestamp, 6) for m in got[plain]]
+        assert b.recv(timeout=0.0) is None
+    finally:
+        for bus in (a, b, plain):
+            bus.shutdown()
+
+
+@pytest.mark.socketcan
+def test_socketcan_batch_bus_reads_what_python_can_sends() -> None:
+    plain = can.Bus(interface="socketcan", channel="vcan0")
+    b = open_bus("socketcan:vcan0")
+    try:
+        sent = [can.Message(arbitration_id=0x1ABCDE, data=b"\x09\x08", is_extended_id=True),
+                can.Message(arbitration_id=0x42, is_remote_frame=True, dlc=3, is_extended_id=False)]
+        for msg in sent:
+            plain.send(msg)
+        got = _read(b, 2)
+        assert [(m.arbitration_id, m.is_extended_id, m.is_remote_frame, m.dlc) for m in got] == \
+               [(0x1ABCDE, True, False, 2), (0x42, False, True, 3)]
+        assert bytes(got[0].data) == b"\x09\x08"
+    finally:
+        plain.shutdown()
+        b.shutdown()
+
+
+@pytest.mark.socketcan
+def test_socketcan_recv_waits_the_whole_timeout() -> None:
+    bus = open_bus("socketcan:vcan0")
+    try:
+        start = time.monotonic()
+        assert bus.recv(timeout=0.15) is None
+        assert time.monotonic() - start >= 0.14
+        assert bus.recv(timeout=0.0) is None
+    finally:
+        bus.shutdown()
+
+
+@pytest.mark.socketcan
+def test_socketcan_doorbell_wakes_only_for_watched_ids_and_loses_nothing() -> None:
+    """wait_for ends on a watched id only; the frames before it stay queued, in order, for recv."""
+    sim, fsw = open_bus("socketcan:vcan0"), open_bus("socketcan:vcan0")
+    try:
+        sim.watch([0x70])
+        transport.send_batch(fsw, _burst(4, base=0x40))
+        start = time.monotonic()
+        assert sim.wait_for(0.1) is False  # unwatched frames do not ring
+        assert time.monotonic() - start >= 0.09
+        fsw.send(can.Message(arbitration_id=0x70, data=b"\x01", is_extended_id=False))
+        assert sim.wait_for(2.0) is True
+        assert [m.arbitration_id for m in _read(sim, 5)] == [0x40, 0x41, 0x42, 0x43, 0x70]
+        assert sim.wait_for(0.0) is False  # the ring was consumed
+        # a watched frame that rang while nobody waited is still reported (then consumed)
+        fsw.send(can.Message(arbitration_id=0x70, data=b"\x02", is_extended_id=False))
+        time.sleep(0.05)
+        assert sim.wait_for(0.0) is True and sim.wait_for(0.0) is False
+        assert sim.recv(timeout=1.0).arbitration_id == 0x70
+    finally:
+        sim.shutdown()
+        fsw.shutdown()
