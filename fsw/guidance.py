@@ -78,6 +78,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gnc import sky_zones
+from gnc.zones import ConicZone
 from gnc.attitude import (
     attitude_error_angle,
     pointing_rate_command_nb,
@@ -357,7 +358,8 @@ class ZoneGeometry:
         self.dim = dim
         self.merge_gap_rad = math.radians(merge_gap_deg)
         self.groups: list[list[int]] = []
-        self.pending: list = []  # shapes of pairs that could not merge because the boresight is between them
+        self.pending: list = []  # would-be shapes (or necks) of close pairs that could not merge
+        self.unmerged: list[tuple[int, int]] = []  # those pairs, as indices into merge()'s output
 
     MAX_MERGED_RADIUS_RAD = math.radians(80.0)
 
@@ -396,6 +398,8 @@ class ZoneGeometry:
             shapes.append(shape)
             caps.append(sky_zones.cap_of(shape))
         order = sorted(range(len(groups)), key=lambda k: groups[k][0])
+        position = {tuple(groups[k]): n for n, k in enumerate(order)}
+        self.unmerged = [(position[a], position[b]) for a, b in refused if a in position and b in position]
         return [shapes[k] for k in order], [groups[k] for k in order]
 
     def _first_merge(self, groups, caps, zone_caps, keep_outside, refused, previous):
@@ -417,19 +421,37 @@ class ZoneGeometry:
                     shape = sky_zones.bridge_zone(caps[gi], caps[gj]) if self.dim == 3 else None
                     if shape is None or any(shape.contains(p) for p in avoid):
                         refused.add(pair)
-                        if shape is not None or cone is not None:
-                            self.pending.append(shape if shape is not None else cone)
+                        merged = shape if shape is not None else cone
+                        self.pending.append(merged if merged is not None else self._neck(ai, ri, aj, rj, d))
                         continue
                 return gi, gj, shape
         return None
 
+    def _neck(self, a: np.ndarray, ra: float, b: np.ndarray, rb: float, d: float):
+        """Cone over the neck between two caps too large to merge: centred where they come closest,
+        merge_gap wide beyond half their gap (or overlap), so it covers the narrow passage and, once the caps
+        overlap, the two notches beside the overlap."""
+        gap = d - ra - rb
+        e = b - (a @ b) * a
+        e /= np.linalg.norm(e)
+        s = ra + 0.5 * gap
+        return ConicZone(math.cos(s) * a + math.sin(s) * e, self.merge_gap_rad + 0.5 * abs(gap))
+
     @staticmethod
-    def fast_eps_max(target: np.ndarray, zones: list) -> float:
-        """min(1 - cos(delta), d_s(x_d, U)) with delta from bounding caps (a conservative lower bound)."""
+    def fast_eps_max(target: np.ndarray, zones: list, ignore: list[tuple[int, int]] = ()) -> float:
+        """min(1 - cos(delta), d_s(x_d, U)) with delta from bounding caps (a conservative lower bound).
+
+        Pairs in ``ignore`` (close pairs that could not merge: `merge` sets them aside) do not count:
+        they have no admissible eps at all, and letting them drive eps to zero would take the law's
+        repulsion away everywhere, not just at their neck, which the substitute target keeps the
+        spacecraft out of. The full assumption check still reports them."""
         bound = 1.0
         caps = [sky_zones.cap_of(z) for z in zones]
+        skip = {tuple(sorted(p)) for p in ignore}
         for i in range(len(zones)):
             for j in range(i + 1, len(zones)):
+                if (i, j) in skip:
+                    continue
                 gap = math.acos(max(-1.0, min(1.0, float(caps[i][0] @ caps[j][0])))) - caps[i][1] - caps[j][1]
                 delta = max(gap, 0.0) / 2.0
                 bound = min(bound, 1.0 - math.cos(delta))
@@ -439,6 +461,15 @@ class ZoneGeometry:
 
     RETREAT_RING_STEP_DEG = 0.5
     RETREAT_AZIMUTHS = 48
+
+    @staticmethod
+    def occulting(target: np.ndarray, zones: list, eps: float, avoid: list = ()) -> int:
+        """Index of the zone whose eps-layer holds the target, len(zones) + k if the k-th avoid shape
+        contains it, -1 if the target is usable."""
+        occ = next((i for i, z in enumerate(zones) if float(z.separation(target)) <= eps), -1)
+        if occ < 0:
+            occ = next((len(zones) + k for k, z in enumerate(avoid) if z.contains(target)), -1)
+        return occ
 
     @staticmethod
     def retreat_target(target: np.ndarray, zones: list, eps: float, standoff_deg: float,
@@ -456,9 +487,7 @@ class ZoneGeometry:
         within 180 deg is free, the farthest ring's first direction is returned (the assumption check then
         reports the violation).
         """
-        occ = next((i for i, z in enumerate(zones) if float(z.separation(target)) <= eps), -1)
-        if occ < 0:
-            occ = next((len(zones) + k for k, z in enumerate(avoid) if z.contains(target)), -1)
+        occ = ZoneGeometry.occulting(target, zones, eps, avoid)
         if occ < 0:
             return target, -1
         d_free = max(1.0 - math.cos(math.radians(standoff_deg)), 1.5 * eps)
@@ -537,6 +566,7 @@ class Guidance:
         self.check_errors: list[str] = []
         self._checks_dirty = True
         self._occulted = -1
+        self._substitute: tuple | None = None  # (commanded target, substitute, time found, occulting index)
         self.last_t_s = 0.0
 
     # ------------------------------------------------------------------------------ configuration
@@ -735,19 +765,18 @@ class Guidance:
                     self._checks_dirty = True
                 self._sky_groups = groups
                 self._sky_law_zones = merged
-                eps_max = ZoneGeometry.fast_eps_max(self.target_N, merged)
+                eps_max = ZoneGeometry.fast_eps_max(self.target_N, merged, geometry.unmerged)
                 eps = self._eps_for(max(eps_max, 1e-5))
-                target, occ = ZoneGeometry.retreat_target(self.target_N, merged, eps, self.cfg.law.retreat_standoff_deg,
-                                                          avoid=geometry.pending, near=y)
+                target, occ = self._substitute_target(t_s, merged, eps, geometry.pending, y)
                 if occ != self._occulted:
                     if occ >= len(merged):
-                        self.events("ASSUMPTION_VIOLATED", reason="target between two zones closing around the boresight: steering out of the gap")
+                        self.events("ASSUMPTION_VIOLATED", reason="boresight or target in the gap of two zones that cannot merge: steering out of it")
                     elif occ >= 0:
                         self.events("ASSUMPTION_VIOLATED", reason=f"target in the eps-layer of zone {occ}: steering to the nearest safe direction")
                     self._occulted = occ
                     self._checks_dirty = True
                 if occ >= 0:
-                    eps_max = ZoneGeometry.fast_eps_max(target, merged)
+                    eps_max = ZoneGeometry.fast_eps_max(target, merged, geometry.unmerged)
                     eps = self._eps_for(max(eps_max, 1e-5))
                 self._sky_target = target
                 self._sky_eps, self._sky_eps_max = eps, eps_max
@@ -771,6 +800,32 @@ class Guidance:
         out.pointing_error_deg = math.degrees(math.acos(max(-1.0, min(1.0, float(y @ self.target_N)))))
         out.roll_error_deg = math.degrees(roll_err)
         return out
+
+    SUBSTITUTE_REFRESH_S = 60.0
+
+    def _substitute_target(self, t_s: float, zones: list, eps: float, pending: list, y: np.ndarray) -> tuple[np.ndarray, int]:
+        """`ZoneGeometry.retreat_target` for the commanded target, reusing the last substitute while it is
+        still clear of every zone by the standoff (a search costs milliseconds; zones rebuild every ~1 s
+        in low orbit). It is searched again when it stops being clear, and at least every
+        SUBSTITUTE_REFRESH_S, so it comes back towards the target as the zones move on.
+
+        A boresight inside a pending shape (the neck or would-be merged shape of two close zones that
+        could not merge) first leaves it: the law target is then the nearest direction clear of it, on the
+        commanded target's side. Two zones closing on the spacecraft leave the law no admissible eps
+        between them, so that is the one place it must not stay."""
+        standoff = self.cfg.law.retreat_standoff_deg
+        if any(p.contains(y) for p in pending):
+            return ZoneGeometry.retreat_target(y, zones, eps, standoff, avoid=pending, near=self.target_N)
+        kept = self._substitute
+        if kept is not None and kept[0] is self.target_N and t_s - kept[2] < self.SUBSTITUTE_REFRESH_S:
+            _, x, _, occ_then = kept
+            occ = ZoneGeometry.occulting(self.target_N, zones, eps, pending)
+            d_free = max(1.0 - math.cos(math.radians(standoff)), 1.5 * eps)
+            if occ >= 0 and occ_then >= 0 and all(float(z.separation(x)) > d_free for z in list(zones) + list(pending)):
+                return x, occ
+        x, occ = ZoneGeometry.retreat_target(self.target_N, zones, eps, standoff, avoid=pending, near=y)
+        self._substitute = (self.target_N, x, t_s, occ)
+        return x, occ
 
     def _report_merge(self, old: list[list[int]], new: list[list[int]]) -> None:
         old_pairs = {(g[0], j) for g in old for j in g[1:]}

@@ -415,3 +415,38 @@ def test_a_zone_sweeping_towards_another_never_traps_the_boresight_between_them(
         q = _propagate(q, out.omega_cmd_BN_B, dt)
     assert worst > 2.5, f"keep-out margin reached {worst:.3f} deg"
     assert ("ASSUMPTION_VIOLATED", {"reason": "target in the eps-layer of zone 1: steering to the nearest safe direction"}) in log
+
+
+def test_retargeting_near_a_closing_gap_keeps_every_margin_positive() -> None:
+    """Dispersed version of the soak's case: the spacecraft starts in or near the gap between a Moon cone
+    and an Earth polygon (78 deg) sweeping over it at 0.06 deg/s, and is retargeted to a random direction
+    (sometimes across the pair, sometimes inside a zone) during the approach; the Earth then starts to
+    pass over the Moon. With the substitute target kept 3 deg clear of every zone, the neck of the unmergeable pair
+    avoided and its pair left out of eps, no margin drops below the inflation (the earlier guidance
+    consumed 1.2 deg of it here, and reached -2.8 deg when the same eight ran to 1400 s)."""
+    rng = np.random.default_rng(1)
+    moon, toward = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+    r = 78.0
+    earth = {"shape": "polygon", "vertices_deg": [[r, 0], [0.7 * r, 0.7 * r], [0, r], [-0.7 * r, 0.7 * r],
+                                                  [-r, 0], [-0.7 * r, -0.7 * r], [0, -r], [0.7 * r, -0.7 * r]]}
+    worst_all, dt = math.inf, 0.1
+    for _ in range(8):
+        a = rng.normal(size=3)
+        y0 = _rot_toward(_arc_point(moon, toward, rng.uniform(16, 26)), a / np.linalg.norm(a), math.radians(rng.uniform(0, 8)))
+        t = rng.normal(size=3)
+        new_target, t_switch = t / np.linalg.norm(t), rng.uniform(50, 600)
+        cfg = _cfg(initial_mode="POINTING", law={"k1": 0.3, "margin_deg": 3.0, "eps_max_used": 0.035, "assumption_check": "off"},
+                   spacecraft={"max_rate_deg_s": 1.0},
+                   pointing={"target_N": list(y0), "roll_gain_1_s": 0.0, "zones": [
+                       {"name": "moon", "body": "inertial", "direction_N": list(moon), "geometry": {"shape": "cone", "half_angle_deg": 12.0}},
+                       {"name": "earth", "body": "earth", "add_body_angular_radius": False, "geometry": earth}]})
+        g = Guidance(cfg)
+        g.ephem.directions = lambda t: {"earth": _arc_point(moon, toward, 110.0 - 0.06 * t)}
+        q = _q(Rotation.align_vectors([y0], [cfg.pointing.boresight_B])[0])
+        for k in range(int(800 / dt)):  # the approach and the first 10 deg of the Earth over the Moon
+            if k == int(t_switch / dt):
+                g.set_target_direction(new_target)
+            out = g.step(k * dt, dt, q, np.zeros(3))
+            worst_all = min(worst_all, out.margin_min_deg)
+            q = _propagate(q, out.omega_cmd_BN_B, dt)
+    assert worst_all > 2.5, f"keep-out margin reached {worst_all:.3f} deg"
