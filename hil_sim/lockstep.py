@@ -178,9 +178,9 @@ class Simulator:
     def _receive_until_done(self, k: int, wait_s: float) -> bool:
         for msg in self.injector.release(self.t_s, "rx"):  # flight-software frames delayed by a fault
             self._classify(msg, self.t_s)
-        # With a doorbell (socketcan) the first wait needs no look at the queue: this tick's frames come
-        # after this tick's SYNC, which has just been sent.
-        wait_first = self._wait_for is not None
+        # With a doorbell (socketcan) a waiting tick starts with the wait: this tick's answer comes after this
+        # tick's SYNC, which has just been sent (earlier frames still queued are read after the wake-up).
+        wait_first = self._wait_for is not None and wait_s > 0.0
         deadline = None  # the clock is read once the queue is empty (in the vcan-vm guest a read costs ~15 us)
         while True:
             if k in self._done_ticks:

@@ -242,6 +242,31 @@ def test_lockstep_over_socketcan_with_in_process_fsw_thread(icd: Icd) -> None:
         fsw_bus.shutdown()
 
 
+@pytest.mark.socketcan
+def test_in_process_ticks_over_socketcan_read_what_is_queued(icd: Icd) -> None:
+    """end_tick(wait_s=0) over socketcan (whose lockstep waits use the CYCLE_DONE doorbell) still takes
+    the frames already queued: every tick's CYCLE_DONE and wheel commands, none counted as a timeout."""
+    sim_bus, fsw_bus = open_bus("socketcan:vcan0"), open_bus("socketcan:vcan0")
+    try:
+        params = _params()
+        world = World(params, seed=5)
+        sim = Simulator(world, sim_bus, icd)
+        driver = FswBusDriver(fsw_bus, icd, world.n_wheels)
+        responder = RateDampingResponder(driver, [w.axis_B for w in params.spacecraft.wheels], 5.0)
+        for _ in range(20):
+            sim.begin_tick()
+            assert responder.cycle(1.0)
+            deadline = time.monotonic() + 1.0  # the frames are on their way through the kernel
+            while not sim_bus.wait_for(0.0) and time.monotonic() < deadline:
+                time.sleep(0.001)
+            assert sim.end_tick(wait_s=0.0)
+        assert sim.stats.cycle_done == 20 and sim.stats.cycle_done_timeouts == 0
+        assert sim.stats.wheel_commands == 20 * world.n_wheels
+    finally:
+        sim_bus.shutdown()
+        fsw_bus.shutdown()
+
+
 def test_realtime_sensor_frames_go_out_at_their_own_rate(icd: Icd) -> None:
     """Between SYNCs the IMU frames are spread over the period (fake clock), not sent in a burst."""
     channel = f"virtual:rtimu{next(_channels)}"
