@@ -78,7 +78,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gnc import sky_zones
-from gnc.zones import ConicZone
 from gnc.attitude import (
     attitude_error_angle,
     pointing_rate_command_nb,
@@ -358,8 +357,8 @@ class ZoneGeometry:
         self.dim = dim
         self.merge_gap_rad = math.radians(merge_gap_deg)
         self.groups: list[list[int]] = []
-        self.pending: list = []  # would-be shapes (or necks) of close pairs that could not merge
-        self.unmerged: list[tuple[int, int]] = []  # those pairs, as indices into merge()'s output
+        self.pending: list = []  # would-be shapes of close pairs that could not merge around the boresight
+        self.unmerged: list[tuple[int, int]] = []  # every close pair left separate, as indices into merge()'s output
 
     MAX_MERGED_RADIUS_RAD = math.radians(80.0)
 
@@ -421,21 +420,11 @@ class ZoneGeometry:
                     shape = sky_zones.bridge_zone(caps[gi], caps[gj]) if self.dim == 3 else None
                     if shape is None or any(shape.contains(p) for p in avoid):
                         refused.add(pair)
-                        merged = shape if shape is not None else cone
-                        self.pending.append(merged if merged is not None else self._neck(ai, ri, aj, rj, d))
+                        if shape is not None or cone is not None:
+                            self.pending.append(shape if shape is not None else cone)
                         continue
                 return gi, gj, shape
         return None
-
-    def _neck(self, a: np.ndarray, ra: float, b: np.ndarray, rb: float, d: float):
-        """Cone over the neck between two caps too large to merge: centred where they come closest,
-        merge_gap wide beyond half their gap (or overlap), so it covers the narrow passage and, once the caps
-        overlap, the two notches beside the overlap."""
-        gap = d - ra - rb
-        e = b - (a @ b) * a
-        e /= np.linalg.norm(e)
-        s = ra + 0.5 * gap
-        return ConicZone(math.cos(s) * a + math.sin(s) * e, self.merge_gap_rad + 0.5 * abs(gap))
 
     @staticmethod
     def fast_eps_max(target: np.ndarray, zones: list, ignore: list[tuple[int, int]] = ()) -> float:
@@ -473,7 +462,7 @@ class ZoneGeometry:
 
     @staticmethod
     def retreat_target(target: np.ndarray, zones: list, eps: float, standoff_deg: float,
-                       avoid: list = (), near: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                       avoid: list = (), near: np.ndarray | None = None, force: bool = False) -> tuple[np.ndarray, int]:
         """Substitute law target when ``target`` is unusable: (direction, index of the zone whose
         eps-layer holds it, len(zones) + k for the k-th ``avoid`` shape, or -1 when it is usable).
 
@@ -485,9 +474,9 @@ class ZoneGeometry:
         a parked boresight clear of a zone sweeping towards it (the Earth from low orbit moves 0.06 deg/s)
         and out of every gap narrower than twice the standoff, so out of gaps about to merge. When nothing
         within 180 deg is free, the farthest ring's first direction is returned (the assumption check then
-        reports the violation).
+        reports the violation). ``force`` searches whatever the target (index len(zones) + len(avoid)).
         """
-        occ = ZoneGeometry.occulting(target, zones, eps, avoid)
+        occ = len(zones) + len(avoid) if force else ZoneGeometry.occulting(target, zones, eps, avoid)
         if occ < 0:
             return target, -1
         d_free = max(1.0 - math.cos(math.radians(standoff_deg)), 1.5 * eps)
@@ -567,6 +556,8 @@ class Guidance:
         self._checks_dirty = True
         self._occulted = -1
         self._substitute: tuple | None = None  # (commanded target, substitute, time found, occulting index)
+        self._escaping = False
+        self._escape_event_t = -math.inf
         self.last_t_s = 0.0
 
     # ------------------------------------------------------------------------------ configuration
@@ -756,6 +747,14 @@ class Guidance:
         out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
         u = self.k1 * self.target_N
         if self.slots:
+            # escape from the gap of an unmergeable pair: start inside the standoff of both zones, end
+            # once 1.5 standoffs clear of one of them (the hysteresis keeps it from flickering)
+            escaping = self._squeezed(y, 1.5) if self._escaping else self._squeezed(y, 1.0)
+            if escaping != self._escaping:
+                self._escaping, self._sky_law_key = escaping, None
+                if escaping and t_s - self._escape_event_t >= 60.0:
+                    self._escape_event_t = t_s
+                    self.events("ASSUMPTION_VIOLATED", reason="boresight between two close zones that cannot merge: steering out of the gap")
             if rebuilt or self._sky_law_key is None:
                 zones = [s.law for s in self.slots]
                 geometry = self.sky_geometry
@@ -769,9 +768,9 @@ class Guidance:
                 eps = self._eps_for(max(eps_max, 1e-5))
                 target, occ = self._substitute_target(t_s, merged, eps, geometry.pending, y)
                 if occ != self._occulted:
-                    if occ >= len(merged):
-                        self.events("ASSUMPTION_VIOLATED", reason="boresight or target in the gap of two zones that cannot merge: steering out of it")
-                    elif occ >= 0:
+                    if occ >= len(merged) and not self._escaping:
+                        self.events("ASSUMPTION_VIOLATED", reason="target between two zones closing around the boresight: steering out of the gap")
+                    elif 0 <= occ < len(merged):
                         self.events("ASSUMPTION_VIOLATED", reason=f"target in the eps-layer of zone {occ}: steering to the nearest safe direction")
                     self._occulted = occ
                     self._checks_dirty = True
@@ -801,6 +800,16 @@ class Guidance:
         out.roll_error_deg = math.degrees(roll_err)
         return out
 
+    def _squeezed(self, y: np.ndarray, factor: float) -> bool:
+        """True if the boresight is within factor x the standoff of both zones of a close pair that could
+        not merge (checked every cycle: two separations per pair)."""
+        if not self.sky_geometry.unmerged:
+            return False
+        d = 1.0 - math.cos(math.radians(factor * self.cfg.law.retreat_standoff_deg))
+        zones = self._sky_law_zones
+        return any(float(zones[i].separation(y)) < d and float(zones[j].separation(y)) < d
+                   for i, j in self.sky_geometry.unmerged)
+
     SUBSTITUTE_REFRESH_S = 60.0
 
     def _substitute_target(self, t_s: float, zones: list, eps: float, pending: list, y: np.ndarray) -> tuple[np.ndarray, int]:
@@ -809,13 +818,13 @@ class Guidance:
         in low orbit). It is searched again when it stops being clear, and at least every
         SUBSTITUTE_REFRESH_S, so it comes back towards the target as the zones move on.
 
-        A boresight inside a pending shape (the neck or would-be merged shape of two close zones that
-        could not merge) first leaves it: the law target is then the nearest direction clear of it, on the
-        commanded target's side. Two zones closing on the spacecraft leave the law no admissible eps
-        between them, so that is the one place it must not stay."""
+        While the boresight is squeezed between two close zones that could not merge (`_squeezed`), or
+        inside the would-be merged shape of such a pair, it first gets out: the law target is then the
+        nearest direction clear of every zone by the standoff, on the commanded target's side. Such a pair
+        leaves the law no admissible eps between its zones, so that is the one place it must not stay."""
         standoff = self.cfg.law.retreat_standoff_deg
-        if any(p.contains(y) for p in pending):
-            return ZoneGeometry.retreat_target(y, zones, eps, standoff, avoid=pending, near=self.target_N)
+        if self._escaping or any(p.contains(y) for p in pending):
+            return ZoneGeometry.retreat_target(y, zones, eps, standoff, avoid=pending, near=self.target_N, force=True)
         kept = self._substitute
         if kept is not None and kept[0] is self.target_N and t_s - kept[2] < self.SUBSTITUTE_REFRESH_S:
             _, x, _, occ_then = kept

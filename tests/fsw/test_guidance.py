@@ -450,3 +450,35 @@ def test_retargeting_near_a_closing_gap_keeps_every_margin_positive() -> None:
             worst_all = min(worst_all, out.margin_min_deg)
             q = _propagate(q, out.omega_cmd_BN_B, dt)
     assert worst_all > 2.5, f"keep-out margin reached {worst_all:.3f} deg"
+
+
+@pytest.mark.parametrize("side_deg", [10.0, 25.0])
+def test_a_slew_across_the_neck_of_a_closing_unmergeable_pair_never_enters_it(side_deg: float) -> None:
+    """The soak's second case: a 40 deg Sun cone and a 78 deg Earth polygon closing at 0.06 deg/s (too
+    large to merge or bridge), and a target across their neck commanded when the neck is 7 deg wide. The
+    law alone would thread the neck and be caught as it closes (the earlier guidance reached -5.8 deg).
+    The boresight squeezed between the two zones steers out of the gap first, and then waits at its mouth."""
+    sun, toward, up = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    r = 78.0
+    earth = {"shape": "polygon", "vertices_deg": [[r, 0], [0.7 * r, 0.7 * r], [0, r], [-0.7 * r, 0.7 * r],
+                                                  [-r, 0], [-0.7 * r, -0.7 * r], [0, -r], [0.7 * r, -0.7 * r]]}
+    mid = _arc_point(sun, toward, 48.0)
+    y0, target = _rot_toward(mid, up, math.radians(side_deg)), _rot_toward(mid, -up, math.radians(side_deg))
+    cfg = _cfg(initial_mode="POINTING", law={"k1": 0.3, "margin_deg": 3.0, "eps_max_used": 0.035, "assumption_check": "off"},
+               spacecraft={"max_rate_deg_s": 1.0},
+               pointing={"target_N": list(y0), "roll_gain_1_s": 0.0, "zones": [
+                   {"name": "sun", "body": "inertial", "direction_N": list(sun), "geometry": {"shape": "cone", "half_angle_deg": 40.0}},
+                   {"name": "earth", "body": "earth", "add_body_angular_radius": False, "geometry": earth}]})
+    log, events = _events()
+    g = Guidance(cfg, events)
+    g.ephem.directions = lambda t: {"earth": _arc_point(sun, toward, 140.0 - 0.06 * t)}
+    q = _q(Rotation.align_vectors([y0], [cfg.pointing.boresight_B])[0])
+    worst, dt = math.inf, 0.1
+    for k in range(int(600 / dt)):
+        if k == int(250 / dt):
+            g.set_target_direction(target)
+        out = g.step(k * dt, dt, q, np.zeros(3))
+        worst = min(worst, out.margin_min_deg)
+        q = _propagate(q, out.omega_cmd_BN_B, dt)
+    assert worst > 2.5, f"keep-out margin reached {worst:.3f} deg"
+    assert ("ASSUMPTION_VIOLATED", {"reason": "boresight between two close zones that cannot merge: steering out of the gap"}) in log
