@@ -156,6 +156,7 @@ class BatchSocketcanBus(SocketcanBus):
         self.socket.setblocking(False)
         self._fd = self.socket.fileno()
         self._rx: deque[can.Message] = deque()
+        self._was_empty = False  # the last read found the socket empty
         self._rx_slots = _Slots(with_control=True)
         self._tx_slots = _Slots(with_control=False)
         self._doorbell: socket.socket | None = None
@@ -176,9 +177,12 @@ class BatchSocketcanBus(SocketcanBus):
 
     def _fill(self, timeout: float | None) -> bool:
         """Queue what the socket holds; if nothing, wait up to ``timeout`` (None: for ever) and read."""
-        if self._read_batch():
+        waiting = timeout is None or timeout > 0.0
+        # After an empty read (a recv(0) just before, typically) a waiting call polls first: poll() reports
+        # what arrived since, and the read that would fail again is saved.
+        if not (waiting and self._was_empty) and self._read_batch():
             return True
-        if timeout is not None and timeout <= 0.0:
+        if not waiting:
             return False
         remaining, deadline = timeout, None
         while _poll(self._fd, remaining):
@@ -200,9 +204,11 @@ class BatchSocketcanBus(SocketcanBus):
             err = ctypes.get_errno()
             if err in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EINTR):
                 slots.used = 0
+                self._was_empty = True
                 return 0
             raise can.CanOperationError(f"Error receiving: {errno.errorcode.get(err, err)}", err)
         slots.used = n
+        self._was_empty = False
         view, control, channel, rx = slots.view, slots.control, self.channel, self._rx
         for i in range(n):
             h = slots.hdr[i].msg_hdr
