@@ -9,11 +9,13 @@ config/missions/demo-pointing.yaml, shortened with --duration. Two figures per r
   cache loading, the physics checks, the summary and the plots.
 
 Transports: udp_multicast on this host; socketcan:vcan0 inside ../shared/tools/vcan-vm (the host
-kernel has no CAN), by re-running this script in the VM with --bus socketcan:vcan0.
+kernel has no CAN; the guest is one CPU of this host), one guest boot per run. ``--both`` alternates a
+host udp_multicast run and a guest socketcan run, so both transports are measured under the same host
+load (the machine is shared: the 1-minute load average of the host is recorded with every run).
 
-    .venv/bin/python bench/sil.py [--duration 600] [--repeat 3] [--bus udp_multicast] [--vm]
+    .venv/bin/python bench/sil.py [--duration 600] [--repeat 3] [--bus udp_multicast] [--vm | --both]
 
-Prints a table (medians) and writes bench/results/sil.json (sil-socketcan.json for the VM run).
+Prints a table (medians) and writes bench/results/sil.json and/or sil-socketcan.json.
 """
 from __future__ import annotations
 
@@ -48,39 +50,83 @@ def one_run(bus: str, duration: float, out: Path) -> dict:
             "cycle_done_timeouts": summary["simulator"]["cycle_done_timeouts"], "pass": summary["pass"]}
 
 
+def one_run_vm(duration: float) -> dict:
+    """One socketcan:vcan0 run inside the guest (this script with --rows-out, in the VM)."""
+    with tempfile.NamedTemporaryFile(dir=ROOT / "bench" / "results", prefix=".vm-row-", suffix=".json") as tmp:
+        cmd = [str(VCAN_VM), "--timeout", "3000", "--", sys.executable, __file__, "--bus", "socketcan:vcan0",
+               "--duration", str(duration), "--repeat", "1", "--rows-out", tmp.name]
+        proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+        text = Path(tmp.name).read_text()
+        if proc.returncode != 0 or not text:
+            raise RuntimeError(f"guest run failed (exit {proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
+        (row,) = json.loads(text)
+    row["where"] = "vcan-vm guest (1 CPU)"
+    return row
+
+
+def _host_run(bus: str, duration: float) -> dict:
+    out = Path(tempfile.mkdtemp(prefix="bench-sil-"))
+    try:
+        row = one_run(bus, duration, out)
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    row["where"] = "host"
+    return row
+
+
+def _table(rows: list[dict]) -> None:
+    print(f"{'bus':34s} {'where':22s} {'sim s':>6s} {'loop wall s':>11s} {'loop x':>7s} {'total wall s':>12s} "
+          f"{'total x':>7s} {'host load':>9s}")
+    for r in rows:
+        print(f"{r['bus']:34s} {r['where']:22s} {r['simulated_s']:6.0f} {r['loop_wall_s']:11.1f} "
+              f"{r['loop_speed_x']:7.1f} {r['total_wall_s']:12.1f} {r['end_to_end_speed_x']:7.1f} "
+              f"{r['host_load_1min']:9.1f}")
+
+
+def _result(bus: str, duration: float, rows: list[dict]) -> dict:
+    loop = statistics.median(r["loop_speed_x"] for r in rows)
+    total = statistics.median(r["end_to_end_speed_x"] for r in rows)
+    print(f"{bus}: median loop speed x{loop:.1f} real time (goal >= 50), end to end x{total:.1f}; median host "
+          f"load {statistics.median(r['host_load_1min'] for r in rows):.1f} on {os.cpu_count()} CPUs")
+    return {"bus": bus, "duration_s": duration, "runs": rows, "median_loop_speed_x": loop,
+            "median_end_to_end_speed_x": total, "goal_x": 50.0, "goal_met": loop >= 50.0,
+            "median_host_load_1min": statistics.median(r["host_load_1min"] for r in rows),
+            "host_cpus": os.cpu_count(), "guest_cpus": 1 if bus.startswith("socketcan") else None}
+
+
+def _write(result: dict) -> None:
+    name = "sil-socketcan.json" if result["bus"].startswith("socketcan") else "sil.json"
+    results = ROOT / "bench" / "results"
+    results.mkdir(parents=True, exist_ok=True)
+    (results / name).write_text(json.dumps(result, indent=1) + "\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--duration", type=float, default=600.0, help="simulated seconds per run (600: the whole demo)")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--bus", default="udp_multicast")
-    parser.add_argument("--vm", action="store_true", help="run the socketcan:vcan0 variant inside vcan-vm")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--vm", action="store_true", help="run the socketcan:vcan0 variant inside vcan-vm")
+    where.add_argument("--both", action="store_true",
+                       help="alternate udp_multicast (host) and socketcan:vcan0 (vcan-vm) runs; write both results")
+    parser.add_argument("--rows-out", type=Path, help=argparse.SUPPRESS)  # the guest's side of --vm/--both
     args = parser.parse_args(argv)
-    if args.vm:
-        cmd = [str(VCAN_VM), "--timeout", "3000", "--", sys.executable, __file__, "--bus", "socketcan:vcan0",
-               "--duration", str(args.duration), "--repeat", str(args.repeat)]
-        return subprocess.call(cmd, cwd=ROOT)
-    out = Path(tempfile.mkdtemp(prefix="bench-sil-"))
-    rows = []
-    try:
-        for _ in range(args.repeat):
-            rows.append(one_run(args.bus, args.duration, out))
-    finally:
-        shutil.rmtree(out, ignore_errors=True)
-    loop = statistics.median(r["loop_speed_x"] for r in rows)
-    total = statistics.median(r["end_to_end_speed_x"] for r in rows)
-    print(f"{'bus':34s} {'sim s':>6s} {'loop wall s':>11s} {'loop x':>7s} {'total wall s':>12s} {'total x':>7s}")
-    for r in rows:
-        print(f"{r['bus']:34s} {r['simulated_s']:6.0f} {r['loop_wall_s']:11.1f} {r['loop_speed_x']:7.1f} "
-              f"{r['total_wall_s']:12.1f} {r['end_to_end_speed_x']:7.1f}")
-    print(f"median loop speed x{loop:.1f} real time (goal >= 50), end to end x{total:.1f}; "
-          f"host load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
-    result = {"bus": args.bus, "duration_s": args.duration, "runs": rows, "median_loop_speed_x": loop,
-              "median_end_to_end_speed_x": total, "goal_x": 50.0, "goal_met": loop >= 50.0,
-              "load_average_1min": os.getloadavg()[0], "cpus": os.cpu_count()}
-    name = "sil-socketcan.json" if args.bus.startswith("socketcan") else "sil.json"
-    results = ROOT / "bench" / "results"
-    results.mkdir(parents=True, exist_ok=True)
-    (results / name).write_text(json.dumps(result, indent=1) + "\n")
+    if args.rows_out is not None:
+        rows = [_host_run(args.bus, args.duration) for _ in range(args.repeat)]
+        args.rows_out.write_text(json.dumps(rows))
+        return 0
+    kinds = ["udp_multicast", "socketcan:vcan0"] if args.both else ["socketcan:vcan0"] if args.vm else [args.bus]
+    rows: dict[str, list[dict]] = {k: [] for k in kinds}
+    for _ in range(args.repeat):
+        for kind in kinds:
+            row = one_run_vm(args.duration) if kind.startswith("socketcan") and (args.vm or args.both) \
+                else _host_run(kind, args.duration)
+            row["host_load_1min"] = os.getloadavg()[0]
+            rows[kind].append(row)
+    _table([r for kind in kinds for r in rows[kind]])
+    for kind in kinds:
+        _write(_result(kind, args.duration, rows[kind]))
     return 0
 
 
