@@ -85,6 +85,9 @@ def main(argv=None) -> int:
     ap.add_argument("--rt-priority", type=int, default=0,
                     help="run under SCHED_FIFO at this priority (root; 0 = normal scheduling), as flight "
                          "software would: a shared host's other work then cannot stretch a cycle past its period")
+    ap.add_argument("--cpu", type=int, default=None,
+                    help="pin the cycle thread to this CPU (the telemetry receiver thread keeps every CPU, so a "
+                         "real-time cycle thread cannot starve it); keeps the run off a CPU that other work needs")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "soak.json"))
     args = ap.parse_args(argv)
 
@@ -121,6 +124,8 @@ def main(argv=None) -> int:
     freeze_heap()  # as the flight software's own cycle loops do before their first cycle
     if args.rt_priority:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt_priority))
+    if args.cpu is not None:
+        os.sched_setaffinity(0, {args.cpu})  # this thread only: the receiver started above keeps its CPUs
     ticks = int(round(args.hours * 3600 / cfg.gnc_period_s))
     trace_start = int(ticks * args.trace_from)
     trace_snap = min(ticks - 1, trace_start + max(1, ticks // 20))
@@ -175,7 +180,7 @@ def main(argv=None) -> int:
         "rss_mb": {"at_10pct": rss_first, "before_tracing": rss_last, "growth": rss_last - rss_first,
                    "end_with_tracing": rss[-1][1], "series": rss},
         "tracemalloc_window_hours": ([trace_snap * cfg.gnc_period_s / 3600, args.hours] if snap_early is not None else None),
-        "rt_priority": args.rt_priority,
+        "rt_priority": args.rt_priority, "cycle_thread_cpu": args.cpu,
         "tracemalloc_top_growth": top,
         "slips": fsw.executive.gnc.slips,
         "exec_ms": {"mean": fsw.executive.gnc.exec_mean_ms, "max": fsw.executive.gnc.exec_max_ms},

@@ -294,6 +294,15 @@ class AssumptionChecker:
             self._pool = None
 
 
+def _warm_batch_kernels(builders: list) -> None:
+    """Run each zone shape's batch separation once: the substitute-target search is their first caller,
+    possibly hours into a run, and loading their compiled code there took 0.3-0.7 s (a cycle slip in the
+    soak). One zone per builder, any centre."""
+    probe = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    for builder in builders:
+        builder.build(np.array([1.0, 0.0, 0.0])).separation_batch(probe)
+
+
 @dataclass
 class _SkySlot:
     index: int
@@ -448,8 +457,9 @@ class ZoneGeometry:
             bound = min(bound, float(z.separation(target)))
         return bound
 
-    RETREAT_RING_STEP_DEG = 0.5
-    RETREAT_AZIMUTHS = 48
+    RETREAT_RING_STEP_DEG = 1.0
+    RETREAT_AZIMUTHS = 36
+    RETREAT_RINGS_PER_BATCH = 8  # ~300 directions: one separation_batch call per zone, ~2 ms with the Earth polygon
 
     @staticmethod
     def occulting(target: np.ndarray, zones: list, eps: float, avoid: list = ()) -> int:
@@ -480,6 +490,10 @@ class ZoneGeometry:
         if occ < 0:
             return target, -1
         d_free = max(1.0 - math.cos(math.radians(standoff_deg)), 1.5 * eps)
+        # no direction nearer than the target's depth inside a zone plus the standoff can be free: the
+        # search starts there (a target deep inside the 81 deg Earth zone would otherwise test ~100 rings
+        # of polygon separations, 0.1-0.3 s, which the first 24 h soak with this search saw as cycle slips)
+        depth = max([-signed_margin_deg(z, target) for z in list(zones) + list(avoid)] + [0.0])
         e1 = np.roll(target, 1) - (np.roll(target, 1) @ target) * target
         e1 /= np.linalg.norm(e1)
         e2 = np.cross(target, e1)
@@ -487,9 +501,11 @@ class ZoneGeometry:
         ring_dirs = np.cos(az)[:, None] * e1 + np.sin(az)[:, None] * e2
         step = math.radians(ZoneGeometry.RETREAT_RING_STEP_DEG)
         rings = int(math.pi / step)
+        start = max(1, int(math.radians(depth + standoff_deg) / step))
         P = target
-        for first in range(1, rings + 1, 12):  # 12 rings a batch: one separation_batch call per zone
-            r = step * np.arange(first, min(first + 12, rings + 1))
+        batch = ZoneGeometry.RETREAT_RINGS_PER_BATCH
+        for first in range(start, rings + 1, batch):
+            r = step * np.arange(first, min(first + batch, rings + 1))
             P = (np.cos(r)[:, None, None] * target + np.sin(r)[:, None, None] * ring_dirs).reshape(-1, 3)
             free = np.ones(len(P), dtype=bool)
             for z in list(zones) + list(avoid):
@@ -539,6 +555,8 @@ class Guidance:
                 )
             )
         self.sky_geometry = ZoneGeometry(3, cfg.law.merge_gap_deg)
+        if self.slots:
+            _warm_batch_kernels([s.builder_law for s in self.slots])
         self._sky_law = None
         self._sky_law_key = None
         self._sky_groups: list[list[int]] = []
@@ -557,6 +575,7 @@ class Guidance:
         self._occulted = -1
         self._substitute: tuple | None = None  # (commanded target, substitute, time found, occulting index)
         self._escaping = False
+        self._escape_point: np.ndarray | None = None
         self._escape_event_t = -math.inf
         self.last_t_s = 0.0
 
@@ -823,14 +842,20 @@ class Guidance:
         nearest direction clear of every zone by the standoff, on the commanded target's side. Such a pair
         leaves the law no admissible eps between its zones, so that is the one place it must not stay."""
         standoff = self.cfg.law.retreat_standoff_deg
+        d_free = max(1.0 - math.cos(math.radians(standoff)), 1.5 * eps)
+        clear = lambda x: all(float(z.separation(x)) > d_free for z in list(zones) + list(pending))  # noqa: E731
         if self._escaping or any(p.contains(y) for p in pending):
-            return ZoneGeometry.retreat_target(y, zones, eps, standoff, avoid=pending, near=self.target_N, force=True)
+            escape = self._escape_point
+            if escape is None or not clear(escape):
+                escape, _ = ZoneGeometry.retreat_target(y, zones, eps, standoff, avoid=pending, near=self.target_N, force=True)
+                self._escape_point = escape
+            return escape, len(zones) + len(pending)
+        self._escape_point = None
         kept = self._substitute
         if kept is not None and kept[0] is self.target_N and t_s - kept[2] < self.SUBSTITUTE_REFRESH_S:
             _, x, _, occ_then = kept
             occ = ZoneGeometry.occulting(self.target_N, zones, eps, pending)
-            d_free = max(1.0 - math.cos(math.radians(standoff)), 1.5 * eps)
-            if occ >= 0 and occ_then >= 0 and all(float(z.separation(x)) > d_free for z in list(zones) + list(pending)):
+            if occ >= 0 and occ_then >= 0 and clear(x):
                 return x, occ
         x, occ = ZoneGeometry.retreat_target(self.target_N, zones, eps, standoff, avoid=pending, near=y)
         self._substitute = (self.target_N, x, t_s, occ)
