@@ -388,31 +388,51 @@ def test_retreat_target_leaves_a_gap_about_to_merge_around_the_spacecraft() -> N
     assert geometry.merge(zones, keep_outside=[inside], keep_merged=groups2)[1] == [[0, 1]]
 
 
+_FIXED = np.array([1.0, 0.0, 0.0])   # centre of the zone that stays put (Moon, Sun)
+_TOWARD = np.array([0.0, 1.0, 0.0])  # the Earth zone comes from this side, along the equator
+
+
+def _octagon(r: float) -> dict:
+    return {"shape": "polygon", "vertices_deg": [[r, 0], [0.7 * r, 0.7 * r], [0, r], [-0.7 * r, 0.7 * r],
+                                                 [-r, 0], [-0.7 * r, -0.7 * r], [0, -r], [0.7 * r, -0.7 * r]]}
+
+
+def _closing_pair(fixed_half_angle_deg: float, earth: dict, y0: np.ndarray, earth_start_deg: float, events=None):
+    """Guidance with a fixed cone at _FIXED and an Earth zone moving towards it at 0.06 deg/s (from low
+    orbit), 3 deg inflation, 1 deg/s; and an attitude with the boresight on y0 (also the first target)."""
+    cfg = _cfg(initial_mode="POINTING", law={"k1": 0.3, "margin_deg": 3.0, "eps_max_used": 0.035, "assumption_check": "off"},
+               spacecraft={"max_rate_deg_s": 1.0},
+               pointing={"target_N": list(y0), "roll_gain_1_s": 0.0, "zones": [
+                   {"name": "fixed", "body": "inertial", "direction_N": list(_FIXED),
+                    "geometry": {"shape": "cone", "half_angle_deg": fixed_half_angle_deg}},
+                   {"name": "earth", "body": "earth", "add_body_angular_radius": False, "geometry": earth}]})
+    g = Guidance(cfg, events)
+    g.ephem.directions = lambda t: {"earth": _arc_point(_FIXED, _TOWARD, earth_start_deg - 0.06 * t)}
+    return g, _q(Rotation.align_vectors([y0], [cfg.pointing.boresight_B])[0])
+
+
+def _fly(g: Guidance, q: np.ndarray, duration_s: float, retarget: tuple[float, np.ndarray] | None = None) -> float:
+    """Kinematic loop (perfect rate tracking, 10 Hz); the smallest physical margin [deg] on the way."""
+    worst, dt = math.inf, 0.1
+    for k in range(int(duration_s / dt)):
+        if retarget is not None and k == int(retarget[0] / dt):
+            g.set_target_direction(retarget[1])
+        out = g.step(k * dt, dt, q, np.zeros(3))
+        worst = min(worst, out.margin_min_deg)
+        q = _propagate(q, out.omega_cmd_BN_B, dt)
+    return worst
+
+
 def test_a_zone_sweeping_towards_another_never_traps_the_boresight_between_them() -> None:
     """The case the 24 h soak found: a large Earth zone (78 deg, as from low orbit) sweeps at 0.06 deg/s
     towards a Moon cone, over the commanded target, with the spacecraft parked in the gap between them.
     The pair is too large to merge, so the gap closes to nothing; the boresight has to leave it sideways
-    in time. Kinematic loop (perfect rate tracking at the rate limit, 10 Hz) on the flight guidance: the
-    physical margin stays positive and the law keeps out of the 3 deg inflation (before the fix, the
-    substitute target crept along the Earth's edge into the neck and the margin reached -0.36 deg)."""
-    moon = np.array([1.0, 0.0, 0.0])
-    toward = np.array([0.0, 1.0, 0.0])
-    target = _rot_toward(_arc_point(moon, toward, 20.0), np.array([0.0, 0.0, 1.0]), math.radians(0.3))
-    cfg = _cfg(initial_mode="POINTING", law={"k1": 0.3, "margin_deg": 3.0, "eps_max_used": 0.035, "assumption_check": "off"},
-               spacecraft={"max_rate_deg_s": 1.0},
-               pointing={"target_N": list(target), "roll_gain_1_s": 0.0, "zones": [
-                   {"name": "moon", "body": "inertial", "direction_N": list(moon), "geometry": {"shape": "cone", "half_angle_deg": 12.0}},
-                   {"name": "earth", "body": "earth", "add_body_angular_radius": False,
-                    "geometry": {"shape": "cone", "half_angle_deg": 78.0}}]})
+    in time. The physical margin stays positive and the law keeps out of the 3 deg inflation (before the
+    fix, the substitute target crept along the Earth's edge into the neck and the margin reached -0.36 deg)."""
+    target = _rot_toward(_arc_point(_FIXED, _TOWARD, 20.0), np.array([0.0, 0.0, 1.0]), math.radians(0.3))
     log, events = _events()
-    g = Guidance(cfg, events)
-    g.ephem.directions = lambda t: {"earth": _arc_point(moon, toward, 106.0 - 0.06 * t)}
-    q = _q(Rotation.align_vectors([target], [cfg.pointing.boresight_B])[0])
-    worst, dt = math.inf, 0.1
-    for k in range(int(500 / dt)):
-        out = g.step(k * dt, dt, q, np.zeros(3))
-        worst = min(worst, out.margin_min_deg)
-        q = _propagate(q, out.omega_cmd_BN_B, dt)
+    g, q = _closing_pair(12.0, {"shape": "cone", "half_angle_deg": 78.0}, target, 106.0, events)
+    worst = _fly(g, q, 500.0)
     assert worst > 2.5, f"keep-out margin reached {worst:.3f} deg"
     assert ("ASSUMPTION_VIOLATED", {"reason": "target in the eps-layer of zone 1: steering to the nearest safe direction"}) in log
 
@@ -421,34 +441,19 @@ def test_retargeting_near_a_closing_gap_keeps_every_margin_positive() -> None:
     """Dispersed version of the soak's case: the spacecraft starts in or near the gap between a Moon cone
     and an Earth polygon (78 deg) sweeping over it at 0.06 deg/s, and is retargeted to a random direction
     (sometimes across the pair, sometimes inside a zone) during the approach; the Earth then starts to
-    pass over the Moon. With the substitute target kept 3 deg clear of every zone, the neck of the unmergeable pair
-    avoided and its pair left out of eps, no margin drops below the inflation (the earlier guidance
-    consumed 1.2 deg of it here, and reached -2.8 deg when the same eight ran to 1400 s)."""
+    pass over the Moon. With the substitute target kept 3 deg clear of every zone, and the unmergeable
+    pair left out of eps, no margin drops below the inflation (the earlier guidance consumed 1.2 deg of
+    it here, and reached -2.8 deg when the same eight ran to 1400 s)."""
     rng = np.random.default_rng(1)
-    moon, toward = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
-    r = 78.0
-    earth = {"shape": "polygon", "vertices_deg": [[r, 0], [0.7 * r, 0.7 * r], [0, r], [-0.7 * r, 0.7 * r],
-                                                  [-r, 0], [-0.7 * r, -0.7 * r], [0, -r], [0.7 * r, -0.7 * r]]}
-    worst_all, dt = math.inf, 0.1
+    worst_all = math.inf
     for _ in range(8):
         a = rng.normal(size=3)
-        y0 = _rot_toward(_arc_point(moon, toward, rng.uniform(16, 26)), a / np.linalg.norm(a), math.radians(rng.uniform(0, 8)))
+        y0 = _rot_toward(_arc_point(_FIXED, _TOWARD, rng.uniform(16, 26)), a / np.linalg.norm(a), math.radians(rng.uniform(0, 8)))
         t = rng.normal(size=3)
         new_target, t_switch = t / np.linalg.norm(t), rng.uniform(50, 600)
-        cfg = _cfg(initial_mode="POINTING", law={"k1": 0.3, "margin_deg": 3.0, "eps_max_used": 0.035, "assumption_check": "off"},
-                   spacecraft={"max_rate_deg_s": 1.0},
-                   pointing={"target_N": list(y0), "roll_gain_1_s": 0.0, "zones": [
-                       {"name": "moon", "body": "inertial", "direction_N": list(moon), "geometry": {"shape": "cone", "half_angle_deg": 12.0}},
-                       {"name": "earth", "body": "earth", "add_body_angular_radius": False, "geometry": earth}]})
-        g = Guidance(cfg)
-        g.ephem.directions = lambda t: {"earth": _arc_point(moon, toward, 110.0 - 0.06 * t)}
-        q = _q(Rotation.align_vectors([y0], [cfg.pointing.boresight_B])[0])
-        for k in range(int(800 / dt)):  # the approach and the first 10 deg of the Earth over the Moon
-            if k == int(t_switch / dt):
-                g.set_target_direction(new_target)
-            out = g.step(k * dt, dt, q, np.zeros(3))
-            worst_all = min(worst_all, out.margin_min_deg)
-            q = _propagate(q, out.omega_cmd_BN_B, dt)
+        g, q = _closing_pair(12.0, _octagon(78.0), y0, 110.0)
+        # the approach and the first 10 deg of the Earth over the Moon
+        worst_all = min(worst_all, _fly(g, q, 800.0, retarget=(t_switch, new_target)))
     assert worst_all > 2.5, f"keep-out margin reached {worst_all:.3f} deg"
 
 
@@ -458,27 +463,11 @@ def test_a_slew_across_the_neck_of_a_closing_unmergeable_pair_never_enters_it(si
     large to merge or bridge), and a target across their neck commanded when the neck is 7 deg wide. The
     law alone would thread the neck and be caught as it closes (the earlier guidance reached -5.8 deg).
     The boresight squeezed between the two zones steers out of the gap first, and then waits at its mouth."""
-    sun, toward, up = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
-    r = 78.0
-    earth = {"shape": "polygon", "vertices_deg": [[r, 0], [0.7 * r, 0.7 * r], [0, r], [-0.7 * r, 0.7 * r],
-                                                  [-r, 0], [-0.7 * r, -0.7 * r], [0, -r], [0.7 * r, -0.7 * r]]}
-    mid = _arc_point(sun, toward, 48.0)
+    up = np.array([0.0, 0.0, 1.0])
+    mid = _arc_point(_FIXED, _TOWARD, 48.0)
     y0, target = _rot_toward(mid, up, math.radians(side_deg)), _rot_toward(mid, -up, math.radians(side_deg))
-    cfg = _cfg(initial_mode="POINTING", law={"k1": 0.3, "margin_deg": 3.0, "eps_max_used": 0.035, "assumption_check": "off"},
-               spacecraft={"max_rate_deg_s": 1.0},
-               pointing={"target_N": list(y0), "roll_gain_1_s": 0.0, "zones": [
-                   {"name": "sun", "body": "inertial", "direction_N": list(sun), "geometry": {"shape": "cone", "half_angle_deg": 40.0}},
-                   {"name": "earth", "body": "earth", "add_body_angular_radius": False, "geometry": earth}]})
     log, events = _events()
-    g = Guidance(cfg, events)
-    g.ephem.directions = lambda t: {"earth": _arc_point(sun, toward, 140.0 - 0.06 * t)}
-    q = _q(Rotation.align_vectors([y0], [cfg.pointing.boresight_B])[0])
-    worst, dt = math.inf, 0.1
-    for k in range(int(600 / dt)):
-        if k == int(250 / dt):
-            g.set_target_direction(target)
-        out = g.step(k * dt, dt, q, np.zeros(3))
-        worst = min(worst, out.margin_min_deg)
-        q = _propagate(q, out.omega_cmd_BN_B, dt)
+    g, q = _closing_pair(40.0, _octagon(78.0), y0, 140.0, events)
+    worst = _fly(g, q, 600.0, retarget=(250.0, target))
     assert worst > 2.5, f"keep-out margin reached {worst:.3f} deg"
     assert ("ASSUMPTION_VIOLATED", {"reason": "boresight between two close zones that cannot merge: steering out of the gap"}) in log
