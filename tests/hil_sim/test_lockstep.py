@@ -220,51 +220,48 @@ def test_two_lockstep_runs_side_by_side_on_vcan0_and_vcan1(icd: Icd) -> None:
     _run_side_by_side(icd, ["socketcan:vcan0", "socketcan:vcan1"])
 
 
-@pytest.mark.socketcan
-def test_lockstep_over_socketcan_with_in_process_fsw_thread(icd: Icd) -> None:
-    """Simulator and the real FswBusDriver on two sockets of vcan0 (flight side in a thread)."""
+@pytest.fixture
+def socketcan_pair(icd: Icd):
+    """Simulator and the real FswBusDriver (in a rate-damping responder) on two sockets of vcan0."""
     sim_bus, fsw_bus = open_bus("socketcan:vcan0"), open_bus("socketcan:vcan0")
     try:
         params = _params()
         world = World(params, seed=5)
         sim = Simulator(world, sim_bus, icd)
         driver = FswBusDriver(fsw_bus, icd, world.n_wheels)
-        responder = RateDampingResponder(driver, [w.axis_B for w in params.spacecraft.wheels], 5.0)
-        fsw = threading.Thread(target=lambda: [responder.cycle(2.0) for _ in range(50)])
-        fsw.start()
-        sim.run_lockstep(50)
-        fsw.join(timeout=30)
-        assert sim.stats.cycle_done == 50 and sim.stats.cycle_done_timeouts == 0
-        assert driver.counters["IMU_RATE"]["ok"] >= 490
-        assert np.linalg.norm(world.truth.omega_BN_B) < np.linalg.norm(OMEGA0)
+        yield sim, RateDampingResponder(driver, [w.axis_B for w in params.spacecraft.wheels], 5.0)
     finally:
         sim_bus.shutdown()
         fsw_bus.shutdown()
 
 
 @pytest.mark.socketcan
-def test_in_process_ticks_over_socketcan_read_what_is_queued(icd: Icd) -> None:
+def test_lockstep_over_socketcan_with_in_process_fsw_thread(socketcan_pair) -> None:
+    """Flight side in a thread, simulator waiting for each CYCLE_DONE."""
+    sim, responder = socketcan_pair
+    fsw = threading.Thread(target=lambda: [responder.cycle(2.0) for _ in range(50)])
+    fsw.start()
+    sim.run_lockstep(50)
+    fsw.join(timeout=30)
+    assert sim.stats.cycle_done == 50 and sim.stats.cycle_done_timeouts == 0
+    assert responder.driver.counters["IMU_RATE"]["ok"] >= 490
+    assert np.linalg.norm(sim.world.truth.omega_BN_B) < np.linalg.norm(OMEGA0)
+
+
+@pytest.mark.socketcan
+def test_in_process_ticks_over_socketcan_read_what_is_queued(socketcan_pair) -> None:
     """end_tick(wait_s=0) over socketcan (whose lockstep waits use the CYCLE_DONE doorbell) still takes
     the frames already queued: every tick's CYCLE_DONE and wheel commands, none counted as a timeout."""
-    sim_bus, fsw_bus = open_bus("socketcan:vcan0"), open_bus("socketcan:vcan0")
-    try:
-        params = _params()
-        world = World(params, seed=5)
-        sim = Simulator(world, sim_bus, icd)
-        driver = FswBusDriver(fsw_bus, icd, world.n_wheels)
-        responder = RateDampingResponder(driver, [w.axis_B for w in params.spacecraft.wheels], 5.0)
-        for _ in range(20):
-            sim.begin_tick()
-            assert responder.cycle(1.0)
-            deadline = time.monotonic() + 1.0  # the frames are on their way through the kernel
-            while not sim_bus.wait_for(0.0) and time.monotonic() < deadline:
-                time.sleep(0.001)
-            assert sim.end_tick(wait_s=0.0)
-        assert sim.stats.cycle_done == 20 and sim.stats.cycle_done_timeouts == 0
-        assert sim.stats.wheel_commands == 20 * world.n_wheels
-    finally:
-        sim_bus.shutdown()
-        fsw_bus.shutdown()
+    sim, responder = socketcan_pair
+    for _ in range(20):
+        sim.begin_tick()
+        assert responder.cycle(1.0)
+        deadline = time.monotonic() + 1.0  # the frames are on their way through the kernel
+        while not sim.bus.wait_for(0.0) and time.monotonic() < deadline:
+            time.sleep(0.001)
+        assert sim.end_tick(wait_s=0.0)
+    assert sim.stats.cycle_done == 20 and sim.stats.cycle_done_timeouts == 0
+    assert sim.stats.wheel_commands == 20 * sim.n_wheels
 
 
 def test_realtime_sensor_frames_go_out_at_their_own_rate(icd: Icd) -> None:
