@@ -369,9 +369,7 @@ class FlightSoftware:
         speeds = np.array(speed_list)
         ctrl = self.control.step(dt, g.omega_cmd_BN_B, omega, speeds)
         try:
-            self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm.tolist())
-            if not realtime:
-                self.driver.send_cycle_done(tick)
+            self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm.tolist(), cycle_done=not realtime)
         except Exception as exc:  # noqa: BLE001 - a transmit failure is reported, the loop goes on
             self._bus_tx_errors = getattr(self, "_bus_tx_errors", 0) + 1
             self._event("FATAL_ERROR", reason=f"bus send failed: {type(exc).__name__}: {exc}"[:110])

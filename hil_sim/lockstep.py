@@ -354,8 +354,7 @@ class RateDampingResponder:
         self.last_inputs = inputs
         omega = inputs.imu.omega_BN_B if inputs.imu is not None else np.zeros(3)
         torques = self.gain * (self.pinv @ omega)
-        self.driver.send_wheel_torques(inputs.tick, torques)
-        self.driver.send_cycle_done(inputs.tick)
+        self.driver.send_wheel_torques(inputs.tick, torques, cycle_done=True)
         self.cycles += 1
         if self.cycles % 10 == 0:
             self.driver.send_heartbeat(0, self.cycles)

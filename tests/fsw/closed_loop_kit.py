@@ -25,9 +25,10 @@ class RecordingDriver:
         self.heartbeats = 0
         self.counters: dict[str, dict[str, int]] = {}
 
-    def send_wheel_torques(self, tick, torques):
+    def send_wheel_torques(self, tick, torques, cycle_done=False):
         assert len(torques) == self.n_wheels
         self.torques = np.asarray(torques, dtype=float)
+        self.cycle_done += int(cycle_done)
 
     def send_cycle_done(self, tick):
         self.cycle_done += 1

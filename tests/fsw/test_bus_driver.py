@@ -220,3 +220,29 @@ def test_realtime_cycle_done_answers_the_newest_sync_and_a_late_cycle_still_coun
         assert 2 <= late <= 6, late  # the overrunning cycle's tick and the ones it covered
     finally:
         loop.close()
+
+
+def test_commands_and_cycle_done_go_as_one_burst_and_a_refused_frame_is_counted(icd: Icd, buses) -> None:
+    """Wheel commands and CYCLE_DONE leave in one send_batch; when the bus refuses one frame of the burst,
+    that frame is counted as a transmit error and the frames after it are still sent."""
+    sim, fsw = buses
+    calls: list[list[str]] = []
+
+    class RefusesSecond:
+        def send_batch(self, msgs, timeout):
+            calls.append([icd.db.get_message_by_frame_id(m.arbitration_id).name for m in msgs])
+            if len(calls) == 1:
+                fsw.send(msgs[0], timeout)
+                return 1  # frame [1] refused
+            for m in msgs:
+                fsw.send(m, timeout)
+            return len(msgs)
+
+    drv = FswBusDriver(fsw, icd, n_wheels=3)
+    drv.bus = RefusesSecond()
+    drv.send_wheel_torques(7, [0.01, 0.02, 0.03], cycle_done=True)
+    assert calls == [["RW1_CMD", "RW2_CMD", "RW3_CMD", "CYCLE_DONE"], ["RW3_CMD", "CYCLE_DONE"]]
+    assert drv.tx_errors == 1
+    rx = E2EReceiver(icd, ignore_ids=icd.ids_sent_by("SIM", "IMU", "STR"))
+    got = [rx.classify(sim.recv(timeout=0.5), 0.0).name for _ in range(3)]
+    assert got == ["RW1_CMD", "RW3_CMD", "CYCLE_DONE"]
