@@ -201,9 +201,7 @@ class FlightSoftware:
         finally:
             g.set_mode(self.cfg.initial_mode)
             g.events = events
-            g._sky_law_key = None
-            g._sky_groups = []
-            g._occulted = -1
+            g.forget_law_state()
         self.checker.start()
 
     # ------------------------------------------------------------------------------------ events

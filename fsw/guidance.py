@@ -716,6 +716,16 @@ class Guidance:
         if not result.ok and was_ok:  # on the transition only: the flag stays in telemetry meanwhile
             self.events("ASSUMPTION_VIOLATED", reason=("; ".join(result.errors) or "check failed")[:110])
 
+    def forget_law_state(self) -> None:
+        """Drop what the law learnt from past cycles (groups, substitute and escape targets), so the next
+        cycle rebuilds it from scratch (after the start-up warm-up ran every mode once)."""
+        self._sky_law_key = None
+        self._sky_groups = []
+        self._occulted = -1
+        self._substitute = None
+        self._escaping = False
+        self._escape_point = None
+
     def mark_checked(self) -> None:
         self._checks_dirty = False
 
