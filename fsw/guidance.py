@@ -462,6 +462,11 @@ class ZoneGeometry:
     RETREAT_RINGS_PER_BATCH = 8  # ~300 directions: one separation_batch call per zone, ~2 ms with the Earth polygon
 
     @staticmethod
+    def clear_separation(standoff_deg: float, eps: float) -> float:
+        """d_s a direction must exceed to be clear of a zone: the standoff, and never inside the eps-layer."""
+        return max(1.0 - math.cos(math.radians(standoff_deg)), 1.5 * eps)
+
+    @staticmethod
     def occulting(target: np.ndarray, zones: list, eps: float, avoid: list = ()) -> int:
         """Index of the zone whose eps-layer holds the target, len(zones) + k if the k-th avoid shape
         contains it, -1 if the target is usable."""
@@ -489,7 +494,7 @@ class ZoneGeometry:
         occ = len(zones) + len(avoid) if force else ZoneGeometry.occulting(target, zones, eps, avoid)
         if occ < 0:
             return target, -1
-        d_free = max(1.0 - math.cos(math.radians(standoff_deg)), 1.5 * eps)
+        d_free = ZoneGeometry.clear_separation(standoff_deg, eps)
         # no direction nearer than the target's depth inside a zone plus the standoff can be free: the
         # search starts there (a target deep inside the 81 deg Earth zone would otherwise test ~100 rings
         # of polygon separations, 0.1-0.3 s, which the first 24 h soak with this search saw as cycle slips)
@@ -852,7 +857,7 @@ class Guidance:
         nearest direction clear of every zone by the standoff, on the commanded target's side. Such a pair
         leaves the law no admissible eps between its zones, so that is the one place it must not stay."""
         standoff = self.cfg.law.retreat_standoff_deg
-        d_free = max(1.0 - math.cos(math.radians(standoff)), 1.5 * eps)
+        d_free = ZoneGeometry.clear_separation(standoff, eps)
         clear = lambda x: all(float(z.separation(x)) > d_free for z in list(zones) + list(pending))  # noqa: E731
         if self._escaping or any(p.contains(y) for p in pending):
             escape = self._escape_point
