@@ -34,6 +34,7 @@ from fsw.dictionary import (
     DEFAULT_TC_PORT,
     DEFAULT_TM_PORT,
     DICTIONARY,
+    Limits,
     LimitState,
     TelemetryDictionary,
 )
@@ -154,7 +155,7 @@ class GroundMonitor:
         self._decoded: IO[str] | None = None
         self._events: IO[str] | None = None
         self._limits: IO[str] | None = None
-        self._limited: dict[str, list[tuple[str, Any]]] = {}
+        self._limited: dict[str, list[tuple[str, Any, float, float]]] = {}
         if self.archive_dir is not None:
             self.archive_dir.mkdir(parents=True, exist_ok=True)
             self._raw = open(self.archive_dir / RAW_ARCHIVE, "ab")
@@ -197,12 +198,15 @@ class GroundMonitor:
         if not ready:
             return 0
         count = 0
+        # One receive time for the batch: everything read here was queued when the read began (a clock
+        # read is a system call in the vcan-vm guest, ~10 us, and the ground takes ~10 packets a wake-up).
+        rx_time_s = time.time()
         while count < self.max_packets_per_poll:  # bounded, so a flood cannot starve stop/display
             try:
                 data = self._sock.recv(65536)
             except OSError:  # includes BlockingIOError: nothing left
                 break
-            self.process(data, time.time())
+            self.process(data, rx_time_s)
             count += 1
         return count
 
@@ -242,13 +246,21 @@ class GroundMonitor:
 
     def _check_limits(self, packet: DecodedTm) -> None:
         """Track each limited channel's state; every YELLOW/RED transition goes to ``limits.jsonl``."""
-        for name, limits in self._limited_channels(packet.packet):
-            value = packet.values[name]
+        limit_stats = self.stats.limits
+        values = packet.values
+        for name, limits, green_low, green_high in self._limited_channels(packet.packet):
+            value = values[name]
             if value != value:  # NaN: no value this packet
                 continue
-            stats = self.stats.limits.setdefault(name, LimitStats())
-            stats.min_value = min(stats.min_value, value)
-            stats.max_value = max(stats.max_value, value)
+            stats = limit_stats.get(name)
+            if stats is None:
+                stats = limit_stats[name] = LimitStats()
+            if value < stats.min_value:
+                stats.min_value = value
+            if value > stats.max_value:
+                stats.max_value = value
+            if stats.state == "GREEN" and green_low <= value <= green_high:
+                continue  # the usual case: green and staying green (what limits.check would say)
             state = limits.check(value).value
             if state == stats.state:
                 continue
@@ -262,11 +274,13 @@ class GroundMonitor:
                                        "to": state, "value": value})
             stats.state = state
 
-    def _limited_channels(self, packet_name: str) -> list[tuple[str, Any]]:
+    def _limited_channels(self, packet_name: str) -> list[tuple[str, Any, float, float]]:
+        """(name, limits, green low, green high) of the packet's limit-checked channels; a value in
+        [green low, green high] is inside every yellow and red bound, i.e. GREEN."""
         cached = self._limited.get(packet_name)
         if cached is None:
             packet = self.dictionary.packet(packet_name)
-            cached = [(c.name, c.limits) for c in packet.channels
+            cached = [(c.name, c.limits, *_green_band(c.limits)) for c in packet.channels
                       if c.limits is not None and c.type not in ("BOOL", "ENUM")]
             self._limited[packet_name] = cached
         return cached
@@ -354,6 +368,12 @@ class GroundMonitor:
     def __exit__(self, *exc: object) -> None:
         if self._sock is not None or self._raw is not None:
             self.close()
+
+
+def _green_band(limits: Limits) -> tuple[float, float]:
+    lows = [b for b in (limits.yellow[0], limits.red[0]) if b is not None]
+    highs = [b for b in (limits.yellow[1], limits.red[1]) if b is not None]
+    return max(lows, default=-math.inf), min(highs, default=math.inf)
 
 
 def read_raw_archive(path: str | Path) -> Iterator[tuple[float, bytes]]:

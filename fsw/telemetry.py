@@ -16,7 +16,7 @@ import struct
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 from fastcrc import crc16  # CRC-16/CCITT-FALSE; a dependency of spacepackets (same CRC as ECSS PUS)
 from spacepackets.ccsds.spacepacket import (
@@ -60,17 +60,28 @@ class TelemetryDecodeError(ValueError):
 
 
 # ------------------------------------------------------------------------------------- encoding
+_HEADERS: dict[tuple[int, int], bytes] = {}
+
+
+def _tm_header(apid: int, data_len: int) -> bytes:
+    """The TM primary header for ``apid`` and ``data_len`` with sequence count 0, built by spacepackets once
+    per (APID, length): a packet then only ORs its count into bytes 2-3 (spacepackets' header and packet
+    objects cost ~6 us per packet; tests/fsw/test_telemetry.py checks the bytes against it)."""
+    header = _HEADERS.get((apid, data_len))
+    if header is None:
+        header = _HEADERS[(apid, data_len)] = SpacePacketHeader(
+            packet_type=PacketType.TM, apid=apid, seq_count=0, data_len=data_len, sec_header_flag=True).pack()
+    return header
+
+
 def _frame(apid: int, seq_count: int, time_s: float, payload: bytes) -> bytes:
     """A TM space packet: primary header, time secondary header, payload, CRC-16."""
-    sec_header = TM_SECONDARY_HEADER.pack(time_s)
-    header = SpacePacketHeader(
-        packet_type=PacketType.TM,
-        apid=apid,
-        seq_count=seq_count % SEQ_MODULO,
-        data_len=len(sec_header) + len(payload) + CRC_LEN - 1,
-        sec_header_flag=True,
-    )
-    body = SpacePacket(header, sec_header=sec_header, user_data=payload).pack()
+    body = bytearray(_tm_header(apid, TM_SECONDARY_HEADER.size + len(payload) + CRC_LEN - 1))
+    seq = seq_count % SEQ_MODULO
+    body[2] |= seq >> 8
+    body[3] |= seq & 0xFF
+    body += TM_SECONDARY_HEADER.pack(time_s)
+    body += payload
     return bytes(body) + struct.pack("!H", crc16_ccitt(body))
 
 
@@ -122,41 +133,75 @@ def _json_float(value: Any) -> Any:
     return value
 
 
+_PRIMARY_HEADER = struct.Struct("!BBHH")  # CCSDS primary header: version/type/flag/APID, sequence, data length
+_TM_TYPE = int(PacketType.TM)
+
+
+class _ChannelLayout(NamedTuple):
+    """What decoding a channel packet needs, worked out once per packet definition."""
+
+    struct: struct.Struct
+    names: tuple[str, ...]
+    enums: tuple[tuple[int, tuple[str, ...]], ...]  # (position, enum names) of the ENUM channels
+
+
+_LAYOUTS: dict[int, tuple[PacketDef, _ChannelLayout]] = {}
+
+
+def _channel_layout(packet: PacketDef) -> _ChannelLayout:
+    # The ground decodes ~10 packets per simulated second: building the 73-channel struct and scanning
+    # the channel types for every packet was a third of a decode.
+    entry = _LAYOUTS.get(id(packet))
+    if entry is None or entry[0] is not packet:
+        layout = _ChannelLayout(packet_struct(packet), tuple(c.name for c in packet.channels),
+                                tuple((i, c.enum) for i, c in enumerate(packet.channels) if c.type == "ENUM"))
+        entry = _LAYOUTS[id(packet)] = (packet, layout)
+    return entry[1]
+
+
+def primary_header_fields(raw: bytes) -> tuple[int, int, int, int, int]:
+    """(CCSDS version, packet type, APID, sequence count, packet length) of the primary header at the
+    start of ``raw`` (at least 6 bytes): what ``SpacePacketHeader.unpack`` reads, with one struct call
+    (that object costs ~9 us to build; tests/fsw/test_telemetry.py compares the two)."""
+    first, apid_low, psc, data_len = _PRIMARY_HEADER.unpack_from(raw)
+    return (first >> 5) & 0b111, (first >> 4) & 1, ((first & 0b111) << 8) | apid_low, psc & 0x3FFF, \
+        data_len + CCSDS_HEADER_LEN + 1
+
+
 def decode_tm_packet(dictionary: TelemetryDictionary, raw: bytes | bytearray | memoryview) -> DecodedTm:
     """Decode a TM space packet with the dictionary; raises TelemetryDecodeError naming the fault."""
     raw = bytes(raw)
     min_len = CCSDS_HEADER_LEN + TM_SECONDARY_HEADER.size + CRC_LEN
     if len(raw) < min_len:
         raise TelemetryDecodeError(f"packet of {len(raw)} bytes shorter than the minimum {min_len}")
-    header = SpacePacketHeader.unpack(raw)
-    if header.packet_type != PacketType.TM:
+    version, packet_type, apid, seq_count, packet_len = primary_header_fields(raw)
+    if packet_type != _TM_TYPE:
         raise TelemetryDecodeError("packet type is TC, expected TM")
-    if header.ccsds_version != 0:
-        raise TelemetryDecodeError(f"CCSDS version {header.ccsds_version}, expected 0")
-    if header.packet_len != len(raw):
-        raise TelemetryDecodeError(f"length field says {header.packet_len} bytes, datagram has {len(raw)}")
+    if version != 0:
+        raise TelemetryDecodeError(f"CCSDS version {version}, expected 0")
+    if packet_len != len(raw):
+        raise TelemetryDecodeError(f"length field says {packet_len} bytes, datagram has {len(raw)}")
     if crc16_ccitt(raw) != 0:  # CRC over data + its own CRC is zero for this CRC
         raise TelemetryDecodeError("CRC mismatch")
     (time_s,) = TM_SECONDARY_HEADER.unpack_from(raw, CCSDS_HEADER_LEN)
     payload = raw[CCSDS_HEADER_LEN + TM_SECONDARY_HEADER.size:-CRC_LEN]
-    if header.apid == dictionary.event_apid:
-        return _decode_event(dictionary, header, time_s, payload)
-    packet = dictionary.packet_by_apid(header.apid)
+    if apid == dictionary.event_apid:
+        return _decode_event(dictionary, apid, seq_count, time_s, payload)
+    packet = dictionary.packet_by_apid(apid)
     if packet is None:
-        raise TelemetryDecodeError(f"unknown APID {header.apid:#x}")
-    layout = packet_struct(packet)
-    if len(payload) != layout.size:
-        raise TelemetryDecodeError(f"{packet.name}: payload {len(payload)} bytes, dictionary says {layout.size}")
-    values: dict[str, Any] = {}
-    for channel, raw_value in zip(packet.channels, layout.unpack(payload)):
-        if channel.type == "ENUM":
-            assert channel.enum is not None
-            raw_value = channel.enum[raw_value] if raw_value < len(channel.enum) else f"INVALID({raw_value})"
-        values[channel.name] = raw_value
-    return DecodedTm(header.apid, header.seq_count, time_s, "channels", packet.name, values=values)
+        raise TelemetryDecodeError(f"unknown APID {apid:#x}")
+    layout = _channel_layout(packet)
+    if len(payload) != layout.struct.size:
+        raise TelemetryDecodeError(f"{packet.name}: payload {len(payload)} bytes, dictionary says {layout.struct.size}")
+    values = dict(zip(layout.names, layout.struct.unpack(payload)))
+    for i, names in layout.enums:
+        name = layout.names[i]
+        raw_value = values[name]
+        values[name] = names[raw_value] if raw_value < len(names) else f"INVALID({raw_value})"
+    return DecodedTm(apid, seq_count, time_s, "channels", packet.name, values=values)
 
 
-def _decode_event(dictionary: TelemetryDictionary, header: SpacePacketHeader, time_s: float,
+def _decode_event(dictionary: TelemetryDictionary, apid: int, seq_count: int, time_s: float,
                   payload: bytes) -> DecodedTm:
     if len(payload) < 3:
         raise TelemetryDecodeError("event payload shorter than id + severity")
@@ -173,7 +218,7 @@ def _decode_event(dictionary: TelemetryDictionary, header: SpacePacketHeader, ti
         raise TelemetryDecodeError(f"event {event.name}: {exc}") from None
     if end != len(payload):
         raise TelemetryDecodeError(f"event {event.name}: {len(payload) - end} unexpected trailing bytes")
-    return DecodedTm(header.apid, header.seq_count, time_s, "event", "EVENT", event=event.name,
+    return DecodedTm(apid, seq_count, time_s, "event", "EVENT", event=event.name,
                      severity=severity.value, args=args, message=format_event_message(event, args))
 
 
@@ -204,6 +249,10 @@ def _wire_value(channel: Channel, value: Any) -> Any:
         low, high = 0, len(channel.enum) - 1
     else:
         low, high = _INT_LIMITS[t]
+    return _saturate(value, low, high)
+
+
+def _saturate(value: Any, low: int, high: int) -> int:
     number = float(value)
     if math.isnan(number):
         return 0
@@ -232,6 +281,33 @@ def _default_value(channel: Channel) -> Any:
     if channel.type == "BOOL":
         return False
     return 0
+
+
+def _saturating(low: int, high: int) -> Callable[[Any], int]:
+    return lambda value: _saturate(value, low, high)
+
+
+def _update_plans(packet: PacketDef, index: dict[str, int],
+                  groups: dict[str, list[str]]) -> dict[str, tuple[int, int, Callable[[Any], Any] | None]]:
+    """Name -> (first slot, end slot, conversion) for the float, bool and integer channels (the conversion
+    ``_wire_value`` makes for that type) and, with conversion None, for the vectors of float channels in
+    consecutive slots: ``TelemetrySender.update`` stores those without a call chain per channel."""
+    convert: dict[str, Callable[[Any], Any]] = {}
+    for c in packet.channels:
+        if c.type in ("F32", "F64"):
+            convert[c.name] = float
+        elif c.type == "BOOL":
+            convert[c.name] = bool
+        elif c.type in _INT_LIMITS:
+            convert[c.name] = _saturating(*_INT_LIMITS[c.type])
+    plans: dict[str, tuple[int, int, Callable[[Any], Any] | None]] = {
+        name: (slot, slot + 1, convert[name]) for name, slot in index.items() if name in convert}
+    for base, members in groups.items():
+        slots = [index[m] for m in members]
+        if base not in index and all(convert.get(m) is float for m in members) \
+                and slots == list(range(slots[0], slots[0] + len(slots))):
+            plans[base] = (slots[0], slots[0] + len(slots), None)
+    return plans
 
 
 @dataclass
@@ -266,6 +342,7 @@ class TelemetrySender:
             p.name: {c.name: i for i, c in enumerate(p.channels)} for p in dictionary.packets
         }
         self._groups = {p.name: vector_groups(p) for p in dictionary.packets}
+        self._plans = {p.name: _update_plans(p, self._index[p.name], self._groups[p.name]) for p in dictionary.packets}
         self._structs = {p.name: packet_struct(p) for p in dictionary.packets}
         self._seq: dict[int, int] = collections.defaultdict(int)
         self._throttle_times: dict[str, collections.deque[float]] = {}
@@ -288,27 +365,47 @@ class TelemetrySender:
         """Store channel values without sending. Vector base names take a sequence (``q_est_NB``);
         ``None`` means "no value" (NaN for floats, 0/False otherwise)."""
         latest = self._packet_values(packet_name)
+        plans = self._plans[packet_name]
+        for name, value in values.items():
+            plan = plans.get(name)
+            if plan is not None and value is not None:
+                # Fast path for float, bool and integer channels and for float vectors (most of the GNC
+                # packet): the conversion _wire_value makes for that type, without the per-channel calls;
+                # anything it refuses takes the general path below, which names the channel.
+                start, stop, convert = plan
+                try:
+                    if convert is not None:
+                        latest[start] = convert(value)
+                        continue
+                    tolist = getattr(value, "tolist", None)  # numpy: one call instead of a scalar per element
+                    components = [float(c) for c in (tolist() if tolist is not None else value)]
+                    if len(components) == stop - start:
+                        latest[start:stop] = components
+                        continue
+                except (TypeError, ValueError):
+                    pass
+            self._update_one(packet_name, latest, name, value)
+
+    def _update_one(self, packet_name: str, latest: list[Any], name: str, value: Any) -> None:
         index = self._index[packet_name]
         channels = self.dictionary.packet(packet_name).channels
-        groups = self._groups[packet_name]
-        for name, value in values.items():
-            slot = index.get(name)
-            if slot is not None:
-                latest[slot] = _convert(channels[slot], value)
-                continue
-            members = groups.get(name)
-            if members is None:
-                raise DictionaryError(f"packet {packet_name} has no channel or vector {name!r}")
-            if value is None:  # "no value" (e.g. no target attitude outside QUATERNION mode)
-                for member in members:
-                    latest[index[member]] = _default_value(channels[index[member]])
-                continue
-            components = list(value)
-            if len(components) > len(members):
-                raise DictionaryError(f"{packet_name}.{name}: {len(components)} values for {len(members)} channels")
-            for member, component in zip(members, components):
-                slot = index[member]
-                latest[slot] = _convert(channels[slot], component)
+        slot = index.get(name)
+        if slot is not None:
+            latest[slot] = _convert(channels[slot], value)
+            return
+        members = self._groups[packet_name].get(name)
+        if members is None:
+            raise DictionaryError(f"packet {packet_name} has no channel or vector {name!r}")
+        if value is None:  # "no value" (e.g. no target attitude outside QUATERNION mode)
+            for member in members:
+                latest[index[member]] = _default_value(channels[index[member]])
+            return
+        components = list(value)
+        if len(components) > len(members):
+            raise DictionaryError(f"{packet_name}.{name}: {len(components)} values for {len(members)} channels")
+        for member, component in zip(members, components):
+            slot = index[member]
+            latest[slot] = _convert(channels[slot], component)
 
     def send_channels(self, packet_name: str, values: Mapping[str, Any] | None = None,
                       time_s: float | None = None) -> bytes:

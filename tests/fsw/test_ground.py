@@ -251,3 +251,33 @@ def test_live_display_renders_during_run(capsys) -> None:
     monitor.run(duration_s=0.4, live=True, refresh_s=0.05)
     out = capsys.readouterr().out
     assert "keepout telemetry" in out and "QUATERNION" in out and "TARGET_REACHED" in out
+
+
+def test_limit_states_follow_the_dictionary_limits_at_and_around_every_bound() -> None:
+    """The monitor's green-band shortcut gives the states Limits.check gives, bounds included."""
+    import math
+
+    monitor = GroundMonitor(DICTIONARY, port=None)
+    tm = TelemetrySender(DICTIONARY, port=None)
+    for packet in ("GNC", "HK"):
+        limited = [c for c in DICTIONARY.packet(packet).channels
+                   if c.limits is not None and c.type not in ("BOOL", "ENUM")]
+        assert limited
+        for channel in limited:
+            limits = channel.limits
+            bounds = [b for b in (*limits.yellow, *limits.red) if b is not None]
+            probes = [v for b in bounds for v in (b, math.nextafter(b, -math.inf), math.nextafter(b, math.inf))]
+            probes += [0.0, 1e9, -1e9, float("nan")] + probes[::-1]
+            expected, state = [], "GREEN"
+            for i, value in enumerate(probes):
+                sent = tm.send_channels(packet, {channel.name: value}, time_s=float(i))
+                wire = monitor.process(sent, 0.0).values[channel.name]
+                if wire == wire:
+                    new = limits.check(wire).value
+                    if new != state:
+                        expected.append((state, new))
+                    state = new
+            stats = monitor.stats.limits[channel.name]
+            assert stats.state == state, channel.name
+            assert stats.to_red == sum(1 for _, to in expected if to == "RED"), channel.name
+            assert stats.to_yellow == sum(1 for _, to in expected if to == "YELLOW"), channel.name

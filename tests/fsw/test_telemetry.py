@@ -244,3 +244,76 @@ def test_decoder_and_ground_survive_any_datagram(data: st.DataObject) -> None:
     monitor = GroundMonitor(DICTIONARY, port=None)
     monitor.process(bytes(raw), 0.0)
     assert monitor.stats.datagrams == 1 and monitor.stats.decoded + monitor.stats.decode_errors == 1
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(min_size=6, max_size=12))
+def test_primary_header_fields_read_as_spacepackets_reads_them(raw: bytes) -> None:
+    from spacepackets.ccsds.spacepacket import SpacePacketHeader
+
+    from fsw.telemetry import primary_header_fields
+
+    header = SpacePacketHeader.unpack(raw)
+    assert primary_header_fields(raw) == (header.ccsds_version, int(header.packet_type), header.apid,
+                                          header.seq_count, header.packet_len)
+
+
+_CHANNEL_VALUES = st.one_of(
+    st.none(), st.booleans(), st.integers(-2**40, 2**40), st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from(["SAFE", "POINTING", "x", "1.5"]))
+_VECTOR_VALUES = st.one_of(
+    _CHANNEL_VALUES,
+    st.lists(st.one_of(st.none(), st.floats(allow_nan=True, allow_infinity=True), st.integers(-9, 9)), max_size=7),
+    st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=7).map(np.array),
+    st.lists(st.integers(-9, 9), min_size=1, max_size=7).map(lambda v: np.array(v, dtype=np.int32)))
+
+
+def _update_channel_by_channel(tm: TelemetrySender, packet: str, values: dict) -> tuple | None:
+    """The general path (one conversion call per channel) for every name; the error if it raises."""
+    try:
+        for name, value in values.items():
+            tm._update_one(packet, tm._latest[packet], name, value)
+    except Exception as exc:  # noqa: BLE001 - compared with what the fast path raises
+        return type(exc), str(exc)
+    return None
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.data())
+def test_update_fast_paths_store_what_the_general_path_stores(data: st.DataObject) -> None:
+    packet = data.draw(st.sampled_from(["GNC", "HK"]))
+    tm = TelemetrySender(DICTIONARY, port=None)
+    names = [c.name for c in DICTIONARY.packet(packet).channels] + list(tm._groups[packet])
+    chosen = data.draw(st.lists(st.sampled_from(names), min_size=1, max_size=8, unique=True))
+    values = {n: data.draw(_VECTOR_VALUES if n in tm._groups[packet] else _CHANNEL_VALUES) for n in chosen}
+    reference = TelemetrySender(DICTIONARY, port=None)
+    expected_error = _update_channel_by_channel(reference, packet, values)
+    try:
+        tm.update(packet, values)
+        error = None
+    except Exception as exc:  # noqa: BLE001
+        error = type(exc), str(exc)
+    assert error == expected_error
+    if error is None:
+        got, want = tm.latest(packet), reference.latest(packet)
+        assert got.keys() == want.keys()
+        for name in got:  # NaN == NaN here; same value and the same wire type
+            assert type(got[name]) is type(want[name]), name
+            assert got[name] == want[name] or (got[name] != got[name] and want[name] != want[name]), name
+    assert any(plan[2] is None for plan in tm._plans["GNC"].values())  # the vector fast path exists
+
+
+@settings(max_examples=200, deadline=None)
+@given(apid=st.integers(0, 0x7FF), seq=st.integers(0, 3 * SEQ_MODULO), time_s=st.floats(allow_nan=False),
+       payload=st.binary(max_size=300))
+def test_tm_packets_are_the_bytes_spacepackets_builds(apid: int, seq: int, time_s: float, payload: bytes) -> None:
+    from spacepackets.ccsds.spacepacket import PacketType, SpacePacket, SpacePacketHeader
+
+    from fsw.dictionary import TM_SECONDARY_HEADER
+    from fsw.telemetry import _frame
+
+    sec = TM_SECONDARY_HEADER.pack(time_s)
+    header = SpacePacketHeader(packet_type=PacketType.TM, apid=apid, seq_count=seq % SEQ_MODULO,
+                               data_len=len(sec) + len(payload) + 1, sec_header_flag=True)
+    body = SpacePacket(header, sec_header=sec, user_data=payload).pack()
+    assert _frame(apid, seq, time_s, payload) == bytes(body) + struct.pack("!H", crc16_ccitt_bitwise(bytes(body)))
