@@ -21,16 +21,16 @@ best ratio any law could reach at these limits. ratio - lb is what the law and t
 The paper's assumptions are checked at each slew's target with the eps the configuration gives
 (gnc.checks, as `keepout config check` does for a mission's own targets): "ok", eps and kappa_bar.
 
-    .venv/bin/python bench/slew.py [--quick] [--pursuit]
+    .venv/bin/python bench/slew.py [--quick] [--law-only]
 
---pursuit also runs a proposed guidance change as an in-process prototype (see pursuit_prototype).
+The flight software plans slews round the zones (pointing.path, fsw.path_guidance). --law-only also runs
+every slew with path planning off, side by side: the paper's law heading straight for the target.
 
 Prints a table and writes bench/results/slew.json.
 """
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
 import os
@@ -201,59 +201,9 @@ def what_geometry_allows(mission, t_s: float) -> dict:
             "kappa_bar": float(rep.kappa_bar), "assumptions_ok": bool(rep.ok), "assumption_errors": list(rep.errors)}
 
 
-PURSUIT_STANDOFF_DEG = 2.0  # the guide path keeps law.margin_deg + this from the physical zones
-PURSUIT_AHEAD_DEG = 6.0     # carrot distance: beyond the braking distance w^2 / (2 a) = 3.3 deg, so no slowing
-
-
-@contextlib.contextmanager
-def pursuit_prototype(standoff_deg: float = PURSUIT_STANDOFF_DEG, ahead_deg: float = PURSUIT_AHEAD_DEG):
-    """A proposed guidance change, NOT in the flight software: pure pursuit along the shortest safe path.
-
-    On SET_TARGET the shortest path to the target keeping margin_deg + standoff_deg from the zones is
-    planned (onboard ephemeris); every cycle the law's x_d is the path point ahead_deg beyond the one
-    nearest the boresight, the real target once it is within ahead_deg. The star-shaped law still runs
-    on the inflated zones with its eps chosen for that x_d, so its repulsion keeps the inflated zones
-    invariant whatever x_d is, and the last leg is the paper's law with the real target. Patched into
-    fsw.guidance.Guidance in this process only (the fast mode runs the flight software in-process).
-    """
-    import fsw.guidance as fg
-    from gnc.attitude import quat_to_dcm_nb
-
-    set_target, step = fg.Guidance.set_target_direction, fg.Guidance.step
-
-    def set_final(self, target_N):
-        self._pursuit_final = np.asarray(target_N, dtype=float) / np.linalg.norm(target_N)
-        self._pursuit_path = None
-        set_target(self, target_N)
-
-    def pursue(self, t_s, dt_s, q_NB, omega_BN_B):
-        final = getattr(self, "_pursuit_final", None)
-        if final is not None and q_NB is not None and self.mode == "POINTING" and self.slots:
-            y = quat_to_dcm_nb(np.asarray(q_NB, dtype=float)) @ self.b_B
-            if self._pursuit_path is None:
-                self._update_sky(t_s)
-                _, vertices = shortest_safe_path(y, final, [z.phys for z in self.slots],
-                                                 self.cfg.law.margin_deg + standoff_deg)
-                dense = [vertices[0]] + [p for a, b in zip(vertices[:-1], vertices[1:])
-                                         for p in list(_arc(a, b, 0.5)) + [b]]
-                self._pursuit_path = np.array(dense)
-            path = self._pursuit_path
-            i = int(np.argmax(path @ y))
-            far = np.flatnonzero(path[i:] @ y < math.cos(math.radians(ahead_deg)))
-            goal = final if far.size == 0 else path[i + far[0]]
-            if not np.allclose(goal, self.target_N):
-                set_target(self, goal)
-        return step(self, t_s, dt_s, q_NB, omega_BN_B)
-
-    fg.Guidance.set_target_direction, fg.Guidance.step = set_final, pursue
-    try:
-        yield
-    finally:
-        fg.Guidance.set_target_direction, fg.Guidance.step = set_target, step
-
-
-def slew_mission(base: dict, start, end) -> dict:
+def slew_mission(base: dict, start, end, path_planning: bool = True) -> dict:
     data = json.loads(json.dumps(base, default=str))
+    data["flight_software"].setdefault("pointing", {}).setdefault("path", {})["enabled"] = path_planning
     a, b = unit(*start), unit(*end)
     theta = math.degrees(math.acos(float(np.clip(a @ b, -1, 1))))
     fsw = data["flight_software"]
@@ -267,13 +217,13 @@ def slew_mission(base: dict, start, end) -> dict:
     return data, theta, t_eig
 
 
-def run_slews(base: dict, slews: list, geometry: bool = True) -> list[dict]:
+def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: bool = True) -> list[dict]:
     from hil_sim.campaign.fast import run_fast
     from hil_sim.mission import Mission
 
     rows = []
     for label, start, end in slews:
-        data, theta, t_eig = slew_mission(base, start, end)
+        data, theta, t_eig = slew_mission(base, start, end, path_planning)
         mission = Mission.model_validate(data)
         wall = time.perf_counter()
         result = run_fast(mission, seed=mission.seed)
@@ -309,9 +259,8 @@ def run_slews(base: dict, slews: list, geometry: bool = True) -> list[dict]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="only the first two slews")
-    parser.add_argument("--pursuit", action="store_true",
-                        help="also run the proposed pure-pursuit guidance (a prototype patched in-process; "
-                             "see pursuit_prototype) and record it under 'pursuit_prototype'")
+    parser.add_argument("--law-only", action="store_true",
+                        help="also fly every slew with path planning off (the law alone) and record it under 'law_only'")
     args = parser.parse_args(argv)
 
     base = yaml.safe_load((ROOT / "config" / "missions" / "demo-pointing.yaml").read_text())
@@ -338,18 +287,15 @@ def main(argv: list[str] | None = None) -> int:
     print(f"median ratio {summary['median_ratio']:.3f}, max {summary['max_ratio']:.3f} (goal <= 1.3); "
           f"smallest margin {min_margin:.2f} deg (goal > 0)")
     report = {"rows": rows, "summary": summary}
-    if args.pursuit:
-        with pursuit_prototype():
-            proto = run_slews(base, slews, geometry=False)
-        print(f"\nprototype (not flight software): pure pursuit {PURSUIT_AHEAD_DEG:g} deg ahead on the shortest path "
-              f"kept {PURSUIT_STANDOFF_DEG:g} deg outside the inflated zones")
-        for r in proto:
+    if args.law_only:
+        alone = run_slews(base, slews, geometry=False, path_planning=False)
+        print("\nthe law alone (pointing.path.enabled: false):")
+        for r in alone:
             margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
             print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['path_deg']:6.1f} {r['path_ratio']:6.3f} "
                   f"{r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f}  {margins}")
-        report["pursuit_prototype"] = {"standoff_deg": PURSUIT_STANDOFF_DEG, "ahead_deg": PURSUIT_AHEAD_DEG,
-                                       "rows": proto, "max_ratio": max(r["ratio"] for r in proto),
-                                       "min_margin_deg": min(min(r["margins_deg"].values()) for r in proto)}
+        report["law_only"] = {"rows": alone, "max_ratio": max(r["ratio"] for r in alone),
+                              "min_margin_deg": min(min(r["margins_deg"].values()) for r in alone)}
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
     (out / "slew.json").write_text(json.dumps(report, indent=1) + "\n")

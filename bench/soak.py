@@ -22,10 +22,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import multiprocessing
 import os
 import socket
 import sys
-import threading
 import time
 import tracemalloc
 from pathlib import Path
@@ -37,23 +37,31 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__)
 sys.path.insert(0, str(ROOT / "tests" / "fsw"))
 
 
-class TmReceiver(threading.Thread):
-    """Counts telemetry datagrams and sequence-count gaps per APID (14-bit counts)."""
+class TmReceiver:
+    """Counts telemetry datagrams and sequence-count gaps per APID (14-bit counts) in a process of its
+    own, as the ground monitor would: a receiver thread in the flight process would take the GIL for
+    every datagram, and a host that preempts it there stalls the real-time cycle thread."""
 
     def __init__(self):
-        super().__init__(daemon=True)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
         self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(0.2)
         self.port = self.sock.getsockname()[1]
         self.received = 0
         self.lost = 0
-        self.last: dict[int, int] = {}
-        self.stop = False
+        ctx = multiprocessing.get_context("fork")
+        self._stop = ctx.Event()
+        self._counts, child_end = ctx.Pipe(duplex=False)
+        self._proc = ctx.Process(target=self._run, args=(child_end,), daemon=True)
 
-    def run(self) -> None:
-        while not self.stop:
+    def start(self) -> None:
+        self._proc.start()
+        self.sock.close()  # the child has it
+
+    def _run(self, counts) -> None:
+        self.sock.settimeout(0.2)
+        last: dict[int, int] = {}
+        while not self._stop.is_set():
             try:
                 data = self.sock.recv(65536)
             except socket.timeout:
@@ -62,11 +70,19 @@ class TmReceiver(threading.Thread):
                 continue
             apid = ((data[0] & 0x07) << 8) | data[1]
             seq = ((data[2] & 0x3F) << 8) | data[3]
-            prev = self.last.get(apid)
+            prev = last.get(apid)
             if prev is not None:
                 self.lost += (seq - prev - 1) % 16384
-            self.last[apid] = seq
+            last[apid] = seq
             self.received += 1
+        counts.send((self.received, self.lost))
+
+    def finish(self) -> None:
+        """Stop the receiver (after the last datagram has had time to arrive) and collect its counts."""
+        self._stop.set()
+        if self._counts.poll(5.0):
+            self.received, self.lost = self._counts.recv()
+        self._proc.join(2)
 
 
 def rss_mb() -> float:
@@ -169,8 +185,7 @@ def main(argv=None) -> int:
         tracemalloc.stop()
     wall = time.perf_counter() - t_wall
     time.sleep(0.5)
-    rx.stop = True
-    rx.join(2)
+    rx.finish()
     counters = fsw.hk_values()
     rss_first = rss[len(rss) // 10][1] if len(rss) > 10 else rss[0][1]
     rss_last = rss_before_trace if rss_before_trace is not None else rss[-1][1]

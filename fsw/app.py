@@ -23,7 +23,8 @@ from fsw.control import RateController
 from fsw.estimation import AttitudeEstimator
 from fsw.executive import Executive
 from fsw.fdir import Fdir, FdirInputs
-from fsw.guidance import AssumptionChecker, Guidance
+from fsw.assumption_check import AssumptionChecker
+from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
 _CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")

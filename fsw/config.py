@@ -249,6 +249,18 @@ class LawConfig(_Strict):
 
 
 # -------------------------------------------------------------------------------------------- modes
+class PathGuidanceConfig(_Strict):
+    """POINTING slews planned round the zones (fsw.path_guidance): the law's target moves along the
+    shortest path that keeps a standoff from every zone the law avoids, instead of heading straight for a
+    target behind a zone and creeping round the zone's edge."""
+
+    enabled: bool = Field(True, description="Plan slews whose great circle is blocked by a zone; false: the law heads straight for the target.")
+    standoff_deg: float = Field(2.0, gt=0.0, le=20.0, description="Clearance of the planned path from every zone as the law sees it (inflated by law.margin_deg, merged) [deg]; keeps the boresight out of the law's eps-layer while it follows the path.")
+    lookahead_deg: float = Field(6.0, ge=1.0, le=45.0, description="The law's target is at least this far ahead of the boresight along the path [deg], and far enough that the law's rate k1 sin(angle) stays at the rate limit (12.6 deg for k1 = 0.1 1/s at 1 deg/s). More than the braking distance at the rate limit (w^2 / 2a, 3.3 deg at 1 deg/s and 0.15 deg/s^2) keeps the slew at full rate; much more cuts corners into the zones' standoff.")
+    replan_period_s: float = Field(30.0, gt=0.0, le=3600.0, description="While a path is followed it is planned again from the boresight this often [s], so it follows zones that move (the Earth from low orbit moves ~0.06 deg/s).")
+    polygon_sides: int = Field(48, ge=8, le=360, description="Sides of the convex polygon drawn round each zone for planning (a plan costs ~3 ms with 48 sides and three zones, growing as the square).")
+
+
 class PointingConfig(_Strict):
     """POINTING mode: instrument boresight to a target direction avoiding sky zones."""
 
@@ -258,6 +270,7 @@ class PointingConfig(_Strict):
     roll_reference_N: Vec3 = Field([0.0, 0.0, 1.0], description="Inertial reference for the roll about the boresight (falls back to another axis when nearly parallel to the boresight).")
     roll_gain_1_s: float = Field(0.05, ge=0.0, le=10.0, description="Roll law gain about the boresight [1/s]; 0 disables roll control.")
     zones: list[SkyZoneConfig] = Field(default_factory=list, max_length=6, description="Keep-out zones for the boresight (at most 6).")
+    path: PathGuidanceConfig = Field(default_factory=PathGuidanceConfig, description="Slew path planning round the zones.")
 
     _n = field_validator("boresight_B", "target_N", "roll_axis_B", "roll_reference_N")(lambda v: _unit(v, "direction"))
 

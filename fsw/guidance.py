@@ -77,6 +77,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fsw.assumption_check import CheckResult
+from fsw.path_guidance import PathFollower, plan_path
 from gnc import sky_zones
 from gnc.attitude import (
     attitude_error_angle,
@@ -164,43 +166,6 @@ class SkyEphemeris:
         return {"sun": sun / _norm(sun), "moon": moon / _norm(moon), "earth": -r / _norm(r)}
 
 
-@dataclass
-class CheckResult:
-    ok: bool
-    errors: list[str]
-    eps_max: float
-    kappa_bar: float | None
-    duration_s: float
-
-
-def run_full_check(target, zones, eps, kappa, law) -> CheckResult:
-    """gnc.checks.check_assumptions as a plain function (picklable: runs in the worker process)."""
-    import time as _time
-
-    from gnc.checks import check_assumptions
-
-    t0 = _time.perf_counter()
-    rep = check_assumptions(target, zones, eps, kappa=kappa, law=law)
-    eps_max = float(rep.eps_max) if rep.eps_max is not None and math.isfinite(rep.eps_max) else float("inf")
-    return CheckResult(bool(rep.ok), [str(e) for e in rep.errors], eps_max, rep.kappa_bar, _time.perf_counter() - t0)
-
-
-def _background_priority() -> None:
-    """Worker initializer: lowest CPU priority, so the check never preempts the GNC cycle; Ctrl-C on the
-    terminal's process group is for the flight software to handle (it stops the worker in `close`)."""
-    import os
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # a forked worker inherits the flight software's SIGTERM handler (stop the executive): `close` must
-    # be able to end it
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    try:
-        os.nice(19)
-    except OSError:
-        pass
-
-
 def _acquisition_rate_B(cfg, boresight_B: np.ndarray) -> np.ndarray:
     """Body rate [rad/s] that sweeps the star tracker out of any exclusion cone without moving the instrument.
 
@@ -215,83 +180,6 @@ def _acquisition_rate_B(cfg, boresight_B: np.ndarray) -> np.ndarray:
         axis = np.eye(3)[int(np.argmin(np.abs(st_B)))]
         axis = axis - (axis @ st_B) * st_B
     return math.radians(cfg.estimator.acquisition_rate_deg_s) * axis / _norm(axis)
-
-
-class AssumptionChecker:
-    """Runs the full assumption check away from the GNC cycle.
-
-    mode 'process': one worker process (fork); `submit` hands it a snapshot, `poll` returns the result
-    once finished (never blocks). mode 'inline': `submit` runs it at once (deterministic, tests).
-    mode 'off': never checks. At most one check is in flight.
-    """
-
-    def __init__(self, mode: str = "process"):
-        self.mode = mode
-        self._pool = None
-        self._future = None
-        self._inline_result: CheckResult | None = None
-        self.submitted = 0
-        self.completed = 0
-        self.failures = 0
-        self.last_duration_s = float("nan")
-
-    @property
-    def busy(self) -> bool:
-        return self._future is not None and not self._future.done()
-
-    def start(self) -> None:
-        """Start the worker process now (forking later, mid-mission, would delay a cycle)."""
-        if self.mode != "process" or self._pool is not None:
-            return
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"),
-                                         initializer=_background_priority)
-        self._pool.submit(math.sqrt, 1.0).result()  # the pool forks its worker on the first submit
-
-    def submit(self, snapshot) -> bool:
-        if self.mode == "off" or snapshot is None or self.busy:
-            return False
-        self.submitted += 1
-        if self.mode == "inline":
-            self._inline_result = run_full_check(*snapshot)
-            return True
-        self.start()
-        self._future = self._pool.submit(run_full_check, *snapshot)
-        return True
-
-    def poll(self) -> CheckResult | None:
-        if self._inline_result is not None:
-            res, self._inline_result = self._inline_result, None
-            self.completed += 1
-            self.last_duration_s = res.duration_s
-            return res
-        if self._future is None or not self._future.done():
-            return None
-        fut, self._future = self._future, None
-        try:
-            res = fut.result()
-        except Exception as exc:  # noqa: BLE001 - a failing check is reported, never fatal
-            self.failures += 1
-            return CheckResult(False, [f"check failed: {type(exc).__name__}: {exc}"], float("inf"), None, float("nan"))
-        self.completed += 1
-        self.last_duration_s = res.duration_s
-        return res
-
-    def close(self) -> None:
-        if self._pool is not None:
-            # A check in progress can take seconds; the flight software must not wait for it, nor leave
-            # the worker running after it exits.
-            workers = list((getattr(self._pool, "_processes", None) or {}).values())
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            for worker in workers:
-                worker.terminate()
-            for worker in workers:
-                worker.join(timeout=2.0)
-                if worker.is_alive():
-                    worker.kill()
-            self._pool = None
 
 
 def _warm_batch_kernels(builders: list) -> None:
@@ -582,6 +470,12 @@ class Guidance:
         self._escaping = False
         self._escape_point: np.ndarray | None = None
         self._escape_event_t = -math.inf
+        # path guidance: the follower of the planned slew path, the law's aim on it, when it was planned
+        self._follower: PathFollower | None = None
+        self._aim: np.ndarray = self.target_N
+        self._aim_k = -1
+        self._plan_due = True
+        self._planned_t = -math.inf
         self.last_t_s = 0.0
 
     # ------------------------------------------------------------------------------ configuration
@@ -614,6 +508,7 @@ class Guidance:
         if mode not in self.MODES:
             raise ValueError(f"unknown mode {mode!r}; allowed: {self.MODES}")
         self.mode = mode
+        self._drop_path()
         if mode == "SAFE":
             self.safe_phase = "RATE_DAMPING"
             self._damped_s = 0.0
@@ -651,6 +546,7 @@ class Guidance:
 
     def set_target_direction(self, target_N: np.ndarray) -> None:
         self.target_N = _unit(np.asarray(target_N, dtype=float))
+        self._drop_path()
         self._sky_law_key = None
         self._checks_dirty = True
 
@@ -708,7 +604,7 @@ class Guidance:
             return (self.q_target.copy(), list(self.s3_law_zones), eps, None if law == "gradient" else self.kappa, law)
         return None
 
-    def apply_check_result(self, result: "CheckResult | None") -> None:
+    def apply_check_result(self, result: CheckResult | None) -> None:
         """Take a finished check: telemetry flag, events on a new violation. Never changes the law:
         the per-cycle eps bound (`ZoneGeometry.fast_eps_max`) is already conservative."""
         if result is None:
@@ -730,6 +626,7 @@ class Guidance:
         self._substitute = None
         self._escaping = False
         self._escape_point = None
+        self._drop_path()
 
     def mark_checked(self) -> None:
         self._checks_dirty = False
@@ -789,7 +686,7 @@ class Guidance:
                 if escaping and t_s - self._escape_event_t >= 60.0:
                     self._escape_event_t = t_s
                     self.events("ASSUMPTION_VIOLATED", reason="boresight between two close zones that cannot merge: steering out of the gap")
-            if rebuilt or self._sky_law_key is None:
+            if rebuilt or self._sky_law_key is None or self._aim_moved(t_s, y):
                 zones = [s.law for s in self.slots]
                 geometry = self.sky_geometry
                 merged, groups = geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
@@ -798,9 +695,12 @@ class Guidance:
                     self._checks_dirty = True
                 self._sky_groups = groups
                 self._sky_law_zones = merged
-                eps_max = ZoneGeometry.fast_eps_max(self.target_N, merged, geometry.unmerged)
+                if self._plan_due or self._path_blocked(t_s, merged + geometry.pending):
+                    self._plan(t_s, y, merged + geometry.pending)
+                aim = self._aim
+                eps_max = ZoneGeometry.fast_eps_max(aim, merged, geometry.unmerged)
                 eps = self._eps_for(max(eps_max, 1e-5))
-                target, occ = self._substitute_target(t_s, merged, eps, geometry.pending, y)
+                target, occ = self._substitute_target(t_s, merged, eps, geometry.pending, y, aim)
                 if occ != self._occulted:
                     if occ >= len(merged) and not self._escaping:
                         self.events("ASSUMPTION_VIOLATED", reason="target between two zones closing around the boresight: steering out of the gap")
@@ -846,8 +746,73 @@ class Guidance:
 
     SUBSTITUTE_REFRESH_S = 60.0
 
-    def _substitute_target(self, t_s: float, zones: list, eps: float, pending: list, y: np.ndarray) -> tuple[np.ndarray, int]:
-        """`ZoneGeometry.retreat_target` for the commanded target, reusing the last substitute while it is
+    # ----------------------------------------------------------------------------- path guidance
+    def _drop_path(self) -> None:
+        """Forget the planned path; the next law rebuild plans one for the current target."""
+        self._follower = None
+        self._aim, self._aim_k = self.target_N, -1
+        self._plan_due = True
+
+    def _plan(self, t_s: float, y: np.ndarray, obstacles: list) -> None:
+        """Plan the slew from the boresight ``y`` round ``obstacles`` (the law's zones after merging, and
+        the shapes of pairs about to merge); follow it only when the great circle is blocked. A plan that
+        fails keeps the path being followed (if any), to be checked again a replan period later: the law
+        keeps every zone safe either way."""
+        self._plan_due = False
+        cfg = self.cfg.pointing.path
+        if not cfg.enabled:
+            return
+        self._planned_t = t_s
+        vertices = plan_path(y, self.target_N, obstacles, cfg.standoff_deg, cfg.polygon_sides)
+        if vertices is None:
+            return
+        if len(vertices) <= 2:
+            self._follower, self._aim, self._aim_k = None, self.target_N, -1
+            return
+        replanned = self._follower is not None
+        # far enough ahead that the law's rate, k1 sin(angle to its target), stays at the rate limit
+        saturating = math.degrees(math.asin(min(1.0, 1.25 * self.max_rate_rad_s / self.k1)))
+        self._follower = PathFollower(vertices, max(cfg.lookahead_deg, saturating))
+        self._aim_k = -1
+        self._aim_moved(t_s, y)
+        if not replanned:
+            length = float(np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", vertices[:-1], vertices[1:]), -1.0, 1.0))).sum())
+            self.events("PATH_PLANNED", length_deg=length, detour_deg=length - _angle_deg(y, self.target_N),
+                        legs=len(vertices) - 1)
+
+    def _path_blocked(self, t_s: float, obstacles: list) -> bool:
+        """Every replan_period_s: does a zone (they move) now come within half the standoff of the rest
+        of the path? Then it is planned again from the boresight. A path that is still clear is kept: a
+        plan from a boresight that has cut a corner towards a zone would hug that zone."""
+        f, cfg = self._follower, self.cfg.pointing.path
+        if f is None or t_s - self._planned_t < cfg.replan_period_s:
+            return False
+        self._planned_t = t_s
+        rest = f.path[f.index:]
+        d = 1.0 - math.cos(math.radians(0.5 * cfg.standoff_deg))
+        return any(bool(np.any(z.separation_batch(rest) <= d)) for z in obstacles)
+
+    def _aim_moved(self, t_s: float, y: np.ndarray) -> bool:
+        """Advance the law's aim along the path; True when the law must be rebuilt (the aim moved, the
+        path ended, or a replan is due)."""
+        f = self._follower
+        if f is None:
+            return False
+        if t_s - self._planned_t >= self.cfg.pointing.path.replan_period_s:
+            return True  # time to check the path against the zones as they are now (`_path_blocked`)
+        k = f.aim_index(y)
+        if k == self._aim_k:
+            return False
+        if k == len(f.path) - 1:  # the last leg is the paper's law to the real target
+            self._follower, self._aim, self._aim_k = None, self.target_N, -1
+        else:
+            self._aim, self._aim_k = f.path[k], k
+        return True
+
+    def _substitute_target(self, t_s: float, zones: list, eps: float, pending: list, y: np.ndarray,
+                           aim: np.ndarray) -> tuple[np.ndarray, int]:
+        """`ZoneGeometry.retreat_target` for the law's aim (the commanded target, or the point ahead on
+        the planned path), reusing the last substitute while it is
         still clear of every zone by the standoff (a search costs milliseconds; zones rebuild every ~1 s
         in low orbit). It is searched again when it stops being clear, and at least every
         SUBSTITUTE_REFRESH_S, so it comes back towards the target as the zones move on.
@@ -862,18 +827,18 @@ class Guidance:
         if self._escaping or any(p.contains(y) for p in pending):
             escape = self._escape_point
             if escape is None or not clear(escape):
-                escape, _ = ZoneGeometry.retreat_target(y, zones, eps, standoff, avoid=pending, near=self.target_N, force=True)
+                escape, _ = ZoneGeometry.retreat_target(y, zones, eps, standoff, avoid=pending, near=aim, force=True)
                 self._escape_point = escape
             return escape, len(zones) + len(pending)
         self._escape_point = None
         kept = self._substitute
-        if kept is not None and kept[0] is self.target_N and t_s - kept[2] < self.SUBSTITUTE_REFRESH_S:
+        if kept is not None and kept[0] is aim and t_s - kept[2] < self.SUBSTITUTE_REFRESH_S:
             _, x, _, occ_then = kept
-            occ = ZoneGeometry.occulting(self.target_N, zones, eps, pending)
+            occ = ZoneGeometry.occulting(aim, zones, eps, pending)
             if occ >= 0 and occ_then >= 0 and clear(x):
                 return x, occ
-        x, occ = ZoneGeometry.retreat_target(self.target_N, zones, eps, standoff, avoid=pending, near=y)
-        self._substitute = (self.target_N, x, t_s, occ)
+        x, occ = ZoneGeometry.retreat_target(aim, zones, eps, standoff, avoid=pending, near=y)
+        self._substitute = (aim, x, t_s, occ)
         return x, occ
 
     def _report_merge(self, old: list[list[int]], new: list[list[int]]) -> None:

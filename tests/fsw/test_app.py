@@ -173,7 +173,7 @@ def test_periodic_assumption_check_keeps_to_its_cpu_budget(loop, monkeypatch) ->
     """In lockstep the onboard check period passes in a fraction of a host second: after a check that
     took d seconds of CPU, the next periodic one waits d (1/fraction - 1) host seconds, so the background
     check cannot starve the simulator and the flight software of CPU."""
-    from fsw.guidance import CheckResult
+    from fsw.assumption_check import CheckResult
 
     class StubChecker:
         mode, busy = "process", False

@@ -3,6 +3,8 @@ with the ephemeris, merging near new moon, target rejection/retreat, double cove
 from __future__ import annotations
 
 import math
+import os
+import pickle
 
 import numpy as np
 import pytest
@@ -229,18 +231,63 @@ def test_assumption_checker_close_stops_a_busy_worker_at_once():
 
     import psutil
 
-    from fsw.guidance import AssumptionChecker
+    from fsw.assumption_check import AssumptionChecker
 
     checker = AssumptionChecker("process")
     checker.start()
-    checker._pool.submit(_time.sleep, 30.0)  # a check that would outlive the flight software
-    workers = [psutil.Process(p.pid) for p in checker._pool._processes.values()]
-    assert workers, "the checker should run its own worker process"
+    worker = psutil.Process(checker.worker.pid)
+    assert worker.pid != os.getpid()
+    # a check that would outlive the flight software: the worker sleeps while unpickling the request
+    checker._requests.send_bytes(pickle.dumps(_Sleep(30.0)))
+    checker._in_flight = True
+    _time.sleep(0.2)
     t0 = _time.monotonic()
     checker.close()
-    gone, alive = psutil.wait_procs(workers, timeout=5.0)
+    gone, alive = psutil.wait_procs([worker], timeout=5.0)
     assert not alive
     assert _time.monotonic() - t0 < 5.0
+    assert not checker.busy
+
+
+class _Sleep:
+    """Unpickles by sleeping: keeps the check worker busy for the close test."""
+
+    def __init__(self, seconds: float):
+        self.seconds = seconds
+
+    def __reduce__(self):
+        import time as _time
+
+        return (_time.sleep, (self.seconds,))
+
+
+def test_assumption_check_runs_in_a_worker_and_the_flight_process_starts_no_thread() -> None:
+    """A helper thread in the flight process holding the GIL while the host preempts it stalls the
+    real-time cycle thread (the 24 h soak saw 0.1-0.2 s slips with a process pool's feeder thread):
+    the checker submits and polls from the calling thread only."""
+    import threading
+    import time as _time
+
+    from fsw.assumption_check import AssumptionChecker
+    from gnc.zones import ConicZone
+
+    before = set(threading.enumerate())
+    checker = AssumptionChecker("process")
+    try:
+        snapshot = (np.array([1.0, 0.0, 0.0]), [ConicZone(np.array([0.0, 1.0, 0.0]), math.radians(20.0))], 0.01, 1.0, "star")
+        assert checker.submit(snapshot)
+        assert checker.busy and not checker.submit(snapshot)  # one check in flight at most
+        deadline = _time.monotonic() + 60.0
+        result = None
+        while result is None and _time.monotonic() < deadline:
+            result = checker.poll()
+            _time.sleep(0.01)
+        assert result is not None and result.ok, result
+        assert result.eps_max == pytest.approx(1.0 - math.cos(math.radians(70.0)), rel=1e-6)
+        assert checker.completed == 1 and checker.failures == 0 and not checker.busy
+        assert set(threading.enumerate()) == before
+    finally:
+        checker.close()
 
 
 def test_without_attitude_fix_the_tracker_is_swept_out_of_its_exclusion_without_moving_the_instrument() -> None:
