@@ -120,7 +120,7 @@ def shortest_safe_path(start: np.ndarray, end: np.ndarray, zones: list, margin_d
     segments can be on a shortest path (a vertex whose two neighbours lie on the same side of the
     segment's great circle), so only those are tested for crossing a polygon.
     """
-    import heapq
+    from fsw.path_guidance import shortest_route
 
     polys = [_polygon(z, margin_deg) for z in zones]
     nodes = [start, end] + [v for P, _ in polys for v in P]
@@ -141,16 +141,12 @@ def shortest_safe_path(start: np.ndarray, end: np.ndarray, zones: list, margin_d
         X = _arc(a, b)
         return not any(np.any(np.all(X @ N.T > 1e-12, axis=1)) for _, N in polys)
 
-    adj: dict[int, list] = {i: [] for i in range(len(nodes))}
+    edges: list[tuple[int, int]] = []
 
     def link(i: int, j: int, check: bool = True) -> None:
-        a, b = nodes[i], nodes[j]
-        n = np.cross(a, b)
-        if check and not (tangent(i, n) and tangent(j, n) and free(a, b)):
-            return
-        L = math.acos(max(-1.0, min(1.0, float(a @ b))))
-        adj[i].append((j, L))
-        adj[j].append((i, L))
+        n = np.cross(nodes[i], nodes[j])
+        if not check or (tangent(i, n) and tangent(j, n) and free(nodes[i], nodes[j])):
+            edges.append((i, j))
 
     link(0, 1)
     for j in range(2, len(nodes)):
@@ -163,23 +159,10 @@ def shortest_safe_path(start: np.ndarray, end: np.ndarray, zones: list, margin_d
             for i in range(len(P)):
                 for j in range(len(polys[k2][0])):
                     link(first[k] + i, first[k2] + j)
-    dist, prev = {0: 0.0}, {0: -1}
-    heap = [(0.0, 0)]
-    while heap:
-        d, i = heapq.heappop(heap)
-        if i == 1:
-            path = []
-            while i >= 0:
-                path.append(nodes[i])
-                i = prev[i]
-            return math.degrees(d), np.array(path[::-1])
-        if d > dist.get(i, math.inf):
-            continue
-        for j, L in adj[i]:
-            if d + L < dist.get(j, math.inf):
-                dist[j], prev[j] = d + L, i
-                heapq.heappush(heap, (d + L, j))
-    return math.inf, start[None, :]
+    route = shortest_route(np.array(nodes), edges)  # the flight planner's graph search; the graph is this one
+    if route is None:
+        return math.inf, start[None, :]
+    return float(np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", route[:-1], route[1:]), -1, 1))).sum()), route
 
 
 def what_geometry_allows(mission, t_s: float) -> dict:

@@ -166,10 +166,11 @@ def plan_path(start: np.ndarray, end: np.ndarray, zones: list, standoff_deg: flo
         free = ~_blocked(nodes, i, j, sc, sd)
         i, j = i[free], j[free]
     edges = list(zip(i.tolist(), j.tolist()))
-    return _dijkstra(nodes, edges)
+    return shortest_route(nodes, edges)
 
 
-def _dijkstra(nodes: np.ndarray, edges: list[tuple[int, int]]) -> np.ndarray | None:
+def shortest_route(nodes: np.ndarray, edges: list[tuple[int, int]]) -> np.ndarray | None:
+    """Dijkstra from nodes[0] to nodes[1] over great-circle ``edges``: the route's nodes, or None."""
     adj: dict[int, list[tuple[int, float]]] = {}
     for a, b in edges:
         length = math.acos(max(-1.0, min(1.0, float(nodes[a] @ nodes[b]))))
