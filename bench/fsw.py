@@ -157,6 +157,8 @@ def bench_realtime(seconds: float, rt_priority: int = 0) -> dict:
         "final_mode": fsw.mode, "simulator": sim_stats, "rt_priority": rt_priority,
         "rt_events": [e.args.get("reason") for e in getattr(fsw.telemetry, "recent_events", [])
                       if e.name.startswith("RT_SCHEDULING")],
+        "warnings": [e.message for e in getattr(fsw.telemetry, "recent_events", [])
+                     if e.severity.name in ("WARNING_LO", "WARNING_HI", "FATAL")][:50],
         "goal_p99_ms": 1.0, "goal_slips": 0,
     }
 

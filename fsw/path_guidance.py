@@ -20,8 +20,9 @@ from scipy.spatial import ConvexHull
 
 from gnc.sky_zones import cap_of
 
-# a polygon containing the kernel in one gnomonic chart needs every vertex well inside the hemisphere
-_MAX_POLYGON_RADIUS_RAD = math.radians(88.0)
+# a polygon about the kernel in one gnomonic chart needs every vertex inside the hemisphere (the Earth
+# zone from 500 km with a 15 deg polygon, 3 deg margin and 2 deg standoff reaches 88 deg)
+_MAX_POLYGON_RADIUS_RAD = math.radians(89.5)
 _TOUCH = 1e-12    # products of signed distances below this are touching
 
 
