@@ -135,9 +135,9 @@ def main(argv=None) -> int:
     loop = BusLoop(cfg, World(wp, seed=21), telemetry=tm, dispatcher=tc)
     fsw = loop.fsw
 
-    from fsw.app import freeze_heap
+    from fsw.app import prepare_cycle_thread
 
-    freeze_heap()  # as the flight software's own cycle loops do before their first cycle
+    prepare_cycle_thread()  # as the flight software's own cycle loops do before their first cycle
     if args.rt_priority:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt_priority))
     if args.cpu is not None:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import ast
 import math
+import os
 import socket
 import subprocess
 import sys
@@ -228,12 +229,29 @@ def test_enter_realtime_gets_sched_fifo_or_says_why_not() -> None:
         assert names == ["RT_SCHEDULING_UNAVAILABLE"]
 
 
-def test_enter_realtime_without_priority_only_freezes_the_heap() -> None:
+def test_enter_realtime_without_priority_only_prepares_the_thread() -> None:
     code = ("import os, gc; from fsw.app import enter_realtime; "
             "print(enter_realtime(0), os.sched_getscheduler(0) == os.SCHED_OTHER, gc.get_freeze_count() > 0)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["[]", "True", "True"]
+
+
+def test_a_cycle_loop_keeps_blas_on_its_own_thread() -> None:
+    """OpenBLAS starts one worker thread per CPU at import; a real-time cycle thread must never wait for
+    one the host has preempted. Checked in a fresh interpreter: the limit is process-wide."""
+    code = ("import numpy, scipy.linalg, threadpoolctl\n"
+            "before = [i['num_threads'] for i in threadpoolctl.threadpool_info()]\n"
+            "from fsw.app import prepare_cycle_thread\n"
+            "prepare_cycle_thread()\n"
+            "print(before)\n"
+            "print([i['num_threads'] for i in threadpoolctl.threadpool_info()])")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "2"}  # as on a 2-CPU host, whatever this host has
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    before, after = (ast.literal_eval(line) for line in out.stdout.strip().splitlines()[-2:])
+    assert before and max(before) == 2
+    assert after == [1] * len(before)
 
 
 def test_cycle_loops_freeze_the_start_up_heap_before_the_first_cycle(loop, monkeypatch) -> None:
