@@ -96,9 +96,8 @@ _MATH_THREAD_LIMIT = None
 def single_threaded_math() -> None:
     """Run numpy's and scipy's BLAS on the calling thread only.
 
-    OpenBLAS splits a large enough product over worker threads of its own, one per CPU, started at import
-    under normal scheduling. A real-time cycle thread then waits for a worker that the host has
-    preempted: the 24 h soak still had a 0.16 s slip with no Python thread left in the process. Every
+    OpenBLAS splits a large enough product over worker threads of its own, one per CPU, under normal
+    scheduling; a real-time cycle thread would then wait for a worker that the host has preempted. Every
     library that threadpoolctl knows gets one thread, for the rest of the process.
     """
     global _MATH_THREAD_LIMIT
