@@ -86,6 +86,9 @@ class TmReceiver:
         self._proc.join(2)
 
 
+LONG_CYCLE_MS = 20.0  # a fifth of the 10 Hz budget: worth a look even when it is not a slip
+
+
 class RtBandwidth:
     """Rests between lockstep steps so that a real-time run stays below the kernel's RT bandwidth."""
 
@@ -181,6 +184,7 @@ def main(argv=None) -> int:
     rss_before_trace = None
     notable, last_event = [], None  # warnings and worse, with onboard time (the deque keeps only the latest)
     rest = RtBandwidth(args.rt_duty) if args.rt_priority else None
+    long_cycles = []  # GNC cycles longer than LONG_CYCLE_MS: when, and whether tracemalloc was on
     for k in range(ticks):
         if rest is not None:
             rest.between_steps()
@@ -188,6 +192,9 @@ def main(argv=None) -> int:
             rss_before_trace = rss_mb()  # RSS growth is judged before tracing adds its own memory
             tracemalloc.start(1)  # one frame: enough to locate growth, ~2x slower instead of ~15x
         loop.step()
+        if fsw.last.exec_time_ms > LONG_CYCLE_MS and len(long_cycles) < 100:
+            long_cycles.append({"t_s": round(k * cfg.gnc_period_s, 1), "exec_ms": round(fsw.last.exec_time_ms, 2),
+                                "tracing": tracemalloc.is_tracing()})
         if k and k % tc_every == 0:
             seq += 1
             v = targets[seq % 2]
@@ -228,6 +235,7 @@ def main(argv=None) -> int:
         "rt_duty": args.rt_duty if args.rt_priority else None, "rested_s": rest.rested_s if rest else 0.0,
         "tracemalloc_top_growth": top,
         "slips": fsw.executive.gnc.slips,
+        "long_cycles": long_cycles,
         "exec_ms": {"mean": fsw.executive.gnc.exec_mean_ms, "max": fsw.executive.gnc.exec_max_ms},
         "tm": {"sent": tm.counters["packets_sent"], "send_errors": tm.counters["send_errors"],
                "received": rx.received, "lost_by_sequence_count": rx.lost},
