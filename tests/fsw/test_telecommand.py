@@ -205,6 +205,71 @@ def test_poll_over_a_real_udp_socket_counts_oversized_and_garbage() -> None:
     assert recorder.calls == [("SET_MODE", {"mode": "SAFE"}), ("NOOP", {})]
 
 
+class _CountingSocket:
+    """The dispatcher's socket with its recv calls counted (every other call passes through)."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self._sock = sock
+        self.recvs = 0
+
+    def recv(self, n: int) -> bytes:
+        self.recvs += 1
+        return self._sock.recv(n)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._sock, name)
+
+
+def test_idle_polls_read_nothing_and_every_arrival_is_handled_at_the_next_poll() -> None:
+    """Armed (SIGIO on arrival), a poll with nothing new makes no recv() call; each command sent before a
+    poll is handled by that poll, none lost, over many rounds; closing restores the signal handler."""
+    import signal
+
+    before = signal.getsignal(signal.SIGIO)
+    dispatcher, recorder, _ = make_dispatcher(port=0)
+    assert dispatcher._armed
+    dispatcher.poll()  # the first poll always reads
+    counting = _CountingSocket(dispatcher._sock)
+    dispatcher._sock = counting
+    address = dispatcher.address
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as uplink:
+        for _ in range(50):
+            assert dispatcher.poll() == []
+        assert counting.recvs == 0
+        for seq in range(200):
+            if seq % 3 == 0:
+                assert dispatcher.poll() == []
+            for k in range(1 + seq % 2):
+                uplink.sendto(encode_command(DICTIONARY, "NOOP", seq_count=2 * seq + k), address)
+            results = dispatcher.poll()
+            assert len(results) == 1 + seq % 2 and all(r.accepted for r in results), seq
+    assert counting.recvs == sum(2 + seq % 2 for seq in range(200))  # each poll after an arrival: + EAGAIN
+    assert dispatcher.counters["accepted"] == len(recorder.calls) == sum(1 + seq % 2 for seq in range(200))
+    dispatcher._sock = counting._sock
+    dispatcher.close()
+    assert signal.getsignal(signal.SIGIO) == before
+
+
+def test_dispatcher_made_outside_the_main_thread_reads_at_every_poll() -> None:
+    import threading
+
+    made: list = []
+    thread = threading.Thread(target=lambda: made.append(make_dispatcher(port=0)))
+    thread.start()
+    thread.join()
+    dispatcher, recorder, _ = made[0]
+    try:
+        assert not dispatcher._armed
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as uplink:
+            uplink.sendto(encode_command(DICTIONARY, "NOOP"), dispatcher.address)
+        deadline = time.monotonic() + 2.0
+        while not recorder.calls and time.monotonic() < deadline:
+            dispatcher.poll()
+        assert recorder.calls == [("NOOP", {})]
+    finally:
+        dispatcher.close()
+
+
 # ------------------------------------------------------------------------------------------ fuzzing
 _OPCODES = [c.opcode for c in DICTIONARY.commands]
 
