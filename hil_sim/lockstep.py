@@ -129,7 +129,8 @@ class Simulator:
             raise RuntimeError("begin_tick() called twice without end_tick()")
         t = self.t_s
         frames = self.devices.frames_due(t) + self.devices.wheel_status_frames(self.world, t)
-        frames = self.injector.process(frames, t)
+        if self.injector:  # without faults it passes the frames through unchanged (no call per frame then)
+            frames = self.injector.process(frames, t)
         following = sum(1 for m in frames if m.arbitration_id in self.icd.by_id)
         sync = self._sync_sender.frame("SYNC", {"tick": self.tick & 0xFFFFFFFF,
                                                 "frames_following": min(following, 255),

@@ -137,6 +137,8 @@ class FswBusDriver:
         self._wheels_rx: list[float | None] = [None] * n_wheels
         self._wheels_new = [False] * n_wheels
         self._pending_sync: dict | None = None  # a SYNC seen while finishing the previous tick
+        self._timeout_s = 0.0  # collect_tick's timeout, and its deadline once a wait has begun
+        self._deadline: float | None = None
         self._realtime = False  # set by collect_latest: frames answer the newest SYNC seen (module docstring)
         self._rt_sync_tick: int | None = None  # newest SYNC tick received in real time
         self._rt_done_tick: int | None = None  # SYNC tick last answered with CYCLE_DONE
@@ -161,15 +163,17 @@ class FswBusDriver:
     def collect_tick(self, timeout_s: float) -> TickInputs | None:
         """Wait up to ``timeout_s`` for SYNC(k) and its announced frames; None if no SYNC arrived.
 
-        ``timeout_s`` bounds the whole call (SYNC plus its frames); 0 means "only what is queued now", the
-        in-process fast mode. Late frames of a tick are used at the next tick, as received.
+        ``timeout_s`` bounds the waiting of the whole call (SYNC plus its frames), counted from the first
+        time the receive queue is empty; 0 means "only what is queued now", the in-process fast mode. Late
+        frames of a tick are used at the next tick, as received.
         """
-        deadline = time.monotonic() + max(0.0, timeout_s)
+        self._timeout_s = max(0.0, timeout_s)
+        self._deadline = None  # set when the queue first runs empty (see _receive)
         self._realtime = False
         sync = self._pending_sync
         self._pending_sync = None
         while sync is None:
-            frame = self._receive(deadline)
+            frame = self._receive()
             if frame is None:
                 return None
             if frame.delivered and frame.frame_id == self._sync_id:
@@ -182,7 +186,7 @@ class FswBusDriver:
         self._begin_tick()
         received = 0
         while received < expected:
-            frame = self._receive(deadline)
+            frame = self._receive()
             if frame is None:
                 break
             if frame.frame_id == self._sync_id and frame.delivered:
@@ -216,16 +220,23 @@ class FswBusDriver:
             frames_expected=expected, frames_received=received,
         )
 
-    def _receive(self, deadline: float) -> ReceivedFrame | None:
-        """Next classified frame before ``deadline`` (own echoes skipped); None on timeout."""
+    def _receive(self) -> ReceivedFrame | None:
+        """Next classified frame within the call's timeout (own echoes skipped); None on timeout."""
         while True:
             # Frames come in bursts after SYNC: try without waiting first, and read the clock only when
-            # the queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest).
+            # the queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest): the
+            # first wait of a call starts the deadline and waits the whole timeout, without a clock read.
             msg = self.bus.recv(timeout=0.0)
             if msg is None:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0.0:
+                if self._timeout_s <= 0.0:
                     return None
+                if self._deadline is None:
+                    remaining = self._timeout_s
+                    self._deadline = time.monotonic() + remaining
+                else:
+                    remaining = self._deadline - time.monotonic()
+                    if remaining <= 0.0:
+                        return None
                 msg = self.bus.recv(timeout=remaining)
                 if msg is None:
                     return None
