@@ -227,7 +227,3 @@ class PathFollower:
         self.index += int(np.argmax(self.path[self.index:] @ y))
         ahead = np.flatnonzero(self.path[self.index:] @ y < self.cos_ahead)
         return len(self.path) - 1 if ahead.size == 0 else self.index + int(ahead[0])
-
-    @property
-    def finished(self) -> bool:
-        return self.index >= len(self.path) - 1
