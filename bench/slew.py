@@ -120,7 +120,7 @@ def shortest_safe_path(start: np.ndarray, end: np.ndarray, zones: list, margin_d
     segments can be on a shortest path (a vertex whose two neighbours lie on the same side of the
     segment's great circle), so only those are tested for crossing a polygon.
     """
-    from fsw.path_guidance import shortest_route
+    from fsw.path_guidance import path_length_deg, shortest_route
 
     polys = [_polygon(z, margin_deg) for z in zones]
     nodes = [start, end] + [v for P, _ in polys for v in P]
@@ -162,7 +162,7 @@ def shortest_safe_path(start: np.ndarray, end: np.ndarray, zones: list, margin_d
     route = shortest_route(np.array(nodes), edges)  # the flight planner's graph search; the graph is this one
     if route is None:
         return math.inf, start[None, :]
-    return float(np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", route[:-1], route[1:]), -1, 1))).sum()), route
+    return path_length_deg(route), route
 
 
 def what_geometry_allows(mission, t_s: float) -> dict:
@@ -201,6 +201,7 @@ def slew_mission(base: dict, start, end, path_planning: bool = True) -> dict:
 
 
 def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: bool = True) -> list[dict]:
+    from fsw.path_guidance import path_length_deg
     from hil_sim.campaign.fast import run_fast
     from hil_sim.mission import Mission
 
@@ -219,7 +220,7 @@ def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: boo
         tr = result.trajectory
         sel = (tr["t_s"] >= 5.0) & (tr["t_s"] <= 5.0 + settle) if math.isfinite(settle) else tr["t_s"] >= 5.0
         y = tr["boresight_N"][sel]
-        path_deg = float(np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", y[:-1], y[1:]), -1, 1))).sum())
+        path_deg = path_length_deg(y)
         row = {"slew": label, "angle_deg": theta, "eigen_axis_s": t_eig, "settling_s": settle,
                "path_deg": path_deg, "path_ratio": path_deg / theta,
                "ratio": settle / t_eig if math.isfinite(settle) else math.inf,

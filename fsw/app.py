@@ -19,11 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fsw.assumption_check import AssumptionChecker
 from fsw.control import RateController
 from fsw.estimation import AttitudeEstimator
 from fsw.executive import Executive
 from fsw.fdir import Fdir, FdirInputs
-from fsw.assumption_check import AssumptionChecker
 from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
@@ -90,9 +90,6 @@ def freeze_heap() -> None:
     gc.freeze()
 
 
-_MATH_THREAD_LIMIT = None
-
-
 def single_threaded_math() -> None:
     """Run numpy's and scipy's BLAS on the calling thread only.
 
@@ -100,10 +97,9 @@ def single_threaded_math() -> None:
     scheduling; a real-time cycle thread would then wait for a worker that the host has preempted. Every
     library that threadpoolctl knows gets one thread, for the rest of the process.
     """
-    global _MATH_THREAD_LIMIT
     from threadpoolctl import threadpool_limits
 
-    _MATH_THREAD_LIMIT = threadpool_limits(limits=1)
+    threadpool_limits(limits=1)  # applied at once; the returned handle is only needed to undo it
 
 
 def prepare_cycle_thread() -> None:
@@ -115,8 +111,9 @@ def prepare_cycle_thread() -> None:
 def enter_realtime(priority: int) -> list[tuple[str, str]]:
     """Prepare this thread for paced cycles; returns (event name, reason) pairs to report.
 
-    Freezes the start-up heap and keeps BLAS on this thread (``prepare_cycle_thread``). With ``priority`` > 0 the thread runs SCHED_FIFO (no
-    time-sharing with the host's other work) and all pages are locked in memory (no page fault mid-cycle).
+    Freezes the start-up heap and keeps BLAS on this thread (``prepare_cycle_thread``). With
+    ``priority`` > 0 the thread runs SCHED_FIFO (no time-sharing with the host's other work) and all pages
+    are locked in memory (no page fault mid-cycle).
     """
     import ctypes
     import ctypes.util

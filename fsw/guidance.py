@@ -78,7 +78,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fsw.assumption_check import CheckResult
-from fsw.path_guidance import PathFollower, plan_path
+from fsw.path_guidance import PathFollower, path_length_deg, plan_path
 from gnc import sky_zones
 from gnc.attitude import (
     attitude_error_angle,
@@ -774,9 +774,9 @@ class Guidance:
         saturating = math.degrees(math.asin(min(1.0, 1.25 * self.max_rate_rad_s / self.k1)))
         self._follower = PathFollower(vertices, max(cfg.lookahead_deg, saturating))
         self._aim_k = -1
-        self._aim_moved(t_s, y)
+        self._advance_aim(y)
         if not replanned:
-            length = float(np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", vertices[:-1], vertices[1:]), -1.0, 1.0))).sum())
+            length = path_length_deg(vertices)
             self.events("PATH_PLANNED", length_deg=length, detour_deg=length - _angle_deg(y, self.target_N),
                         legs=len(vertices) - 1)
 
@@ -793,13 +793,18 @@ class Guidance:
         return any(bool(np.any(z.separation_batch(rest) <= d)) for z in obstacles)
 
     def _aim_moved(self, t_s: float, y: np.ndarray) -> bool:
-        """Advance the law's aim along the path; True when the law must be rebuilt (the aim moved, the
-        path ended, or a replan is due)."""
+        """True when the law must be rebuilt: the aim moved along the path, the path ended, or it is time
+        to check the path against the moved zones."""
         f = self._follower
         if f is None:
             return False
         if t_s - self._planned_t >= self.cfg.pointing.path.replan_period_s:
             return True  # time to check the path against the zones as they are now (`_path_blocked`)
+        return self._advance_aim(y)
+
+    def _advance_aim(self, y: np.ndarray) -> bool:
+        """Move the law's aim to the path point ahead of the boresight ``y``; True if it moved."""
+        f = self._follower
         k = f.aim_index(y)
         if k == self._aim_k:
             return False

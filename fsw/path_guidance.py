@@ -8,7 +8,7 @@ from every zone the law avoids (a visibility graph over convex polygons drawn ro
 moves the law's target x_d along it, a look-ahead beyond the boresight. The law still runs on the
 inflated zones with its eps chosen for that x_d, so the paper's invariance of the inflated zones holds
 whatever x_d is: the plan only chooses which way round; the last leg is the paper's law to the real
-target. Design note 9 in docs/design-notes.md.
+target. Design note 10 in docs/design-notes.md.
 """
 from __future__ import annotations
 
@@ -41,18 +41,18 @@ def planning_polygon(zone, standoff_deg: float, rays: int) -> tuple[np.ndarray, 
     s = math.radians(standoff_deg)
     if cap + s > _MAX_POLYGON_RADIUS_RAD:
         return None
-    B = zone.vertices_sphere if getattr(zone, "shape", None) == "polygon" else zone.boundary(rays)
+    exact = getattr(zone, "shape", None) == "polygon"  # its own vertices; other shapes are sampled
+    B = zone.vertices_sphere if exact else zone.boundary(rays)
     e1 = np.cross(g, [0.0, 0.0, 1.0] if abs(g[2]) < 0.9 else [1.0, 0.0, 0.0])
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(g, e1)
     uv = np.column_stack([B @ e1, B @ e2]) / (B @ g)[:, None]
     P = B[ConvexHull(uv).vertices]  # counter-clockwise about g seen from outside
-    if getattr(zone, "shape", None) != "polygon":
+    if not exact:
         # sides between boundary samples cut inside a curved boundary by their sagitta, about
         # length x turning / 8: moved out by that much more, the polygon contains the zone
-        N = _sides(P)
-        length = np.arccos(np.clip(np.einsum("ij,ij->i", P, np.roll(P, -1, axis=0)), -1.0, 1.0))
-        turn = np.arccos(np.clip(np.einsum("ij,ij->i", N, np.roll(N, -1, axis=0)), -1.0, 1.0))
+        length = _successive_angles(P)
+        turn = _successive_angles(_sides(P))
         s += float(np.max(length * np.maximum(turn, np.roll(turn, 1)))) / 8.0
     P, N = _fewer_sides(P, g, 2.0 * math.pi / rays)
     if s > 0.0:
@@ -68,6 +68,16 @@ def planning_polygon(zone, standoff_deg: float, rays: int) -> tuple[np.ndarray, 
     return P, N
 
 
+def _successive_angles(U: np.ndarray) -> np.ndarray:
+    """Angle [rad] between each unit row and the next, cyclically."""
+    return np.arccos(np.clip(np.einsum("ij,ij->i", U, np.roll(U, -1, axis=0)), -1.0, 1.0))
+
+
+def path_length_deg(vertices: np.ndarray) -> float:
+    """Length [deg] of the great-circle legs through ``vertices`` (an open path)."""
+    return float(np.degrees(_successive_angles(vertices)[:-1]).sum())
+
+
 def _sides(P: np.ndarray) -> np.ndarray:
     """Inward unit normals of the sides P_i -> P_i+1 of a counter-clockwise convex polygon."""
     N = np.cross(P, np.roll(P, -1, axis=0))
@@ -80,7 +90,7 @@ def _fewer_sides(P: np.ndarray, g: np.ndarray, turn_rad: float) -> tuple[np.ndar
     always kept). The kept sides' great circles meet outside the dropped run, so it still contains P.
     The visibility graph costs the square of the vertex count."""
     N = _sides(P)
-    turning = np.arccos(np.clip(np.einsum("ij,ij->i", N, np.roll(N, -1, axis=0)), -1.0, 1.0))
+    turning = _successive_angles(N)
     step = np.floor(np.concatenate([[0.0], np.cumsum(turning)[:-1]]) / turn_rad)
     keep = np.flatnonzero(np.diff(np.concatenate([[-1.0], step])) > 0)
     if len(keep) == len(N) or len(keep) < 3:
