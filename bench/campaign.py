@@ -135,6 +135,83 @@ def _tick_breakdown(duration: float) -> dict:
     return out
 
 
+def _frame_path_floor(repeats: int = 7, ticks: int = 2000) -> dict:
+    """The least a fast-mode tick can cost with the frames on a python-can bus, whatever the flight
+    software and the world cost: one tick's 22 frames (SYNC, 10 IMU, 2 star tracker, 4 wheel statuses out;
+    4 wheel commands, CYCLE_DONE back), with constant signals, through the steps every frame takes:
+
+    * ``message_objects``: only a ``can.Message`` built per frame and passed through a deque;
+    * ``virtual_bus``: the same messages sent and received on the ``LightVirtualBus`` of fast mode;
+    * ``icd_e2e_bus``: the generated ICD codec (encode with range checks and CRC) on the sending side and
+      the E2E receiver (CRC, decode, range and counter checks) on the receiving side, over that bus.
+
+    Medians of ``repeats`` runs of ``ticks`` ticks, in microseconds per tick."""
+    import collections
+
+    from fsw.bus import E2EReceiver, E2ESender, Icd, open_bus
+    from fsw.bus.icd import _data_frame
+
+    icd = Icd()
+    names = (["SYNC"] + ["IMU_RATE"] * 10 + ["ST_QUAT_A", "ST_QUAT_B"] + [f"RW{i}_STATUS" for i in range(1, 5)]
+             + [f"RW{i}_CMD" for i in range(1, 5)] + ["CYCLE_DONE"])
+    # mid-range values: every frame passes the codec's and the receiver's range checks
+    signals = {n: {s: (0.0 if lo <= 0.0 <= hi else lo) for s, (lo, hi) in icd.spec(n).ranges.items()
+                   if not s.startswith("E2E_")} for n in set(names)}
+    ids = [icd.spec(n).frame_id for n in names]
+    payload = bytearray(8)
+    channel = f"virtual:floor{os.getpid()}"
+    tx, rx = open_bus(channel, light=True), open_bus(channel, light=True)
+    sender, receiver = E2ESender(icd), E2EReceiver(icd)
+    queue: collections.deque = collections.deque()
+
+    def message_objects() -> None:
+        for frame_id in ids:
+            queue.append(_data_frame(frame_id, payload))
+        while queue:
+            queue.popleft()
+
+    def virtual_bus() -> None:
+        for frame_id in ids:
+            tx.send(_data_frame(frame_id, payload))
+        while rx.recv(0.0) is not None:
+            pass
+
+    def icd_e2e_bus() -> None:
+        for name in names:
+            tx.send(sender.frame(name, signals[name]))
+        while True:
+            msg = rx.recv(0.0)
+            if msg is None:
+                break
+            frame = receiver.classify(msg, 0.0)
+            if not frame.delivered:
+                raise RuntimeError(f"floor: frame {frame.name} classified {frame.status}")
+
+    out = {}
+    try:
+        for step in (message_objects, virtual_bus, icd_e2e_bus):
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                for _ in range(ticks):
+                    step()
+                times.append(1e6 * (time.perf_counter() - t0) / ticks)
+            out[step.__name__] = statistics.median(times)
+    finally:
+        tx.shutdown()
+        rx.shutdown()
+    out["frames_per_tick"] = len(names)
+    return out
+
+
+def _print_floor(floor: dict) -> None:
+    budget_us = 1e6 * 0.1 * os.cpu_count() / GOAL_SIM_S_PER_WALL_S
+    print(f"\nthe frame path's floor, {floor['frames_per_tick']} frames per tick, no flight software, no world "
+          f"[us per tick; the goal's whole budget is {budget_us:.0f} us]:")
+    for k in ("message_objects", "virtual_bus", "icd_e2e_bus"):
+        print(f"  {k:44s} {floor[k]:8.1f}  ({100.0 * floor[k] / budget_us:5.1f} % of the budget)")
+
+
 def _print_breakdown(breakdown: dict) -> None:
     cpu = breakdown["cpu_ms_per_tick"]
     print("\none run in-process (the second, caches warm), per GNC tick [ms]:")
@@ -159,7 +236,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-dask", action="store_true")
     ap.add_argument("--breakdown-only", action="store_true",
                     help="only the per-tick breakdown of one in-process run (prints, writes no JSON)")
+    ap.add_argument("--floor-only", action="store_true",
+                    help="only the frame path's floor per tick (prints, writes no JSON)")
     args = ap.parse_args(argv)
+    if args.floor_only:
+        _print_floor(_frame_path_floor())
+        return 0
     if args.breakdown_only:
         _print_breakdown(_tick_breakdown(min(args.duration or 120.0, 120.0)))
         return 0
@@ -172,6 +254,7 @@ def main(argv: list[str] | None = None) -> int:
                     Client(cluster) as client:
                 rows.append(_measure(f"Dask LocalCluster, {n} worker(s)", args.runs, args.duration, scheduler=client))
     breakdown = _tick_breakdown(min(args.duration or 120.0, 120.0))
+    floor = _frame_path_floor()
 
     print(f"\nregression campaign, fast mode, {args.runs} runs per row, "
           f"{args.duration or 'full'} s per run, {os.cpu_count()} cores (load avg {os.getloadavg()[0]:.1f})")
@@ -182,10 +265,12 @@ def main(argv: list[str] | None = None) -> int:
               f"{r['sim_s_per_wall_s']:13.1f} {r['median_run_wall_s']:13.1f} {r['median_run_sim_s_per_wall_s']:10.1f}")
     print(f"goal: >= {GOAL_SIM_S_PER_WALL_S:.0f} sim-s/wall-s in total")
     _print_breakdown(breakdown)
+    _print_floor(floor)
 
     result = {"bench": "campaign", "campaign": str(CAMPAIGN.relative_to(ROOT)), "runs_per_row": args.runs,
               "duration_s": args.duration, "cores": os.cpu_count(), "load_avg_1min": os.getloadavg()[0],
               "python": platform.python_version(), "rows": rows, "tick_breakdown_ms": breakdown,
+              "frame_path_floor_us_per_tick": floor,
               "goal_sim_s_per_wall_s": GOAL_SIM_S_PER_WALL_S,
               "goal_ms_per_tick_per_core": 1e3 * 0.1 * os.cpu_count() / GOAL_SIM_S_PER_WALL_S,
               "best_sim_s_per_wall_s": max(r["sim_s_per_wall_s"] for r in rows)}
