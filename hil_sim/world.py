@@ -242,6 +242,23 @@ class WorldBatch:
         self._no_normals_rows = np.zeros((0, M * 3))
         self._t = 0.0
         self._advance(0.0, np.zeros((M, N)), 0)
+        self._warm_period_kernel()
+
+    def _warm_period_kernel(self) -> None:
+        """Call the period kernel once with no step (J = 0), with the types ``advance_sampled`` passes: on a
+        machine without numba's cache it compiles here, at set-up, not inside the first lockstep tick
+        (seconds, in which the flight software would wait for a SYNC)."""
+        M, N = self.n_runs, self.n_wheels
+        none, eph = np.zeros(0, dtype=np.bool_), self.ephemeris
+        eph_t0, sun_c, moon_c = eph.table
+        decay, gm, has_coulomb = self._coef
+        _world_period_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, np.zeros((0, M, N)),
+                             np.zeros((0, M * 3)), 0.0, 0, self.U_APPLIED, self.FLAGS, decay, gm, has_coulomb,
+                             self._work, np.zeros(0), self.ORB, sun_c, moon_c, eph_t0, eph.node_spacing_s, self.AUX,
+                             none, np.zeros(0), np.zeros((0, M * 6)), self.BIAS, self.GYRO_P, np.zeros((0, M, 3)),
+                             np.zeros((0, M), dtype=np.bool_), none, self.ST_P, self.ST_BASIS, np.zeros((0, M * 3)),
+                             self.ST_Q, self.ST_VALID, self.ST_BLIND, np.zeros((0, M, 4)),
+                             np.zeros((0, M), dtype=np.bool_), np.zeros((0, M), dtype=np.int64))
 
     # ----------------------------------------------------------------------------------------- stepping
     @property

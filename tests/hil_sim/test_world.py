@@ -274,3 +274,41 @@ def test_truth_ephemeris_nodes_kept_on_disk_are_astropy_s_numbers(tmp_path, monk
     monkeypatch.setenv(et.CACHE_ENV, str(tmp_path))
     for a, b in zip(computed, et._astropy_nodes(*args)):
         np.testing.assert_array_equal(a, b)
+
+
+
+_FIRST_STEP_COMPILES = """
+import dataclasses, sys
+import numpy as np
+sys.path.insert(0, {tests!r})
+from test_world import _noisy_params
+from hil_sim.params import SpacecraftParams
+from hil_sim.world import WorldBatch, _world_period_kernel
+
+quiet = dataclasses.replace(_noisy_params(), spacecraft=SpacecraftParams())
+worlds = [WorldBatch([p] * runs, seed=3) for runs in (1, 2) for p in (_noisy_params(), quiet)]
+compiled = list(_world_period_kernel.signatures)
+some_due = np.array([True, False] * 5)
+for world in worlds:
+    for imu_due, st_due in ((np.ones(10, bool), some_due), (some_due, np.zeros(10, bool))):
+        world.advance_sampled(0.01, 1, np.zeros((10, world.n_runs, world.n_wheels)), imu_due, st_due)
+print(len(compiled), len(_world_period_kernel.signatures))
+"""
+
+
+def test_period_kernel_is_compiled_at_set_up_not_at_the_first_step():
+    """The lockstep simulator's first tick must not compile (seconds on a machine without numba's cache,
+    while the flight software waits for SYNC): set-up compiles the period kernel for the exact argument
+    types advance_sampled passes, with and without random disturbance, for any sensor due pattern. In a
+    fresh interpreter, where nothing has called the kernel yet."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = _FIRST_STEP_COMPILES.format(tests=str(Path(__file__).parent))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         cwd=Path(__file__).parents[2])
+    assert out.returncode == 0, out.stderr
+    at_set_up, after_steps = map(int, out.stdout.split())
+    assert at_set_up >= 1, "set-up did not compile the period kernel"
+    assert after_steps == at_set_up, "a step compiled the period kernel for new argument types"
