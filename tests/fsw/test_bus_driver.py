@@ -217,7 +217,9 @@ def test_realtime_cycle_done_answers_the_newest_sync_and_a_late_cycle_still_coun
         late, done = run(20)
         assert done >= 19 and late <= 1, (late, done)  # before the fix: late == 20, done == 0
         late, done = run(20, overrun_at=10)
-        assert 2 <= late <= 6, late  # the overrunning cycle's tick and the ones it covered
+        # the overrunning cycle's tick and the ones it covered (2-4); on a loaded host the threads' own
+        # scheduling delays add a few (7 seen at load 4.8 on 2 cores); the defect this guards is all 20
+        assert 2 <= late <= 10, late
     finally:
         loop.close()
 
