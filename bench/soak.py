@@ -21,6 +21,7 @@ Prints a table and writes bench/results/soak.json.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import math
 import multiprocessing
@@ -114,6 +115,30 @@ def rss_mb() -> float:
     return psutil.Process().memory_info().rss / 1e6
 
 
+
+class GcTimer:
+    """The cyclic garbage collector's runs, timed through ``gc.callbacks``: how many per generation, the
+    longest, and the collecting time inside the current step (to tell a long cycle that collected)."""
+
+    def __init__(self) -> None:
+        self.started = 0.0
+        self.in_step_s = 0.0
+        self.count = [0, 0, 0]
+        self.longest_ms = [0.0, 0.0, 0.0]
+        self.total_s = [0.0, 0.0, 0.0]
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self.started = time.perf_counter()
+            return
+        spent = time.perf_counter() - self.started
+        g = info["generation"]
+        self.count[g] += 1
+        self.total_s[g] += spent
+        self.longest_ms[g] = max(self.longest_ms[g], 1e3 * spent)
+        self.in_step_s += spent
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hours", type=float, default=24.0, help="simulated hours (default 24)")
@@ -184,17 +209,20 @@ def main(argv=None) -> int:
     rss_before_trace = None
     notable, last_event = [], None  # warnings and worse, with onboard time (the deque keeps only the latest)
     rest = RtBandwidth(args.rt_duty) if args.rt_priority else None
-    long_cycles = []  # GNC cycles longer than LONG_CYCLE_MS: when, and whether tracemalloc was on
+    long_cycles = []  # GNC cycles longer than LONG_CYCLE_MS: when, whether tracemalloc was on, GC time in it
+    gc_timer = GcTimer()
+    gc.callbacks.append(gc_timer)
     for k in range(ticks):
         if rest is not None:
             rest.between_steps()
         if k == trace_start and not args.no_tracemalloc:
             rss_before_trace = rss_mb()  # RSS growth is judged before tracing adds its own memory
             tracemalloc.start(1)  # one frame: enough to locate growth, ~2x slower instead of ~15x
+        gc_timer.in_step_s = 0.0
         loop.step()
         if fsw.last.exec_time_ms > LONG_CYCLE_MS and len(long_cycles) < 100:
             long_cycles.append({"t_s": round(k * cfg.gnc_period_s, 1), "exec_ms": round(fsw.last.exec_time_ms, 2),
-                                "tracing": tracemalloc.is_tracing()})
+                                "tracing": tracemalloc.is_tracing(), "gc_ms_in_step": round(1e3 * gc_timer.in_step_s, 2)})
         if k and k % tc_every == 0:
             seq += 1
             v = targets[seq % 2]
@@ -236,6 +264,7 @@ def main(argv=None) -> int:
         "tracemalloc_top_growth": top,
         "slips": fsw.executive.gnc.slips,
         "long_cycles": long_cycles,
+        "gc": {"collections": gc_timer.count, "longest_ms": gc_timer.longest_ms, "total_s": gc_timer.total_s},
         "exec_ms": {"mean": fsw.executive.gnc.exec_mean_ms, "max": fsw.executive.gnc.exec_max_ms},
         "tm": {"sent": tm.counters["packets_sent"], "send_errors": tm.counters["send_errors"],
                "received": rx.received, "lost_by_sequence_count": rx.lost},
@@ -261,6 +290,10 @@ def main(argv=None) -> int:
         ("RSS at 10 % / before tracing / growth [MB]", f"{rss_first:.1f} / {rss_last:.1f} / {rss_last - rss_first:+.1f}"),
         ("cycle slips (lockstep budget)", str(result["slips"])),
         ("GNC exec mean / max [ms]", f"{result['exec_ms']['mean']:.3f} / {result['exec_ms']['max']:.1f}"),
+        (f"cycles over {LONG_CYCLE_MS:.0f} ms (GC time in them [ms])",
+         ", ".join(f"{c['exec_ms']:.0f} ({c['gc_ms_in_step']:.0f})" for c in long_cycles[:12]) or "none"),
+        ("GC collections gen 0/1/2, longest [ms]",
+         "/".join(str(n) for n in gc_timer.count) + ", " + "/".join(f"{m:.1f}" for m in gc_timer.longest_ms)),
         ("TM packets sent / received / lost", f"{result['tm']['sent']} / {rx.received} / {rx.lost}"),
         ("bus CRC / alive / timeouts", f"{counters['bus_crc_errors']} / {counters['bus_alive_errors']} / {counters['bus_timeouts']}"),
         ("FDIR trips, final mode", f"{result['fdir_trips']} {result['fdir_trips_by_monitor']}, {result['final_mode']}"),
