@@ -139,6 +139,26 @@ class GcTimer:
         self.in_step_s += spent
 
 
+
+class StealClock:
+    """CPU time the hypervisor took from one CPU (``steal`` in /proc/stat, in ms; 10 ms resolution): a
+    real-time thread in a virtual machine cannot stop its virtual CPU from being descheduled, so a long
+    cycle with steal time in it was not the flight software's own. ``cpu`` None: all CPUs together."""
+
+    def __init__(self, cpu: int | None) -> None:
+        self._fd = os.open("/proc/stat", os.O_RDONLY)
+        self._key = b"cpu " if cpu is None else f"\ncpu{cpu} ".encode()
+        self._ms_per_tick = 1e3 / os.sysconf("SC_CLK_TCK")
+
+    def ms(self) -> float:
+        buf = os.pread(self._fd, 16384, 0)
+        i = buf.find(self._key) + len(self._key)
+        return int(buf[i:buf.find(b"\n", i)].split()[7]) * self._ms_per_tick
+
+    def close(self) -> None:
+        os.close(self._fd)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hours", type=float, default=24.0, help="simulated hours (default 24)")
@@ -212,6 +232,8 @@ def main(argv=None) -> int:
     long_cycles = []  # GNC cycles longer than LONG_CYCLE_MS: when, whether tracemalloc was on, GC time in it
     gc_timer = GcTimer()
     gc.callbacks.append(gc_timer)
+    steal = StealClock(args.cpu)
+    steal_start = steal.ms()
     for k in range(ticks):
         if rest is not None:
             rest.between_steps()
@@ -219,10 +241,12 @@ def main(argv=None) -> int:
             rss_before_trace = rss_mb()  # RSS growth is judged before tracing adds its own memory
             tracemalloc.start(1)  # one frame: enough to locate growth, ~2x slower instead of ~15x
         gc_timer.in_step_s = 0.0
+        stolen_before = steal.ms()
         loop.step()
         if fsw.last.exec_time_ms > LONG_CYCLE_MS and len(long_cycles) < 100:
             long_cycles.append({"t_s": round(k * cfg.gnc_period_s, 1), "exec_ms": round(fsw.last.exec_time_ms, 2),
-                                "tracing": tracemalloc.is_tracing(), "gc_ms_in_step": round(1e3 * gc_timer.in_step_s, 2)})
+                                "tracing": tracemalloc.is_tracing(), "gc_ms_in_step": round(1e3 * gc_timer.in_step_s, 2),
+                                "steal_ms_in_step": steal.ms() - stolen_before})
         if k and k % tc_every == 0:
             seq += 1
             v = targets[seq % 2]
@@ -264,6 +288,7 @@ def main(argv=None) -> int:
         "tracemalloc_top_growth": top,
         "slips": fsw.executive.gnc.slips,
         "long_cycles": long_cycles,
+        "steal_ms": steal.ms() - steal_start,
         "gc": {"collections": gc_timer.count, "longest_ms": gc_timer.longest_ms, "total_s": gc_timer.total_s},
         "exec_ms": {"mean": fsw.executive.gnc.exec_mean_ms, "max": fsw.executive.gnc.exec_max_ms},
         "tm": {"sent": tm.counters["packets_sent"], "send_errors": tm.counters["send_errors"],
@@ -283,6 +308,7 @@ def main(argv=None) -> int:
             m = e.args.get("monitor")
             result["fdir_trips_by_monitor"][m] = result["fdir_trips_by_monitor"].get(m, 0) + 1
     loop.close()
+    steal.close()
     print(f"\nSoak: {args.hours} simulated hours ({ticks} ticks) in {wall:.0f} s wall")
     rows = [
         ("quaternion norm drift, estimate (max |q|-1)", f"{result['quat_norm_drift']['estimate_max']:.2e}"),
@@ -290,8 +316,10 @@ def main(argv=None) -> int:
         ("RSS at 10 % / before tracing / growth [MB]", f"{rss_first:.1f} / {rss_last:.1f} / {rss_last - rss_first:+.1f}"),
         ("cycle slips (lockstep budget)", str(result["slips"])),
         ("GNC exec mean / max [ms]", f"{result['exec_ms']['mean']:.3f} / {result['exec_ms']['max']:.1f}"),
-        (f"cycles over {LONG_CYCLE_MS:.0f} ms (GC time in them [ms])",
-         ", ".join(f"{c['exec_ms']:.0f} ({c['gc_ms_in_step']:.0f})" for c in long_cycles[:12]) or "none"),
+        (f"cycles over {LONG_CYCLE_MS:.0f} ms (GC / hypervisor steal in them) [ms]",
+         ", ".join(f"{c['exec_ms']:.0f} ({c['gc_ms_in_step']:.0f}/{c['steal_ms_in_step']:.0f})"
+                   for c in long_cycles[:12]) or "none"),
+        ("hypervisor steal on the cycle's CPU over the run [s]", f"{result['steal_ms'] / 1e3:.1f}"),
         ("GC collections gen 0/1/2, longest [ms]",
          "/".join(str(n) for n in gc_timer.count) + ", " + "/".join(f"{m:.1f}" for m in gc_timer.longest_ms)),
         ("TM packets sent / received / lost", f"{result['tm']['sent']} / {rx.received} / {rx.lost}"),
