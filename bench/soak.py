@@ -5,7 +5,7 @@
 
 Everything runs in one process on a ``virtual`` CAN bus (hil_sim.lockstep.Simulator in-process mode):
 every frame is ICD-encoded, E2E-protected and checked. Telemetry goes as real UDP datagrams to a loopback
-receiver thread that checks the CCSDS sequence counts per APID, so lost packets are counted, not guessed.
+receiver process that checks the CCSDS sequence counts per APID, so lost packets are counted, not guessed.
 The scenario keeps the spacecraft busy: POINTING with Sun (star-shaped), Moon (cone) and Earth (polygon)
 zones moving with the ephemeris, a new target telecommanded every 20 simulated minutes (alternating
 between two sky directions), housekeeping and assumption checks as in flight.
@@ -13,7 +13,8 @@ between two sky directions), housekeeping and assumption checks as in flight.
 Reported: quaternion-norm drift of the estimate and of the truth, memory (RSS over time; growth from
 10 % of the run until tracing starts, and the tracemalloc top growth over the last part of the run, from
 --trace-from + 5 % to the end), cycle slips (lockstep budget: a cycle whose host execution time exceeds
-the period), lost telemetry packets, bus E2E error counters, FDIR trips, final mode. Goals: no growth,
+the period), every cycle over 20 ms with the garbage collector's time and the hypervisor's steal time on
+the cycle's CPU inside it, lost telemetry packets, bus E2E error counters, FDIR trips, final mode. Goals: no growth,
 0 slips, 0 lost. ``--rt-priority N`` runs it under SCHED_FIFO as flight software would run, resting
 between steps to stay below the kernel's real-time bandwidth (``--rt-duty``).
 Prints a table and writes bench/results/soak.json.
@@ -115,7 +116,6 @@ def rss_mb() -> float:
     return psutil.Process().memory_info().rss / 1e6
 
 
-
 class GcTimer:
     """The cyclic garbage collector's runs, timed through ``gc.callbacks``: how many per generation, the
     longest, and the collecting time inside the current step (to tell a long cycle that collected)."""
@@ -137,7 +137,6 @@ class GcTimer:
         self.total_s[g] += spent
         self.longest_ms[g] = max(self.longest_ms[g], 1e3 * spent)
         self.in_step_s += spent
-
 
 
 class StealClock:
