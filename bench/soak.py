@@ -242,8 +242,11 @@ def main(argv=None) -> int:
         gc_timer.in_step_s = 0.0
         stolen_before = steal.ms()
         loop.step()
-        if fsw.last.exec_time_ms > LONG_CYCLE_MS and len(long_cycles) < 100:
-            long_cycles.append({"t_s": round(k * cfg.gnc_period_s, 1), "exec_ms": round(fsw.last.exec_time_ms, 2),
+        task_ms = 1e3 * fsw.executive.gnc.last_exec_s  # the whole GNC task, as slips are judged
+        if task_ms > LONG_CYCLE_MS and len(long_cycles) < 100:
+            # cycle_ms: the part up to the cycle record; the rest is the telemetry packet's sending
+            long_cycles.append({"t_s": round(k * cfg.gnc_period_s, 1), "exec_ms": round(task_ms, 2),
+                                "cycle_ms": round(fsw.last.exec_time_ms, 2),
                                 "tracing": tracemalloc.is_tracing(), "gc_ms_in_step": round(1e3 * gc_timer.in_step_s, 2),
                                 "steal_ms_in_step": steal.ms() - stolen_before})
         if k and k % tc_every == 0:
@@ -315,8 +318,8 @@ def main(argv=None) -> int:
         ("RSS at 10 % / before tracing / growth [MB]", f"{rss_first:.1f} / {rss_last:.1f} / {rss_last - rss_first:+.1f}"),
         ("cycle slips (lockstep budget)", str(result["slips"])),
         ("GNC exec mean / max [ms]", f"{result['exec_ms']['mean']:.3f} / {result['exec_ms']['max']:.1f}"),
-        (f"cycles over {LONG_CYCLE_MS:.0f} ms (GC / hypervisor steal in them) [ms]",
-         ", ".join(f"{c['exec_ms']:.0f} ({c['gc_ms_in_step']:.0f}/{c['steal_ms_in_step']:.0f})"
+        (f"GNC tasks over {LONG_CYCLE_MS:.0f} ms (GC / hypervisor steal; TM send in them) [ms]",
+         ", ".join(f"{c['exec_ms']:.0f} ({c['gc_ms_in_step']:.0f}/{c['steal_ms_in_step']:.0f}; TM {c['exec_ms'] - c['cycle_ms']:.0f})"
                    for c in long_cycles[:12]) or "none"),
         ("hypervisor steal on the cycle's CPU over the run [s]", f"{result['steal_ms'] / 1e3:.1f}"),
         ("GC collections gen 0/1/2, longest [ms]",
