@@ -249,16 +249,25 @@ class WorldBatch:
         machine without numba's cache it compiles here, at set-up, not inside the first lockstep tick
         (seconds, in which the flight software would wait for a SYNC)."""
         M, N = self.n_runs, self.n_wheels
-        none, eph = np.zeros(0, dtype=np.bool_), self.ephemeris
-        eph_t0, sun_c, moon_c = eph.table
+        none = np.zeros(0, dtype=np.bool_)
+        self._period_kernel(np.zeros((0, M, N)), np.zeros((0, M * 3)), 0.0, 0, np.zeros(0), none, np.zeros(0),
+                            np.zeros((0, M * 6)), none, np.zeros((0, M * 3)),
+                            (np.zeros((0, M, 3)), np.zeros((0, M), dtype=np.bool_), np.zeros((0, M, 4)),
+                             np.zeros((0, M), dtype=np.bool_), np.zeros((0, M), dtype=np.int64)))
+
+    def _period_kernel(self, u_seq, normals, dt_sub, n_sub, t_end, imu_due, imu_dt, imu_normals, st_due, st_normals,
+                       out) -> int:
+        """``_world_period_kernel`` on this batch's state; ``out``: (gyro, sat, st_q, st_valid, st_blind)."""
+        eph = self.ephemeris
+        eph_t0, sun_c, moon_c = eph.table  # one read: consistent even if another thread extends the table
         decay, gm, has_coulomb = self._coef
-        _world_period_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, np.zeros((0, M, N)),
-                             np.zeros((0, M * 3)), 0.0, 0, self.U_APPLIED, self.FLAGS, decay, gm, has_coulomb,
-                             self._work, np.zeros(0), self.ORB, sun_c, moon_c, eph_t0, eph.node_spacing_s, self.AUX,
-                             none, np.zeros(0), np.zeros((0, M * 6)), self.BIAS, self.GYRO_P, np.zeros((0, M, 3)),
-                             np.zeros((0, M), dtype=np.bool_), none, self.ST_P, self.ST_BASIS, np.zeros((0, M * 3)),
-                             self.ST_Q, self.ST_VALID, self.ST_BLIND, np.zeros((0, M, 4)),
-                             np.zeros((0, M), dtype=np.bool_), np.zeros((0, M), dtype=np.int64))
+        gyro, sat, st_q, st_valid, st_blind = out
+        return _world_period_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_seq, normals, dt_sub, n_sub,
+                                    self.U_APPLIED, self.FLAGS, decay, gm, has_coulomb, self._work, t_end, self.ORB,
+                                    sun_c, moon_c, eph_t0, eph.node_spacing_s, self.AUX,
+                                    imu_due, imu_dt, imu_normals, self.BIAS, self.GYRO_P, gyro, sat,
+                                    st_due, self.ST_P, self.ST_BASIS, st_normals, self.ST_Q, self.ST_VALID,
+                                    self.ST_BLIND, st_q, st_valid, st_blind)
 
     # ----------------------------------------------------------------------------------------- stepping
     @property
@@ -320,19 +329,13 @@ class WorldBatch:
         if dt_sub != self._coef_dt:
             self._coef = dyn.step_coefficients(self.W, self.B, dt_sub)
             self._coef_dt = dt_sub
-        decay, gm, has_coulomb = self._coef
-        eph_t0, sun_c, moon_c = eph.table
         if self._period_out is None or self._period_out[0].shape[0] != J:
             # outputs reused from period to period (callers copy what they keep, as with GYRO_OUT)
             self._period_out = (np.zeros((J, M, 3)), np.zeros((J, M), dtype=np.bool_), np.zeros((J, M, 4)),
                                 np.zeros((J, M), dtype=np.bool_), np.zeros((J, M), np.int64))
         gyro, sat, st_q, st_valid, st_blind = self._period_out
-        done = _world_period_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_seq, normals, dt_sub, n_sub,
-                                    self.U_APPLIED, self.FLAGS, decay, gm, has_coulomb, self._work, t_end, self.ORB,
-                                    sun_c, moon_c, eph_t0, eph.node_spacing_s, self.AUX,
-                                    imu_due, imu_dt, imu_normals, self.BIAS, self.GYRO_P, gyro, sat,
-                                    st_due, self.ST_P, self.ST_BASIS, st_normals, self.ST_Q, self.ST_VALID,
-                                    self.ST_BLIND, st_q, st_valid, st_blind)
+        done = self._period_kernel(u_seq, normals, dt_sub, n_sub, t_end, imu_due, imu_dt, imu_normals, st_due,
+                                   st_normals, self._period_out)
         if done:
             self._t = float(t_end[done - 1])
             if done == J:
