@@ -276,7 +276,6 @@ def test_truth_ephemeris_nodes_kept_on_disk_are_astropy_s_numbers(tmp_path, monk
         np.testing.assert_array_equal(a, b)
 
 
-
 _FIRST_STEP_COMPILES = """
 import dataclasses, sys
 import numpy as np
