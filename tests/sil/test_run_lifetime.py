@@ -154,17 +154,31 @@ def test_ground_killed_mid_run_cannot_pass(tmp_path):
     assert summary["status"].startswith("crashed: ground at t = ") and not summary["pass"], summary["status"]
 
 
+def _udp_drops(port: int) -> int:
+    """The kernel's count of datagrams dropped at the local UDP port (a full receive buffer)."""
+    drops = 0
+    for line in Path("/proc/net/udp").read_text().splitlines()[1:]:
+        fields = line.split()
+        if int(fields[1].split(":")[1], 16) == port:
+            drops += int(fields[-1])
+    return drops
+
+
 @pytest.mark.slow
 def test_ground_that_lost_telemetry_is_judged_incomplete(tmp_path):
-    """The ground stopped (SIGSTOP) for a while: the kernel drops what its socket cannot hold; the run
-    completes, but the judge sees the sequence gaps and the run cannot pass."""
-    proc = _start(tmp_path, 150.0)
+    """The ground stopped (SIGSTOP) until the kernel dropped telemetry its full socket could not hold: the
+    run completes, but the judge sees the sequence gaps and the run cannot pass."""
+    proc = _start(tmp_path, LONG_S)
     run_dir = _wait_running(proc, tmp_path / "runs")
     ground = [p for p in psutil.Process(proc.pid).children() if "spawn_main" in " ".join(p.cmdline())][0]
+    (port,) = {c.laddr.port for c in ground.net_connections(kind="udp")}
     ground.suspend()
-    time.sleep(8.0)
+    deadline = time.monotonic() + 300
+    while _udp_drops(port) == 0 and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.5)
     ground.resume()
-    text, _ = proc.communicate(timeout=600)
+    assert _udp_drops(port) > 0, "the kernel dropped nothing: the test did not make the ground lose telemetry"
+    text, _ = proc.communicate(timeout=900)
     summary = _summary(run_dir)
     assert summary["status"] == "incomplete telemetry", (summary["telemetry_complete"], text)
     assert proc.returncode == sil.EXIT_INCOMPLETE_TELEMETRY and not summary["pass"]
