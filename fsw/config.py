@@ -250,7 +250,7 @@ class LawConfig(_Strict):
 
 # -------------------------------------------------------------------------------------------- modes
 class PathGuidanceConfig(_Strict):
-    """POINTING slews planned round the zones (fsw.path_guidance): the law's target moves along the
+    """POINTING slews planned round the zones (fsw.guidance.path_planning): the law's target moves along the
     shortest path that keeps a standoff from every zone the law avoids, instead of heading straight for a
     target behind a zone and creeping round the zone's edge."""
 

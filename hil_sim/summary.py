@@ -117,7 +117,7 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> l
 
 
 def lifted_quaternions(mission, truth: dict[str, np.ndarray]) -> np.ndarray:
-    """The truth attitude as the flight software's law sees it on S^3 (see fsw.guidance 'Double cover')."""
+    """The truth attitude as the flight software's law sees it on S^3 (see fsw.guidance.quaternion 'Double cover')."""
     q = np.array(truth["q_NB"], dtype=float)
     if not len(q):
         return q
