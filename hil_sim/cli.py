@@ -15,7 +15,7 @@ _COMMAND_MODULES = (
     "hil_sim.mission_cli",  # keepout config schema|validate|check
     "hil_sim.sil_cli",    # keepout sil run
     "hil_sim.bus_cli",    # keepout bus monitor|log
-    "fsw.ground",         # keepout ground [send ...]
+    "ground.cli",         # keepout ground [send ...]
     "hil_sim.campaign_cli",  # keepout campaign run|rerun|baseline|compare|shrink
 )
 

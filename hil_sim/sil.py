@@ -172,7 +172,7 @@ def ground_process(archive_dir: str, port: int, port_queue, ready, fsw_started, 
     the final packets are archived.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from fsw.ground import GroundMonitor
+    from ground.monitor import GroundMonitor
 
     monitor = GroundMonitor(port=port, archive_dir=archive_dir)
     port_queue.put(monitor.address[1])
@@ -441,7 +441,7 @@ def run_sil(options: RunOptions) -> RunResult:
             bus = open_bus(info.spec, run_id=run_dir.name)
         except (BusUnavailableError, OSError) as exc:
             raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
-        from fsw.ground import CommandSender
+        from ground.commanding import CommandSender
 
         sender = CommandSender(host=tmtc.telecommand_bind_host if tmtc.telecommand_bind_host != "0.0.0.0"
                                else "127.0.0.1", port=tc_port)
