@@ -23,6 +23,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validat
 
 from fsw.config import FswConfig
 from fsw.dictionary import FDIR_MONITORS
+from keepout_config import config_path
 
 if TYPE_CHECKING:
     from hil_sim.params import WorldParams
@@ -418,7 +419,7 @@ def _path(loc: tuple[str | int, ...]) -> str:
     return format_path(loc)
 
 
-SCHEMA_PATH = Path(__file__).resolve().parent.parent / "config" / "schema" / "mission.schema.json"
+SCHEMA_PATH = config_path("schema", "mission.schema.json")
 DRAFT07 = "http://json-schema.org/draft-07/schema#"
 
 
