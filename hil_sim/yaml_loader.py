@@ -222,11 +222,107 @@ def _compose_all(text: str) -> list[yaml.Node]:
 
 
 def syntax_problem(name: str, text: str, exc: yaml.MarkedYAMLError) -> Problem:
-    """A YAML syntax error as a Problem at the place the parser stopped."""
+    """A YAML syntax error as a Problem in plain words, with the fix, at the place to change.
+
+    PyYAML's own words ("expected <block end>, but found '<block mapping start>'") describe its parser
+    state, not the file; the common mistakes (a tab, a key indented differently from its neighbours, an
+    unclosed bracket or quote) are recognised and explained against the lines above.
+    """
     mark = exc.problem_mark or exc.context_mark
     line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
-    msg = f"YAML syntax error: {exc.problem}" + (f" ({exc.context})" if exc.context else "")
-    return Problem(name, line, col, "", msg)
+    problem = str(exc.problem or "")
+    context_at = exc.context_mark
+    lines = text.splitlines()
+    if "'\\t'" in problem:
+        return Problem(name, line, col, "", "a tab character: YAML does not allow tabs here; use spaces for "
+                       "indentation (and after ':')")
+    if mark is not None and ("mapping values are not allowed" in problem or "expected <block end>" in problem):
+        hint = _indentation_hint(lines, mark.line)
+        if hint is not None:
+            return Problem(name, mark.line + 1, hint[0], "", hint[1])
+    if "mapping values are not allowed" in problem:
+        return Problem(name, line, col, "", "a second ':' on this line: a value that contains ': ' must be "
+                       "quoted, e.g. key: 'a: b'")
+    if context_at is not None and "flow sequence" in str(exc.context):
+        return Problem(name, line, col, "", f"the '[' opened at line {context_at.line + 1}, column "
+                       f"{context_at.column + 1} is not closed: end the list with ']' on its line")
+    if context_at is not None and "flow mapping" in str(exc.context):
+        return Problem(name, line, col, "", f"the '{{' opened at line {context_at.line + 1}, column "
+                       f"{context_at.column + 1} is not closed: end the mapping with '}}' on its line")
+    if context_at is not None and "quoted scalar" in str(exc.context):
+        return Problem(name, context_at.line + 1, context_at.column + 1, "", "this quote is never closed: add "
+                       "the matching quote at the end of the value")
+    what = str(exc.context or "").replace("while parsing a ", "").replace("while scanning a ", "")
+    where = (f" (in the {what} that starts at line {context_at.line + 1})"
+             if context_at is not None and what else "")
+    return Problem(name, line, col, "", f"YAML syntax error: {problem}{where}")
+
+
+def _content_lines(lines: list[str], before: int) -> list[tuple[int, int, str]]:
+    """(line index, indent, text) of the lines before ``before`` that hold YAML, nearest first."""
+    out = []
+    for i in range(min(before, len(lines)) - 1, -1, -1):
+        stripped = lines[i].strip()
+        if stripped and not stripped.startswith("#"):
+            out.append((i, len(lines[i]) - len(lines[i].lstrip(" ")), stripped))
+    return out
+
+
+def _columns(indent: int, text: str) -> list[tuple[int, str]]:
+    """The columns a line opens, with how to name them: a key, or a list item and the key inside it."""
+    if text.startswith("- ") or text == "-":
+        item = text if len(text) <= 24 else text[:21] + "..."
+        out = [(indent, f"the list item '{item}'")]
+        rest = text[1:].lstrip(" ")
+        if rest and ":" in rest and not rest.startswith(("{", "[", "'", '"')):
+            out.append((indent + len(text) - len(rest), "'" + rest.split(":", 1)[0].strip() + "'"))
+        return out
+    return [(indent, "'" + text.split(":", 1)[0].strip() + "'")]
+
+
+def _spaces(n: int) -> str:
+    return f"{n} space" + ("" if n == 1 else "s")
+
+
+def _indentation_hint(lines: list[str], index: int) -> tuple[int, str] | None:
+    """(column, message) when line ``index`` is a key or list item indented unlike the lines above it."""
+    if index >= len(lines) or index == 0:
+        return None
+    raw = lines[index]
+    indent = len(raw) - len(raw.lstrip(" "))
+    text = raw.strip()
+    if not text or (":" not in text and not text.startswith("-")):
+        return None
+    above = _content_lines(lines, index)
+    if not above:
+        return None
+    me = _columns(indent, text)[0][1]
+    prev_i, prev_indent, prev_text = above[0]
+    prev_col, prev_label = _columns(prev_indent, prev_text)[-1]
+    if indent > prev_col:
+        if prev_text.rstrip().endswith(":"):
+            return None  # a child of a mapping key: not an indentation problem
+        return (indent + 1, f"{me} is indented {_spaces(indent)}, more than {prev_label} on line {prev_i + 1} "
+                f"({_spaces(prev_col)}), which already has a value, so YAML reads this line as part of that "
+                f"value; indent it {_spaces(prev_col)} to line up with {prev_label}")
+    # the columns it could line up with: those opened by the enclosing lines above
+    columns: list[tuple[int, str, int]] = []
+    lowest = prev_col + 1
+    for i, ind, t in above:
+        if ind < lowest:
+            columns += [(c, label, i + 1) for c, label in _columns(ind, t) if c < lowest]
+            lowest = ind
+        if ind == 0:
+            break
+    if any(c == indent for c, _, _ in columns):
+        return None
+    deeper = sorted((c for c in columns if c[0] > indent), key=lambda c: c[0])[:1]
+    shallower = sorted((c for c in columns if c[0] < indent), key=lambda c: -c[0])[:1]
+    choices = deeper + shallower
+    seen = ", ".join(f"{label} (line {n}) at {_spaces(c)}" for c, label, n in choices)
+    fix = " or ".join(f"{_spaces(c)} to line up with {label}" for c, label, _ in choices)
+    return (indent + 1, f"{me} is indented {_spaces(indent)}, which lines up with nothing above it ({seen}): "
+            f"the keys of one mapping, and the items of one list, must start in the same column; indent it {fix}")
 
 
 def load_marked(path: str | Path, text: str | None = None) -> Marked:
