@@ -24,7 +24,8 @@ PATH_DESCRIPTION = ("key path into the mission, dots between keys and [i] for li
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    # allow_inf_nan=False: a NaN or inf bound or sigma would draw NaN missions
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 # ---------------------------------------------------------------------------------------------
