@@ -127,7 +127,7 @@ def test_tc_round_trip_ground_send_to_dispatcher_and_command_event_back() -> Non
     assert [r.accepted for r in results] == [True]
     assert modes == ["POINTING"]
     assert dispatcher.counters["accepted"] == 1 and dispatcher.hk_values()["tc_accepted"] == 1
-    _receive(monitor, 2)  # CMD_DISPATCHED + CMD_COMPLETED arrive as telemetry
+    _receive(monitor, 4)  # CMD_DISPATCHED, acceptance report, CMD_COMPLETED, completion report
     assert [(e.event, e.severity) for e in monitor.events] == [("CMD_DISPATCHED", "COMMAND"),
                                                                ("CMD_COMPLETED", "COMMAND")]
     assert monitor.events[-1].args["command"] == "SET_MODE"
