@@ -4,7 +4,7 @@
 
 1. loads the mission (every problem as file:line:col) and runs the physics checks: a bad mission never
    starts a run;
-2. creates ``runs/<name>-<timestamp>/`` and writes the config actually used (bus, ports, clock and
+2. creates ``runs/<run id>/`` (`run_id`: name, time and a random part) and writes the config actually used (bus, ports, clock and
    duration overrides applied) with its sha256;
 3. starts the ground monitor (its own process: archives every telemetry packet, raw and decoded), then
    the flight software (``python -m fsw --config mission.yaml --bus SPEC``, its own process and
@@ -19,8 +19,7 @@
    ``summary.json`` (requirements judged on truth) and the plots, also after Ctrl-C (with what was
    recorded).
 
-Exit code: 0 all requirements pass, 1 a requirement failed, 2 the mission was rejected, 3 the run
-could not start, 130 interrupted (the summary is still written).
+Exit code and the summary's ``status``: see ``EXIT_*`` below and docs/running.md.
 """
 from __future__ import annotations
 
