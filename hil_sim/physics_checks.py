@@ -7,8 +7,10 @@ the whole run, because the Sun, Moon and Earth zones move:
 * the initial attitude already inside a zone;
 * a zone whose kernel g_i is not strictly inside it (the law pushes away from g_i);
 * the paper's Assumption 1 (zones pairwise at least 2 delta apart) and the admissible eps interval
-  (0, min(eps_bar, 1 - cos delta)) at every sampled time, for the zones as the law sees them
-  (inflated by ``law.margin_deg``) and with the onboard ephemeris (`fsw.guidance.SkyEphemeris`);
+  (0, min(eps_bar, 1 - cos delta)) at every sampled time, for the zones as the flight software flies
+  them: inflated by ``law.margin_deg`` and merged by its own `fsw.guidance.ZoneGeometry.merge` when
+  closer than ``law.merge_gap_deg``, with the onboard ephemeris (`fsw.guidance.SkyEphemeris`); a close
+  pair it cannot merge (the target between them) is an error;
 * kappa <= kappa_bar (StarShapedLaw: an undesired stable equilibrium may exist);
 * wheels too weak for the commanded rate limit: the angular acceleration they can give about the worst
   body axis versus ``control.max_command_accel_deg_s2``, the wheel momentum headroom versus
@@ -149,16 +151,33 @@ def _kernel_hint(name: str, exc: Exception) -> str:
     return text
 
 
+@dataclass
+class FlownZones:
+    """The law's zones at one time as the flight software flies them: after its own merging."""
+
+    zones: list  # merged law zones
+    groups: list[list[int]]  # indices into the mission's zones, one group per merged zone
+    names: list[str]  # "sun", or "sun+moon" for a merged group
+    unmerged: list[tuple[int, int]]  # close pairs the flight software could not merge (indices into zones)
+
+
 class SkyZones:
-    """Physical and law (inflated) sky zones of a mission at any time, with the onboard ephemeris."""
+    """Physical and law (inflated) sky zones of a mission at any time, with the onboard ephemeris.
+
+    The law zones are inflated exactly as `fsw.guidance` inflates them (the law margin plus the rebuild
+    tolerance), and `as_flown` merges them with the flight software's own `ZoneGeometry.merge`, so the
+    checks judge the geometry the flight software will fly, not the zones as written.
+    """
 
     def __init__(self, mission: "Mission"):
-        from fsw.guidance import SkyEphemeris
+        from fsw.guidance import ZONE_REBUILD_TOL_DEG, SkyEphemeris
         from gnc import sky_zones
 
         fsw = mission.flight_software
         self.ephemeris = SkyEphemeris(fsw)
         self.margin_deg = fsw.law.margin_deg
+        self.merge_gap_deg = fsw.law.merge_gap_deg
+        law_inflation_deg = self.margin_deg + ZONE_REBUILD_TOL_DEG
         self.names: list[str] = []
         self.bodies: list[str] = []
         self._phys, self._law, self._fixed = [], [], []
@@ -169,7 +188,7 @@ class SkyZones:
             self.bodies.append(z.body)
             try:
                 self._phys.append(sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra))
-                self._law.append(sky_zones.SkyZoneBuilder(z.geometry, self.margin_deg, extra))
+                self._law.append(sky_zones.SkyZoneBuilder(z.geometry, law_inflation_deg, extra))
                 self._phys[-1].build(np.array([0.0, 0.0, 1.0]))
             except ValueError as exc:
                 raise ZoneBuildError(_kernel_hint(z.name, exc)) from None
@@ -187,6 +206,16 @@ class SkyZones:
 
     def law(self, t_s: float) -> list:
         return [b.build(c) for b, c in zip(self._law, self.centers(t_s))]
+
+    def as_flown(self, law_zones: list, target: np.ndarray) -> FlownZones:
+        """Merge ``law_zones`` as the flight software does with the boresight at ``target`` (where it
+        settles: a merged zone must leave it outside, or the pair is bridged or left apart)."""
+        from fsw.guidance import ZoneGeometry
+
+        geometry = ZoneGeometry(3, self.merge_gap_deg)
+        merged, groups = geometry.merge(list(law_zones), keep_outside=[np.asarray(target, dtype=float)])
+        names = ["+".join(self.names[k] for k in g) for g in groups]
+        return FlownZones(merged, groups, names, list(geometry.unmerged))
 
     def max_rate_deg_s(self, t_s: float, dt_s: float = 60.0) -> float:
         """Fastest apparent motion of a zone centre [deg/s] around t."""
@@ -341,7 +370,25 @@ def _check_pointing(mission, segments, report, step_s) -> None:
                                f"'{name}' (margin {m_phys:.2f} deg to the physical zone, {m_law:.2f} deg to "
                                "the inflated one); the flight software would reject it", t_s=float(t),
                                margin_deg=m_phys)
-            eps_max = _check_assumptions_at(mission, seg.target, law_zones, sky.names, kappa, float(t),
+            flown = sky.as_flown(law_zones, seg.target)
+            for group, name in zip(flown.groups, flown.names):
+                if len(group) > 1 and ("merged", name) not in seen:
+                    seen.add(("merged", name))
+                    report.add("info", "merge", f"t = {t:.0f} s: zones {' and '.join(repr(sky.names[k]) for k in group)} "
+                               f"are closer than law.merge_gap_deg = {sky.merge_gap_deg:g} deg: the flight software "
+                               "flies them as one zone", t_s=float(t))
+            for i, j in flown.unmerged:
+                if (seg.source, "unmerged", i, j) in seen:
+                    continue
+                seen.add((seg.source, "unmerged", i, j))
+                gap = _cap_gap_deg(flown.zones[i], flown.zones[j])
+                report.add("error", "merge", f"t = {t:.0f} s: zones '{flown.names[i]}' and '{flown.names[j]}' are "
+                           f"{gap:.2f} deg apart as the law sees them (inflated by law.margin_deg), closer than "
+                           f"law.merge_gap_deg = {sky.merge_gap_deg:g} deg, but the flight software cannot merge "
+                           f"them: the target from {seg.source} lies between them, so it would steer out of the "
+                           "gap and never reach the target; move the target out of the gap", t_s=float(t),
+                           gap_deg=gap)
+            eps_max = _check_assumptions_at(mission, seg.target, flown.zones, flown.names, kappa, float(t),
                                             f"POINTING target from {seg.source}", report, seen)
             if math.isfinite(eps_max):
                 worst_eps_max = min(worst_eps_max, eps_max)
@@ -349,6 +396,12 @@ def _check_pointing(mission, segments, report, step_s) -> None:
         eps = _eps_in_use(mission, worst_eps_max)
         report.add("info", "eps", f"POINTING: smallest admissible eps upper bound over the run {worst_eps_max:.4g}; "
                    f"eps in use {eps:.4g}", eps_max=worst_eps_max, eps=eps)
+
+
+def _cap_gap_deg(zone_a, zone_b) -> float:
+    """Angle between the bounding caps of two zones [deg] (negative when they overlap)."""
+    (a, ra), (b, rb) = zone_a.bounding_cap, zone_b.bounding_cap
+    return math.degrees(math.acos(max(-1.0, min(1.0, float(np.dot(a, b))))) - ra - rb)
 
 
 def _kernel_check(name: str, zone, report: PhysicsReport, seen: set) -> None:
