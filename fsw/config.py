@@ -340,7 +340,7 @@ class FdirConfig(_Strict):
     star_tracker_stale: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=50, action="none"), description="No valid fresh star-tracker sample this cycle (value 1/0): the estimator coasts; event after persistence.")
     star_tracker_corrupt: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="none"), description="Star-tracker frames with CRC/sequence/length errors this cycle (count; limit).")
     innovation: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=5, action="reset_estimator"), description="Star-tracker innovation angle above `limit` [deg].")
-    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="isolate_wheel_safe"), description="Wheel reports a fault flag or no status (value 1/0), per wheel.")
+    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="isolate_wheel"), description="Wheel reports a fault flag, no status, or a speed that does not follow its torque commands (value 1/0), per wheel.")
     wheel_speed: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.95, persistence_cycles=5, action="safe"), description="|wheel speed| / max_speed above `limit`, per wheel.")
     keepout_yellow: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=1, action="none"), description="Physical keep-out margin below `limit` [deg] (yellow): KEEP_OUT_MARGIN_LOW warning.")
     keepout_red: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.0, persistence_cycles=2, action="safe"), description="Physical keep-out margin below `limit` [deg] (red, 0 = inside): KEEP_OUT_VIOLATION.")
