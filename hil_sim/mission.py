@@ -290,6 +290,10 @@ class Mission(_Model):
         "auto", description="auto: the SIL picks free UDP ports for telemetry and telecommands for each run "
         "(parallel runs never collide) and writes them into the config it saves; fixed: use "
         "flight_software.tmtc as given")
+    telemetry_link: Literal["multicast", "unicast"] = Field(
+        "multicast", description="multicast: the flight software sends telemetry to a per-run multicast group on "
+        "loopback, which the SIL's ground and any number of attached ground clients join (`keepout ground --run`); "
+        "unicast: to flight_software.tmtc.telemetry_host only, as to a real ground station (one receiver)")
     simulation: Simulation = Field(default_factory=Simulation)
     spacecraft: SpacecraftTruth
     orbit: Orbit

@@ -38,7 +38,7 @@ def _run(args: argparse.Namespace) -> int:
 
     options = RunOptions(mission=args.mission or DEFAULT_MISSION, bus=args.bus, duration_s=args.duration,
                          realtime=args.realtime, out_root=args.out,
-                         progress=not args.no_progress and sys.stdout.isatty())
+                         progress=not args.no_progress and sys.stdout.isatty(), announce=True)
     try:
         result = run_sil(options)
     except MissionRejected as exc:
