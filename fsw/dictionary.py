@@ -2,7 +2,7 @@
 
 Following F Prime, the flight software and the ground tools read the same dictionary: the flight side
 builds packets from it (``fsw.telemetry``), decodes telecommands with it (``fsw.telecommand``), and the
-ground (``fsw.ground``) decodes and limit-checks telemetry with it. ``config/telemetry_dictionary.json``
+ground (the ``ground`` package) decodes and limit-checks telemetry with it. ``config/telemetry_dictionary.json``
 is generated from this module (``python -m fsw.dictionary --out config/telemetry_dictionary.json``) and a
 test keeps the committed file equal to the generated one.
 

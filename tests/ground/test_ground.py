@@ -12,21 +12,19 @@ import numpy as np
 from rich.console import Console
 
 from fsw.dictionary import DICTIONARY, GNC_APID, HK_APID, LimitState
-from fsw.ground import (
+from ground.archive import (
     DECODED_ARCHIVE,
     EVENTS_ARCHIVE,
     LIMITS_ARCHIVE,
     RAW_ARCHIVE,
     SUMMARY_FILE,
-    GroundMonitor,
-    limit_state,
-    main,
     read_channels,
     read_events,
     read_raw_archive,
-    render_tables,
-    run_ground_monitor,
 )
+from ground.cli import main
+from ground.display import limit_state, render_tables
+from ground.monitor import GroundMonitor, run_ground_monitor
 from fsw.telecommand import CommandDispatcher
 from fsw.telemetry import TelemetrySender, encode_tm_packet
 
