@@ -104,7 +104,9 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     monitor.echo_events = args.no_live
     stats = monitor.run(duration_s=args.duration, live=not args.no_live)
     summary = stats.to_json_dict()
-    print(f"received {summary['datagrams']} packets, {summary['decode_errors']} decode errors, "
+    kinds = ", ".join(f"{k} {n}" for k, n in sorted(summary["decode_errors_by_kind"].items()))
+    print(f"received {summary['datagrams']} packets, {summary['decode_errors']} decode errors"
+          f"{f' ({kinds})' if kinds else ''}, "
           f"{summary['missing_packets']} missing in {len(stats.gaps)} gaps")
     return 0
 
