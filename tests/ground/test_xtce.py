@@ -21,6 +21,7 @@ import xmlschema
 from fsw.dictionary import DICTIONARY
 from fsw.telecommand import CommandDispatcher, encode_command
 from fsw.telemetry import TelemetrySender, decode_tm_packet
+from ground.cli import main
 from ground.xtce import to_xtce
 
 XSD = Path(__file__).resolve().parents[1] / "data" / "xtce" / "SpaceSystemV1.2.xsd"
@@ -28,8 +29,13 @@ NS = "{http://www.omg.org/spec/XTCE/20180204}"
 
 
 @pytest.fixture(scope="module")
-def xtce_text() -> str:
-    return to_xtce()
+def xtce_text(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """What `keepout ground xtce --out FILE` writes."""
+    out = tmp_path_factory.mktemp("xtce") / "keepout.xtce.xml"
+    assert main(["ground", "xtce", "--out", str(out)]) == 0
+    text = out.read_text(encoding="utf-8")
+    assert text == to_xtce()
+    return text
 
 
 def test_export_validates_against_the_xtce_1_2_schema(xtce_text: str) -> None:
