@@ -620,11 +620,20 @@ class FlightSoftware:
             self.telemetry.send_channels("HK", values)
 
     # -------------------------------------------------------------------------------------- loops
-    def run_lockstep(self, max_ticks: int | None = None, timeout_s: float | None = None) -> int:
-        """Run one GNC cycle per SYNC tick until ``max_ticks`` or the simulator stops sending SYNC."""
+    def run_lockstep(self, max_ticks: int | None = None, timeout_s: float | None = None,
+                     first_sync_timeout_s: float | None = None) -> int:
+        """Run one GNC cycle per SYNC tick until ``max_ticks`` or the simulator stops sending SYNC.
+
+        ``first_sync_timeout_s``: before the first SYNC, keep waiting this long in all (a bench where the
+        simulator is started by hand); after it, ``timeout_s`` without SYNC ends the run."""
         timeout = self.cfg.rates.lockstep_timeout_s if timeout_s is None else timeout_s
+        give_up_at = time.monotonic() + (first_sync_timeout_s or 0.0)
+
+        def still_starting() -> bool:
+            return self.executive.last_tick is None and time.monotonic() < give_up_at
+
         prepare_cycle_thread()
-        n = self.executive.run_lockstep(self.driver.collect_tick, timeout, max_ticks)
+        n = self.executive.run_lockstep(self.driver.collect_tick, timeout, max_ticks, on_timeout=still_starting)
         return n
 
     def run_realtime(self, duration_s: float | None = None) -> int:

@@ -442,6 +442,27 @@ def load_fsw_config(path: str | Path) -> FswConfig:
     return parse_fsw_config(data, source=str(p), prefix=prefix)
 
 
+def load_bus_settings(path: str | Path) -> tuple[str, int | None]:
+    """The bus spec and CAN bit rate [bit/s] a mission YAML names (top-level ``bus`` and
+    ``bus_bitrate_bps``; ``auto`` and None when absent, as in a bare FswConfig YAML)."""
+    import yaml
+
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{p}: cannot read: {exc}") from exc
+    data = data if isinstance(data, dict) else {}
+    bus = data.get("bus", "auto")
+    bitrate = data.get("bus_bitrate_bps")
+    if not isinstance(bus, str):
+        raise ConfigError(f"{p}: bus: expected a bus spec string such as auto or pcan:PCAN_USBBUS1, got {bus!r}")
+    if bitrate is not None and (isinstance(bitrate, bool) or not isinstance(bitrate, int)
+                                or not 10000 <= bitrate <= 1000000):
+        raise ConfigError(f"{p}: bus_bitrate_bps: expected an integer in 10000..1000000 [bit/s], got {bitrate!r}")
+    return bus, bitrate
+
+
 def parse_fsw_config(data: dict, source: str = "<dict>", prefix: str = "") -> FswConfig:
     try:
         return FswConfig.model_validate(data)

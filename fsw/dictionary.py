@@ -25,6 +25,8 @@ Wire format (all big-endian), CCSDS 133.0-B-2 space packets built with ``spacepa
   with payload ``event id (u16), severity (u8), args...``.
 - Telecommands (packet type TC, no secondary header): primary header with ``TC_APID``, ``opcode (u16)``,
   args in declaration order, CRC-16/CCITT-FALSE. Strings are ``u8 length + UTF-8 bytes``.
+- Every telecommand is acknowledged in the ``TC_ACK`` telemetry packet (``TC_ACK_APID``), as PUS service 1:
+  acceptance success/failure and completion success/failure with a reason code from ``TC_REASONS``.
 """
 from __future__ import annotations
 

@@ -57,7 +57,16 @@ def crc16_ccitt(data: bytes | bytearray) -> int:
 
 
 class TelemetryDecodeError(ValueError):
-    """A received telemetry packet is malformed (message says why)."""
+    """A received telemetry packet is malformed (message says why; ``kind`` classifies it for the ground's
+    counters: one of ``DECODE_ERROR_KINDS``)."""
+
+    def __init__(self, message: str, kind: str = "MALFORMED") -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+# How the ground classifies packets it cannot decode (counted per kind, shown in the monitor).
+DECODE_ERROR_KINDS = ("TRUNCATED", "MALFORMED", "CRC_MISMATCH", "UNKNOWN_APID", "UNKNOWN_EVENT")
 
 
 # ------------------------------------------------------------------------------------- encoding
@@ -174,23 +183,24 @@ def decode_tm_packet(dictionary: TelemetryDictionary, raw: bytes | bytearray | m
     raw = bytes(raw)
     min_len = CCSDS_HEADER_LEN + TM_SECONDARY_HEADER.size + CRC_LEN
     if len(raw) < min_len:
-        raise TelemetryDecodeError(f"packet of {len(raw)} bytes shorter than the minimum {min_len}")
+        raise TelemetryDecodeError(f"packet of {len(raw)} bytes shorter than the minimum {min_len}", "TRUNCATED")
     version, packet_type, apid, seq_count, packet_len = primary_header_fields(raw)
     if packet_type != _TM_TYPE:
         raise TelemetryDecodeError("packet type is TC, expected TM")
     if version != 0:
         raise TelemetryDecodeError(f"CCSDS version {version}, expected 0")
     if packet_len != len(raw):
-        raise TelemetryDecodeError(f"length field says {packet_len} bytes, datagram has {len(raw)}")
+        raise TelemetryDecodeError(f"length field says {packet_len} bytes, datagram has {len(raw)}",
+                                   "TRUNCATED" if packet_len > len(raw) else "MALFORMED")
     if crc16_ccitt(raw) != 0:  # CRC over data + its own CRC is zero for this CRC
-        raise TelemetryDecodeError("CRC mismatch")
+        raise TelemetryDecodeError("CRC mismatch", "CRC_MISMATCH")
     (time_s,) = TM_SECONDARY_HEADER.unpack_from(raw, CCSDS_HEADER_LEN)
     payload = raw[CCSDS_HEADER_LEN + TM_SECONDARY_HEADER.size:-CRC_LEN]
     if apid == dictionary.event_apid:
         return _decode_event(dictionary, apid, seq_count, time_s, payload)
     packet = dictionary.packet_by_apid(apid)
     if packet is None:
-        raise TelemetryDecodeError(f"unknown APID {apid:#x}")
+        raise TelemetryDecodeError(f"unknown APID {apid:#x}", "UNKNOWN_APID")
     layout = _channel_layout(packet)
     if len(payload) != layout.struct.size:
         raise TelemetryDecodeError(f"{packet.name}: payload {len(payload)} bytes, dictionary says {layout.struct.size}")
@@ -205,11 +215,11 @@ def decode_tm_packet(dictionary: TelemetryDictionary, raw: bytes | bytearray | m
 def _decode_event(dictionary: TelemetryDictionary, apid: int, seq_count: int, time_s: float,
                   payload: bytes) -> DecodedTm:
     if len(payload) < 3:
-        raise TelemetryDecodeError("event payload shorter than id + severity")
+        raise TelemetryDecodeError("event payload shorter than id + severity", "TRUNCATED")
     event_id, severity_code = struct.unpack_from("!HB", payload, 0)
     event = dictionary.event_by_id(event_id)
     if event is None:
-        raise TelemetryDecodeError(f"unknown event id {event_id}")
+        raise TelemetryDecodeError(f"unknown event id {event_id}", "UNKNOWN_EVENT")
     try:
         severity = Severity.from_code(severity_code)
         args, end = decode_args(event.args, payload, 3)

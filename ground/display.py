@@ -75,6 +75,9 @@ def render_tables(monitor: GroundMonitor) -> Any:
         link.add_column(column)
     link.add_row(str(stats.datagrams), str(stats.decoded), str(stats.decode_errors), str(len(stats.gaps)),
                  str(stats.missing), style="bold red" if stats.missing or stats.decode_errors else "")
+    if stats.decode_errors:  # what the undecodable packets were, and the last one's reason
+        kinds = ", ".join(f"{kind} {n}" for kind, n in sorted(stats.decode_errors_by_kind.items()))
+        link.caption = f"undecoded: {kinds}; last: {stats.last_decode_error[:100]}"
     events = Table(title="latest events", expand=False)
     for column in ("time_s", "severity", "event", "message"):
         events.add_column(column)

@@ -87,6 +87,8 @@ class GroundStats:
     bytes: int = 0
     decoded: int = 0
     decode_errors: int = 0
+    decode_errors_by_kind: dict[str, int] = field(default_factory=dict)  # TRUNCATED, UNKNOWN_APID, ...
+    last_decode_error: str = ""
     per_apid: dict[int, ApidStats] = field(default_factory=dict)
     gaps: list[Gap] = field(default_factory=list)
     limits: dict[str, LimitStats] = field(default_factory=dict)
@@ -98,7 +100,8 @@ class GroundStats:
     def to_json_dict(self) -> dict[str, Any]:
         return {
             "datagrams": self.datagrams, "bytes": self.bytes, "decoded": self.decoded,
-            "decode_errors": self.decode_errors, "missing_packets": self.missing,
+            "decode_errors": self.decode_errors, "decode_errors_by_kind": dict(self.decode_errors_by_kind),
+            "last_decode_error": self.last_decode_error, "missing_packets": self.missing,
             "per_apid": {f"{apid:#05x}": {"received": s.received, "missing": s.missing, "gaps": s.gaps,
                                           "duplicates_or_restarts": s.duplicates_or_restarts,
                                           "last_seq": s.last_seq}
@@ -200,10 +203,14 @@ class GroundMonitor:
             self._raw.write(RAW_RECORD.pack(rx_time_s, len(raw)) + raw)
         try:
             packet = decode_tm_packet(self.dictionary, raw)
-        except (TelemetryDecodeError, ValueError) as exc:
-            self.stats.decode_errors += 1
-            self._write(self._decoded, {"rx_time_s": rx_time_s, "error": str(exc), "length": len(raw),
-                                        "hex": raw[:64].hex()})
+        except Exception as exc:  # noqa: BLE001 - whatever arrives, the ground counts it and goes on
+            kind = exc.kind if isinstance(exc, TelemetryDecodeError) else "MALFORMED"
+            stats = self.stats
+            stats.decode_errors += 1
+            stats.decode_errors_by_kind[kind] = stats.decode_errors_by_kind.get(kind, 0) + 1
+            stats.last_decode_error = f"{kind}: {exc}"
+            self._write(self._decoded, {"rx_time_s": rx_time_s, "error": str(exc), "kind": kind,
+                                        "length": len(raw), "hex": raw[:64].hex()})
             return None
         self.stats.decoded += 1
         record = packet.to_json_dict()

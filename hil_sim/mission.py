@@ -49,7 +49,10 @@ UnitQuat = Annotated[list[float], Field(min_length=4, max_length=4,
                      AfterValidator(lambda v: _unit_quaternion(v))]
 
 FdirMonitor = Literal[FDIR_MONITORS]  # type: ignore[valid-type]  (the telemetry dictionary's monitors)
-BUS_PATTERN = r"^(auto|socketcan(:[A-Za-z0-9_]+)?|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?)$"
+# auto, the loopback transports, or any python-can interface as INTERFACE:CHANNEL[,KEY=VALUE...] (checked
+# further by fsw.bus.transport.resolve_spec when the run starts)
+BUS_PATTERN = (r"^(auto|socketcan(:[A-Za-z0-9_]+)?|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?"
+               r"|[a-z0-9_]+:[^\s,]+(,[A-Za-z_][A-Za-z0-9_]*=[^\s,]+)*)$")
 
 
 class _Model(BaseModel):
@@ -285,7 +288,12 @@ class Mission(_Model):
     duration_s: float = Field(gt=0, le=10 * 86400, description="simulated duration [s]")
     seed: int = Field(0, ge=0, le=2**32 - 1, description="seed of every random process in the truth models")
     bus: str = Field("auto", pattern=BUS_PATTERN, description="auto (socketcan on vcan0 when it exists, else "
-                     "udp_multicast) | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL]")
+                     "udp_multicast) | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL] | "
+                     "INTERFACE:CHANNEL[,KEY=VALUE...] for a python-can hardware interface (pcan:PCAN_USBBUS1, "
+                     "kvaser:0, slcan:/dev/ttyACM0, ...)")
+    bus_bitrate_bps: int = Field(500000, ge=10000, le=1000000, description="CAN bit rate [bit/s] a hardware "
+                                 "interface (pcan, kvaser, vector, slcan, ...) is opened with; SocketCAN takes the "
+                                 "kernel's setting, the loopback transports have none")
     tmtc_ports: Literal["auto", "fixed"] = Field(
         "auto", description="auto: the SIL picks free UDP ports for telemetry and telecommands for each run "
         "(parallel runs never collide) and writes them into the config it saves; fixed: use "

@@ -524,7 +524,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         # Open the simulator's end of the bus and build the world (astropy ephemeris nodes take a few
         # seconds) before the flight software starts: it waits only lockstep_timeout_s for SYNC(0).
         try:
-            bus = open_bus(info.spec, run_id=run_dir.name)
+            bus = open_bus(info.spec, run_id=run_dir.name, bitrate=mission.bus_bitrate_bps)
         except (BusUnavailableError, OSError) as exc:
             raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
         from ground.commanding import CommandSender
