@@ -323,6 +323,15 @@ def realize(disp: Dispersion, params: Params, nominal: Any) -> Any:
     raise DispersionError(f"unknown dispersion kind {type(disp).__name__}")
 
 
+def expected_fdir_events(disp: Dispersion, params: Params, end_s: float) -> list[str]:
+    """FDIR monitors a run with these drawn parameters must trip: a drawn wheel failure that starts early
+    enough before the end of the run (``end_s``) to be detected expects its ``expected_fdir_event``."""
+    if not isinstance(disp, WheelFailureDispersion) or disp.expected_fdir_event is None:
+        return []
+    failed = any(params[f"wheel{i + 1}"] >= 0.5 for i in range(disp.n_wheels))
+    return [disp.expected_fdir_event] if failed and params["start_s"] + disp.detection_s <= end_s else []
+
+
 def features(disp: Dispersion, params: Params) -> dict[str, float]:
     """Scalar columns for tables and scatter plots (derived quantities a person reads easily)."""
     out = {f"{disp.name}.{k}": float(v) for k, v in params.items()}

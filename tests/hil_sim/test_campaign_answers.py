@@ -86,3 +86,57 @@ def test_criteria_come_before_the_known_sense_of_a_metric():
     assert known == {"min_margin_deg": "higher", "margin_sun_deg": "higher", "settling_time_s": "lower"}
     sides = bl.better_sides([Criterion(name="c", metric="settling_time_s", op=">", limit=1.0)], known)
     assert sides["settling_time_s"] == "higher" and sides["margin_sun_deg"] == "higher"
+
+
+# --- expected FDIR events follow the drawn faults ---------------------------------------------------
+
+def _wheel_failure_plan(start_s: float, duration_s: float, probability: float = 1.0, event: str = "WHEEL_FAULT"):
+    from pathlib import Path
+
+    from hil_sim.campaign.runner import build_plan
+    from hil_sim.campaign.spec import WheelFailureDispersion, load_campaign
+    regression = Path(__file__).resolve().parents[2] / "config" / "campaigns" / "regression.yaml"
+    campaign = load_campaign(regression)
+    wheel = WheelFailureDispersion(name="wheel_failure", path="faults", kind="wheel_failure", n_wheels=4,
+                                   probability=probability, max_failed=1, expected_fdir_event=event,
+                                   start_s={"dist": "uniform", "low": start_s, "high": start_s + 1e-6})
+    campaign = campaign.model_copy(update={"dispersions": [wheel], "duration_s": duration_s})
+    plan, _ = build_plan(regression, campaign=campaign, runs=1)
+    return plan
+
+
+def test_a_drawn_wheel_failure_expects_its_fdir_event_and_only_then():
+    plan = _wheel_failure_plan(start_s=50.0, duration_s=600.0)
+    params = plan.draw(0)
+    assert sum(v for k, v in params["wheel_failure"].items() if k.startswith("wheel")) == 1.0
+    _, mission = plan.mission(params, 1)
+    assert mission.requirements.expected_fdir_events == ["WHEEL_FAULT"]
+    # the same run without the failure (as shrinking makes it) expects nothing
+    healthy = {"wheel_failure": {**{k: 0.0 for k in params["wheel_failure"] if k.startswith("wheel")},
+                                 "start_s": 50.0}}
+    assert plan.mission(healthy, 1)[1].requirements.expected_fdir_events == []
+    # a failure too close to the end to be detected, or after it, expects nothing either
+    late = _wheel_failure_plan(start_s=598.0, duration_s=600.0)
+    assert late.mission(late.draw(0), 1)[1].requirements.expected_fdir_events == []
+
+
+def test_a_run_with_a_drawn_wheel_failure_counts_the_isolation_as_expected():
+    """Fast mode, the real flight software: RW1..4 commands stop at t = 3 s; FDIR trips WHEEL_FAULT. On the
+    old judging that trip was 'unexpected' and the run failed."""
+    from hil_sim.campaign.execute import execute_run
+    plan = _wheel_failure_plan(start_s=3.0, duration_s=12.0)
+    record = execute_run(plan, 0)
+    assert record.status != "error", record.error
+    assert any("WHEEL_FAULT" in e for e in record.events), record.events
+    assert record.metrics["unexpected_fdir_events"] == 0.0
+    assert record.metrics["missing_expected_fdir_events"] == 0.0
+    assert record.verdicts["no_unexpected_fdir"] and record.verdicts["expected_fdir"]
+
+
+def test_an_expected_fdir_event_that_does_not_come_is_counted_missing():
+    from hil_sim.campaign.execute import execute_run
+    plan = _wheel_failure_plan(start_s=3.0, duration_s=12.0, event="ESTIMATOR_DIVERGENCE")
+    record = execute_run(plan, 0)
+    assert record.metrics["missing_expected_fdir_events"] == 1.0
+    assert record.metrics["unexpected_fdir_events"] >= 1.0  # the WHEEL_FAULT trip was not the expected one
+    assert not record.verdicts["expected_fdir"] and record.status == "fail"
