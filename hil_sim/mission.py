@@ -27,6 +27,7 @@ from keepout_config import config_path
 
 if TYPE_CHECKING:
     from hil_sim.params import WorldParams
+    from hil_sim.yaml_loader import Marked
 
 SCHEMA_VERSION = 1
 MAX_WHEELS = 6  # RW1..RW6 in config/icd/keepout.dbc
@@ -431,6 +432,11 @@ def ra_dec_to_unit(ra_deg: float, dec_deg: float) -> np.ndarray:
 
 def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
     """Load and validate a mission file; raise yaml_loader.ConfigError listing every problem."""
+    return load_mission_marked(path, text=text)[0]
+
+
+def load_mission_marked(path: str | Path, *, text: str | None = None) -> tuple[Mission, "Marked"]:
+    """`load_mission`, plus the file's key positions (to place later findings at file:line:col)."""
     from hil_sim.yaml_loader import ConfigError, Problem, load_marked, problems_from_validation
     from pydantic import ValidationError
 
@@ -442,7 +448,7 @@ def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
     problems = [Problem(doc.file, *doc.mark_for(loc), _path(loc), msg) for loc, msg in mission.semantic_problems()]
     if problems:
         raise ConfigError(problems)
-    return mission
+    return mission, doc
 
 
 def _path(loc: tuple[str | int, ...]) -> str:

@@ -120,12 +120,12 @@ class RunResult:
 
 def prepare(options: RunOptions):
     """Load + check the mission; return (mission, physics report). Raises MissionRejected."""
-    from hil_sim.mission import load_mission
+    from hil_sim.mission import load_mission_marked
     from hil_sim.physics_checks import check_mission
     from hil_sim.yaml_loader import ConfigError
 
     try:
-        mission = load_mission(options.mission)
+        mission, doc = load_mission_marked(options.mission)
     except ConfigError as exc:
         raise MissionRejected(str(exc)) from None
     updates: dict[str, Any] = {}
@@ -145,7 +145,7 @@ def prepare(options: RunOptions):
     if not options.skip_physics_checks:
         report = check_mission(mission)
         if not report.ok:
-            raise MissionRejected(f"{options.mission}: physics checks failed:\n{report.format()}")
+            raise MissionRejected(f"{options.mission}: physics checks failed:\n{report.format(doc, errors_only=True)}")
     return mission, report
 
 
