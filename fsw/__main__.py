@@ -28,6 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tm-port", type=int, default=None, help="override tmtc.telemetry_port")
     p.add_argument("--tc-port", type=int, default=None, help="override tmtc.telecommand_port (0: ephemeral)")
     p.add_argument("--dbc", default=None, help="ICD DBC file (default config/icd/keepout.dbc)")
+    p.add_argument("--key-file", default=None,
+                   help="link key file (overrides tmtc.security.key_file; relative paths from the current folder)")
     return p
 
 
@@ -43,9 +45,17 @@ def main(argv: list[str] | None = None) -> int:
     from fsw.app import FlightSoftware
     from fsw.bus import BusSpecError, BusUnavailableError, FswBusDriver, Icd, open_bus
     from fsw.dictionary import DICTIONARY
+    from fsw.link_security import KeyFileError
     from fsw.telecommand import CommandDispatcher
     from fsw.telemetry import TelemetrySender
 
+    try:
+        uplink, downlink = link_associations(cfg, args.config, args.key_file)
+    except KeyFileError as exc:
+        print(f"fsw: {exc}", file=sys.stderr)
+        return 2
+    for warning in cfg.tmtc.warnings():
+        print(f"fsw: warning: {warning}", file=sys.stderr)
     try:
         bus = open_bus(args.bus, args.run_id)
     except BusSpecError as exc:
@@ -59,9 +69,10 @@ def main(argv: list[str] | None = None) -> int:
     tc_port = tm_cfg.telecommand_port if args.tc_port is None else args.tc_port
     icd = Icd(args.dbc) if args.dbc else Icd()
     driver = FswBusDriver(bus, icd, len(cfg.spacecraft.wheels))
-    telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port)
+    telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port, security=downlink)
     try:
-        dispatcher = CommandDispatcher(DICTIONARY, telemetry, host=tm_cfg.telecommand_bind_host, port=tc_port)
+        dispatcher = CommandDispatcher(DICTIONARY, telemetry, host=tm_cfg.telecommand_bind_host, port=tc_port,
+                                       security=uplink, budget_s=tm_cfg.uplink_budget_ms / 1000.0)
     except OSError as exc:
         print(f"fsw: cannot bind the telecommand socket {tm_cfg.telecommand_bind_host}:{tc_port}: {exc}", file=sys.stderr)
         return 2
@@ -89,6 +100,26 @@ def main(argv: list[str] | None = None) -> int:
         telemetry.close()
         bus.shutdown()
     return code
+
+
+def link_associations(cfg, config_path: str, key_file: str | None = None):
+    """(uplink receiver, downlink sender) associations from the mission's key file (``key_file``
+    overrides it). Raises KeyFileError when there is no usable key: the flight software never runs an
+    unauthenticated uplink."""
+    from pathlib import Path
+
+    from fsw.dictionary import DICTIONARY
+    from fsw.link_security import SPI_TM, KeyFileError, SecurityAssociation, load_key_file, uplink_receiver
+
+    if key_file is None:
+        named = cfg.tmtc.security.key_file
+        if named is None:
+            raise KeyFileError(f"{config_path}: flight_software.tmtc.security.key_file: no link key named; make "
+                               "one with `keepout ground keygen FILE` and name it there (or pass --key-file)")
+        key_file = str(Path(config_path).resolve().parent / named)
+    key = load_key_file(key_file)
+    uplink = uplink_receiver(key, cfg.tmtc.security.tc_window, resync_opcode=DICTIONARY.command("SEC_RESYNC").opcode)
+    return uplink, SecurityAssociation(key, SPI_TM)
 
 
 if __name__ == "__main__":

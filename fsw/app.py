@@ -570,6 +570,8 @@ class FlightSoftware:
             "bus_decode_errors": total("bad_length", "out_of_range"),
             "bus_timeouts": total("timeout"),
             "bus_tx_errors": getattr(self, "_bus_tx_errors", 0),
+            "bus_unknown_ids": sum(self.driver.counters.get("_bus", {}).get(k, 0) for k in ("unknown_id", "error_frame")),
+            "bus_stale_syncs": getattr(self.driver, "stale_syncs", 0),
             "imu_stale_cycles": self.fdir.stale_counts["IMU"],
             "st_stale_cycles": self.fdir.stale_counts["STAR_TRACKER"],
             "tm_packets_sent": tm.get("packets_sent", 0),

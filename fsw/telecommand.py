@@ -5,6 +5,14 @@ address), checks every datagram (length, header, APID, CRC, opcode, argument typ
 handler runs, and classifies every failure as one of the typed errors INVALID_OPCODE, VALIDATION, FORMAT
 or EXECUTION. Every datagram changes the counters; none can raise out of ``handle_datagram``/``poll``.
 
+With a ``security`` association (``fsw.link_security``, what the flight process always uses) every
+datagram must first pass the link's authentication and anti-replay checks; a refusal is the error class
+SECURITY, counted by reason in the association (which RESET_COUNTERS never clears). The link, not the
+handlers, does this: the handlers only ever see authenticated, fresh commands.
+
+``poll`` reads the uplink until it is empty, within a time budget per call; what the kernel had to
+discard because the socket buffer was full (SO_RXQ_OVFL) is counted, so no command is lost silently.
+
 Handlers are registered per opcode and called with the decoded arguments as keywords (enums as their
 names, e.g. ``handler(mode="POINTING")``). A handler signals a rejected request by raising
 ``CommandValidationError`` (e.g. target inside a keep-out zone) or ``CommandExecutionError``; any other
@@ -19,6 +27,7 @@ import signal
 import socket
 import struct
 import threading
+import time
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -47,6 +56,9 @@ from fsw.dictionary import (
     decode_args,
     encode_args,
 )
+from fsw.link_security import FORMAT as LINK_FORMAT
+from fsw.link_security import REASONS as SECURITY_REASONS
+from fsw.link_security import SecurityAssociation, SecurityError
 from fsw.telemetry import crc16_ccitt
 
 if TYPE_CHECKING:
@@ -59,6 +71,18 @@ INVALID_OPCODE = "INVALID_OPCODE"
 VALIDATION = "VALIDATION"
 FORMAT = "FORMAT"
 EXECUTION = "EXECUTION"
+SECURITY = "SECURITY"
+
+# SO_RXQ_OVFL (Linux socket option 40, not exported by every Python): each datagram then carries the
+# socket's cumulative count of datagrams the kernel dropped because the receive buffer was full.
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)
+_OVFL = struct.Struct("=I")
+_ANC_SPACE = socket.CMSG_SPACE(_OVFL.size)
+_BUDGET_CHECK_EVERY = 16  # datagrams between two clock reads while draining
+# SO_RXQ_OVFL reports drops only with the next datagram queued; drops after the last one are read with
+# SO_MEMINFO (Linux >= 4.16: u32 sk_meminfo array, SK_MEMINFO_DROPS at index 8) when housekeeping asks.
+SO_MEMINFO = getattr(socket, "SO_MEMINFO", 55)
+_MEMINFO_DROPS = 8
 
 
 class CommandError(Exception):
@@ -85,6 +109,12 @@ class CommandFormatError(CommandError):
 
 class CommandExecutionError(CommandError):
     kind = EXECUTION
+
+
+class CommandSecurityError(CommandError):
+    """The link refused the datagram: unauthenticated, bad MAC, replayed or outside the SN window."""
+
+    kind = SECURITY
 
 
 @dataclass(frozen=True)
@@ -195,17 +225,23 @@ class CommandDispatcher:
 
     ``port=None`` creates no socket (``handle_datagram`` only); ``port=0`` binds an ephemeral port
     (read it from ``address``). ``telemetry`` (optional) receives the COMMAND and rejection events.
+    ``security``: the uplink association every datagram must pass (None: plain packets, unit tests).
+    ``budget_s``: host time one ``poll`` may spend draining the socket (the rest waits for the next).
     """
 
     COUNTER_NAMES = ("received", "accepted", "rejected", "invalid_opcode", "validation", "format",
-                     "execution", "seq_gaps")
+                     "execution", "security", "seq_gaps")
 
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, telemetry: TelemetrySender | None = None,
                  host: str = DEFAULT_HOST, port: int | None = DEFAULT_TC_PORT, *,
-                 max_packets_per_poll: int = 64) -> None:
+                 security: SecurityAssociation | None = None, budget_s: float = 0.005,
+                 rcvbuf_bytes: int | None = None) -> None:
         self.dictionary = dictionary
         self.telemetry = telemetry
-        self.max_packets_per_poll = max_packets_per_poll
+        self.security = security
+        self.budget_s = budget_s
+        self.kernel_drops = 0  # datagrams the kernel discarded (socket buffer full), never reset
+        self.budget_exhausted = 0  # polls that stopped at the budget with datagrams still queued
         self._handlers: dict[int, Handler] = {}
         self.counters: dict[str, int] = dict.fromkeys(self.COUNTER_NAMES, 0)
         self.last_opcode = 0
@@ -216,9 +252,17 @@ class CommandDispatcher:
         self._armed = False
         if port is not None:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            if rcvbuf_bytes is not None:
+                self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
+            try:
+                self._sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+            except OSError:
+                pass  # not Linux: drops cannot be counted (hk shows 0)
             self._sock.bind((host, port))
             self._sock.setblocking(False)
             self._arm()
+        if security is not None and security.resync_opcode is not None:
+            self.register(security.resync_opcode, self._cmd_resync)
 
     def _arm(self) -> None:
         """Ask for SIGIO on arrivals (see ``_on_sigio``); where that is not possible (no SIGIO, not the main
@@ -269,7 +313,7 @@ class CommandDispatcher:
 
     # ---- input ----
     def poll(self, timeout_s: float = 0.0) -> list[CommandResult]:
-        """Handle every datagram waiting on the socket (at most ``max_packets_per_poll``)."""
+        """Handle every datagram waiting on the socket, until it is empty or ``budget_s`` is spent."""
         if self._sock is None:
             return []
         results: list[CommandResult] = []
@@ -280,17 +324,25 @@ class CommandDispatcher:
             ready, _, _ = select.select([self._sock], [], [], timeout_s)
             if not ready:
                 return results
-        for _ in range(self.max_packets_per_poll):
+        start = time.perf_counter()
+        while True:
             try:
                 # Read more than the maximum so an oversized datagram is seen as oversized, not cut.
-                data = self._sock.recv(65536)
+                data, ancillary, _, _ = self._sock.recvmsg(65536, _ANC_SPACE)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError:
                 break
+            for level, kind, value in ancillary:
+                if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(value) >= _OVFL.size:
+                    self.kernel_drops = max(self.kernel_drops, _OVFL.unpack_from(value)[0])
             results.append(self.handle_datagram(data))
-        else:
-            self._maybe_readable = True  # stopped at the bound: more may be waiting
+            if len(results) % _BUDGET_CHECK_EVERY == 0 and time.perf_counter() - start > self.budget_s:
+                # Out of time with datagrams still queued: they wait for the next cycle (the kernel counts
+                # any that no longer fit), the GNC cycle keeps its deadline.
+                self.budget_exhausted += 1
+                self._maybe_readable = True
+                break
         return results
 
     def handle_datagram(self, data: bytes) -> CommandResult:
@@ -300,6 +352,8 @@ class CommandDispatcher:
         name: str | None = None
         seq: int | None = None
         try:
+            if self.security is not None:
+                data = self._unprotect(data)
             try:
                 definition, args, seq = decode_command(self.dictionary, bytes(data))
             except InvalidOpcodeError:
@@ -327,6 +381,18 @@ class CommandDispatcher:
         result = CommandResult(True, None, opcode, name, seq, "accepted", args)
         self.last_result = result
         return result
+
+    def _unprotect(self, data: bytes) -> bytes:
+        try:
+            return self.security.unprotect(data)[0]
+        except SecurityError as exc:
+            if exc.reason == LINK_FORMAT:
+                raise CommandFormatError(str(exc)) from None
+            raise CommandSecurityError(f"{exc.reason}: {exc}") from None
+
+    def _cmd_resync(self) -> None:
+        """SEC_RESYNC: the link already moved the window to this command's SN; say so."""
+        self._event("SEC_RESYNCED", sn=self.security.last_sn)
 
     def _reject(self, kind: str, opcode: int | None, name: str | None, seq: int | None,
                 reason: str) -> CommandResult:
@@ -358,10 +424,31 @@ class CommandDispatcher:
         return {"tc_accepted": c["accepted"], "tc_rejected": c["rejected"],
                 "tc_invalid_opcode": c["invalid_opcode"], "tc_validation_errors": c["validation"],
                 "tc_format_errors": c["format"], "tc_execution_errors": c["execution"],
-                "tc_last_opcode": self.last_opcode}
+                "tc_last_opcode": self.last_opcode, **self.security_hk_values()}
+
+    def security_hk_values(self) -> dict[str, int]:
+        """Link-security and uplink-loss channels: never reset by RESET_COUNTERS (the evidence stays)."""
+        sa = self.security
+        values = {f"tc_sec_{reason}": (sa.counters[reason] if sa is not None else 0) for reason in SECURITY_REASONS}
+        values.update(tc_sec_resyncs=sa.resyncs if sa is not None else 0,
+                      tc_sec_last_sn=sa.last_sn if sa is not None else 0,
+                      tc_uplink_dropped=self._read_kernel_drops(), tc_uplink_deferred=self.budget_exhausted)
+        return values
 
     def reset_counters(self) -> None:
         self.counters = dict.fromkeys(self.COUNTER_NAMES, 0)
+
+    def _read_kernel_drops(self) -> int:
+        """The kernel's drop count for the uplink socket, including drops no datagram has reported yet."""
+        if self._sock is not None:
+            try:
+                info = self._sock.getsockopt(socket.SOL_SOCKET, SO_MEMINFO, 4 * (_MEMINFO_DROPS + 1))
+                if len(info) >= 4 * (_MEMINFO_DROPS + 1):
+                    drops = _OVFL.unpack_from(info, 4 * _MEMINFO_DROPS)[0]
+                    self.kernel_drops = max(self.kernel_drops, drops)
+            except OSError:
+                pass  # older kernel: the per-datagram SO_RXQ_OVFL count alone
+        return self.kernel_drops
 
     @property
     def address(self) -> tuple[str, int] | None:

@@ -46,6 +46,7 @@ from fsw.dictionary import (
     packet_struct,
     vector_groups,
 )
+from fsw.link_security import SecurityAssociation
 
 SEQ_MODULO = MAX_SEQ_COUNT + 1  # 16384
 
@@ -326,13 +327,16 @@ class TelemetrySender:
     replay). The socket binds to ``bind_host`` (loopback when the destination is on loopback, so a
     default flight build never listens on an external interface). ``clock`` gives the onboard time in
     seconds stamped into packets when the caller passes no ``time_s`` (lockstep flight code passes
-    the simulated time).
+    the simulated time). ``security``: the downlink association (``fsw.link_security``) that signs
+    every packet before it is sent (None: plain packets).
     """
 
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, host: str = DEFAULT_HOST,
                  port: int | None = DEFAULT_TM_PORT, *, bind_host: str | None = None,
-                 clock: Callable[[], float] = time.monotonic, event_history: int = 512) -> None:
+                 clock: Callable[[], float] = time.monotonic, event_history: int = 512,
+                 security: SecurityAssociation | None = None) -> None:
         self.dictionary = dictionary
+        self.security = security
         self.destination = (host, port) if port is not None else None
         self.clock = clock
         self._latest: dict[str, list[Any]] = {
@@ -419,8 +423,7 @@ class TelemetrySender:
         packet = self.dictionary.packet(packet_name)
         payload = self._structs[packet_name].pack(*self._latest[packet_name])
         raw = _frame(packet.apid, self._next_seq(packet.apid), self._time(time_s), payload)
-        self._transmit(raw)
-        return raw
+        return self._transmit(raw)
 
     def latest(self, packet_name: str) -> dict[str, Any]:
         """The values the next packet would carry (wire types: enums as indices)."""
@@ -502,20 +505,24 @@ class TelemetrySender:
         """The sequence count the next packet on ``apid`` will carry."""
         return self._seq[apid]
 
-    def _transmit(self, raw: bytes) -> None:
+    def _transmit(self, raw: bytes) -> bytes:
+        """Sign (with a security association) and send one packet; returns the bytes sent."""
+        if self.security is not None:
+            raw = self.security.protect(raw)
         if self._sock is None or self.destination is None:
             self.counters["packets_sent"] += 1
             self.counters["bytes_sent"] += len(raw)
-            return
+            return raw
         try:
             self._sock.sendto(raw, self.destination)
         except OSError:
             # A full socket buffer or an unreachable ground must not stop the flight software; the
             # ground sees the gap in the sequence count, and the count shows in housekeeping.
             self.counters["send_errors"] += 1
-            return
+            return raw
         self.counters["packets_sent"] += 1
         self.counters["bytes_sent"] += len(raw)
+        return raw
 
     def reset_counters(self) -> None:
         for key in self.counters:

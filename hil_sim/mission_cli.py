@@ -69,12 +69,14 @@ def _validate(args: argparse.Namespace) -> int:
     status = 0
     for path in args.files:
         try:
-            load_mission(path)
+            mission = load_mission(path)
         except ConfigError as exc:
             print(exc, file=sys.stderr)
             print(f"{path}: {len(exc.problems)} problem(s)", file=sys.stderr)
             status = 1
         else:
+            for warning in mission.flight_software.tmtc.warnings():
+                print(f"{path}: warning: {warning}", file=sys.stderr)
             print(f"{path}: valid")
     return status
 
