@@ -34,6 +34,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    import os
+
+    from fsw.lifetime import PARENT_PID_ENV, die_with_parent
+
+    if os.environ.get(PARENT_PID_ENV):  # started by the SIL: end with it, whatever ends it
+        die_with_parent()
     args = build_parser().parse_args(argv)
     from fsw.config import ConfigError, load_fsw_config
 

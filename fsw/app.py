@@ -284,14 +284,16 @@ class FlightSoftware:
             v = np.array([c0, c1, c2, c3], dtype=float)
         n = float(np.linalg.norm(v))
         if not math.isfinite(n) or abs(n - 1.0) > 1e-3:
-            raise CommandValidationError(f"SET_TARGET: {kind} must be a unit vector (norm {n:.6f})")
+            raise CommandValidationError(f"SET_TARGET: {kind} must be a unit vector (norm {n:.6f})",
+                                         "TARGET_NOT_UNIT")
         v = v / n
         hit = self.guidance.target_violation(kind, v)
         if hit is not None:
             zone, margin = hit
             bodies = self._zone_bodies(kind)
             self._event("TARGET_REJECTED", zone=zone, body=bodies[zone] if zone < len(bodies) else "INERTIAL", margin_deg=margin)
-            raise CommandValidationError(f"SET_TARGET: target inside keep-out zone {zone} (margin {margin:.3f} deg)")
+            raise CommandValidationError(f"SET_TARGET: target inside keep-out zone {zone} (margin {margin:.3f} deg)",
+                                         "TARGET_IN_KEEP_OUT")
         if kind == "DIRECTION":
             self.guidance.set_target_direction(v)
         else:
@@ -311,7 +313,7 @@ class FlightSoftware:
         try:
             self.guidance.set_gains(k1, kappa, "auto" if eps == 0 else eps, rate_limit_deg_s)
         except ValueError as exc:
-            raise CommandValidationError(f"SET_GAINS: {exc}") from None
+            raise CommandValidationError(f"SET_GAINS: {exc}", "GAINS_INADMISSIBLE") from None
         self._event("GAINS_SET", k1=k1, kappa=kappa, eps=eps, rate_limit_deg_s=rate_limit_deg_s)
 
     # ------------------------------------------------------------------------------------ cycles

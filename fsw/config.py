@@ -24,7 +24,8 @@ Quat = Annotated[list[float], Field(min_length=4, max_length=4)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    # allow_inf_nan=False: a NaN or inf in a gain or a vector would otherwise reach the control loop
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
 
 def _unit(v: list[float], what: str) -> list[float]:
@@ -250,7 +251,7 @@ class LawConfig(_Strict):
 
 # -------------------------------------------------------------------------------------------- modes
 class PathGuidanceConfig(_Strict):
-    """POINTING slews planned round the zones (fsw.path_guidance): the law's target moves along the
+    """POINTING slews planned round the zones (fsw.guidance.path_planning): the law's target moves along the
     shortest path that keeps a standoff from every zone the law avoids, instead of heading straight for a
     target behind a zone and creeping round the zone's edge."""
 
@@ -326,7 +327,7 @@ class FdirRule(_Strict):
     """Limit-check rule: when the monitored value exceeds `limit` for `persistence_cycles` consecutive GNC cycles, emit the event and take `action` (once per trip)."""
 
     enabled: bool = True
-    limit: float = Field(description="Threshold in the rule's unit (see the rule description).")
+    limit: float = Field(ge=-1e6, le=1e6, description="Threshold in the rule's unit (see the rule description).")
     persistence_cycles: int = Field(3, ge=1, le=100000, description="Consecutive GNC cycles beyond the limit before the rule trips.")
     action: FdirAction = Field("none", description="Action when tripped.")
 
@@ -379,6 +380,21 @@ class TmTcConfig(_Strict):
     """Telemetry/telecommand sockets (loopback unless the mission names another address)."""
 
     telemetry_host: str = Field("127.0.0.1", description="Destination address of telemetry datagrams.")
+
+    @field_validator("telemetry_host")
+    @classmethod
+    def _unicast(cls, v: str) -> str:
+        import ipaddress
+
+        try:
+            addr = ipaddress.ip_address(v)
+        except ValueError:
+            return v  # a host name: resolved when the socket is opened
+        if addr.is_unspecified or addr.is_multicast or addr == ipaddress.ip_address("255.255.255.255"):
+            kind = ("unspecified" if addr.is_unspecified else "multicast" if addr.is_multicast else "broadcast")
+            raise ValueError(f"{v} is a {kind} address: telemetry goes to one ground station; give its unicast "
+                             "address, e.g. 127.0.0.1")
+        return v
     telemetry_port: int = Field(50100, ge=1, le=65535)
     telecommand_bind_host: str = Field("127.0.0.1", description="Address the telecommand socket binds to; a non-loopback address needs allow_non_loopback: true.")
     telecommand_port: int = Field(50101, ge=0, le=65535, description="0 = ephemeral port.")

@@ -64,7 +64,7 @@ def _schema(args: argparse.Namespace) -> int:
 
 def _validate(args: argparse.Namespace) -> int:
     from hil_sim.mission import load_mission
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.yaml_loader import ConfigError, ConfigFileError
 
     status = 0
     for path in args.files:
@@ -72,13 +72,21 @@ def _validate(args: argparse.Namespace) -> int:
             mission = load_mission(path)
         except ConfigError as exc:
             print(exc, file=sys.stderr)
-            print(f"{path}: {len(exc.problems)} problem(s)", file=sys.stderr)
-            status = 1
+            if not isinstance(exc, ConfigFileError):
+                print(f"{path}: {len(exc.problems)} problem(s)", file=sys.stderr)
+            status = max(status, _status(exc))
         else:
             for warning in mission.flight_software.tmtc.warnings():
                 print(f"{path}: warning: {warning}", file=sys.stderr)
             print(f"{path}: valid")
     return status
+
+
+def _status(exc: Exception) -> int:
+    """Exit status for a file that failed to load: 2 when it cannot be read at all, 1 for its content."""
+    from hil_sim.yaml_loader import ConfigFileError
+
+    return 2 if isinstance(exc, ConfigFileError) else 1
 
 
 def _check(args: argparse.Namespace) -> int:
@@ -92,7 +100,7 @@ def _check(args: argparse.Namespace) -> int:
             mission = load_mission(path)
         except ConfigError as exc:
             print(exc, file=sys.stderr)
-            status = 1
+            status = max(status, _status(exc))
             continue
         report = check_mission(mission, step_s=args.step_s)
         print(f"== {path}")

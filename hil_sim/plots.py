@@ -171,7 +171,7 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
 
 def _estimation_error(run_dir: Path, truth: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Estimation error at each GNC telemetry sample: onboard time = simulated time in the SIL."""
-    from fsw.ground import read_channels
+    from ground.archive import read_channels
     from gnc.attitude import attitude_error_angle
 
     archive = run_dir / "ground"

@@ -117,7 +117,7 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> l
 
 
 def lifted_quaternions(mission, truth: dict[str, np.ndarray]) -> np.ndarray:
-    """The truth attitude as the flight software's law sees it on S^3 (see fsw.guidance 'Double cover')."""
+    """The truth attitude as the flight software's law sees it on S^3 (see fsw.guidance.quaternion 'Double cover')."""
     q = np.array(truth["q_NB"], dtype=float)
     if not len(q):
         return q
@@ -241,9 +241,39 @@ def _event_args(e: dict[str, Any]) -> dict[str, Any]:
     return e.get("args") or e.get("values") or {}
 
 
-def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(summary dict for JSON, series for plots)."""
+# Telemetry completeness: packets a run may miss at its ends (the first cycle before the ground saw the
+# flight software start, the last cycle after the simulator's last tick) without having lost any
+TM_END_SLACK_PACKETS = 2
+
+
+def telemetry_completeness(ground: dict[str, Any], sim_s: float, rates) -> tuple[bool, str]:
+    """Did the ground receive all the telemetry of ``sim_s`` simulated seconds? (no sequence gaps, and
+    the GNC and housekeeping packet counts match the simulated time at the flight software's rates)."""
+    from fsw.dictionary import GNC_APID, HK_APID
+
+    if not ground:
+        return False, "the ground wrote no ground_summary.json: it did not end normally"
+    per_apid = ground.get("per_apid", {})
+    problems = []
+    if ground.get("missing_packets", 0):
+        problems.append(f"{ground['missing_packets']} packets missing in sequence-count gaps")
+    for name, apid, rate_hz in (("GNC", GNC_APID, rates.gnc_rate_hz), ("HK", HK_APID, rates.housekeeping_rate_hz)):
+        received = int(per_apid.get(f"{apid:#05x}", {}).get("received", 0))
+        expected = int(math.floor(sim_s * rate_hz + 1e-9))
+        if received < expected - TM_END_SLACK_PACKETS:
+            problems.append(f"{name}: {received} packets received of {expected} for {sim_s:.1f} s at {rate_hz:g} Hz")
+    return not problems, "; ".join(problems) or "no gaps; packet counts match the simulated time"
+
+
+def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
+             status: str | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(summary dict for JSON, series for plots).
+
+    ``status``: how the run ended (hil_sim.sil: ``completed``, ``interrupted``, ``crashed: ...``); a
+    completed run whose ground lost telemetry becomes ``incomplete telemetry``. Only a completed run
+    can pass."""
     run_dir = Path(run_dir)
+    status = status or ("interrupted" if interrupted else "completed")
     req = mission.requirements
     truth = load_truth(run_dir)
     t = truth["t_s"]
@@ -323,16 +353,21 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict
     ground = _read_json(run_dir / "ground" / "ground_summary.json")
     wall = float(sim_stats.get("wall_s", 0.0) or 0.0)
     sim_s = float(sim_stats.get("sim_s", 0.0) or 0.0)
+    tm_complete, tm_detail = telemetry_completeness(ground, sim_s, mission.flight_software.rates)
+    if status == "completed" and not tm_complete:
+        status = "incomplete telemetry"
     summary = {
         "mission": mission.name,
         "run_dir": str(run_dir),
+        "status": status,
         "config_sha256": _read_text(run_dir / "mission.yaml.sha256").split(" ")[0],
         "bus": sim_stats.get("bus"),
-        "interrupted": interrupted,
+        "interrupted": status == "interrupted",
         "simulated_s": sim_s,
         "wall_s": wall,
         "speed_x_realtime": sim_s / wall if wall > 0 else None,
-        "pass": all(r["pass"] for r in results) and not interrupted,
+        "telemetry_complete": {"complete": tm_complete, "detail": tm_detail},
+        "pass": all(r["pass"] for r in results) and status == "completed",
         "requirements": results,
         "zones": {z.name: {"kind": z.kind, "min_margin_deg": float(z.margin_deg.min()) if len(z.margin_deg) else None}
                   for z in zones},
@@ -349,10 +384,14 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict
     return summary, series
 
 
+def summary_json(summary: dict[str, Any]) -> str:
+    return json.dumps(summary, indent=1, default=_json_default) + "\n"
+
+
 def write_summary(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
     """Evaluate and write summary.json; returns (summary, series for the plots)."""
     summary, series = evaluate(run_dir, mission, interrupted=interrupted)
-    (Path(run_dir) / "summary.json").write_text(json.dumps(summary, indent=1, default=_json_default) + "\n")
+    (Path(run_dir) / "summary.json").write_text(summary_json(summary))
     return summary, series
 
 
@@ -364,7 +403,10 @@ def format_summary(summary: dict[str, Any]) -> str:
         lines.append(f"{r['name'][:38]:38s} {text[:14]:>14s}  {str(r['limit'])[:28]:28s} "
                      f"{'PASS' if r['pass'] else 'FAIL'}")
     speed = summary.get("speed_x_realtime")
-    verdict = "PASS" if summary["pass"] else ("INTERRUPTED" if summary["interrupted"] else "FAIL")
+    status = summary.get("status", "completed")
+    verdict = "PASS" if summary["pass"] else ("FAIL" if status == "completed" else status.split(":")[0].upper())
+    if status != "completed":
+        lines.append(f"status: {status}")
     lines.append(f"{verdict}: {summary['mission']} ({summary['simulated_s']:.1f} s simulated in "
                  f"{summary['wall_s']:.1f} s wall{f', x{speed:.1f}' if speed else ''}) -> {summary['run_dir']}")
     return "\n".join(lines)

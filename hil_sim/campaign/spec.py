@@ -15,6 +15,8 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from keepout_config import config_path
+
 SCHEMA_VERSION = 1
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 PATH_DESCRIPTION = ("key path into the mission, dots between keys and [i] for list items, "
@@ -22,7 +24,8 @@ PATH_DESCRIPTION = ("key path into the mission, dots between keys and [i] for li
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    # allow_inf_nan=False: a NaN or inf bound or sigma would draw NaN missions
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -283,7 +286,7 @@ def resolve_base_mission(campaign_path: str | Path, campaign: Campaign) -> Path:
     return base
 
 
-SCHEMA_PATH = Path(__file__).resolve().parents[2] / "config" / "schema" / "campaign.schema.json"
+SCHEMA_PATH = config_path("schema", "campaign.schema.json")
 
 
 def campaign_json_schema() -> dict[str, Any]:

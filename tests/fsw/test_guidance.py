@@ -518,3 +518,21 @@ def test_a_slew_across_the_neck_of_a_closing_unmergeable_pair_never_enters_it(si
     worst = _fly(g, q, 600.0, retarget=(250.0, target))
     assert worst > 2.5, f"keep-out margin reached {worst:.3f} deg"
     assert ("ASSUMPTION_VIOLATED", {"reason": "boresight between two close zones that cannot merge: steering out of the gap"}) in log
+
+
+def test_merge_zones_public_entry_groups_close_cones_and_keeps_far_ones_apart():
+    """`fsw.guidance.merge_zones` (the configuration's load-time checks use it): two 10 deg cones 22 deg
+    apart (2 deg gap < 4 deg merge gap) become one zone containing both; a cone 90 deg away stays alone."""
+    from fsw.guidance import merge_zones
+    from gnc.zones import ConicZone
+
+    r = math.radians(10.0)
+    a = ConicZone(np.array([1.0, 0.0, 0.0]), r)
+    b = ConicZone(np.array([math.cos(math.radians(22)), math.sin(math.radians(22)), 0.0]), r)
+    c = ConicZone(np.array([0.0, 0.0, 1.0]), r)
+    merged, groups = merge_zones([a, b, c], merge_gap_deg=4.0)
+    assert groups == [[0, 1], [2]]
+    for x in (a.axis, b.axis):
+        assert merged[0].contains(x)
+    assert not merged[1].contains(a.axis)
+    assert merge_zones([a, b, c], merge_gap_deg=1.0)[1] == [[0], [1], [2]]

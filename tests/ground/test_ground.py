@@ -12,21 +12,19 @@ import numpy as np
 from rich.console import Console
 
 from fsw.dictionary import DICTIONARY, GNC_APID, HK_APID, LimitState
-from fsw.ground import (
+from ground.archive import (
     DECODED_ARCHIVE,
     EVENTS_ARCHIVE,
     LIMITS_ARCHIVE,
     RAW_ARCHIVE,
     SUMMARY_FILE,
-    GroundMonitor,
-    limit_state,
-    main,
     read_channels,
     read_events,
     read_raw_archive,
-    render_tables,
-    run_ground_monitor,
 )
+from ground.cli import main
+from ground.display import limit_state, render_tables
+from ground.monitor import GroundMonitor, run_ground_monitor
 from fsw.telecommand import CommandDispatcher
 from fsw.telemetry import TelemetrySender, encode_tm_packet
 
@@ -129,7 +127,7 @@ def test_tc_round_trip_ground_send_to_dispatcher_and_command_event_back() -> Non
     assert [r.accepted for r in results] == [True]
     assert modes == ["POINTING"]
     assert dispatcher.counters["accepted"] == 1 and dispatcher.hk_values()["tc_accepted"] == 1
-    _receive(monitor, 2)  # CMD_DISPATCHED + CMD_COMPLETED arrive as telemetry
+    _receive(monitor, 4)  # CMD_DISPATCHED, acceptance report, CMD_COMPLETED, completion report
     assert [(e.event, e.severity) for e in monitor.events] == [("CMD_DISPATCHED", "COMMAND"),
                                                                ("CMD_COMPLETED", "COMMAND")]
     assert monitor.events[-1].args["command"] == "SET_MODE"
