@@ -112,18 +112,15 @@ def link_associations(cfg, config_path: str, key_file: str | None = None):
     """(uplink receiver, downlink sender) associations from the mission's key file (``key_file``
     overrides it). Raises KeyFileError when there is no usable key: the flight software never runs an
     unauthenticated uplink."""
-    from pathlib import Path
-
     from fsw.dictionary import DICTIONARY
-    from fsw.link_security import SPI_TM, KeyFileError, SecurityAssociation, load_key_file, uplink_receiver
+    from fsw.link_security import (SPI_TM, KeyFileError, SecurityAssociation, load_key_file, mission_key_path,
+                                   uplink_receiver)
 
-    if key_file is None:
-        named = cfg.tmtc.security.key_file
-        if named is None:
-            raise KeyFileError(f"{config_path}: flight_software.tmtc.security.key_file: no link key named; make "
-                               "one with `keepout ground keygen FILE` and name it there (or pass --key-file)")
-        key_file = str(Path(config_path).resolve().parent / named)
-    key = load_key_file(key_file)
+    path = key_file or mission_key_path(cfg.tmtc.security.key_file, config_path)
+    if path is None:
+        raise KeyFileError(f"{config_path}: flight_software.tmtc.security.key_file: no link key named; make "
+                           "one with `keepout ground keygen FILE` and name it there (or pass --key-file)")
+    key = load_key_file(path)
     uplink = uplink_receiver(key, cfg.tmtc.security.tc_window, resync_opcode=DICTIONARY.command("SEC_RESYNC").opcode)
     return uplink, SecurityAssociation(key, SPI_TM)
 

@@ -54,6 +54,7 @@ MAX_SN = 2**32 - 1  # an association must be rekeyed before its SN runs out (SDL
 KEY_BYTES = 32
 DEFAULT_TC_WINDOW = 1024
 SN_FILE_SUFFIX = ".tcsn"
+LINK_KEY_FILE = "link.key"  # the SIL's per-run key, in the run folder
 
 # Reasons a receiver gives (and counts); the format class is not a security event.
 FORMAT = "format"
@@ -110,6 +111,14 @@ def load_key_file(path: str | Path) -> bytes:
     if len(key) < 16:
         raise KeyFileError(f"{p}: key of {len(key)} bytes is too short (at least 16, {KEY_BYTES} written by keygen)")
     return key
+
+
+def mission_key_path(named: str | None, config_path: str | Path) -> Path | None:
+    """The key file a mission names (``flight_software.tmtc.security.key_file``), relative to the
+    mission file's folder; None when it names none."""
+    if named is None:
+        return None
+    return Path(config_path).resolve().parent / named
 
 
 def _subkey(key: bytes, spi: int) -> bytes:

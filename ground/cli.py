@@ -9,7 +9,7 @@ from typing import Any
 
 from fsw.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DEFAULT_TM_PORT, DICTIONARY, TelemetryDictionary
 from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
-from ground.commanding import CommandSender
+from ground.commanding import CommandSender, signing_sender_args
 from ground.monitor import GroundMonitor
 
 
@@ -29,8 +29,9 @@ def add_cli(subparsers: Any) -> None:
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     parser.add_argument("--dictionary", default=None, help="telemetry dictionary JSON (default: built in)")
     parser.add_argument("--no-live", action="store_true", help="no live table; print events as lines")
+    parser.add_argument("--key-file", default=None, help=_KEY_HELP)
     parser.set_defaults(func=_cmd_monitor)
-    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode}")
+    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode,keygen}")
     send = sub.add_parser("send", help="send one telecommand, e.g. `keepout ground send SET_MODE POINTING`",
                           epilog=_command_help(DICTIONARY), formatter_class=argparse.RawDescriptionHelpFormatter)
     send.add_argument("opcode", help="command name (or numeric opcode)")
@@ -45,11 +46,50 @@ def add_cli(subparsers: Any) -> None:
                            "flight software sees consecutive counts across invocations")
     send.add_argument("--no-check", action="store_true",
                       help="skip the dictionary range checks (test the flight-side validation)")
+    send.add_argument("--key-file", dest="send_key_file", default=None, help=_KEY_HELP)
     send.set_defaults(func=_cmd_send)
+    keygen = sub.add_parser("keygen", help="write a new link key file (32 random bytes as hex, mode 0600)")
+    keygen.add_argument("key_path", help="where to write it (never overwrites); name it in the mission as "
+                                         "flight_software.tmtc.security.key_file")
+    keygen.set_defaults(func=_cmd_keygen)
     decode = sub.add_parser("decode", help="rebuild the decoded JSONL from a raw archive and report gaps")
     decode.add_argument("archive_dir", help="directory holding tm_raw.bin")
     decode.add_argument("--out", default=None, help="output JSONL (default: ARCHIVE_DIR/tm_decoded.jsonl)")
     decode.set_defaults(func=_cmd_decode)
+
+
+_KEY_HELP = ("link key file (default: the mission's flight_software.tmtc.security.key_file); telecommands "
+             "are signed and telemetry verified with it")
+
+
+def _key_file(explicit: str | None, config_path: str | None) -> str:
+    """The link key file to use; raises ValueError (one line) when there is none."""
+    if explicit:
+        return explicit
+    if config_path:
+        from fsw.config import load_fsw_config
+        from fsw.link_security import mission_key_path
+
+        path = mission_key_path(load_fsw_config(config_path).tmtc.security.key_file, config_path)
+        if path is not None:
+            return str(path)
+    raise ValueError("no link key: pass --key-file FILE, or --config MISSION naming "
+                     "flight_software.tmtc.security.key_file (`keepout ground keygen FILE` makes one)")
+
+
+def _cmd_keygen(args: argparse.Namespace) -> int:
+    from fsw.link_security import write_key_file
+
+    try:
+        write_key_file(args.key_path)
+    except FileExistsError:
+        print(f"keepout ground keygen: {args.key_path} exists; a key is never overwritten", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"keepout ground keygen: {args.key_path}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.key_path} (mode 0600)")
+    return 0
 
 
 def _command_help(dictionary: TelemetryDictionary) -> str:
@@ -87,16 +127,19 @@ def _mission_addresses(config_path: str | None) -> dict[str, Any]:
 def _cmd_monitor(args: argparse.Namespace) -> int:
     from fsw.dictionary import DictionaryError
 
+    from fsw.link_security import downlink_receiver, load_key_file
+
     try:
         dictionary = _load_dictionary(args.dictionary)
         addresses = _mission_addresses(args.config)
+        security = downlink_receiver(load_key_file(_key_file(args.key_file, args.config)))
     except (DictionaryError, ValueError) as exc:
         print(f"keepout ground: {exc}", file=sys.stderr)
         return 2
     host = args.host if args.host is not None else addresses["tm_host"]
     port = args.port if args.port is not None else addresses["tm_port"]
     try:
-        monitor = GroundMonitor(dictionary, host, port, args.archive)
+        monitor = GroundMonitor(dictionary, host, port, args.archive, security=security)
     except OSError as exc:
         print(f"keepout ground: cannot bind {host}:{port}: {exc}", file=sys.stderr)
         return 2
@@ -105,7 +148,8 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     stats = monitor.run(duration_s=args.duration, live=not args.no_live)
     summary = stats.to_json_dict()
     print(f"received {summary['datagrams']} packets, {summary['decode_errors']} decode errors, "
-          f"{summary['missing_packets']} missing in {len(stats.gaps)} gaps")
+          f"{summary['missing_packets']} missing in {len(stats.gaps)} gaps, "
+          f"{summary['rejected_by_link_security']} refused by the link security (forged/unauthenticated/replayed)")
     return 0
 
 
@@ -119,12 +163,13 @@ def _cmd_send(args: argparse.Namespace) -> int:
         tc_port = args.tc_port if args.tc_port is not None else addresses["tc_port"]
         command: str | int = int(args.opcode, 0) if args.opcode[:1].isdigit() else args.opcode.upper()
         dictionary.command(command)  # unknown command: fail before touching the sequence file
+        signing = signing_sender_args(_key_file(args.send_key_file, args.config))
         seq = args.seq
         if args.seq_file:
             from spacepackets.seqcount import CcsdsFileSeqCountProvider
 
             seq = CcsdsFileSeqCountProvider(Path(args.seq_file)).get_and_increment()
-        with CommandSender(dictionary, tc_host, tc_port, seq) as sender:
+        with CommandSender(dictionary, tc_host, tc_port, seq, **signing) as sender:
             packet = sender.send(command, *args.args, check_range=not args.no_check)
     except (ArgError, DictionaryError, ValueError) as exc:
         print(f"keepout ground send: {exc}", file=sys.stderr)

@@ -47,6 +47,7 @@ import numpy as np
 import yaml
 
 from fsw.lifetime import PARENT_PID_ENV, die_with_parent
+from fsw.link_security import LINK_KEY_FILE, write_key_file
 from keepout_config import config_path
 
 DEFAULT_MISSION = config_path("missions", "demo-pointing.yaml")
@@ -185,17 +186,20 @@ STATUS_CHANNELS = ("mode", "pointing_error_deg", "att_error_deg", "margin_min_de
 
 
 def ground_process(archive_dir: str, port: int, port_queue, ready, fsw_started, stop_event, status_queue,
-                   parent_pid: int | None = None) -> None:
-    """Entry point of the ground process: archive telemetry until told to stop.
+                   parent_pid: int | None = None, key_file: str | None = None) -> None:
+    """Entry point of the ground process: archive telemetry until told to stop (verified with the run's
+    link key ``key_file``: forged or replayed packets are counted, never archived).
 
     Ctrl-C is ignored here: the orchestrator stops the ground last, after the flight software, so
     the final packets are archived. Killed with the orchestrator, whatever kills it.
     """
     die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from fsw.link_security import downlink_receiver, load_key_file
     from ground.monitor import GroundMonitor
 
-    monitor = GroundMonitor(port=port, archive_dir=archive_dir)
+    security = downlink_receiver(load_key_file(key_file)) if key_file else None
+    monitor = GroundMonitor(port=port, archive_dir=archive_dir, security=security)
     port_queue.put(monitor.address[1])
     ready.set()
     last_status = 0.0
@@ -472,9 +476,14 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
     port_queue, status_queue = ctx.Queue(), ctx.Queue(maxsize=4)
     ready, fsw_started, stop_event = ctx.Event(), ctx.Event(), ctx.Event()
     ground_dir = run_dir / GROUND_DIR
+    # The run's own link key (0600, in the run folder): the flight software, the ground and the timeline
+    # sign and verify with it; no key is ever shared between runs or written into a YAML.
+    key_path = run_dir / LINK_KEY_FILE
+    write_key_file(key_path)
     ground = ctx.Process(target=ground_process, name="keepout-ground",
                          args=(str(ground_dir), tmtc.telemetry_port if fixed_ports else 0, port_queue, ready,
-                               fsw_started, stop_event, status_queue, os.getpid()))
+                               fsw_started, stop_event, status_queue, os.getpid()),
+                         kwargs={"key_file": str(key_path)})
     fsw_proc: subprocess.Popen | None = None
     bus = None
     candump = None
@@ -494,6 +503,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         tc_port = tmtc.telecommand_port if fixed_ports else _free_udp_port()
         data = _config_used(mission, bus_spec=info.spec, tm_port=tm_port, tc_port=tc_port,
                             realtime=options.realtime)
+        data["flight_software"]["tmtc"]["security"]["key_file"] = LINK_KEY_FILE  # beside the config used
         write_config(run_dir, data, Path(options.mission))
 
         # Open the simulator's end of the bus and build the world (astropy ephemeris nodes take a few
@@ -502,10 +512,10 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
             bus = open_bus(info.spec, run_id=run_dir.name)
         except (BusUnavailableError, OSError) as exc:
             raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
-        from ground.commanding import CommandSender
+        from ground.commanding import CommandSender, signing_sender_args
 
         sender = CommandSender(host=tmtc.telecommand_bind_host if tmtc.telecommand_bind_host != "0.0.0.0"
-                               else "127.0.0.1", port=tc_port)
+                               else "127.0.0.1", port=tc_port, **signing_sender_args(key_path))
         timeline = Timeline(mission, sender)
         world = World(world_params(mission), seed=mission.seed)
         world.truth  # noqa: B018  (evaluates the ephemeris at t = 0 now, not during the first tick)
