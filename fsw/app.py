@@ -574,6 +574,7 @@ class FlightSoftware:
             "bus_tx_errors": getattr(self, "_bus_tx_errors", 0),
             "bus_unknown_ids": sum(self.driver.counters.get("_bus", {}).get(k, 0) for k in ("unknown_id", "error_frame")),
             "bus_stale_syncs": getattr(self.driver, "stale_syncs", 0),
+            "bus_unexpected_frames": getattr(self.driver, "unexpected_frames", 0),
             "imu_stale_cycles": self.fdir.stale_counts["IMU"],
             "st_stale_cycles": self.fdir.stale_counts["STAR_TRACKER"],
             "tm_packets_sent": tm.get("packets_sent", 0),

@@ -615,6 +615,8 @@ _HK_CHANNELS: list[Channel] = [
             Limits(yellow=(None, 0))),
     Channel("bus_stale_syncs", "U32", "", "lockstep SYNC frames whose tick was not after the last one (replayed), ignored",
             Limits(yellow=(None, 0))),
+    Channel("bus_unexpected_frames", "U32", "", "lockstep: E2E-good device frames outside every announced tick (replayed, injected or late), not used",
+            Limits(yellow=(None, 0))),
     Channel("imu_stale_cycles", "U32", "", "consecutive cycles without a fresh IMU sample"),
     Channel("st_stale_cycles", "U32", "", "consecutive cycles without a fresh star-tracker sample"),
     Channel("tc_accepted", "U32", "", "telecommands accepted"),

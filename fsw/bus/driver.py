@@ -13,7 +13,9 @@ Two ways to read the bus:
 Only frames the E2E receiver delivers (ok / ok_some_lost) reach these samples, and only those count
 toward the frames a lockstep tick waits for: frames that fail E2E (corrupt, repeated, out of sequence)
 cannot close a tick early. A SYNC whose tick is not after the last one (a replayed or stale SYNC) is
-counted (``stale_syncs``) and ignored. See docs/bus.md for what E2E can and cannot stop.
+counted (``stale_syncs``) and ignored, and in lockstep a device frame that arrives outside every
+announced tick (after a tick closed, before the next SYNC: replayed, injected or late) is counted
+(``unexpected_frames``) and not used. See docs/bus.md for what E2E can and cannot stop.
 """
 from __future__ import annotations
 
@@ -155,6 +157,7 @@ class FswBusDriver:
         self.last_tick: int | None = None
         self.incomplete_ticks = 0
         self.stale_syncs = 0
+        self.unexpected_frames = 0
         self.tx_errors = 0
         self._supervision_started = False
 
@@ -182,11 +185,14 @@ class FswBusDriver:
         sync = self._pending_sync
         self._pending_sync = None
         while sync is None:
-            frame = self._receive()
+            frame = self._receive(apply=False)
             if frame is None:
                 return None
-            if frame.delivered and frame.frame_id == self._sync_id and not self._stale_sync(frame.signals):
-                sync = dict(frame.signals)
+            if frame.delivered and frame.frame_id == self._sync_id:
+                if not self._stale_sync(frame.signals):
+                    sync = dict(frame.signals)
+            elif frame.delivered and frame.frame_id in self._device_ids:
+                self.unexpected_frames += 1  # belongs to no announced tick
         tick = int(sync["tick"])
         self.period_s = float(sync["period_ms"]) / 1000.0
         self.t_tick = tick * self.period_s
@@ -242,9 +248,10 @@ class FswBusDriver:
             frames_expected=expected, frames_received=received,
         )
 
-    def _receive(self, grace_s: float | None = None) -> ReceivedFrame | None:
+    def _receive(self, grace_s: float | None = None, apply: bool = True) -> ReceivedFrame | None:
         """Next classified frame within the call's timeout (own echoes skipped); None on timeout.
-        ``grace_s``: when the queue is empty, wait at most this long (still within the timeout)."""
+        ``grace_s``: when the queue is empty, wait at most this long (still within the timeout);
+        ``apply``: hand a delivered frame to the samples (False: only classify it)."""
         while True:
             # Frames come in bursts after SYNC: try without waiting first, and read the clock only when
             # the queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest): the
@@ -270,7 +277,8 @@ class FswBusDriver:
             frame = self.receiver.classify(msg, now)
             if frame is None:
                 continue
-            self._apply(frame, now)
+            if apply:
+                self._apply(frame, now)
             return frame
 
     def _start_supervision(self, now: float) -> None:
