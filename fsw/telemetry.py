@@ -253,6 +253,15 @@ def _wire_value(channel: Channel, value: Any) -> Any:
     return _saturate(value, low, high)
 
 
+_F32_MAX = 3.4028234663852886e38
+
+
+def _f32(value: float) -> float:
+    """``value`` as float32 can hold it: beyond the largest float32, +-inf (what IEEE conversion gives),
+    instead of struct's OverflowError."""
+    return math.copysign(math.inf, value) if math.isfinite(value) and abs(value) > _F32_MAX else value
+
+
 def _saturate(value: Any, low: int, high: int) -> int:
     number = float(value)
     if math.isnan(number):
@@ -416,12 +425,20 @@ class TelemetrySender:
         """Update ``values`` and send the whole packet; channels not given keep their last value.
 
         Unknown names raise ``DictionaryError`` (a programming error); numeric values never raise:
-        integers saturate at their type's range. Returns the packet bytes.
+        integers saturate at their type's range, F32 values beyond float32 become +-inf. Returns the
+        packet bytes.
         """
         if values:
             self.update(packet_name, values)
         packet = self.dictionary.packet(packet_name)
-        payload = self._structs[packet_name].pack(*self._latest[packet_name])
+        latest = self._latest[packet_name]
+        try:
+            payload = self._structs[packet_name].pack(*latest)
+        except OverflowError:  # an F32 channel beyond float32 (found by bench/fuzz.py): saturate, then pack
+            for i, channel in enumerate(packet.channels):
+                if channel.type == "F32":
+                    latest[i] = _f32(latest[i])
+            payload = self._structs[packet_name].pack(*latest)
         raw = _frame(packet.apid, self._next_seq(packet.apid), self._time(time_s), payload)
         return self._transmit(raw)
 
@@ -460,6 +477,8 @@ class TelemetrySender:
             if arg.name not in args:
                 raise DictionaryError(f"event {event.name}: missing arg {arg.name!r}")
             value = coerce_arg(arg, args[arg.name], check_range=False)
+            if arg.type == "F32":
+                value = _f32(value)
             if arg.type in _INT_LIMITS:
                 low, high = _INT_LIMITS[arg.type]
                 value = min(max(value, low), high)
