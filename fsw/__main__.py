@@ -62,6 +62,8 @@ def add_arguments(p: argparse.ArgumentParser, first_sync_default: float | None =
     p.add_argument("--tm-port", type=int, default=None, help="override tmtc.telemetry_port")
     p.add_argument("--tc-port", type=int, default=None, help="override tmtc.telecommand_port (0: ephemeral)")
     p.add_argument("--dbc", default=None, help="ICD DBC file (default config/icd/keepout.dbc)")
+    p.add_argument("--key-file", default=None,
+                   help="link key file (overrides tmtc.security.key_file; relative paths from the current folder)")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -87,10 +89,18 @@ def run(args: argparse.Namespace) -> int:
     from fsw.app import FlightSoftware
     from fsw.bus import BusSpecError, BusUnavailableError, FswBusDriver, Icd, open_bus
     from fsw.dictionary import DICTIONARY
+    from fsw.link_security import KeyFileError
     from fsw.telecommand import CommandDispatcher
     from fsw.telemetry import TelemetrySender
 
     bus_spec = args.bus if args.bus is not None else mission_bus
+    try:
+        uplink, downlink = link_associations(cfg, args.config, args.key_file)
+    except KeyFileError as exc:
+        print(f"fsw: {exc}", file=sys.stderr)
+        return 2
+    for warning in cfg.tmtc.warnings():
+        print(f"fsw: warning: {warning}", file=sys.stderr)
     try:
         bus = open_bus(bus_spec, args.run_id, bitrate=args.bitrate if args.bitrate is not None else mission_bitrate)
     except BusSpecError as exc:
@@ -104,11 +114,12 @@ def run(args: argparse.Namespace) -> int:
     tc_port = tm_cfg.telecommand_port if args.tc_port is None else args.tc_port
     icd = Icd(args.dbc) if args.dbc else Icd()
     driver = FswBusDriver(bus, icd, len(cfg.spacecraft.wheels))
-    telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port,
+    telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port, security=downlink,
                                 multicast_interface=tm_cfg.telemetry_multicast_interface,
                                 multicast_ttl=tm_cfg.telemetry_multicast_ttl)
     try:
-        dispatcher = CommandDispatcher(DICTIONARY, telemetry, host=tm_cfg.telecommand_bind_host, port=tc_port)
+        dispatcher = CommandDispatcher(DICTIONARY, telemetry, host=tm_cfg.telecommand_bind_host, port=tc_port,
+                                       security=uplink, budget_s=tm_cfg.uplink_budget_ms / 1000.0)
     except OSError as exc:
         print(f"fsw: cannot bind the telecommand socket {tm_cfg.telecommand_bind_host}:{tc_port}: {exc}", file=sys.stderr)
         return 2
@@ -139,6 +150,23 @@ def run(args: argparse.Namespace) -> int:
         telemetry.close()
         bus.shutdown()
     return code
+
+
+def link_associations(cfg, config_path: str, key_file: str | None = None):
+    """(uplink receiver, downlink sender) associations from the mission's key file (``key_file``
+    overrides it). Raises KeyFileError when there is no usable key: the flight software never runs an
+    unauthenticated uplink."""
+    from fsw.dictionary import DICTIONARY
+    from fsw.link_security import (SPI_TM, KeyFileError, SecurityAssociation, load_key_file, mission_key_path,
+                                   uplink_receiver)
+
+    path = key_file or mission_key_path(cfg.tmtc.security.key_file, config_path)
+    if path is None:
+        raise KeyFileError(f"{config_path}: flight_software.tmtc.security.key_file: no link key named; make "
+                           "one with `keepout ground keygen FILE` and name it there (or pass --key-file)")
+    key = load_key_file(path)
+    uplink = uplink_receiver(key, cfg.tmtc.security.tc_window, resync_opcode=DICTIONARY.command("SEC_RESYNC").opcode)
+    return uplink, SecurityAssociation(key, SPI_TM)
 
 
 if __name__ == "__main__":

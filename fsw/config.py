@@ -357,6 +357,25 @@ class OrbitKnowledge(_Strict):
     arg_latitude_at_epoch_deg: float = Field(0.0, ge=-360.0, le=360.0, description="Argument of latitude at the epoch [deg].")
 
 
+class LinkSecurityConfig(_Strict):
+    """Link security (fsw.link_security, in the manner of CCSDS SDLS): MAC and anti-replay on TC and TM."""
+
+    key_file: str | None = Field(None, description="Path of the link key file (hex, mode 0600; `keepout ground keygen FILE` makes one), relative to the mission file's folder. Never the key itself. Required by the flight software process; the SIL makes a fresh key for every run in its run folder and uses that instead.")
+    tc_window: int = Field(1024, ge=1, le=1_000_000, description="Anti-replay window: an uplink security sequence number is accepted when above the last accepted one by at most this much; beyond it only SEC_RESYNC is.")
+
+
+def is_loopback_host(host: str) -> bool:
+    """True for a loopback IP literal (127.0.0.0/8, ::1) or "localhost"."""
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 class TmTcConfig(_Strict):
     """Telemetry/telecommand sockets (loopback unless the mission names another address)."""
 
@@ -384,9 +403,28 @@ class TmTcConfig(_Strict):
         "group (loopback keeps the telemetry on this computer).")
     telemetry_multicast_ttl: int = Field(
         0, ge=0, le=255, description="With a multicast telemetry_host: hops the datagrams may take (0: this host only).")
-    telecommand_bind_host: str = Field("127.0.0.1", description="Address the telecommand socket binds to.")
+    telecommand_bind_host: str = Field("127.0.0.1", description="Address the telecommand socket binds to; a non-loopback address needs allow_non_loopback: true.")
     telecommand_port: int = Field(50101, ge=0, le=65535, description="0 = ephemeral port.")
+    allow_non_loopback: bool = Field(False, description="Explicit consent to bind the telecommand socket to a non-loopback address (reachable from the network; commands are still authenticated). A warning is printed whenever it is used.")
+    uplink_budget_ms: float = Field(5.0, gt=0.0, le=1000.0, description="Host time a GNC cycle may spend reading the uplink [ms]; what is left stays queued for the next cycle, and what the kernel had to drop is counted (tc_uplink_dropped).")
     gnc_packet_every_n_cycles: int = Field(1, ge=1, le=1000, description="Send the GNC state packet every n GNC cycles.")
+    security: LinkSecurityConfig = Field(default_factory=LinkSecurityConfig, description="Link security: the key file and the uplink anti-replay window (docs/security.md).")
+
+    @model_validator(mode="after")
+    def _loopback_unless_allowed(self) -> "TmTcConfig":
+        if not is_loopback_host(self.telecommand_bind_host) and not self.allow_non_loopback:
+            raise ValueError(f"telecommand_bind_host {self.telecommand_bind_host!r} is not a loopback address "
+                             "(127.0.0.1, ::1, localhost): any host that can reach it could send telecommands; "
+                             "set allow_non_loopback: true to bind it anyway")
+        return self
+
+    def warnings(self) -> list[str]:
+        """What ``config validate`` and the flight software print about these sockets."""
+        if is_loopback_host(self.telecommand_bind_host):
+            return []
+        return [f"flight_software.tmtc.telecommand_bind_host {self.telecommand_bind_host!r} is not loopback "
+                "(allow_non_loopback: true): telecommands are accepted from the network, authenticated "
+                "by the link key only"]
 
 
 class FswConfig(_Strict):

@@ -465,7 +465,7 @@ FDIR_ACTIONS = ("NONE", "EVENT_ONLY", "REJECT_SENSOR", "ISOLATE_WHEEL", "ENTER_S
 ZONE_BODIES = ("SUN", "MOON", "EARTH", "INERTIAL", "ATTITUDE", "MERGED")
 RATE_GROUPS = ("GNC", "HK")
 SENSORS = ("IMU", "STAR_TRACKER", "WHEEL")
-TC_ERRORS = ("INVALID_OPCODE", "VALIDATION", "FORMAT", "EXECUTION")
+TC_ERRORS = ("INVALID_OPCODE", "VALIDATION", "FORMAT", "EXECUTION", "SECURITY")
 
 # Telecommand verification, after PUS service 1 (ECSS-E-ST-70-41C ch. 6.1): every telecommand gets an
 # acceptance report (success or failure with a reason code) and, once accepted, a completion report. They
@@ -499,13 +499,19 @@ TC_REASONS: tuple[tuple[str, str, str], ...] = (
     ("TARGET_IN_KEEP_OUT", "VALIDATION", "target lies inside a keep-out zone (TARGET_REJECTED event names it)"),
     ("GAINS_INADMISSIBLE", "VALIDATION", "gains refused by the law (e.g. eps outside the admissible interval)"),
     ("EXECUTION_FAILED", "EXECUTION", "the handler failed while executing an accepted command"),
+    # link security (fsw.link_security): only REPLAY and OUTSIDE_WINDOW are ever acknowledged (the packet
+    # authenticated); the others are counted in housekeeping and not answered
+    ("UNAUTHENTICATED", "SECURITY", "no security header, or another security parameter index (not answered)"),
+    ("BAD_MAC", "SECURITY", "the MAC does not verify: forged or signed with another key (not answered)"),
+    ("REPLAY", "SECURITY", "security sequence number not above the last accepted one: a replay"),
+    ("OUTSIDE_WINDOW", "SECURITY", "security sequence number beyond the anti-replay window: send SEC_RESYNC"),
 )
 TC_REASON_CODES = tuple(name for name, _, _ in TC_REASONS)
 TC_REASON_CLASS = {name: error_class for name, error_class, _ in TC_REASONS}
 TC_REASON_DOCS = {name: doc for name, _, doc in TC_REASONS}
 TC_COMMON_FAILURE_CODES = ("PACKET_TOO_SHORT", "PACKET_TOO_LONG", "BAD_HEADER", "WRONG_APID", "LENGTH_MISMATCH",
                            "CRC_MISMATCH", "UNKNOWN_OPCODE", "NO_HANDLER", "ARGS_TRUNCATED", "TRAILING_BYTES",
-                           "BAD_ENUM", "ARG_OUT_OF_RANGE")
+                           "BAD_ENUM", "ARG_OUT_OF_RANGE", "REPLAY", "OUTSIDE_WINDOW")
 TC_COMPLETION_FAILURE_CODES = ("EXECUTION_FAILED",)
 TARGET_KINDS = ("DIRECTION", "QUATERNION")
 MODE_REASONS = ("INIT", "TELECOMMAND", "FDIR", "AUTONOMOUS")
@@ -607,6 +613,12 @@ _HK_CHANNELS: list[Channel] = [
     Channel("bus_decode_errors", "U32", "", "bus frames that failed to decode", Limits(yellow=(None, 0))),
     Channel("bus_timeouts", "U32", "", "ticks with missing sensor frames", Limits(yellow=(None, 0))),
     Channel("bus_tx_errors", "U32", "", "bus transmit failures", Limits(yellow=(None, 0))),
+    Channel("bus_unknown_ids", "U32", "", "bus frames with an identifier not in the ICD (or error/extended/remote frames)",
+            Limits(yellow=(None, 0))),
+    Channel("bus_stale_syncs", "U32", "", "lockstep SYNC frames whose tick was not after the last one (replayed), ignored",
+            Limits(yellow=(None, 0))),
+    Channel("bus_unexpected_frames", "U32", "", "lockstep: E2E-good device frames outside every announced tick (replayed, injected or late), not used",
+            Limits(yellow=(None, 0))),
     Channel("imu_stale_cycles", "U32", "", "consecutive cycles without a fresh IMU sample"),
     Channel("st_stale_cycles", "U32", "", "consecutive cycles without a fresh star-tracker sample"),
     Channel("tc_accepted", "U32", "", "telecommands accepted"),
@@ -618,6 +630,21 @@ _HK_CHANNELS: list[Channel] = [
     Channel("tc_format_errors", "U32", "", "telecommands rejected: malformed packet"),
     Channel("tc_execution_errors", "U32", "", "telecommands failed in execution: handler failed"),
     Channel("tc_last_opcode", "U16", "", "opcode of the last accepted telecommand"),
+    # link security (fsw.link_security) and uplink loss: never reset by RESET_COUNTERS
+    Channel("tc_sec_unauthenticated", "U32", "", "uplink datagrams without a security header / with another SPI",
+            Limits(yellow=(None, 0))),
+    Channel("tc_sec_bad_mac", "U32", "", "uplink datagrams whose MAC did not verify (forged)",
+            Limits(yellow=(None, 0))),
+    Channel("tc_sec_replay", "U32", "", "uplink datagrams refused: security SN not above the last accepted",
+            Limits(yellow=(None, 0))),
+    Channel("tc_sec_outside_window", "U32", "", "uplink datagrams refused: security SN beyond the window",
+            Limits(yellow=(None, 0))),
+    Channel("tc_sec_resyncs", "U32", "", "SEC_RESYNC commands that moved the anti-replay window"),
+    Channel("tc_sec_last_sn", "U32", "", "last accepted uplink security SN (the ground sends above it)"),
+    Channel("tc_uplink_dropped", "U32", "", "uplink datagrams the kernel discarded, socket buffer full (SO_RXQ_OVFL)",
+            Limits(yellow=(None, 0))),
+    Channel("tc_uplink_deferred", "U32", "", "cycles whose uplink read stopped at its time budget, datagrams left queued",
+            Limits(yellow=(None, 0))),
     Channel("tm_packets_sent", "U32", "", "telemetry packets sent"),
     Channel("tm_send_errors", "U32", "", "telemetry packets that failed to send", Limits(yellow=(None, 0))),
     Channel("events_sent", "U32", "", "events sent"),
@@ -743,6 +770,8 @@ EVENTS: tuple[EventDef, ...] = (
              (_OPCODE, Arg("command", "STRING"))),
     EventDef("CMD_REJECTED", 62, Severity.WARNING_HI, "command opcode {opcode} rejected: {error}: {reason}",
              (_OPCODE, Arg("error", "ENUM", enum=TC_ERRORS), _REASON), throttle=20, throttle_window_s=10.0),
+    EventDef("SEC_RESYNCED", 63, Severity.WARNING_LO, "uplink anti-replay window moved to security SN {sn}",
+             (Arg("sn", "U32"),)),
     EventDef("EVENTS_THROTTLED", 70, Severity.DIAGNOSTIC, "{count} {event} events throttled",
              (Arg("event", "STRING"), Arg("count", "U32"))),
 )
@@ -772,6 +801,8 @@ COMMANDS: tuple[CommandDef, ...] = (
          Arg("rate_limit_deg_s", "F64", "deg/s", "body rate command limit", min=1e-3, max=20.0)),
         failure_codes=("GAINS_INADMISSIBLE",),
     ),
+    CommandDef("SEC_RESYNC", 0x10, "move the uplink anti-replay window forward to this command's security "
+               "SN (the only command accepted beyond the window; never backwards)"),
 )
 
 DICTIONARY = TelemetryDictionary(PACKETS, EVENTS, COMMANDS)

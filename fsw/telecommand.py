@@ -5,6 +5,14 @@ address), checks every datagram (length, header, APID, CRC, opcode, argument typ
 handler runs, and classifies every failure as one of the typed errors INVALID_OPCODE, VALIDATION, FORMAT
 or EXECUTION. Every datagram changes the counters; none can raise out of ``handle_datagram``/``poll``.
 
+With a ``security`` association (``fsw.link_security``, what the flight process always uses) every
+datagram must first pass the link's authentication and anti-replay checks; a refusal is the error class
+SECURITY, counted by reason in the association (which RESET_COUNTERS never clears). The link, not the
+handlers, does this: the handlers only ever see authenticated, fresh commands.
+
+``poll`` reads the uplink until it is empty, within a time budget per call; what the kernel had to
+discard because the socket buffer was full (SO_RXQ_OVFL) is counted, so no command is lost silently.
+
 Handlers are registered per opcode and called with the decoded arguments as keywords (enums as their
 names, e.g. ``handler(mode="POINTING")``). A handler signals a rejected request by raising
 ``CommandValidationError`` (e.g. target inside a keep-out zone) or ``CommandExecutionError``; any other
@@ -25,6 +33,7 @@ import signal
 import socket
 import struct
 import threading
+import time
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -54,6 +63,10 @@ from fsw.dictionary import (
     decode_args,
     encode_args,
 )
+from fsw.link_security import FORMAT as LINK_FORMAT
+from fsw.link_security import OUTSIDE_WINDOW, REPLAY
+from fsw.link_security import REASONS as SECURITY_REASONS
+from fsw.link_security import SecurityAssociation, SecurityError
 from fsw.telemetry import crc16_ccitt
 
 if TYPE_CHECKING:
@@ -66,6 +79,18 @@ INVALID_OPCODE = "INVALID_OPCODE"
 VALIDATION = "VALIDATION"
 FORMAT = "FORMAT"
 EXECUTION = "EXECUTION"
+SECURITY = "SECURITY"
+
+# SO_RXQ_OVFL (Linux socket option 40, not exported by every Python): each datagram then carries the
+# socket's cumulative count of datagrams the kernel dropped because the receive buffer was full.
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)
+_OVFL = struct.Struct("=I")
+_ANC_SPACE = socket.CMSG_SPACE(_OVFL.size)
+_BUDGET_CHECK_EVERY = 16  # datagrams between two clock reads while draining
+# SO_RXQ_OVFL reports drops only with the next datagram queued; drops after the last one are read with
+# SO_MEMINFO (Linux >= 4.16: u32 sk_meminfo array, SK_MEMINFO_DROPS at index 8) when housekeeping asks.
+SO_MEMINFO = getattr(socket, "SO_MEMINFO", 55)
+_MEMINFO_DROPS = 8
 
 
 class CommandError(Exception):
@@ -111,6 +136,18 @@ class CommandExecutionError(CommandError):
     """The handler failed while executing an accepted command (a completion failure)."""
 
     default_code = "EXECUTION_FAILED"
+
+
+class CommandSecurityError(CommandError):
+    """The link refused the datagram: unauthenticated, bad MAC, replayed or outside the SN window
+    (codes of the SECURITY class; a link-level CRC failure is CRC_MISMATCH, class FORMAT).
+    ``acknowledge``: whether the refusal is reported in a TC_ACK (only for authenticated packets)."""
+
+    default_code = "BAD_MAC"
+
+    def __init__(self, message: str, code: str | None = None, acknowledge: bool = True) -> None:
+        super().__init__(message, code)
+        self.acknowledge = acknowledge
 
 
 @dataclass(frozen=True)
@@ -238,19 +275,25 @@ class CommandDispatcher:
 
     ``port=None`` creates no socket (``handle_datagram`` only); ``port=0`` binds an ephemeral port
     (read it from ``address``). ``telemetry`` (optional) receives the COMMAND and rejection events.
+    ``security``: the uplink association every datagram must pass (None: plain packets, unit tests).
+    ``budget_s``: host time one ``poll`` may spend draining the socket (the rest waits for the next).
     """
 
-    # accepted + rejected = received; completed + failed = accepted; the four error classes add up to
+    # accepted + rejected = received; completed + failed = accepted; the five error classes add up to
     # rejected + failed.
     COUNTER_NAMES = ("received", "accepted", "rejected", "completed", "failed", "invalid_opcode", "validation",
-                     "format", "execution", "seq_gaps", "acks_sent")
+                     "format", "execution", "security", "seq_gaps", "acks_sent")
 
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, telemetry: TelemetrySender | None = None,
                  host: str = DEFAULT_HOST, port: int | None = DEFAULT_TC_PORT, *,
-                 max_packets_per_poll: int = 64) -> None:
+                 security: SecurityAssociation | None = None, budget_s: float = 0.005,
+                 rcvbuf_bytes: int | None = None) -> None:
         self.dictionary = dictionary
         self.telemetry = telemetry
-        self.max_packets_per_poll = max_packets_per_poll
+        self.security = security
+        self.budget_s = budget_s
+        self.kernel_drops = 0  # datagrams the kernel discarded (socket buffer full), never reset
+        self.budget_exhausted = 0  # polls that stopped at the budget with datagrams still queued
         self._handlers: dict[int, Handler] = {}
         self.counters: dict[str, int] = dict.fromkeys(self.COUNTER_NAMES, 0)
         self.last_opcode = 0
@@ -261,9 +304,17 @@ class CommandDispatcher:
         self._armed = False
         if port is not None:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            if rcvbuf_bytes is not None:
+                self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
+            try:
+                self._sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+            except OSError:
+                pass  # not Linux: drops cannot be counted (hk shows 0)
             self._sock.bind((host, port))
             self._sock.setblocking(False)
             self._arm()
+        if security is not None and security.resync_opcode is not None:
+            self.register(security.resync_opcode, self._cmd_resync)
 
     def _arm(self) -> None:
         """Ask for SIGIO on arrivals (see ``_on_sigio``); where that is not possible (no SIGIO, not the main
@@ -314,7 +365,7 @@ class CommandDispatcher:
 
     # ---- input ----
     def poll(self, timeout_s: float = 0.0) -> list[CommandResult]:
-        """Handle every datagram waiting on the socket (at most ``max_packets_per_poll``)."""
+        """Handle every datagram waiting on the socket, until it is empty or ``budget_s`` is spent."""
         if self._sock is None:
             return []
         results: list[CommandResult] = []
@@ -325,17 +376,25 @@ class CommandDispatcher:
             ready, _, _ = select.select([self._sock], [], [], timeout_s)
             if not ready:
                 return results
-        for _ in range(self.max_packets_per_poll):
+        start = time.perf_counter()
+        while True:
             try:
                 # Read more than the maximum so an oversized datagram is seen as oversized, not cut.
-                data = self._sock.recv(65536)
+                data, ancillary, _, _ = self._sock.recvmsg(65536, _ANC_SPACE)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError:
                 break
+            for level, kind, value in ancillary:
+                if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(value) >= _OVFL.size:
+                    self.kernel_drops = max(self.kernel_drops, _OVFL.unpack_from(value)[0])
             results.append(self.handle_datagram(data))
-        else:
-            self._maybe_readable = True  # stopped at the bound: more may be waiting
+            if len(results) % _BUDGET_CHECK_EVERY == 0 and time.perf_counter() - start > self.budget_s:
+                # Out of time with datagrams still queued: they wait for the next cycle (the kernel counts
+                # any that no longer fit), the GNC cycle keeps its deadline.
+                self.budget_exhausted += 1
+                self._maybe_readable = True
+                break
         return results
 
     def handle_datagram(self, data: bytes) -> CommandResult:
@@ -349,6 +408,8 @@ class CommandDispatcher:
         name: str | None = None
         seq: int | None = None
         try:
+            if self.security is not None:
+                data = self._unprotect(data)
             try:
                 definition, args, seq = decode_command(self.dictionary, data)
             except CommandError:
@@ -383,11 +444,29 @@ class CommandDispatcher:
         self.last_result = result
         return result
 
+    def _unprotect(self, data: bytes) -> bytes:
+        """The plain packet inside a secured one, or CommandSecurityError. A packet that does not
+        authenticate (junk, no security header, bad MAC) is refused with ``acknowledge = False``: the flight
+        software answers only packets signed with the mission key, so a flood of junk draws no flood of
+        reports, and a forger cannot fake a rejection of the ground's own command."""
+        try:
+            return self.security.unprotect(data)[0]
+        except SecurityError as exc:
+            code = {LINK_FORMAT: "CRC_MISMATCH"}.get(exc.reason, exc.reason.upper())
+            raise CommandSecurityError(f"{exc.reason}: {exc}", code,
+                                       acknowledge=exc.reason in (REPLAY, OUTSIDE_WINDOW)) from None
+
+    def _cmd_resync(self) -> None:
+        """SEC_RESYNC: the link already moved the window to this command's SN; say so."""
+        self._event("SEC_RESYNCED", sn=self.security.last_sn)
+
     def _fail(self, exc: CommandError, opcode: int | None, name: str | None, seq: int | None,
               request_id: int, ack_seq: int) -> CommandResult:
         """A failure: an execution error fails an accepted command (completion failure); any other error
         rejects the command (acceptance failure: nothing changed on board)."""
         kind, code, reason = exc.kind, exc.code, str(exc)
+        if not getattr(exc, "acknowledge", True):
+            request_id = -1  # not answered (see _unprotect)
         self.counters[kind.lower()] += 1
         accepted = kind == EXECUTION
         if accepted:
@@ -397,8 +476,9 @@ class CommandDispatcher:
         else:
             self.counters["rejected"] += 1
         self._event("CMD_REJECTED", opcode=opcode or 0, error=kind, reason=reason)
-        self._acknowledge("COMPLETION_FAILURE" if accepted else "ACCEPTANCE_FAILURE", request_id, ack_seq,
-                          opcode, code)
+        if request_id >= 0:
+            self._acknowledge("COMPLETION_FAILURE" if accepted else "ACCEPTANCE_FAILURE", request_id, ack_seq,
+                              opcode, code)
         result = CommandResult(accepted, kind, opcode, name, seq, reason, None, code, request_id)
         self.last_result = result
         return result
@@ -437,10 +517,31 @@ class CommandDispatcher:
                 "tc_failed": c["failed"],
                 "tc_invalid_opcode": c["invalid_opcode"], "tc_validation_errors": c["validation"],
                 "tc_format_errors": c["format"], "tc_execution_errors": c["execution"],
-                "tc_last_opcode": self.last_opcode}
+                "tc_last_opcode": self.last_opcode, **self.security_hk_values()}
+
+    def security_hk_values(self) -> dict[str, int]:
+        """Link-security and uplink-loss channels: never reset by RESET_COUNTERS (the evidence stays)."""
+        sa = self.security
+        values = {f"tc_sec_{reason}": (sa.counters[reason] if sa is not None else 0) for reason in SECURITY_REASONS}
+        values.update(tc_sec_resyncs=sa.resyncs if sa is not None else 0,
+                      tc_sec_last_sn=sa.last_sn if sa is not None else 0,
+                      tc_uplink_dropped=self._read_kernel_drops(), tc_uplink_deferred=self.budget_exhausted)
+        return values
 
     def reset_counters(self) -> None:
         self.counters = dict.fromkeys(self.COUNTER_NAMES, 0)
+
+    def _read_kernel_drops(self) -> int:
+        """The kernel's drop count for the uplink socket, including drops no datagram has reported yet."""
+        if self._sock is not None:
+            try:
+                info = self._sock.getsockopt(socket.SOL_SOCKET, SO_MEMINFO, 4 * (_MEMINFO_DROPS + 1))
+                if len(info) >= 4 * (_MEMINFO_DROPS + 1):
+                    drops = _OVFL.unpack_from(info, 4 * _MEMINFO_DROPS)[0]
+                    self.kernel_drops = max(self.kernel_drops, drops)
+            except OSError:
+                pass  # older kernel: the per-datagram SO_RXQ_OVFL count alone
+        return self.kernel_drops
 
     @property
     def address(self) -> tuple[str, int] | None:

@@ -47,6 +47,7 @@ from fsw.dictionary import (
     packet_struct,
     vector_groups,
 )
+from fsw.link_security import SecurityAssociation
 
 SEQ_MODULO = MAX_SEQ_COUNT + 1  # 16384
 
@@ -263,6 +264,15 @@ def _wire_value(channel: Channel, value: Any) -> Any:
     return _saturate(value, low, high)
 
 
+_F32_MAX = 3.4028234663852886e38
+
+
+def _f32(value: float) -> float:
+    """``value`` as float32 can hold it: beyond the largest float32, +-inf (what IEEE conversion gives),
+    instead of struct's OverflowError."""
+    return math.copysign(math.inf, value) if math.isfinite(value) and abs(value) > _F32_MAX else value
+
+
 def _saturate(value: Any, low: int, high: int) -> int:
     number = float(value)
     if math.isnan(number):
@@ -339,14 +349,17 @@ class TelemetrySender:
     sent on the interface of ``multicast_interface`` with TTL ``multicast_ttl`` and loopback on, so every
     ground client that joined the group there receives each packet. ``clock`` gives the onboard time in
     seconds stamped into packets when the caller passes no ``time_s`` (lockstep flight code passes
-    the simulated time).
+    the simulated time). ``security``: the downlink association (``fsw.link_security``) that signs
+    every packet before it is sent (None: plain packets).
     """
 
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, host: str = DEFAULT_HOST,
                  port: int | None = DEFAULT_TM_PORT, *, bind_host: str | None = None,
                  clock: Callable[[], float] = time.monotonic, event_history: int = 512,
-                 multicast_interface: str = DEFAULT_HOST, multicast_ttl: int = 0) -> None:
+                 multicast_interface: str = DEFAULT_HOST, multicast_ttl: int = 0,
+                 security: SecurityAssociation | None = None) -> None:
         self.dictionary = dictionary
+        self.security = security
         self.destination = (host, port) if port is not None else None
         self.clock = clock
         self._latest: dict[str, list[Any]] = {
@@ -435,15 +448,22 @@ class TelemetrySender:
         """Update ``values`` and send the whole packet; channels not given keep their last value.
 
         Unknown names raise ``DictionaryError`` (a programming error); numeric values never raise:
-        integers saturate at their type's range. Returns the packet bytes.
+        integers saturate at their type's range, F32 values beyond float32 become +-inf. Returns the
+        packet bytes.
         """
         if values:
             self.update(packet_name, values)
         packet = self.dictionary.packet(packet_name)
-        payload = self._structs[packet_name].pack(*self._latest[packet_name])
+        latest = self._latest[packet_name]
+        try:
+            payload = self._structs[packet_name].pack(*latest)
+        except OverflowError:  # an F32 channel beyond float32 (found by bench/fuzz.py): saturate, then pack
+            for i, channel in enumerate(packet.channels):
+                if channel.type == "F32":
+                    latest[i] = _f32(latest[i])
+            payload = self._structs[packet_name].pack(*latest)
         raw = _frame(packet.apid, self._next_seq(packet.apid), self._time(time_s), payload)
-        self._transmit(raw)
-        return raw
+        return self._transmit(raw)
 
     def latest(self, packet_name: str) -> dict[str, Any]:
         """The values the next packet would carry (wire types: enums as indices)."""
@@ -480,6 +500,8 @@ class TelemetrySender:
             if arg.name not in args:
                 raise DictionaryError(f"event {event.name}: missing arg {arg.name!r}")
             value = coerce_arg(arg, args[arg.name], check_range=False)
+            if arg.type == "F32":
+                value = _f32(value)
             if arg.type in _INT_LIMITS:
                 low, high = _INT_LIMITS[arg.type]
                 value = min(max(value, low), high)
@@ -525,20 +547,24 @@ class TelemetrySender:
         """The sequence count the next packet on ``apid`` will carry."""
         return self._seq[apid]
 
-    def _transmit(self, raw: bytes) -> None:
+    def _transmit(self, raw: bytes) -> bytes:
+        """Sign (with a security association) and send one packet; returns the bytes sent."""
+        if self.security is not None:
+            raw = self.security.protect(raw)
         if self._sock is None or self.destination is None:
             self.counters["packets_sent"] += 1
             self.counters["bytes_sent"] += len(raw)
-            return
+            return raw
         try:
             self._sock.sendto(raw, self.destination)
         except OSError:
             # A full socket buffer or an unreachable ground must not stop the flight software; the
             # ground sees the gap in the sequence count, and the count shows in housekeeping.
             self.counters["send_errors"] += 1
-            return
+            return raw
         self.counters["packets_sent"] += 1
         self.counters["bytes_sent"] += len(raw)
+        return raw
 
     def reset_counters(self) -> None:
         for key in self.counters:

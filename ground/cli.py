@@ -11,8 +11,9 @@ from pathlib import Path
 from typing import Any
 
 from fsw.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DEFAULT_TM_PORT, DICTIONARY, TelemetryDictionary
+from fsw.link_security import downlink_receiver, load_key_file
 from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
-from ground.commanding import CommandSender
+from ground.commanding import CommandSender, signing_sender_args
 from ground.link import LOOPBACK, Endpoints, LinkError, find_run, open_telemetry
 from ground.monitor import GroundMonitor
 
@@ -38,8 +39,9 @@ def add_cli(subparsers: Any) -> None:
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     parser.add_argument("--dictionary", default=None, help="telemetry dictionary JSON (default: built in)")
     parser.add_argument("--no-live", action="store_true", help="no live table; print events as lines")
+    parser.add_argument("--key-file", default=None, help=_KEY_HELP)
     parser.set_defaults(func=_cmd_monitor)
-    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode,xtce}")
+    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode,xtce,keygen}")
     send = sub.add_parser(
         "send", help="send one telecommand and wait for its acknowledgement, e.g. `keepout ground send SET_MODE "
         "POINTING`", description="Send one telecommand, wait for its acknowledgements in telemetry (acceptance, "
@@ -67,7 +69,12 @@ def add_cli(subparsers: Any) -> None:
                            "flight software sees consecutive counts across invocations")
     send.add_argument("--no-check", action="store_true",
                       help="skip the dictionary range checks (test the flight-side validation)")
+    send.add_argument("--key-file", dest="send_key_file", default=None, help=_KEY_HELP)
     send.set_defaults(func=_cmd_send)
+    keygen = sub.add_parser("keygen", help="write a new link key file (32 random bytes as hex, mode 0600)")
+    keygen.add_argument("key_path", help="where to write it (never overwrites); name it in the mission as "
+                                         "flight_software.tmtc.security.key_file")
+    keygen.set_defaults(func=_cmd_keygen)
     decode = sub.add_parser("decode", help="rebuild the decoded JSONL from a raw archive and report gaps")
     decode.add_argument("archive_dir", help="directory holding tm_raw.bin")
     decode.add_argument("--out", default=None, help="output JSONL (default: ARCHIVE_DIR/tm_decoded.jsonl)")
@@ -114,6 +121,40 @@ def _seq_count(text: str) -> int:
     if not 0 <= value <= 16383:
         raise argparse.ArgumentTypeError(f"{text!r} is not a TC sequence count; allowed: 0..16383")
     return value
+
+
+_KEY_HELP = ("link key file (default: the mission's flight_software.tmtc.security.key_file); telecommands "
+             "are signed and telemetry verified with it")
+
+
+def _key_file(explicit: str | None, config_path: str | None) -> str:
+    """The link key file to use; raises ValueError (one line) when there is none."""
+    if explicit:
+        return explicit
+    if config_path:
+        from fsw.config import load_fsw_config
+        from fsw.link_security import mission_key_path
+
+        path = mission_key_path(load_fsw_config(config_path).tmtc.security.key_file, config_path)
+        if path is not None:
+            return str(path)
+    raise ValueError("no link key: pass --key-file FILE, or --config MISSION naming "
+                     "flight_software.tmtc.security.key_file (`keepout ground keygen FILE` makes one)")
+
+
+def _cmd_keygen(args: argparse.Namespace) -> int:
+    from fsw.link_security import write_key_file
+
+    try:
+        write_key_file(args.key_path)
+    except FileExistsError:
+        print(f"keepout ground keygen: {args.key_path} exists; a key is never overwritten", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"keepout ground keygen: {args.key_path}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.key_path} (mode 0600)")
+    return 0
 
 
 def _command_help(dictionary: TelemetryDictionary) -> str:
@@ -201,6 +242,8 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         if run_dir is not None and endpoints.state == "finished":
             raise LinkError(f"run {run_dir} has finished: nothing to attach to; its archive is "
                             f"{run_dir / 'ground'} (browse it with `keepout ground web --run {run_dir}`)")
+        key_file = _key_file(args.key_file, str(run_dir / 'mission.yaml') if run_dir is not None else args.config)
+        security = downlink_receiver(load_key_file(key_file))
         sock = open_telemetry(endpoints)
     except (DictionaryError, LinkError, ValueError) as exc:
         print(f"keepout ground: {exc}", file=sys.stderr)
@@ -209,7 +252,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     if archive is None:
         archive = (run_dir / "attached" / f"ground-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
                    if run_dir is not None else "ground_archive")
-    monitor = GroundMonitor(dictionary, port=None, archive_dir=archive, sock=sock)
+    monitor = GroundMonitor(dictionary, port=None, archive_dir=archive, sock=sock, security=security)
     where = f"{endpoints.tm_host}:{endpoints.tm_port}" + (" (multicast)" if endpoints.multicast else "")
     attached = f"attached to run {endpoints.run_id}, " if run_dir is not None else ""
     print(f"keepout ground: {attached}telemetry on {where}, archive {archive}", flush=True)
@@ -222,7 +265,8 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     kinds = ", ".join(f"{k} {n}" for k, n in sorted(summary["decode_errors_by_kind"].items()))
     print(f"received {summary['datagrams']} packets, {summary['decode_errors']} decode errors"
           f"{f' ({kinds})' if kinds else ''}, "
-          f"{summary['missing_packets']} missing in {len(stats.gaps)} gaps")
+          f"{summary['missing_packets']} missing in {len(stats.gaps)} gaps, "
+          f"{summary['rejected_by_link_security']} refused by the link security (forged/unauthenticated/replayed)")
     return 0
 
 
@@ -238,6 +282,9 @@ def _cmd_send(args: argparse.Namespace) -> int:
         tc_port = args.tc_port if args.tc_port is not None else addresses["tc_port"]
         command: str | int = int(args.opcode, 0) if args.opcode[:1].isdigit() else args.opcode.upper()
         definition = dictionary.command(command)  # unknown command: fail before touching the sequence file
+        key_file = _key_file(args.send_key_file, args.config)
+        signing = signing_sender_args(key_file)
+        downlink = downlink_receiver(load_key_file(key_file))
     except (ArgError, DictionaryError, ValueError) as exc:
         print(f"keepout ground send: {exc}", file=sys.stderr)
         return verify.EXIT_BAD_INPUT
@@ -252,14 +299,14 @@ def _cmd_send(args: argparse.Namespace) -> int:
             from spacepackets.seqcount import CcsdsFileSeqCountProvider
 
             seq = CcsdsFileSeqCountProvider(Path(args.seq_file)).get_and_increment()
-        with CommandSender(dictionary, tc_host, tc_port, seq) as sender:
+        with CommandSender(dictionary, tc_host, tc_port, seq, **signing) as sender:
             if telemetry is None:
                 packet = sender.send(command, *args.args, check_range=not args.no_check)
                 print(f"sent {definition.name} ({len(packet)} bytes) to {tc_host}:{tc_port}: {packet.hex()} "
                       "(not waiting for the acknowledgement)")
                 return verify.EXIT_COMPLETED
             packet, result = verify.send_verified(sender, telemetry, command, args.args, timeout_s=args.timeout,
-                                                  check_range=not args.no_check)
+                                                  check_range=not args.no_check, downlink=downlink)
     except (ArgError, DictionaryError, ValueError) as exc:
         print(f"keepout ground send: {exc}", file=sys.stderr)
         return verify.EXIT_BAD_INPUT

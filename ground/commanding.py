@@ -3,18 +3,36 @@ from __future__ import annotations
 
 import errno
 import socket
+from pathlib import Path
 from typing import Any
 
 from fsw.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DICTIONARY, TelemetryDictionary
+from fsw.link_security import SPI_TC, SecurityAssociation, SequenceFile, load_key_file
 from fsw.telemetry import SEQ_MODULO
 
 
+def signing_sender_args(key_file: str | Path) -> dict[str, Any]:
+    """``CommandSender`` keyword arguments that sign with the key in ``key_file``, drawing security SNs
+    from the sequence file beside it (raises KeyFileError naming the file)."""
+    return {"security": SecurityAssociation(load_key_file(key_file), SPI_TC),
+            "sequence": SequenceFile.beside(key_file)}
+
+
 class CommandSender:
-    """Sends telecommands to the flight software, with its own TC sequence count."""
+    """Sends telecommands to the flight software, with its own TC sequence count.
+
+    ``security``: the uplink association (``fsw.link_security``) that signs every command; its security
+    sequence numbers come from ``sequence`` (a ``SequenceFile`` shared by every sender of the key), else
+    from the association itself. Without ``security`` commands go out plain (the flight software refuses
+    them: unit tests of the flight side only).
+    """
 
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, host: str = DEFAULT_HOST,
-                 port: int = DEFAULT_TC_PORT, seq_count: int = 0) -> None:
+                 port: int = DEFAULT_TC_PORT, seq_count: int = 0, *,
+                 security: SecurityAssociation | None = None, sequence: SequenceFile | None = None) -> None:
         self.dictionary = dictionary
+        self.security = security
+        self.sequence = sequence
         self.destination = (host, port)
         self.seq_count = seq_count
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -34,6 +52,8 @@ class CommandSender:
             raise TypeError("pass command args either positionally or by name, not both")
         packet = encode_command(self.dictionary, command, kwargs if kwargs else args, self.seq_count,
                                 check_range=check_range)
+        if self.security is not None:
+            packet = self.security.protect(packet, self.sequence.advance() if self.sequence is not None else None)
         self._sock.send(packet)
         self.seq_count = (self.seq_count + 1) % SEQ_MODULO
         return packet

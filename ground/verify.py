@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from fsw.dictionary import TC_REASON_DOCS, TelemetryDictionary
+from fsw.link_security import SecurityAssociation
 from fsw.telemetry import decode_tm_packet
 from ground.commanding import CommandSender
 
@@ -53,9 +54,14 @@ class Ack:
         return text
 
 
-def parse_ack(dictionary: TelemetryDictionary, raw: bytes) -> Ack | None:
-    """The report in ``raw`` if it is a decodable TC_ACK packet, else None (other telemetry, or garbage)."""
+def parse_ack(dictionary: TelemetryDictionary, raw: bytes, downlink: SecurityAssociation | None = None
+              ) -> Ack | None:
+    """The report in ``raw`` if it is a decodable TC_ACK packet, else None (other telemetry, or garbage).
+    With ``downlink`` the packet must verify against the link key first: a forged acknowledgement is
+    never taken for the flight software's."""
     try:
+        if downlink is not None:
+            raw, _ = downlink.unprotect(raw)
         packet = decode_tm_packet(dictionary, raw)
     except Exception:  # noqa: BLE001 - not ours to judge here; the monitor counts bad packets
         return None
@@ -82,7 +88,8 @@ def request_id(packet: bytes) -> int:
 
 
 def send_verified(sender: CommandSender, telemetry: socket.socket, command: str | int, args: Any = (),
-                  *, timeout_s: float = 5.0, check_range: bool = True) -> tuple[bytes, Verification]:
+                  *, timeout_s: float = 5.0, check_range: bool = True,
+                  downlink: SecurityAssociation | None = None) -> tuple[bytes, Verification]:
     """Send ``command`` and wait up to ``timeout_s`` for its acknowledgements on ``telemetry`` (a bound UDP
     socket receiving the flight software's telemetry). Returns (packet sent, verification).
 
@@ -107,7 +114,7 @@ def send_verified(sender: CommandSender, telemetry: socket.socket, command: str 
                 raw = telemetry.recv(65536)
             except (BlockingIOError, InterruptedError):
                 break
-            ack = parse_ack(sender.dictionary, raw)
+            ack = parse_ack(sender.dictionary, raw, downlink)
             if ack is None or ack.request_id != wanted:
                 continue
             acks.append(ack)

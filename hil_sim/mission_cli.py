@@ -70,7 +70,11 @@ def _validate(args: argparse.Namespace) -> int:
     status = 0
     for path in args.files:
         try:
+<<<<<<< HEAD
             mission, doc = load_mission_marked(path)
+=======
+            mission = load_mission(path)
+>>>>>>> wt-security
         except ConfigError as exc:
             print(exc, file=sys.stderr)
             if not isinstance(exc, ConfigFileError):
@@ -85,6 +89,8 @@ def _validate(args: argparse.Namespace) -> int:
             print(f"{path}: {len(report.errors)} problem(s)", file=sys.stderr)
             status = max(status, 1)
         else:
+            for warning in mission.flight_software.tmtc.warnings():
+                print(f"{path}: warning: {warning}", file=sys.stderr)
             print(f"{path}: valid")
     return status
 

@@ -50,6 +50,7 @@ import numpy as np
 import yaml
 
 from fsw.lifetime import PARENT_PID_ENV, die_with_parent
+from fsw.link_security import LINK_KEY_FILE, write_key_file
 from ground.link import ENDPOINTS_FILE
 from keepout_config import config_path
 
@@ -192,8 +193,9 @@ STATUS_CHANNELS = ("mode", "pointing_error_deg", "att_error_deg", "margin_min_de
 
 
 def ground_process(archive_dir: str, endpoints: dict, port: int, port_queue, ready, fsw_started, stop_event,
-                   status_queue, parent_pid: int | None = None) -> None:
-    """Entry point of the ground process: archive telemetry until told to stop.
+                   status_queue, parent_pid: int | None = None, key_file: str | None = None) -> None:
+    """Entry point of the ground process: archive telemetry until told to stop (verified with the run's
+    link key ``key_file``: forged or replayed packets are counted, never archived).
 
     It opens the run's telemetry as every other ground client does (``ground.link.open_telemetry``);
     ``port`` 0 lets the kernel choose the run's port, which goes back on ``port_queue`` (or the reason
@@ -202,6 +204,7 @@ def ground_process(archive_dir: str, endpoints: dict, port: int, port_queue, rea
     """
     die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from fsw.link_security import downlink_receiver, load_key_file
     from ground.link import Endpoints, LinkError, open_telemetry
     from ground.monitor import GroundMonitor
 
@@ -211,7 +214,8 @@ def ground_process(archive_dir: str, endpoints: dict, port: int, port_queue, rea
         port_queue.put(str(exc))
         ready.set()
         return
-    monitor = GroundMonitor(port=None, archive_dir=archive_dir, sock=sock)
+    security = downlink_receiver(load_key_file(key_file)) if key_file else None
+    monitor = GroundMonitor(port=None, archive_dir=archive_dir, sock=sock, security=security)
     port_queue.put(monitor.address[1])
     ready.set()
     last_status = 0.0
@@ -489,9 +493,14 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
     port_queue, status_queue = ctx.Queue(), ctx.Queue(maxsize=4)
     ready, fsw_started, stop_event = ctx.Event(), ctx.Event(), ctx.Event()
     ground_dir = run_dir / GROUND_DIR
+    # The run's own link key (0600, in the run folder): the flight software, the ground and the timeline
+    # sign and verify with it; no key is ever shared between runs or written into a YAML.
+    key_path = run_dir / LINK_KEY_FILE
+    write_key_file(key_path)
     ground = ctx.Process(target=ground_process, name="keepout-ground",
                          args=(str(ground_dir), endpoints.to_json_dict(), tmtc.telemetry_port if fixed_ports else 0,
-                               port_queue, ready, fsw_started, stop_event, status_queue, os.getpid()))
+                               port_queue, ready, fsw_started, stop_event, status_queue, os.getpid()),
+                         kwargs={"key_file": str(key_path)})
     fsw_proc: subprocess.Popen | None = None
     bus = None
     candump = None
@@ -513,6 +522,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         tc_port = tmtc.telecommand_port if fixed_ports else _free_udp_port()
         data = _config_used(mission, bus_spec=info.spec, tm_host=endpoints.tm_host, tm_port=tm_port,
                             tc_port=tc_port, realtime=options.realtime)
+        data["flight_software"]["tmtc"]["security"]["key_file"] = LINK_KEY_FILE  # beside the config used
         write_config(run_dir, data, Path(options.mission))
         endpoints = dataclasses.replace(endpoints, tm_port=tm_port, tc_port=tc_port,
                                         pids={"sil": os.getpid(), "ground": ground.pid})
@@ -527,9 +537,9 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
             bus = open_bus(info.spec, run_id=run_dir.name, bitrate=mission.bus_bitrate_bps)
         except (BusUnavailableError, OSError) as exc:
             raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
-        from ground.commanding import CommandSender
+        from ground.commanding import CommandSender, signing_sender_args
 
-        sender = CommandSender(host=endpoints.tc_host, port=tc_port)
+        sender = CommandSender(host=endpoints.tc_host, port=tc_port, **signing_sender_args(key_path))
         timeline = Timeline(mission, sender)
         world = World(world_params(mission), seed=mission.seed)
         world.truth  # noqa: B018  (evaluates the ephemeris at t = 0 now, not during the first tick)

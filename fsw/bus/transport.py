@@ -4,10 +4,12 @@ Specs:
   ``socketcan:IFACE``               SocketCAN (``socketcan`` alone means vcan0). The real thing, opened
                                     as :class:`fsw.bus.socketcan_batch.BatchSocketcanBus` (python-can's
                                     bus with batched reads/writes: few system calls per frame).
-  ``udp_multicast[:GROUP:PORT]``     python-can's multi-process interface, for kernels without CAN.
-                                    Without GROUP/PORT they are derived from the run id, so two SIL
-                                    runs never hear each other (receivers bind the port, so the port
-                                    differs as well as the group).
+  ``udp_multicast[:GROUP:PORT]``     python-can's multi-process interface, for kernels without CAN,
+                                    confined to the loopback interface
+                                    (:class:`fsw.bus.udp_loopback.LoopbackUdpMulticastBus`). Without
+                                    GROUP/PORT both are drawn at random (``secrets``): every run gets
+                                    its own bus, which no other run shares or can predict; the
+                                    resolved spec is what the other processes of the run are given.
   ``virtual[:CHANNEL]``              python-can's in-process bus (unit tests, campaigns' fast mode;
                                     ``open_bus(..., light=True)`` gives :class:`LightVirtualBus`).
   ``auto``                          socketcan on vcan0 when /sys/class/net/vcan0 exists, else
@@ -23,9 +25,9 @@ Specs:
 """
 from __future__ import annotations
 
-import hashlib
-import os
+import ipaddress
 import queue
+import secrets
 import sys
 import time
 from dataclasses import dataclass
@@ -85,17 +87,17 @@ def vcan_hint(iface: str = "vcan0") -> str:
     )
 
 
-def udp_endpoint_for_run(run_id: str | int | None) -> tuple[str, int]:
-    """Multicast group and port derived from a run id (stable, spread over 65k groups x 16k ports)."""
-    key = str(run_id if run_id is not None else f"pid-{os.getpid()}").encode()
-    digest = hashlib.sha256(key).digest()
-    group = f"{UDP_GROUP_PREFIX}.{digest[0]}.{max(1, digest[1])}"
-    port = UDP_PORT_BASE + int.from_bytes(digest[2:4], "big") % UDP_PORT_SPAN
-    return group, port
+def random_udp_endpoint() -> tuple[str, int]:
+    """A multicast group and port for one run, drawn at random (65k groups x 16k ports): not derived
+    from anything another process could know (the run folder's name was, and runs started in the
+    same second shared it)."""
+    group = f"{UDP_GROUP_PREFIX}.{secrets.randbelow(256)}.{1 + secrets.randbelow(254)}"
+    return group, UDP_PORT_BASE + secrets.randbelow(UDP_PORT_SPAN)
 
 
 def resolve_spec(spec: str, run_id: str | int | None = None) -> BusInfo:
-    """Turn a --bus spec into a concrete one. Raises BusSpecError for malformed specs."""
+    """Turn a --bus spec into a concrete one. Raises BusSpecError for malformed specs.
+    (``run_id`` is kept for callers' signatures; udp_multicast endpoints are random, see the module.)"""
     spec = (spec or "auto").strip()
     kind, _, rest = spec.partition(":")
     kind = kind.lower()
@@ -125,8 +127,15 @@ def resolve_spec(spec: str, run_id: str | int | None = None) -> BusInfo:
                 raise BusSpecError(f"bus spec {spec!r}: PORT {port_text!r} is not an integer") from None
             if not 1024 <= port <= 65535:
                 raise BusSpecError(f"bus spec {spec!r}: PORT must be 1024..65535")
+            try:
+                multicast = ipaddress.IPv4Address(group).is_multicast
+            except ValueError:
+                multicast = False
+            if not multicast:
+                raise BusSpecError(f"bus spec {spec!r}: GROUP {group!r} is not an IPv4 multicast address "
+                                   f"(224.0.0.0-239.255.255.255, e.g. 239.74.1.2); {SPEC_HELP}")
         else:
-            group, port = udp_endpoint_for_run(run_id)
+            group, port = random_udp_endpoint()
         return BusInfo(f"udp_multicast:{group}:{port}", "udp_multicast", group, port,
                        f"udp_multicast group {group} port {port}")
     if kind == "virtual":
@@ -189,8 +198,10 @@ def open_bus(spec: str = "auto", run_id: str | int | None = None, *, info_out: l
             raise BusUnavailableError(f"cannot open python-can interface {info.interface!r} channel "
                                       f"{info.channel!r}: {type(exc).__name__}: {exc}") from None
     if info.interface == "udp_multicast":
+        from fsw.bus.udp_loopback import LoopbackUdpMulticastBus
+
         # fd=False: classic CAN frames only, as on the spacecraft bus.
-        return can.Bus(interface="udp_multicast", channel=info.channel, port=info.port, fd=False)
+        return LoopbackUdpMulticastBus(channel=info.channel, port=info.port, fd=False)
     if light:
         return LightVirtualBus(channel=info.channel, receive_own_messages=False)
     return can.Bus(interface="virtual", channel=info.channel, receive_own_messages=False)

@@ -278,15 +278,15 @@ def test_poll_over_a_real_udp_socket_counts_oversized_and_garbage() -> None:
 
 
 class _CountingSocket:
-    """The dispatcher's socket with its recv calls counted (every other call passes through)."""
+    """The dispatcher's socket with its recvmsg calls counted (every other call passes through)."""
 
     def __init__(self, sock: socket.socket) -> None:
         self._sock = sock
         self.recvs = 0
 
-    def recv(self, n: int) -> bytes:
+    def recvmsg(self, *args: Any) -> tuple:
         self.recvs += 1
-        return self._sock.recv(n)
+        return self._sock.recvmsg(*args)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._sock, name)
