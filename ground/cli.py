@@ -142,6 +142,13 @@ def _key_file(explicit: str | None, config_path: str | None) -> str:
                      "flight_software.tmtc.security.key_file (`keepout ground keygen FILE` makes one)")
 
 
+def _run_key_file(explicit: str | None, run_dir: Path) -> str:
+    """The link key of a SIL run: the per-run key the SIL wrote into its folder (or ``--key-file``)."""
+    from fsw.link_security import LINK_KEY_FILE
+
+    return explicit or str(run_dir / LINK_KEY_FILE)
+
+
 def _cmd_keygen(args: argparse.Namespace) -> int:
     from fsw.link_security import write_key_file
 
@@ -242,7 +249,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         if run_dir is not None and endpoints.state == "finished":
             raise LinkError(f"run {run_dir} has finished: nothing to attach to; its archive is "
                             f"{run_dir / 'ground'} (browse it with `keepout ground web --run {run_dir}`)")
-        key_file = _key_file(args.key_file, str(run_dir / 'mission.yaml') if run_dir is not None else args.config)
+        key_file = _run_key_file(args.key_file, run_dir) if run_dir is not None else _key_file(args.key_file, args.config)
         security = downlink_receiver(load_key_file(key_file))
         sock = open_telemetry(endpoints)
     except (DictionaryError, LinkError, ValueError) as exc:
