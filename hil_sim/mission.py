@@ -397,6 +397,21 @@ class Mission(_Model):
 # ---------------------------------------------------------------------------------------------
 
 WHEEL_KNOWLEDGE_KEYS = ("axis_B", "max_torque_Nm", "max_speed_rad_s", "spin_inertia_kgm2")
+# where each piece of the flight software's knowledge comes from when the file does not give it
+# (written_once does it; docs/missions.md lists it as the key's default)
+KNOWLEDGE_DEFAULTS = {
+    "flight_software.epoch_utc": "epoch_utc",
+    "flight_software.spacecraft.inertia_B_kgm2": "spacecraft.inertia_B_kgm2",
+    "flight_software.spacecraft.wheels": "spacecraft.wheels (axis_B, max_torque_Nm, max_speed_rad_s, "
+                                         "spin_inertia_kgm2)",
+    "flight_software.spacecraft.star_tracker_q_BS": "spacecraft.star_tracker.q_BS",
+    "flight_software.pointing.boresight_B": "spacecraft.instrument_boresight_B",
+    "flight_software.pointing.target_N": "initial_state.ra_dec_deg, when the initial attitude is given so",
+    "flight_software.orbit.radius_km": "orbit.semi_major_axis_km",
+    "flight_software.orbit.inclination_deg": "orbit.inclination_deg",
+    "flight_software.orbit.raan_deg": "orbit.raan_deg",
+    "flight_software.orbit.arg_latitude_at_epoch_deg": "orbit.arg_perigee_deg + orbit.mean_anomaly_deg",
+}
 
 
 def written_once(data: Any) -> Any:

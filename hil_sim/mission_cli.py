@@ -1,4 +1,5 @@
-"""``keepout config schema | validate FILE... | check FILE...``: editor schema, validation, physics report.
+"""``keepout config schema | docs | validate FILE... | check FILE...``: editor schema, reference, validation,
+physics report.
 
 Imports stay light at module level (the CLI imports every area on start); pydantic models and the
 maths load inside the handlers.
@@ -22,6 +23,13 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
     schema.add_argument("--check", action="store_true",
                         help="do not write: exit 1 when the committed schema differs from the models")
     schema.set_defaults(func=_schema)
+
+    docs = sub.add_parser("docs", help="write docs/missions.md, the mission-file reference, from the schema")
+    docs.add_argument("--out", type=Path, default=None, help="where to write it (default: docs/missions.md); "
+                      "'-' for stdout")
+    docs.add_argument("--check", action="store_true",
+                      help="do not write: exit 1 when the committed reference differs from the models")
+    docs.set_defaults(func=_docs)
 
     validate = sub.add_parser("validate", help="check mission files against the schema; every problem as "
                               "file:line:col key.path: message")
@@ -59,6 +67,28 @@ def _schema(args: argparse.Namespace) -> int:
         return 0
     path = write_json_schema(args.out) if args.out else write_json_schema()
     print(f"wrote {path}")
+    return 0
+
+
+def _docs(args: argparse.Namespace) -> int:
+    from hil_sim.mission_docs import DOCS_PATH, mission_docs, write_mission_docs
+
+    if args.check:
+        path = args.out or DOCS_PATH
+        try:
+            committed = Path(path).read_text(encoding="utf-8")
+        except OSError as exc:
+            print(f"{path}: cannot read: {exc.strerror or exc}", file=sys.stderr)
+            return 1
+        if committed != mission_docs():
+            print(f"{path}: out of date with the mission models; run `keepout config docs`", file=sys.stderr)
+            return 1
+        print(f"{path}: up to date")
+        return 0
+    if args.out is not None and str(args.out) == "-":
+        sys.stdout.write(mission_docs())
+        return 0
+    print(f"wrote {write_mission_docs(args.out) if args.out else write_mission_docs()}")
     return 0
 
 
