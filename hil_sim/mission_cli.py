@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Callable
 
 
 def add_cli(subparsers: argparse._SubParsersAction) -> None:
@@ -47,48 +48,37 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
 def _schema(args: argparse.Namespace) -> int:
     import json
 
-    from hil_sim.mission import SCHEMA_PATH, mission_json_schema, write_json_schema
+    from hil_sim.mission import SCHEMA_PATH, mission_json_schema
 
-    if args.check:
-        path = args.out or SCHEMA_PATH
-        try:
-            committed = json.loads(Path(path).read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            print(f"{path}: cannot read: {exc}", file=sys.stderr)
-            return 1
-        if committed != mission_json_schema():
-            print(f"{path}: out of date with hil_sim/mission.py; run `keepout config schema`", file=sys.stderr)
-            return 1
-        print(f"{path}: up to date")
-        return 0
-    if args.out is not None and str(args.out) == "-":
-        json.dump(mission_json_schema(), sys.stdout, indent=2)
-        print()
-        return 0
-    path = write_json_schema(args.out) if args.out else write_json_schema()
-    print(f"wrote {path}")
-    return 0
+    return _generated(args, SCHEMA_PATH, lambda: json.dumps(mission_json_schema(), indent=2) + "\n", "schema")
 
 
 def _docs(args: argparse.Namespace) -> int:
-    from hil_sim.mission_docs import DOCS_PATH, mission_docs, write_mission_docs
+    from hil_sim.mission_docs import DOCS_PATH, mission_docs
 
+    return _generated(args, DOCS_PATH, mission_docs, "docs")
+
+
+def _generated(args: argparse.Namespace, default: Path, text: Callable[[], str], command: str) -> int:
+    """Write (``--out``, '-' for stdout) or ``--check`` a file generated from the mission models."""
+    path = Path(args.out or default)
     if args.check:
-        path = args.out or DOCS_PATH
         try:
-            committed = Path(path).read_text(encoding="utf-8")
+            committed = path.read_text(encoding="utf-8")
         except OSError as exc:
             print(f"{path}: cannot read: {exc.strerror or exc}", file=sys.stderr)
             return 1
-        if committed != mission_docs():
-            print(f"{path}: out of date with the mission models; run `keepout config docs`", file=sys.stderr)
+        if committed != text():
+            print(f"{path}: out of date with the mission models; run `keepout config {command}`", file=sys.stderr)
             return 1
         print(f"{path}: up to date")
         return 0
-    if args.out is not None and str(args.out) == "-":
-        sys.stdout.write(mission_docs())
+    if str(args.out) == "-":
+        sys.stdout.write(text())
         return 0
-    print(f"wrote {write_mission_docs(args.out) if args.out else write_mission_docs()}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text(), encoding="utf-8")
+    print(f"wrote {path}")
     return 0
 
 

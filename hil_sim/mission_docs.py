@@ -253,9 +253,3 @@ def mission_docs() -> str:
     _sections("", schema, schema.get("definitions", {}), out, 2)
     return "\n".join(out) + "\n"
 
-
-def write_mission_docs(path: str | Path = DOCS_PATH) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(mission_docs(), encoding="utf-8")
-    return path
