@@ -105,6 +105,8 @@ def _validate(args: argparse.Namespace) -> int:
             print(f"{path}: {len(report.errors)} problem(s)", file=sys.stderr)
             status = max(status, 1)
         else:
+            for warning in mission.flight_software.tmtc.warnings():
+                print(f"{path}: warning: {warning}", file=sys.stderr)
             print(f"{path}: valid")
     return status
 

@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gnc.wheels import fibonacci_sphere, wheel_authority
+
 if TYPE_CHECKING:
     from hil_sim.mission import Mission
 
@@ -586,32 +588,12 @@ def _check_quaternion(mission, segments, report, quick: bool = False) -> None:
                        f"bound {eps_max:.4g}, eps in use {_eps_in_use(mission, eps_max):.4g}", eps_max=eps_max)
 
 
-def wheel_authority(axes_B: np.ndarray, limits: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Largest magnitude along each unit direction d that minimum-norm allocation can produce.
-
-    The flight software allocates w = W^+ v and scales the whole vector down until every |w_i| <= limit_i,
-    so along d the reachable magnitude is min_i limit_i / |(W^+ d)_i|.
-    """
-    W = np.asarray(axes_B, dtype=float).T  # 3 x n
-    per_unit = np.abs(directions @ np.linalg.pinv(W).T)  # (m, n): |W^+ d| per wheel
-    with np.errstate(divide="ignore"):
-        return np.min(np.where(per_unit > 1e-12, limits[None, :] / per_unit, np.inf), axis=1)
-
-
-def _fibonacci_sphere(count: int) -> np.ndarray:
-    k = np.arange(count) + 0.5
-    z = 1 - 2 * k / count
-    phi = math.pi * (1 + 5 ** 0.5) * k
-    r = np.sqrt(1 - z * z)
-    return np.stack((r * np.cos(phi), r * np.sin(phi), z), axis=1)
-
-
 def _check_wheels(mission, report) -> None:
     sc = mission.spacecraft
     fsw = mission.flight_software
     J = np.asarray(sc.inertia_B_kgm2, dtype=float)
     axes = np.asarray([w.axis_B for w in sc.wheels])
-    d = _fibonacci_sphere(2000)
+    d = fibonacci_sphere(2000)
     torque = wheel_authority(axes, np.array([w.max_torque_Nm for w in sc.wheels]), d)
     Jd = np.einsum("ij,mj->mi", J, d)
     inertia_along = np.einsum("mi,mi->m", d, Jd)
