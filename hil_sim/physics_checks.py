@@ -612,7 +612,7 @@ def _check_wheels(mission, report) -> None:
                    accel_avail_deg_s2=accel_avail_deg_s2,
                    accel_cmd_deg_s2=accel_cmd)
     speeds = mission.initial_state.wheel_speeds_rad_s or [0.0] * len(sc.wheels)
-    headroom = np.array([w.Js_kgm2 * max(0.0, mission.requirements.max_wheel_speed_fraction * w.max_speed_rad_s
+    headroom = np.array([w.spin_inertia_kgm2 * max(0.0, mission.requirements.max_wheel_speed_fraction * w.max_speed_rad_s
                                          - abs(s)) for w, s in zip(sc.wheels, speeds)])
     # body momentum J omega along d must come from the wheels: reachable |omega| = h(J d)/|J d|
     momentum = wheel_authority(axes, headroom, Jd / np.linalg.norm(Jd, axis=1, keepdims=True))

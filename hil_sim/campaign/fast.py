@@ -36,7 +36,7 @@ _WORLD_FIELDS = {
     ("orbit",): ("orbit",),
     ("epoch_utc",): ("epoch_utc",),
 }
-_WHEEL_FIELDS = {"Js_kgm2": "Js_kgm2", "max_torque_Nm": "max_torque_Nm", "max_speed_rad_s": "max_speed_rad_s",
+_WHEEL_FIELDS = {"Js_kgm2": "Js_kgm2", "spin_inertia_kgm2": "Js_kgm2", "max_torque_Nm": "max_torque_Nm", "max_speed_rad_s": "max_speed_rad_s",
                  "viscous_friction_Nm_per_rad_s": "viscous_friction_Nm_per_rad_s",
                  "coulomb_friction_Nm": "coulomb_friction_Nm", "axis_B": "axis_B", "failure": "failure"}
 
