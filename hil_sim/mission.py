@@ -283,6 +283,8 @@ class Requirements(_Model):
     max_settling_time_s: float | None = Field(None, gt=0, le=10 * 86400, description="after the last target command [s]")
     max_final_pointing_error_deg: float = Field(0.05, gt=0, le=180, description="truth error at the end [deg]")
     max_wheel_speed_fraction: float = Field(0.9, gt=0, le=1, description="peak |wheel speed| / its limit")
+    max_body_rate_fraction: float = Field(1.05, gt=0, le=10, description="peak true |omega| / the configured "
+                                          "rate limit (5 % allows for sensor noise and sampling)")
     max_cycle_slips: int = Field(0, ge=0)
     expected_fdir_events: list[FdirMonitor] = Field(
         [], description="FDIR monitors that MUST trip during the run (the 'monitor' of FDIR_TRIPPED events, "

@@ -226,6 +226,7 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     metrics["final_error_deg"] = float(err[-1])
     limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
     metrics["peak_wheel_speed_fraction"] = float(np.max(np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]))
+    metrics["peak_body_rate_fraction"] = summary.peak_body_rate_fraction(mission, truth)[0]
     # lockstep: a slip is a tick the flight software never answered with CYCLE_DONE (as the SIL counts)
     metrics["cycle_slips"] = float(cycle_slips)
     expected = list(req.expected_fdir_events)
