@@ -115,7 +115,9 @@ class EstimatorConfig(_Strict):
 
     gyro_arw_rad_s_sqrt_hz: float = Field(1e-4, gt=0.0, le=1.0, description="Gyro angle random walk (rate white-noise density) [rad/s/sqrt(Hz)].")
     gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-6, gt=0.0, le=1e-2, description="Gyro bias random walk density [rad/s^2/sqrt(Hz)].")
-    star_tracker_sigma_arcsec: float = Field(20.0, gt=0.0, le=3600.0, description="Star-tracker 1-sigma attitude noise per axis [arcsec].")
+    star_tracker_sigma_arcsec: float = Field(20.0, gt=0.0, le=3600.0, description="Star-tracker 1-sigma attitude noise per axis [arcsec] (the default of the two below).")
+    star_tracker_cross_sigma_arcsec: float | None = Field(None, gt=0.0, le=3600.0, description="Star-tracker 1-sigma noise about each of its two cross-boresight axes (sensor x, y) [arcsec]; default star_tracker_sigma_arcsec.")
+    star_tracker_about_sigma_arcsec: float | None = Field(None, gt=0.0, le=36000.0, description="Star-tracker 1-sigma roll noise about its boresight (sensor z) [arcsec]; default star_tracker_sigma_arcsec.")
     initial_attitude_sigma_deg: float = Field(5.0, gt=0.0, le=180.0, description="Initial attitude 1-sigma per axis after (re)initialisation from the star tracker [deg].")
     initial_bias_sigma_deg_s: float = Field(0.05, gt=0.0, le=10.0, description="Initial gyro bias 1-sigma per axis [deg/s].")
     star_tracker_max_age_s: float = Field(0.5, gt=0.0, le=10.0, description="A star-tracker sample older than this is stale and not used [s].")
