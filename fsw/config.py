@@ -340,7 +340,7 @@ class FdirConfig(_Strict):
     star_tracker_stale: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=50, action="none"), description="No valid fresh star-tracker sample this cycle (value 1/0): the estimator coasts; event after persistence.")
     star_tracker_corrupt: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="none"), description="Star-tracker frames with CRC/sequence/length errors this cycle (count; limit).")
     innovation: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=5, action="reset_estimator"), description="Star-tracker innovation angle above `limit` [deg].")
-    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="isolate_wheel_safe"), description="Wheel reports a fault flag or no status (value 1/0), per wheel.")
+    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="isolate_wheel"), description="Wheel reports a fault flag, no status, or a speed that does not follow its torque commands (value 1/0), per wheel.")
     wheel_speed: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.95, persistence_cycles=5, action="safe"), description="|wheel speed| / max_speed above `limit`, per wheel.")
     keepout_yellow: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=1, action="none"), description="Physical keep-out margin below `limit` [deg] (yellow): KEEP_OUT_MARGIN_LOW warning.")
     keepout_red: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.0, persistence_cycles=2, action="safe"), description="Physical keep-out margin below `limit` [deg] (red, 0 = inside): KEEP_OUT_VIOLATION.")
@@ -379,23 +379,30 @@ def is_loopback_host(host: str) -> bool:
 class TmTcConfig(_Strict):
     """Telemetry/telecommand sockets (loopback unless the mission names another address)."""
 
-    telemetry_host: str = Field("127.0.0.1", description="Destination address of telemetry datagrams.")
+    telemetry_host: str = Field("127.0.0.1", description="Destination address of telemetry datagrams: a "
+                                "ground station's address (unicast), or a multicast group (224.0.0.0/4) that "
+                                "any number of ground clients join.")
 
     @field_validator("telemetry_host")
     @classmethod
-    def _unicast(cls, v: str) -> str:
+    def _unicast_or_group(cls, v: str) -> str:
         import ipaddress
 
         try:
             addr = ipaddress.ip_address(v)
         except ValueError:
             return v  # a host name: resolved when the socket is opened
-        if addr.is_unspecified or addr.is_multicast or addr == ipaddress.ip_address("255.255.255.255"):
-            kind = ("unspecified" if addr.is_unspecified else "multicast" if addr.is_multicast else "broadcast")
-            raise ValueError(f"{v} is a {kind} address: telemetry goes to one ground station; give its unicast "
-                             "address, e.g. 127.0.0.1")
+        if addr.is_unspecified or addr == ipaddress.ip_address("255.255.255.255"):
+            kind = "unspecified" if addr.is_unspecified else "broadcast"
+            raise ValueError(f"{v} is a {kind} address: give a ground station's unicast address "
+                             "(e.g. 127.0.0.1) or a multicast group (224.0.0.0/4)")
         return v
     telemetry_port: int = Field(50100, ge=1, le=65535)
+    telemetry_multicast_interface: str = Field(
+        "127.0.0.1", description="With a multicast telemetry_host: the local address whose interface sends the "
+        "group (loopback keeps the telemetry on this computer).")
+    telemetry_multicast_ttl: int = Field(
+        0, ge=0, le=255, description="With a multicast telemetry_host: hops the datagrams may take (0: this host only).")
     telecommand_bind_host: str = Field("127.0.0.1", description="Address the telecommand socket binds to; a non-loopback address needs allow_non_loopback: true.")
     telecommand_port: int = Field(50101, ge=0, le=65535, description="0 = ephemeral port.")
     allow_non_loopback: bool = Field(False, description="Explicit consent to bind the telecommand socket to a non-loopback address (reachable from the network; commands are still authenticated). A warning is printed whenever it is used.")
@@ -471,6 +478,27 @@ def load_fsw_config(path: str | Path) -> FswConfig:
         data = data["flight_software"] or {}
         prefix = "flight_software."
     return parse_fsw_config(data, source=str(p), prefix=prefix)
+
+
+def load_bus_settings(path: str | Path) -> tuple[str, int | None]:
+    """The bus spec and CAN bit rate [bit/s] a mission YAML names (top-level ``bus`` and
+    ``bus_bitrate_bps``; ``auto`` and None when absent, as in a bare FswConfig YAML)."""
+    import yaml
+
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{p}: cannot read: {exc}") from exc
+    data = data if isinstance(data, dict) else {}
+    bus = data.get("bus", "auto")
+    bitrate = data.get("bus_bitrate_bps")
+    if not isinstance(bus, str):
+        raise ConfigError(f"{p}: bus: expected a bus spec string such as auto or pcan:PCAN_USBBUS1, got {bus!r}")
+    if bitrate is not None and (isinstance(bitrate, bool) or not isinstance(bitrate, int)
+                                or not 10000 <= bitrate <= 1000000):
+        raise ConfigError(f"{p}: bus_bitrate_bps: expected an integer in 10000..1000000 [bit/s], got {bitrate!r}")
+    return bus, bitrate
 
 
 def parse_fsw_config(data: dict, source: str = "<dict>", prefix: str = "") -> FswConfig:

@@ -25,6 +25,8 @@ Wire format (all big-endian), CCSDS 133.0-B-2 space packets built with ``spacepa
   with payload ``event id (u16), severity (u8), args...``.
 - Telecommands (packet type TC, no secondary header): primary header with ``TC_APID``, ``opcode (u16)``,
   args in declaration order, CRC-16/CCITT-FALSE. Strings are ``u8 length + UTF-8 bytes``.
+- Every telecommand is acknowledged in the ``TC_ACK`` telemetry packet (``TC_ACK_APID``), as PUS service 1:
+  acceptance success/failure and completion success/failure with a reason code from ``TC_REASONS``.
 """
 from __future__ import annotations
 
@@ -753,6 +755,9 @@ EVENTS: tuple[EventDef, ...] = (
              (Arg("wheel", "U8"), Arg("speed_rad_s", "F32", "rad/s")), throttle=5, throttle_window_s=10.0),
     EventDef("WHEEL_ISOLATED", 42, Severity.WARNING_HI, "wheel {wheel} removed from allocation",
              (Arg("wheel", "U8"),)),
+    EventDef("SLEW_LIMITS_REDUCED", 44, Severity.WARNING_LO,
+             "slew limits reduced to {rate_limit_deg_s:.3f} deg/s, {accel_deg_s2:.4f} deg/s^2 on {wheels} wheels",
+             (Arg("rate_limit_deg_s", "F32", "deg/s"), Arg("accel_deg_s2", "F32", "deg/s^2"), Arg("wheels", "U8"))),
     EventDef("TORQUE_SATURATED", 43, Severity.DIAGNOSTIC, "wheel torque scaled by {scale:.3f}",
              (Arg("scale", "F32"),), throttle=1, throttle_window_s=10.0),
     EventDef("CYCLE_SLIP", 50, Severity.WARNING_LO,

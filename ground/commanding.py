@@ -1,6 +1,7 @@
 """Ground commanding: encode telecommands with the flight dictionary and send them over UDP."""
 from __future__ import annotations
 
+import errno
 import socket
 from pathlib import Path
 from typing import Any
@@ -35,6 +36,13 @@ class CommandSender:
         self.destination = (host, port)
         self.seq_count = seq_count
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        # Connected, so that an ICMP "port unreachable" (nobody serves telecommands there) comes back to us
+        # (``refused``) instead of vanishing: a UDP send itself succeeds whoever listens.
+        try:
+            self._sock.connect(self.destination)
+        except OSError:
+            self._sock.close()
+            raise
 
     def send(self, command: str | int, *args: Any, check_range: bool = True, **kwargs: Any) -> bytes:
         """Encode and send; positional or keyword args (raises ``ArgError`` naming a bad arg)."""
@@ -46,9 +54,17 @@ class CommandSender:
                                 check_range=check_range)
         if self.security is not None:
             packet = self.security.protect(packet, self.sequence.advance() if self.sequence is not None else None)
-        self._sock.sendto(packet, self.destination)
+        self._sock.send(packet)
         self.seq_count = (self.seq_count + 1) % SEQ_MODULO
         return packet
+
+    def refused(self) -> bool:
+        """True when the destination answered a telecommand with "port unreachable" (reading clears it)."""
+        return self._sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR) == errno.ECONNREFUSED
+
+    def fileno(self) -> int:
+        """The socket's descriptor: readable when an error (such as a refusal) is pending."""
+        return self._sock.fileno()
 
     def close(self) -> None:
         self._sock.close()

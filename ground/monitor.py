@@ -95,6 +95,8 @@ class GroundStats:
     bytes: int = 0
     decoded: int = 0
     decode_errors: int = 0
+    decode_errors_by_kind: dict[str, int] = field(default_factory=dict)  # TRUNCATED, UNKNOWN_APID, ...
+    last_decode_error: str = ""
     per_apid: dict[int, ApidStats] = field(default_factory=dict)
     gaps: list[Gap] = field(default_factory=list)
     limits: dict[str, LimitStats] = field(default_factory=dict)
@@ -112,7 +114,8 @@ class GroundStats:
     def to_json_dict(self) -> dict[str, Any]:
         return {
             "datagrams": self.datagrams, "bytes": self.bytes, "decoded": self.decoded,
-            "decode_errors": self.decode_errors, "missing_packets": self.missing,
+            "decode_errors": self.decode_errors, "decode_errors_by_kind": dict(self.decode_errors_by_kind),
+            "last_decode_error": self.last_decode_error, "missing_packets": self.missing,
             "rejected_by_link_security": self.forged, "rejected_by_reason": dict(sorted(self.rejected.items())),
             "per_apid": {f"{apid:#05x}": {"received": s.received, "missing": s.missing, "gaps": s.gaps,
                                           "duplicates_or_restarts": s.duplicates_or_restarts,
@@ -127,7 +130,8 @@ class GroundMonitor:
     """Receives telemetry on ``host:port``, archives raw + decoded, tracks gaps, keeps latest values.
 
     ``archive_dir=None`` keeps everything in memory only (tests, quick looks). ``port=0`` binds an
-    ephemeral port (read ``address``); ``port=None`` opens no socket (feed ``process`` directly). ``write_decoded=False`` archives raw packets and events only
+    ephemeral port (read ``address``); ``port=None`` opens no socket (feed ``process`` directly); ``sock``
+    receives from a socket opened elsewhere (a run's multicast telemetry: ``ground.link.open_telemetry``). ``write_decoded=False`` archives raw packets and events only
     (the decoded JSONL of a 24 h soak is gigabytes; ``decode_archive`` rebuilds it from the raw file). Use as a context manager or call ``close()`` to flush the archive
     and write the summary.
     """
@@ -135,7 +139,8 @@ class GroundMonitor:
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, host: str = DEFAULT_HOST,
                  port: int | None = DEFAULT_TM_PORT, archive_dir: str | Path | None = None,
                  recv_buffer_bytes: int = 8 * 1024 * 1024, event_history: int = 20,
-                 write_decoded: bool = True, security: SecurityAssociation | None = None) -> None:
+                 write_decoded: bool = True, sock: socket.socket | None = None,
+                 security: SecurityAssociation | None = None) -> None:
         self.dictionary = dictionary
         self.security = security
         self.stats = GroundStats()
@@ -160,8 +165,8 @@ class GroundMonitor:
             self._limits = open(self.archive_dir / LIMITS_ARCHIVE, "a", encoding="utf-8")
             if security is not None:
                 self._rejected = open(self.archive_dir / REJECTED_ARCHIVE, "ab")
-        self._sock: socket.socket | None = None
-        if port is not None:
+        self._sock: socket.socket | None = sock  # e.g. ``ground.link.open_telemetry(endpoints)``
+        if sock is None and port is not None:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             # A big receive buffer absorbs bursts when lockstep runs faster than real time.
             try:
@@ -222,10 +227,14 @@ class GroundMonitor:
             self._raw.write(RAW_RECORD.pack(rx_time_s, len(raw)) + raw)
         try:
             packet = decode_tm_packet(self.dictionary, raw)
-        except (TelemetryDecodeError, ValueError) as exc:
-            self.stats.decode_errors += 1
-            self._write(self._decoded, {"rx_time_s": rx_time_s, "error": str(exc), "length": len(raw),
-                                        "hex": raw[:64].hex()})
+        except Exception as exc:  # noqa: BLE001 - whatever arrives, the ground counts it and goes on
+            kind = exc.kind if isinstance(exc, TelemetryDecodeError) else "MALFORMED"
+            stats = self.stats
+            stats.decode_errors += 1
+            stats.decode_errors_by_kind[kind] = stats.decode_errors_by_kind.get(kind, 0) + 1
+            stats.last_decode_error = f"{kind}: {exc}"
+            self._write(self._decoded, {"rx_time_s": rx_time_s, "error": str(exc), "kind": kind,
+                                        "length": len(raw), "hex": raw[:64].hex()})
             return None
         self.stats.decoded += 1
         record = packet.to_json_dict()

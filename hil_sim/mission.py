@@ -27,6 +27,7 @@ from keepout_config import config_path
 
 if TYPE_CHECKING:
     from hil_sim.params import WorldParams
+    from hil_sim.yaml_loader import Marked
 
 SCHEMA_VERSION = 1
 MAX_WHEELS = 6  # RW1..RW6 in config/icd/keepout.dbc
@@ -49,7 +50,10 @@ UnitQuat = Annotated[list[float], Field(min_length=4, max_length=4,
                      AfterValidator(lambda v: _unit_quaternion(v))]
 
 FdirMonitor = Literal[FDIR_MONITORS]  # type: ignore[valid-type]  (the telemetry dictionary's monitors)
-BUS_PATTERN = r"^(auto|socketcan(:[A-Za-z0-9_]+)?|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?)$"
+# auto, the loopback transports, or any python-can interface as INTERFACE:CHANNEL[,KEY=VALUE...] (checked
+# further by fsw.bus.transport.resolve_spec when the run starts)
+BUS_PATTERN = (r"^(auto|socketcan(:[A-Za-z0-9_]+)?|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?"
+               r"|[a-z0-9_]+:[^\s,]+(,[A-Za-z_][A-Za-z0-9_]*=[^\s,]+)*)$")
 
 
 class _Model(BaseModel):
@@ -285,11 +289,20 @@ class Mission(_Model):
     duration_s: float = Field(gt=0, le=10 * 86400, description="simulated duration [s]")
     seed: int = Field(0, ge=0, le=2**32 - 1, description="seed of every random process in the truth models")
     bus: str = Field("auto", pattern=BUS_PATTERN, description="auto (socketcan on vcan0 when it exists, else "
-                     "udp_multicast) | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL]")
+                     "udp_multicast) | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL] | "
+                     "INTERFACE:CHANNEL[,KEY=VALUE...] for a python-can hardware interface (pcan:PCAN_USBBUS1, "
+                     "kvaser:0, slcan:/dev/ttyACM0, ...)")
+    bus_bitrate_bps: int = Field(500000, ge=10000, le=1000000, description="CAN bit rate [bit/s] a hardware "
+                                 "interface (pcan, kvaser, vector, slcan, ...) is opened with; SocketCAN takes the "
+                                 "kernel's setting, the loopback transports have none")
     tmtc_ports: Literal["auto", "fixed"] = Field(
         "auto", description="auto: the SIL picks free UDP ports for telemetry and telecommands for each run "
         "(parallel runs never collide) and writes them into the config it saves; fixed: use "
         "flight_software.tmtc as given")
+    telemetry_link: Literal["multicast", "unicast"] = Field(
+        "multicast", description="multicast: the flight software sends telemetry to a per-run multicast group on "
+        "loopback, which the SIL's ground and any number of attached ground clients join (`keepout ground --run`); "
+        "unicast: to flight_software.tmtc.telemetry_host only, as to a real ground station (one receiver)")
     simulation: Simulation = Field(default_factory=Simulation)
     spacecraft: SpacecraftTruth
     orbit: Orbit
@@ -419,6 +432,11 @@ def ra_dec_to_unit(ra_deg: float, dec_deg: float) -> np.ndarray:
 
 def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
     """Load and validate a mission file; raise yaml_loader.ConfigError listing every problem."""
+    return load_mission_marked(path, text=text)[0]
+
+
+def load_mission_marked(path: str | Path, *, text: str | None = None) -> tuple[Mission, "Marked"]:
+    """`load_mission`, plus the file's key positions (to place later findings at file:line:col)."""
     from hil_sim.yaml_loader import ConfigError, Problem, load_marked, problems_from_validation
     from pydantic import ValidationError
 
@@ -430,7 +448,7 @@ def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
     problems = [Problem(doc.file, *doc.mark_for(loc), _path(loc), msg) for loc, msg in mission.semantic_problems()]
     if problems:
         raise ConfigError(problems)
-    return mission
+    return mission, doc
 
 
 def _path(loc: tuple[str | int, ...]) -> str:

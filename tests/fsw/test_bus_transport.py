@@ -26,6 +26,52 @@ def test_bad_specs_name_the_accepted_forms(bad: str) -> None:
         resolve_spec(bad)
 
 
+@pytest.mark.parametrize("spec, interface, channel, options", [
+    ("pcan:PCAN_USBBUS1", "pcan", "PCAN_USBBUS1", {}),
+    ("kvaser:0", "kvaser", "0", {}),
+    ("vector:0,app_name=keepout", "vector", "0", {"app_name": "keepout"}),
+    ("slcan:/dev/ttyACM0", "slcan", "/dev/ttyACM0", {}),
+    ("socketcand:can0,host=10.0.0.2,port=29536", "socketcand", "can0", {"host": "10.0.0.2", "port": 29536}),
+])
+def test_any_python_can_interface_is_a_bus_spec(spec: str, interface: str, channel: str, options: dict) -> None:
+    info = resolve_spec(spec)
+    assert (info.spec, info.interface, info.channel, dict(info.options)) == (spec, interface, channel, options)
+
+
+@pytest.mark.parametrize("bad", ["pcan:", "kvaser:0,bitrate", "vector:0,9x=1", "warpdrive:0"])
+def test_bad_hardware_specs_say_what_is_allowed(bad: str) -> None:
+    with pytest.raises(BusSpecError, match="accepted"):
+        resolve_spec(bad)
+
+
+def test_hardware_interface_opens_with_the_mission_bitrate(monkeypatch: pytest.MonkeyPatch) -> None:
+    opened: list[dict] = []
+    real_bus = can.Bus
+
+    def fake_bus(**kwargs):
+        opened.append(kwargs)
+        return real_bus(interface="virtual", channel="hw-stand-in")
+
+    monkeypatch.setattr(transport.can, "Bus", fake_bus)
+    open_bus("kvaser:1,data_bitrate=2000000", bitrate=250000).shutdown()
+    open_bus("pcan:PCAN_USBBUS1,bitrate=125000", bitrate=250000).shutdown()  # the spec's own option wins
+    assert opened == [{"interface": "kvaser", "channel": "1", "bitrate": 250000, "data_bitrate": 2000000},
+                      {"interface": "pcan", "channel": "PCAN_USBBUS1", "bitrate": 125000}]
+
+
+def test_missing_hardware_driver_is_a_clear_bus_unavailable_error() -> None:
+    # no PCAN driver on a test machine: python-can's own message, wrapped with the interface and channel
+    with pytest.raises(BusUnavailableError, match="python-can interface 'pcan' channel 'PCAN_USBBUS1'"):
+        open_bus("pcan:PCAN_USBBUS1", bitrate=500000)
+
+
+def test_udp_endpoint_depends_on_run_id_only() -> None:
+    a, b = udp_endpoint_for_run("run-a"), udp_endpoint_for_run("run-b")
+    assert a == udp_endpoint_for_run("run-a")
+    assert a[0] != b[0] and a[1] != b[1]
+    assert resolve_spec("udp_multicast", run_id="run-a").spec == f"udp_multicast:{a[0]}:{a[1]}"
+
+
 def test_udp_endpoint_is_random_per_run_not_derived_from_the_run_name() -> None:
     # Two runs with the same folder name (started in the same second) must not share a bus.
     specs = {resolve_spec("udp_multicast", run_id="demo-20261125-120000").spec for _ in range(20)}

@@ -124,7 +124,7 @@ def test_tc_round_trip_ground_send_to_dispatcher_and_command_event_back(tmp_path
 
     json_dictionary = str(Path(__file__).resolve().parents[2] / "config" / "telemetry_dictionary.json")
     assert main(["ground", "--dictionary", json_dictionary, "send", "SET_MODE", "POINTING",
-                 "--port", str(tc_port), "--key-file", str(tmp_path / "link.key")]) == 0
+                 "--port", str(tc_port), "--no-wait", "--key-file", str(tmp_path / "link.key")]) == 0
     results = []
     deadline = time.monotonic() + 3.0
     while not results and time.monotonic() < deadline:
@@ -220,7 +220,7 @@ def test_send_takes_the_telecommand_address_and_key_from_the_mission_config(tmp_
     mission = tmp_path / "mission.yaml"
     mission.write_text("flight_software:\n  tmtc:\n    telecommand_bind_host: 127.0.0.1\n"
                        f"    telecommand_port: {dispatcher.address[1]}\n    security: {{key_file: link.key}}\n")
-    assert main(["ground", "--config", str(mission), "send", "NOOP"]) == 0
+    assert main(["ground", "--config", str(mission), "send", "NOOP", "--no-wait"]) == 0
     deadline = time.monotonic() + 3.0
     while not calls and time.monotonic() < deadline:
         dispatcher.poll(timeout_s=0.1)
