@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"fsw: {exc}", file=sys.stderr)
         return 2
     from fsw.app import FlightSoftware
-    from fsw.bus import BusSpecError, BusUnavailableError, FswBusDriver, Icd, open_bus
+    from fsw.bus import BusSpecError, BusUnavailableError, FswBusDriver, Icd, open_bus, resolve_spec
     from fsw.dictionary import DICTIONARY
     from fsw.link_security import KeyFileError
     from fsw.telecommand import CommandDispatcher
@@ -95,7 +95,11 @@ def run(args: argparse.Namespace) -> int:
 
     bus_spec = args.bus if args.bus is not None else mission_bus
     try:
+        resolve_spec(bus_spec)  # a malformed --bus is named before anything else
         uplink, downlink = link_associations(cfg, args.config, args.key_file)
+    except BusSpecError as exc:
+        print(f"fsw: --bus {bus_spec!r}: {exc}", file=sys.stderr)
+        return 2
     except KeyFileError as exc:
         print(f"fsw: {exc}", file=sys.stderr)
         return 2

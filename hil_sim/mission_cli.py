@@ -70,11 +70,7 @@ def _validate(args: argparse.Namespace) -> int:
     status = 0
     for path in args.files:
         try:
-<<<<<<< HEAD
             mission, doc = load_mission_marked(path)
-=======
-            mission = load_mission(path)
->>>>>>> wt-security
         except ConfigError as exc:
             print(exc, file=sys.stderr)
             if not isinstance(exc, ConfigFileError):
