@@ -95,13 +95,6 @@ def run(args: argparse.Namespace) -> int:
 
     bus_spec = args.bus if args.bus is not None else mission_bus
     try:
-        uplink, downlink = link_associations(cfg, args.config, args.key_file)
-    except KeyFileError as exc:
-        print(f"fsw: {exc}", file=sys.stderr)
-        return 2
-    for warning in cfg.tmtc.warnings():
-        print(f"fsw: warning: {warning}", file=sys.stderr)
-    try:
         bus = open_bus(bus_spec, args.run_id, bitrate=args.bitrate if args.bitrate is not None else mission_bitrate)
     except BusSpecError as exc:
         print(f"fsw: --bus {bus_spec!r}: {exc}", file=sys.stderr)
@@ -109,6 +102,14 @@ def run(args: argparse.Namespace) -> int:
     except BusUnavailableError as exc:
         print(f"fsw: bus unavailable: {exc}", file=sys.stderr)
         return 3
+    try:
+        uplink, downlink = link_associations(cfg, args.config, args.key_file)
+    except KeyFileError as exc:
+        bus.shutdown()
+        print(f"fsw: {exc}", file=sys.stderr)
+        return 2
+    for warning in cfg.tmtc.warnings():
+        print(f"fsw: warning: {warning}", file=sys.stderr)
     tm_cfg = cfg.tmtc
     tm_port = tm_cfg.telemetry_port if args.tm_port is None else args.tm_port
     tc_port = tm_cfg.telecommand_port if args.tc_port is None else args.tc_port

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from fsw.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DEFAULT_TM_PORT, DICTIONARY, TelemetryDictionary
-from fsw.link_security import downlink_receiver, load_key_file
+from fsw.link_security import LINK_KEY_FILE, downlink_receiver, load_key_file
 from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
 from ground.commanding import CommandSender, signing_sender_args
 from ground.link import LOOPBACK, Endpoints, LinkError, find_run, open_telemetry
@@ -142,13 +142,6 @@ def _key_file(explicit: str | None, config_path: str | None) -> str:
                      "flight_software.tmtc.security.key_file (`keepout ground keygen FILE` makes one)")
 
 
-def _run_key_file(explicit: str | None, run_dir: Path) -> str:
-    """The link key of a SIL run: the per-run key the SIL wrote into its folder (or ``--key-file``)."""
-    from fsw.link_security import LINK_KEY_FILE
-
-    return explicit or str(run_dir / LINK_KEY_FILE)
-
-
 def _cmd_keygen(args: argparse.Namespace) -> int:
     from fsw.link_security import write_key_file
 
@@ -249,7 +242,9 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         if run_dir is not None and endpoints.state == "finished":
             raise LinkError(f"run {run_dir} has finished: nothing to attach to; its archive is "
                             f"{run_dir / 'ground'} (browse it with `keepout ground web --run {run_dir}`)")
-        key_file = _run_key_file(args.key_file, run_dir) if run_dir is not None else _key_file(args.key_file, args.config)
+        # a SIL run's key is RUN_DIR/link.key (made by the SIL for that run)
+        key_file = args.key_file or (str(run_dir / LINK_KEY_FILE) if run_dir is not None
+                                     else _key_file(None, args.config))
         security = downlink_receiver(load_key_file(key_file))
         sock = open_telemetry(endpoints)
     except (DictionaryError, LinkError, ValueError) as exc:
