@@ -15,6 +15,7 @@ from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
 from ground.commanding import CommandSender
 from ground.link import LOOPBACK, Endpoints, LinkError, find_run, open_telemetry
 from ground.monitor import GroundMonitor
+from ground.web.cli import add_cli as add_web_cli
 
 
 def add_cli(subparsers: Any) -> None:
@@ -39,7 +40,7 @@ def add_cli(subparsers: Any) -> None:
     parser.add_argument("--dictionary", default=None, help="telemetry dictionary JSON (default: built in)")
     parser.add_argument("--no-live", action="store_true", help="no live table; print events as lines")
     parser.set_defaults(func=_cmd_monitor)
-    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode}")
+    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode,web}")
     send = sub.add_parser("send", help="send one telecommand, e.g. `keepout ground send SET_MODE POINTING`",
                           epilog=_command_help(DICTIONARY), formatter_class=argparse.RawDescriptionHelpFormatter)
     send.add_argument("opcode", help="command name (or numeric opcode)")
@@ -59,6 +60,7 @@ def add_cli(subparsers: Any) -> None:
     decode.add_argument("archive_dir", help="directory holding tm_raw.bin")
     decode.add_argument("--out", default=None, help="output JSONL (default: ARCHIVE_DIR/tm_decoded.jsonl)")
     decode.set_defaults(func=_cmd_decode)
+    add_web_cli(sub)
 
 
 def _command_help(dictionary: TelemetryDictionary) -> str:
