@@ -3,6 +3,9 @@
 A run's archive directory holds ``tm_raw.bin`` (records of ``rx_time_s`` float64 + ``length`` u32 +
 packet bytes, big-endian; written before decoding so nothing is lost), ``tm_decoded.jsonl``,
 ``events.jsonl``, ``limits.jsonl`` (every YELLOW/RED limit transition) and ``ground_summary.json``.
+With link security ``tm_raw.bin`` holds the authenticated packets in their plain form (security header
+and MAC checked and taken off) and ``tm_rejected.bin`` (same record format) the datagrams that failed
+authentication or anti-replay, as received.
 """
 from __future__ import annotations
 
@@ -21,6 +24,7 @@ DECODED_ARCHIVE = "tm_decoded.jsonl"
 EVENTS_ARCHIVE = "events.jsonl"
 LIMITS_ARCHIVE = "limits.jsonl"  # every yellow/red limit transition seen by the ground
 SUMMARY_FILE = "ground_summary.json"
+REJECTED_ARCHIVE = "tm_rejected.bin"  # datagrams refused by the link security, never decoded as telemetry
 
 
 def read_raw_archive(path: str | Path) -> Iterator[tuple[float, bytes]]:

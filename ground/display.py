@@ -71,10 +71,14 @@ def render_tables(monitor: GroundMonitor) -> Any:
         channels.add_row(name, text, dictionary.channel(name).unit, state.value if state else "", style=style)
     stats = monitor.stats
     link = Table(title="link", expand=False)
-    for column in ("datagrams", "decoded", "decode errors", "gaps", "missing"):
+    for column in ("datagrams", "decoded", "decode errors", "gaps", "missing", "forged/unauthenticated"):
         link.add_column(column)
     link.add_row(str(stats.datagrams), str(stats.decoded), str(stats.decode_errors), str(len(stats.gaps)),
-                 str(stats.missing), style="bold red" if stats.missing or stats.decode_errors else "")
+                 str(stats.missing), ", ".join(f"{k} {n}" for k, n in sorted(stats.rejected.items())) or "0",
+                 style="bold red" if stats.missing or stats.decode_errors or stats.rejected else "")
+    if stats.decode_errors:  # what the undecodable packets were, and the last one's reason
+        kinds = ", ".join(f"{kind} {n}" for kind, n in sorted(stats.decode_errors_by_kind.items()))
+        link.caption = f"undecoded: {kinds}; last: {stats.last_decode_error[:100]}"
     events = Table(title="latest events", expand=False)
     for column in ("time_s", "severity", "event", "message"):
         events.add_column(column)

@@ -6,6 +6,12 @@ limit-checks every channel that has dictionary limits (each GREEN/YELLOW/RED tra
 ``limits.jsonl``) and keeps the latest values and events for displays. On close
 ``ground_summary.json`` holds per-APID counts, gaps, decode errors and per-channel limit statistics.
 
+With a downlink ``security`` association (``fsw.link_security``; the SIL and the CLI always give one)
+every datagram must carry a valid MAC and a security sequence number above the last one. Only those are
+archived, as the plain packet they carry: a forged, unauthenticated or replayed packet is counted by
+reason (``stats.rejected``, shown live and in the summary) and kept apart in ``tm_rejected.bin``, never
+in ``tm_raw.bin`` or the event log, so it cannot change what the run is judged on.
+
 ``run_ground_monitor`` is the picklable entry point the SIL orchestrator runs in its own process.
 """
 from __future__ import annotations
@@ -28,6 +34,7 @@ from ground.archive import (
     LIMITS_ARCHIVE,
     RAW_ARCHIVE,
     RAW_RECORD,
+    REJECTED_ARCHIVE,
     SUMMARY_FILE,
 )
 from ground.display import LiveDisplay
@@ -35,6 +42,7 @@ from ground.display import LiveDisplay
 if TYPE_CHECKING:
     import threading
 
+    from fsw.link_security import SecurityAssociation
     from fsw.telemetry import DecodedTm
 
 # A backwards jump larger than this is read as a flight-software restart, not as 16000 lost packets.
@@ -87,18 +95,28 @@ class GroundStats:
     bytes: int = 0
     decoded: int = 0
     decode_errors: int = 0
+    decode_errors_by_kind: dict[str, int] = field(default_factory=dict)  # TRUNCATED, UNKNOWN_APID, ...
+    last_decode_error: str = ""
     per_apid: dict[int, ApidStats] = field(default_factory=dict)
     gaps: list[Gap] = field(default_factory=list)
     limits: dict[str, LimitStats] = field(default_factory=dict)
+    rejected: dict[str, int] = field(default_factory=dict)  # link-security refusals by reason
 
     @property
     def missing(self) -> int:
         return sum(s.missing for s in self.per_apid.values())
 
+    @property
+    def forged(self) -> int:
+        """Datagrams refused by the link security (forged, unauthenticated, replayed or corrupt)."""
+        return sum(self.rejected.values())
+
     def to_json_dict(self) -> dict[str, Any]:
         return {
             "datagrams": self.datagrams, "bytes": self.bytes, "decoded": self.decoded,
-            "decode_errors": self.decode_errors, "missing_packets": self.missing,
+            "decode_errors": self.decode_errors, "decode_errors_by_kind": dict(self.decode_errors_by_kind),
+            "last_decode_error": self.last_decode_error, "missing_packets": self.missing,
+            "rejected_by_link_security": self.forged, "rejected_by_reason": dict(sorted(self.rejected.items())),
             "per_apid": {f"{apid:#05x}": {"received": s.received, "missing": s.missing, "gaps": s.gaps,
                                           "duplicates_or_restarts": s.duplicates_or_restarts,
                                           "last_seq": s.last_seq}
@@ -121,8 +139,10 @@ class GroundMonitor:
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, host: str = DEFAULT_HOST,
                  port: int | None = DEFAULT_TM_PORT, archive_dir: str | Path | None = None,
                  recv_buffer_bytes: int = 8 * 1024 * 1024, event_history: int = 20,
-                 write_decoded: bool = True, sock: socket.socket | None = None) -> None:
+                 write_decoded: bool = True, sock: socket.socket | None = None,
+                 security: SecurityAssociation | None = None) -> None:
         self.dictionary = dictionary
+        self.security = security
         self.stats = GroundStats()
         self.latest: dict[str, Any] = {}
         self.latest_time_s: float | None = None
@@ -134,6 +154,7 @@ class GroundMonitor:
         self._decoded: IO[str] | None = None
         self._events: IO[str] | None = None
         self._limits: IO[str] | None = None
+        self._rejected: IO[bytes] | None = None
         self._limited: dict[str, list[tuple[str, Any, float, float]]] = {}
         if self.archive_dir is not None:
             self.archive_dir.mkdir(parents=True, exist_ok=True)
@@ -142,6 +163,8 @@ class GroundMonitor:
                 self._decoded = open(self.archive_dir / DECODED_ARCHIVE, "a", encoding="utf-8")
             self._events = open(self.archive_dir / EVENTS_ARCHIVE, "a", encoding="utf-8")
             self._limits = open(self.archive_dir / LIMITS_ARCHIVE, "a", encoding="utf-8")
+            if security is not None:
+                self._rejected = open(self.archive_dir / REJECTED_ARCHIVE, "ab")
         self._sock: socket.socket | None = sock  # e.g. ``ground.link.open_telemetry(endpoints)``
         if sock is None and port is not None:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -196,14 +219,22 @@ class GroundMonitor:
         rx_time_s = time.time() if rx_time_s is None else rx_time_s
         self.stats.datagrams += 1
         self.stats.bytes += len(raw)
+        if self.security is not None:
+            raw = self._authenticate(raw, rx_time_s)
+            if raw is None:
+                return None
         if self._raw is not None:
             self._raw.write(RAW_RECORD.pack(rx_time_s, len(raw)) + raw)
         try:
             packet = decode_tm_packet(self.dictionary, raw)
-        except (TelemetryDecodeError, ValueError) as exc:
-            self.stats.decode_errors += 1
-            self._write(self._decoded, {"rx_time_s": rx_time_s, "error": str(exc), "length": len(raw),
-                                        "hex": raw[:64].hex()})
+        except Exception as exc:  # noqa: BLE001 - whatever arrives, the ground counts it and goes on
+            kind = exc.kind if isinstance(exc, TelemetryDecodeError) else "MALFORMED"
+            stats = self.stats
+            stats.decode_errors += 1
+            stats.decode_errors_by_kind[kind] = stats.decode_errors_by_kind.get(kind, 0) + 1
+            stats.last_decode_error = f"{kind}: {exc}"
+            self._write(self._decoded, {"rx_time_s": rx_time_s, "error": str(exc), "kind": kind,
+                                        "length": len(raw), "hex": raw[:64].hex()})
             return None
         self.stats.decoded += 1
         record = packet.to_json_dict()
@@ -222,6 +253,20 @@ class GroundMonitor:
             self.latest_time_s = packet.time_s
             self._check_limits(packet)
         return packet
+
+    def _authenticate(self, raw: bytes, rx_time_s: float) -> bytes | None:
+        """The plain packet inside an authentic, fresh secured one; None (counted, quarantined) otherwise."""
+        from fsw.link_security import SecurityError
+
+        try:
+            return self.security.unprotect(raw)[0]
+        except SecurityError as exc:
+            self.stats.rejected[exc.reason] = self.stats.rejected.get(exc.reason, 0) + 1
+            if self._rejected is not None:
+                self._rejected.write(RAW_RECORD.pack(rx_time_s, len(raw)) + raw)
+            self._write(self._decoded, {"rx_time_s": rx_time_s, "rejected": exc.reason, "error": str(exc),
+                                        "length": len(raw)})
+            return None
 
     def _check_limits(self, packet: DecodedTm) -> None:
         """Track each limited channel's state; every YELLOW/RED transition goes to ``limits.jsonl``."""
@@ -322,7 +367,7 @@ class GroundMonitor:
         return self.stats
 
     def flush(self) -> None:
-        for stream in (self._raw, self._decoded, self._events, self._limits):
+        for stream in (self._raw, self._decoded, self._events, self._limits, self._rejected):
             if stream is not None:
                 stream.flush()
 
@@ -333,7 +378,7 @@ class GroundMonitor:
         if self._sock is not None:
             self._sock.close()
             self._sock = None
-        for name in ("_raw", "_decoded", "_events", "_limits"):
+        for name in ("_raw", "_decoded", "_events", "_limits", "_rejected"):
             stream = getattr(self, name)
             if stream is not None:
                 stream.close()
@@ -359,15 +404,20 @@ def _green_band(limits: Limits) -> tuple[float, float]:
 def run_ground_monitor(archive_dir: str, host: str = DEFAULT_HOST, port: int = DEFAULT_TM_PORT,
                        duration_s: float | None = None, stop_event: Any | None = None,
                        dictionary_path: str | None = None, ready: Any | None = None,
-                       port_queue: Any | None = None, write_decoded: bool = True) -> dict[str, Any]:
+                       port_queue: Any | None = None, write_decoded: bool = True,
+                       key_file: str | None = None) -> dict[str, Any]:
     """Process entry point for the SIL orchestrator (``multiprocessing.Process(target=...)``).
 
     ``ready`` (optional multiprocessing Event) is set once the socket is bound, so the orchestrator
     can start the flight software without losing the first packets. With ``port=0`` the bound port
-    is put on ``port_queue`` (a multiprocessing Queue) before ``ready`` is set.
+    is put on ``port_queue`` (a multiprocessing Queue) before ``ready`` is set. ``key_file``: the link
+    key; telemetry is then verified (see the module docstring).
     """
+    from fsw.link_security import downlink_receiver, load_key_file
+
     dictionary = TelemetryDictionary.load(dictionary_path) if dictionary_path else DICTIONARY
-    monitor = GroundMonitor(dictionary, host, port, archive_dir, write_decoded=write_decoded)
+    security = downlink_receiver(load_key_file(key_file)) if key_file else None
+    monitor = GroundMonitor(dictionary, host, port, archive_dir, write_decoded=write_decoded, security=security)
     if port_queue is not None:
         port_queue.put(monitor.address[1])
     if ready is not None:
