@@ -25,7 +25,8 @@ SKY_TYPE = "keepout.sky"
 EVENT_STREAMS = {
     "events": ("Event log", "every event of the flight software, with its severity"),
     "fdir": ("FDIR trips", "FDIR_TRIPPED / FDIR_CLEARED events"),
-    "acks": ("Command acknowledgements", "acceptance, rejection and completion of each telecommand"),
+    "acks": ("Command acknowledgements", "PUS-1 verification reports (TC_ACK): acceptance success/failure and "
+             "completion success/failure of each telecommand, with its sequence count and reason code"),
 }
 SKY_KEY = "sky"
 OVERVIEW_KEY = "overview"
@@ -128,7 +129,7 @@ def build_objects(dictionary: TelemetryDictionary, title: str = "keepout") -> di
     }
     objects["event_table"] = {
         "identifier": _identifier("event_table"), "name": "Events and acknowledgements", "type": "table",
-        "location": f"{NAMESPACE}:{ROOT_KEY}", "composition": [_identifier("events")],
+        "location": f"{NAMESPACE}:{ROOT_KEY}", "composition": [_identifier("events"), _identifier("acks")],
         "configuration": {"hiddenColumns": {"onboard_s": False}},
     }
     objects[OVERVIEW_KEY] = _overview()

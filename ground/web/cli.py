@@ -24,6 +24,8 @@ def add_cli(subparsers: Any) -> None:
     web.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"HTTP port (default {DEFAULT_PORT}; 0: any free)")
     web.add_argument("--openmct", default=None, metavar="DIR",
                      help="Open MCT dist folder (default: the one `make setup` installs under ground/web)")
+    web.add_argument("--key-file", dest="web_key_file", default=None,
+                     help="link key that live telemetry must verify against (default: the run's own RUN_DIR/link.key)")
     web.set_defaults(func=_cmd_web)
 
 
@@ -55,7 +57,12 @@ def _cmd_web(args: argparse.Namespace) -> int:
         archive, config, endpoints = _source(args)
         dictionary = TelemetryDictionary.load(args.dictionary) if args.dictionary else DICTIONARY
         cfg = load_fsw_config(config) if config is not None else None
-        ground = WebGround(dictionary, archive, openmct_dir, cfg=cfg, endpoints=endpoints,
+        security = None
+        if endpoints is not None and endpoints.state == "running":
+            from fsw.link_security import LINK_KEY_FILE, downlink_receiver, load_key_file
+
+            security = downlink_receiver(load_key_file(args.web_key_file or archive.parent / LINK_KEY_FILE))
+        ground = WebGround(dictionary, archive, openmct_dir, cfg=cfg, endpoints=endpoints, security=security,
                            title=endpoints.run_id if endpoints else archive.name)
         sock = bind(args.host, args.port)
     except (WebSetupError, LinkError, ConfigError, DictionaryError, ValueError) as exc:

@@ -1,10 +1,10 @@
 """Decoded telemetry -> Open MCT points, for history (from the archive) and real time (from the link).
 
 One ``PointMaker`` per stream of packets: channel packets give one row per packet (stored compactly in
-``History``; points are built on request), events give event points (all events; FDIR trips and command
-acknowledgements also on their own streams), and GNC packets give sky points (boresight, target, body
-directions and the keep-out zone outlines as right ascension / declination), at most one per
-``SKY_PERIOD_S`` of onboard time so the trail stays light.
+``History``; points are built on request); events give event points (FDIR trips also on their own
+stream); ``TC_ACK`` verification reports give acknowledgement points; GNC packets give sky points
+(boresight, target, body directions and the keep-out zone outlines as right ascension / declination), at
+most one per ``SKY_PERIOD_S`` of onboard time so the trail stays light.
 """
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ import numpy as np
 
 from fsw.dictionary import TelemetryDictionary
 from ground.archive import RAW_ARCHIVE, raw_records
+from ground.verify import ACK_PACKET
 from ground.web.catalog import SKY_KEY, channel_key, radec_deg
 
 if TYPE_CHECKING:
@@ -29,10 +30,16 @@ ZONE_OUTLINE_POINTS = 48
 FDIR_EVENTS = ("FDIR_TRIPPED", "FDIR_CLEARED")
 
 
-def is_acknowledgement(packet: DecodedTm) -> bool:
-    """Telecommand verification reports: the dispatcher's CMD_* events (accepted/dispatched, rejected,
-    completed) and any other command-verification event the dictionary declares (``TC_*``)."""
-    return packet.kind == "event" and (packet.event or "").startswith(("CMD_", "TC_"))
+def ack_point(dictionary: TelemetryDictionary, utc: float, packet: DecodedTm) -> dict[str, Any]:
+    """A command acknowledgement (a ``TC_ACK`` verification report) as an event-like point."""
+    from ground.verify import Ack
+
+    v = packet.values
+    ack = Ack(v["ack_report"], int(v["ack_request_id"]), int(v["ack_tc_seq"]), int(v["ack_opcode"]), v["ack_code"],
+              packet.time_s)
+    failed = ack.report.endswith("FAILURE")
+    return {"id": "acks", "utc": utc, "onboard_s": packet.time_s, "severity": "WARNING_HI" if failed else "COMMAND",
+            "event": ack.report, "message": ack.describe(dictionary).split("  ", 1)[-1].strip()}
 
 
 class SkyModel:
@@ -143,12 +150,10 @@ class PointMaker:
         if packet.kind == "event":
             point = {"utc": utc, "onboard_s": packet.time_s, "severity": packet.severity, "event": packet.event,
                      "message": packet.message}
-            keys = ["events"]
-            if packet.event in FDIR_EVENTS:
-                keys.append("fdir")
-            if is_acknowledgement(packet):
-                keys.append("acks")
+            keys = ["events", "fdir"] if packet.event in FDIR_EVENTS else ["events"]
             return [{"id": key, **point} for key in keys]
+        if packet.packet == ACK_PACKET:
+            return [ack_point(self.dictionary, utc, packet)]
         if packet.packet == "GNC" and packet.time_s >= self._last_sky_s + SKY_PERIOD_S:
             self._last_sky_s = packet.time_s
             return [self._sky_point(utc, packet)]

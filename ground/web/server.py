@@ -38,6 +38,7 @@ from ground.web.points import ArchiveReader, PointMaker
 
 if TYPE_CHECKING:
     from fsw.config import FswConfig
+    from fsw.link_security import SecurityAssociation
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 OPENMCT_ENV = "KEEPOUT_OPENMCT_DIR"
@@ -86,7 +87,7 @@ def parse_client_message(text: str, known_keys: set[str] | dict[str, Any]) -> tu
     return op, key
 
 
-@dataclass
+@dataclass(eq=False)  # one per connection, kept in a set by identity
 class _Client:
     ws: web.WebSocketResponse
     keys: set[str] = field(default_factory=set)
@@ -103,18 +104,20 @@ class WebGround:
     """The state behind the web server: the catalog, the archive reader and the live telemetry feed."""
 
     def __init__(self, dictionary: TelemetryDictionary, archive_dir: Path, openmct_dir: Path, *,
-                 cfg: FswConfig | None = None, endpoints: Endpoints | None = None, title: str = "keepout") -> None:
+                 cfg: FswConfig | None = None, endpoints: Endpoints | None = None, title: str = "keepout",
+                 security: SecurityAssociation | None = None) -> None:
         self.dictionary = dictionary
         self.objects = build_objects(dictionary, title)
         self.telemetry_keys = {k for k, o in self.objects.items() if "telemetry" in o}
         self.reader = ArchiveReader(archive_dir, PointMaker(dictionary, cfg))
         self.live_maker = PointMaker(dictionary, cfg)
         self.endpoints = endpoints
+        self.security = security  # the downlink association: live packets must verify against the link key
         self.openmct_dir = openmct_dir
         self.title = title
         self.clients: set[_Client] = set()
-        self.counters = {"tm_packets": 0, "tm_decode_errors": 0, "ws_connections": 0, "ws_protocol_errors": 0,
-                         "ws_batches_dropped": 0}
+        self.counters = {"tm_packets": 0, "tm_decode_errors": 0, "tm_refused_by_link_security": 0,
+                         "ws_connections": 0, "ws_protocol_errors": 0, "ws_batches_dropped": 0}
         self._sock: socket.socket | None = None
 
     # ---- the application ----
@@ -197,6 +200,7 @@ class WebGround:
 
     def _on_telemetry(self) -> None:
         """Read what arrived, turn it into points, and queue each client the points it subscribed to."""
+        from fsw.link_security import SecurityError
         from fsw.telemetry import TelemetryDecodeError, decode_tm_packet
 
         rx_time_s = time.time()
@@ -208,6 +212,12 @@ class WebGround:
             except OSError:  # BlockingIOError: nothing left
                 break
             self.counters["tm_packets"] += 1
+            if self.security is not None:
+                try:
+                    raw = self.security.unprotect(raw)[0]
+                except SecurityError:
+                    self.counters["tm_refused_by_link_security"] += 1
+                    continue
             try:
                 packet = decode_tm_packet(self.dictionary, raw)
             except (TelemetryDecodeError, ValueError):
