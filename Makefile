@@ -11,7 +11,14 @@ $(BIN)/keepout: pyproject.toml
 	$(BIN)/pip install -q -e '.[dev,dask]'
 	touch $(BIN)/keepout
 
-setup: $(BIN)/keepout
+# Open MCT for `keepout ground web`, from the npm registry (pinned in ground/web/package-lock.json).
+OPENMCT := ground/web/node_modules/openmct/dist/openmct.js
+$(OPENMCT): ground/web/package.json ground/web/package-lock.json
+	@command -v npm >/dev/null 2>&1 || { echo "make setup: npm is missing (Debian: apt-get install -y npm)" >&2; exit 1; }
+	npm ci --prefix ground/web --no-audit --no-fund --loglevel=error
+	touch $@
+
+setup: $(BIN)/keepout $(OPENMCT)
 
 demo: setup
 	$(BIN)/keepout sil run
@@ -28,4 +35,4 @@ paper: setup
 	$(BIN)/keepout paper --out docs/paper
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info ground/web/node_modules

@@ -16,6 +16,7 @@ from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
 from ground.commanding import CommandSender, signing_sender_args
 from ground.link import LOOPBACK, Endpoints, LinkError, find_run, open_telemetry
 from ground.monitor import GroundMonitor
+from ground.web.cli import add_cli as add_web_cli
 
 
 def add_cli(subparsers: Any) -> None:
@@ -41,7 +42,7 @@ def add_cli(subparsers: Any) -> None:
     parser.add_argument("--no-live", action="store_true", help="no live table; print events as lines")
     parser.add_argument("--key-file", default=None, help=_KEY_HELP)
     parser.set_defaults(func=_cmd_monitor)
-    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode,xtce,keygen}")
+    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode,xtce,keygen,web}")
     send = sub.add_parser(
         "send", help="send one telecommand and wait for its acknowledgement, e.g. `keepout ground send SET_MODE "
         "POINTING`", description="Send one telecommand, wait for its acknowledgements in telemetry (acceptance, "
@@ -85,6 +86,7 @@ def add_cli(subparsers: Any) -> None:
                                       "as Yamcs decodes keepout's packets and builds its telecommands.")
     xtce.add_argument("--out", default=None, help="output file (default: standard output)")
     xtce.set_defaults(func=_cmd_xtce)
+    add_web_cli(sub)
 
 
 def udp_port(text: str) -> int:
