@@ -269,15 +269,14 @@ def _cmd_decode(args: argparse.Namespace) -> int:
 
 def _cmd_xtce(args: argparse.Namespace) -> int:
     from fsw.dictionary import DictionaryError
-    from ground.xtce import to_xtce
+    from ground.xtce import to_xtce, write_xtce
 
     try:
-        text = to_xtce(_load_dictionary(args.dictionary))
+        dictionary = _load_dictionary(args.dictionary)
         if args.out is None:
-            sys.stdout.write(text)
+            sys.stdout.write(to_xtce(dictionary))
             return 0
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(text, encoding="utf-8")
+        write_xtce(args.out, dictionary)
     except DictionaryError as exc:
         print(f"keepout ground xtce: {exc}", file=sys.stderr)
         return 2
