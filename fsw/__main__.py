@@ -104,7 +104,9 @@ def run(args: argparse.Namespace) -> int:
     tc_port = tm_cfg.telecommand_port if args.tc_port is None else args.tc_port
     icd = Icd(args.dbc) if args.dbc else Icd()
     driver = FswBusDriver(bus, icd, len(cfg.spacecraft.wheels))
-    telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port)
+    telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port,
+                                multicast_interface=tm_cfg.telemetry_multicast_interface,
+                                multicast_ttl=tm_cfg.telemetry_multicast_ttl)
     try:
         dispatcher = CommandDispatcher(DICTIONARY, telemetry, host=tm_cfg.telecommand_bind_host, port=tc_port)
     except OSError as exc:

@@ -340,7 +340,7 @@ class FdirConfig(_Strict):
     star_tracker_stale: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=50, action="none"), description="No valid fresh star-tracker sample this cycle (value 1/0): the estimator coasts; event after persistence.")
     star_tracker_corrupt: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="none"), description="Star-tracker frames with CRC/sequence/length errors this cycle (count; limit).")
     innovation: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=5, action="reset_estimator"), description="Star-tracker innovation angle above `limit` [deg].")
-    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="isolate_wheel_safe"), description="Wheel reports a fault flag or no status (value 1/0), per wheel.")
+    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="isolate_wheel"), description="Wheel reports a fault flag, no status, or a speed that does not follow its torque commands (value 1/0), per wheel.")
     wheel_speed: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.95, persistence_cycles=5, action="safe"), description="|wheel speed| / max_speed above `limit`, per wheel.")
     keepout_yellow: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=1, action="none"), description="Physical keep-out margin below `limit` [deg] (yellow): KEEP_OUT_MARGIN_LOW warning.")
     keepout_red: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.0, persistence_cycles=2, action="safe"), description="Physical keep-out margin below `limit` [deg] (red, 0 = inside): KEEP_OUT_VIOLATION.")
@@ -360,23 +360,30 @@ class OrbitKnowledge(_Strict):
 class TmTcConfig(_Strict):
     """Telemetry/telecommand sockets (loopback unless the mission names another address)."""
 
-    telemetry_host: str = Field("127.0.0.1", description="Destination address of telemetry datagrams.")
+    telemetry_host: str = Field("127.0.0.1", description="Destination address of telemetry datagrams: a "
+                                "ground station's address (unicast), or a multicast group (224.0.0.0/4) that "
+                                "any number of ground clients join.")
 
     @field_validator("telemetry_host")
     @classmethod
-    def _unicast(cls, v: str) -> str:
+    def _unicast_or_group(cls, v: str) -> str:
         import ipaddress
 
         try:
             addr = ipaddress.ip_address(v)
         except ValueError:
             return v  # a host name: resolved when the socket is opened
-        if addr.is_unspecified or addr.is_multicast or addr == ipaddress.ip_address("255.255.255.255"):
-            kind = ("unspecified" if addr.is_unspecified else "multicast" if addr.is_multicast else "broadcast")
-            raise ValueError(f"{v} is a {kind} address: telemetry goes to one ground station; give its unicast "
-                             "address, e.g. 127.0.0.1")
+        if addr.is_unspecified or addr == ipaddress.ip_address("255.255.255.255"):
+            kind = "unspecified" if addr.is_unspecified else "broadcast"
+            raise ValueError(f"{v} is a {kind} address: give a ground station's unicast address "
+                             "(e.g. 127.0.0.1) or a multicast group (224.0.0.0/4)")
         return v
     telemetry_port: int = Field(50100, ge=1, le=65535)
+    telemetry_multicast_interface: str = Field(
+        "127.0.0.1", description="With a multicast telemetry_host: the local address whose interface sends the "
+        "group (loopback keeps the telemetry on this computer).")
+    telemetry_multicast_ttl: int = Field(
+        0, ge=0, le=255, description="With a multicast telemetry_host: hops the datagrams may take (0: this host only).")
     telecommand_bind_host: str = Field("127.0.0.1", description="Address the telecommand socket binds to.")
     telecommand_port: int = Field(50101, ge=0, le=65535, description="0 = ephemeral port.")
     gnc_packet_every_n_cycles: int = Field(1, ge=1, le=1000, description="Send the GNC state packet every n GNC cycles.")

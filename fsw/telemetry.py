@@ -10,6 +10,7 @@ ground monitor; the wire format is described in ``fsw.dictionary``.
 from __future__ import annotations
 
 import collections
+import ipaddress
 import math
 import socket
 import struct
@@ -334,14 +335,17 @@ class TelemetrySender:
 
     ``host``/``port`` is the ground destination; ``port=None`` records without sending (unit tests,
     replay). The socket binds to ``bind_host`` (loopback when the destination is on loopback, so a
-    default flight build never listens on an external interface). ``clock`` gives the onboard time in
+    default flight build never listens on an external interface). A multicast ``host`` (224.0.0.0/4) is
+    sent on the interface of ``multicast_interface`` with TTL ``multicast_ttl`` and loopback on, so every
+    ground client that joined the group there receives each packet. ``clock`` gives the onboard time in
     seconds stamped into packets when the caller passes no ``time_s`` (lockstep flight code passes
     the simulated time).
     """
 
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, host: str = DEFAULT_HOST,
                  port: int | None = DEFAULT_TM_PORT, *, bind_host: str | None = None,
-                 clock: Callable[[], float] = time.monotonic, event_history: int = 512) -> None:
+                 clock: Callable[[], float] = time.monotonic, event_history: int = 512,
+                 multicast_interface: str = DEFAULT_HOST, multicast_ttl: int = 0) -> None:
         self.dictionary = dictionary
         self.destination = (host, port) if port is not None else None
         self.clock = clock
@@ -365,6 +369,15 @@ class TelemetrySender:
         self._sock: socket.socket | None = None
         if self.destination is not None:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            if _is_multicast(host):
+                # Fan-out to any number of ground clients: they join the group on ``multicast_interface``.
+                # Loop on, so clients on this host receive it; TTL 0 keeps it on this host by default.
+                self._sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
+                                      socket.inet_aton(multicast_interface))
+                self._sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, multicast_ttl)
+                self._sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+                if bind_host is None:
+                    bind_host = multicast_interface
             if bind_host is None:
                 bind_host = DEFAULT_HOST if _is_loopback(host) else "0.0.0.0"
             self._sock.bind((bind_host, 0))
@@ -549,3 +562,10 @@ class TelemetrySender:
 
 def _is_loopback(host: str) -> bool:
     return host.startswith("127.") or host in ("localhost", "::1")
+
+
+def _is_multicast(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_multicast
+    except ValueError:  # a host name: never a group
+        return False

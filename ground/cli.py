@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import argparse
+import ipaddress
+import os
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -10,6 +13,7 @@ from typing import Any
 from fsw.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DEFAULT_TM_PORT, DICTIONARY, TelemetryDictionary
 from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
 from ground.commanding import CommandSender
+from ground.link import LOOPBACK, Endpoints, LinkError, find_run, open_telemetry
 from ground.monitor import GroundMonitor
 
 
@@ -19,13 +23,18 @@ def add_cli(subparsers: Any) -> None:
         "ground", help="ground monitor: receive/archive/display telemetry; send telecommands",
         description="Receive, archive and display keepout telemetry; `ground send` sends a telecommand.",
     )
+    parser.add_argument("--run", default=None, metavar="RUN_DIR",
+                        help="attach to a SIL run (its endpoints.json; `latest`: the newest under ./runs); "
+                             "archives into RUN_DIR/attached/ unless --archive is given")
     parser.add_argument("--config", default=None,
                         help="mission YAML: take telemetry/telecommand addresses from flight_software.tmtc")
     parser.add_argument("--host", default=None,
                         help=f"address to bind for telemetry (default {DEFAULT_HOST} or the mission's)")
     parser.add_argument("--port", type=_listen_port, default=None,
                         help=f"telemetry UDP port (default {DEFAULT_TM_PORT} or the mission's; 0: any free port)")
-    parser.add_argument("--archive", default="ground_archive", help="archive directory (raw + decoded)")
+    parser.add_argument("--archive", default=None,
+                        help="archive directory (raw + decoded; default ground_archive, or with --run a new "
+                             "folder under RUN_DIR/attached/)")
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     parser.add_argument("--dictionary", default=None, help="telemetry dictionary JSON (default: built in)")
     parser.add_argument("--no-live", action="store_true", help="no live table; print events as lines")
@@ -129,14 +138,58 @@ def _load_dictionary(path: str | None) -> TelemetryDictionary:
 def _mission_addresses(config_path: str | None) -> dict[str, Any]:
     """Telemetry/telecommand addresses from a mission YAML (``fsw.config``), or the defaults."""
     addresses = {"tm_host": DEFAULT_HOST, "tm_port": DEFAULT_TM_PORT, "tc_host": DEFAULT_HOST,
-                 "tc_port": DEFAULT_TC_PORT}
+                 "tc_port": DEFAULT_TC_PORT, "tm_interface": LOOPBACK}
     if config_path:
         from fsw.config import load_fsw_config
 
         tmtc = load_fsw_config(config_path).tmtc  # raises ConfigError naming the file and key
         addresses.update(tm_host=tmtc.telemetry_host, tm_port=tmtc.telemetry_port,
-                         tc_host=tmtc.telecommand_bind_host, tc_port=tmtc.telecommand_port)
+                         tc_host=tmtc.telecommand_bind_host, tc_port=tmtc.telecommand_port,
+                         tm_interface=tmtc.telemetry_multicast_interface)
     return addresses
+
+
+def _monitor_endpoints(args: argparse.Namespace) -> tuple[Endpoints, Path | None]:
+    """The telemetry to receive: a run's (``--run``), or the mission's / command line's address."""
+    if args.run is not None:
+        if args.config or args.host or args.port is not None:
+            raise LinkError("--run takes the addresses from the run's endpoints.json: drop --config/--host/--port")
+        run_dir = find_run(args.run)
+        return Endpoints.load(run_dir), run_dir
+    addresses = _mission_addresses(args.config)
+    host = args.host if args.host is not None else addresses["tm_host"]
+    port = args.port if args.port is not None else addresses["tm_port"]
+    multicast = ipaddress.ip_address(host).is_multicast if _is_ip(host) else False
+    return Endpoints(run_id="-", tm_transport="udp-multicast" if multicast else "udp", tm_host=host, tm_port=port,
+                     tc_host=addresses["tc_host"], tc_port=addresses["tc_port"], bus="-",
+                     tm_interface=addresses["tm_interface"]), None
+
+
+def _is_ip(host: str) -> bool:
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    return True
+
+
+class _RunFinished:
+    """``is_set()`` once the attached run's endpoints.json says it finished (read at most once a second)."""
+
+    def __init__(self, run_dir: Path) -> None:
+        self.run_dir = run_dir
+        self._next_check = 0.0
+        self._finished = False
+
+    def is_set(self) -> bool:
+        now = time.monotonic()
+        if not self._finished and now >= self._next_check:
+            self._next_check = now + 1.0
+            try:
+                self._finished = Endpoints.load(self.run_dir).state == "finished"
+            except LinkError:
+                pass
+        return self._finished
 
 
 def _cmd_monitor(args: argparse.Namespace) -> int:
@@ -144,20 +197,27 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
 
     try:
         dictionary = _load_dictionary(args.dictionary)
-        addresses = _mission_addresses(args.config)
-    except (DictionaryError, ValueError) as exc:
+        endpoints, run_dir = _monitor_endpoints(args)
+        if run_dir is not None and endpoints.state == "finished":
+            raise LinkError(f"run {run_dir} has finished: nothing to attach to; its archive is "
+                            f"{run_dir / 'ground'} (browse it with `keepout ground web --run {run_dir}`)")
+        sock = open_telemetry(endpoints)
+    except (DictionaryError, LinkError, ValueError) as exc:
         print(f"keepout ground: {exc}", file=sys.stderr)
         return 2
-    host = args.host if args.host is not None else addresses["tm_host"]
-    port = args.port if args.port is not None else addresses["tm_port"]
-    try:
-        monitor = GroundMonitor(dictionary, host, port, args.archive)
-    except OSError as exc:
-        print(f"keepout ground: cannot bind {host}:{port}: {exc}", file=sys.stderr)
-        return 2
-    print(f"keepout ground: telemetry on {monitor.address[0]}:{monitor.address[1]}, archive {args.archive}")
+    archive = args.archive
+    if archive is None:
+        archive = (run_dir / "attached" / f"ground-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+                   if run_dir is not None else "ground_archive")
+    monitor = GroundMonitor(dictionary, port=None, archive_dir=archive, sock=sock)
+    where = f"{endpoints.tm_host}:{endpoints.tm_port}" + (" (multicast)" if endpoints.multicast else "")
+    attached = f"attached to run {endpoints.run_id}, " if run_dir is not None else ""
+    print(f"keepout ground: {attached}telemetry on {where}, archive {archive}", flush=True)
     monitor.echo_events = args.no_live
-    stats = monitor.run(duration_s=args.duration, live=not args.no_live)
+    stop = _RunFinished(run_dir) if run_dir is not None else None
+    stats = monitor.run(duration_s=args.duration, stop_event=stop, live=not args.no_live)
+    if stop is not None and stop.is_set():
+        print(f"run {endpoints.run_id} finished")
     summary = stats.to_json_dict()
     kinds = ", ".join(f"{k} {n}" for k, n in sorted(summary["decode_errors_by_kind"].items()))
     print(f"received {summary['datagrams']} packets, {summary['decode_errors']} decode errors"

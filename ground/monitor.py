@@ -115,7 +115,8 @@ class GroundMonitor:
     """Receives telemetry on ``host:port``, archives raw + decoded, tracks gaps, keeps latest values.
 
     ``archive_dir=None`` keeps everything in memory only (tests, quick looks). ``port=0`` binds an
-    ephemeral port (read ``address``); ``port=None`` opens no socket (feed ``process`` directly). ``write_decoded=False`` archives raw packets and events only
+    ephemeral port (read ``address``); ``port=None`` opens no socket (feed ``process`` directly); ``sock``
+    receives from a socket opened elsewhere (a run's multicast telemetry: ``ground.link.open_telemetry``). ``write_decoded=False`` archives raw packets and events only
     (the decoded JSONL of a 24 h soak is gigabytes; ``decode_archive`` rebuilds it from the raw file). Use as a context manager or call ``close()`` to flush the archive
     and write the summary.
     """
@@ -123,7 +124,7 @@ class GroundMonitor:
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, host: str = DEFAULT_HOST,
                  port: int | None = DEFAULT_TM_PORT, archive_dir: str | Path | None = None,
                  recv_buffer_bytes: int = 8 * 1024 * 1024, event_history: int = 20,
-                 write_decoded: bool = True) -> None:
+                 write_decoded: bool = True, sock: socket.socket | None = None) -> None:
         self.dictionary = dictionary
         self.stats = GroundStats()
         self.latest: dict[str, Any] = {}
@@ -144,8 +145,8 @@ class GroundMonitor:
                 self._decoded = open(self.archive_dir / DECODED_ARCHIVE, "a", encoding="utf-8")
             self._events = open(self.archive_dir / EVENTS_ARCHIVE, "a", encoding="utf-8")
             self._limits = open(self.archive_dir / LIMITS_ARCHIVE, "a", encoding="utf-8")
-        self._sock: socket.socket | None = None
-        if port is not None:
+        self._sock: socket.socket | None = sock  # e.g. ``ground.link.open_telemetry(endpoints)``
+        if sock is None and port is not None:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             # A big receive buffer absorbs bursts when lockstep runs faster than real time.
             try:

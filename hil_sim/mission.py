@@ -27,6 +27,7 @@ from keepout_config import config_path
 
 if TYPE_CHECKING:
     from hil_sim.params import WorldParams
+    from hil_sim.yaml_loader import Marked
 
 SCHEMA_VERSION = 1
 MAX_WHEELS = 6  # RW1..RW6 in config/icd/keepout.dbc
@@ -298,6 +299,10 @@ class Mission(_Model):
         "auto", description="auto: the SIL picks free UDP ports for telemetry and telecommands for each run "
         "(parallel runs never collide) and writes them into the config it saves; fixed: use "
         "flight_software.tmtc as given")
+    telemetry_link: Literal["multicast", "unicast"] = Field(
+        "multicast", description="multicast: the flight software sends telemetry to a per-run multicast group on "
+        "loopback, which the SIL's ground and any number of attached ground clients join (`keepout ground --run`); "
+        "unicast: to flight_software.tmtc.telemetry_host only, as to a real ground station (one receiver)")
     simulation: Simulation = Field(default_factory=Simulation)
     spacecraft: SpacecraftTruth
     orbit: Orbit
@@ -427,6 +432,11 @@ def ra_dec_to_unit(ra_deg: float, dec_deg: float) -> np.ndarray:
 
 def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
     """Load and validate a mission file; raise yaml_loader.ConfigError listing every problem."""
+    return load_mission_marked(path, text=text)[0]
+
+
+def load_mission_marked(path: str | Path, *, text: str | None = None) -> tuple[Mission, "Marked"]:
+    """`load_mission`, plus the file's key positions (to place later findings at file:line:col)."""
     from hil_sim.yaml_loader import ConfigError, Problem, load_marked, problems_from_validation
     from pydantic import ValidationError
 
@@ -438,7 +448,7 @@ def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
     problems = [Problem(doc.file, *doc.mark_for(loc), _path(loc), msg) for loc, msg in mission.semantic_problems()]
     if problems:
         raise ConfigError(problems)
-    return mission
+    return mission, doc
 
 
 def _path(loc: tuple[str | int, ...]) -> str:

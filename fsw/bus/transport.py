@@ -80,8 +80,8 @@ def vcan_hint(iface: str = "vcan0") -> str:
     commands = "\n  ".join(c.format(iface=iface) for c in VCAN_CREATE_COMMANDS)
     return (
         f"SocketCAN interface {iface} does not exist on this machine. Create it with:\n  {commands}\n"
-        "or, where the kernel has no CAN at all, run inside ../shared/tools/vcan-vm "
-        "(e.g. `vcan-vm -- .venv/bin/python -m pytest -m socketcan`), or use --bus udp_multicast."
+        "(a kernel built without CAN has no vcan module: run in a virtual machine whose kernel has it), "
+        "or use --bus udp_multicast."
     )
 
 

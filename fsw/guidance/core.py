@@ -10,12 +10,15 @@ import math
 import numpy as np
 
 from fsw.assumption_check import CheckResult
-from fsw.guidance.common import GuidanceOutput, _unit, signed_margin_deg
+from fsw.guidance.common import GuidanceOutput, _saturate, _unit, signed_margin_deg
 from fsw.guidance.ephemeris import SkyEphemeris
 from fsw.guidance.path_following import PathFollowing
 from fsw.guidance.path_planning import PathFollower
 from fsw.guidance.pointing import ZONE_REBUILD_TOL_DEG, PointingGuidance, _SkySlot, _warm_batch_kernels
 from fsw.guidance.quaternion import QuaternionGuidance
+from fsw.guidance.slew_limits import (
+    BRAKING_RESERVE_DEG, allowed_braking_deg, braking_problem, rate_for_distance_deg_s, rule_eps,
+)
 from fsw.guidance.safe import SafeGuidance, _acquisition_rate_B
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
@@ -34,6 +37,11 @@ class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance
         self.kappa = cfg.law.kappa
         self.eps_cfg = cfg.law.eps
         self.max_rate_rad_s = math.radians(cfg.spacecraft.max_rate_deg_s)
+        # what the rate loop can follow: the braking rule and the governor (slew_limits) use them
+        self.accel_deg_s2 = cfg.control.max_command_accel_deg_s2
+        self.bandwidth_rad_s = cfg.control.rate_bandwidth_rad_s
+        self._governor_margins: list[float] | None = None
+        self.rate_cap_deg_s = math.inf  # lowered when a wheel is lost (reduce_slew_authority)
         self.ephem = SkyEphemeris(cfg)
         p = cfg.pointing
         self.b_B = np.asarray(p.boresight_B, dtype=float)
@@ -70,6 +78,8 @@ class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance
         # SAFE mode state
         self.safe_phase = "RATE_DAMPING"
         self._damped_s = 0.0
+        self._safe_sun: np.ndarray | None = None  # the Sun direction the Sun-safe aim was chosen for
+        self._held_target_N = self.target_N  # the POINTING target while SAFE aims elsewhere
         # assumption-check cache (refreshed by the housekeeping task and on changes)
         self.eps_max_checked = float("inf")
         self.assumptions_ok = True
@@ -92,8 +102,14 @@ class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance
     def set_mode(self, mode: str) -> None:
         if mode not in self.MODES:
             raise ValueError(f"unknown mode {mode!r}; allowed: {self.MODES}")
+        if mode == "SAFE" and self.mode != "SAFE":
+            self._held_target_N = self.target_N  # SAFE aims the boresight elsewhere; POINTING resumes this
+        elif mode != "SAFE" and self.mode == "SAFE":
+            self.target_N, self._sky_law_key = self._held_target_N, None
+        self._safe_sun = None
         self.mode = mode
         self._drop_path()
+        self._governor_margins = None
         if mode == "SAFE":
             self.safe_phase = "RATE_DAMPING"
             self._damped_s = 0.0
@@ -106,11 +122,50 @@ class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance
             raise ValueError("k1, kappa and rate limit must be positive")
         if eps != "auto" and not (0.0 < float(eps) < 1.0):
             raise ValueError("eps must be in (0, 1) or 'auto'")
+        problem = braking_problem(rate_limit_deg_s, self.accel_deg_s2, self.bandwidth_rad_s, self.cfg.law.margin_deg,
+                                  rule_eps(eps, self.cfg.law.eps_max_used))
+        if problem is not None:
+            raise ValueError(problem)
+        if rate_limit_deg_s > self.rate_cap_deg_s:
+            raise ValueError(f"WHEEL_AUTHORITY: the wheels left allow at most {self.rate_cap_deg_s:.3g} deg/s")
         self.k1, self.kappa, self.eps_cfg = float(k1), float(kappa), eps
         self.max_rate_rad_s = math.radians(rate_limit_deg_s)
         self._sky_law_key = None
         self._s3_law = None
         self._checks_dirty = True
+
+    def reduce_slew_authority(self, accel_deg_s2: float, rate_cap_deg_s: float) -> tuple[float, float]:
+        """The wheels left give only ``accel_deg_s2`` and ``rate_cap_deg_s`` (momentum) about the worst axis:
+        shrink the acceleration the governor assumes, the rate limit (to the cap and to what the braking
+        rule allows at the new acceleration) and k1 in proportion (k1 = 2 a / w lands a slew without
+        overshoot). Returns the new (rate limit [deg/s], acceleration [deg/s^2])."""
+        if accel_deg_s2 < self.accel_deg_s2:
+            self.k1 *= accel_deg_s2 / self.accel_deg_s2
+            self.accel_deg_s2 = accel_deg_s2
+        allowed = allowed_braking_deg(self.cfg.law.margin_deg, rule_eps(self.eps_cfg, self.cfg.law.eps_max_used))
+        self.rate_cap_deg_s = min(self.rate_cap_deg_s, rate_cap_deg_s,
+                                  rate_for_distance_deg_s(allowed, self.accel_deg_s2, self.bandwidth_rad_s))
+        rate = min(math.degrees(self.max_rate_rad_s), self.rate_cap_deg_s)
+        self.max_rate_rad_s = math.radians(rate)
+        self._sky_law_key = None
+        self._s3_law = None
+        return rate, self.accel_deg_s2
+
+    def _govern(self, omega_BN_B: np.ndarray, margins_deg: list[float], angle_per_margin: float = 1.0) -> np.ndarray:
+        """The rate governor (`slew_limits`): scale ``omega_BN_B`` down to the largest rate that can still
+        stop before the nearest zone the boresight (or attitude) is approaching, i.e. whose margin fell
+        since the last cycle; a zone being left is not a reason to slow down (the law pushes out of it).
+        ``angle_per_margin``: body rotation per degree of margin (2 on S^3, where the quaternion's angle is
+        half the rotation's)."""
+        prev, self._governor_margins = self._governor_margins, list(margins_deg)
+        if prev is None or len(prev) != len(margins_deg):
+            return omega_BN_B
+        closing = [m for m, p in zip(margins_deg, prev) if m < p]
+        if not closing:
+            return omega_BN_B
+        room = angle_per_margin * min(closing) - BRAKING_RESERVE_DEG
+        rate = math.radians(rate_for_distance_deg_s(room, self.accel_deg_s2, self.bandwidth_rad_s))
+        return _saturate(omega_BN_B, rate)
 
     def target_violation(self, kind: str, value: np.ndarray) -> tuple[int, float] | None:
         """(zone index, margin deg) when a candidate target lies inside an (inflated) zone, else None."""
@@ -130,6 +185,9 @@ class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance
         return None
 
     def set_target_direction(self, target_N: np.ndarray) -> None:
+        if self.mode == "SAFE":  # kept for POINTING; SAFE keeps aiming at its Sun-safe attitude
+            self._held_target_N = _unit(np.asarray(target_N, dtype=float))
+            return
         self.target_N = _unit(np.asarray(target_N, dtype=float))
         self._drop_path()
         self._sky_law_key = None

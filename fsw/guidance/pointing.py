@@ -155,9 +155,14 @@ class PointingGuidance:
         out.assumptions_ok = self.assumptions_ok
         omega_law = pointing_rate_command_nb(q, self.b_B, np.ascontiguousarray(u))
         omega_cmd = _saturate(np.asarray(omega_law), self.max_rate_rad_s)
+        if self.slots:
+            omega_cmd = self._govern(omega_cmd, out.margins_deg)
         roll_err = self._roll_error(R, y)
         omega_roll = self.cfg.pointing.roll_gain_1_s * roll_err * self.b_B
-        out.omega_cmd_BN_B = omega_cmd + _saturate(omega_roll, 0.5 * self.max_rate_rad_s)
+        # the roll rate is about the boresight, the law's rate normal to it: the roll gets what the rate
+        # limit leaves, so the body rate as a whole stays within the limit (at most half of it)
+        room = math.sqrt(max(0.0, self.max_rate_rad_s ** 2 - float(omega_cmd @ omega_cmd)))
+        out.omega_cmd_BN_B = omega_cmd + _saturate(omega_roll, min(room, 0.5 * self.max_rate_rad_s))
         out.pointing_error_deg = math.degrees(math.acos(max(-1.0, min(1.0, float(y @ self.target_N)))))
         out.roll_error_deg = math.degrees(roll_err)
         return out

@@ -95,6 +95,8 @@ class QuaternionGuidance:
         out.assumptions_ok = self.assumptions_ok
         omega = quaternion_rate_command_nb(np.ascontiguousarray(x), np.ascontiguousarray(u))
         out.omega_cmd_BN_B = _saturate(np.asarray(omega), self.max_rate_rad_s)
+        if self.s3_law_zones:
+            out.omega_cmd_BN_B = self._govern(out.omega_cmd_BN_B, out.margins_deg, angle_per_margin=2.0)
         out.att_error_deg = math.degrees(float(attitude_error_angle(q, xd)))
         R = quat_to_dcm_nb(q)
         out.boresight_N = R @ self.b_B
