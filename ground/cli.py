@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from fsw.config import udp_port, udp_port_or_zero
 from fsw.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DEFAULT_TM_PORT, DICTIONARY, TelemetryDictionary
 from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
 from ground.commanding import CommandSender
@@ -30,7 +31,7 @@ def add_cli(subparsers: Any) -> None:
                         help="mission YAML: take telemetry/telecommand addresses from flight_software.tmtc")
     parser.add_argument("--host", default=None,
                         help=f"address to bind for telemetry (default {DEFAULT_HOST} or the mission's)")
-    parser.add_argument("--port", type=_listen_port, default=None,
+    parser.add_argument("--port", type=udp_port_or_zero, default=None,
                         help=f"telemetry UDP port (default {DEFAULT_TM_PORT} or the mission's; 0: any free port)")
     parser.add_argument("--archive", default=None,
                         help="archive directory (raw + decoded; default ground_archive, or with --run a new "
@@ -82,22 +83,6 @@ def add_cli(subparsers: Any) -> None:
                                       "as Yamcs decodes keepout's packets and builds its telecommands.")
     xtce.add_argument("--out", default=None, help="output file (default: standard output)")
     xtce.set_defaults(func=_cmd_xtce)
-
-
-def udp_port(text: str) -> int:
-    """argparse type: a UDP port number 1..65535 (a clear error instead of a traceback later)."""
-    try:
-        port = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a port number; allowed: 1..65535") from None
-    if not 1 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"{port} is not a UDP port; allowed: 1..65535")
-    return port
-
-
-def _listen_port(text: str) -> int:
-    """argparse type: a port to listen on, 0..65535 (0: the kernel picks a free one)."""
-    return 0 if text.strip() == "0" else udp_port(text)
 
 
 def _positive_seconds(text: str) -> float:
