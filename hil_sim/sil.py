@@ -583,13 +583,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         missed_in_row = 0
         for _ in range(n_ticks):
             timeline.release(sim.t_s)
-            if options.realtime:
-                before = sim.stats.cycle_done_late
-                sim.run_realtime(1)
-                done = sim.stats.cycle_done_late == before
-            else:
-                sim.begin_tick()
-                done = sim.end_tick()
+            done = sim.run_tick(options.realtime)
             recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
             missed_in_row = 0 if done else missed_in_row + 1
             # a crash shows within FSW_POLL_TICKS ticks (waitpid is a system call: ~15 us in the vcan-vm guest)
