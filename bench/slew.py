@@ -23,7 +23,7 @@ The paper's assumptions are checked at each slew's target with the eps the confi
 
     .venv/bin/python bench/slew.py [--quick] [--law-only]
 
-The flight software plans slews round the zones (pointing.path, fsw.path_guidance). --law-only also runs
+The flight software plans slews round the zones (pointing.path, fsw.guidance.path_planning). --law-only also runs
 every slew with path planning off, side by side: the paper's law heading straight for the target.
 
 Prints a table and writes bench/results/slew.json.
@@ -120,7 +120,7 @@ def shortest_safe_path(start: np.ndarray, end: np.ndarray, zones: list, margin_d
     segments can be on a shortest path (a vertex whose two neighbours lie on the same side of the
     segment's great circle), so only those are tested for crossing a polygon.
     """
-    from fsw.path_guidance import path_length_deg, shortest_route
+    from fsw.guidance.path_planning import path_length_deg, shortest_route
 
     polys = [_polygon(z, margin_deg) for z in zones]
     nodes = [start, end] + [v for P, _ in polys for v in P]
@@ -201,7 +201,7 @@ def slew_mission(base: dict, start, end, path_planning: bool = True) -> dict:
 
 
 def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: bool = True) -> list[dict]:
-    from fsw.path_guidance import path_length_deg
+    from fsw.guidance.path_planning import path_length_deg
     from hil_sim.campaign.fast import run_fast
     from hil_sim.mission import Mission
 

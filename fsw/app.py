@@ -23,7 +23,7 @@ from fsw.assumption_check import AssumptionChecker
 from fsw.control import RateController
 from fsw.estimation import AttitudeEstimator
 from fsw.executive import Executive
-from fsw.fdir import Fdir, FdirInputs
+from fsw.fdir import Fdir, FdirInputs, WheelSpeedResidual
 from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
@@ -178,6 +178,7 @@ class FlightSoftware:
         self.guidance = Guidance(config, events=self._event)
         self.control = RateController(config)
         self.fdir = Fdir(config, self.n_wheels, event=self._event)
+        self.wheel_residual = WheelSpeedResidual(self.control.Js)
         self.executive = Executive(
             config.rates.gnc_rate_hz, config.rates.housekeeping_rate_hz, config.rates.slip_event_throttle_s,
             gnc_task=self._gnc_task, hk_task=self.housekeeping, on_slip=self._on_slip, clock=clock,
@@ -284,14 +285,16 @@ class FlightSoftware:
             v = np.array([c0, c1, c2, c3], dtype=float)
         n = float(np.linalg.norm(v))
         if not math.isfinite(n) or abs(n - 1.0) > 1e-3:
-            raise CommandValidationError(f"SET_TARGET: {kind} must be a unit vector (norm {n:.6f})")
+            raise CommandValidationError(f"SET_TARGET: {kind} must be a unit vector (norm {n:.6f})",
+                                         "TARGET_NOT_UNIT")
         v = v / n
         hit = self.guidance.target_violation(kind, v)
         if hit is not None:
             zone, margin = hit
             bodies = self._zone_bodies(kind)
             self._event("TARGET_REJECTED", zone=zone, body=bodies[zone] if zone < len(bodies) else "INERTIAL", margin_deg=margin)
-            raise CommandValidationError(f"SET_TARGET: target inside keep-out zone {zone} (margin {margin:.3f} deg)")
+            raise CommandValidationError(f"SET_TARGET: target inside keep-out zone {zone} (margin {margin:.3f} deg)",
+                                         "TARGET_IN_KEEP_OUT")
         if kind == "DIRECTION":
             self.guidance.set_target_direction(v)
         else:
@@ -311,7 +314,7 @@ class FlightSoftware:
         try:
             self.guidance.set_gains(k1, kappa, "auto" if eps == 0 else eps, rate_limit_deg_s)
         except ValueError as exc:
-            raise CommandValidationError(f"SET_GAINS: {exc}") from None
+            raise CommandValidationError(f"SET_GAINS: {exc}", "GAINS_INADMISSIBLE") from None
         self._event("GAINS_SET", k1=k1, kappa=kappa, eps=eps, rate_limit_deg_s=rate_limit_deg_s)
 
     # ------------------------------------------------------------------------------------ cycles
@@ -395,6 +398,7 @@ class FlightSoftware:
         # ---- FDIR (sensor monitors are armed once the sensor has been heard from: a flight software
         # started before its devices must not trip on silence)
         corrupt = self._corrupt_deltas()
+        residual_off = self.wheel_residual.update(dt, speeds, ctrl.wheel_torque_cmd_Nm) & self.control.active
         self._imu_seen = getattr(self, "_imu_seen", False) or imu is not None
         # a tracker that answers but is blind (Sun/Moon/rate) has been heard: its silence is then a fault
         self._st_seen = getattr(self, "_st_seen", False) or st is not None
@@ -407,13 +411,13 @@ class FlightSoftware:
             st_corrupt_frames=corrupt["STAR_TRACKER"],
             innovation_deg=status.innovation_deg if status is not None else None,
             wheel_fault=[(w is None and armed) or (w is not None and bool(int(w.fault) & WHEEL_FAULT_MASK))
-                         for w, armed in zip(wheels, self._wheel_seen)],
+                         or bool(off) for w, armed, off in zip(wheels, self._wheel_seen, residual_off)],
             wheel_speed_ratio=[
                 max(abs(s) / m, 1.0 if (w is not None and int(w.fault) & WHEEL_OVERSPEED) else 0.0) if math.isfinite(s) else math.nan
                 for s, m, w in zip(speed_list, self.control.max_speed.tolist(), wheels)
             ],
             wheel_speed_rad_s=speed_list,
-            margins_deg=g.margins_deg if g.mode != "SAFE" else [],
+            margins_deg=g.margins_deg,  # every mode: SAFE keeps out too, so a violation is one in SAFE
             zone_bodies=g.zone_bodies,
             slipped=slipped_before,
         )
@@ -461,13 +465,33 @@ class FlightSoftware:
     def _execute(self, action) -> None:
         a = action.action
         if a in ("isolate_wheel", "isolate_wheel_safe") and action.wheel is not None:
-            if self.control.isolate(action.wheel):
-                self._event("WHEEL_ISOLATED", wheel=action.wheel + 1)
+            if not self._isolate_wheel(action.wheel):
+                a = "safe"  # the others cannot control three axes, or a wheel was already lost
         if a == "reset_estimator":
             self.estimator.reset()
             self._event("ESTIMATOR_RESET", reason=f"FDIR {action.monitor}")
         if a in ("safe", "isolate_wheel_safe") and self.guidance.mode != "SAFE":
             self.set_mode("SAFE", "FDIR")
+
+    def _isolate_wheel(self, wheel: int) -> bool:
+        """Take ``wheel`` out of the allocation and fly on with the others: the rate loop's acceleration limit
+        and the guidance's slew limits shrink to what they can give (worst axis), so the braking distances
+        behind the keep-out guarantee still hold. False (the caller enters SAFE) when the rest cannot
+        control three axes or when this is the second wheel lost."""
+        ctl = self.control
+        if not ctl.active[wheel]:
+            return True
+        second = not ctl.active.all()
+        if not ctl.isolate(wheel):
+            return False
+        self.wheel_residual.forget()
+        self._event("WHEEL_ISOLATED", wheel=wheel + 1)
+        accel_deg_s2, rate_deg_s = ctl.slew_authority()
+        ctl.max_accel = min(ctl.max_accel, math.radians(accel_deg_s2))
+        rate, accel = self.guidance.reduce_slew_authority(math.degrees(ctl.max_accel), rate_deg_s)
+        self._event("SLEW_LIMITS_REDUCED", rate_limit_deg_s=rate, accel_deg_s2=accel,
+                    wheels=int(ctl.active.sum()))
+        return not second
 
     # ---------------------------------------------------------------------------------- telemetry
     def _send_gnc_tm(self, g, ctrl, speeds, imu_valid, st, st_fresh, status, exec_ms) -> None:
@@ -570,6 +594,9 @@ class FlightSoftware:
             "bus_decode_errors": total("bad_length", "out_of_range"),
             "bus_timeouts": total("timeout"),
             "bus_tx_errors": getattr(self, "_bus_tx_errors", 0),
+            "bus_unknown_ids": sum(self.driver.counters.get("_bus", {}).get(k, 0) for k in ("unknown_id", "error_frame")),
+            "bus_stale_syncs": getattr(self.driver, "stale_syncs", 0),
+            "bus_unexpected_frames": getattr(self.driver, "unexpected_frames", 0),
             "imu_stale_cycles": self.fdir.stale_counts["IMU"],
             "st_stale_cycles": self.fdir.stale_counts["STAR_TRACKER"],
             "tm_packets_sent": tm.get("packets_sent", 0),
@@ -596,11 +623,20 @@ class FlightSoftware:
             self.telemetry.send_channels("HK", values)
 
     # -------------------------------------------------------------------------------------- loops
-    def run_lockstep(self, max_ticks: int | None = None, timeout_s: float | None = None) -> int:
-        """Run one GNC cycle per SYNC tick until ``max_ticks`` or the simulator stops sending SYNC."""
+    def run_lockstep(self, max_ticks: int | None = None, timeout_s: float | None = None,
+                     first_sync_timeout_s: float | None = None) -> int:
+        """Run one GNC cycle per SYNC tick until ``max_ticks`` or the simulator stops sending SYNC.
+
+        ``first_sync_timeout_s``: before the first SYNC, keep waiting this long in all (a bench where the
+        simulator is started by hand); after it, ``timeout_s`` without SYNC ends the run."""
         timeout = self.cfg.rates.lockstep_timeout_s if timeout_s is None else timeout_s
+        give_up_at = time.monotonic() + (first_sync_timeout_s or 0.0)
+
+        def still_starting() -> bool:
+            return self.executive.last_tick is None and time.monotonic() < give_up_at
+
         prepare_cycle_thread()
-        n = self.executive.run_lockstep(self.driver.collect_tick, timeout, max_ticks)
+        n = self.executive.run_lockstep(self.driver.collect_tick, timeout, max_ticks, on_timeout=still_starting)
         return n
 
     def run_realtime(self, duration_s: float | None = None) -> int:

@@ -24,7 +24,8 @@ Quat = Annotated[list[float], Field(min_length=4, max_length=4)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    # allow_inf_nan=False: a NaN or inf in a gain or a vector would otherwise reach the control loop
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
 
 def _unit(v: list[float], what: str) -> list[float]:
@@ -115,7 +116,9 @@ class EstimatorConfig(_Strict):
 
     gyro_arw_rad_s_sqrt_hz: float = Field(1e-4, gt=0.0, le=1.0, description="Gyro angle random walk (rate white-noise density) [rad/s/sqrt(Hz)].")
     gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-6, gt=0.0, le=1e-2, description="Gyro bias random walk density [rad/s^2/sqrt(Hz)].")
-    star_tracker_sigma_arcsec: float = Field(20.0, gt=0.0, le=3600.0, description="Star-tracker 1-sigma attitude noise per axis [arcsec].")
+    star_tracker_sigma_arcsec: float = Field(20.0, gt=0.0, le=3600.0, description="Star-tracker 1-sigma attitude noise per axis [arcsec] (the default of the two below).")
+    star_tracker_cross_sigma_arcsec: float | None = Field(None, gt=0.0, le=3600.0, description="Star-tracker 1-sigma noise about each of its two cross-boresight axes (sensor x, y) [arcsec]; default star_tracker_sigma_arcsec.")
+    star_tracker_about_sigma_arcsec: float | None = Field(None, gt=0.0, le=36000.0, description="Star-tracker 1-sigma roll noise about its boresight (sensor z) [arcsec]; default star_tracker_sigma_arcsec.")
     initial_attitude_sigma_deg: float = Field(5.0, gt=0.0, le=180.0, description="Initial attitude 1-sigma per axis after (re)initialisation from the star tracker [deg].")
     initial_bias_sigma_deg_s: float = Field(0.05, gt=0.0, le=10.0, description="Initial gyro bias 1-sigma per axis [deg/s].")
     star_tracker_max_age_s: float = Field(0.5, gt=0.0, le=10.0, description="A star-tracker sample older than this is stale and not used [s].")
@@ -236,6 +239,7 @@ class LawConfig(_Strict):
     margin_deg: float = Field(3.0, ge=0.0, le=30.0, description="The law avoids physical zones inflated by this margin [deg]; see fsw.guidance for how to choose it.")
     merge_gap_deg: float = Field(4.0, ge=0.0, le=30.0, description="Two (inflated) zones whose bounding caps are closer than this gap [deg] are replaced by one conservative cone containing both, with an event. Assumption 1 ties eps to the gap (eps < 1 - cos(gap/2)), so a small gap forces an eps-layer too thin for the loop to turn in; merging trades sky area for a usable layer.")
     retreat_standoff_deg: float = Field(3.0, gt=0.0, le=30.0, description="When the target is unusable (in a zone's eps-layer, or between two zones about to merge around the spacecraft), the law steers to the nearest direction at least this far [deg] outside every (inflated) zone instead. It keeps a parked boresight clear of a zone sweeping towards it and must be at least half of merge_gap_deg, so the substitute never lies in a gap about to merge.")
+    stall_watchdog_s: float = Field(30.0, ge=0.0, le=3600.0, description="Guidance watchdog (fsw.guidance.watchdog): a POINTING slew whose error has not fallen for this long [s], with the law's rate near zero and the boresight outside every eps-layer, raises GUIDANCE_STALLED and is replanned from where the boresight is; 0 disables it.")
     check_period_s: float = Field(10.0, gt=0.0, le=3600.0, description="How often the full assumption check (gnc.checks, incl. the numerical Assumption 2 test) is re-run while zones move [s]; it is re-submitted at once on target/gain/mode/zone-merge changes.")
     check_max_cpu_fraction: float = Field(0.1, gt=0.0, le=1.0, description="CPU budget of the periodic full check in 'process' mode: after a check that took d seconds, the next periodic one waits at least d (1/fraction - 1) seconds of host time, whatever check_period_s says. It binds in lockstep runs faster than real time; checks after a target/gain/mode/zone change are not delayed.")
     assumption_check: Literal["process", "inline", "off"] = Field("process", description="Where the full check runs: 'process' (a worker process, so the seconds it can take never delay a GNC cycle; results only feed telemetry/events), 'inline' (in the housekeeping group; deterministic, for tests), 'off'. The per-cycle eps bound never depends on it.")
@@ -250,7 +254,7 @@ class LawConfig(_Strict):
 
 # -------------------------------------------------------------------------------------------- modes
 class PathGuidanceConfig(_Strict):
-    """POINTING slews planned round the zones (fsw.path_guidance): the law's target moves along the
+    """POINTING slews planned round the zones (fsw.guidance.path_planning): the law's target moves along the
     shortest path that keeps a standoff from every zone the law avoids, instead of heading straight for a
     target behind a zone and creeping round the zone's edge."""
 
@@ -326,7 +330,7 @@ class FdirRule(_Strict):
     """Limit-check rule: when the monitored value exceeds `limit` for `persistence_cycles` consecutive GNC cycles, emit the event and take `action` (once per trip)."""
 
     enabled: bool = True
-    limit: float = Field(description="Threshold in the rule's unit (see the rule description).")
+    limit: float = Field(ge=-1e6, le=1e6, description="Threshold in the rule's unit (see the rule description).")
     persistence_cycles: int = Field(3, ge=1, le=100000, description="Consecutive GNC cycles beyond the limit before the rule trips.")
     action: FdirAction = Field("none", description="Action when tripped.")
 
@@ -339,7 +343,7 @@ class FdirConfig(_Strict):
     star_tracker_stale: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=50, action="none"), description="No valid fresh star-tracker sample this cycle (value 1/0): the estimator coasts; event after persistence.")
     star_tracker_corrupt: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="none"), description="Star-tracker frames with CRC/sequence/length errors this cycle (count; limit).")
     innovation: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=5, action="reset_estimator"), description="Star-tracker innovation angle above `limit` [deg].")
-    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="isolate_wheel_safe"), description="Wheel reports a fault flag or no status (value 1/0), per wheel.")
+    wheel_fault: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.5, persistence_cycles=3, action="isolate_wheel"), description="Wheel reports a fault flag, no status, or a speed that does not follow its torque commands (value 1/0), per wheel.")
     wheel_speed: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.95, persistence_cycles=5, action="safe"), description="|wheel speed| / max_speed above `limit`, per wheel.")
     keepout_yellow: FdirRule = Field(default_factory=lambda: FdirRule(limit=1.0, persistence_cycles=1, action="none"), description="Physical keep-out margin below `limit` [deg] (yellow): KEEP_OUT_MARGIN_LOW warning.")
     keepout_red: FdirRule = Field(default_factory=lambda: FdirRule(limit=0.0, persistence_cycles=2, action="safe"), description="Physical keep-out margin below `limit` [deg] (red, 0 = inside): KEEP_OUT_VIOLATION.")
@@ -356,14 +360,74 @@ class OrbitKnowledge(_Strict):
     arg_latitude_at_epoch_deg: float = Field(0.0, ge=-360.0, le=360.0, description="Argument of latitude at the epoch [deg].")
 
 
+class LinkSecurityConfig(_Strict):
+    """Link security (fsw.link_security, in the manner of CCSDS SDLS): MAC and anti-replay on TC and TM."""
+
+    key_file: str | None = Field(None, description="Path of the link key file (hex, mode 0600; `keepout ground keygen FILE` makes one), relative to the mission file's folder. Never the key itself. Required by the flight software process; the SIL makes a fresh key for every run in its run folder and uses that instead.")
+    tc_window: int = Field(1024, ge=1, le=1_000_000, description="Anti-replay window: an uplink security sequence number is accepted when above the last accepted one by at most this much; beyond it only SEC_RESYNC is.")
+
+
+def is_loopback_host(host: str) -> bool:
+    """True for a loopback IP literal (127.0.0.0/8, ::1) or "localhost"."""
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 class TmTcConfig(_Strict):
     """Telemetry/telecommand sockets (loopback unless the mission names another address)."""
 
-    telemetry_host: str = Field("127.0.0.1", description="Destination address of telemetry datagrams.")
+    telemetry_host: str = Field("127.0.0.1", description="Destination address of telemetry datagrams: a "
+                                "ground station's address (unicast), or a multicast group (224.0.0.0/4) that "
+                                "any number of ground clients join.")
+
+    @field_validator("telemetry_host")
+    @classmethod
+    def _unicast_or_group(cls, v: str) -> str:
+        import ipaddress
+
+        try:
+            addr = ipaddress.ip_address(v)
+        except ValueError:
+            return v  # a host name: resolved when the socket is opened
+        if addr.is_unspecified or addr == ipaddress.ip_address("255.255.255.255"):
+            kind = "unspecified" if addr.is_unspecified else "broadcast"
+            raise ValueError(f"{v} is a {kind} address: give a ground station's unicast address "
+                             "(e.g. 127.0.0.1) or a multicast group (224.0.0.0/4)")
+        return v
     telemetry_port: int = Field(50100, ge=1, le=65535)
-    telecommand_bind_host: str = Field("127.0.0.1", description="Address the telecommand socket binds to.")
+    telemetry_multicast_interface: str = Field(
+        "127.0.0.1", description="With a multicast telemetry_host: the local address whose interface sends the "
+        "group (loopback keeps the telemetry on this computer).")
+    telemetry_multicast_ttl: int = Field(
+        0, ge=0, le=255, description="With a multicast telemetry_host: hops the datagrams may take (0: this host only).")
+    telecommand_bind_host: str = Field("127.0.0.1", description="Address the telecommand socket binds to; a non-loopback address needs allow_non_loopback: true.")
     telecommand_port: int = Field(50101, ge=0, le=65535, description="0 = ephemeral port.")
+    allow_non_loopback: bool = Field(False, description="Explicit consent to bind the telecommand socket to a non-loopback address (reachable from the network; commands are still authenticated). A warning is printed whenever it is used.")
+    uplink_budget_ms: float = Field(5.0, gt=0.0, le=1000.0, description="Host time a GNC cycle may spend reading the uplink [ms]; what is left stays queued for the next cycle, and what the kernel had to drop is counted (tc_uplink_dropped).")
     gnc_packet_every_n_cycles: int = Field(1, ge=1, le=1000, description="Send the GNC state packet every n GNC cycles.")
+    security: LinkSecurityConfig = Field(default_factory=LinkSecurityConfig, description="Link security: the key file and the uplink anti-replay window (docs/security.md).")
+
+    @model_validator(mode="after")
+    def _loopback_unless_allowed(self) -> "TmTcConfig":
+        if not is_loopback_host(self.telecommand_bind_host) and not self.allow_non_loopback:
+            raise ValueError(f"telecommand_bind_host {self.telecommand_bind_host!r} is not a loopback address "
+                             "(127.0.0.1, ::1, localhost): any host that can reach it could send telecommands; "
+                             "set allow_non_loopback: true to bind it anyway")
+        return self
+
+    def warnings(self) -> list[str]:
+        """What ``config validate`` and the flight software print about these sockets."""
+        if is_loopback_host(self.telecommand_bind_host):
+            return []
+        return [f"flight_software.tmtc.telecommand_bind_host {self.telecommand_bind_host!r} is not loopback "
+                "(allow_non_loopback: true): telecommands are accepted from the network, authenticated "
+                "by the link key only"]
 
 
 class FswConfig(_Strict):
@@ -417,6 +481,45 @@ def load_fsw_config(path: str | Path) -> FswConfig:
         data = data["flight_software"] or {}
         prefix = "flight_software."
     return parse_fsw_config(data, source=str(p), prefix=prefix)
+
+
+def udp_port(text: str) -> int:
+    """argparse type: a UDP port number 1..65535 (a clear error instead of a traceback later)."""
+    import argparse
+
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number; allowed: 1..65535") from None
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a UDP port; allowed: 1..65535")
+    return port
+
+
+def udp_port_or_zero(text: str) -> int:
+    """argparse type: a port to bind, 0..65535 (0: the kernel picks a free one)."""
+    return 0 if text.strip() == "0" else udp_port(text)
+
+
+def load_bus_settings(path: str | Path) -> tuple[str, int | None]:
+    """The bus spec and CAN bit rate [bit/s] a mission YAML names (top-level ``bus`` and
+    ``bus_bitrate_bps``; ``auto`` and None when absent, as in a bare FswConfig YAML)."""
+    import yaml
+
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{p}: cannot read: {exc}") from exc
+    data = data if isinstance(data, dict) else {}
+    bus = data.get("bus", "auto")
+    bitrate = data.get("bus_bitrate_bps")
+    if not isinstance(bus, str):
+        raise ConfigError(f"{p}: bus: expected a bus spec string such as auto or pcan:PCAN_USBBUS1, got {bus!r}")
+    if bitrate is not None and (isinstance(bitrate, bool) or not isinstance(bitrate, int)
+                                or not 10000 <= bitrate <= 1000000):
+        raise ConfigError(f"{p}: bus_bitrate_bps: expected an integer in 10000..1000000 [bit/s], got {bitrate!r}")
+    return bus, bitrate
 
 
 def parse_fsw_config(data: dict, source: str = "<dict>", prefix: str = "") -> FswConfig:

@@ -115,6 +115,23 @@ class RateController:
         self.M = allocation_matrix(self.G, self.active)
         return True
 
+    # share of the worst-axis torque the slew may use: the rest is for feedback, gyroscopic terms and
+    # disturbances (the default spacecraft's 0.15 deg/s^2 is 0.79 of its four wheels' 0.19)
+    AUTHORITY_FRACTION = 0.8
+    # wheel speed the slews may use, as a fraction of the limit (the rest is FDIR's WHEEL_SPEED margin)
+    MOMENTUM_FRACTION = 0.9
+
+    def slew_authority(self) -> tuple[float, float]:
+        """(angular acceleration [deg/s^2], body rate [deg/s]) the active wheels can give about the worst
+        body axis, less the reserves: the torque share AUTHORITY_FRACTION, and the momentum left between
+        each wheel's present speed and MOMENTUM_FRACTION of its limit."""
+        from gnc.wheels import worst_axis_authority
+
+        a = self.active
+        headroom = self.Js[a] * np.maximum(0.0, self.MOMENTUM_FRACTION * self.max_speed[a] - np.abs(self.wheel_speed[a]))
+        accel, rate = worst_axis_authority(self.J, self.G[:, a].T, self.max_torque[a], headroom)
+        return math.degrees(self.AUTHORITY_FRACTION * accel), math.degrees(rate)
+
     @property
     def isolated_mask(self) -> int:
         return int(sum(1 << i for i in range(self.n) if not self.active[i]))

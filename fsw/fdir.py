@@ -12,19 +12,26 @@ IMU_CORRUPT         imu_corrupt             IMU frames rejected by E2E this cycl
 ST_STALE            star_tracker_stale      1 when no valid fresh star-tracker sample this cycle
 ST_CORRUPT          star_tracker_corrupt    star-tracker frames rejected by E2E this cycle
 INNOVATION          innovation              star-tracker innovation [deg]
-WHEEL_FAULT         wheel_fault             per wheel: 1 when fault flags set or status missing
+WHEEL_FAULT         wheel_fault             per wheel: 1 when fault flags set, status missing, or the
+                                            measured speed disagrees with the commanded torque
+                                            (`WheelSpeedResidual`)
 WHEEL_SPEED         wheel_speed             per wheel: |speed| / max_speed
 KEEP_OUT_MARGIN     keepout_yellow/_red     smallest signed physical margin [deg] (below limit)
 CYCLE_SLIP          cycle_slip              1 when the GNC cycle slipped
 ==================  ======================  =================================================
 
 Actions are returned to the application (`FlightSoftware`), which executes them: ``safe`` (enter SAFE),
-``reset_estimator``, ``isolate_wheel`` (remove it from allocation), ``isolate_wheel_safe`` (both).
+``reset_estimator``, ``isolate_wheel`` (remove it from allocation and fly on with the others, within
+slew limits recomputed for them; SAFE only when they cannot control three axes or a wheel was already
+lost), ``isolate_wheel_safe`` (isolate and enter SAFE).
 """
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+
+import numpy as np
 
 _ACTION_CODES = {
     "none": "EVENT_ONLY",
@@ -82,6 +89,46 @@ class LimitMonitor:
         self.count = 0
         if self.state != "DISABLED":
             self.state = "NOMINAL"
+
+
+class WheelSpeedResidual:
+    """Commanded-versus-measured wheel speed: a wheel whose speed does not follow its torque commands.
+
+    Over the last ``window`` cycles the speed change the commands predict, ``sum(tau_cmd dt) / Js`` (the
+    command of cycle k acts until the speed read at k + 1), is compared with the change measured. A dead
+    motor (no torque) leaves the speed to friction, a seized bearing drops it to zero, a driver that
+    ignores its commands keeps it: each leaves a residual that friction (~0.2 rad/s per second here) and
+    the speed quantisation (0.04 rad/s) do not reach. Flags what a wheel's own status does not report.
+    """
+
+    def __init__(self, spin_inertia_kgm2: np.ndarray, window: int = 10, abs_limit_rad_s: float = 2.0,
+                 rel_limit: float = 0.5):
+        self.Js = np.asarray(spin_inertia_kgm2, dtype=float)
+        self.window = window
+        self.abs_limit = abs_limit_rad_s
+        self.rel_limit = rel_limit
+        self._rows: deque = deque(maxlen=window)
+        self._prev_speed: np.ndarray | None = None
+        self._prev_cmd = np.zeros(len(self.Js))
+
+    def update(self, dt_s: float, speed_rad_s: np.ndarray, torque_cmd_Nm: np.ndarray) -> np.ndarray:
+        """Feed this cycle's measured speeds (NaN: no status) and the torques just commanded; returns the
+        wheels whose residual over the window is beyond limit (bool per wheel)."""
+        speed = np.asarray(speed_rad_s, dtype=float)
+        if self._prev_speed is not None:
+            self._rows.append((speed - self._prev_speed, self._prev_cmd * dt_s / self.Js))
+        self._prev_speed, self._prev_cmd = speed, np.asarray(torque_cmd_Nm, dtype=float).copy()
+        if len(self._rows) < self.window:
+            return np.zeros(len(self.Js), dtype=bool)
+        measured = np.sum([r[0] for r in self._rows], axis=0)
+        predicted = np.sum([r[1] for r in self._rows], axis=0)
+        residual = np.abs(measured - predicted)
+        # NaN (a missing status) compares False: the missing status is its own fault
+        return residual > self.abs_limit + self.rel_limit * np.abs(predicted)
+
+    def forget(self) -> None:
+        """Start the window again (after an isolation the other wheels' commands change abruptly)."""
+        self._rows.clear()
 
 
 @dataclass

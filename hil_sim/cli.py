@@ -14,8 +14,10 @@ _COMMAND_MODULES = (
     "gnc.paper",          # keepout paper
     "hil_sim.mission_cli",  # keepout config schema|validate|check
     "hil_sim.sil_cli",    # keepout sil run
+    "fsw.__main__",       # keepout fsw MISSION (HIL bench: the flight software alone)
+    "hil_sim.sim_cli",    # keepout sim MISSION (HIL bench: the simulator alone)
     "hil_sim.bus_cli",    # keepout bus monitor|log
-    "fsw.ground",         # keepout ground [send ...]
+    "ground.cli",         # keepout ground [send ...]
     "hil_sim.campaign_cli",  # keepout campaign run|rerun|baseline|compare|shrink
     "hil_sim.init_cli",   # keepout init DIR
 )

@@ -6,7 +6,9 @@
    starts a run;
 2. creates ``runs/<run id>/`` (`run_id`: name, time and a random part) and writes the config actually used (bus, ports, clock and
    duration overrides applied) with its sha256;
-3. starts the ground monitor (its own process: archives every telemetry packet, raw and decoded), then
+3. starts the ground monitor (its own process: archives every telemetry packet, raw and decoded), writes
+   ``endpoints.json`` (``ground.link``: the run's telemetry multicast group and port, telecommand port,
+   bus, pids) so that any number of other ground clients can attach (``keepout ground --run RUN_DIR``), then
    the flight software (``python -m fsw --config mission.yaml --bus SPEC``, its own process and
    session), and waits for the flight software's FSW_STARTED event to reach the ground, so its bus is
    open before the first SYNC;
@@ -23,8 +25,10 @@ Exit code and the summary's ``status``: see ``EXIT_*`` below and docs/running.md
 """
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import hashlib
+import ipaddress
 import json
 import math
 import multiprocessing as mp
@@ -46,6 +50,8 @@ import numpy as np
 import yaml
 
 from fsw.lifetime import PARENT_PID_ENV, die_with_parent
+from fsw.link_security import LINK_KEY_FILE, write_key_file
+from ground.link import ENDPOINTS_FILE
 from keepout_config import config_path
 
 DEFAULT_MISSION = config_path("missions", "demo-pointing.yaml")
@@ -95,6 +101,7 @@ class RunOptions:
     realtime: bool = False
     out_root: Path = Path("runs")
     progress: bool = True
+    announce: bool = False  # print the line to attach a ground to this run as soon as it starts
     skip_physics_checks: bool = False
     fsw_start_timeout_s: float = 600.0  # the first start on a fresh machine compiles (and caches) numba kernels
     cycle_done_timeout_s: float = 30.0  # lockstep: a tick unanswered this long counts as missed
@@ -114,12 +121,12 @@ class RunResult:
 
 def prepare(options: RunOptions):
     """Load + check the mission; return (mission, physics report). Raises MissionRejected."""
-    from hil_sim.mission import load_mission
+    from hil_sim.mission import load_mission_marked
     from hil_sim.physics_checks import check_mission
     from hil_sim.yaml_loader import ConfigError
 
     try:
-        mission = load_mission(options.mission)
+        mission, doc = load_mission_marked(options.mission)
     except ConfigError as exc:
         raise MissionRejected(str(exc)) from None
     updates: dict[str, Any] = {}
@@ -139,7 +146,7 @@ def prepare(options: RunOptions):
     if not options.skip_physics_checks:
         report = check_mission(mission)
         if not report.ok:
-            raise MissionRejected(f"{options.mission}: physics checks failed:\n{report.format()}")
+            raise MissionRejected(f"{options.mission}: physics checks failed:\n{report.format(doc, errors_only=True)}")
     return mission, report
 
 
@@ -149,7 +156,8 @@ def _free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _config_used(mission, *, bus_spec: str, tm_port: int | None, tc_port: int | None, realtime: bool) -> dict:
+def _config_used(mission, *, bus_spec: str, tm_host: str, tm_port: int | None, tc_port: int | None,
+                 realtime: bool) -> dict:
     data = mission.model_dump(mode="json")
     data["bus"] = bus_spec
     fsw = data["flight_software"]
@@ -157,6 +165,7 @@ def _config_used(mission, *, bus_spec: str, tm_port: int | None, tc_port: int | 
     # a loaded host can stall the simulator for seconds (other runs, plotting): the flight software
     # should not take that for the end of the run
     fsw["rates"]["lockstep_timeout_s"] = max(fsw["rates"]["lockstep_timeout_s"], LOCKSTEP_TIMEOUT_S)
+    fsw["tmtc"]["telemetry_host"] = tm_host
     if tm_port is not None:
         fsw["tmtc"]["telemetry_port"] = tm_port
     if tc_port is not None:
@@ -183,18 +192,30 @@ def write_config(run_dir: Path, data: dict, source: Path) -> str:
 STATUS_CHANNELS = ("mode", "pointing_error_deg", "att_error_deg", "margin_min_deg", "active_zone", "cycle")
 
 
-def ground_process(archive_dir: str, port: int, port_queue, ready, fsw_started, stop_event, status_queue,
-                   parent_pid: int | None = None) -> None:
-    """Entry point of the ground process: archive telemetry until told to stop.
+def ground_process(archive_dir: str, endpoints: dict, port: int, port_queue, ready, fsw_started, stop_event,
+                   status_queue, parent_pid: int | None = None, key_file: str | None = None) -> None:
+    """Entry point of the ground process: archive telemetry until told to stop (verified with the run's
+    link key ``key_file``: forged or replayed packets are counted, never archived).
 
-    Ctrl-C is ignored here: the orchestrator stops the ground last, after the flight software, so
-    the final packets are archived. Killed with the orchestrator, whatever kills it.
+    It opens the run's telemetry as every other ground client does (``ground.link.open_telemetry``);
+    ``port`` 0 lets the kernel choose the run's port, which goes back on ``port_queue`` (or the reason
+    the socket could not be opened, as a string). Ctrl-C is ignored here: the orchestrator stops the
+    ground last, after the flight software, so the final packets are archived. Killed with the orchestrator, whatever kills it.
     """
     die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from fsw.ground import GroundMonitor
+    from fsw.link_security import downlink_receiver, load_key_file
+    from ground.link import Endpoints, LinkError, open_telemetry
+    from ground.monitor import GroundMonitor
 
-    monitor = GroundMonitor(port=port, archive_dir=archive_dir)
+    try:
+        sock = open_telemetry(Endpoints.from_json_dict(endpoints), port=port)
+    except LinkError as exc:
+        port_queue.put(str(exc))
+        ready.set()
+        return
+    security = downlink_receiver(load_key_file(key_file)) if key_file else None
+    monitor = GroundMonitor(port=None, archive_dir=archive_dir, sock=sock, security=security)
     port_queue.put(monitor.address[1])
     ready.set()
     failure: OSError | None = None
@@ -489,14 +510,20 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         raise MissionRejected(f"bus {mission.bus!r}: {exc}") from None
     fixed_ports = mission.tmtc_ports == "fixed"
     tmtc = mission.flight_software.tmtc
+    endpoints = _endpoints(mission, run_dir.name, info.spec, options.realtime)
 
     ctx = mp.get_context("spawn")
     port_queue, status_queue = ctx.Queue(), ctx.Queue(maxsize=4)
     ready, fsw_started, stop_event = ctx.Event(), ctx.Event(), ctx.Event()
     ground_dir = run_dir / GROUND_DIR
+    # The run's own link key (0600, in the run folder): the flight software, the ground and the timeline
+    # sign and verify with it; no key is ever shared between runs or written into a YAML.
+    key_path = run_dir / LINK_KEY_FILE
+    write_key_file(key_path)
     ground = ctx.Process(target=ground_process, name="keepout-ground",
-                         args=(str(ground_dir), tmtc.telemetry_port if fixed_ports else 0, port_queue, ready,
-                               fsw_started, stop_event, status_queue, os.getpid()))
+                         args=(str(ground_dir), endpoints.to_json_dict(), tmtc.telemetry_port if fixed_ports else 0,
+                               port_queue, ready, fsw_started, stop_event, status_queue, os.getpid()),
+                         kwargs={"key_file": str(key_path)})
     fsw_proc: subprocess.Popen | None = None
     bus = None
     candump = None
@@ -513,21 +540,29 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         if not ready.wait(60.0):
             raise RunNotStarted("the ground monitor did not start within 60 s")
         tm_port = port_queue.get(timeout=10.0)
+        if isinstance(tm_port, str):
+            raise RunNotStarted(f"the ground monitor could not start: {tm_port}")
         tc_port = tmtc.telecommand_port if fixed_ports else _free_udp_port()
-        data = _config_used(mission, bus_spec=info.spec, tm_port=tm_port, tc_port=tc_port,
-                            realtime=options.realtime)
+        data = _config_used(mission, bus_spec=info.spec, tm_host=endpoints.tm_host, tm_port=tm_port,
+                            tc_port=tc_port, realtime=options.realtime)
+        data["flight_software"]["tmtc"]["security"]["key_file"] = LINK_KEY_FILE  # beside the config used
         write_config(run_dir, data, Path(options.mission))
+        endpoints = dataclasses.replace(endpoints, tm_port=tm_port, tc_port=tc_port,
+                                        pids={"sil": os.getpid(), "ground": ground.pid})
+        endpoints.write(run_dir)
+        if options.announce:
+            print(f"run {run_dir}: attach with `keepout ground --run {run_dir}` or "
+                  f"`keepout ground web --run {run_dir}`", flush=True)
 
         # Open the simulator's end of the bus and build the world (astropy ephemeris nodes take a few
         # seconds) before the flight software starts: it waits only lockstep_timeout_s for SYNC(0).
         try:
-            bus = open_bus(info.spec, run_id=run_dir.name)
+            bus = open_bus(info.spec, run_id=run_dir.name, bitrate=mission.bus_bitrate_bps)
         except (BusUnavailableError, OSError) as exc:
             raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
-        from fsw.ground import CommandSender
+        from ground.commanding import CommandSender, signing_sender_args
 
-        sender = CommandSender(host=tmtc.telecommand_bind_host if tmtc.telecommand_bind_host != "0.0.0.0"
-                               else "127.0.0.1", port=tc_port)
+        sender = CommandSender(host=endpoints.tc_host, port=tc_port, **signing_sender_args(key_path))
         timeline = Timeline(mission, sender)
         world = World(world_params(mission), seed=mission.seed)
         world.truth  # noqa: B018  (evaluates the ephemeris at t = 0 now, not during the first tick)
@@ -543,6 +578,8 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         fsw_proc = _start_fsw(run_dir, info.spec)
         if not options.realtime:
             _no_wakeup_preemption(fsw_proc.pid)
+        endpoints = dataclasses.replace(endpoints, pids={**endpoints.pids, "fsw": fsw_proc.pid})
+        endpoints.write(run_dir)
         deadline = time.monotonic() + options.fsw_start_timeout_s
         while not fsw_started.wait(0.2):
             if fsw_proc.poll() is not None:
@@ -563,13 +600,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         missed_in_row = 0
         for _ in range(n_ticks):
             timeline.release(sim.t_s)
-            if options.realtime:
-                before = sim.stats.cycle_done_late
-                sim.run_realtime(1)
-                done = sim.stats.cycle_done_late == before
-            else:
-                sim.begin_tick()
-                done = sim.end_tick()
+            done = sim.run_tick(options.realtime)
             recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
             missed_in_row = 0 if done else missed_in_row + 1
             # a crash shows within FSW_POLL_TICKS ticks (waitpid is a system call: ~15 us in the vcan-vm guest)
@@ -606,6 +637,8 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         wall_s = time.monotonic() - started_wall
         progress.stop()
         _stop_children(fsw_proc, ground, stop_event)
+        if (run_dir / ENDPOINTS_FILE).exists():
+            _quietly(lambda: dataclasses.replace(endpoints, state="finished").write(run_dir))
         for close in (bus.shutdown if bus is not None else None, candump.close if candump is not None else None):
             _quietly(close)
         if recorder is not None:
@@ -717,6 +750,25 @@ def _judge(run_dir: Path, mission, status: str, code: int | None) -> RunResult:
     except Exception as exc:  # plots are a view: a failure must not hide the summary
         _quietly(lambda: (run_dir / "plots_error.txt").write_text(f"{type(exc).__name__}: {exc}\n"))
     return RunResult(run_dir, code, summary)
+
+
+def _endpoints(mission, run_id: str, bus_spec: str, realtime: bool):
+    """The run's link before its ports are known: a per-run loopback multicast group (any number of ground
+    clients attach), or with ``telemetry_link: unicast`` the SIL's own ground at the mission's address."""
+    from ground.link import LOOPBACK, Endpoints, random_group
+
+    tmtc = mission.flight_software.tmtc
+    tc_host = tmtc.telecommand_bind_host if tmtc.telecommand_bind_host != "0.0.0.0" else LOOPBACK
+    if mission.telemetry_link == "unicast":
+        transport, tm_host, interface = "udp", tmtc.telemetry_host, tmtc.telemetry_host
+    else:
+        # fixed ports keep a group the mission names, so an outside ground can be set up in advance
+        fixed_group = mission.tmtc_ports == "fixed" and ipaddress.ip_address(tmtc.telemetry_host).is_multicast
+        transport, interface = "udp-multicast", tmtc.telemetry_multicast_interface
+        tm_host = tmtc.telemetry_host if fixed_group else random_group()
+    return Endpoints(run_id=run_id, tm_transport=transport, tm_host=tm_host, tm_port=0, tm_interface=interface,
+                     tc_host=tc_host, tc_port=0, bus=bus_spec, clock="realtime" if realtime else "lockstep",
+                     pids={"sil": os.getpid()}, started_unix_s=time.time())
 
 
 def _truth_error_function(mission, boresight_B: np.ndarray):

@@ -38,7 +38,7 @@ def _run(args: argparse.Namespace) -> int:
 
     options = RunOptions(mission=args.mission or DEFAULT_MISSION, bus=args.bus, duration_s=args.duration,
                          realtime=args.realtime, out_root=args.out,
-                         progress=not args.no_progress and sys.stdout.isatty())
+                         progress=not args.no_progress and sys.stdout.isatty(), announce=True)
     try:
         result = run_sil(options)
     except MissionRejected as exc:
@@ -47,5 +47,16 @@ def _run(args: argparse.Namespace) -> int:
     except RunNotStarted as exc:
         print(f"run could not start: {exc}", file=sys.stderr)
         return EXIT_NOT_STARTED
-    print(format_summary(result.summary))
+    print(format_summary(result.summary, total_wall_s=_since_process_start()))
     return result.exit_code
+
+
+def _since_process_start() -> float | None:
+    """Wall time since this process started (interpreter, imports, set-up and the run: what a user waits)."""
+    import time
+
+    import psutil
+    try:
+        return max(0.0, time.time() - psutil.Process().create_time())
+    except psutil.Error:
+        return None

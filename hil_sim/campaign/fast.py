@@ -36,7 +36,7 @@ _WORLD_FIELDS = {
     ("orbit",): ("orbit",),
     ("epoch_utc",): ("epoch_utc",),
 }
-_WHEEL_FIELDS = {"Js_kgm2": "Js_kgm2", "max_torque_Nm": "max_torque_Nm", "max_speed_rad_s": "max_speed_rad_s",
+_WHEEL_FIELDS = {"Js_kgm2": "Js_kgm2", "spin_inertia_kgm2": "Js_kgm2", "max_torque_Nm": "max_torque_Nm", "max_speed_rad_s": "max_speed_rad_s",
                  "viscous_friction_Nm_per_rad_s": "viscous_friction_Nm_per_rad_s",
                  "coulomb_friction_Nm": "coulomb_friction_Nm", "axis_B": "axis_B", "failure": "failure"}
 
@@ -185,6 +185,21 @@ def _icd():
     return _ICD
 
 
+# Which side of each metric ``judge`` writes is better, for ``keepout campaign compare`` when no criterion
+# of the campaign names the metric (the criteria's own sense comes first).
+_METRIC_BETTER = {"min_margin_deg": "higher", "settling_time_s": "lower", "final_error_deg": "lower",
+                  "peak_wheel_speed_fraction": "lower", "peak_body_rate_fraction": "lower", "cycle_slips": "lower",
+                  "unexpected_fdir_events": "lower", "missing_expected_fdir_events": "lower",
+                  "rejected_commands": "lower"}
+
+
+def metric_better(name: str) -> str | None:
+    """"higher" or "lower" for a metric of ``judge`` (per-zone margins ``margin_<zone>_deg`` included)."""
+    if name.startswith("margin_") and name.endswith("_deg"):
+        return "higher"
+    return _METRIC_BETTER.get(name)
+
+
 def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycle_slips: float,
           rejected_commands: int = 0) -> tuple[dict[str, float], dict[str, np.ndarray]]:
     """A run's metrics, judged on truth with the SIL's own functions (``hil_sim.summary``), so the fast and
@@ -211,6 +226,7 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     metrics["final_error_deg"] = float(err[-1])
     limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
     metrics["peak_wheel_speed_fraction"] = float(np.max(np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]))
+    metrics["peak_body_rate_fraction"] = summary.peak_body_rate_fraction(mission, truth)[0]
     # lockstep: a slip is a tick the flight software never answered with CYCLE_DONE (as the SIL counts)
     metrics["cycle_slips"] = float(cycle_slips)
     expected = list(req.expected_fdir_events)

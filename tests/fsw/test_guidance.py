@@ -518,3 +518,66 @@ def test_a_slew_across_the_neck_of_a_closing_unmergeable_pair_never_enters_it(si
     worst = _fly(g, q, 600.0, retarget=(250.0, target))
     assert worst > 2.5, f"keep-out margin reached {worst:.3f} deg"
     assert ("ASSUMPTION_VIOLATED", {"reason": "boresight between two close zones that cannot merge: steering out of the gap"}) in log
+
+
+def test_merge_zones_public_entry_groups_close_cones_and_keeps_far_ones_apart():
+    """`fsw.guidance.merge_zones` (the configuration's load-time checks use it): two 10 deg cones 22 deg
+    apart (2 deg gap < 4 deg merge gap) become one zone containing both; a cone 90 deg away stays alone."""
+    from fsw.guidance import merge_zones
+    from gnc.zones import ConicZone
+
+    r = math.radians(10.0)
+    a = ConicZone(np.array([1.0, 0.0, 0.0]), r)
+    b = ConicZone(np.array([math.cos(math.radians(22)), math.sin(math.radians(22)), 0.0]), r)
+    c = ConicZone(np.array([0.0, 0.0, 1.0]), r)
+    merged, groups = merge_zones([a, b, c], merge_gap_deg=4.0)
+    assert groups == [[0, 1], [2]]
+    for x in (a.axis, b.axis):
+        assert merged[0].contains(x)
+    assert not merged[1].contains(a.axis)
+    assert merge_zones([a, b, c], merge_gap_deg=1.0)[1] == [[0], [1], [2]]
+
+
+def _safe_slew(zones: list[dict], steps: int):
+    """SAFE from rest with the boresight 60 deg from the Sun; the Sun axis is the anti-boresight, so the
+    Sun-safe boresight is the anti-Sun direction, 120 deg away. Kinematic loop; returns the guidance, the
+    boresight path and the Sun direction."""
+    cfg = _cfg(initial_mode="SAFE", pointing={"zones": zones},
+               safe={"sun_axis_B": [0, 0, -1], "damping_exit_rate_deg_s": 0.05, "max_rate_deg_s": 0.5})
+    g = Guidance(cfg)
+    sun = g.ephem.directions(0.0)["sun"]
+    e = np.cross(sun, [0.0, 0.0, 1.0])
+    e /= np.linalg.norm(e)
+    y0 = math.cos(math.radians(60)) * sun + math.sin(math.radians(60)) * e
+    q = _q(Rotation.align_vectors([y0], [[0.0, 0.0, 1.0]])[0])
+    path = []
+    for k in range(steps):
+        out = g.step(0.1 * k, 0.1, q, np.zeros(3))
+        q = _propagate(q, out.omega_cmd_BN_B, 0.1)
+        path.append(_rot(q).apply([0.0, 0.0, 1.0]))
+    return g, out, np.array(path), sun, e
+
+
+def test_safe_mode_reaches_the_sun_safe_attitude_round_a_zone_on_its_way() -> None:
+    """A zone on the SAFE slew's way: without keep-out SAFE would cross it (checked first, so the test can
+    fail); SAFE with the zone goes round it and still ends with the Sun axis on the Sun."""
+    _, _, _, sun, e = _safe_slew([], 1)
+    mid = math.cos(math.radians(120)) * sun + math.sin(math.radians(120)) * e  # on the straight way
+    zone = [{"name": "block", "body": "inertial", "direction_N": mid.tolist(),
+             "geometry": {"shape": "cone", "half_angle_deg": 10.0}}]
+    _, _, straight, _, _ = _safe_slew([], 3500)
+    assert np.degrees(np.arccos(np.clip(straight @ mid, -1, 1))).min() < 10.0  # the old SAFE went through
+    g, out, path, sun, _ = _safe_slew(zone, 5000)
+    margin = np.degrees(np.arccos(np.clip(path @ mid, -1, 1))) - 10.0  # independent of the guidance's own
+    assert margin.min() > 0.0
+    assert out.mode == "SAFE" and out.safe_phase == "SUN_POINTING"
+    assert math.degrees(math.acos(np.clip(path[-1] @ -sun, -1, 1))) < 1.0
+
+
+def test_safe_aims_back_at_the_commanded_target_when_pointing_resumes() -> None:
+    cfg = _cfg(initial_mode="POINTING", pointing={"target_N": [0.0, 0.6, 0.8]})
+    g = Guidance(cfg)
+    g.set_mode("SAFE")
+    g.set_target_direction(np.array([0.0, 1.0, 0.0]))  # commanded during SAFE: held for POINTING
+    g.set_mode("POINTING")
+    np.testing.assert_allclose(g.target_N, [0.0, 1.0, 0.0])

@@ -1,4 +1,4 @@
-"""Slew path planning round the keep-out zones (fsw.path_guidance) and its use by the POINTING guidance."""
+"""Slew path planning round the keep-out zones (fsw.guidance.path_planning) and its use by the POINTING guidance."""
 from __future__ import annotations
 
 import math
@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from fsw.config import FswConfig
 from fsw.guidance import Guidance
-from fsw.path_guidance import PathFollower, densify, plan_path, planning_polygon
+from fsw.guidance.path_planning import PathFollower, densify, plan_path, planning_polygon
 from gnc.zones import ConicZone, StarZone
 
 

@@ -1,0 +1,103 @@
+"""QUATERNION mode: the attitude quaternion on S^3 steered by the paper's law past forbidden-attitude
+zones (`GradientLaw` when every zone is a cone, else `StarShapedLaw`), ``omega = 2 A(q)^T u``.
+
+Double cover (QUATERNION). q and -q are the same attitude, but the paper's law lives on S^3 where they are
+different points (its seven-cone example even puts a zone at -x_d). Choice: the law sees a *continuous
+lift* of the estimate. On entering the mode and on every new target the sign is chosen in the target's
+hemisphere (q . x_d >= 0, the shorter rotation); afterwards the sign is kept continuous from cycle to cycle
+(flip whenever q_est . q_prev < 0). The closed loop is then exactly the paper's continuous system on S^3, so
+its guarantees apply to the lifted path, there is no chattering at q . x_d = 0, and no unwinding is forced
+unless the zones demand it. A zone's physical set of attitudes is both +U and -U; a zone that must be
+avoided on both sheets sets ``antipodal_copy: true`` (the default is false so that the paper's S^3
+problems are reproduced exactly). Consequence for the paper's seven-cone example: with this lift the cone
+at -x_d is never approached and the cones at +-e2..e4 (the 180 deg rotations) lie on the lifted start's
+far boundary, so the example converges without touching them; a zone that really stands between the
+start and the target (tests/fsw/test_closed_loop.py, the paper's S^3 star zone with its antipodal copy)
+is gone around by the StarShapedLaw.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fsw.guidance.common import (
+    GuidanceOutput, _make_gradient_law, _make_star_law, _saturate, _unit, signed_margin_deg,
+)
+from fsw.guidance.zone_merging import ZoneGeometry
+from gnc.attitude import attitude_error_angle, quat_to_dcm_nb, quaternion_rate_command_nb
+
+
+class QuaternionGuidance:
+    """Mixin of `fsw.guidance.Guidance`: QUATERNION mode."""
+
+    def _build_s3_zones(self) -> None:
+        from gnc import zones as gz
+
+        m = math.radians(self.cfg.law.margin_deg)
+        self.s3_phys, self.s3_law_zones, self.s3_names = [], [], []
+        for zc in self.cfg.quaternion.zones:
+            centers = [np.asarray(zc.center_q, dtype=float)]
+            if zc.antipodal_copy:
+                centers.append(-centers[0])
+            for c in centers:
+                if zc.shape == "cone":
+                    ha = math.radians(zc.half_angle_deg)
+                    self.s3_phys.append(gz.ConicZone(c, ha))
+                    self.s3_law_zones.append(gz.ConicZone(c, ha + m))
+                else:
+                    a = np.asarray(zc.semi_axes, dtype=float)
+                    # margin applied per principal direction in angle (exact along the semi-axes)
+                    a_infl = np.tan(np.minimum(np.arctan(a) + m, math.radians(89.0)))
+                    self.s3_phys.append(gz.StarZone.superellipsoid(c, None, a, zc.exponent))
+                    self.s3_law_zones.append(gz.StarZone.superellipsoid(c, None, a_infl, zc.exponent))
+                self.s3_names.append(zc.name)
+        law = self.cfg.quaternion.law
+        all_cones = all(z.shape == "cone" for z in self.cfg.quaternion.zones)
+        self.s3_use_gradient = law == "gradient" or (law == "auto" and all_cones)
+
+
+    def set_target_quaternion(self, q_NB: np.ndarray) -> None:
+        self.q_target = _unit(np.asarray(q_NB, dtype=float))
+        self._q_lift = None
+        self._s3_law = None
+        self._checks_dirty = True
+
+
+    def _quaternion(self, t_s: float, q: np.ndarray) -> GuidanceOutput:
+        xd = self.q_target
+        if self._q_lift is None:
+            x = q if float(q @ xd) >= 0.0 else -q
+        else:
+            x = q if float(q @ self._q_lift) >= 0.0 else -q
+        self._q_lift = x
+        out = GuidanceOutput(np.zeros(3), "QUATERNION", q_target_NB=xd.copy())
+        if self.s3_law_zones:
+            if self._s3_law is None:
+                eps_max = ZoneGeometry.fast_eps_max(xd, self.s3_law_zones)
+                eps = self._eps_for(max(eps_max, 1e-5))
+                self._s3_eps, self._s3_eps_max = eps, eps_max
+                self._current_eps = eps
+                if self.s3_use_gradient:
+                    self._s3_law = _make_gradient_law(xd, self.s3_law_zones, 1.0, eps)
+                else:
+                    self._s3_law = _make_star_law(xd, self.s3_law_zones, 1.0, self.kappa, eps)
+            u_law, zone = self._s3_law.control_and_zone(x)
+            u = self.k1 * np.asarray(u_law, dtype=float)
+            out.eps, out.eps_max = self._s3_eps, self._s3_eps_max
+            out.active_zone = -1 if zone is None else int(zone)
+            margins = [signed_margin_deg(z, x) for z in self.s3_phys]
+            out.margins_deg, out.margin_min_deg = margins, min(margins)
+            out.zone_count = len(self.s3_phys)
+            out.zone_bodies = ["ATTITUDE"] * len(self.s3_phys)
+        else:
+            u = self.k1 * xd
+        out.assumptions_ok = self.assumptions_ok
+        omega = quaternion_rate_command_nb(np.ascontiguousarray(x), np.ascontiguousarray(u))
+        out.omega_cmd_BN_B = _saturate(np.asarray(omega), self.max_rate_rad_s)
+        if self.s3_law_zones:
+            out.omega_cmd_BN_B = self._govern(out.omega_cmd_BN_B, out.margins_deg, angle_per_margin=2.0)
+        out.att_error_deg = math.degrees(float(attitude_error_angle(q, xd)))
+        R = quat_to_dcm_nb(q)
+        out.boresight_N = R @ self.b_B
+        return out
