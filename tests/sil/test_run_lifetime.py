@@ -10,6 +10,7 @@ import os
 import re
 import resource
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -174,17 +175,18 @@ def test_ground_that_lost_telemetry_is_judged_incomplete(tmp_path):
     """The ground stopped (SIGSTOP) and its socket filled (junk datagrams: its buffer holds minutes of
     telemetry), so the kernel drops the flight software's packets for a few seconds: the run completes,
     but the judge sees the sequence gaps and the run cannot pass."""
-    import socket
-
     proc, run_dir = _running(tmp_path)
     ground = [p for p in psutil.Process(proc.pid).children() if "spawn_main" in " ".join(p.cmdline())][0]
-    (port,) = {c.laddr.port for c in ground.net_connections(kind="udp")}
+    link = json.loads((run_dir / "endpoints.json").read_text())  # where the run's telemetry goes
+    port = link["tm_port"]
     ground.suspend()
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as junk:
+        junk.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(link["tm_interface"]))
+        junk.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
         deadline = time.monotonic() + 120
         while _udp_drops(port) < 1000 and time.monotonic() < deadline:
             for _ in range(1000):
-                junk.sendto(b"\0" * 1024, ("127.0.0.1", port))
+                junk.sendto(b"\0" * 1024, (link["tm_host"], port))
     time.sleep(5.0)  # telemetry sent now finds the socket full
     ground.resume()
     assert _udp_drops(port) > 0, "the kernel dropped nothing: the test did not make the ground lose telemetry"
