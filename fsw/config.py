@@ -533,17 +533,24 @@ def _is_ra_dec(value) -> bool:
             and 0.0 <= value[0] <= 360.0 and -90.0 <= value[1] <= 90.0)
 
 
-def load_fsw_config(path: str | Path) -> FswConfig:
-    """Load an FswConfig from a mission YAML (key ``flight_software:``) or a bare FswConfig YAML."""
+def _read_yaml(p: Path):
+    """The data of a YAML file within the size, depth and alias limits of `fsw.safe_yaml`."""
     import yaml
 
-    p = Path(path)
+    from fsw.safe_yaml import UnreadableFile, load_config_file
+
     try:
-        data = yaml.safe_load(p.read_text())
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read: {exc}") from exc
+        return load_config_file(p)
+    except UnreadableFile as exc:
+        raise ConfigError(f"{p}: cannot read: {exc}") from None
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: not valid YAML: {exc}") from exc
+        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
+
+
+def load_fsw_config(path: str | Path) -> FswConfig:
+    """Load an FswConfig from a mission YAML (key ``flight_software:``) or a bare FswConfig YAML."""
+    p = Path(path)
+    data = _read_yaml(p)
     if data is None:
         data = {}
     if not isinstance(data, dict):
@@ -559,13 +566,8 @@ def load_fsw_config(path: str | Path) -> FswConfig:
 def load_bus_settings(path: str | Path) -> tuple[str, int | None]:
     """The bus spec and CAN bit rate [bit/s] a mission YAML names (top-level ``bus`` and
     ``bus_bitrate_bps``; ``auto`` and None when absent, as in a bare FswConfig YAML)."""
-    import yaml
-
     p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{p}: cannot read: {exc}") from exc
+    data = _read_yaml(p)
     data = data if isinstance(data, dict) else {}
     bus = data.get("bus", "auto")
     bitrate = data.get("bus_bitrate_bps")

@@ -187,3 +187,24 @@ def test_campaign_numbers_are_finite(tmp_path, value):
     path.write_text(text.replace("../missions/demo-pointing.yaml", str(DEMO)))
     with pytest.raises(ConfigError, match="finite number"):
         load_campaign(path)
+
+
+@pytest.mark.parametrize("kind", ["bomb", "deep", "fifo"])
+def test_the_flight_software_reading_its_mission_alone_is_bounded_too(tmp_path, kind):
+    """`keepout fsw MISSION` reads the mission itself (fsw never imports hil_sim): same limits."""
+    from fsw.config import ConfigError as FswConfigError, load_fsw_config
+
+    path = tmp_path / "m.yaml"
+    if kind == "bomb":
+        lines = ['a0: &a0 ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+        lines += [f"a{n}: &a{n} [" + ", ".join([f"*a{n - 1}"] * 9) + "]" for n in range(1, 10)]
+        path.write_text("\n".join(lines) + "\nflight_software: {}\n")
+        expected = "expands to more than"
+    elif kind == "deep":
+        path.write_text("[" * 100_000 + "]" * 100_000)
+        expected = "nested more than 32 levels deep"
+    else:
+        os.mkfifo(path)
+        expected = "is not a regular file"
+    with pytest.raises(FswConfigError, match=expected):
+        load_fsw_config(path)
