@@ -329,9 +329,9 @@ def main() -> int:
     n_lat, n_thr, ticks, n_fuzz = (500, 5000, 100, 100_000) if args.quick else (2000, 20000, 300, 200_000)
     results: dict = {"date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "host": os.uname().nodename}
     results["bus_load"] = [bus_load(6), bus_load(4)]
-    from fsw.bus.transport import udp_endpoint_for_run
+    from fsw.bus.transport import random_udp_endpoint
 
-    group, port = udp_endpoint_for_run(f"bench-{os.getpid()}")
+    group, port = random_udp_endpoint()
     udp = f"udp_multicast:{group}:{port}"
     results["host_cpus"] = os.cpu_count()
     results["udp_multicast"] = {"host_loadavg_1min": os.getloadavg()[0],

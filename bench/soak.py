@@ -158,6 +158,12 @@ class StealClock:
         os.close(self._fd)
 
 
+def _repo_relative(filename: str) -> str:
+    """A source file as the repository names it: a result file names no folder of the machine."""
+    path = Path(filename).resolve()
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else path.name
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hours", type=float, default=24.0, help="simulated hours (default 24)")
@@ -271,7 +277,8 @@ def main(argv=None) -> int:
     if snap_early is not None:
         snap_end = tracemalloc.take_snapshot()
         for stat in snap_end.compare_to(snap_early, "lineno")[:8]:
-            top.append({"where": str(stat.traceback[0]), "size_diff_kB": stat.size_diff / 1024, "count_diff": stat.count_diff})
+            frame = stat.traceback[0]
+            top.append({"where": f"{_repo_relative(frame.filename)}:{frame.lineno}", "size_diff_kB": stat.size_diff / 1024, "count_diff": stat.count_diff})
         tracemalloc.stop()
     wall = time.perf_counter() - t_wall
     time.sleep(0.5)

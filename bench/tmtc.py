@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from fsw.dictionary import DICTIONARY
-from fsw.ground import GroundMonitor, run_ground_monitor
+from ground.monitor import GroundMonitor, run_ground_monitor
 from fsw.telecommand import CommandDispatcher, encode_command
 from fsw.telemetry import TelemetrySender, decode_tm_packet
 

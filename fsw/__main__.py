@@ -1,10 +1,14 @@
 """Flight-software process entry: ``python -m fsw --config MISSION.yaml --bus SPEC``.
 
 ``--config`` is a mission YAML with the FswConfig under ``flight_software:`` or a bare FswConfig YAML.
-``--bus`` is a bus spec (``auto``, ``socketcan:vcan0``, ``udp_multicast[:group:port]``, ``virtual[:ch]``).
+``--bus`` is a bus spec (``auto``, ``socketcan:vcan0``, ``udp_multicast[:group:port]``, ``virtual[:ch]``, or any
+python-can interface as ``INTERFACE:CHANNEL``, e.g. ``pcan:PCAN_USBBUS1``); without it, the mission's ``bus``,
+opened at the mission's ``bus_bitrate_bps``.
 The tick source comes from ``rates.tick_source`` unless ``--lockstep`` / ``--realtime`` overrides it.
 A lockstep run ends when no SYNC arrives for ``rates.lockstep_timeout_s`` (the simulator finished);
-a real-time run ends after ``--duration-s`` or on SIGINT/SIGTERM.
+a real-time run ends after ``--duration-s`` or on SIGINT/SIGTERM. ``--first-sync-timeout-s`` lets a lockstep run
+wait longer for the first SYNC (a bench where the simulator is started by hand, on another computer).
+Once the bus is open and the software initialised it prints one ``fsw: ready`` line.
 
 Exit codes: 0 normal end, 2 bad configuration or arguments, 3 bus unavailable, 1 unexpected failure.
 """
@@ -15,10 +19,40 @@ import signal
 import sys
 
 
+BENCH_FIRST_SYNC_TIMEOUT_S = 600.0  # `keepout fsw`: the simulator is started by hand, maybe on another computer
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m fsw", description="keepout flight software")
     p.add_argument("--config", required=True, help="mission YAML (key flight_software:) or bare FswConfig YAML")
-    p.add_argument("--bus", default="auto", help="bus spec: auto | socketcan:vcan0 | udp_multicast[:group:port] | virtual[:channel]")
+    add_arguments(p)
+    return p
+
+
+def add_cli(subparsers: argparse._SubParsersAction) -> None:
+    """``keepout fsw MISSION [--bus SPEC]``: the flight software alone, for a processor-in-the-loop bench
+    (the simulator runs as ``keepout sim`` on the same bus, maybe on another computer; docs/hil-bench.md)."""
+    p = subparsers.add_parser(
+        "fsw", help="run the flight software alone on a bus (HIL bench; pair with `keepout sim`)",
+        description="Run the flight software alone on the mission's bus or --bus SPEC (any python-can interface "
+                    "as INTERFACE:CHANNEL). Lockstep (default when the mission ticks on SYNC): start this first, "
+                    "then `keepout sim MISSION --bus SPEC`; it waits up to --first-sync-timeout-s for the first "
+                    "SYNC and ends when SYNC stops. Exit codes: 0 normal end, 2 bad configuration or arguments, 3 "
+                    "bus unavailable, 1 unexpected failure. See docs/hil-bench.md.")
+    p.add_argument("config", metavar="MISSION", help="mission YAML (or a bare FswConfig YAML)")
+    add_arguments(p, first_sync_default=BENCH_FIRST_SYNC_TIMEOUT_S)
+    p.set_defaults(func=run)
+
+
+def add_arguments(p: argparse.ArgumentParser, first_sync_default: float | None = None) -> None:
+    p.add_argument("--bus", default=None, help="bus spec: auto | socketcan:vcan0 | udp_multicast[:group:port] | "
+                   "virtual[:channel] | INTERFACE:CHANNEL[,KEY=VALUE...] (any python-can interface); default: the "
+                   "mission's bus")
+    p.add_argument("--bitrate", type=int, default=None, help="CAN bit rate [bit/s] for a hardware interface "
+                   "(default: the mission's bus_bitrate_bps)")
+    p.add_argument("--first-sync-timeout-s", type=float, default=first_sync_default,
+                   help="lockstep: wait this long for the simulator's first SYNC (default: "
+                        f"{first_sync_default or 'rates.lockstep_timeout_s'})")
     p.add_argument("--run-id", default=None, help="run id for per-run UDP multicast endpoints (bus 'auto')")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--lockstep", action="store_true", help="tick on simulator SYNC frames")
@@ -28,28 +62,49 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tm-port", type=int, default=None, help="override tmtc.telemetry_port")
     p.add_argument("--tc-port", type=int, default=None, help="override tmtc.telecommand_port (0: ephemeral)")
     p.add_argument("--dbc", default=None, help="ICD DBC file (default config/icd/keepout.dbc)")
-    return p
+    p.add_argument("--key-file", default=None,
+                   help="link key file (overrides tmtc.security.key_file; relative paths from the current folder)")
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    from fsw.config import ConfigError, load_fsw_config
+    return run(build_parser().parse_args(argv))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the flight software with parsed arguments (``python -m fsw`` and ``keepout fsw``)."""
+    import os
+
+    from fsw.lifetime import PARENT_PID_ENV, die_with_parent
+
+    if os.environ.get(PARENT_PID_ENV):  # started by the SIL: end with it, whatever ends it
+        die_with_parent()
+    from fsw.config import ConfigError, load_bus_settings, load_fsw_config
 
     try:
         cfg = load_fsw_config(args.config)
+        mission_bus, mission_bitrate = load_bus_settings(args.config)
     except ConfigError as exc:
         print(f"fsw: {exc}", file=sys.stderr)
         return 2
     from fsw.app import FlightSoftware
     from fsw.bus import BusSpecError, BusUnavailableError, FswBusDriver, Icd, open_bus
     from fsw.dictionary import DICTIONARY
+    from fsw.link_security import KeyFileError
     from fsw.telecommand import CommandDispatcher
     from fsw.telemetry import TelemetrySender
 
+    bus_spec = args.bus if args.bus is not None else mission_bus
     try:
-        bus = open_bus(args.bus, args.run_id)
+        uplink, downlink = link_associations(cfg, args.config, args.key_file)
+    except KeyFileError as exc:
+        print(f"fsw: {exc}", file=sys.stderr)
+        return 2
+    for warning in cfg.tmtc.warnings():
+        print(f"fsw: warning: {warning}", file=sys.stderr)
+    try:
+        bus = open_bus(bus_spec, args.run_id, bitrate=args.bitrate if args.bitrate is not None else mission_bitrate)
     except BusSpecError as exc:
-        print(f"fsw: --bus {args.bus!r}: {exc}", file=sys.stderr)
+        print(f"fsw: --bus {bus_spec!r}: {exc}", file=sys.stderr)
         return 2
     except BusUnavailableError as exc:
         print(f"fsw: bus unavailable: {exc}", file=sys.stderr)
@@ -59,9 +114,12 @@ def main(argv: list[str] | None = None) -> int:
     tc_port = tm_cfg.telecommand_port if args.tc_port is None else args.tc_port
     icd = Icd(args.dbc) if args.dbc else Icd()
     driver = FswBusDriver(bus, icd, len(cfg.spacecraft.wheels))
-    telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port)
+    telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port, security=downlink,
+                                multicast_interface=tm_cfg.telemetry_multicast_interface,
+                                multicast_ttl=tm_cfg.telemetry_multicast_ttl)
     try:
-        dispatcher = CommandDispatcher(DICTIONARY, telemetry, host=tm_cfg.telecommand_bind_host, port=tc_port)
+        dispatcher = CommandDispatcher(DICTIONARY, telemetry, host=tm_cfg.telecommand_bind_host, port=tc_port,
+                                       security=uplink, budget_s=tm_cfg.uplink_budget_ms / 1000.0)
     except OSError as exc:
         print(f"fsw: cannot bind the telecommand socket {tm_cfg.telecommand_bind_host}:{tc_port}: {exc}", file=sys.stderr)
         return 2
@@ -73,12 +131,15 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _stop)
     signal.signal(signal.SIGINT, _stop)
     realtime = args.realtime or (not args.lockstep and cfg.rates.tick_source == "clock")
+    print(f"fsw: ready: bus {bus_spec}, {'real time' if realtime else 'lockstep'}, telemetry to "
+          f"{tm_cfg.telemetry_host}:{tm_port}, telecommands on {dispatcher.address[0]}:{dispatcher.address[1]}",
+          flush=True)
     code = 0
     try:
         if realtime:
             fsw.run_realtime(args.duration_s)
         else:
-            fsw.run_lockstep(args.max_ticks)
+            fsw.run_lockstep(args.max_ticks, first_sync_timeout_s=args.first_sync_timeout_s)
     except Exception as exc:  # noqa: BLE001 - report, then exit non-zero
         telemetry.event("FATAL_ERROR", reason=f"{type(exc).__name__}: {exc}"[:110])
         print(f"fsw: fatal: {type(exc).__name__}: {exc}", file=sys.stderr)
@@ -89,6 +150,23 @@ def main(argv: list[str] | None = None) -> int:
         telemetry.close()
         bus.shutdown()
     return code
+
+
+def link_associations(cfg, config_path: str, key_file: str | None = None):
+    """(uplink receiver, downlink sender) associations from the mission's key file (``key_file``
+    overrides it). Raises KeyFileError when there is no usable key: the flight software never runs an
+    unauthenticated uplink."""
+    from fsw.dictionary import DICTIONARY
+    from fsw.link_security import (SPI_TM, KeyFileError, SecurityAssociation, load_key_file, mission_key_path,
+                                   uplink_receiver)
+
+    path = key_file or mission_key_path(cfg.tmtc.security.key_file, config_path)
+    if path is None:
+        raise KeyFileError(f"{config_path}: flight_software.tmtc.security.key_file: no link key named; make "
+                           "one with `keepout ground keygen FILE` and name it there (or pass --key-file)")
+    key = load_key_file(path)
+    uplink = uplink_receiver(key, cfg.tmtc.security.tc_window, resync_opcode=DICTIONARY.command("SEC_RESYNC").opcode)
+    return uplink, SecurityAssociation(key, SPI_TM)
 
 
 if __name__ == "__main__":

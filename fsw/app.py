@@ -285,14 +285,16 @@ class FlightSoftware:
             v = np.array([c0, c1, c2, c3], dtype=float)
         n = float(np.linalg.norm(v))
         if not math.isfinite(n) or abs(n - 1.0) > 1e-3:
-            raise CommandValidationError(f"SET_TARGET: {kind} must be a unit vector (norm {n:.6f})")
+            raise CommandValidationError(f"SET_TARGET: {kind} must be a unit vector (norm {n:.6f})",
+                                         "TARGET_NOT_UNIT")
         v = v / n
         hit = self.guidance.target_violation(kind, v)
         if hit is not None:
             zone, margin = hit
             bodies = self._zone_bodies(kind)
             self._event("TARGET_REJECTED", zone=zone, body=bodies[zone] if zone < len(bodies) else "INERTIAL", margin_deg=margin)
-            raise CommandValidationError(f"SET_TARGET: target inside keep-out zone {zone} (margin {margin:.3f} deg)")
+            raise CommandValidationError(f"SET_TARGET: target inside keep-out zone {zone} (margin {margin:.3f} deg)",
+                                         "TARGET_IN_KEEP_OUT")
         if kind == "DIRECTION":
             self.guidance.set_target_direction(v)
         else:
@@ -312,7 +314,7 @@ class FlightSoftware:
         try:
             self.guidance.set_gains(k1, kappa, "auto" if eps == 0 else eps, rate_limit_deg_s)
         except ValueError as exc:
-            raise CommandValidationError(f"SET_GAINS: {exc}") from None
+            raise CommandValidationError(f"SET_GAINS: {exc}", "GAINS_INADMISSIBLE") from None
         self._event("GAINS_SET", k1=k1, kappa=kappa, eps=eps, rate_limit_deg_s=rate_limit_deg_s)
 
     # ------------------------------------------------------------------------------------ cycles
@@ -592,6 +594,9 @@ class FlightSoftware:
             "bus_decode_errors": total("bad_length", "out_of_range"),
             "bus_timeouts": total("timeout"),
             "bus_tx_errors": getattr(self, "_bus_tx_errors", 0),
+            "bus_unknown_ids": sum(self.driver.counters.get("_bus", {}).get(k, 0) for k in ("unknown_id", "error_frame")),
+            "bus_stale_syncs": getattr(self.driver, "stale_syncs", 0),
+            "bus_unexpected_frames": getattr(self.driver, "unexpected_frames", 0),
             "imu_stale_cycles": self.fdir.stale_counts["IMU"],
             "st_stale_cycles": self.fdir.stale_counts["STAR_TRACKER"],
             "tm_packets_sent": tm.get("packets_sent", 0),
@@ -618,11 +623,20 @@ class FlightSoftware:
             self.telemetry.send_channels("HK", values)
 
     # -------------------------------------------------------------------------------------- loops
-    def run_lockstep(self, max_ticks: int | None = None, timeout_s: float | None = None) -> int:
-        """Run one GNC cycle per SYNC tick until ``max_ticks`` or the simulator stops sending SYNC."""
+    def run_lockstep(self, max_ticks: int | None = None, timeout_s: float | None = None,
+                     first_sync_timeout_s: float | None = None) -> int:
+        """Run one GNC cycle per SYNC tick until ``max_ticks`` or the simulator stops sending SYNC.
+
+        ``first_sync_timeout_s``: before the first SYNC, keep waiting this long in all (a bench where the
+        simulator is started by hand); after it, ``timeout_s`` without SYNC ends the run."""
         timeout = self.cfg.rates.lockstep_timeout_s if timeout_s is None else timeout_s
+        give_up_at = time.monotonic() + (first_sync_timeout_s or 0.0)
+
+        def still_starting() -> bool:
+            return self.executive.last_tick is None and time.monotonic() < give_up_at
+
         prepare_cycle_thread()
-        n = self.executive.run_lockstep(self.driver.collect_tick, timeout, max_ticks)
+        n = self.executive.run_lockstep(self.driver.collect_tick, timeout, max_ticks, on_timeout=still_starting)
         return n
 
     def run_realtime(self, duration_s: float | None = None) -> int:

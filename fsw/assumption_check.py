@@ -42,12 +42,16 @@ def _failed(reason: str) -> CheckResult:
     return CheckResult(False, [f"check failed: {reason}"[:200]], float("inf"), None, float("nan"))
 
 
-def _background_priority() -> None:
+def _background_priority(parent_pid: int) -> None:
     """In the worker: lowest CPU priority, so the check never preempts the GNC cycle; Ctrl-C on the
-    terminal's process group is for the flight software to handle (it stops the worker in `close`)."""
+    terminal's process group is for the flight software to handle (it stops the worker in `close`);
+    killed with the flight software (even by SIGKILL, which runs no `close`)."""
     import os
     import signal
 
+    from fsw.lifetime import die_with_parent
+
+    die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # a forked worker inherits the flight software's SIGTERM handler (stop the executive): `close` must
     # be able to end it
@@ -63,8 +67,10 @@ def _background_priority() -> None:
         pass
 
 
-def _worker(requests, results) -> None:
-    _background_priority()
+def _worker(requests, results, parent_pid: int, parent_ends=()) -> None:
+    _background_priority(parent_pid)
+    for conn in parent_ends:  # forked copies of the parent's ends: without closing them, no EOF ever comes
+        conn.close()
     while True:
         try:
             snapshot = pickle.loads(requests.recv_bytes())
@@ -108,6 +114,7 @@ class AssumptionChecker:
             return
         import fcntl
         import multiprocessing
+        import os
 
         ctx = multiprocessing.get_context("fork")
         req_r, req_w = ctx.Pipe(duplex=False)
@@ -116,7 +123,7 @@ class AssumptionChecker:
             self._capacity = fcntl.fcntl(req_w.fileno(), fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
         except OSError:
             self._capacity = fcntl.fcntl(req_w.fileno(), fcntl.F_GETPIPE_SZ)
-        self.worker = ctx.Process(target=_worker, args=(req_r, res_w), name="keepout-assumption-check", daemon=True)
+        self.worker = ctx.Process(target=_worker, args=(req_r, res_w, os.getpid(), (req_w, res_r)), name="keepout-assumption-check", daemon=True)
         self.worker.start()
         req_r.close()
         res_w.close()

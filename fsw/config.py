@@ -24,7 +24,8 @@ Quat = Annotated[list[float], Field(min_length=4, max_length=4)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    # allow_inf_nan=False: a NaN or inf in a gain or a vector would otherwise reach the control loop
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
 
 def _unit(v: list[float], what: str) -> list[float]:
@@ -326,7 +327,7 @@ class FdirRule(_Strict):
     """Limit-check rule: when the monitored value exceeds `limit` for `persistence_cycles` consecutive GNC cycles, emit the event and take `action` (once per trip)."""
 
     enabled: bool = True
-    limit: float = Field(description="Threshold in the rule's unit (see the rule description).")
+    limit: float = Field(ge=-1e6, le=1e6, description="Threshold in the rule's unit (see the rule description).")
     persistence_cycles: int = Field(3, ge=1, le=100000, description="Consecutive GNC cycles beyond the limit before the rule trips.")
     action: FdirAction = Field("none", description="Action when tripped.")
 
@@ -356,14 +357,74 @@ class OrbitKnowledge(_Strict):
     arg_latitude_at_epoch_deg: float = Field(0.0, ge=-360.0, le=360.0, description="Argument of latitude at the epoch [deg].")
 
 
+class LinkSecurityConfig(_Strict):
+    """Link security (fsw.link_security, in the manner of CCSDS SDLS): MAC and anti-replay on TC and TM."""
+
+    key_file: str | None = Field(None, description="Path of the link key file (hex, mode 0600; `keepout ground keygen FILE` makes one), relative to the mission file's folder. Never the key itself. Required by the flight software process; the SIL makes a fresh key for every run in its run folder and uses that instead.")
+    tc_window: int = Field(1024, ge=1, le=1_000_000, description="Anti-replay window: an uplink security sequence number is accepted when above the last accepted one by at most this much; beyond it only SEC_RESYNC is.")
+
+
+def is_loopback_host(host: str) -> bool:
+    """True for a loopback IP literal (127.0.0.0/8, ::1) or "localhost"."""
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 class TmTcConfig(_Strict):
     """Telemetry/telecommand sockets (loopback unless the mission names another address)."""
 
-    telemetry_host: str = Field("127.0.0.1", description="Destination address of telemetry datagrams.")
+    telemetry_host: str = Field("127.0.0.1", description="Destination address of telemetry datagrams: a "
+                                "ground station's address (unicast), or a multicast group (224.0.0.0/4) that "
+                                "any number of ground clients join.")
+
+    @field_validator("telemetry_host")
+    @classmethod
+    def _unicast_or_group(cls, v: str) -> str:
+        import ipaddress
+
+        try:
+            addr = ipaddress.ip_address(v)
+        except ValueError:
+            return v  # a host name: resolved when the socket is opened
+        if addr.is_unspecified or addr == ipaddress.ip_address("255.255.255.255"):
+            kind = "unspecified" if addr.is_unspecified else "broadcast"
+            raise ValueError(f"{v} is a {kind} address: give a ground station's unicast address "
+                             "(e.g. 127.0.0.1) or a multicast group (224.0.0.0/4)")
+        return v
     telemetry_port: int = Field(50100, ge=1, le=65535)
-    telecommand_bind_host: str = Field("127.0.0.1", description="Address the telecommand socket binds to.")
+    telemetry_multicast_interface: str = Field(
+        "127.0.0.1", description="With a multicast telemetry_host: the local address whose interface sends the "
+        "group (loopback keeps the telemetry on this computer).")
+    telemetry_multicast_ttl: int = Field(
+        0, ge=0, le=255, description="With a multicast telemetry_host: hops the datagrams may take (0: this host only).")
+    telecommand_bind_host: str = Field("127.0.0.1", description="Address the telecommand socket binds to; a non-loopback address needs allow_non_loopback: true.")
     telecommand_port: int = Field(50101, ge=0, le=65535, description="0 = ephemeral port.")
+    allow_non_loopback: bool = Field(False, description="Explicit consent to bind the telecommand socket to a non-loopback address (reachable from the network; commands are still authenticated). A warning is printed whenever it is used.")
+    uplink_budget_ms: float = Field(5.0, gt=0.0, le=1000.0, description="Host time a GNC cycle may spend reading the uplink [ms]; what is left stays queued for the next cycle, and what the kernel had to drop is counted (tc_uplink_dropped).")
     gnc_packet_every_n_cycles: int = Field(1, ge=1, le=1000, description="Send the GNC state packet every n GNC cycles.")
+    security: LinkSecurityConfig = Field(default_factory=LinkSecurityConfig, description="Link security: the key file and the uplink anti-replay window (docs/security.md).")
+
+    @model_validator(mode="after")
+    def _loopback_unless_allowed(self) -> "TmTcConfig":
+        if not is_loopback_host(self.telecommand_bind_host) and not self.allow_non_loopback:
+            raise ValueError(f"telecommand_bind_host {self.telecommand_bind_host!r} is not a loopback address "
+                             "(127.0.0.1, ::1, localhost): any host that can reach it could send telecommands; "
+                             "set allow_non_loopback: true to bind it anyway")
+        return self
+
+    def warnings(self) -> list[str]:
+        """What ``config validate`` and the flight software print about these sockets."""
+        if is_loopback_host(self.telecommand_bind_host):
+            return []
+        return [f"flight_software.tmtc.telecommand_bind_host {self.telecommand_bind_host!r} is not loopback "
+                "(allow_non_loopback: true): telecommands are accepted from the network, authenticated "
+                "by the link key only"]
 
 
 class FswConfig(_Strict):
@@ -417,6 +478,27 @@ def load_fsw_config(path: str | Path) -> FswConfig:
         data = data["flight_software"] or {}
         prefix = "flight_software."
     return parse_fsw_config(data, source=str(p), prefix=prefix)
+
+
+def load_bus_settings(path: str | Path) -> tuple[str, int | None]:
+    """The bus spec and CAN bit rate [bit/s] a mission YAML names (top-level ``bus`` and
+    ``bus_bitrate_bps``; ``auto`` and None when absent, as in a bare FswConfig YAML)."""
+    import yaml
+
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{p}: cannot read: {exc}") from exc
+    data = data if isinstance(data, dict) else {}
+    bus = data.get("bus", "auto")
+    bitrate = data.get("bus_bitrate_bps")
+    if not isinstance(bus, str):
+        raise ConfigError(f"{p}: bus: expected a bus spec string such as auto or pcan:PCAN_USBBUS1, got {bus!r}")
+    if bitrate is not None and (isinstance(bitrate, bool) or not isinstance(bitrate, int)
+                                or not 10000 <= bitrate <= 1000000):
+        raise ConfigError(f"{p}: bus_bitrate_bps: expected an integer in 10000..1000000 [bit/s], got {bitrate!r}")
+    return bus, bitrate
 
 
 def parse_fsw_config(data: dict, source: str = "<dict>", prefix: str = "") -> FswConfig:

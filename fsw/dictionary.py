@@ -2,7 +2,7 @@
 
 Following F Prime, the flight software and the ground tools read the same dictionary: the flight side
 builds packets from it (``fsw.telemetry``), decodes telecommands with it (``fsw.telecommand``), and the
-ground (``fsw.ground``) decodes and limit-checks telemetry with it. ``config/telemetry_dictionary.json``
+ground (the ``ground`` package) decodes and limit-checks telemetry with it. ``config/telemetry_dictionary.json``
 is generated from this module (``python -m fsw.dictionary --out config/telemetry_dictionary.json``) and a
 test keeps the committed file equal to the generated one.
 
@@ -25,6 +25,8 @@ Wire format (all big-endian), CCSDS 133.0-B-2 space packets built with ``spacepa
   with payload ``event id (u16), severity (u8), args...``.
 - Telecommands (packet type TC, no secondary header): primary header with ``TC_APID``, ``opcode (u16)``,
   args in declaration order, CRC-16/CCITT-FALSE. Strings are ``u8 length + UTF-8 bytes``.
+- Every telecommand is acknowledged in the ``TC_ACK`` telemetry packet (``TC_ACK_APID``), as PUS service 1:
+  acceptance success/failure and completion success/failure with a reason code from ``TC_REASONS``.
 """
 from __future__ import annotations
 
@@ -46,6 +48,7 @@ DICTIONARY_VERSION = "1.0"
 GNC_APID = 0x010
 HK_APID = 0x011
 EVENT_APID = 0x012
+TC_ACK_APID = 0x013  # telecommand verification reports (the role of PUS service 1)
 TC_APID = 0x050
 
 # Default UDP ports on loopback (the mission config may override host and ports).
@@ -234,16 +237,32 @@ class EventDef:
 
 @dataclass(frozen=True)
 class CommandDef:
-    """A telecommand: opcode and typed args (validated by the dispatcher before any handler runs)."""
+    """A telecommand: opcode and typed args (validated by the dispatcher before any handler runs).
+
+    ``failure_codes`` are the reason codes (``TC_REASON_CODES``) its own handler may answer with, on top
+    of the checks every telecommand goes through (``TC_COMMON_FAILURE_CODES``).
+    """
 
     name: str
     opcode: int
     description: str
     args: tuple[Arg, ...] = ()
+    failure_codes: tuple[str, ...] = ()
+
+    @property
+    def acknowledgement(self) -> dict[str, Any]:
+        """What the flight software reports for this command (documented in the JSON export)."""
+        return {"success": ["ACCEPTANCE_SUCCESS", "COMPLETION_SUCCESS"],
+                "acceptance_failure_codes": [*TC_COMMON_FAILURE_CODES, *self.failure_codes],
+                "completion_failure_codes": list(TC_COMPLETION_FAILURE_CODES)}
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "opcode": self.opcode, "description": self.description,
-                "args": [a.to_dict() for a in self.args]}
+        out: dict[str, Any] = {"name": self.name, "opcode": self.opcode, "description": self.description,
+                               "args": [a.to_dict() for a in self.args]}
+        if self.failure_codes:
+            out["failure_codes"] = list(self.failure_codes)
+        out["acknowledgement"] = self.acknowledgement
+        return out
 
 
 @dataclass
@@ -285,6 +304,11 @@ class TelemetryDictionary:
         for definition in (*self.events, *self.commands):
             for arg in definition.args:
                 _check_type(arg.type, f"{definition.name}.{arg.name}", arg.enum)
+        for command in self.commands:
+            unknown = set(command.failure_codes) - set(TC_REASON_CODES)
+            if unknown:
+                raise DictionaryError(f"command {command.name}: failure codes {sorted(unknown)} not in "
+                                      f"TC_REASON_CODES")
 
     # ---- lookups (errors name what exists) ----
     def packet(self, name: str) -> PacketDef:
@@ -346,6 +370,13 @@ class TelemetryDictionary:
             },
             "severities": [s.value for s in Severity],
             "apids": {"tc": self.tc_apid, "event": self.event_apid},
+            "tc_verification": {
+                "packet": "TC_ACK",
+                "description": TC_VERIFICATION_DOC,
+                "reports": [{"name": name, "pus_subtype": subtype} for name, subtype in TC_ACK_REPORTS],
+                "reason_codes": [{"code": code, "name": name, "description": TC_REASON_DOCS[name]}
+                                 for code, name in enumerate(TC_REASON_CODES)],
+            },
             "ports": {"tm": DEFAULT_TM_PORT, "tc": DEFAULT_TC_PORT, "host": DEFAULT_HOST},
             "packets": [p.to_dict() for p in self.packets],
             "events": [e.to_dict() for e in self.events],
@@ -372,7 +403,7 @@ class TelemetryDictionary:
             )
             commands = tuple(
                 CommandDef(c["name"], int(c["opcode"]), c["description"],
-                           tuple(_arg_from_dict(a) for a in c["args"]))
+                           tuple(_arg_from_dict(a) for a in c["args"]), tuple(c.get("failure_codes", ())))
                 for c in data["commands"]
             )
             return cls(packets, events, commands, version=data["version"],
@@ -434,7 +465,54 @@ FDIR_ACTIONS = ("NONE", "EVENT_ONLY", "REJECT_SENSOR", "ISOLATE_WHEEL", "ENTER_S
 ZONE_BODIES = ("SUN", "MOON", "EARTH", "INERTIAL", "ATTITUDE", "MERGED")
 RATE_GROUPS = ("GNC", "HK")
 SENSORS = ("IMU", "STAR_TRACKER", "WHEEL")
-TC_ERRORS = ("INVALID_OPCODE", "VALIDATION", "FORMAT", "EXECUTION")
+TC_ERRORS = ("INVALID_OPCODE", "VALIDATION", "FORMAT", "EXECUTION", "SECURITY")
+
+# Telecommand verification, after PUS service 1 (ECSS-E-ST-70-41C ch. 6.1): every telecommand gets an
+# acceptance report (success or failure with a reason code) and, once accepted, a completion report. They
+# travel in the TC_ACK packet and quote the command's request id (its first four octets: version, type,
+# APID, sequence flags and count) and sequence count, so the sender can match them.
+TC_ACK_REPORTS = (("ACCEPTANCE_SUCCESS", 1), ("ACCEPTANCE_FAILURE", 2),
+                  ("COMPLETION_SUCCESS", 7), ("COMPLETION_FAILURE", 8))  # (name, PUS subtype)
+TC_VERIFICATION_DOC = (
+    "every telecommand is answered by a TC_ACK packet: ACCEPTANCE_SUCCESS or ACCEPTANCE_FAILURE (with a "
+    "reason code) once the packet, its arguments and the handler's own checks passed or failed; an accepted "
+    "command is then answered by COMPLETION_SUCCESS or COMPLETION_FAILURE (with a reason code). A rejected "
+    "command changed nothing on board. Each report quotes the command's request id (its first four octets) "
+    "and sequence count."
+)
+# (name, error class of TC_ERRORS, description); the code on the wire is the position in this table.
+TC_REASONS: tuple[tuple[str, str, str], ...] = (
+    ("NONE", "", "no failure (success reports)"),
+    ("PACKET_TOO_SHORT", "FORMAT", "datagram shorter than header + opcode + CRC (10 bytes)"),
+    ("PACKET_TOO_LONG", "FORMAT", f"datagram longer than {MAX_TC_PACKET_LEN} bytes"),
+    ("BAD_HEADER", "FORMAT", "CCSDS version not 0, not a TC, segmented, or secondary header flag set"),
+    ("WRONG_APID", "FORMAT", "APID is not the telecommand APID"),
+    ("LENGTH_MISMATCH", "FORMAT", "packet length field disagrees with the datagram length"),
+    ("CRC_MISMATCH", "FORMAT", "CRC-16/CCITT-FALSE check failed"),
+    ("UNKNOWN_OPCODE", "INVALID_OPCODE", "opcode not in the dictionary"),
+    ("NO_HANDLER", "INVALID_OPCODE", "command in the dictionary but not handled by this flight software"),
+    ("ARGS_TRUNCATED", "FORMAT", "packet ends before the last argument"),
+    ("TRAILING_BYTES", "FORMAT", "bytes after the last argument"),
+    ("BAD_ENUM", "VALIDATION", "enumerated argument index outside the declared names"),
+    ("ARG_OUT_OF_RANGE", "VALIDATION", "argument outside its declared range, or not finite"),
+    ("TARGET_NOT_UNIT", "VALIDATION", "target direction or quaternion is not of unit norm"),
+    ("TARGET_IN_KEEP_OUT", "VALIDATION", "target lies inside a keep-out zone (TARGET_REJECTED event names it)"),
+    ("GAINS_INADMISSIBLE", "VALIDATION", "gains refused by the law (e.g. eps outside the admissible interval)"),
+    ("EXECUTION_FAILED", "EXECUTION", "the handler failed while executing an accepted command"),
+    # link security (fsw.link_security): only REPLAY and OUTSIDE_WINDOW are ever acknowledged (the packet
+    # authenticated); the others are counted in housekeeping and not answered
+    ("UNAUTHENTICATED", "SECURITY", "no security header, or another security parameter index (not answered)"),
+    ("BAD_MAC", "SECURITY", "the MAC does not verify: forged or signed with another key (not answered)"),
+    ("REPLAY", "SECURITY", "security sequence number not above the last accepted one: a replay"),
+    ("OUTSIDE_WINDOW", "SECURITY", "security sequence number beyond the anti-replay window: send SEC_RESYNC"),
+)
+TC_REASON_CODES = tuple(name for name, _, _ in TC_REASONS)
+TC_REASON_CLASS = {name: error_class for name, error_class, _ in TC_REASONS}
+TC_REASON_DOCS = {name: doc for name, _, doc in TC_REASONS}
+TC_COMMON_FAILURE_CODES = ("PACKET_TOO_SHORT", "PACKET_TOO_LONG", "BAD_HEADER", "WRONG_APID", "LENGTH_MISMATCH",
+                           "CRC_MISMATCH", "UNKNOWN_OPCODE", "NO_HANDLER", "ARGS_TRUNCATED", "TRAILING_BYTES",
+                           "BAD_ENUM", "ARG_OUT_OF_RANGE", "REPLAY", "OUTSIDE_WINDOW")
+TC_COMPLETION_FAILURE_CODES = ("EXECUTION_FAILED",)
 TARGET_KINDS = ("DIRECTION", "QUATERNION")
 MODE_REASONS = ("INIT", "TELECOMMAND", "FDIR", "AUTONOMOUS")
 
@@ -535,15 +613,38 @@ _HK_CHANNELS: list[Channel] = [
     Channel("bus_decode_errors", "U32", "", "bus frames that failed to decode", Limits(yellow=(None, 0))),
     Channel("bus_timeouts", "U32", "", "ticks with missing sensor frames", Limits(yellow=(None, 0))),
     Channel("bus_tx_errors", "U32", "", "bus transmit failures", Limits(yellow=(None, 0))),
+    Channel("bus_unknown_ids", "U32", "", "bus frames with an identifier not in the ICD (or error/extended/remote frames)",
+            Limits(yellow=(None, 0))),
+    Channel("bus_stale_syncs", "U32", "", "lockstep SYNC frames whose tick was not after the last one (replayed), ignored",
+            Limits(yellow=(None, 0))),
+    Channel("bus_unexpected_frames", "U32", "", "lockstep: E2E-good device frames outside every announced tick (replayed, injected or late), not used",
+            Limits(yellow=(None, 0))),
     Channel("imu_stale_cycles", "U32", "", "consecutive cycles without a fresh IMU sample"),
     Channel("st_stale_cycles", "U32", "", "consecutive cycles without a fresh star-tracker sample"),
     Channel("tc_accepted", "U32", "", "telecommands accepted"),
-    Channel("tc_rejected", "U32", "", "telecommands rejected (all reasons)"),
+    Channel("tc_rejected", "U32", "", "telecommands rejected at acceptance (all reasons)"),
+    Channel("tc_completed", "U32", "", "accepted telecommands completed"),
+    Channel("tc_failed", "U32", "", "accepted telecommands whose execution failed", Limits(yellow=(None, 0))),
     Channel("tc_invalid_opcode", "U32", "", "telecommands rejected: unknown or unhandled opcode"),
     Channel("tc_validation_errors", "U32", "", "telecommands rejected: argument out of range"),
     Channel("tc_format_errors", "U32", "", "telecommands rejected: malformed packet"),
-    Channel("tc_execution_errors", "U32", "", "telecommands rejected: handler failed"),
+    Channel("tc_execution_errors", "U32", "", "telecommands failed in execution: handler failed"),
     Channel("tc_last_opcode", "U16", "", "opcode of the last accepted telecommand"),
+    # link security (fsw.link_security) and uplink loss: never reset by RESET_COUNTERS
+    Channel("tc_sec_unauthenticated", "U32", "", "uplink datagrams without a security header / with another SPI",
+            Limits(yellow=(None, 0))),
+    Channel("tc_sec_bad_mac", "U32", "", "uplink datagrams whose MAC did not verify (forged)",
+            Limits(yellow=(None, 0))),
+    Channel("tc_sec_replay", "U32", "", "uplink datagrams refused: security SN not above the last accepted",
+            Limits(yellow=(None, 0))),
+    Channel("tc_sec_outside_window", "U32", "", "uplink datagrams refused: security SN beyond the window",
+            Limits(yellow=(None, 0))),
+    Channel("tc_sec_resyncs", "U32", "", "SEC_RESYNC commands that moved the anti-replay window"),
+    Channel("tc_sec_last_sn", "U32", "", "last accepted uplink security SN (the ground sends above it)"),
+    Channel("tc_uplink_dropped", "U32", "", "uplink datagrams the kernel discarded, socket buffer full (SO_RXQ_OVFL)",
+            Limits(yellow=(None, 0))),
+    Channel("tc_uplink_deferred", "U32", "", "cycles whose uplink read stopped at its time budget, datagrams left queued",
+            Limits(yellow=(None, 0))),
     Channel("tm_packets_sent", "U32", "", "telemetry packets sent"),
     Channel("tm_send_errors", "U32", "", "telemetry packets that failed to send", Limits(yellow=(None, 0))),
     Channel("events_sent", "U32", "", "events sent"),
@@ -558,11 +659,24 @@ _HK_CHANNELS: list[Channel] = [
     Channel("rss_mb", "F32", "MB", "resident memory of the flight software process"),
 ]
 
+_TC_ACK_CHANNELS: list[Channel] = [
+    Channel("ack_report", "ENUM", "", "verification report (PUS subtypes 1, 2, 7, 8)",
+            enum=tuple(name for name, _ in TC_ACK_REPORTS)),
+    Channel("ack_request_id", "U32", "", "request id of the telecommand: its first four octets (version, type, "
+                                          "secondary header flag, APID, sequence flags, sequence count)"),
+    Channel("ack_tc_seq", "U16", "", "sequence count of the telecommand"),
+    Channel("ack_opcode", "U16", "", "opcode of the telecommand (0 when it could not be read)"),
+    Channel("ack_code", "ENUM", "", "reason code (NONE for success reports)", enum=TC_REASON_CODES),
+]
+
 PACKETS: tuple[PacketDef, ...] = (
     PacketDef("GNC", GNC_APID, "GNC rate", "GNC state: estimate, guidance, control, zones, wheels",
               tuple(_GNC_CHANNELS)),
     PacketDef("HK", HK_APID, "1 Hz", "housekeeping: counters, timing, bus E2E, TC, FDIR, wheel health",
               tuple(_HK_CHANNELS)),
+    PacketDef("TC_ACK", TC_ACK_APID, "per telecommand",
+              "telecommand verification report (PUS service 1): " + TC_VERIFICATION_DOC,
+              tuple(_TC_ACK_CHANNELS)),
 )
 
 _OPCODE = Arg("opcode", "U16", description="telecommand opcode")
@@ -656,6 +770,8 @@ EVENTS: tuple[EventDef, ...] = (
              (_OPCODE, Arg("command", "STRING"))),
     EventDef("CMD_REJECTED", 62, Severity.WARNING_HI, "command opcode {opcode} rejected: {error}: {reason}",
              (_OPCODE, Arg("error", "ENUM", enum=TC_ERRORS), _REASON), throttle=20, throttle_window_s=10.0),
+    EventDef("SEC_RESYNCED", 63, Severity.WARNING_LO, "uplink anti-replay window moved to security SN {sn}",
+             (Arg("sn", "U32"),)),
     EventDef("EVENTS_THROTTLED", 70, Severity.DIAGNOSTIC, "{count} {event} events throttled",
              (Arg("event", "STRING"), Arg("count", "U32"))),
 )
@@ -675,6 +791,7 @@ COMMANDS: tuple[CommandDef, ...] = (
          Arg("c1", description="component 1", **_UNIT_COMPONENT),
          Arg("c2", description="component 2", **_UNIT_COMPONENT),
          Arg("c3", description="component 3 (QUATERNION only)", default=0.0, **_UNIT_COMPONENT)),
+        failure_codes=("TARGET_NOT_UNIT", "TARGET_IN_KEEP_OUT"),
     ),
     CommandDef(
         "SET_GAINS", 0x05, "set law gains; eps = 0 selects the admissible eps automatically",
@@ -682,7 +799,10 @@ COMMANDS: tuple[CommandDef, ...] = (
          Arg("kappa", "F64", "", "star-shaped law gain kappa", min=1e-6, max=100.0),
          Arg("eps", "F64", "", "eps-layer width in d_s units (0: auto)", min=0.0, max=1.0),
          Arg("rate_limit_deg_s", "F64", "deg/s", "body rate command limit", min=1e-3, max=20.0)),
+        failure_codes=("GAINS_INADMISSIBLE",),
     ),
+    CommandDef("SEC_RESYNC", 0x10, "move the uplink anti-replay window forward to this command's security "
+               "SN (the only command accepted beyond the window; never backwards)"),
 )
 
 DICTIONARY = TelemetryDictionary(PACKETS, EVENTS, COMMANDS)

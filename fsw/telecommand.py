@@ -5,10 +5,24 @@ address), checks every datagram (length, header, APID, CRC, opcode, argument typ
 handler runs, and classifies every failure as one of the typed errors INVALID_OPCODE, VALIDATION, FORMAT
 or EXECUTION. Every datagram changes the counters; none can raise out of ``handle_datagram``/``poll``.
 
+With a ``security`` association (``fsw.link_security``, what the flight process always uses) every
+datagram must first pass the link's authentication and anti-replay checks; a refusal is the error class
+SECURITY, counted by reason in the association (which RESET_COUNTERS never clears). The link, not the
+handlers, does this: the handlers only ever see authenticated, fresh commands.
+
+``poll`` reads the uplink until it is empty, within a time budget per call; what the kernel had to
+discard because the socket buffer was full (SO_RXQ_OVFL) is counted, so no command is lost silently.
+
 Handlers are registered per opcode and called with the decoded arguments as keywords (enums as their
 names, e.g. ``handler(mode="POINTING")``). A handler signals a rejected request by raising
 ``CommandValidationError`` (e.g. target inside a keep-out zone) or ``CommandExecutionError``; any other
 exception is also counted as an execution error, never propagated.
+
+Every telecommand is acknowledged in telemetry as PUS service 1 does (``TC_ACK`` packets, see
+``fsw.dictionary.TC_VERIFICATION_DOC``): ACCEPTANCE_SUCCESS or ACCEPTANCE_FAILURE with a reason code,
+then for an accepted command COMPLETION_SUCCESS or COMPLETION_FAILURE, each quoting the command's request
+id and sequence count. Each failure carries a reason code from ``TC_REASON_CODES``; its error class follows
+from the code.
 """
 from __future__ import annotations
 
@@ -19,6 +33,7 @@ import signal
 import socket
 import struct
 import threading
+import time
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -42,11 +57,16 @@ from fsw.dictionary import (
     ArgError,
     ArgTruncatedError,
     CommandDef,
+    TC_REASON_CLASS,
     TelemetryDictionary,
     coerce_arg,
     decode_args,
     encode_args,
 )
+from fsw.link_security import FORMAT as LINK_FORMAT
+from fsw.link_security import OUTSIDE_WINDOW, REPLAY
+from fsw.link_security import REASONS as SECURITY_REASONS
+from fsw.link_security import SecurityAssociation, SecurityError
 from fsw.telemetry import crc16_ccitt
 
 if TYPE_CHECKING:
@@ -59,43 +79,98 @@ INVALID_OPCODE = "INVALID_OPCODE"
 VALIDATION = "VALIDATION"
 FORMAT = "FORMAT"
 EXECUTION = "EXECUTION"
+SECURITY = "SECURITY"
+
+# SO_RXQ_OVFL (Linux socket option 40, not exported by every Python): each datagram then carries the
+# socket's cumulative count of datagrams the kernel dropped because the receive buffer was full.
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)
+_OVFL = struct.Struct("=I")
+_ANC_SPACE = socket.CMSG_SPACE(_OVFL.size)
+_BUDGET_CHECK_EVERY = 16  # datagrams between two clock reads while draining
+# SO_RXQ_OVFL reports drops only with the next datagram queued; drops after the last one are read with
+# SO_MEMINFO (Linux >= 4.16: u32 sk_meminfo array, SK_MEMINFO_DROPS at index 8) when housekeeping asks.
+SO_MEMINFO = getattr(socket, "SO_MEMINFO", 55)
+_MEMINFO_DROPS = 8
 
 
 class CommandError(Exception):
-    """Base of the typed telecommand errors; ``kind`` is one of the four error classes."""
+    """Base of the typed telecommand errors.
 
-    kind = EXECUTION
+    ``code`` is the reason code reported in the acknowledgement (a name of ``TC_REASON_CODES``); ``kind``,
+    the error class counted in housekeeping, follows from it (INVALID_OPCODE, VALIDATION, FORMAT, EXECUTION).
+    """
+
+    default_code = "EXECUTION_FAILED"
+
+    def __init__(self, message: str, code: str | None = None) -> None:
+        super().__init__(message)
+        self.code = code or self.default_code
+        if self.code not in TC_REASON_CLASS or not TC_REASON_CLASS[self.code]:
+            raise ValueError(f"{self.code!r} is not a failure code of TC_REASON_CODES")
+
+    @property
+    def kind(self) -> str:
+        return TC_REASON_CLASS[self.code]
 
 
 class InvalidOpcodeError(CommandError):
-    kind = INVALID_OPCODE
+    default_code = "UNKNOWN_OPCODE"
 
 
 class CommandValidationError(CommandError):
-    """Arguments are well formed but not acceptable (out of range, target inside a zone, ...)."""
+    """Arguments are well formed but not acceptable (out of range, target inside a zone, ...).
 
-    kind = VALIDATION
+    Raised by a handler, it rejects the command at acceptance: the handler must raise it before it changes
+    anything on board."""
+
+    default_code = "ARG_OUT_OF_RANGE"
 
 
 class CommandFormatError(CommandError):
     """The packet is malformed: length, header, APID, CRC or argument encoding."""
 
-    kind = FORMAT
+    default_code = "BAD_HEADER"
 
 
 class CommandExecutionError(CommandError):
-    kind = EXECUTION
+    """The handler failed while executing an accepted command (a completion failure)."""
+
+    default_code = "EXECUTION_FAILED"
+
+
+class CommandSecurityError(CommandError):
+    """The link refused the datagram: unauthenticated, bad MAC, replayed or outside the SN window
+    (codes of the SECURITY class; a link-level CRC failure is CRC_MISMATCH, class FORMAT).
+    ``acknowledge``: whether the refusal is reported in a TC_ACK (only for authenticated packets)."""
+
+    default_code = "BAD_MAC"
+
+    def __init__(self, message: str, code: str | None = None, acknowledge: bool = True) -> None:
+        super().__init__(message, code)
+        self.acknowledge = acknowledge
 
 
 @dataclass(frozen=True)
 class CommandResult:
+    """The outcome of one datagram, as reported in its acknowledgements.
+
+    ``accepted``: passed every check (acceptance success); ``completed``: also executed (completion success).
+    ``error`` is the error class and ``code`` the reason code of a failure (None / "NONE" on success).
+    """
+
     accepted: bool
-    error: str | None  # None when accepted, else INVALID_OPCODE / VALIDATION / FORMAT / EXECUTION
+    error: str | None  # None when completed, else INVALID_OPCODE / VALIDATION / FORMAT / EXECUTION
     opcode: int | None
     name: str | None
     seq_count: int | None
     reason: str
     args: Mapping[str, Any] | None = None
+    code: str = "NONE"
+    request_id: int = 0
+
+    @property
+    def completed(self) -> bool:
+        return self.accepted and self.error is None
 
 
 # --------------------------------------------------------------------------------------- codec
@@ -132,9 +207,11 @@ def decode_command(dictionary: TelemetryDictionary, data: bytes) -> tuple[Comman
     Raises ``CommandFormatError``, ``InvalidOpcodeError`` or ``CommandValidationError``.
     """
     if len(data) < MIN_TC_PACKET_LEN:
-        raise CommandFormatError(f"packet of {len(data)} bytes shorter than the minimum {MIN_TC_PACKET_LEN}")
+        raise CommandFormatError(f"packet of {len(data)} bytes shorter than the minimum {MIN_TC_PACKET_LEN}",
+                                 "PACKET_TOO_SHORT")
     if len(data) > MAX_TC_PACKET_LEN:
-        raise CommandFormatError(f"packet of {len(data)} bytes longer than the maximum {MAX_TC_PACKET_LEN}")
+        raise CommandFormatError(f"packet of {len(data)} bytes longer than the maximum {MAX_TC_PACKET_LEN}",
+                                 "PACKET_TOO_LONG")
     header = SpacePacketHeader.unpack(data)
     if header.ccsds_version != 0:
         raise CommandFormatError(f"CCSDS version {header.ccsds_version}, expected 0")
@@ -145,11 +222,13 @@ def decode_command(dictionary: TelemetryDictionary, data: bytes) -> tuple[Comman
     if header.sec_header_flag:
         raise CommandFormatError("secondary header flag set; keepout TCs carry none")
     if header.apid != dictionary.tc_apid:
-        raise CommandFormatError(f"APID {header.apid:#x} is not the telecommand APID {dictionary.tc_apid:#x}")
+        raise CommandFormatError(f"APID {header.apid:#x} is not the telecommand APID {dictionary.tc_apid:#x}",
+                                 "WRONG_APID")
     if header.packet_len != len(data):
-        raise CommandFormatError(f"length field says {header.packet_len} bytes, datagram has {len(data)}")
+        raise CommandFormatError(f"length field says {header.packet_len} bytes, datagram has {len(data)}",
+                                 "LENGTH_MISMATCH")
     if crc16_ccitt(data) != 0:
-        raise CommandFormatError("CRC mismatch")
+        raise CommandFormatError("CRC mismatch", "CRC_MISMATCH")
     payload = data[CCSDS_HEADER_LEN:-CRC_LEN]
     (opcode,) = OPCODE.unpack_from(payload, 0)
     definition = dictionary.command_by_opcode(opcode)
@@ -158,15 +237,16 @@ def decode_command(dictionary: TelemetryDictionary, data: bytes) -> tuple[Comman
     try:
         raw_args, end = decode_args(definition.args, payload, OPCODE.size)
     except ArgTruncatedError as exc:
-        raise CommandFormatError(f"{definition.name}: {exc}") from None
-    except ArgError as exc:
-        raise CommandValidationError(f"{definition.name}: {exc}") from None
+        raise CommandFormatError(f"{definition.name}: {exc}", "ARGS_TRUNCATED") from None
+    except ArgError as exc:  # an enum index outside the declared names
+        raise CommandValidationError(f"{definition.name}: {exc}", "BAD_ENUM") from None
     if end != len(payload):
-        raise CommandFormatError(f"{definition.name}: {len(payload) - end} bytes after the last argument")
+        raise CommandFormatError(f"{definition.name}: {len(payload) - end} bytes after the last argument",
+                                 "TRAILING_BYTES")
     try:
         args = {arg.name: coerce_arg(arg, raw_args[arg.name]) for arg in definition.args}
     except ArgError as exc:
-        raise CommandValidationError(f"{definition.name}: {exc}") from None
+        raise CommandValidationError(f"{definition.name}: {exc}", "ARG_OUT_OF_RANGE") from None
     return definition, args, header.seq_count
 
 
@@ -195,17 +275,25 @@ class CommandDispatcher:
 
     ``port=None`` creates no socket (``handle_datagram`` only); ``port=0`` binds an ephemeral port
     (read it from ``address``). ``telemetry`` (optional) receives the COMMAND and rejection events.
+    ``security``: the uplink association every datagram must pass (None: plain packets, unit tests).
+    ``budget_s``: host time one ``poll`` may spend draining the socket (the rest waits for the next).
     """
 
-    COUNTER_NAMES = ("received", "accepted", "rejected", "invalid_opcode", "validation", "format",
-                     "execution", "seq_gaps")
+    # accepted + rejected = received; completed + failed = accepted; the five error classes add up to
+    # rejected + failed.
+    COUNTER_NAMES = ("received", "accepted", "rejected", "completed", "failed", "invalid_opcode", "validation",
+                     "format", "execution", "security", "seq_gaps", "acks_sent")
 
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, telemetry: TelemetrySender | None = None,
                  host: str = DEFAULT_HOST, port: int | None = DEFAULT_TC_PORT, *,
-                 max_packets_per_poll: int = 64) -> None:
+                 security: SecurityAssociation | None = None, budget_s: float = 0.005,
+                 rcvbuf_bytes: int | None = None) -> None:
         self.dictionary = dictionary
         self.telemetry = telemetry
-        self.max_packets_per_poll = max_packets_per_poll
+        self.security = security
+        self.budget_s = budget_s
+        self.kernel_drops = 0  # datagrams the kernel discarded (socket buffer full), never reset
+        self.budget_exhausted = 0  # polls that stopped at the budget with datagrams still queued
         self._handlers: dict[int, Handler] = {}
         self.counters: dict[str, int] = dict.fromkeys(self.COUNTER_NAMES, 0)
         self.last_opcode = 0
@@ -216,9 +304,17 @@ class CommandDispatcher:
         self._armed = False
         if port is not None:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            if rcvbuf_bytes is not None:
+                self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
+            try:
+                self._sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+            except OSError:
+                pass  # not Linux: drops cannot be counted (hk shows 0)
             self._sock.bind((host, port))
             self._sock.setblocking(False)
             self._arm()
+        if security is not None and security.resync_opcode is not None:
+            self.register(security.resync_opcode, self._cmd_resync)
 
     def _arm(self) -> None:
         """Ask for SIGIO on arrivals (see ``_on_sigio``); where that is not possible (no SIGIO, not the main
@@ -269,7 +365,7 @@ class CommandDispatcher:
 
     # ---- input ----
     def poll(self, timeout_s: float = 0.0) -> list[CommandResult]:
-        """Handle every datagram waiting on the socket (at most ``max_packets_per_poll``)."""
+        """Handle every datagram waiting on the socket, until it is empty or ``budget_s`` is spent."""
         if self._sock is None:
             return []
         results: list[CommandResult] = []
@@ -280,36 +376,50 @@ class CommandDispatcher:
             ready, _, _ = select.select([self._sock], [], [], timeout_s)
             if not ready:
                 return results
-        for _ in range(self.max_packets_per_poll):
+        start = time.perf_counter()
+        while True:
             try:
                 # Read more than the maximum so an oversized datagram is seen as oversized, not cut.
-                data = self._sock.recv(65536)
+                data, ancillary, _, _ = self._sock.recvmsg(65536, _ANC_SPACE)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError:
                 break
+            for level, kind, value in ancillary:
+                if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(value) >= _OVFL.size:
+                    self.kernel_drops = max(self.kernel_drops, _OVFL.unpack_from(value)[0])
             results.append(self.handle_datagram(data))
-        else:
-            self._maybe_readable = True  # stopped at the bound: more may be waiting
+            if len(results) % _BUDGET_CHECK_EVERY == 0 and time.perf_counter() - start > self.budget_s:
+                # Out of time with datagrams still queued: they wait for the next cycle (the kernel counts
+                # any that no longer fit), the GNC cycle keeps its deadline.
+                self.budget_exhausted += 1
+                self._maybe_readable = True
+                break
         return results
 
     def handle_datagram(self, data: bytes) -> CommandResult:
-        """Check, decode and dispatch one datagram. Never raises (except BaseException like Ctrl-C)."""
+        """Check, decode and dispatch one datagram, and acknowledge it in telemetry (TC_ACK packets: an
+        acceptance report, then for an accepted command a completion report). Never raises (except
+        BaseException like Ctrl-C)."""
         self.counters["received"] += 1
+        data = bytes(data)
+        request_id = _request_id(data)
         opcode: int | None = None
         name: str | None = None
         seq: int | None = None
         try:
+            if self.security is not None:
+                data = self._unprotect(data)
             try:
-                definition, args, seq = decode_command(self.dictionary, bytes(data))
-            except InvalidOpcodeError:
-                opcode = _peek_opcode(data)
+                definition, args, seq = decode_command(self.dictionary, data)
+            except CommandError:
+                opcode = _peek_opcode(data)  # what the packet says, for the report (0 when too short)
                 raise
             opcode, name = definition.opcode, definition.name
             self._track_sequence(seq)
             handler = self._handlers.get(opcode)
             if handler is None:
-                raise InvalidOpcodeError(f"{name} has no handler in this flight software")
+                raise InvalidOpcodeError(f"{name} has no handler in this flight software", "NO_HANDLER")
             self._event("CMD_DISPATCHED", opcode=opcode, command=name, seq=seq)
             try:
                 handler(**args)
@@ -318,24 +428,72 @@ class CommandDispatcher:
             except Exception as exc:  # noqa: BLE001 - a handler bug must not take down the task
                 raise CommandExecutionError(f"{name}: {type(exc).__name__}: {exc}") from exc
         except CommandError as exc:
-            return self._reject(exc.kind, opcode, name, seq, str(exc))
+            return self._fail(exc, opcode, name, seq, request_id, _seq_of(data) if seq is None else seq)
         except Exception as exc:  # noqa: BLE001 - last line of defence: count, never crash
-            return self._reject(FORMAT, opcode, name, seq, f"unexpected {type(exc).__name__}: {exc}")
+            failure = CommandFormatError(f"unexpected {type(exc).__name__}: {exc}")
+            return self._fail(failure, opcode, name, seq, request_id, _seq_of(data) if seq is None else seq)
+        # Handlers run to completion synchronously: acceptance (the checks and the handler's own
+        # validation passed) and completion are reported together.
         self.counters["accepted"] += 1
+        self.counters["completed"] += 1
         self.last_opcode = opcode
+        self._acknowledge("ACCEPTANCE_SUCCESS", request_id, seq, opcode)
         self._event("CMD_COMPLETED", opcode=opcode, command=name)
-        result = CommandResult(True, None, opcode, name, seq, "accepted", args)
+        self._acknowledge("COMPLETION_SUCCESS", request_id, seq, opcode)
+        result = CommandResult(True, None, opcode, name, seq, "completed", args, "NONE", request_id)
         self.last_result = result
         return result
 
-    def _reject(self, kind: str, opcode: int | None, name: str | None, seq: int | None,
-                reason: str) -> CommandResult:
-        self.counters["rejected"] += 1
+    def _unprotect(self, data: bytes) -> bytes:
+        """The plain packet inside a secured one, or CommandSecurityError. A packet that does not
+        authenticate (junk, no security header, bad MAC) is refused with ``acknowledge = False``: the flight
+        software answers only packets signed with the mission key, so a flood of junk draws no flood of
+        reports, and a forger cannot fake a rejection of the ground's own command."""
+        try:
+            return self.security.unprotect(data)[0]
+        except SecurityError as exc:
+            code = {LINK_FORMAT: "CRC_MISMATCH"}.get(exc.reason, exc.reason.upper())
+            raise CommandSecurityError(f"{exc.reason}: {exc}", code,
+                                       acknowledge=exc.reason in (REPLAY, OUTSIDE_WINDOW)) from None
+
+    def _cmd_resync(self) -> None:
+        """SEC_RESYNC: the link already moved the window to this command's SN; say so."""
+        self._event("SEC_RESYNCED", sn=self.security.last_sn)
+
+    def _fail(self, exc: CommandError, opcode: int | None, name: str | None, seq: int | None,
+              request_id: int, ack_seq: int) -> CommandResult:
+        """A failure: an execution error fails an accepted command (completion failure); any other error
+        rejects the command (acceptance failure: nothing changed on board)."""
+        kind, code, reason = exc.kind, exc.code, str(exc)
+        if not getattr(exc, "acknowledge", True):
+            request_id = -1  # not answered (see _unprotect)
         self.counters[kind.lower()] += 1
+        accepted = kind == EXECUTION
+        if accepted:
+            self.counters["accepted"] += 1
+            self.counters["failed"] += 1
+            self._acknowledge("ACCEPTANCE_SUCCESS", request_id, ack_seq, opcode)
+        else:
+            self.counters["rejected"] += 1
         self._event("CMD_REJECTED", opcode=opcode or 0, error=kind, reason=reason)
-        result = CommandResult(False, kind, opcode, name, seq, reason)
+        if request_id >= 0:
+            self._acknowledge("COMPLETION_FAILURE" if accepted else "ACCEPTANCE_FAILURE", request_id, ack_seq,
+                              opcode, code)
+        result = CommandResult(accepted, kind, opcode, name, seq, reason, None, code, request_id)
         self.last_result = result
         return result
+
+    def _acknowledge(self, report: str, request_id: int, seq: int, opcode: int | None, code: str = "NONE") -> None:
+        """Send one verification report (a TC_ACK packet: never throttled, unlike events)."""
+        if self.telemetry is None:
+            return
+        values = {"ack_report": report, "ack_request_id": request_id, "ack_tc_seq": seq,
+                  "ack_opcode": opcode or 0, "ack_code": code}
+        try:
+            self.telemetry.send_channels("TC_ACK", values)  # stamped by the telemetry clock: onboard time
+            self.counters["acks_sent"] += 1
+        except Exception:  # noqa: BLE001 - reporting must never turn a command into a crash
+            pass
 
     def _track_sequence(self, seq: int) -> None:
         # The ground counts TCs per APID too; a jump means an uplinked command never arrived.
@@ -355,13 +513,35 @@ class CommandDispatcher:
     def hk_values(self) -> dict[str, int]:
         """The dispatcher's housekeeping channels, named as in the dictionary's HK packet."""
         c = self.counters
-        return {"tc_accepted": c["accepted"], "tc_rejected": c["rejected"],
+        return {"tc_accepted": c["accepted"], "tc_rejected": c["rejected"], "tc_completed": c["completed"],
+                "tc_failed": c["failed"],
                 "tc_invalid_opcode": c["invalid_opcode"], "tc_validation_errors": c["validation"],
                 "tc_format_errors": c["format"], "tc_execution_errors": c["execution"],
-                "tc_last_opcode": self.last_opcode}
+                "tc_last_opcode": self.last_opcode, **self.security_hk_values()}
+
+    def security_hk_values(self) -> dict[str, int]:
+        """Link-security and uplink-loss channels: never reset by RESET_COUNTERS (the evidence stays)."""
+        sa = self.security
+        values = {f"tc_sec_{reason}": (sa.counters[reason] if sa is not None else 0) for reason in SECURITY_REASONS}
+        values.update(tc_sec_resyncs=sa.resyncs if sa is not None else 0,
+                      tc_sec_last_sn=sa.last_sn if sa is not None else 0,
+                      tc_uplink_dropped=self._read_kernel_drops(), tc_uplink_deferred=self.budget_exhausted)
+        return values
 
     def reset_counters(self) -> None:
         self.counters = dict.fromkeys(self.COUNTER_NAMES, 0)
+
+    def _read_kernel_drops(self) -> int:
+        """The kernel's drop count for the uplink socket, including drops no datagram has reported yet."""
+        if self._sock is not None:
+            try:
+                info = self._sock.getsockopt(socket.SOL_SOCKET, SO_MEMINFO, 4 * (_MEMINFO_DROPS + 1))
+                if len(info) >= 4 * (_MEMINFO_DROPS + 1):
+                    drops = _OVFL.unpack_from(info, 4 * _MEMINFO_DROPS)[0]
+                    self.kernel_drops = max(self.kernel_drops, drops)
+            except OSError:
+                pass  # older kernel: the per-datagram SO_RXQ_OVFL count alone
+        return self.kernel_drops
 
     @property
     def address(self) -> tuple[str, int] | None:
@@ -382,6 +562,16 @@ class CommandDispatcher:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _request_id(data: bytes) -> int:
+    """PUS request id: the first four octets of the telecommand (zero-padded when shorter)."""
+    return int.from_bytes(data[:4].ljust(4, b"\0"), "big")
+
+
+def _seq_of(data: bytes) -> int:
+    """The sequence count field of a packet that may not decode (0 when too short to hold one)."""
+    return int.from_bytes(data[2:4], "big") & MAX_SEQ_COUNT if len(data) >= 4 else 0
 
 
 def _peek_opcode(data: bytes) -> int | None:

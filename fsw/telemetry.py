@@ -10,6 +10,7 @@ ground monitor; the wire format is described in ``fsw.dictionary``.
 from __future__ import annotations
 
 import collections
+import ipaddress
 import math
 import socket
 import struct
@@ -46,6 +47,7 @@ from fsw.dictionary import (
     packet_struct,
     vector_groups,
 )
+from fsw.link_security import SecurityAssociation
 
 SEQ_MODULO = MAX_SEQ_COUNT + 1  # 16384
 
@@ -56,7 +58,16 @@ def crc16_ccitt(data: bytes | bytearray) -> int:
 
 
 class TelemetryDecodeError(ValueError):
-    """A received telemetry packet is malformed (message says why)."""
+    """A received telemetry packet is malformed (message says why; ``kind`` classifies it for the ground's
+    counters: one of ``DECODE_ERROR_KINDS``)."""
+
+    def __init__(self, message: str, kind: str = "MALFORMED") -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+# How the ground classifies packets it cannot decode (counted per kind, shown in the monitor).
+DECODE_ERROR_KINDS = ("TRUNCATED", "MALFORMED", "CRC_MISMATCH", "UNKNOWN_APID", "UNKNOWN_EVENT")
 
 
 # ------------------------------------------------------------------------------------- encoding
@@ -173,23 +184,24 @@ def decode_tm_packet(dictionary: TelemetryDictionary, raw: bytes | bytearray | m
     raw = bytes(raw)
     min_len = CCSDS_HEADER_LEN + TM_SECONDARY_HEADER.size + CRC_LEN
     if len(raw) < min_len:
-        raise TelemetryDecodeError(f"packet of {len(raw)} bytes shorter than the minimum {min_len}")
+        raise TelemetryDecodeError(f"packet of {len(raw)} bytes shorter than the minimum {min_len}", "TRUNCATED")
     version, packet_type, apid, seq_count, packet_len = primary_header_fields(raw)
     if packet_type != _TM_TYPE:
         raise TelemetryDecodeError("packet type is TC, expected TM")
     if version != 0:
         raise TelemetryDecodeError(f"CCSDS version {version}, expected 0")
     if packet_len != len(raw):
-        raise TelemetryDecodeError(f"length field says {packet_len} bytes, datagram has {len(raw)}")
+        raise TelemetryDecodeError(f"length field says {packet_len} bytes, datagram has {len(raw)}",
+                                   "TRUNCATED" if packet_len > len(raw) else "MALFORMED")
     if crc16_ccitt(raw) != 0:  # CRC over data + its own CRC is zero for this CRC
-        raise TelemetryDecodeError("CRC mismatch")
+        raise TelemetryDecodeError("CRC mismatch", "CRC_MISMATCH")
     (time_s,) = TM_SECONDARY_HEADER.unpack_from(raw, CCSDS_HEADER_LEN)
     payload = raw[CCSDS_HEADER_LEN + TM_SECONDARY_HEADER.size:-CRC_LEN]
     if apid == dictionary.event_apid:
         return _decode_event(dictionary, apid, seq_count, time_s, payload)
     packet = dictionary.packet_by_apid(apid)
     if packet is None:
-        raise TelemetryDecodeError(f"unknown APID {apid:#x}")
+        raise TelemetryDecodeError(f"unknown APID {apid:#x}", "UNKNOWN_APID")
     layout = _channel_layout(packet)
     if len(payload) != layout.struct.size:
         raise TelemetryDecodeError(f"{packet.name}: payload {len(payload)} bytes, dictionary says {layout.struct.size}")
@@ -204,11 +216,11 @@ def decode_tm_packet(dictionary: TelemetryDictionary, raw: bytes | bytearray | m
 def _decode_event(dictionary: TelemetryDictionary, apid: int, seq_count: int, time_s: float,
                   payload: bytes) -> DecodedTm:
     if len(payload) < 3:
-        raise TelemetryDecodeError("event payload shorter than id + severity")
+        raise TelemetryDecodeError("event payload shorter than id + severity", "TRUNCATED")
     event_id, severity_code = struct.unpack_from("!HB", payload, 0)
     event = dictionary.event_by_id(event_id)
     if event is None:
-        raise TelemetryDecodeError(f"unknown event id {event_id}")
+        raise TelemetryDecodeError(f"unknown event id {event_id}", "UNKNOWN_EVENT")
     try:
         severity = Severity.from_code(severity_code)
         args, end = decode_args(event.args, payload, 3)
@@ -250,6 +262,15 @@ def _wire_value(channel: Channel, value: Any) -> Any:
     else:
         low, high = _INT_LIMITS[t]
     return _saturate(value, low, high)
+
+
+_F32_MAX = 3.4028234663852886e38
+
+
+def _f32(value: float) -> float:
+    """``value`` as float32 can hold it: beyond the largest float32, +-inf (what IEEE conversion gives),
+    instead of struct's OverflowError."""
+    return math.copysign(math.inf, value) if math.isfinite(value) and abs(value) > _F32_MAX else value
 
 
 def _saturate(value: Any, low: int, high: int) -> int:
@@ -324,15 +345,21 @@ class TelemetrySender:
 
     ``host``/``port`` is the ground destination; ``port=None`` records without sending (unit tests,
     replay). The socket binds to ``bind_host`` (loopback when the destination is on loopback, so a
-    default flight build never listens on an external interface). ``clock`` gives the onboard time in
+    default flight build never listens on an external interface). A multicast ``host`` (224.0.0.0/4) is
+    sent on the interface of ``multicast_interface`` with TTL ``multicast_ttl`` and loopback on, so every
+    ground client that joined the group there receives each packet. ``clock`` gives the onboard time in
     seconds stamped into packets when the caller passes no ``time_s`` (lockstep flight code passes
-    the simulated time).
+    the simulated time). ``security``: the downlink association (``fsw.link_security``) that signs
+    every packet before it is sent (None: plain packets).
     """
 
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, host: str = DEFAULT_HOST,
                  port: int | None = DEFAULT_TM_PORT, *, bind_host: str | None = None,
-                 clock: Callable[[], float] = time.monotonic, event_history: int = 512) -> None:
+                 clock: Callable[[], float] = time.monotonic, event_history: int = 512,
+                 multicast_interface: str = DEFAULT_HOST, multicast_ttl: int = 0,
+                 security: SecurityAssociation | None = None) -> None:
         self.dictionary = dictionary
+        self.security = security
         self.destination = (host, port) if port is not None else None
         self.clock = clock
         self._latest: dict[str, list[Any]] = {
@@ -355,6 +382,15 @@ class TelemetrySender:
         self._sock: socket.socket | None = None
         if self.destination is not None:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            if _is_multicast(host):
+                # Fan-out to any number of ground clients: they join the group on ``multicast_interface``.
+                # Loop on, so clients on this host receive it; TTL 0 keeps it on this host by default.
+                self._sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF,
+                                      socket.inet_aton(multicast_interface))
+                self._sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, multicast_ttl)
+                self._sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+                if bind_host is None:
+                    bind_host = multicast_interface
             if bind_host is None:
                 bind_host = DEFAULT_HOST if _is_loopback(host) else "0.0.0.0"
             self._sock.bind((bind_host, 0))
@@ -412,15 +448,22 @@ class TelemetrySender:
         """Update ``values`` and send the whole packet; channels not given keep their last value.
 
         Unknown names raise ``DictionaryError`` (a programming error); numeric values never raise:
-        integers saturate at their type's range. Returns the packet bytes.
+        integers saturate at their type's range, F32 values beyond float32 become +-inf. Returns the
+        packet bytes.
         """
         if values:
             self.update(packet_name, values)
         packet = self.dictionary.packet(packet_name)
-        payload = self._structs[packet_name].pack(*self._latest[packet_name])
+        latest = self._latest[packet_name]
+        try:
+            payload = self._structs[packet_name].pack(*latest)
+        except OverflowError:  # an F32 channel beyond float32 (found by bench/fuzz.py): saturate, then pack
+            for i, channel in enumerate(packet.channels):
+                if channel.type == "F32":
+                    latest[i] = _f32(latest[i])
+            payload = self._structs[packet_name].pack(*latest)
         raw = _frame(packet.apid, self._next_seq(packet.apid), self._time(time_s), payload)
-        self._transmit(raw)
-        return raw
+        return self._transmit(raw)
 
     def latest(self, packet_name: str) -> dict[str, Any]:
         """The values the next packet would carry (wire types: enums as indices)."""
@@ -457,6 +500,8 @@ class TelemetrySender:
             if arg.name not in args:
                 raise DictionaryError(f"event {event.name}: missing arg {arg.name!r}")
             value = coerce_arg(arg, args[arg.name], check_range=False)
+            if arg.type == "F32":
+                value = _f32(value)
             if arg.type in _INT_LIMITS:
                 low, high = _INT_LIMITS[arg.type]
                 value = min(max(value, low), high)
@@ -502,20 +547,24 @@ class TelemetrySender:
         """The sequence count the next packet on ``apid`` will carry."""
         return self._seq[apid]
 
-    def _transmit(self, raw: bytes) -> None:
+    def _transmit(self, raw: bytes) -> bytes:
+        """Sign (with a security association) and send one packet; returns the bytes sent."""
+        if self.security is not None:
+            raw = self.security.protect(raw)
         if self._sock is None or self.destination is None:
             self.counters["packets_sent"] += 1
             self.counters["bytes_sent"] += len(raw)
-            return
+            return raw
         try:
             self._sock.sendto(raw, self.destination)
         except OSError:
             # A full socket buffer or an unreachable ground must not stop the flight software; the
             # ground sees the gap in the sequence count, and the count shows in housekeeping.
             self.counters["send_errors"] += 1
-            return
+            return raw
         self.counters["packets_sent"] += 1
         self.counters["bytes_sent"] += len(raw)
+        return raw
 
     def reset_counters(self) -> None:
         for key in self.counters:
@@ -539,3 +588,10 @@ class TelemetrySender:
 
 def _is_loopback(host: str) -> bool:
     return host.startswith("127.") or host in ("localhost", "::1")
+
+
+def _is_multicast(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_multicast
+    except ValueError:  # a host name: never a group
+        return False

@@ -1,6 +1,9 @@
-"""``keepout campaign run|rerun|baseline save|compare|shrink``.
+"""``keepout campaign run|rerun|report|baseline save|compare|shrink``.
 
 Top-level imports stay light: every ``keepout`` start imports this module to build the parser.
+
+Exit codes of ``run`` and ``report``: 0 PASS, 1 FAIL, 2 not started (bad input), 4 INCONCLUSIVE (no run
+failed, but too few runs to show the required success probability), 130 interrupted.
 """
 from __future__ import annotations
 
@@ -10,14 +13,17 @@ import sys
 from pathlib import Path
 
 DEFAULT_BASELINES = Path("config") / "campaigns" / "baselines"
+EXIT_CODES = ("exit codes of run and report: 0 PASS, 1 FAIL, 2 not started, 4 INCONCLUSIVE (no failure, but "
+              "too few runs to show the required success probability), 130 interrupted")
 
 
 def add_cli(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("campaign", help="dispersed Monte Carlo campaigns: run, rerun, baselines, shrink",
-                              description="Dispersed campaigns of a mission (config/campaigns/*.yaml).")
+                              description="Dispersed campaigns of a mission (config/campaigns/*.yaml).",
+                              epilog=EXIT_CODES)
     sub = p.add_subparsers(dest="campaign_command", metavar="ACTION")
 
-    run = sub.add_parser("run", help="run a campaign (resumable)")
+    run = sub.add_parser("run", help="run a campaign (resumable)", epilog=EXIT_CODES)
     run.add_argument("campaign", help="campaign YAML, e.g. config/campaigns/regression.yaml")
     run.add_argument("--runs", type=int, help="number of runs (default: the campaign's)")
     run.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
@@ -34,6 +40,11 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
     rerun.add_argument("campaign", help="a campaign output folder (or a campaign YAML: its newest folder)")
     rerun.add_argument("--run", type=int, required=True, help="run index")
     rerun.set_defaults(func=_cmd_rerun)
+
+    rep = sub.add_parser("report", help="regenerate the tables, JUnit XML and report of a campaign folder",
+                         epilog=EXIT_CODES)
+    rep.add_argument("campaign", help="a campaign output folder (or a campaign YAML: its newest folder)")
+    rep.set_defaults(func=_cmd_report)
 
     base = sub.add_parser("baseline", help="store a campaign's results as the baseline")
     bsub = base.add_subparsers(dest="baseline_command", metavar="ACTION")
@@ -62,7 +73,7 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
 
 def _console():
     from rich.console import Console
-    return Console(stderr=True)
+    return Console(stderr=True, soft_wrap=True)  # messages stay one line (pasted paths and commands)
 
 
 def plan_from_results(results_dir: Path, **kw):
@@ -114,13 +125,32 @@ def _cmd_run(args: argparse.Namespace) -> int:
         console.print(f"[yellow]interrupted: {len(outcome.records)} finished runs kept in {out}; "
                       f"`keepout campaign run {args.campaign} --out {out}` resumes[/yellow]")
     results = finalize(plan, out, outcome.records, report=not args.no_report)
+    code = _print_results(console, results)
+    return 130 if outcome.interrupted else code
+
+
+def _print_results(console, results) -> int:
     verdict = results["verdict"]
-    console.print(("[green]" if verdict.passed else "[red]") + verdict.text())
+    colour = "[green]" if verdict.passed else ("[yellow]" if verdict.inconclusive else "[red]")
+    console.print(colour + verdict.text())
     console.print(f"results: {results['parquet']}, {results['csv']}, {results['junit']}"
                   + (f", {results['report']['html']}" if "report" in results else ""))
-    if outcome.interrupted:
-        return 130
-    return 0 if verdict.passed else 1
+    return verdict.exit_code
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from hil_sim.campaign.runner import finalize, load_records
+    console = _console()
+    try:
+        out, plan = _folder_and_plan(args.campaign)
+    except ValueError as exc:
+        console.print(f"[red]no report:[/red] {exc}")
+        return 2
+    records = load_records(out)
+    if not records:
+        console.print(f"[red]no report:[/red] {out} holds no finished run (runs/run-*.json)")
+        return 2
+    return _print_results(console, finalize(plan, out, records))
 
 
 def _run_with_progress(plan, out, workers, scheduler, console):
@@ -143,8 +173,11 @@ def _cmd_rerun(args: argparse.Namespace) -> int:
     from hil_sim.campaign.execute import execute_run
     from hil_sim.campaign.runner import load_records
     console = _console()
-    out = _results_dir(args.campaign)
-    plan = plan_from_results(out)
+    try:
+        out, plan = _folder_and_plan(args.campaign, args.run)
+    except ValueError as exc:
+        console.print(f"[red]not rerun:[/red] {exc}")
+        return 2
     stored = {r.run: r for r in load_records(out)}.get(args.run)
     record = execute_run(plan, args.run)
     console.print(f"run {args.run}: {record.status}  metrics {record.metrics}")
@@ -165,28 +198,65 @@ def _cmd_rerun(args: argparse.Namespace) -> int:
     return 0
 
 
+def _folder_and_plan(arg: str, run: int | None = None):
+    """(output folder, plan) of a campaign folder or YAML; a ``ValueError`` with one clear line otherwise,
+    also when ``run`` is not one of the campaign's run indices."""
+    from hil_sim.yaml_loader import ConfigError
+    try:
+        out = _results_dir(arg)
+        if not (out / "plan.json").is_file():
+            raise FileNotFoundError(f"{out} is not a campaign output folder (no plan.json)")
+        plan = plan_from_results(out)
+    except (OSError, RuntimeError, KeyError, ConfigError) as exc:
+        raise ValueError(str(exc)) from None
+    runs = plan.campaign.runs
+    if run is not None and not 0 <= run < runs:
+        raise ValueError(f"run {run} is not a run of {out}: campaign {plan.campaign.name} has runs 0 to {runs - 1}")
+    return out, plan
+
+
 def _baseline_dir(results: Path, given: Path | None) -> Path:
     if given:
         return given
-    name = json.loads((results / "plan.json").read_text())["campaign"]
+    plan = results / "plan.json"
+    if not plan.is_file():
+        raise FileNotFoundError(f"{results} is not a campaign output folder (no plan.json)")
+    name = json.loads(plan.read_text())["campaign"]
     return DEFAULT_BASELINES / name
 
 
 def _cmd_baseline_save(args: argparse.Namespace) -> int:
     from hil_sim.campaign.baseline import save_baseline
-    dest = save_baseline(args.results, _baseline_dir(args.results, args.to))
+    try:
+        dest = save_baseline(args.results, _baseline_dir(args.results, args.to))
+    except (OSError, ValueError, KeyError) as exc:
+        print(f"baseline not saved: {exc}", file=sys.stderr)
+        return 2
     _console().print(f"baseline saved to {dest}")
     return 0
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     import pandas as pd
-    from hil_sim.campaign.baseline import compare, load_baseline
+    from hil_sim.campaign.baseline import better_sides, compare, load_baseline
+    from hil_sim.campaign.fast import metric_better
     from hil_sim.campaign.spec import load_campaign
-    base_df, meta = load_baseline(_baseline_dir(args.results, args.baseline))
-    campaign = load_campaign(args.results / "campaign.yaml")
-    new_df = pd.read_parquet(args.results / "results.parquet")
-    result = compare(base_df, new_df, campaign.baseline)
+    from hil_sim.yaml_loader import ConfigError
+    try:
+        if not (args.results / "plan.json").is_file():
+            raise FileNotFoundError(f"{args.results} is not a campaign output folder (no plan.json)")
+        base_df, meta = load_baseline(_baseline_dir(args.results, args.baseline))
+        campaign = load_campaign(args.results / "campaign.yaml")
+        table = args.results / "results.parquet"
+        if not table.is_file():
+            raise FileNotFoundError(f"{args.results} has no results.parquet: run the campaign (or "
+                                    f"`keepout campaign report {args.results}`) first")
+        new_df = pd.read_parquet(table)
+    except (OSError, ValueError, KeyError, ConfigError) as exc:
+        print(f"no comparison: {exc}", file=sys.stderr)
+        return 2
+    known = {c[2:]: metric_better(c[2:]) for c in new_df.columns if c.startswith("m.") and metric_better(c[2:])}
+    result = compare(base_df, new_df, campaign.baseline, better=better_sides(campaign.criteria, known))
     print(f"baseline: {meta.get('source')} ({meta.get('runs_in_table')} runs); new: {args.results} ({len(new_df)} runs)")
     print(result.text())
     return 1 if result.regressed else 0
@@ -195,8 +265,11 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 def _cmd_shrink(args: argparse.Namespace) -> int:
     import yaml
     from hil_sim.campaign.shrink import shrink_run, shrunk_mission
-    out = _results_dir(args.campaign)
-    plan = plan_from_results(out)
+    try:
+        out, plan = _folder_and_plan(args.campaign, args.run)
+    except ValueError as exc:
+        print(f"not shrunk: {exc}", file=sys.stderr)
+        return 2
     try:
         result = shrink_run(plan, args.run, max_evaluations=args.max_evaluations,
                             criteria=set(args.criterion) if args.criterion else None)

@@ -3,7 +3,7 @@
 State of one run, 7 + N numbers: ``q_NB`` (4, scalar-first Hamilton, rotates body vectors into N),
 ``omega_BN_B`` (3, rad/s), ``Omega`` (N, wheel speed relative to the body about its axis g_i, rad/s).
 
-Equations (the same as Basilisk's BalancedWheels, see ../shared/reference/basilisk/rw_reference_inputs.json):
+Equations (the same as Basilisk's BalancedWheels, see tests/data/basilisk/rw_reference_inputs.json):
   I_s omega_dot = -omega x (I omega + sum_i Js_i Omega_i g_i) - sum_i g_i u_i + tau_ext
   Omega_dot_i   = u_i / Js_i - g_i . omega_dot
   q_dot         = 1/2 A(q) omega,  A = [-q_v^T; eta I + q_v^x]

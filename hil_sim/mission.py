@@ -23,15 +23,25 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validat
 
 from fsw.config import FswConfig
 from fsw.dictionary import FDIR_MONITORS
+from keepout_config import config_path
 
 if TYPE_CHECKING:
     from hil_sim.params import WorldParams
+    from hil_sim.yaml_loader import Marked
 
 SCHEMA_VERSION = 1
 MAX_WHEELS = 6  # RW1..RW6 in config/icd/keepout.dbc
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
-Matrix3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
+
+
+def bounded_vec3(limit: float) -> Any:
+    """A 3-vector whose components lie in [-limit, limit] (a physical range: NaN, inf and 1e300 are refused)."""
+    return Annotated[list[Annotated[float, Field(ge=-limit, le=limit)]], Field(min_length=3, max_length=3)]
+
+
+MAX_INERTIA_KGM2 = 1e9  # the ISS is ~1e8 kg m^2
+Matrix3 = Annotated[list[bounded_vec3(MAX_INERTIA_KGM2)], Field(min_length=3, max_length=3)]
 UnitVec3 = Annotated[list[float], Field(min_length=3, max_length=3,
                                         description="direction (normalised on load)"),
                      AfterValidator(lambda v: _unit_vector(v))]
@@ -40,11 +50,15 @@ UnitQuat = Annotated[list[float], Field(min_length=4, max_length=4,
                      AfterValidator(lambda v: _unit_quaternion(v))]
 
 FdirMonitor = Literal[FDIR_MONITORS]  # type: ignore[valid-type]  (the telemetry dictionary's monitors)
-BUS_PATTERN = r"^(auto|socketcan(:[A-Za-z0-9_]+)?|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?)$"
+# auto, the loopback transports, or any python-can interface as INTERFACE:CHANNEL[,KEY=VALUE...] (checked
+# further by fsw.bus.transport.resolve_spec when the run starts)
+BUS_PATTERN = (r"^(auto|socketcan(:[A-Za-z0-9_]+)?|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?"
+               r"|[a-z0-9_]+:[^\s,]+(,[A-Za-z_][A-Za-z0-9_]*=[^\s,]+)*)$")
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_default=True)
+    # allow_inf_nan=False: NaN and inf never reach the truth models (they would crash a run mid-way)
+    model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False)
 
 
 def _unit_vector(values: list[float], what: str = "a direction") -> list[float]:
@@ -88,10 +102,12 @@ class ImuTruth(_Model):
     bias_random_walk_rad_s_per_sqrt_s: float = Field(
         1e-7, ge=0, le=1e-3, description="bias random walk: std of the bias change over dt is this * sqrt(dt) "
         "[rad/s/sqrt(s)]")
-    bias_B_rad_s: Vec3 = Field([0.0, 0.0, 0.0], description="gyro bias at t=0 in body axes [rad/s]")
+    bias_B_rad_s: bounded_vec3(0.1) = Field([0.0, 0.0, 0.0], description="gyro bias at t=0 in body axes "
+                                            "[rad/s], each within +-0.1 rad/s (5.7 deg/s)")
     bias_turn_on_std_rad_s: float = Field(4.8e-6, ge=0, le=1e-2, description="random turn-on bias added to "
                                           "bias_B_rad_s, 1-sigma per axis [rad/s]")
-    scale_factor_ppm: Vec3 = Field([0.0, 0.0, 0.0], description="scale-factor error per axis [ppm]")
+    scale_factor_ppm: bounded_vec3(1e5) = Field([0.0, 0.0, 0.0], description="scale-factor error per axis "
+                                                "[ppm], each within +-1e5 ppm (10 %)")
     quantisation_rad_s: float = Field(1e-7, ge=0, le=1e-2, description="output resolution [rad/s]")
     saturation_rad_s: float = Field(0.35, gt=0, le=20, description="measurement range per axis [rad/s]")
 
@@ -113,7 +129,8 @@ class StarTrackerTruth(_Model):
 class Disturbance(_Model):
     """External torque on the spacecraft: constant plus first-order Gauss-Markov per body axis."""
 
-    constant_B_Nm: Vec3 = Field([0.0, 0.0, 0.0], description="constant torque in body axes [N m]")
+    constant_B_Nm: bounded_vec3(1.0) = Field([0.0, 0.0, 0.0], description="constant torque in body axes [N m], "
+                                             "each within +-1 N m")
     random_std_Nm: float = Field(0.0, ge=0, le=1, description="stationary 1-sigma of the random part [N m]")
     random_correlation_time_s: float = Field(60.0, ge=0, le=1e6, description="its correlation time [s] "
                                              "(0: white, redrawn every integration step)")
@@ -166,8 +183,9 @@ class InitialState(_Model):
     """Truth state at t = 0."""
 
     q_NB: UnitQuat = Field(description="attitude, scalar first; rotates body vectors into N")
-    omega_BN_B_rad_s: Vec3 = Field([0.0, 0.0, 0.0], description="body rate [rad/s]")
-    wheel_speeds_rad_s: list[float] | None = Field(None, description="one per wheel [rad/s]; default all zero")
+    omega_BN_B_rad_s: bounded_vec3(1.0) = Field([0.0, 0.0, 0.0], description="body rate [rad/s], each "
+                                                "component within +-1 rad/s (57 deg/s)")
+    wheel_speeds_rad_s: list[Annotated[float, Field(ge=-1000, le=1000)]] | None = Field(None, description="one per wheel [rad/s]; default all zero")
 
 
 
@@ -175,8 +193,12 @@ class InitialState(_Model):
 # Ground timeline (telecommands sent by the ground monitor at simulated times)
 # ---------------------------------------------------------------------------------------------
 
+RaDec = Annotated[tuple[Annotated[float, Field(ge=0, le=360)], Annotated[float, Field(ge=-90, le=90)]],
+                  Field(description="[right ascension in [0, 360], declination in [-90, 90]] [deg]")]
+
+
 class _Timed(_Model):
-    t_s: float = Field(ge=0, description="simulated time at which the ground sends the telecommand [s]")
+    t_s: float = Field(ge=0, le=10 * 86400, description="simulated time at which the ground sends the telecommand [s]")
 
 
 class SetModeCommand(_Timed):
@@ -188,9 +210,11 @@ class SetTargetCommand(_Timed):
     """A new target: a pointing direction (POINTING) or an attitude (QUATERNION)."""
 
     command: Literal["SET_TARGET"]
-    target_N: Vec3 | None = Field(None, description="boresight target direction in N (POINTING)")
-    ra_dec_deg: Annotated[list[float], Field(min_length=2, max_length=2)] | None = Field(
-        None, description="target as [right ascension, declination] [deg] (POINTING)")
+    target_N: bounded_vec3(1e6) | None = Field(None, description="boresight target direction in N (POINTING), "
+                                               "normalised when used")
+    ra_dec_deg: RaDec | None = Field(
+        None, description="target as [right ascension, declination] [deg] (POINTING): RA in [0, 360], "
+        "Dec in [-90, 90]")
     q_target_NB: UnitQuat | None = Field(None, description="target attitude (QUATERNION)")
 
     def target_direction_N(self) -> np.ndarray | None:
@@ -203,8 +227,8 @@ class SetTargetCommand(_Timed):
 
 class SetGainsCommand(_Timed):
     command: Literal["SET_GAINS"]
-    k1: float | None = Field(None, gt=0)
-    kappa: float | None = Field(None, gt=0)
+    k1: float | None = Field(None, gt=0, le=100)
+    kappa: float | None = Field(None, gt=0, le=100)
     eps: float | None = Field(None, gt=0, lt=1)
     rate_limit_deg_s: float | None = Field(None, gt=0, le=30)
 
@@ -226,8 +250,8 @@ class BusFault(_Model):
 
     kind: Literal["drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent"]
     message: str = Field(description="DBC message name, e.g. IMU_RATE, ST_QUAT_A, RW2_STATUS")
-    start_s: float = Field(ge=0, description="start of the fault window, simulated time [s]")
-    end_s: float = Field(gt=0, description="end of the fault window, simulated time [s]")
+    start_s: float = Field(ge=0, le=10 * 86400, description="start of the fault window, simulated time [s]")
+    end_s: float = Field(gt=0, le=10 * 86400, description="end of the fault window, simulated time [s]")
     delay_s: float | None = Field(None, gt=0, le=10, description="for kind=delay: extra latency [s]")
     bit: int | None = Field(None, ge=0, le=63, description="for kind=corrupt: which payload bit to flip")
     probability: float = Field(1.0, gt=0, le=1, description="fraction of the frames in the window affected")
@@ -236,11 +260,11 @@ class BusFault(_Model):
 class Requirements(_Model):
     """What a run must achieve to pass (judged on truth by the simulator, not on the FSW's view)."""
 
-    min_keepout_margin_deg: float = Field(0.0, description="every zone's minimum signed margin must exceed "
+    min_keepout_margin_deg: float = Field(0.0, ge=-90, le=90, description="every zone's minimum signed margin must exceed "
                                           "this [deg] (0: never inside a physical zone)")
     settling_tolerance_deg: float = Field(0.05, gt=0, le=10, description="settled when the truth pointing "
                                           "(or attitude) error stays below this [deg]")
-    max_settling_time_s: float | None = Field(None, gt=0, description="after the last target command [s]")
+    max_settling_time_s: float | None = Field(None, gt=0, le=10 * 86400, description="after the last target command [s]")
     max_final_pointing_error_deg: float = Field(0.05, gt=0, le=180, description="truth error at the end [deg]")
     max_wheel_speed_fraction: float = Field(0.9, gt=0, le=1, description="peak |wheel speed| / its limit")
     max_body_rate_fraction: float = Field(1.05, gt=0, le=10, description="peak true |omega| / the configured "
@@ -267,11 +291,20 @@ class Mission(_Model):
     duration_s: float = Field(gt=0, le=10 * 86400, description="simulated duration [s]")
     seed: int = Field(0, ge=0, le=2**32 - 1, description="seed of every random process in the truth models")
     bus: str = Field("auto", pattern=BUS_PATTERN, description="auto (socketcan on vcan0 when it exists, else "
-                     "udp_multicast) | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL]")
+                     "udp_multicast) | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL] | "
+                     "INTERFACE:CHANNEL[,KEY=VALUE...] for a python-can hardware interface (pcan:PCAN_USBBUS1, "
+                     "kvaser:0, slcan:/dev/ttyACM0, ...)")
+    bus_bitrate_bps: int = Field(500000, ge=10000, le=1000000, description="CAN bit rate [bit/s] a hardware "
+                                 "interface (pcan, kvaser, vector, slcan, ...) is opened with; SocketCAN takes the "
+                                 "kernel's setting, the loopback transports have none")
     tmtc_ports: Literal["auto", "fixed"] = Field(
         "auto", description="auto: the SIL picks free UDP ports for telemetry and telecommands for each run "
         "(parallel runs never collide) and writes them into the config it saves; fixed: use "
         "flight_software.tmtc as given")
+    telemetry_link: Literal["multicast", "unicast"] = Field(
+        "multicast", description="multicast: the flight software sends telemetry to a per-run multicast group on "
+        "loopback, which the SIL's ground and any number of attached ground clients join (`keepout ground --run`); "
+        "unicast: to flight_software.tmtc.telemetry_host only, as to a real ground station (one receiver)")
     simulation: Simulation = Field(default_factory=Simulation)
     spacecraft: SpacecraftTruth
     orbit: Orbit
@@ -401,6 +434,11 @@ def ra_dec_to_unit(ra_deg: float, dec_deg: float) -> np.ndarray:
 
 def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
     """Load and validate a mission file; raise yaml_loader.ConfigError listing every problem."""
+    return load_mission_marked(path, text=text)[0]
+
+
+def load_mission_marked(path: str | Path, *, text: str | None = None) -> tuple[Mission, "Marked"]:
+    """`load_mission`, plus the file's key positions (to place later findings at file:line:col)."""
     from hil_sim.yaml_loader import ConfigError, Problem, load_marked, problems_from_validation
     from pydantic import ValidationError
 
@@ -412,7 +450,7 @@ def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
     problems = [Problem(doc.file, *doc.mark_for(loc), _path(loc), msg) for loc, msg in mission.semantic_problems()]
     if problems:
         raise ConfigError(problems)
-    return mission
+    return mission, doc
 
 
 def _path(loc: tuple[str | int, ...]) -> str:
@@ -420,7 +458,7 @@ def _path(loc: tuple[str | int, ...]) -> str:
     return format_path(loc)
 
 
-SCHEMA_PATH = Path(__file__).resolve().parent.parent / "config" / "schema" / "mission.schema.json"
+SCHEMA_PATH = config_path("schema", "mission.schema.json")
 DRAFT07 = "http://json-schema.org/draft-07/schema#"
 
 

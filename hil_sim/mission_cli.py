@@ -63,38 +63,57 @@ def _schema(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from hil_sim.mission import load_mission
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission import load_mission_marked
+    from hil_sim.physics_checks import check_mission
+    from hil_sim.yaml_loader import ConfigError, ConfigFileError
 
     status = 0
     for path in args.files:
         try:
-            load_mission(path)
+            mission, doc = load_mission_marked(path)
         except ConfigError as exc:
             print(exc, file=sys.stderr)
-            print(f"{path}: {len(exc.problems)} problem(s)", file=sys.stderr)
-            status = 1
+            if not isinstance(exc, ConfigFileError):
+                print(f"{path}: {len(exc.problems)} problem(s)", file=sys.stderr)
+            status = max(status, _status(exc))
+            continue
+        # the physics errors that need no numerical sweep (targets, initial state, zone shapes, merges,
+        # wheels): the same errors `config check` reports for them
+        report = check_mission(mission, quick=True)
+        if report.errors:
+            print(report.format(doc, errors_only=True), file=sys.stderr)
+            print(f"{path}: {len(report.errors)} problem(s)", file=sys.stderr)
+            status = max(status, 1)
         else:
+            for warning in mission.flight_software.tmtc.warnings():
+                print(f"{path}: warning: {warning}", file=sys.stderr)
             print(f"{path}: valid")
     return status
 
 
+def _status(exc: Exception) -> int:
+    """Exit status for a file that failed to load: 2 when it cannot be read at all, 1 for its content."""
+    from hil_sim.yaml_loader import ConfigFileError
+
+    return 2 if isinstance(exc, ConfigFileError) else 1
+
+
 def _check(args: argparse.Namespace) -> int:
-    from hil_sim.mission import load_mission
+    from hil_sim.mission import load_mission_marked
     from hil_sim.physics_checks import check_mission
     from hil_sim.yaml_loader import ConfigError
 
     status = 0
     for path in args.files:
         try:
-            mission = load_mission(path)
+            mission, doc = load_mission_marked(path)
         except ConfigError as exc:
             print(exc, file=sys.stderr)
-            status = 1
+            status = max(status, _status(exc))
             continue
         report = check_mission(mission, step_s=args.step_s)
         print(f"== {path}")
-        print(report.format())
+        print(report.format(doc))
         if not report.ok:
             status = 1
     return status

@@ -7,8 +7,10 @@ the whole run, because the Sun, Moon and Earth zones move:
 * the initial attitude already inside a zone;
 * a zone whose kernel g_i is not strictly inside it (the law pushes away from g_i);
 * the paper's Assumption 1 (zones pairwise at least 2 delta apart) and the admissible eps interval
-  (0, min(eps_bar, 1 - cos delta)) at every sampled time, for the zones as the law sees them
-  (inflated by ``law.margin_deg``) and with the onboard ephemeris (`fsw.guidance.SkyEphemeris`);
+  (0, min(eps_bar, 1 - cos delta)) at every sampled time, for the zones as the flight software flies
+  them: inflated by ``law.margin_deg`` and merged by its own `fsw.guidance.ZoneGeometry.merge` when
+  closer than ``law.merge_gap_deg``, with the onboard ephemeris (`fsw.guidance.SkyEphemeris`); a close
+  pair it cannot merge (the target between them) is an error;
 * kappa <= kappa_bar (StarShapedLaw: an undesired stable equilibrium may exist);
 * wheels too weak for the commanded rate limit: the angular acceleration they can give about the worst
   body axis versus ``control.max_command_accel_deg_s2``, the wheel momentum headroom versus
@@ -34,15 +36,28 @@ MAX_SWEEP_SAMPLES = 240
 ZONE_MOTION_PER_SAMPLE_DEG = 0.5  # sample often enough that no zone centre moves more than this between checks
 
 
+Loc = tuple[str | int, ...]
+
+
 @dataclass
 class Finding:
     level: str  # "error" | "warning" | "info"
     check: str  # short name of the check
     message: str
     numbers: dict[str, float] = field(default_factory=dict)
+    loc: Loc | None = None  # key path of the key to change in the mission file
 
     def __str__(self) -> str:
         return f"{self.level.upper():7s} [{self.check}] {self.message}"
+
+    def located(self, doc: Any) -> str:
+        """``file:line:col key.path: error: message`` at the key to change (``doc``: yaml_loader.Marked)."""
+        from hil_sim.yaml_loader import format_path
+
+        if doc is None or self.loc is None:
+            return str(self)
+        line, col = doc.mark_for(self.loc, prefer_key=True)
+        return f"{doc.file}:{line}:{col} {format_path(self.loc)}: {self.level}: {self.message}"
 
 
 @dataclass
@@ -62,11 +77,15 @@ class PhysicsReport:
     def warnings(self) -> list[Finding]:
         return [f for f in self.findings if f.level == "warning"]
 
-    def add(self, level: str, check: str, message: str, **numbers: float) -> None:
-        self.findings.append(Finding(level, check, message, {k: float(v) for k, v in numbers.items()}))
+    def add(self, level: str, check: str, message: str, loc: Loc | None = None, **numbers: float) -> None:
+        self.findings.append(Finding(level, check, message, {k: float(v) for k, v in numbers.items()}, loc))
 
-    def format(self) -> str:
-        lines = [str(f) for f in self.findings]
+    def format(self, doc: Any = None, *, errors_only: bool = False) -> str:
+        """One line per finding (at ``file:line:col`` of the key to change when ``doc``, the mission's
+        `yaml_loader.Marked`, is given), then the verdict (left out with ``errors_only``)."""
+        if errors_only:
+            return "\n".join(f.located(doc) for f in self.errors)
+        lines = [f.located(doc) for f in self.findings]
         verdict = "PASS" if self.ok else "FAIL"
         lines.append(f"{verdict}: {len(self.errors)} error(s), {len(self.warnings)} warning(s), "
                      f"{self.samples} time sample(s) checked")
@@ -74,8 +93,8 @@ class PhysicsReport:
 
     def to_dict(self) -> dict[str, Any]:
         return {"ok": self.ok, "samples": self.samples,
-                "findings": [{"level": f.level, "check": f.check, "message": f.message, "numbers": f.numbers}
-                             for f in self.findings]}
+                "findings": [{"level": f.level, "check": f.check, "message": f.message, "numbers": f.numbers,
+                              "key": None if f.loc is None else list(f.loc)} for f in self.findings]}
 
 
 def d_s_to_deg(d_s: float) -> float:
@@ -98,6 +117,7 @@ class Segment:
     mode: str
     target: np.ndarray  # unit 3-vector (POINTING) or quaternion (QUATERNION)
     source: str  # where the target comes from, for messages
+    loc: Loc = ()  # key path of the target in the mission file
 
 
 def schedule(mission: "Mission") -> list[Segment]:
@@ -109,13 +129,15 @@ def schedule(mission: "Mission") -> list[Segment]:
     target_dir = np.asarray(fsw.pointing.target_N, dtype=float)
     target_q = np.asarray(fsw.quaternion.target_q_NB, dtype=float)
     src_dir, src_q = "flight_software.pointing.target_N", "flight_software.quaternion.target_q_NB"
+    loc_dir: Loc = ("flight_software", "pointing", "target_N")
+    loc_q: Loc = ("flight_software", "quaternion", "target_q_NB")
     segments: list[Segment] = []
     t = 0.0
 
     def close(until: float) -> None:
         if until > t or not segments:
-            tgt, src = (target_q, src_q) if mode == "QUATERNION" else (target_dir, src_dir)
-            segments.append(Segment(t, until, mode, tgt.copy(), src))
+            tgt, src, loc = (target_q, src_q, loc_q) if mode == "QUATERNION" else (target_dir, src_dir, loc_dir)
+            segments.append(Segment(t, until, mode, tgt.copy(), src, loc))
 
     for i, entry in enumerate(mission.timeline):
         if isinstance(entry, SetModeCommand):
@@ -127,8 +149,10 @@ def schedule(mission: "Mission") -> list[Segment]:
             direction = entry.target_direction_N()
             if direction is not None:
                 target_dir, src_dir = direction, f"timeline[{i}]"
+                loc_dir = ("timeline", i, "target_N" if entry.target_N is not None else "ra_dec_deg")
             elif entry.q_target_NB is not None:
                 target_q, src_q = np.asarray(entry.q_target_NB, dtype=float), f"timeline[{i}]"
+                loc_q = ("timeline", i, "q_target_NB")
     close(mission.duration_s)
     return [s for s in segments if s.t_end_s > s.t_start_s or len(segments) == 1]
 
@@ -139,6 +163,10 @@ def schedule(mission: "Mission") -> list[Segment]:
 
 class ZoneBuildError(ValueError):
     """A zone description that gnc cannot turn into a star-shaped set about its centre (kernel)."""
+
+    def __init__(self, message: str, loc: Loc | None = None):
+        super().__init__(message)
+        self.loc = loc
 
 
 def _kernel_hint(name: str, exc: Exception) -> str:
@@ -151,16 +179,33 @@ def _kernel_hint(name: str, exc: Exception) -> str:
     return text
 
 
+@dataclass
+class FlownZones:
+    """The law's zones at one time as the flight software flies them: after its own merging."""
+
+    zones: list  # merged law zones
+    groups: list[list[int]]  # indices into the mission's zones, one group per merged zone
+    names: list[str]  # "sun", or "sun+moon" for a merged group
+    unmerged: list[tuple[int, int]]  # close pairs the flight software could not merge (indices into zones)
+
+
 class SkyZones:
-    """Physical and law (inflated) sky zones of a mission at any time, with the onboard ephemeris."""
+    """Physical and law (inflated) sky zones of a mission at any time, with the onboard ephemeris.
+
+    The law zones are inflated exactly as `fsw.guidance` inflates them (the law margin plus the rebuild
+    tolerance), and `as_flown` merges them with the flight software's own `ZoneGeometry.merge`, so the
+    checks judge the geometry the flight software will fly, not the zones as written.
+    """
 
     def __init__(self, mission: "Mission"):
-        from fsw.guidance import SkyEphemeris
+        from fsw.guidance import ZONE_REBUILD_TOL_DEG, SkyEphemeris
         from gnc import sky_zones
 
         fsw = mission.flight_software
         self.ephemeris = SkyEphemeris(fsw)
         self.margin_deg = fsw.law.margin_deg
+        self.merge_gap_deg = fsw.law.merge_gap_deg
+        law_inflation_deg = self.margin_deg + ZONE_REBUILD_TOL_DEG
         self.names: list[str] = []
         self.bodies: list[str] = []
         self._phys, self._law, self._fixed = [], [], []
@@ -171,10 +216,10 @@ class SkyZones:
             self.bodies.append(z.body)
             try:
                 self._phys.append(sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra))
-                self._law.append(sky_zones.SkyZoneBuilder(z.geometry, self.margin_deg, extra))
+                self._law.append(sky_zones.SkyZoneBuilder(z.geometry, law_inflation_deg, extra))
                 self._phys[-1].build(np.array([0.0, 0.0, 1.0]))
             except ValueError as exc:
-                raise ZoneBuildError(_kernel_hint(z.name, exc)) from None
+                raise ZoneBuildError(_kernel_hint(z.name, exc), ZONES_LOC + (len(self.names) - 1, "geometry")) from None
             self._fixed.append(np.asarray(z.direction_N, dtype=float) if z.body == "inertial" else None)
 
     def __len__(self) -> int:
@@ -190,6 +235,16 @@ class SkyZones:
     def law(self, t_s: float) -> list:
         return [b.build(c) for b, c in zip(self._law, self.centers(t_s))]
 
+    def as_flown(self, law_zones: list, target: np.ndarray) -> FlownZones:
+        """Merge ``law_zones`` as the flight software does with the boresight at ``target`` (where it
+        settles: a merged zone must leave it outside, or the pair is bridged or left apart)."""
+        from fsw.guidance import ZoneGeometry
+
+        geometry = ZoneGeometry(3, self.merge_gap_deg)
+        merged, groups = geometry.merge(list(law_zones), keep_outside=[np.asarray(target, dtype=float)])
+        names = ["+".join(self.names[k] for k in g) for g in groups]
+        return FlownZones(merged, groups, names, list(geometry.unmerged))
+
     def max_rate_deg_s(self, t_s: float, dt_s: float = 60.0) -> float:
         """Fastest apparent motion of a zone centre [deg/s] around t."""
         a, b = self.centers(t_s), self.centers(t_s + dt_s)
@@ -201,11 +256,11 @@ def s3_zones(mission: "Mission") -> tuple[list[str], list, list]:
     """(names, physical zones, law zones inflated by margin) on S^3, as fsw.guidance builds them."""
     m = math.radians(mission.flight_software.law.margin_deg)
     names, phys, law = [], [], []
-    for zc in mission.flight_software.quaternion.zones:
+    for k, zc in enumerate(mission.flight_software.quaternion.zones):
         try:
             _append_s3_zone(zc, m, names, phys, law)
         except ValueError as exc:
-            raise ZoneBuildError(_kernel_hint(zc.name, exc)) from None
+            raise ZoneBuildError(_kernel_hint(zc.name, exc), S3_ZONES_LOC + (k,)) from None
     return names, phys, law
 
 
@@ -233,22 +288,33 @@ def _append_s3_zone(zc, margin_rad: float, names: list, phys: list, law: list) -
 # The checks
 # ---------------------------------------------------------------------------------------------
 
-def check_mission(mission: "Mission", step_s: float | None = None) -> PhysicsReport:
-    """Run every physics check on a validated mission; never raises for a bad mission, reports it."""
+ZONES_LOC: Loc = ("flight_software", "pointing", "zones")
+S3_ZONES_LOC: Loc = ("flight_software", "quaternion", "zones")
+LAW_LOC: Loc = ("flight_software", "law")
+BODY_NAMES = {"sun": "the Sun", "moon": "the Moon", "earth": "the Earth"}
+
+
+def check_mission(mission: "Mission", step_s: float | None = None, *, quick: bool = False) -> PhysicsReport:
+    """Run every physics check on a validated mission; never raises for a bad mission, reports it.
+
+    ``quick`` leaves out the paper's assumption sweep (seconds of numerical search per time sample):
+    `keepout config validate` runs it so, and reports the same errors as `config check` for targets,
+    the initial state, zone shapes, merges and wheels.
+    """
     report = PhysicsReport()
     segments = schedule(mission)
     modes = {s.mode for s in segments}
     fsw = mission.flight_software
     if "POINTING" in modes and fsw.pointing.zones:
         try:
-            _check_pointing(mission, segments, report, step_s)
+            _check_pointing(mission, segments, report, step_s, quick)
         except ZoneBuildError as exc:
-            report.add("error", "kernel", str(exc))
+            report.add("error", "kernel", str(exc), exc.loc)
     if "QUATERNION" in modes and fsw.quaternion.zones:
         try:
-            _check_quaternion(mission, segments, report)
+            _check_quaternion(mission, segments, report, quick)
         except ZoneBuildError as exc:
-            report.add("error", "kernel", str(exc))
+            report.add("error", "kernel", str(exc), exc.loc)
     _check_wheels(mission, report)
     if not report.findings:
         report.add("info", "summary", "no problems found")
@@ -262,38 +328,108 @@ def _eps_in_use(mission: "Mission", eps_max: float) -> float:
     return float(law.eps)
 
 
-def _check_assumptions_at(mission, target, zones, names, kappa, t_s, where, report, seen, law_name="star") -> float:
-    """Check the law's assumptions at one time; return the upper end of the admissible eps interval."""
+@dataclass
+class _Where:
+    """What a finding is about: the time, the target's source and key, the zones and their keys."""
+
+    t_s: float
+    seg: Segment
+    names: list[str]  # one per zone as the law sees it
+    zone_locs: list[Loc]  # the key of the (first) mission zone behind each
+
+
+def _check_assumptions_at(mission, zones, where: _Where, kappa, report, seen, law_name="star") -> float:
+    """Check the law's assumptions at one time, each failure in plain words at the key to change;
+    return the upper end of the admissible eps interval."""
     from gnc.checks import check_assumptions
 
     law = mission.flight_software.law
+    target = where.seg.target
     # first the eps interval alone (cheap), then the full check with the eps the flight software would use
     probe = check_assumptions(target, zones, 1e-9, kappa=None, law=law_name, check_r_sets=False)
     eps_max = float(probe.eps_max)
     eps = _eps_in_use(mission, eps_max) if eps_max > 0 else 1e-9
     rep = check_assumptions(target, zones, eps, kappa=kappa if law_name == "star" else None, law=law_name)
+    kappa_low = (rep.kappa_bar is not None and math.isfinite(float(rep.kappa_bar)) and kappa is not None
+                 and kappa <= float(rep.kappa_bar))
+    found = False
     for msg in rep.errors:
-        key = (where, "assumption", _strip_numbers(msg))
+        plain = _plain_assumption(msg, where, eps, eps_max)
+        if plain is None or (kappa_low and msg.startswith("kappa =")):
+            continue  # reported by another check (target, kernel, kappa): one root cause, one error
+        text, loc = plain
+        key = (where.seg.source, loc, _strip_numbers(text))
+        found = True
         if key not in seen:
             seen.add(key)
-            report.add("error", "assumptions", f"t = {t_s:.0f} s, {where}: {msg} (zones: {_named(names)})",
-                       t_s=t_s, eps=eps, eps_max=eps_max)
-    if law.eps == "auto" and not eps_max > 0 and (where, "eps") not in seen:
-        seen.add((where, "eps"))
-        report.add("error", "eps", f"t = {t_s:.0f} s, {where}: no admissible eps exists (eps_max = {eps_max:.4g})",
-                   t_s=t_s, eps_max=eps_max)
-    if rep.kappa_bar is not None and math.isfinite(float(rep.kappa_bar)) and kappa is not None \
-            and kappa <= float(rep.kappa_bar) and (where, "kappa") not in seen:
-        seen.add((where, "kappa"))
-        report.add("error", "kappa", f"t = {t_s:.0f} s, {where}: kappa = {kappa:.4g} <= kappa_bar = "
-                   f"{float(rep.kappa_bar):.4g} (eps = {eps:.4g}): an undesired stable equilibrium can exist; "
-                   "raise law.kappa", t_s=t_s, kappa=kappa, kappa_bar=float(rep.kappa_bar))
+            report.add("error", "assumptions", text, loc, t_s=where.t_s, eps=eps, eps_max=eps_max)
+    if law.eps == "auto" and not eps_max > 0 and not found and (where.seg.source, "eps") not in seen:
+        seen.add((where.seg.source, "eps"))
+        report.add("error", "eps", f"at t = {where.t_s:.0f} s no avoidance layer fits round the zones for the "
+                   f"target from {where.seg.source} (eps_max = {eps_max:.4g}): move the target away from the "
+                   "zones", where.seg.loc, t_s=where.t_s, eps_max=eps_max)
+    if kappa_low and "kappa" not in seen:  # one gain too low: one error, at the first target it fails for
+        seen.add("kappa")
+        kbar = float(rep.kappa_bar)
+        report.add("error", "kappa", f"law.kappa = {kappa:.4g} is at or below kappa_bar = {kbar:.4g} for the target "
+                   f"from {where.seg.source} at t = {where.t_s:.0f} s (eps = {eps:.4g}): the law can come to rest "
+                   f"short of the target; raise law.kappa above {kbar:.4g}", LAW_LOC + ("kappa",),
+                   t_s=where.t_s, kappa=kappa, kappa_bar=kbar)
     for msg in rep.warnings:
-        key = (where, "warning", _strip_numbers(msg))
+        key = (where.seg.source, "warning", _strip_numbers(msg))
         if key not in seen:
             seen.add(key)
-            report.add("warning", "assumptions", f"t = {t_s:.0f} s, {where}: {msg}", t_s=t_s)
+            report.add("warning", "assumptions", f"t = {where.t_s:.0f} s, target from {where.seg.source}: "
+                       f"{_zone_names(msg, where.names)}", where.seg.loc, t_s=where.t_s)
     return eps_max
+
+
+def _plain_assumption(msg: str, where: _Where, eps: float, eps_max: float) -> tuple[str, Loc] | None:
+    """A gnc.checks error (the paper's notation) in plain words with its fix and the key to change;
+    None when another check already reports its cause."""
+    import re
+
+    t, src, names = f"t = {where.t_s:.0f} s", where.seg.source, where.names
+
+    def zone(i: str) -> str:
+        return f"'{names[int(i)]}'" if int(i) < len(names) else f"zone {i}"
+
+    if msg.startswith("target x_d") or "is not strictly inside the zone" in msg:
+        return None  # the target and kernel checks say it with the numbers
+    if m := re.match(r"Assumption 1: zones (\d+) and (\d+) touch or overlap", msg):
+        return (f"zones {zone(m[1])} and {zone(m[2])} touch or overlap at {t} as the law sees them (inflated by "
+                "law.margin_deg), and the flight software does not merge them: move them apart, or raise "
+                "law.merge_gap_deg so that they merge", where.zone_locs[int(m[2])])
+    if m := re.match(r"eps = (\S+) is not below eps_bar < d_s\(x_d, U\) = (\S+) \(zone (\d+)", msg) \
+            or (m := re.match(r"x_d is inside the eps-layer of zone (\d+)", msg)):
+        z = zone(m[3] if m.re.groups == 3 else m[1])
+        return (f"law.eps = {eps:.4g} is too thick for the target from {src}: at {t} the target lies in the "
+                f"avoidance layer of zone {z}, where the law turns away, so the spacecraft would not settle on "
+                f"it; set law.eps below {eps_max:.4g}, or eps: auto", LAW_LOC + ("eps",))
+    if m := re.match(r"eps = (\S+) is not below 1 - cos\(delta\) = (\S+) \(zones (\d+) and (\d+)\)", msg):
+        return (f"law.eps = {eps:.4g} is too thick for the gap between zones {zone(m[3])} and {zone(m[4])} at {t}: "
+                f"their avoidance layers would touch; set law.eps below {float(m[2]):.4g}, or eps: auto",
+                LAW_LOC + ("eps",))
+    if m := re.match(r"Assumption 2: R_(\d+) and R_(\d+) overlap", msg):
+        return (f"seen from the target from {src}, zones {zone(m[1])} and {zone(m[2])} lie one behind the other at "
+                f"{t}: a path round one can be sent into the other's avoidance layer and back; move the target so "
+                "that they do not shadow each other, or thin the layer (law.eps_max_used)", where.seg.loc)
+    if m := re.match(r"zone (\d+): the geodesic from x_d to -g_\d+ passes through the zone", msg):
+        return (f"zone {zone(m[1])} lies across the great circle from the target from {src} to the point opposite "
+                f"the zone's centre at {t}: the law can stall there whatever law.kappa; move the target",
+                where.seg.loc)
+    if m := re.match(r"zone (\d+): -g_\d+ = .* lies in the zone", msg):
+        return (f"zone {zone(m[1])} reaches the point opposite its own centre: the law needs every zone smaller "
+                "than a hemisphere; make it smaller", where.zone_locs[int(m[1])])
+    if m := re.match(r"zone (\d+): g_\d+ = -x_d", msg):
+        return (f"the target from {src} is exactly opposite the centre of zone {zone(m[1])} at {t}: the law has no "
+                "way round it; move the target a little", where.seg.loc)
+    return f"{t}, target from {src}: {_zone_names(msg, names)}", where.seg.loc
+
+
+def _zone_names(msg: str, names: list[str]) -> str:
+    import re
+    return re.sub(r"\bzone (\d+)\b", lambda m: f"zone '{names[int(m[1])]}'" if int(m[1]) < len(names) else m[0], msg)
 
 
 def _strip_numbers(text: str) -> str:
@@ -301,8 +437,10 @@ def _strip_numbers(text: str) -> str:
     return re.sub(r"[-+]?\d[\d.eE+-]*", "#", text)
 
 
-def _named(names: list[str]) -> str:
-    return ", ".join(f"{i}={n}" for i, n in enumerate(names))
+def _ra_dec(v: np.ndarray) -> str:
+    ra = math.degrees(math.atan2(float(v[1]), float(v[0]))) % 360.0
+    dec = math.degrees(math.asin(max(-1.0, min(1.0, float(v[2])))))
+    return f"({ra:.1f}, {dec:.1f})"
 
 
 def _sweep_times(segment: Segment, sky: SkyZones, step_s: float | None) -> np.ndarray:
@@ -314,7 +452,23 @@ def _sweep_times(segment: Segment, sky: SkyZones, step_s: float | None) -> np.nd
     return np.linspace(segment.t_start_s, segment.t_end_s, count)
 
 
-def _check_pointing(mission, segments, report, step_s) -> None:
+def _target_in_zone(seg: Segment, t: float, k: int, sky: SkyZones, m_phys: float, m_law: float) -> str:
+    """The target-inside-a-zone error in plain words: where the target and the zone's centre are, and
+    how far to move the target."""
+    body = sky.bodies[k]
+    centre = BODY_NAMES.get(body, "the zone's centre")
+    here = f"the target from {seg.source} at RA/Dec {_ra_dec(seg.target)}"
+    there = f"{centre} is at RA/Dec {_ra_dec(sky.centers(t)[k])}"
+    if m_phys <= 0:
+        return (f"{here} is {-m_phys:.1f} deg inside zone '{sky.names[k]}' at t = {t:.0f} s: {there}; move it at "
+                f"least {-m_law:.1f} deg further from {centre} (the {-m_phys:.1f} deg into the zone plus the law "
+                f"margin, law.margin_deg = {sky.margin_deg:g} deg)")
+    return (f"{here} is only {m_phys:.2f} deg outside zone '{sky.names[k]}' at t = {t:.0f} s, within the "
+            f"{sky.margin_deg:g} deg law margin of the zone (law.margin_deg), so the flight software would reject "
+            f"it: {there}; move it at least {-m_law:.2f} deg further from {centre}")
+
+
+def _check_pointing(mission, segments, report, step_s, quick: bool = False) -> None:
     sky = SkyZones(mission)
     fsw = mission.flight_software
     kappa = fsw.law.kappa
@@ -323,28 +477,52 @@ def _check_pointing(mission, segments, report, step_s) -> None:
     # the initial boresight (truth) must not start inside a physical zone
     from gnc.attitude import quat_rotate
     y0 = np.asarray(quat_rotate(np.asarray(mission.initial_state.q_NB), np.asarray(mission.spacecraft.instrument_boresight_B)))
-    for name, zone in zip(sky.names, sky.physical(0.0)):
+    for k, zone in enumerate(sky.physical(0.0)):
         m = signed_margin_deg(zone, y0)
         if m <= 0:
-            report.add("error", "initial-state", f"the instrument boresight starts inside zone '{name}' "
-                       f"(signed margin {m:.2f} deg)", margin_deg=m)
+            report.add("error", "initial-state", f"the instrument boresight starts at RA/Dec {_ra_dec(y0)}, "
+                       f"{-m:.2f} deg inside zone '{sky.names[k]}' ({BODY_NAMES.get(sky.bodies[k], 'its centre')} is "
+                       f"at RA/Dec {_ra_dec(sky.centers(0.0)[k])}): start outside it, e.g. give initial_state as "
+                       "RA/Dec + roll away from the zone", ("initial_state",), margin_deg=m)
     for seg in (s for s in segments if s.mode == "POINTING"):
         times = _sweep_times(seg, sky, step_s)
         report.samples += len(times)
         for t in times:
             phys, law_zones = sky.physical(float(t)), sky.law(float(t))
-            for name, zp, zl in zip(sky.names, phys, law_zones):
-                _kernel_check(name, zp, report, seen)
+            target_inside = False
+            for k, (zp, zl) in enumerate(zip(phys, law_zones)):
+                _kernel_check(sky.names[k], zp, report, seen, ZONES_LOC + (k, "geometry"))
                 m_phys, m_law = signed_margin_deg(zp, seg.target), signed_margin_deg(zl, seg.target)
-                if m_law <= 0 and (seg.source, name) not in seen:
-                    seen.add((seg.source, name))
-                    what = "inside" if m_phys <= 0 else f"within the {sky.margin_deg:g} deg law margin of"
-                    report.add("error", "target", f"t = {t:.0f} s: the target from {seg.source} is {what} zone "
-                               f"'{name}' (margin {m_phys:.2f} deg to the physical zone, {m_law:.2f} deg to "
-                               "the inflated one); the flight software would reject it", t_s=float(t),
-                               margin_deg=m_phys)
-            eps_max = _check_assumptions_at(mission, seg.target, law_zones, sky.names, kappa, float(t),
-                                            f"POINTING target from {seg.source}", report, seen)
+                if m_law <= 0:
+                    target_inside = True
+                    if (seg.source, sky.names[k]) not in seen:
+                        seen.add((seg.source, sky.names[k]))
+                        report.add("error", "target", _target_in_zone(seg, float(t), k, sky, m_phys, m_law),
+                                   seg.loc, t_s=float(t), margin_deg=m_phys)
+            if target_inside:
+                continue  # the assumptions fail with it: one root cause, one error
+            flown = sky.as_flown(law_zones, seg.target)
+            for group, name in zip(flown.groups, flown.names):
+                if len(group) > 1 and ("merged", name) not in seen:
+                    seen.add(("merged", name))
+                    report.add("info", "merge", f"t = {t:.0f} s: zones {' and '.join(repr(sky.names[k]) for k in group)} "
+                               f"are closer than law.merge_gap_deg = {sky.merge_gap_deg:g} deg: the flight software "
+                               "flies them as one zone", t_s=float(t))
+            for i, j in flown.unmerged:
+                if (seg.source, "unmerged", i, j) in seen:
+                    continue
+                seen.add((seg.source, "unmerged", i, j))
+                gap = _cap_gap_deg(flown.zones[i], flown.zones[j])
+                report.add("error", "merge", f"t = {t:.0f} s: zones '{flown.names[i]}' and '{flown.names[j]}' are "
+                           f"{gap:.2f} deg apart as the law sees them (inflated by law.margin_deg), closer than "
+                           f"law.merge_gap_deg = {sky.merge_gap_deg:g} deg, but the flight software cannot merge "
+                           f"them: the target from {seg.source} lies between them, so it would steer out of the "
+                           "gap and never reach the target; move the target out of the gap", seg.loc,
+                           t_s=float(t), gap_deg=gap)
+            if flown.unmerged or quick:
+                continue
+            where = _Where(float(t), seg, flown.names, [ZONES_LOC + (g[0],) for g in flown.groups])
+            eps_max = _check_assumptions_at(mission, flown.zones, where, kappa, report, seen)
             if math.isfinite(eps_max):
                 worst_eps_max = min(worst_eps_max, eps_max)
     if math.isfinite(worst_eps_max):
@@ -353,42 +531,57 @@ def _check_pointing(mission, segments, report, step_s) -> None:
                    f"eps in use {eps:.4g}", eps_max=worst_eps_max, eps=eps)
 
 
-def _kernel_check(name: str, zone, report: PhysicsReport, seen: set) -> None:
+def _cap_gap_deg(zone_a, zone_b) -> float:
+    """Angle between the bounding caps of two zones [deg] (negative when they overlap)."""
+    (a, ra), (b, rb) = zone_a.bounding_cap, zone_b.bounding_cap
+    return math.degrees(math.acos(max(-1.0, min(1.0, float(np.dot(a, b))))) - ra - rb)
+
+
+def _kernel_check(name: str, zone, report: PhysicsReport, seen: set, loc: Loc) -> None:
     if ("kernel", name) in seen:
         return
     seen.add(("kernel", name))
     g = np.asarray(zone.kernel, dtype=float)
     s = float(zone.signed_separation(g))
     if not (zone.contains(g) and s < 0):
-        report.add("error", "kernel", f"zone '{name}': its kernel g is not strictly inside the zone (signed "
-                   f"separation {s:.3g}); the law steers away from g, so g must be an interior point from which "
-                   "the zone is star-shaped", signed_separation=s)
+        report.add("error", "kernel", f"zone '{name}': its centre is not strictly inside the zone (signed "
+                   f"separation {s:.3g}); the law steers away from the centre, so the shape must contain it, with "
+                   "every boundary point in straight view from it", loc, signed_separation=s)
 
 
-def _check_quaternion(mission, segments, report) -> None:
+def _check_quaternion(mission, segments, report, quick: bool = False) -> None:
     fsw = mission.flight_software
     names, phys, law_zones = s3_zones(mission)
+    zone_locs = [S3_ZONES_LOC + (k,) for k, zc in enumerate(fsw.quaternion.zones)
+                 for _ in range(2 if zc.antipodal_copy else 1)]
     all_cones = all(z.shape == "cone" for z in fsw.quaternion.zones)
     gradient = fsw.quaternion.law == "gradient" or (fsw.quaternion.law == "auto" and all_cones)
     kappa = None if gradient else fsw.law.kappa
     seen: set = set()
-    for name, zone in zip(names, phys):
-        _kernel_check(name, zone, report, seen)
+    for name, zone, loc in zip(names, phys, zone_locs):
+        _kernel_check(name, zone, report, seen, loc)
     q0 = np.asarray(mission.initial_state.q_NB, dtype=float)
     for seg in (s for s in segments if s.mode == "QUATERNION"):
         report.samples += 1
         # the flight software lifts the attitude into the target's hemisphere on entry (fsw.guidance)
         x0 = q0 if float(q0 @ seg.target) >= 0 else -q0
+        target_inside = False
         for name, zp, zl in zip(names, phys, law_zones):
             m_phys, m_law = signed_margin_deg(zp, seg.target), signed_margin_deg(zl, seg.target)
             if m_law <= 0:
-                report.add("error", "target", f"the attitude target from {seg.source} is "
-                           f"{'inside' if m_phys <= 0 else 'within the law margin of'} S^3 zone '{name}' "
-                           f"(margin {m_phys:.2f} deg on S^3)", margin_deg=m_phys)
+                target_inside = True
+                what = (f"{-m_phys:.2f} deg inside" if m_phys <= 0 else
+                        f"only {m_phys:.2f} deg outside (within the law margin of)")
+                report.add("error", "target", f"the attitude target from {seg.source} is {what} the forbidden-"
+                           f"attitude zone '{name}' (angles on S^3, half the rotation angle): move it at least "
+                           f"{-m_law:.2f} deg on S^3 ({-2 * m_law:.2f} deg of rotation) away", seg.loc, margin_deg=m_phys)
             if seg.t_start_s == 0.0 and signed_margin_deg(zp, x0) <= 0:
-                report.add("error", "initial-state", f"the initial attitude is inside S^3 zone '{name}'")
-        eps_max = _check_assumptions_at(mission, seg.target, law_zones, names, kappa, seg.t_start_s,
-                                        f"QUATERNION target from {seg.source}", report, seen,
+                report.add("error", "initial-state", f"the initial attitude is inside the forbidden-attitude zone "
+                           f"'{name}': start outside it", ("initial_state", "q_NB"))
+        if target_inside or quick:
+            continue
+        where = _Where(seg.t_start_s, seg, names, zone_locs)
+        eps_max = _check_assumptions_at(mission, law_zones, where, kappa, report, seen,
                                         law_name="gradient" if gradient else "star")
         if math.isfinite(eps_max):
             report.add("info", "eps", f"QUATERNION ({'GradientLaw' if gradient else 'StarShapedLaw'}): eps upper "
@@ -407,7 +600,8 @@ def _check_braking(mission, report) -> float:
     rate, eps = fsw.spacecraft.max_rate_deg_s, fsw.law.eps
     problem = braking_problem(rate, accel, bandwidth, margin, rule_eps(eps, cap))
     if problem is not None:
-        report.add("error", "braking", f"flight_software.spacecraft.max_rate_deg_s: {problem}")
+        report.add("error", "braking", f"flight_software.spacecraft.max_rate_deg_s: {problem}",
+                   ("flight_software", "spacecraft", "max_rate_deg_s"))
     first = braking_distance_deg(rate, accel, bandwidth)
     for i, entry in enumerate(mission.timeline):
         if entry.command != "SET_GAINS":
@@ -417,7 +611,7 @@ def _check_braking(mission, report) -> float:
         problem = braking_problem(rate, accel, bandwidth, margin, rule_eps(eps, cap))
         if problem is not None:
             report.add("error", "braking", f"timeline[{i}] SET_GAINS at {entry.t_s:g} s would be rejected onboard: "
-                       f"{problem}")
+                       f"{problem}", ("timeline", i, "rate_limit_deg_s"))
     return first
 
 
@@ -440,7 +634,9 @@ def _check_wheels(mission, report) -> None:
     if accel_avail_deg_s2 < accel_cmd:
         report.add("error", "wheels", f"the wheels can accelerate the body at only {accel_avail_deg_s2:.4g} deg/s^2 "
                    f"about body axis {axis}, below the commanded-rate slew limit control.max_command_accel_deg_s2 "
-                   f"= {accel_cmd:g}: the rate loop saturates and lags the law", accel_avail_deg_s2=accel_avail_deg_s2,
+                   f"= {accel_cmd:g}: the rate loop saturates and lags the law; lower it to {accel_avail_deg_s2:.3g} or "
+                   "fit stronger wheels", ("flight_software", "control", "max_command_accel_deg_s2"),
+                   accel_avail_deg_s2=accel_avail_deg_s2,
                    accel_cmd_deg_s2=accel_cmd)
     speeds = mission.initial_state.wheel_speeds_rad_s or [0.0] * len(sc.wheels)
     headroom = np.array([w.Js_kgm2 * max(0.0, mission.requirements.max_wheel_speed_fraction * w.max_speed_rad_s
@@ -453,7 +649,8 @@ def _check_wheels(mission, report) -> None:
     if rate_avail_deg_s < rate_limit:
         report.add("error", "wheels", f"wheel momentum (up to {mission.requirements.max_wheel_speed_fraction:g} of "
                    f"max speed) allows only {rate_avail_deg_s:.4g} deg/s about body axis "
-                   f"{np.round(d[worst_m], 3).tolist()}, below the rate limit spacecraft.max_rate_deg_s = {rate_limit:g}",
+                   f"{np.round(d[worst_m], 3).tolist()}, below the rate limit spacecraft.max_rate_deg_s = {rate_limit:g}; "
+                   f"lower it to {rate_avail_deg_s:.3g}", ("flight_software", "spacecraft", "max_rate_deg_s"),
                    rate_avail_deg_s=rate_avail_deg_s, rate_limit_deg_s=rate_limit)
     braking_deg = _check_braking(mission, report)
     report.add("info", "wheels", f"worst-axis authority: {accel_avail_deg_s2:.4g} deg/s^2 (commanded "
@@ -465,9 +662,9 @@ def _check_wheels(mission, report) -> None:
             err = math.degrees(math.acos(float(np.clip(np.dot(wk.axis_B, wt.axis_B), -1, 1))))
             if err > 1.0:
                 report.add("warning", "knowledge", f"wheel {i}: the flight software's axis is {err:.1f} deg from the "
-                           "true axis", axis_error_deg=err)
+                           "true axis", ("flight_software", "spacecraft", "wheels", i), axis_error_deg=err)
     b_err = math.degrees(math.acos(float(np.clip(np.dot(fsw.pointing.boresight_B, sc.instrument_boresight_B), -1, 1))))
     if b_err > 0.05:
         report.add("warning", "knowledge", f"flight_software.pointing.boresight_B is {b_err:.2f} deg from the true "
                    "spacecraft.instrument_boresight_B: this misalignment eats into the keep-out margin",
-                   boresight_error_deg=b_err)
+                   ("flight_software", "pointing", "boresight_B"), boresight_error_deg=b_err)

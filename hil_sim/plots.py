@@ -1,8 +1,8 @@
 """PNG plots of a SIL run (written into the run folder by the orchestrator).
 
-* ``sky.png`` (missions with sky zones): the instrument boresight path on the celestial sphere
-  (right ascension / declination), the physical zones drawn as they moved (outlines fade with time),
-  the targets; ``attitude.png`` (missions with S^3 zones): the lifted attitude quaternion against time
+* ``sky.png`` (missions with sky zones): the instrument boresight path on the celestial sphere, full sky
+  (Mollweide) and around the path (true angles, readable at the poles), RA/Dec as in ``hil_sim.skyplot``,
+  the physical zones drawn as they moved (outlines fade with time), the targets; ``attitude.png`` (missions with S^3 zones): the lifted attitude quaternion against time
   (as the paper plots it) and the attitude error;
 * ``margins.png``: signed margin to every physical zone against time with the requirement limit and the
   law's inflation margin, and the truth pointing/attitude error;
@@ -18,37 +18,11 @@ from pathlib import Path
 import numpy as np
 
 
-def _ra_dec_deg(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    v = np.atleast_2d(v)
-    ra = np.degrees(np.arctan2(v[:, 1], v[:, 0])) % 360.0
-    dec = np.degrees(np.arcsin(np.clip(v[:, 2], -1.0, 1.0)))
-    return ra, dec
-
-
-def _cut_ra(samples: list[np.ndarray]) -> float:
-    """RA [deg] in the widest empty gap of everything drawn: the map wraps there, not through a zone."""
-    ra = np.sort(np.concatenate([r[np.isfinite(r)] for r in samples if len(r)]) % 360.0)
-    if len(ra) < 2:
-        return 180.0
-    gaps = np.diff(np.concatenate([ra, ra[:1] + 360.0]))
-    k = int(np.argmax(gaps))
-    return float((ra[k] + gaps[k] / 2.0) % 360.0)
-
-
-def _break_wraps(ra: np.ndarray, dec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Insert NaNs where the RA wraps through 0/360 so lines do not cross the whole map."""
-    if len(ra) < 2:
-        return ra, dec
-    jumps = np.nonzero(np.abs(np.diff(ra)) > 180.0)[0] + 1
-    return np.insert(ra.astype(float), jumps, np.nan), np.insert(dec.astype(float), jumps, np.nan)
-
-
 def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import matplotlib.ticker
 
     from hil_sim.summary import evaluate
 
@@ -64,39 +38,7 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
     att_zones = [z for z in series["zones"] if z.kind == "attitude"]
 
     if sky_zones or mission.flight_software.pointing.zones or any(s.mode == "POINTING" for s in series["segments"]):
-        fig, ax = plt.subplots(figsize=(10, 5.5))
-        colors = plt.cm.tab10.colors
-        path_ra, path_dec = _ra_dec_deg(series["y_N"])
-        targets = [s.target for s in series["segments"] if s.mode == "POINTING"]
-        cut = _cut_ra([path_ra] + [_ra_dec_deg(pts)[0] for z in sky_zones for _, pts in z.boundary_history]
-                      + [_ra_dec_deg(x)[0] for x in targets])
-        unwrap = lambda ra: (ra - cut) % 360.0 + cut  # noqa: E731  (values in [cut, cut + 360))
-        for k, z in enumerate(sky_zones):
-            n = len(z.boundary_history)
-            for j, (tz, pts) in enumerate(z.boundary_history):
-                ra, dec = _ra_dec_deg(np.vstack([pts, pts[:1]]))
-                ra, dec = _break_wraps(unwrap(ra), dec)
-                alpha = 0.25 + 0.75 * (j + 1) / n
-                ax.plot(ra, dec, color=colors[k % 10], alpha=alpha, lw=1.2,
-                        label=f"zone {z.name} (as it moved)" if j == n - 1 else None)
-        sc = ax.scatter(unwrap(path_ra), path_dec, c=t, s=3, cmap="viridis", zorder=3)
-        fig.colorbar(sc, ax=ax, label="time [s]")
-        for s in series["segments"]:
-            if s.mode == "POINTING":
-                tra, tdec = _ra_dec_deg(s.target)
-                ax.plot(unwrap(tra), tdec, marker="*", ms=14, color="k", ls="none", zorder=4)
-                ax.annotate(f"target @{s.t_start_s:.0f} s", (unwrap(tra)[0], tdec[0]), textcoords="offset points",
-                            xytext=(6, 6), fontsize=8)
-        ax.plot(unwrap(path_ra[:1]), path_dec[:1], marker="o", color="k", ls="none", label="start")
-        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v % 360:.0f}"))
-        ax.set_xlim(cut + 360.0, cut)  # sky maps: RA increases to the left
-        ax.set_ylim(-90, 90)
-        ax.set_xlabel("right ascension [deg]")
-        ax.set_ylabel("declination [deg]")
-        ax.set_title(f"{mission.name}: instrument boresight on the sky (truth) and physical keep-out zones")
-        ax.grid(alpha=0.3)
-        ax.legend(loc="lower left", fontsize=8)
-        written.append(_save(fig, run_dir / "sky.png"))
+        written.append(_sky_plot(plt, run_dir, mission, series, t, sky_zones))
 
     if att_zones or any(s.mode == "QUATERNION" for s in series["segments"]):
         fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
@@ -107,7 +49,7 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
             if s.mode == "QUATERNION":
                 for i in range(4):
                     ax1.hlines(s.target[i], s.t_start_s, s.t_end_s, colors=f"C{i}", linestyles=":", lw=1)
-        ax1.set_ylabel("q_NB (lifted, truth)")
+        ax1.set_ylabel("q_NB components (lifted, truth) [-]")
         ax1.legend(ncol=4, fontsize=8)
         ax1.set_title(f"{mission.name}: attitude on S^3 (dotted: targets)")
         ax2.semilogy(t, np.maximum(series["error_deg"], 1e-4))
@@ -161,7 +103,7 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
         ax.semilogy(te, np.maximum(err_deg, 1e-5), label="|estimate - truth| (attitude angle)")
         ax.semilogy(te, np.maximum(sigma3_deg, 1e-5), ls="--", label="3-sigma from cov_trace")
         ax.set_xlabel("time [s]")
-        ax.set_ylabel("[deg]")
+        ax.set_ylabel("attitude error [deg]")
         ax.set_title(f"{mission.name}: attitude estimation error (flight software telemetry vs truth)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
@@ -169,9 +111,50 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
     return written
 
 
+def _sky_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, sky_zones: list) -> Path:
+    """Full sky (Mollweide) and a local view about the boresight's path (readable at any declination,
+    the poles included), in the one RA convention of ``hil_sim.skyplot``."""
+    from hil_sim import skyplot
+
+    fig = plt.figure(figsize=(15, 5.8))
+    ax_sky = fig.add_subplot(1, 2, 1, projection="mollweide")
+    ax_loc = fig.add_subplot(1, 2, 2)
+    colors = plt.cm.tab10.colors
+    y_N = series["y_N"]
+    targets = [np.asarray(s.target, dtype=float) for s in series["segments"] if s.mode == "POINTING"]
+    center, radius = skyplot.local_view(np.vstack([y_N] + [x[None, :] for x in targets]))
+    for k, z in enumerate(sky_zones):
+        n = len(z.boundary_history)
+        for j, (_, pts) in enumerate(z.boundary_history):
+            closed = np.vstack([pts, pts[:1]])
+            style = dict(color=colors[k % 10], alpha=0.25 + 0.75 * (j + 1) / n, lw=1.2,
+                         label=f"zone {z.name} (as it moved)" if j == n - 1 else None)
+            skyplot.sky_line(ax_sky, closed, **style)
+            ax_loc.plot(*skyplot.local_xy_deg(closed, center), **style)
+    skyplot.sky_points(ax_sky, y_N, c=t, s=3, cmap="viridis", zorder=3)
+    sc = ax_loc.scatter(*skyplot.local_xy_deg(y_N, center), c=t, s=3, cmap="viridis", zorder=3)
+    fig.colorbar(sc, ax=ax_loc, label="time [s]")
+    for s in series["segments"]:
+        if s.mode == "POINTING":
+            for ax, (x, y) in ((ax_sky, skyplot.mollweide_lon_lat(s.target)),
+                               (ax_loc, skyplot.local_xy_deg(s.target, center))):
+                ax.plot(x, y, marker="*", ms=14, color="k", ls="none", zorder=4)
+                ax.annotate(f"target @{s.t_start_s:.0f} s", (x[0], y[0]), textcoords="offset points",
+                            xytext=(6, 6), fontsize=8)
+    skyplot.sky_points(ax_sky, y_N[:1], marker="o", color="k", zorder=5, label="start")
+    ax_loc.plot(*skyplot.local_xy_deg(y_N[:1], center), marker="o", color="k", ls="none", label="start")
+    skyplot.format_full_sky(ax_sky)
+    skyplot.format_local(ax_loc, center, radius)
+    ax_sky.set_title("full sky (Mollweide)", fontsize=10)
+    ax_loc.set_title("around the boresight's path (true angles)", fontsize=10)
+    ax_loc.legend(loc="lower left", fontsize=8)
+    fig.suptitle(f"{mission.name}: instrument boresight on the sky (truth) and physical keep-out zones")
+    return _save(fig, run_dir / "sky.png")
+
+
 def _estimation_error(run_dir: Path, truth: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Estimation error at each GNC telemetry sample: onboard time = simulated time in the SIL."""
-    from fsw.ground import read_channels
+    from ground.archive import read_channels
     from gnc.attitude import attitude_error_angle
 
     archive = run_dir / "ground"

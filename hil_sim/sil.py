@@ -4,9 +4,11 @@
 
 1. loads the mission (every problem as file:line:col) and runs the physics checks: a bad mission never
    starts a run;
-2. creates ``runs/<name>-<timestamp>/`` and writes the config actually used (bus, ports, clock and
+2. creates ``runs/<run id>/`` (`run_id`: name, time and a random part) and writes the config actually used (bus, ports, clock and
    duration overrides applied) with its sha256;
-3. starts the ground monitor (its own process: archives every telemetry packet, raw and decoded), then
+3. starts the ground monitor (its own process: archives every telemetry packet, raw and decoded), writes
+   ``endpoints.json`` (``ground.link``: the run's telemetry multicast group and port, telecommand port,
+   bus, pids) so that any number of other ground clients can attach (``keepout ground --run RUN_DIR``), then
    the flight software (``python -m fsw --config mission.yaml --bus SPEC``, its own process and
    session), and waits for the flight software's FSW_STARTED event to reach the ground, so its bus is
    open before the first SYNC;
@@ -19,23 +21,26 @@
    ``summary.json`` (requirements judged on truth) and the plots, also after Ctrl-C (with what was
    recorded).
 
-Exit code: 0 all requirements pass, 1 a requirement failed, 2 the mission was rejected, 3 the run
-could not start, 130 interrupted (the summary is still written).
+Exit code and the summary's ``status``: see ``EXIT_*`` below and docs/running.md.
 """
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import hashlib
+import ipaddress
 import json
 import math
 import multiprocessing as mp
 import os
 import queue
+import secrets
 import shutil
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,14 +49,25 @@ from typing import Any
 import numpy as np
 import yaml
 
-ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_MISSION = ROOT / "config" / "missions" / "demo-pointing.yaml"
-MODELINE = "# yaml-language-server: $schema=../../config/schema/mission.schema.json"
+from fsw.lifetime import PARENT_PID_ENV, die_with_parent
+from fsw.link_security import LINK_KEY_FILE, write_key_file
+from ground.link import ENDPOINTS_FILE
+from keepout_config import config_path
+
+DEFAULT_MISSION = config_path("missions", "demo-pointing.yaml")
+# the run folder may be anywhere: its config names the installed schema by URI
+MODELINE = f"# yaml-language-server: $schema={config_path('schema', 'mission.schema.json').as_uri()}"
 
 LOCKSTEP_TIMEOUT_S = 60.0  # flight software: end of run when no SYNC for this long
 FSW_POLL_TICKS = 20  # the simulator checks that the flight software is alive every this many ticks
 GROUND_BATCH_S = 0.02  # the ground sleeps this long after a read, so a wake-up takes ~10 packets, not 1
+# Exit codes (docs/running.md): 0 every requirement passed; 1 a requirement failed; 2 the mission was
+# rejected; 3 the run could not start; 4 a process crashed (fsw, ground or simulator); 5 the run ended
+# but the ground's telemetry is incomplete; 130 Ctrl-C (SIGINT), 143 SIGTERM. 1, 4, 5, 130, 143 come
+# with a judged summary.json.
 EXIT_PASS, EXIT_FAIL, EXIT_REJECTED, EXIT_NOT_STARTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_CRASHED, EXIT_INCOMPLETE_TELEMETRY, EXIT_TERMINATED = 4, 5, 143
+STATUS_COMPLETED, STATUS_INTERRUPTED, STATUS_INCOMPLETE = "completed", "interrupted", "incomplete telemetry"
 
 CONFIG_FILE = "mission.yaml"
 TRUTH_FILE = "truth.npz"
@@ -69,6 +85,14 @@ class RunNotStarted(RuntimeError):
     """A process of the SIL could not be started (the message says which and why)."""
 
 
+class ProcessCrashed(RuntimeError):
+    """A process of the SIL ended mid-run; the message is the run's status (``crashed: fsw at t = ...``)."""
+
+
+class Terminated(BaseException):
+    """SIGTERM reached the orchestrator: the run ends as after Ctrl-C (summary written, children stopped)."""
+
+
 @dataclass
 class RunOptions:
     mission: Path = DEFAULT_MISSION
@@ -77,6 +101,7 @@ class RunOptions:
     realtime: bool = False
     out_root: Path = Path("runs")
     progress: bool = True
+    announce: bool = False  # print the line to attach a ground to this run as soon as it starts
     skip_physics_checks: bool = False
     fsw_start_timeout_s: float = 600.0  # the first start on a fresh machine compiles (and caches) numba kernels
     cycle_done_timeout_s: float = 30.0  # lockstep: a tick unanswered this long counts as missed
@@ -96,12 +121,12 @@ class RunResult:
 
 def prepare(options: RunOptions):
     """Load + check the mission; return (mission, physics report). Raises MissionRejected."""
-    from hil_sim.mission import load_mission
+    from hil_sim.mission import load_mission_marked
     from hil_sim.physics_checks import check_mission
     from hil_sim.yaml_loader import ConfigError
 
     try:
-        mission = load_mission(options.mission)
+        mission, doc = load_mission_marked(options.mission)
     except ConfigError as exc:
         raise MissionRejected(str(exc)) from None
     updates: dict[str, Any] = {}
@@ -121,7 +146,7 @@ def prepare(options: RunOptions):
     if not options.skip_physics_checks:
         report = check_mission(mission)
         if not report.ok:
-            raise MissionRejected(f"{options.mission}: physics checks failed:\n{report.format()}")
+            raise MissionRejected(f"{options.mission}: physics checks failed:\n{report.format(doc, errors_only=True)}")
     return mission, report
 
 
@@ -131,7 +156,8 @@ def _free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _config_used(mission, *, bus_spec: str, tm_port: int | None, tc_port: int | None, realtime: bool) -> dict:
+def _config_used(mission, *, bus_spec: str, tm_host: str, tm_port: int | None, tc_port: int | None,
+                 realtime: bool) -> dict:
     data = mission.model_dump(mode="json")
     data["bus"] = bus_spec
     fsw = data["flight_software"]
@@ -139,6 +165,7 @@ def _config_used(mission, *, bus_spec: str, tm_port: int | None, tc_port: int | 
     # a loaded host can stall the simulator for seconds (other runs, plotting): the flight software
     # should not take that for the end of the run
     fsw["rates"]["lockstep_timeout_s"] = max(fsw["rates"]["lockstep_timeout_s"], LOCKSTEP_TIMEOUT_S)
+    fsw["tmtc"]["telemetry_host"] = tm_host
     if tm_port is not None:
         fsw["tmtc"]["telemetry_port"] = tm_port
     if tc_port is not None:
@@ -165,16 +192,30 @@ def write_config(run_dir: Path, data: dict, source: Path) -> str:
 STATUS_CHANNELS = ("mode", "pointing_error_deg", "att_error_deg", "margin_min_deg", "active_zone", "cycle")
 
 
-def ground_process(archive_dir: str, port: int, port_queue, ready, fsw_started, stop_event, status_queue) -> None:
-    """Entry point of the ground process: archive telemetry until told to stop.
+def ground_process(archive_dir: str, endpoints: dict, port: int, port_queue, ready, fsw_started, stop_event,
+                   status_queue, parent_pid: int | None = None, key_file: str | None = None) -> None:
+    """Entry point of the ground process: archive telemetry until told to stop (verified with the run's
+    link key ``key_file``: forged or replayed packets are counted, never archived).
 
-    Ctrl-C is ignored here: the orchestrator stops the ground last, after the flight software, so
-    the final packets are archived.
+    It opens the run's telemetry as every other ground client does (``ground.link.open_telemetry``);
+    ``port`` 0 lets the kernel choose the run's port, which goes back on ``port_queue`` (or the reason
+    the socket could not be opened, as a string). Ctrl-C is ignored here: the orchestrator stops the
+    ground last, after the flight software, so the final packets are archived. Killed with the orchestrator, whatever kills it.
     """
+    die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from fsw.ground import GroundMonitor
+    from fsw.link_security import downlink_receiver, load_key_file
+    from ground.link import Endpoints, LinkError, open_telemetry
+    from ground.monitor import GroundMonitor
 
-    monitor = GroundMonitor(port=port, archive_dir=archive_dir)
+    try:
+        sock = open_telemetry(Endpoints.from_json_dict(endpoints), port=port)
+    except LinkError as exc:
+        port_queue.put(str(exc))
+        ready.set()
+        return
+    security = downlink_receiver(load_key_file(key_file)) if key_file else None
+    monitor = GroundMonitor(port=None, archive_dir=archive_dir, sock=sock, security=security)
     port_queue.put(monitor.address[1])
     ready.set()
     last_status = 0.0
@@ -326,14 +367,30 @@ class Timeline:
 # The run
 # ---------------------------------------------------------------------------------------------
 
+def run_id(name: str) -> str:
+    """``<name>-<date>-<time>-<6 hex>``: unique per run, not per second (many runs start at once); the
+    random part also keeps concurrent runs' derived bus endpoints apart."""
+    return f"{name}-{dt.datetime.now().strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(3)}"
+
+
 def _run_dir(out_root: Path, name: str) -> Path:
-    stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    path = out_root / f"{name}-{stamp}"
-    k = 1
-    while path.exists():
-        k += 1
-        path = out_root / f"{name}-{stamp}-{k}"
-    path.mkdir(parents=True)
+    """Create the run folder (absolute: the children get absolute paths, whatever their working folder).
+    Raises RunNotStarted, before anything starts, when ``out_root`` cannot take it."""
+    out_root = Path(out_root).absolute()
+    try:
+        out_root.mkdir(parents=True, exist_ok=True)
+        while True:
+            path = out_root / run_id(name)
+            try:
+                path.mkdir()
+                break
+            except FileExistsError:
+                continue
+        (path / ".write-test").write_bytes(b"x" * 4096)  # a full disk or a quota shows here, not mid-run
+        (path / ".write-test").unlink()
+    except OSError as exc:
+        raise RunNotStarted(f"--out {out_root}: cannot write the run folder there: "
+                            f"{exc.strerror or exc}") from None
     return path
 
 
@@ -390,61 +447,99 @@ def _fmt(value: Any) -> str:
 
 
 def run_sil(options: RunOptions) -> RunResult:
-    """Run one SIL mission end to end (see the module docstring). Raises MissionRejected, RunNotStarted."""
+    """Run one SIL mission end to end (see the module docstring). Raises MissionRejected, RunNotStarted.
+
+    Once the flight software has started, whatever ends the run (the end of the mission, Ctrl-C,
+    SIGTERM, a crash of any of the three processes, a full disk) ends it here with a judged
+    ``summary.json`` whose ``status`` says which, and the matching exit code."""
+    mission, report = prepare(options)
+    run_dir = _run_dir(Path(options.out_root), mission.name)
+    _reserve_summary(run_dir)
+    if report is not None:
+        (run_dir / "physics_checks.txt").write_text(report.format() + "\n")
+    previous_sigterm = None
+    if threading.current_thread() is threading.main_thread():
+        previous_sigterm = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        status, code = _run(options, mission, run_dir)
+    finally:
+        if previous_sigterm is not None:
+            signal.signal(signal.SIGTERM, previous_sigterm)
+    return _judge(run_dir, mission, status, code)
+
+
+def _raise_terminated(signum, frame) -> None:  # noqa: ARG001
+    raise Terminated()
+
+
+def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
+    """Start the ground and the flight software, run the simulator; returns (status, exit code or None
+    for 'judge the requirements'). Raises RunNotStarted until the flight software has started."""
     from fsw.bus.icd import Icd
     from fsw.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
     from hil_sim.lockstep import Simulator
     from hil_sim.mission import world_params
     from hil_sim.world import World
 
-    mission, report = prepare(options)
-    run_dir = _run_dir(Path(options.out_root), mission.name)
-    if report is not None:
-        (run_dir / "physics_checks.txt").write_text(report.format() + "\n")
     try:
         info = resolve_spec(mission.bus, run_id=run_dir.name)
     except BusSpecError as exc:
         raise MissionRejected(f"bus {mission.bus!r}: {exc}") from None
     fixed_ports = mission.tmtc_ports == "fixed"
     tmtc = mission.flight_software.tmtc
+    endpoints = _endpoints(mission, run_dir.name, info.spec, options.realtime)
 
     ctx = mp.get_context("spawn")
     port_queue, status_queue = ctx.Queue(), ctx.Queue(maxsize=4)
     ready, fsw_started, stop_event = ctx.Event(), ctx.Event(), ctx.Event()
     ground_dir = run_dir / GROUND_DIR
+    # The run's own link key (0600, in the run folder): the flight software, the ground and the timeline
+    # sign and verify with it; no key is ever shared between runs or written into a YAML.
+    key_path = run_dir / LINK_KEY_FILE
+    write_key_file(key_path)
     ground = ctx.Process(target=ground_process, name="keepout-ground",
-                         args=(str(ground_dir), tmtc.telemetry_port if fixed_ports else 0, port_queue, ready,
-                               fsw_started, stop_event, status_queue))
+                         args=(str(ground_dir), endpoints.to_json_dict(), tmtc.telemetry_port if fixed_ports else 0,
+                               port_queue, ready, fsw_started, stop_event, status_queue, os.getpid()),
+                         kwargs={"key_file": str(key_path)})
     fsw_proc: subprocess.Popen | None = None
     bus = None
     candump = None
     recorder = None
     sim = None
     timeline = None
-    interrupted = False
+    status, code = STATUS_COMPLETED, None
     abort_reason = ""
     started_wall = time.monotonic()
     progress = _Progress(False, 0.0, "")
+    running = False  # the flight software has started: from here on every end of the run is judged
     try:
         ground.start()
         if not ready.wait(60.0):
             raise RunNotStarted("the ground monitor did not start within 60 s")
         tm_port = port_queue.get(timeout=10.0)
+        if isinstance(tm_port, str):
+            raise RunNotStarted(f"the ground monitor could not start: {tm_port}")
         tc_port = tmtc.telecommand_port if fixed_ports else _free_udp_port()
-        data = _config_used(mission, bus_spec=info.spec, tm_port=tm_port, tc_port=tc_port,
-                            realtime=options.realtime)
-        config_hash = write_config(run_dir, data, Path(options.mission))
+        data = _config_used(mission, bus_spec=info.spec, tm_host=endpoints.tm_host, tm_port=tm_port,
+                            tc_port=tc_port, realtime=options.realtime)
+        data["flight_software"]["tmtc"]["security"]["key_file"] = LINK_KEY_FILE  # beside the config used
+        write_config(run_dir, data, Path(options.mission))
+        endpoints = dataclasses.replace(endpoints, tm_port=tm_port, tc_port=tc_port,
+                                        pids={"sil": os.getpid(), "ground": ground.pid})
+        endpoints.write(run_dir)
+        if options.announce:
+            print(f"run {run_dir}: attach with `keepout ground --run {run_dir}` or "
+                  f"`keepout ground web --run {run_dir}`", flush=True)
 
         # Open the simulator's end of the bus and build the world (astropy ephemeris nodes take a few
         # seconds) before the flight software starts: it waits only lockstep_timeout_s for SYNC(0).
         try:
-            bus = open_bus(info.spec, run_id=run_dir.name)
+            bus = open_bus(info.spec, run_id=run_dir.name, bitrate=mission.bus_bitrate_bps)
         except (BusUnavailableError, OSError) as exc:
             raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
-        from fsw.ground import CommandSender
+        from ground.commanding import CommandSender, signing_sender_args
 
-        sender = CommandSender(host=tmtc.telecommand_bind_host if tmtc.telecommand_bind_host != "0.0.0.0"
-                               else "127.0.0.1", port=tc_port)
+        sender = CommandSender(host=endpoints.tc_host, port=tc_port, **signing_sender_args(key_path))
         timeline = Timeline(mission, sender)
         world = World(world_params(mission), seed=mission.seed)
         world.truth  # noqa: B018  (evaluates the ephemeris at t = 0 now, not during the first tick)
@@ -457,21 +552,23 @@ def run_sil(options: RunOptions) -> RunResult:
         n_ticks = int(round(mission.duration_s / gnc_period))
         recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels))
         recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)
-        fsw_log = open(run_dir / FSW_LOG, "w")
-        fsw_proc = subprocess.Popen(
-            [sys.executable, "-m", "fsw", "--config", str(run_dir / CONFIG_FILE), "--bus", info.spec],
-            stdout=fsw_log, stderr=subprocess.STDOUT, cwd=str(ROOT), start_new_session=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        fsw_proc = _start_fsw(run_dir, info.spec)
         if not options.realtime:
             _no_wakeup_preemption(fsw_proc.pid)
+        endpoints = dataclasses.replace(endpoints, pids={**endpoints.pids, "fsw": fsw_proc.pid})
+        endpoints.write(run_dir)
         deadline = time.monotonic() + options.fsw_start_timeout_s
         while not fsw_started.wait(0.2):
             if fsw_proc.poll() is not None:
                 raise RunNotStarted(f"the flight software exited with code {fsw_proc.returncode} before it "
                                     f"started; see {run_dir / FSW_LOG}:\n" + _tail(run_dir / FSW_LOG))
+            if not ground.is_alive():
+                raise RunNotStarted(f"the ground monitor exited (code {ground.exitcode}) before the flight "
+                                    f"software started")
             if time.monotonic() > deadline:
                 raise RunNotStarted(f"no FSW_STARTED event from the flight software within "
                                     f"{options.fsw_start_timeout_s:.0f} s; see {run_dir / FSW_LOG}")
+        running = True
 
         progress = _Progress(options.progress, mission.duration_s, info.note)
         boresight_B = np.asarray(mission.spacecraft.instrument_boresight_B)
@@ -489,39 +586,46 @@ def run_sil(options: RunOptions) -> RunResult:
                 done = sim.end_tick()
             recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
             missed_in_row = 0 if done else missed_in_row + 1
+            # a crash shows within FSW_POLL_TICKS ticks (waitpid is a system call: ~15 us in the vcan-vm guest)
+            if not done or sim.tick % FSW_POLL_TICKS == 0:
+                _check_alive(fsw_proc, ground, sim.t_s, run_dir)
             if missed_in_row >= options.max_consecutive_missed:
                 abort_reason = (f"the flight software answered none of the last {missed_in_row} ticks "
                                 f"(t = {sim.t_s:.1f} s): run ended early")
                 break
-            # a crash shows within FSW_POLL_TICKS ticks (waitpid is a system call: ~15 us in the vcan-vm guest)
-            if (not done or sim.tick % FSW_POLL_TICKS == 0) and fsw_proc.poll() is not None:
-                raise RunNotStarted(f"the flight software exited (code {fsw_proc.returncode}) at t = "
-                                    f"{sim.t_s:.1f} s; see {run_dir / FSW_LOG}:\n" + _tail(run_dir / FSW_LOG))
             if progress.enabled:
                 progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s),
                                 status_queue)
         progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s), status_queue,
                         force=True)
+        _check_alive(fsw_proc, ground, sim.t_s, run_dir)
     except KeyboardInterrupt:
-        interrupted = True
+        status, code = STATUS_INTERRUPTED, EXIT_INTERRUPTED
+    except Terminated:
+        status, code = STATUS_INTERRUPTED, EXIT_TERMINATED
+    except ProcessCrashed as exc:
+        status, code = str(exc), EXIT_CRASHED
+    except Exception as exc:  # noqa: BLE001 - after the start, a failure here is the simulator's crash
+        if not running:
+            raise
+        where = f"t = {sim.t_s:.1f} s" if sim is not None else "start"
+        reason = f"{exc.strerror} ({exc.filename})" if isinstance(exc, OSError) and exc.strerror else \
+            f"{type(exc).__name__}: {exc}"
+        status, code = f"crashed: simulator at {where}: {reason}", EXIT_CRASHED
     finally:
-        # a second Ctrl-C must not cut the orderly shutdown short
+        # neither a second Ctrl-C nor a SIGTERM may cut the orderly shutdown short
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        previous_term = (signal.signal(signal.SIGTERM, signal.SIG_IGN)
+                         if threading.current_thread() is threading.main_thread() else None)
         wall_s = time.monotonic() - started_wall
         progress.stop()
-        _stop_fsw(fsw_proc)
-        stop_event.set()
-        if ground.is_alive() or ground.exitcode is None:
-            ground.join(timeout=15.0)
-            if ground.is_alive():
-                ground.terminate()
-                ground.join(timeout=5.0)
-        if bus is not None:
-            bus.shutdown()
-        if candump is not None:
-            candump.close()
+        _stop_children(fsw_proc, ground, stop_event)
+        if (run_dir / ENDPOINTS_FILE).exists():
+            _quietly(lambda: dataclasses.replace(endpoints, state="finished").write(run_dir))
+        for close in (bus.shutdown if bus is not None else None, candump.close if candump is not None else None):
+            _quietly(close)
         if recorder is not None:
-            recorder.save(run_dir / TRUTH_FILE)
+            _quietly(lambda: recorder.save(run_dir / TRUTH_FILE))
         if sim is not None:
             stats = {**sim.stats.__dict__, "aborted": abort_reason, "clock": "realtime" if options.realtime else "lockstep", "bus": info.spec, "bus_note": info.note, "wall_s": wall_s,
                      "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
@@ -530,19 +634,123 @@ def run_sil(options: RunOptions) -> RunResult:
                                          for e in getattr(sim.injector, "log", [])],
                      "telecommands": timeline.sent if timeline else [],
                      "telecommand_errors": timeline.errors if timeline else []}
-            (run_dir / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n")
+            _quietly(lambda: (run_dir / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n"))
         signal.signal(signal.SIGINT, previous)
-    # Anything that reached here has a run folder with what was recorded: judge it.
-    from hil_sim.plots import write_plots
-    from hil_sim.summary import write_summary
+        if previous_term is not None:
+            signal.signal(signal.SIGTERM, previous_term)
+    return status, code
 
-    summary, series = write_summary(run_dir, mission, interrupted=interrupted)
+
+def _start_fsw(run_dir: Path, bus_spec: str) -> subprocess.Popen:
+    """``python -m fsw`` in its own session (a terminal's Ctrl-C is the orchestrator's to handle), in the
+    run folder, with absolute paths; it dies with this process (fsw.lifetime)."""
+    with open(run_dir / FSW_LOG, "w") as fsw_log:
+        return subprocess.Popen(
+            [sys.executable, "-m", "fsw", "--config", str(run_dir / CONFIG_FILE), "--bus", bus_spec],
+            stdout=fsw_log, stderr=subprocess.STDOUT, cwd=str(run_dir), start_new_session=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1", PARENT_PID_ENV: str(os.getpid())})
+
+
+def _check_alive(fsw_proc: subprocess.Popen, ground, t_s: float, run_dir: Path) -> None:
+    """Raise ProcessCrashed when the flight software or the ground monitor ended mid-run."""
+    if fsw_proc.poll() is not None:
+        raise ProcessCrashed(f"crashed: fsw at t = {t_s:.1f} s (exit code {fsw_proc.returncode}; see "
+                             f"{run_dir / FSW_LOG})")
+    if not ground.is_alive():
+        raise ProcessCrashed(f"crashed: ground at t = {t_s:.1f} s (exit code {ground.exitcode})")
+
+
+def _stop_children(fsw_proc: subprocess.Popen | None, ground, stop_event) -> None:
+    """The flight software first (its last telemetry still reaches the ground), then the ground."""
+    _stop_fsw(fsw_proc)
+    stop_event.set()
+    if ground.is_alive() or (ground.pid is not None and ground.exitcode is None):
+        ground.join(timeout=15.0)
+        if ground.is_alive():
+            ground.terminate()
+            ground.join(timeout=5.0)
+
+
+def _quietly(step) -> None:
+    """One shutdown step; a failure (a full disk) must not keep the next ones or the summary from running."""
+    if step is None:
+        return
+    try:
+        step()
+    except (OSError, ValueError) as exc:
+        print(f"keepout: shutdown step failed: {exc}", file=sys.stderr)
+
+
+SUMMARY_FILE = "summary.json"
+SUMMARY_RESERVE_BYTES = 256 * 1024
+
+
+def _reserve_summary(run_dir: Path) -> None:
+    """Write summary.json at the start, status 'running', padded: the final summary overwrites these
+    blocks, so it can be written even when the disk has filled up during the run."""
+    head = json.dumps({"status": "running", "pass": False, "run_dir": str(run_dir)})
+    (run_dir / SUMMARY_FILE).write_text(head + " " * (SUMMARY_RESERVE_BYTES - len(head)) + "\n")
+
+
+def _write_reserved_summary(run_dir: Path, summary: dict[str, Any]) -> None:
+    """Overwrite the reserved summary.json in place; on a full disk, a short summary that fits."""
+    from hil_sim.summary import summary_json
+
+    path = run_dir / SUMMARY_FILE
+    text = summary_json(summary).encode()
+    try:
+        with open(path, "r+b") as f:
+            f.write(text)
+            f.truncate()
+        return
+    except OSError as exc:
+        short = {k: summary.get(k) for k in ("mission", "run_dir", "status", "pass", "simulated_s")}
+        short["status"] = f"{summary.get('status')}; the full summary could not be written: {exc.strerror}"
+        summary["status"] = short["status"]
+    with open(path, "r+b") as f:
+        f.write(json.dumps(short, indent=1).encode()[:SUMMARY_RESERVE_BYTES])
+        f.truncate()
+
+
+def _judge(run_dir: Path, mission, status: str, code: int | None) -> RunResult:
+    """Judge what was recorded, write summary.json and the plots; the exit code follows the status."""
+    from hil_sim.plots import write_plots
+    from hil_sim.summary import evaluate
+
+    summary, series = evaluate(run_dir, mission, status=status)
+    status = summary["status"]  # 'completed' becomes 'incomplete telemetry' when the ground lost some
+    if code is None:
+        code = (EXIT_INCOMPLETE_TELEMETRY if status == STATUS_INCOMPLETE
+                else EXIT_PASS if summary["pass"] else EXIT_FAIL)
+    try:
+        _write_reserved_summary(run_dir, summary)
+    except OSError as exc:
+        print(f"keepout: {run_dir / SUMMARY_FILE}: cannot write: {exc.strerror}", file=sys.stderr)
+        code = code if code != EXIT_PASS else EXIT_CRASHED
     try:
         write_plots(run_dir, mission, series)
     except Exception as exc:  # plots are a view: a failure must not hide the summary
-        (run_dir / "plots_error.txt").write_text(f"{type(exc).__name__}: {exc}\n")
-    code = EXIT_INTERRUPTED if interrupted else (EXIT_PASS if summary["pass"] else EXIT_FAIL)
+        _quietly(lambda: (run_dir / "plots_error.txt").write_text(f"{type(exc).__name__}: {exc}\n"))
     return RunResult(run_dir, code, summary)
+
+
+def _endpoints(mission, run_id: str, bus_spec: str, realtime: bool):
+    """The run's link before its ports are known: a per-run loopback multicast group (any number of ground
+    clients attach), or with ``telemetry_link: unicast`` the SIL's own ground at the mission's address."""
+    from ground.link import LOOPBACK, Endpoints, random_group
+
+    tmtc = mission.flight_software.tmtc
+    tc_host = tmtc.telecommand_bind_host if tmtc.telecommand_bind_host != "0.0.0.0" else LOOPBACK
+    if mission.telemetry_link == "unicast":
+        transport, tm_host, interface = "udp", tmtc.telemetry_host, tmtc.telemetry_host
+    else:
+        # fixed ports keep a group the mission names, so an outside ground can be set up in advance
+        fixed_group = mission.tmtc_ports == "fixed" and ipaddress.ip_address(tmtc.telemetry_host).is_multicast
+        transport, interface = "udp-multicast", tmtc.telemetry_multicast_interface
+        tm_host = tmtc.telemetry_host if fixed_group else random_group()
+    return Endpoints(run_id=run_id, tm_transport=transport, tm_host=tm_host, tm_port=0, tm_interface=interface,
+                     tc_host=tc_host, tc_port=0, bus=bus_spec, clock="realtime" if realtime else "lockstep",
+                     pids={"sil": os.getpid()}, started_unix_s=time.time())
 
 
 def _truth_error_function(mission, boresight_B: np.ndarray):

@@ -14,11 +14,13 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
         "run", help="run a mission: simulator, flight software and ground monitor on one bus",
         description="Run a mission: simulator (devices on the bus), flight software and ground monitor as three "
                     "processes on one bus; writes runs/<name>-<timestamp>/ with the config used, telemetry "
-                    "archive, events, candump log, summary.json and plots. Exit code 0 when every requirement "
-                    "passes, 1 when one fails, 2 when the mission is rejected, 3 when the run cannot start, "
-                    "130 on Ctrl-C (what was recorded is still summarised).")
+                    "archive, events, candump log, summary.json (with the run's status) and plots. Exit code 0 "
+                    "when every requirement passes, 1 when one fails, 2 when the mission is rejected, 3 when "
+                    "the run cannot start, 4 when a process crashed mid-run, 5 when the ground's telemetry is "
+                    "incomplete, 130 on Ctrl-C, 143 on SIGTERM (what was recorded is still judged; see "
+                    "docs/running.md).")
     run.add_argument("mission", nargs="?", type=Path, default=None,
-                     help="mission YAML (default: config/missions/demo-pointing.yaml)")
+                     help="mission YAML (default: the packaged demo-pointing mission)")
     run.add_argument("--realtime", action="store_true", help="pace the simulator to the clock (default: lockstep)")
     run.add_argument("--bus", default=None,
                      help="override the mission's bus: auto | socketcan[:IFACE] | udp_multicast[:GROUP:PORT]")
@@ -36,7 +38,7 @@ def _run(args: argparse.Namespace) -> int:
 
     options = RunOptions(mission=args.mission or DEFAULT_MISSION, bus=args.bus, duration_s=args.duration,
                          realtime=args.realtime, out_root=args.out,
-                         progress=not args.no_progress and sys.stdout.isatty())
+                         progress=not args.no_progress and sys.stdout.isatty(), announce=True)
     try:
         result = run_sil(options)
     except MissionRejected as exc:
@@ -45,5 +47,16 @@ def _run(args: argparse.Namespace) -> int:
     except RunNotStarted as exc:
         print(f"run could not start: {exc}", file=sys.stderr)
         return EXIT_NOT_STARTED
-    print(format_summary(result.summary))
+    print(format_summary(result.summary, total_wall_s=_since_process_start()))
     return result.exit_code
+
+
+def _since_process_start() -> float | None:
+    """Wall time since this process started (interpreter, imports, set-up and the run: what a user waits)."""
+    import time
+
+    import psutil
+    try:
+        return max(0.0, time.time() - psutil.Process().create_time())
+    except psutil.Error:
+        return None

@@ -265,9 +265,39 @@ def _event_args(e: dict[str, Any]) -> dict[str, Any]:
     return e.get("args") or e.get("values") or {}
 
 
-def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(summary dict for JSON, series for plots)."""
+# Telemetry completeness: packets a run may miss at its ends (the first cycle before the ground saw the
+# flight software start, the last cycle after the simulator's last tick) without having lost any
+TM_END_SLACK_PACKETS = 2
+
+
+def telemetry_completeness(ground: dict[str, Any], sim_s: float, rates) -> tuple[bool, str]:
+    """Did the ground receive all the telemetry of ``sim_s`` simulated seconds? (no sequence gaps, and
+    the GNC and housekeeping packet counts match the simulated time at the flight software's rates)."""
+    from fsw.dictionary import GNC_APID, HK_APID
+
+    if not ground:
+        return False, "the ground wrote no ground_summary.json: it did not end normally"
+    per_apid = ground.get("per_apid", {})
+    problems = []
+    if ground.get("missing_packets", 0):
+        problems.append(f"{ground['missing_packets']} packets missing in sequence-count gaps")
+    for name, apid, rate_hz in (("GNC", GNC_APID, rates.gnc_rate_hz), ("HK", HK_APID, rates.housekeeping_rate_hz)):
+        received = int(per_apid.get(f"{apid:#05x}", {}).get("received", 0))
+        expected = int(math.floor(sim_s * rate_hz + 1e-9))
+        if received < expected - TM_END_SLACK_PACKETS:
+            problems.append(f"{name}: {received} packets received of {expected} for {sim_s:.1f} s at {rate_hz:g} Hz")
+    return not problems, "; ".join(problems) or "no gaps; packet counts match the simulated time"
+
+
+def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
+             status: str | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(summary dict for JSON, series for plots).
+
+    ``status``: how the run ended (hil_sim.sil: ``completed``, ``interrupted``, ``crashed: ...``); a
+    completed run whose ground lost telemetry becomes ``incomplete telemetry``. Only a completed run
+    can pass."""
     run_dir = Path(run_dir)
+    status = status or ("interrupted" if interrupted else "completed")
     req = mission.requirements
     truth = load_truth(run_dir)
     t = truth["t_s"]
@@ -281,46 +311,53 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict
     settle = settling(mission, t, err, segments)
     results: list[dict[str, Any]] = []
 
-    def requirement(name: str, value: Any, limit: Any, passed: bool, detail: str = "") -> None:
-        results.append({"name": name, "value": value, "limit": limit, "pass": bool(passed), "detail": detail})
+    def requirement(name: str, value: Any, limit: Any, passed: bool, detail: str = "", unit: str = "") -> None:
+        # value and limit in the same unit (``unit``), numbers rounded for a person to read
+        results.append({"name": name, "value": _rounded(value), "unit": unit, "limit": limit, "pass": bool(passed),
+                        "detail": detail})
 
     sim_stats = _read_json(run_dir / "simulator.json")
     if len(t) < 2:
-        requirement("truth recorded", int(len(t)), ">= 2 samples", False, "the run produced no truth samples")
+        requirement("truth recorded", int(len(t)), ">= 2", False, "the run produced no truth samples", "samples")
     if sim_stats.get("aborted"):
-        requirement("run completed", False, True, False, str(sim_stats["aborted"]))
+        requirement("run completed", "no", "yes", False, str(sim_stats["aborted"]))
     for z in zones:
         if len(z.margin_deg):
             i = int(np.argmin(z.margin_deg))
-            requirement(f"keep-out margin {z.name}", round(float(z.margin_deg[i]), 4),
-                        f"> {req.min_keepout_margin_deg}", float(z.margin_deg[i]) > req.min_keepout_margin_deg,
-                        f"minimum signed margin to the physical {z.kind} zone at t = {t[i]:.1f} s [deg]")
+            requirement(f"keep-out margin {z.name}", float(z.margin_deg[i]),
+                        f"> {_num(req.min_keepout_margin_deg)}", float(z.margin_deg[i]) > req.min_keepout_margin_deg,
+                        f"minimum signed margin to the physical {z.kind} zone at t = {t[i]:.1f} s", "deg")
     for s in (s for s in settle if s["judged"]):
         ok = s["settled_at_s"] is not None
-        limit = f"< {req.settling_tolerance_deg} deg by {s['until_s']:.0f} s"
+        # the value is a time after the command, so the limit is one too: the time left before the next
+        # target (or the end), or max_settling_time_s when it is shorter
+        span_s = s["until_s"] - s["commanded_at_s"]
+        limit_s = span_s if req.max_settling_time_s is None else min(span_s, req.max_settling_time_s)
         if req.max_settling_time_s is not None:
             ok = ok and s["settling_time_s"] <= req.max_settling_time_s
-            limit += f", within {req.max_settling_time_s} s"
-        requirement(f"settling ({s['target_from']})", s["settling_time_s"], limit, ok,
-                    f"target commanded at {s['commanded_at_s']:.1f} s; final error {s['final_error_deg']:.4f} deg"
-                    if s["final_error_deg"] is not None else "no samples")
+        final = s["final_error_deg"]
+        requirement(f"settling ({s['target_from']})", "not settled" if s["settling_time_s"] is None
+                    else s["settling_time_s"], f"<= {_num(limit_s)}", ok,
+                    f"to within {_num(req.settling_tolerance_deg)} deg of the target commanded at "
+                    f"{s['commanded_at_s']:.1f} s; final error "
+                    + (f"{final:.4f} deg" if final is not None else "unknown (no samples)"), "s")
     if len(t):
         final = float(err[-1])
-        requirement("final pointing error", round(final, 5), f"< {req.max_final_pointing_error_deg}",
+        requirement("final pointing error", final, f"< {_num(req.max_final_pointing_error_deg)}",
                     math.isfinite(final) and final < req.max_final_pointing_error_deg,
-                    "truth error to the active target at the end [deg]")
+                    "truth error to the active target at the end", "deg")
         limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
         frac = np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]
         peak = float(frac.max())
         w = int(np.argmax(frac.max(axis=0)))
-        requirement("peak wheel speed", round(peak, 4), f"<= {req.max_wheel_speed_fraction}",
+        requirement("peak wheel speed", 100.0 * peak, f"<= {_num(100.0 * req.max_wheel_speed_fraction)}",
                     peak <= req.max_wheel_speed_fraction,
                     f"wheel {w + 1}: {float(np.abs(truth['wheel_speed_rad_s'][:, w]).max()):.1f} rad/s of "
-                    f"{limits[w]:.0f} rad/s")
+                    f"{limits[w]:.0f} rad/s", "% of max")
         rate_frac, rate_t = peak_body_rate_fraction(mission, truth)
-        requirement("peak body rate", round(rate_frac, 4), f"<= {req.max_body_rate_fraction}",
+        requirement("peak body rate", round(100.0 * rate_frac, 2), f"<= {_num(100.0 * req.max_body_rate_fraction)}",
                     rate_frac <= req.max_body_rate_fraction,
-                    f"true |omega| / configured rate limit, at t = {rate_t:.1f} s")
+                    f"true |omega| / the configured rate limit, at t = {rate_t:.1f} s", "% of max")
     hk = _hk_last(run_dir, ("slips_gnc", "cycles", "fdir_trips", "bus_crc_errors", "bus_alive_errors",
                             "bus_timeouts", "tc_accepted", "tc_rejected"))
     missed = int(sim_stats.get("cycle_done_timeouts", 0)) + int(sim_stats.get("cycle_done_late", 0))
@@ -329,7 +366,7 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict
         # real time: a slip is a cycle that overran its period, as the flight software counts them,
         # plus cycles whose CYCLE_DONE came after the next tick began
         slips = None if fsw_slips is None else fsw_slips + missed
-        requirement("cycle slips", slips, f"<= {req.max_cycle_slips}",
+        requirement("cycle slips", "unknown" if slips is None else slips, f"<= {req.max_cycle_slips}",
                     slips is not None and slips <= req.max_cycle_slips,
                     f"flight software GNC slips {fsw_slips} + late cycles {missed}" if slips is not None
                     else "no housekeeping telemetry reached the ground: slips unknown")
@@ -344,23 +381,29 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict
     expected = list(req.expected_fdir_events)
     missing = [m for m in expected if m not in trips]
     unexpected = [m for m in trips if m not in expected]
-    requirement("expected FDIR events", sorted(set(trips) & set(expected)), expected, not missing,
-                f"missing: {missing}" if missing else "all occurred")
+    occurred = [m for m in dict.fromkeys(trips) if m in expected]
+    requirement("expected FDIR events", ", ".join(occurred) or "none", ", ".join(expected) or "none", not missing,
+                ("missing: " + ", ".join(missing)) if missing else "all occurred")
     requirement("unexpected FDIR events", len(unexpected), f"<= {req.max_unexpected_fdir_events}",
                 len(unexpected) <= req.max_unexpected_fdir_events, ", ".join(unexpected) or "none")
     ground = _read_json(run_dir / "ground" / "ground_summary.json")
     wall = float(sim_stats.get("wall_s", 0.0) or 0.0)
     sim_s = float(sim_stats.get("sim_s", 0.0) or 0.0)
+    tm_complete, tm_detail = telemetry_completeness(ground, sim_s, mission.flight_software.rates)
+    if status == "completed" and not tm_complete:
+        status = "incomplete telemetry"
     summary = {
         "mission": mission.name,
         "run_dir": str(run_dir),
+        "status": status,
         "config_sha256": _read_text(run_dir / "mission.yaml.sha256").split(" ")[0],
         "bus": sim_stats.get("bus"),
-        "interrupted": interrupted,
+        "interrupted": status == "interrupted",
         "simulated_s": sim_s,
         "wall_s": wall,
         "speed_x_realtime": sim_s / wall if wall > 0 else None,
-        "pass": all(r["pass"] for r in results) and not interrupted,
+        "telemetry_complete": {"complete": tm_complete, "detail": tm_detail},
+        "pass": all(r["pass"] for r in results) and status == "completed",
         "requirements": results,
         "zones": {z.name: {"kind": z.kind, "min_margin_deg": float(z.margin_deg.min()) if len(z.margin_deg) else None}
                   for z in zones},
@@ -377,24 +420,67 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict
     return summary, series
 
 
+def summary_json(summary: dict[str, Any]) -> str:
+    return json.dumps(summary, indent=1, default=_json_default) + "\n"
+
+
 def write_summary(run_dir: Path, mission, *, interrupted: bool = False) -> tuple[dict[str, Any], dict[str, Any]]:
     """Evaluate and write summary.json; returns (summary, series for the plots)."""
     summary, series = evaluate(run_dir, mission, interrupted=interrupted)
-    (Path(run_dir) / "summary.json").write_text(json.dumps(summary, indent=1, default=_json_default) + "\n")
+    (Path(run_dir) / "summary.json").write_text(summary_json(summary))
     return summary, series
 
 
-def format_summary(summary: dict[str, Any]) -> str:
-    lines = [f"{'requirement':38s} {'value':>14s}  {'limit':28s} result"]
+def _num(value: float) -> str:
+    """A number as a person writes it: 4 significant digits, no float noise (139.9, 0.05, 1.2e-05)."""
+    return f"{float(value):.4g}"
+
+
+def _rounded(value: Any) -> Any:
+    """Requirement values rounded to 4 significant digits (summary.json and the table alike)."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return float(_num(v)) if math.isfinite(v) else v
+    return value
+
+
+def _cell(value: Any, unit: str = "") -> str:
+    """A table cell: a number with its unit; a limit such as "<= 250" gets the unit after its number."""
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, (list, tuple)):
+        return ", ".join(str(v) for v in value) or "none"
+    if isinstance(value, (int, float)):
+        text = _num(value) if isinstance(value, float) else str(value)
+        return f"{text} {unit}".strip()
+    text = str(value)
+    return f"{text} {unit}" if unit and text[-1:].isdigit() else text
+
+
+def format_summary(summary: dict[str, Any], total_wall_s: float | None = None) -> str:
+    """The requirement table and the verdict line. ``total_wall_s``: wall time of the whole command, start-up
+    included (the summary's own ``wall_s`` is the simulation loop alone)."""
+    lines = [f"{'requirement':38s} {'value':>18s}  {'limit':22s} result"]
     for r in summary["requirements"]:
-        value = r["value"]
-        text = f"{value:.4g}" if isinstance(value, float) else str(value)
-        lines.append(f"{r['name'][:38]:38s} {text[:14]:>14s}  {str(r['limit'])[:28]:28s} "
-                     f"{'PASS' if r['pass'] else 'FAIL'}")
+        unit = r.get("unit", "")
+        lines.append(f"{r['name'][:38]:38s} {_cell(r['value'], unit)[:18]:>18s}  "
+                     f"{_cell(r['limit'], unit)[:22]:22s} {'PASS' if r['pass'] else 'FAIL'}")
     speed = summary.get("speed_x_realtime")
-    verdict = "PASS" if summary["pass"] else ("INTERRUPTED" if summary["interrupted"] else "FAIL")
-    lines.append(f"{verdict}: {summary['mission']} ({summary['simulated_s']:.1f} s simulated in "
-                 f"{summary['wall_s']:.1f} s wall{f', x{speed:.1f}' if speed else ''}) -> {summary['run_dir']}")
+    status = summary.get("status", "completed")
+    verdict = "PASS" if summary["pass"] else ("FAIL" if status == "completed" else status.split(":")[0].upper())
+    if status != "completed":
+        lines.append(f"status: {status}")
+    loop = f"{summary['wall_s']:.1f} s flying" + (f", x{speed:.1f}" if speed else "")
+    wall = (f"{total_wall_s:.1f} s wall including start-up ({loop})" if total_wall_s is not None
+            else f"{summary['wall_s']:.1f} s wall{f', x{speed:.1f}' if speed else ''}")
+    lines.append(f"{verdict}: {summary['mission']} ({summary['simulated_s']:.1f} s simulated in {wall}) -> "
+                 f"{summary['run_dir']}")
     return "\n".join(lines)
 
 

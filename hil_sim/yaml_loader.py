@@ -11,6 +11,8 @@ editors and terminals turn into clickable links.
 from __future__ import annotations
 
 import difflib
+import os
+import stat
 import types
 import typing
 from dataclasses import dataclass, field
@@ -55,6 +57,7 @@ class Marked:
     file: str
     value_marks: dict[Loc, tuple[int, int]] = field(default_factory=dict)  # 1-based (line, col)
     key_marks: dict[Loc, tuple[int, int]] = field(default_factory=dict)
+    nodes_built: int = 0
 
     def mark_for(self, loc: Loc, *, prefer_key: bool = False) -> tuple[int, int]:
         """Best (line, col) for ``loc``: the deepest prefix of it that exists in the document."""
@@ -85,6 +88,10 @@ def _mark(node: yaml.Node) -> tuple[int, int]:
 def _build(node: yaml.Node, loc: Loc, doc: Marked, problems: list[Problem],
            constructor: yaml.constructor.SafeConstructor) -> Any:
     doc.value_marks[loc] = _mark(node)
+    doc.nodes_built += 1
+    if doc.nodes_built > MAX_NODES:  # aliases inside aliases expand geometrically
+        raise _LimitExceeded(f"the document expands to more than {MAX_NODES} values (YAML aliases "
+                             "repeating aliases?); write the values out", node.start_mark)
     if isinstance(node, yaml.MappingNode):
         out: dict[Any, Any] = {}
         for key_node, value_node in node.value:
@@ -112,27 +119,231 @@ def _build(node: yaml.Node, loc: Loc, doc: Marked, problems: list[Problem],
     return constructor.construct_object(node, deep=True)
 
 
+MAX_FILE_BYTES = 4 * 1024 * 1024  # a mission is a few kB; anything this big is a mistake or an attack
+MAX_ALIASES = 100  # YAML aliases (*name) allowed in one file: a mission needs none
+MAX_DEPTH = 32  # nesting of mappings and lists: a mission nests 6 deep
+MAX_NODES = 200_000  # values after alias expansion: stops a "billion laughs" before it costs memory
+
+
+class ConfigFileError(ConfigError):
+    """The file itself cannot be read (missing, a directory, a FIFO, unreadable, too large): the
+    commands exit 2 for it, as for a rejected mission, rather than 1 (a problem in its content)."""
+
+
+def read_config_text(path: str | Path) -> str:
+    """The text of a config file, refusing anything that could hang or exhaust memory.
+
+    The file is opened non-blocking (opening a FIFO for reading would otherwise wait for a writer
+    forever) and checked with fstat on the open descriptor (no race between a check and the open):
+    only a regular file of at most MAX_FILE_BYTES is read.
+    """
+    name = str(path)
+
+    def fail(message: str) -> ConfigFileError:
+        return ConfigFileError([Problem(name, 1, 1, "", message)])
+
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        raise fail("file not found") from None
+    except IsADirectoryError:
+        raise fail("is a directory; give a YAML file") from None
+    except PermissionError:
+        raise fail("permission denied: the file cannot be read (check its permissions)") from None
+    except OSError as exc:
+        raise fail(f"cannot open: {exc.strerror or exc}") from None
+    try:
+        info = os.fstat(fd)
+        if stat.S_ISDIR(info.st_mode):
+            raise fail("is a directory; give a YAML file")
+        if not stat.S_ISREG(info.st_mode):
+            raise fail("is not a regular file (a FIFO, socket or device); give a YAML file")
+        if info.st_size > MAX_FILE_BYTES:
+            raise fail(f"is {info.st_size / 2**20:.1f} MB; a config file may be at most "
+                       f"{MAX_FILE_BYTES // 2**20} MB")
+        os.set_blocking(fd, True)
+        with os.fdopen(fd, "rb", closefd=True) as handle:
+            fd = -1
+            raw = handle.read(MAX_FILE_BYTES + 1)  # the file may have grown since fstat
+    except OSError as exc:
+        raise fail(f"cannot read: {exc.strerror or exc}") from None
+    finally:
+        if fd >= 0:
+            os.close(fd)
+    if len(raw) > MAX_FILE_BYTES:
+        raise fail(f"is larger than {MAX_FILE_BYTES // 2**20} MB, the limit for a config file")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise fail(f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+
+
+class _LimitExceeded(yaml.YAMLError):
+    def __init__(self, message: str, mark: Any):
+        super().__init__(message)
+        self.message, self.mark = message, mark
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with the nesting depth and the number of aliases bounded while composing
+    (its composer recurses once per level: 100 k levels would end in a RecursionError)."""
+
+    def __init__(self, stream: str):
+        super().__init__(stream)
+        self._depth = 0
+        self._aliases = 0
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            self._aliases += 1
+            if self._aliases > MAX_ALIASES:
+                raise _LimitExceeded(f"more than {MAX_ALIASES} YAML aliases (*name); write the values out",
+                                     self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise _LimitExceeded(f"nested more than {MAX_DEPTH} levels deep; a mission nests about 6",
+                                     self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+def _compose_all(text: str) -> list[yaml.Node]:
+    loader = _BoundedLoader(text)
+    try:
+        nodes = []
+        while loader.check_node():
+            nodes.append(loader.get_node())
+        return nodes
+    finally:
+        loader.dispose()
+
+
+def syntax_problem(name: str, text: str, exc: yaml.MarkedYAMLError) -> Problem:
+    """A YAML syntax error as a Problem in plain words, with the fix, at the place to change.
+
+    PyYAML's own words ("expected <block end>, but found '<block mapping start>'") describe its parser
+    state, not the file; the common mistakes (a tab, a key indented differently from its neighbours, an
+    unclosed bracket or quote) are recognised and explained against the lines above.
+    """
+    mark = exc.problem_mark or exc.context_mark
+    line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
+    problem = str(exc.problem or "")
+    context_at = exc.context_mark
+    lines = text.splitlines()
+    if "'\\t'" in problem:
+        return Problem(name, line, col, "", "a tab character: YAML does not allow tabs here; use spaces for "
+                       "indentation (and after ':')")
+    if mark is not None and ("mapping values are not allowed" in problem or "expected <block end>" in problem):
+        hint = _indentation_hint(lines, mark.line)
+        if hint is not None:
+            return Problem(name, mark.line + 1, hint[0], "", hint[1])
+    if "mapping values are not allowed" in problem:
+        return Problem(name, line, col, "", "a second ':' on this line: a value that contains ': ' must be "
+                       "quoted, e.g. key: 'a: b'")
+    if context_at is not None and "flow sequence" in str(exc.context):
+        return Problem(name, line, col, "", f"the '[' opened at line {context_at.line + 1}, column "
+                       f"{context_at.column + 1} is not closed: end the list with ']' on its line")
+    if context_at is not None and "flow mapping" in str(exc.context):
+        return Problem(name, line, col, "", f"the '{{' opened at line {context_at.line + 1}, column "
+                       f"{context_at.column + 1} is not closed: end the mapping with '}}' on its line")
+    if context_at is not None and "quoted scalar" in str(exc.context):
+        return Problem(name, context_at.line + 1, context_at.column + 1, "", "this quote is never closed: add "
+                       "the matching quote at the end of the value")
+    what = str(exc.context or "").replace("while parsing a ", "").replace("while scanning a ", "")
+    where = (f" (in the {what} that starts at line {context_at.line + 1})"
+             if context_at is not None and what else "")
+    return Problem(name, line, col, "", f"YAML syntax error: {problem}{where}")
+
+
+def _content_lines(lines: list[str], before: int) -> list[tuple[int, int, str]]:
+    """(line index, indent, text) of the lines before ``before`` that hold YAML, nearest first."""
+    out = []
+    for i in range(min(before, len(lines)) - 1, -1, -1):
+        stripped = lines[i].strip()
+        if stripped and not stripped.startswith("#"):
+            out.append((i, len(lines[i]) - len(lines[i].lstrip(" ")), stripped))
+    return out
+
+
+def _columns(indent: int, text: str) -> list[tuple[int, str]]:
+    """The columns a line opens, with how to name them: a key, or a list item and the key inside it."""
+    if text.startswith("- ") or text == "-":
+        item = text if len(text) <= 24 else text[:21] + "..."
+        out = [(indent, f"the list item '{item}'")]
+        rest = text[1:].lstrip(" ")
+        if rest and ":" in rest and not rest.startswith(("{", "[", "'", '"')):
+            out.append((indent + len(text) - len(rest), "'" + rest.split(":", 1)[0].strip() + "'"))
+        return out
+    return [(indent, "'" + text.split(":", 1)[0].strip() + "'")]
+
+
+def _spaces(n: int) -> str:
+    return f"{n} space" + ("" if n == 1 else "s")
+
+
+def _indentation_hint(lines: list[str], index: int) -> tuple[int, str] | None:
+    """(column, message) when line ``index`` is a key or list item indented unlike the lines above it."""
+    if index >= len(lines) or index == 0:
+        return None
+    raw = lines[index]
+    indent = len(raw) - len(raw.lstrip(" "))
+    text = raw.strip()
+    if not text or (":" not in text and not text.startswith("-")):
+        return None
+    above = _content_lines(lines, index)
+    if not above:
+        return None
+    me = _columns(indent, text)[0][1]
+    prev_i, prev_indent, prev_text = above[0]
+    prev_col, prev_label = _columns(prev_indent, prev_text)[-1]
+    if indent > prev_col:
+        if prev_text.rstrip().endswith(":"):
+            return None  # a child of a mapping key: not an indentation problem
+        return (indent + 1, f"{me} is indented {_spaces(indent)}, more than {prev_label} on line {prev_i + 1} "
+                f"({_spaces(prev_col)}), which already has a value, so YAML reads this line as part of that "
+                f"value; indent it {_spaces(prev_col)} to line up with {prev_label}")
+    # the columns it could line up with: those opened by the enclosing lines above
+    columns: list[tuple[int, str, int]] = []
+    lowest = prev_col + 1
+    for i, ind, t in above:
+        if ind < lowest:
+            columns += [(c, label, i + 1) for c, label in _columns(ind, t) if c < lowest]
+            lowest = ind
+        if ind == 0:
+            break
+    if any(c == indent for c, _, _ in columns):
+        return None
+    deeper = sorted((c for c in columns if c[0] > indent), key=lambda c: c[0])[:1]
+    shallower = sorted((c for c in columns if c[0] < indent), key=lambda c: -c[0])[:1]
+    choices = deeper + shallower
+    seen = ", ".join(f"{label} (line {n}) at {_spaces(c)}" for c, label, n in choices)
+    fix = " or ".join(f"{_spaces(c)} to line up with {label}" for c, label, _ in choices)
+    return (indent + 1, f"{me} is indented {_spaces(indent)}, which lines up with nothing above it ({seen}): "
+            f"the keys of one mapping, and the items of one list, must start in the same column; indent it {fix}")
+
+
 def load_marked(path: str | Path, text: str | None = None) -> Marked:
     """Compose ``path`` (or ``text`` named as ``path``) and return its data with marks.
 
-    Raises ConfigError for YAML syntax errors, duplicate keys, more than one document, or a
-    document that is not a mapping.
+    Raises ConfigFileError when the file cannot be read (see `read_config_text`), ConfigError for YAML
+    syntax errors, duplicate keys, more than one document, a document that is not a mapping, or one
+    beyond the size, depth and alias limits.
     """
     name = str(path)
     if text is None:
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise ConfigError([Problem(name, 1, 1, "", "file not found")]) from None
-        except UnicodeDecodeError as exc:
-            raise ConfigError([Problem(name, 1, 1, "", f"not UTF-8 text ({exc.reason})")]) from None
+        text = read_config_text(path)
+    elif len(text) > MAX_FILE_BYTES:
+        raise ConfigFileError([Problem(name, 1, 1, "", f"larger than {MAX_FILE_BYTES // 2**20} MB, the limit "
+                                       "for a config file")])
     try:
-        nodes = list(yaml.compose_all(text, Loader=yaml.SafeLoader))
+        nodes = _compose_all(text)
+    except _LimitExceeded as exc:
+        raise ConfigError([Problem(name, exc.mark.line + 1, exc.mark.column + 1, "", exc.message)]) from None
     except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
-        msg = f"YAML syntax error: {exc.problem}" + (f" ({exc.context})" if exc.context else "")
-        raise ConfigError([Problem(name, line, col, "", msg)]) from None
+        raise ConfigError([syntax_problem(name, text, exc)]) from None
     except yaml.YAMLError as exc:
         raise ConfigError([Problem(name, 1, 1, "", f"YAML error: {exc}")]) from None
     if not nodes:
@@ -149,6 +360,8 @@ def load_marked(path: str | Path, text: str | None = None) -> Marked:
     constructor = yaml.SafeLoader("")  # only its construct_object is used
     try:
         doc.data = _build(root, (), doc, problems, constructor)
+    except _LimitExceeded as exc:
+        problems.append(Problem(name, exc.mark.line + 1, exc.mark.column + 1, "", exc.message))
     except yaml.constructor.ConstructorError as exc:
         mark = exc.problem_mark
         problems.append(Problem(name, mark.line + 1 if mark else 1, mark.column + 1 if mark else 1, "",

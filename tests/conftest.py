@@ -13,8 +13,8 @@ import pytest
 
 VCAN_HINT = (
     "no SocketCAN vcan0 here; create it with "
-    "`sudo modprobe vcan && sudo ip link add dev vcan0 type vcan && sudo ip link set up vcan0`, "
-    "or run inside ../shared/tools/vcan-vm"
+    "`sudo modprobe vcan && sudo ip link add dev vcan0 type vcan && sudo ip link set up vcan0` "
+    "(a kernel without the vcan module: run the tests in a virtual machine whose kernel has it)"
 )
 
 

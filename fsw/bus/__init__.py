@@ -12,7 +12,7 @@ from fsw.bus.transport import (
     BusUnavailableError,
     open_bus,
     resolve_spec,
-    udp_endpoint_for_run,
+    random_udp_endpoint,
     vcan_hint,
 )
 
@@ -20,5 +20,5 @@ __all__ = [
     "BusInfo", "BusSpecError", "BusUnavailableError", "DEFAULT_DBC_PATH", "E2EReceiver", "E2ESender",
     "FswBusDriver", "Icd", "IcdError", "ImuSample", "LatestInputs", "MessageSpec", "ReceivedFrame",
     "StarTrackerSample", "TickInputs", "WheelStatus", "crc8_sae_j1850", "e2e_crc", "open_bus",
-    "resolve_spec", "udp_endpoint_for_run", "vcan_hint",
+    "resolve_spec", "random_udp_endpoint", "vcan_hint",
 ]

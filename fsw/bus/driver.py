@@ -10,7 +10,12 @@ Two ways to read the bus:
     cycle's wheel commands it sends CYCLE_DONE(k) for that SYNC k (once per SYNC), and the commands
     carry k in ``tick_lsb``. The simulator can then tell a cycle that kept up from a late one.
 
-Only frames the E2E receiver delivers (ok / ok_some_lost) reach these samples.
+Only frames the E2E receiver delivers (ok / ok_some_lost) reach these samples, and only those count
+toward the frames a lockstep tick waits for: frames that fail E2E (corrupt, repeated, out of sequence)
+cannot close a tick early. A SYNC whose tick is not after the last one (a replayed or stale SYNC) is
+counted (``stale_syncs``) and ignored, and in lockstep a device frame that arrives outside every
+announced tick (after a tick closed, before the next SYNC: replayed, injected or late) is counted
+(``unexpected_frames``) and not used. See docs/bus.md for what E2E can and cannot stop.
 """
 from __future__ import annotations
 
@@ -29,6 +34,11 @@ from fsw.bus.transport import send_batch
 FSW_NODE = "FSW"
 MAX_WHEELS = 6
 TX_TIMEOUT_S = 0.05  # how long a send may wait for room in the transmit queue
+# Once every announced frame of a tick has arrived but some failed E2E, the tick waits this much longer
+# (queue empty) for good frames before it closes incomplete: the simulator sends a tick as one burst, so
+# the wait only matters when frames were corrupted, and a flood of bad frames cannot close it before the
+# burst is read.
+FRAME_GRACE_S = 0.02
 
 
 class ImuSample(NamedTuple):
@@ -146,6 +156,8 @@ class FswBusDriver:
         self.period_s = 0.0
         self.last_tick: int | None = None
         self.incomplete_ticks = 0
+        self.stale_syncs = 0
+        self.unexpected_frames = 0
         self.tx_errors = 0
         self._supervision_started = False
 
@@ -173,32 +185,48 @@ class FswBusDriver:
         sync = self._pending_sync
         self._pending_sync = None
         while sync is None:
-            frame = self._receive()
+            frame = self._receive(apply=False)
             if frame is None:
                 return None
             if frame.delivered and frame.frame_id == self._sync_id:
-                sync = dict(frame.signals)
+                if not self._stale_sync(frame.signals):
+                    sync = dict(frame.signals)
+            elif frame.delivered and frame.frame_id in self._device_ids:
+                self.unexpected_frames += 1  # belongs to no announced tick
         tick = int(sync["tick"])
         self.period_s = float(sync["period_ms"]) / 1000.0
         self.t_tick = tick * self.period_s
         self._start_supervision(self.t_tick)
         expected = int(sync["frames_following"])
         self._begin_tick()
-        received = 0
+        received = failed = 0
         while received < expected:
-            frame = self._receive()
+            frame = self._receive(FRAME_GRACE_S if received + failed >= expected else None)
             if frame is None:
                 break
             if frame.frame_id == self._sync_id and frame.delivered:
+                if self._stale_sync(frame.signals, tick):
+                    continue
                 self._pending_sync = dict(frame.signals)  # next tick already started: stop here
                 break
             if frame.frame_id in self._device_ids:
-                received += 1
+                if frame.delivered:
+                    received += 1
+                else:
+                    failed += 1
         if received < expected:
             self.incomplete_ticks += 1
         self.receiver.check_timeouts(self.t_tick)
         self.last_tick = tick
         return self._tick_inputs(tick, expected, received)
+
+    def _stale_sync(self, signals: dict, current: int | None = None) -> bool:
+        """A SYNC for a tick at or before the current (or last) one: replayed or stale, counted, ignored."""
+        last = self.last_tick if current is None else current
+        if last is not None and int(signals["tick"]) <= last:
+            self.stale_syncs += 1
+            return True
+        return False
 
     def _begin_tick(self) -> None:
         self._imu_batch = []
@@ -220,8 +248,10 @@ class FswBusDriver:
             frames_expected=expected, frames_received=received,
         )
 
-    def _receive(self) -> ReceivedFrame | None:
-        """Next classified frame within the call's timeout (own echoes skipped); None on timeout."""
+    def _receive(self, grace_s: float | None = None, apply: bool = True) -> ReceivedFrame | None:
+        """Next classified frame within the call's timeout (own echoes skipped); None on timeout.
+        ``grace_s``: when the queue is empty, wait at most this long (still within the timeout);
+        ``apply``: hand a delivered frame to the samples (False: only classify it)."""
         while True:
             # Frames come in bursts after SYNC: try without waiting first, and read the clock only when
             # the queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest): the
@@ -237,6 +267,8 @@ class FswBusDriver:
                     remaining = self._deadline - time.monotonic()
                     if remaining <= 0.0:
                         return None
+                if grace_s is not None:
+                    remaining = min(remaining, grace_s)
                 msg = self.bus.recv(timeout=remaining)
                 if msg is None:
                     return None
@@ -245,7 +277,8 @@ class FswBusDriver:
             frame = self.receiver.classify(msg, now)
             if frame is None:
                 continue
-            self._apply(frame, now)
+            if apply:
+                self._apply(frame, now)
             return frame
 
     def _start_supervision(self, now: float) -> None:
@@ -267,7 +300,8 @@ class FswBusDriver:
             now = self.clock()
             frame = self.receiver.classify(msg, now)
             if frame is not None:
-                if frame.frame_id == self._sync_id and frame.delivered:
+                if frame.frame_id == self._sync_id and frame.delivered \
+                        and not self._stale_sync(frame.signals, self._rt_sync_tick):
                     self._rt_sync_tick = int(frame.signals["tick"])
                 self._apply(frame, now)
         now = self.clock()

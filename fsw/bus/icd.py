@@ -20,11 +20,12 @@ from typing import Any, Mapping
 
 import can
 import cantools
+from keepout_config import config_path
 
 from fsw.bus.e2e import _TABLE as _CRC_TABLE
 from fsw.bus.e2e import crc8_sae_j1850, e2e_crc
 
-DEFAULT_DBC_PATH = Path(__file__).resolve().parents[2] / "config" / "icd" / "keepout.dbc"
+DEFAULT_DBC_PATH = config_path("icd", "keepout.dbc")
 
 E2E_CRC_SIGNAL = "E2E_CRC"
 E2E_COUNTER_SIGNAL = "E2E_Counter"

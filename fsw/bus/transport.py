@@ -4,20 +4,30 @@ Specs:
   ``socketcan:IFACE``               SocketCAN (``socketcan`` alone means vcan0). The real thing, opened
                                     as :class:`fsw.bus.socketcan_batch.BatchSocketcanBus` (python-can's
                                     bus with batched reads/writes: few system calls per frame).
-  ``udp_multicast[:GROUP:PORT]``     python-can's multi-process interface, for kernels without CAN.
-                                    Without GROUP/PORT they are derived from the run id, so two SIL
-                                    runs never hear each other (receivers bind the port, so the port
-                                    differs as well as the group).
+  ``udp_multicast[:GROUP:PORT]``     python-can's multi-process interface, for kernels without CAN,
+                                    confined to the loopback interface
+                                    (:class:`fsw.bus.udp_loopback.LoopbackUdpMulticastBus`). Without
+                                    GROUP/PORT both are drawn at random (``secrets``): every run gets
+                                    its own bus, which no other run shares or can predict; the
+                                    resolved spec is what the other processes of the run are given.
   ``virtual[:CHANNEL]``              python-can's in-process bus (unit tests, campaigns' fast mode;
                                     ``open_bus(..., light=True)`` gives :class:`LightVirtualBus`).
   ``auto``                          socketcan on vcan0 when /sys/class/net/vcan0 exists, else
                                     udp_multicast; the choice is reported through ``BusInfo``.
+  ``INTERFACE:CHANNEL[,KEY=VALUE...]`` any other python-can interface, for real CAN hardware on a
+                                    processor-in-the-loop bench: ``pcan:PCAN_USBBUS1``, ``kvaser:0``,
+                                    ``vector:0,app_name=keepout``, ``slcan:/dev/ttyACM0``,
+                                    ``socketcand:can0,host=10.0.0.2,port=29536``, ``gs_usb:0``... The
+                                    KEY=VALUE options go to ``can.Bus`` as keyword arguments (numbers as
+                                    numbers). ``open_bus(..., bitrate=)`` passes the mission's bitrate to
+                                    these; SocketCAN's bitrate is the kernel's (``ip link set can0 type can
+                                    bitrate 500000``), and the loopback transports have none.
 """
 from __future__ import annotations
 
-import hashlib
-import os
+import ipaddress
 import queue
+import secrets
 import sys
 import time
 from dataclasses import dataclass
@@ -45,7 +55,11 @@ class BusSpecError(ValueError):
     """A malformed --bus spec (message lists the accepted forms)."""
 
 
-SPEC_HELP = "accepted: auto | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL]"
+SPEC_HELP = ("accepted: auto | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL] | "
+             "INTERFACE:CHANNEL[,KEY=VALUE...] for any python-can interface (pcan, kvaser, vector, slcan, "
+             "socketcand, gs_usb, ...)")
+# The python-can interfaces the generic INTERFACE:CHANNEL form opens (the loopback ones have their own forms).
+_OWN_FORMS = ("socketcan", "udp_multicast", "virtual")
 
 
 @dataclass(frozen=True)
@@ -57,6 +71,7 @@ class BusInfo:
     channel: str
     port: int | None
     note: str          # human-readable explanation ("auto: vcan0 not present, using udp_multicast ...")
+    options: tuple[tuple[str, Any], ...] = ()  # generic interfaces: extra can.Bus keyword arguments
 
 
 def interface_present(iface: str) -> bool:
@@ -67,22 +82,22 @@ def vcan_hint(iface: str = "vcan0") -> str:
     commands = "\n  ".join(c.format(iface=iface) for c in VCAN_CREATE_COMMANDS)
     return (
         f"SocketCAN interface {iface} does not exist on this machine. Create it with:\n  {commands}\n"
-        "or, where the kernel has no CAN at all, run inside ../shared/tools/vcan-vm "
-        "(e.g. `vcan-vm -- .venv/bin/python -m pytest -m socketcan`), or use --bus udp_multicast."
+        "(a kernel built without CAN has no vcan module: run in a virtual machine whose kernel has it), "
+        "or use --bus udp_multicast."
     )
 
 
-def udp_endpoint_for_run(run_id: str | int | None) -> tuple[str, int]:
-    """Multicast group and port derived from a run id (stable, spread over 65k groups x 16k ports)."""
-    key = str(run_id if run_id is not None else f"pid-{os.getpid()}").encode()
-    digest = hashlib.sha256(key).digest()
-    group = f"{UDP_GROUP_PREFIX}.{digest[0]}.{max(1, digest[1])}"
-    port = UDP_PORT_BASE + int.from_bytes(digest[2:4], "big") % UDP_PORT_SPAN
-    return group, port
+def random_udp_endpoint() -> tuple[str, int]:
+    """A multicast group and port for one run, drawn at random (65k groups x 16k ports): not derived
+    from anything another process could know (the run folder's name was, and runs started in the
+    same second shared it)."""
+    group = f"{UDP_GROUP_PREFIX}.{secrets.randbelow(256)}.{1 + secrets.randbelow(254)}"
+    return group, UDP_PORT_BASE + secrets.randbelow(UDP_PORT_SPAN)
 
 
 def resolve_spec(spec: str, run_id: str | int | None = None) -> BusInfo:
-    """Turn a --bus spec into a concrete one. Raises BusSpecError for malformed specs."""
+    """Turn a --bus spec into a concrete one. Raises BusSpecError for malformed specs.
+    (``run_id`` is kept for callers' signatures; udp_multicast endpoints are random, see the module.)"""
     spec = (spec or "auto").strip()
     kind, _, rest = spec.partition(":")
     kind = kind.lower()
@@ -112,23 +127,55 @@ def resolve_spec(spec: str, run_id: str | int | None = None) -> BusInfo:
                 raise BusSpecError(f"bus spec {spec!r}: PORT {port_text!r} is not an integer") from None
             if not 1024 <= port <= 65535:
                 raise BusSpecError(f"bus spec {spec!r}: PORT must be 1024..65535")
+            try:
+                multicast = ipaddress.IPv4Address(group).is_multicast
+            except ValueError:
+                multicast = False
+            if not multicast:
+                raise BusSpecError(f"bus spec {spec!r}: GROUP {group!r} is not an IPv4 multicast address "
+                                   f"(224.0.0.0-239.255.255.255, e.g. 239.74.1.2); {SPEC_HELP}")
         else:
-            group, port = udp_endpoint_for_run(run_id)
+            group, port = random_udp_endpoint()
         return BusInfo(f"udp_multicast:{group}:{port}", "udp_multicast", group, port,
                        f"udp_multicast group {group} port {port}")
     if kind == "virtual":
         channel = rest or "keepout"
         return BusInfo(f"virtual:{channel}", "virtual", channel, None, f"virtual channel {channel}")
+    if kind in can.interfaces.VALID_INTERFACES:
+        channel, *pairs = rest.split(",")
+        if not channel:
+            raise BusSpecError(f"bus spec {spec!r}: give the channel, e.g. {kind}:0 or {kind}:PCAN_USBBUS1; "
+                               f"{SPEC_HELP}")
+        options = []
+        for pair in pairs:
+            key, sep, value = pair.partition("=")
+            if not sep or not key.isidentifier():
+                raise BusSpecError(f"bus spec {spec!r}: option {pair!r} is not KEY=VALUE; {SPEC_HELP}")
+            options.append((key, _option_value(value)))
+        return BusInfo(f"{kind}:{rest}", kind, channel, None, f"python-can interface {kind} channel {channel}",
+                       tuple(options))
     raise BusSpecError(f"unknown bus spec {spec!r}; {SPEC_HELP}")
 
 
+def _option_value(text: str) -> Any:
+    """A KEY=VALUE option's value: an int or float when it reads as one, else the string."""
+    for convert in (int, float):
+        try:
+            return convert(text)
+        except ValueError:
+            pass
+    return text
+
+
 def open_bus(spec: str = "auto", run_id: str | int | None = None, *, info_out: list | None = None,
-             light: bool = False) -> can.BusABC:
+             light: bool = False, bitrate: int | None = None) -> can.BusABC:
     """Open the bus named by ``spec`` (see module docstring). The BusInfo is appended to ``info_out``.
     ``light``: a ``virtual`` spec opens a :class:`LightVirtualBus` (ignored for other transports).
+    ``bitrate`` [bit/s]: for hardware interfaces (the generic form); the others have no bitrate to set.
 
     Raises BusUnavailableError (with the commands that create vcan0) when socketcan is asked for and the
-    interface is missing.
+    interface is missing, or when a hardware interface cannot be opened (driver, device or channel
+    missing: python-can's message says which).
     """
     info = resolve_spec(spec, run_id)
     if info_out is not None:
@@ -141,9 +188,20 @@ def open_bus(spec: str = "auto", run_id: str | int | None = None, *, info_out: l
         from fsw.bus.socketcan_batch import BatchSocketcanBus
 
         return BatchSocketcanBus(channel=info.channel, receive_own_messages=False, fd=False)
+    if info.interface not in _OWN_FORMS:
+        kwargs = dict(info.options)
+        if bitrate is not None:
+            kwargs.setdefault("bitrate", int(bitrate))
+        try:
+            return can.Bus(interface=info.interface, channel=info.channel, **kwargs)
+        except (can.CanError, ImportError, OSError, ValueError, TypeError) as exc:
+            raise BusUnavailableError(f"cannot open python-can interface {info.interface!r} channel "
+                                      f"{info.channel!r}: {type(exc).__name__}: {exc}") from None
     if info.interface == "udp_multicast":
+        from fsw.bus.udp_loopback import LoopbackUdpMulticastBus
+
         # fd=False: classic CAN frames only, as on the spacecraft bus.
-        return can.Bus(interface="udp_multicast", channel=info.channel, port=info.port, fd=False)
+        return LoopbackUdpMulticastBus(channel=info.channel, port=info.port, fd=False)
     if light:
         return LightVirtualBus(channel=info.channel, receive_own_messages=False)
     return can.Bus(interface="virtual", channel=info.channel, receive_own_messages=False)

@@ -9,6 +9,11 @@ Two complementary checks per metric:
   (p < alpha flags a moved distribution), which also works when the inputs differ (other seeds or runs).
 
 Any run that passed in the baseline and fails now is always a regression.
+
+Which way is better comes from the campaign's criteria (``>``/``>=``: larger is better, ``<``/``<=``: smaller,
+``==``: closer to the limit), then from the metric's known sense (``better`` argument); a metric that moved
+only the better way is reported IMPROVED, not a regression. A moved metric whose better side is unknown
+counts as a regression (a change nobody can judge must be looked at).
 """
 from __future__ import annotations
 
@@ -20,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hil_sim.campaign.spec import BaselinePolicy, Tolerance
+from hil_sim.campaign.spec import BaselinePolicy, Criterion, Tolerance
 
 DEFAULT_REL = 1e-9
 BASELINE_TABLE = "results.parquet"
@@ -60,6 +65,22 @@ class MetricComparison:
     new_median: float
     flagged: bool
     reasons: list[str] = field(default_factory=list)
+    better: str | None = None  # "higher" | "lower" | "closer:<limit>" | None (unknown)
+    improved: bool = False  # flagged, and every change is toward the better side
+
+    @property
+    def regressed(self) -> bool:
+        return self.flagged and not self.improved
+
+    def verdict(self) -> str:
+        if not self.flagged:
+            return "ok"
+        why = "; ".join(self.reasons)
+        if self.improved:
+            return f"IMPROVED ({_better_text(self.better)}): {why}"
+        if self.better is None:
+            return f"MOVED (no criterion says which way is better): {why}"
+        return f"WORSE ({_better_text(self.better)}): {why}"
 
 
 @dataclass
@@ -71,7 +92,7 @@ class Comparison:
 
     @property
     def regressed(self) -> bool:
-        return bool(self.new_failures) or any(m.flagged for m in self.metrics)
+        return bool(self.new_failures) or any(m.regressed for m in self.metrics)
 
     def text(self) -> str:
         lines = [f"{'metric':28s} {'paired':>6s} {'beyond tol':>10s} {'max |diff|':>11s} {'KS p':>8s} "
@@ -79,7 +100,7 @@ class Comparison:
         for m in self.metrics:
             lines.append(f"{m.metric:28s} {m.paired_runs:6d} {m.runs_beyond_tolerance:10d} {m.max_abs_diff:11.4g} "
                          f"{m.ks_pvalue:8.3g} {m.mw_pvalue:8.3g} {m.baseline_median:11.4g} {m.new_median:11.4g}  "
-                         + ("MOVED: " + "; ".join(m.reasons) if m.flagged else "ok"))
+                         + m.verdict())
         if not self.same_inputs:
             lines.append("note: the runs' seeds or dispersed values differ from the baseline's: per-run "
                          "differences are not meaningful, only the distribution tests count")
@@ -87,7 +108,13 @@ class Comparison:
             lines.append(f"new failures (passed in the baseline): runs {self.new_failures}")
         if self.fixed_runs:
             lines.append(f"runs that failed in the baseline and pass now: {self.fixed_runs}")
-        lines.append("REGRESSION" if self.regressed else "no regression beyond tolerance")
+        improved = [m.metric for m in self.metrics if m.improved]
+        if self.regressed:
+            lines.append("REGRESSION")
+        elif improved:
+            lines.append(f"no regression; improved: {', '.join(improved)}")
+        else:
+            lines.append("no regression beyond tolerance")
         return "\n".join(lines)
 
 
@@ -117,11 +144,57 @@ def same_run_inputs(merged: pd.DataFrame, columns: list[str]) -> bool:
     return len(merged) > 0
 
 
+def better_sides(criteria: list[Criterion], known: dict[str, str] | None = None) -> dict[str, str]:
+    """Metric -> which side is better: from the criteria first (``>``: "higher", ``<``: "lower", ``==``:
+    "closer:<limit>"), then ``known`` (a run mode's own sense of its metrics) for metrics no criterion names."""
+    out = dict(known or {})
+    for c in criteria:
+        out[c.metric] = ("higher" if c.op in (">", ">=") else "lower" if c.op in ("<", "<=")
+                         else f"closer:{c.limit!r}")
+    return out
+
+
+def _score(values: np.ndarray, better: str) -> np.ndarray:
+    """Larger score = better, whatever the metric's sense."""
+    if better == "higher":
+        return values
+    if better == "lower":
+        return -values
+    limit = float(better.split(":", 1)[1])
+    return -np.abs(values - limit)
+
+
+def _better_text(better: str | None) -> str:
+    if better is None:
+        return "better side unknown"
+    if better.startswith("closer:"):
+        return f"closer to {float(better.split(':', 1)[1]):g} is better"
+    return f"{'larger' if better == 'higher' else 'smaller'} is better"
+
+
+def _only_better(o: np.ndarray, n: np.ndarray, beyond: np.ndarray, old_all: np.ndarray, new_all: np.ndarray,
+                 better: str | None) -> bool:
+    """Every paired run beyond tolerance moved to the better side, and the median did not get worse."""
+    if better is None:
+        return False
+    with np.errstate(invalid="ignore"):
+        worse = _score(n[beyond], better) < _score(o[beyond], better)
+    if np.any(worse | ~np.isfinite(_score(n[beyond], better))):
+        return False
+    old_med, new_med = _median(_score(old_all, better)), _median(_score(new_all, better))
+    if not (math.isfinite(old_med) and math.isfinite(new_med)):
+        return False
+    # flagged by the distribution tests alone: the median itself must have moved the better way
+    return bool(new_med >= old_med) if beyond.any() else bool(new_med > old_med)
+
+
 def compare(baseline: pd.DataFrame, new: pd.DataFrame, policy: BaselinePolicy,
-            *, same_inputs: bool | None = None) -> Comparison:
+            *, same_inputs: bool | None = None, better: dict[str, str] | None = None) -> Comparison:
     """Compare two results tables. ``same_inputs`` (default: decided from the tables) enables the paired,
     per-run check; it holds when each paired run had the same seed and the same dispersed parameters, so
-    only the software or configuration under test differs."""
+    only the software or configuration under test differs. ``better``: metric -> "higher" | "lower" |
+    "closer:<limit>" (see ``better_sides``); a move to the better side only is an improvement."""
+    better = better or {}
     metrics = sorted(c for c in set(baseline.columns) & set(new.columns) if c.startswith("m."))
     merged = baseline.merge(new, on="run", suffixes=("_old", "_new"))
     if same_inputs is None:
@@ -149,10 +222,12 @@ def compare(baseline: pd.DataFrame, new: pd.DataFrame, policy: BaselinePolicy,
             reasons.append(f"KS p = {ks_p:.3g} < {policy.alpha:g}")
         if mw_p < policy.alpha:
             reasons.append(f"Mann-Whitney p = {mw_p:.3g} < {policy.alpha:g}")
+        side = better.get(name)
         out.append(MetricComparison(metric=name, paired_runs=int(o.size), runs_beyond_tolerance=int(beyond.sum()),
                                     max_abs_diff=float(d.max()) if d.size else 0.0, ks_pvalue=ks_p, mw_pvalue=mw_p,
                                     baseline_median=_median(old_all), new_median=_median(new_all),
-                                    flagged=bool(reasons), reasons=reasons))
+                                    flagged=bool(reasons), reasons=reasons, better=side,
+                                    improved=bool(reasons) and _only_better(o, n, beyond, old_all, new_all, side)))
     failed_old = merged["status_old"] != "pass"
     failed_new = merged["status_new"] != "pass"
     return Comparison(same_inputs=same_inputs, metrics=out,

@@ -288,6 +288,11 @@ def discrete_params(disp: Dispersion) -> set[str]:
     return set()
 
 
+# End of a wheel failure's fault window: the longest the mission schema allows (faults[].end_s <= 10 days),
+# i.e. after the end of any run.
+NEVER_ENDS_S = 10 * 86400.0
+
+
 def realize(disp: Dispersion, params: Params, nominal: Any) -> Any:
     """The value to write at ``disp.path`` for these parameters."""
     if isinstance(disp, ScalarDispersion):
@@ -318,9 +323,18 @@ def realize(disp: Dispersion, params: Params, nominal: Any) -> Any:
         for i in range(disp.n_wheels):
             if params[f"wheel{i + 1}"] >= 0.5:
                 entries.append({"kind": disp.fault_kind, "message": disp.message_template.format(n=i + 1),
-                                "start_s": float(params["start_s"]), "end_s": 1.0e9})
+                                "start_s": float(params["start_s"]), "end_s": NEVER_ENDS_S})
         return entries
     raise DispersionError(f"unknown dispersion kind {type(disp).__name__}")
+
+
+def expected_fdir_events(disp: Dispersion, params: Params, end_s: float) -> list[str]:
+    """FDIR monitors a run with these drawn parameters must trip: a drawn wheel failure that starts early
+    enough before the end of the run (``end_s``) to be detected expects its ``expected_fdir_event``."""
+    if not isinstance(disp, WheelFailureDispersion) or disp.expected_fdir_event is None:
+        return []
+    failed = any(params[f"wheel{i + 1}"] >= 0.5 for i in range(disp.n_wheels))
+    return [disp.expected_fdir_event] if failed and params["start_s"] + disp.detection_s <= end_s else []
 
 
 def features(disp: Dispersion, params: Params) -> dict[str, float]:

@@ -111,7 +111,19 @@ class Plan:
             for key, time_key in (("timeline", "t_s"), ("faults", "start_s")):
                 if isinstance(raw.get(key), list):
                     raw[key] = [e for e in raw[key] if not (isinstance(e, dict) and float(e.get(time_key, 0)) > end)]
+        self._expect_fdir_events(raw, params)
         return raw, validate_mission(self.model_class, raw)
+
+    def _expect_fdir_events(self, raw: dict[str, Any], params: dict[str, dict[str, float]]) -> None:
+        """A run in which a fault was drawn expects the FDIR event that fault gives (so the isolation is not
+        counted as unexpected, and its absence is counted as missing), in every mode: it is written into
+        the run's own ``requirements.expected_fdir_events``."""
+        end_s = float(raw.get("duration_s", math.inf))
+        drawn = [m for d in self.campaign.dispersions for m in dsp.expected_fdir_events(d, params[d.name], end_s)]
+        if drawn:
+            req = raw.setdefault("requirements", {})
+            expected = list(req.get("expected_fdir_events") or [])
+            req["expected_fdir_events"] = expected + [m for m in dict.fromkeys(drawn) if m not in expected]
 
 
 def validate_mission(model_class: type[BaseModel], raw: dict[str, Any]) -> Any:

@@ -185,6 +185,21 @@ def _icd():
     return _ICD
 
 
+# Which side of each metric ``judge`` writes is better, for ``keepout campaign compare`` when no criterion
+# of the campaign names the metric (the criteria's own sense comes first).
+_METRIC_BETTER = {"min_margin_deg": "higher", "settling_time_s": "lower", "final_error_deg": "lower",
+                  "peak_wheel_speed_fraction": "lower", "peak_body_rate_fraction": "lower", "cycle_slips": "lower",
+                  "unexpected_fdir_events": "lower", "missing_expected_fdir_events": "lower",
+                  "rejected_commands": "lower"}
+
+
+def metric_better(name: str) -> str | None:
+    """"higher" or "lower" for a metric of ``judge`` (per-zone margins ``margin_<zone>_deg`` included)."""
+    if name.startswith("margin_") and name.endswith("_deg"):
+        return "higher"
+    return _METRIC_BETTER.get(name)
+
+
 def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycle_slips: float,
           rejected_commands: int = 0) -> tuple[dict[str, float], dict[str, np.ndarray]]:
     """A run's metrics, judged on truth with the SIL's own functions (``hil_sim.summary``), so the fast and

@@ -15,6 +15,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from hil_sim import skyplot
 from hil_sim.campaign.execute import STATUS_ERROR, STATUS_FAIL, RunRecord
 from hil_sim.campaign.results import Verdict
 from hil_sim.campaign.spec import Campaign, Criterion
@@ -28,6 +29,33 @@ def slack(criterion: Criterion, value: float) -> float:
         return -math.inf
     return value - criterion.limit if criterion.op in (">", ">=") else (
         criterion.limit - value if criterion.op in ("<", "<=") else -abs(value - criterion.limit))
+
+
+# Unit of a metric or parameter column from its name's suffix (the project's naming convention).
+_UNIT_SUFFIXES = (("_deg", "deg"), ("_s", "s"), ("_fraction", "-"), ("_rad_s", "rad/s"), ("_Nm", "N m"),
+                  ("_days", "days"), ("_arcsec", "arcsec"), ("_events", "count"), ("_slips", "count"),
+                  ("_commands", "count"), (".failed", "count"), ("scale", "-"), ("_utc", "-"))
+
+
+def metric_unit(name: str, campaign: Campaign | None = None) -> str:
+    """Unit of a metric or parameter column from its name's suffix (``min_margin_deg`` -> ``deg``); a
+    dispersed parameter's component (``gyro_bias.0``, ``star_tracker_noise.value``) takes the unit of its
+    mission path (``spacecraft.imu.bias_B_rad_s`` -> ``rad/s``)."""
+    candidates = [name]
+    if campaign is not None and "." in name:
+        head, _, tail = name.partition(".")
+        disp = next((d for d in campaign.dispersions if d.name == head), None)
+        if disp is not None and (tail.isdigit() or tail == "value"):
+            candidates.append(disp.path.split(".")[-1].split("[")[0])
+    for candidate in candidates:
+        for suffix, unit in sorted(_UNIT_SUFFIXES, key=lambda x: -len(x[0])):
+            if candidate.endswith(suffix):
+                return unit
+    return "-"
+
+
+def metric_label(name: str, campaign: Campaign | None = None) -> str:
+    return f"{name} [{metric_unit(name, campaign)}]"
 
 
 def worst_runs(campaign: Campaign, records: Sequence[RunRecord], count: int = WORST_RUNS) -> list[RunRecord]:
@@ -60,10 +88,10 @@ def plot_distribution(df: pd.DataFrame, criterion: Criterion, path: Path) -> Pat
         ax_c.step(xs, np.arange(1, xs.size + 1) / values.size, where="post", color="#4c72b0")
     for ax in (ax_h, ax_c):
         ax.axvline(criterion.limit, color="#c44e52", lw=2, ls="--", label=f"limit {criterion.op} {criterion.limit:g}")
-        ax.set_xlabel(criterion.metric)
+        ax.set_xlabel(metric_label(criterion.metric))
         ax.grid(alpha=0.3)
-    ax_h.set_ylabel("runs")
-    ax_c.set_ylabel("fraction of runs <= x")
+    ax_h.set_ylabel("runs [count]")
+    ax_c.set_ylabel("fraction of runs <= x [-]")
     ax_c.set_ylim(0, 1.02)
     ax_h.legend(loc="best", fontsize=8)
     title = f"{criterion.name}: {criterion.text()}"
@@ -74,15 +102,6 @@ def plot_distribution(df: pd.DataFrame, criterion: Criterion, path: Path) -> Pat
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
-
-
-def _sky_line(ax, v: np.ndarray, **kw) -> None:
-    """A path on the sphere as RA/Dec on Mollweide axes, split where it wraps at RA = 180 deg."""
-    ra, dec = _ra_dec(v)
-    breaks = np.nonzero(np.abs(np.diff(ra)) > np.pi)[0] + 1
-    label = kw.pop("label", None)
-    for k, (a, b) in enumerate(zip(np.split(ra, breaks), np.split(dec, breaks))):
-        ax.plot(a, b, label=label if k == 0 else None, **kw)
 
 
 def plot_worst_trajectories(campaign: Campaign, worst: Sequence[RunRecord],
@@ -101,16 +120,15 @@ def plot_worst_trajectories(campaign: Campaign, worst: Sequence[RunRecord],
         ax = fig.add_subplot(rows, cols, k + 1, projection="mollweide")
         for key in sorted(traj):
             if key.startswith("zone_") and traj[key].ndim == 2 and traj[key].shape[1] == 3:
-                _sky_line(ax, np.vstack([traj[key], traj[key][:1]]), color="#c44e52", lw=1.4,
-                          label="keep-out zone" if key == "zone_0" else None)
+                skyplot.sky_line(ax, np.vstack([traj[key], traj[key][:1]]), color="#c44e52", lw=1.4,
+                                 label="keep-out zone" if key == "zone_0" else None)
         x = _sphere_path(traj)
-        _sky_line(ax, x, color="#4c72b0", lw=1.6, label="boresight")
-        ra, dec = _ra_dec(x[0])
-        ax.scatter(ra, dec, color="#55a868", s=25, zorder=3, label="start")
+        skyplot.sky_line(ax, x, color="#4c72b0", lw=1.6, label="boresight")
+        skyplot.sky_points(ax, x[:1], color="#55a868", s=25, zorder=3, label="start")
         if "target" in traj and np.asarray(traj["target"]).shape == (3,):
-            ra, dec = _ra_dec(np.asarray(traj["target"]))
-            ax.scatter(ra, dec, color="k", marker="*", s=70, zorder=3, label="final target")
-        ax.grid(alpha=0.4)
+            skyplot.sky_points(ax, np.asarray(traj["target"]), color="k", marker="*", s=70, zorder=3,
+                               label="final target")
+        skyplot.format_full_sky(ax)
         ax.tick_params(labelsize=7)
         value = rec.metrics.get(c.metric, math.nan)
         ax.set_title(f"run {rec.run} [{rec.status}] {c.metric} = {value:.3g}", fontsize=9)
@@ -132,7 +150,7 @@ def _sphere_path(traj: dict[str, np.ndarray]) -> np.ndarray | None:
     return None
 
 
-def plot_scatter(df: pd.DataFrame, criterion: Criterion, path: Path) -> Path | None:
+def plot_scatter(df: pd.DataFrame, criterion: Criterion, path: Path, campaign: Campaign | None = None) -> Path | None:
     """The first criterion's metric against every dispersed parameter column."""
     col = f"m.{criterion.metric}"
     params = [c for c in df.columns if c.startswith("p.") and df[c].nunique(dropna=True) > 1]
@@ -149,8 +167,8 @@ def plot_scatter(df: pd.DataFrame, criterion: Criterion, path: Path) -> Path | N
         ax.scatter(x[~failed], y[~failed], s=10, color="#4c72b0", label="pass")
         ax.scatter(x[failed], y[failed], s=16, color="#c44e52", marker="x", label="fail")
         ax.axhline(criterion.limit, color="#c44e52", ls="--", lw=1)
-        ax.set_xlabel(p[2:], fontsize=8)
-        ax.set_ylabel(criterion.metric, fontsize=8)
+        ax.set_xlabel(metric_label(p[2:], campaign), fontsize=8)
+        ax.set_ylabel(metric_label(criterion.metric), fontsize=8)
         ax.grid(alpha=0.3)
     for ax in list(axes.flat)[len(params):]:
         ax.set_visible(False)
@@ -160,13 +178,6 @@ def plot_scatter(df: pd.DataFrame, criterion: Criterion, path: Path) -> Path | N
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
-
-
-def _ra_dec(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    v = np.atleast_2d(v)
-    ra = np.arctan2(v[:, 1], v[:, 0])  # already in [-pi, pi] as the Mollweide axes want
-    dec = np.arcsin(np.clip(v[:, 2], -1.0, 1.0))
-    return ra, dec
 
 
 def plot_basin(campaign: Campaign, records: Sequence[RunRecord], starts: dict[int, np.ndarray],
@@ -180,17 +191,15 @@ def plot_basin(campaign: Campaign, records: Sequence[RunRecord], starts: dict[in
     ax = fig.add_subplot(111, projection="mollweide")
     for key in sorted(sample_traj):
         if key.startswith("zone_") and sample_traj[key].ndim == 2 and sample_traj[key].shape[1] == 3:
-            ra, dec = _ra_dec(sample_traj[key])
-            ax.scatter(ra, dec, s=2, color="#c44e52")
+            skyplot.sky_points(ax, sample_traj[key], s=2, color="#c44e52")
     passed = np.array([r.status == "pass" for r in ok])
-    ra, dec = _ra_dec(np.array([starts[r.run] for r in ok]))
-    ax.scatter(ra[passed], dec[passed], s=12, color="#4c72b0", label=f"converged ({int(passed.sum())})")
-    ax.scatter(ra[~passed], dec[~passed], s=22, color="#c44e52", marker="x",
-               label=f"failed ({int((~passed).sum())})")
+    start = np.array([starts[r.run] for r in ok])
+    skyplot.sky_points(ax, start[passed], s=12, color="#4c72b0", label=f"converged ({int(passed.sum())})")
+    skyplot.sky_points(ax, start[~passed], s=22, color="#c44e52", marker="x",
+                       label=f"failed ({int((~passed).sum())})")
     if "target" in sample_traj and np.asarray(sample_traj["target"]).shape == (3,):
-        tra, tdec = _ra_dec(np.asarray(sample_traj["target"]))
-        ax.scatter(tra, tdec, s=120, marker="*", color="k", label="target")
-    ax.grid(alpha=0.4)
+        skyplot.sky_points(ax, np.asarray(sample_traj["target"]), s=120, marker="*", color="k", label="target")
+    skyplot.format_full_sky(ax)
     ax.legend(loc="lower right", fontsize=8)
     ax.set_title(f"{campaign.name}: initial boresight (RA/Dec) of {len(ok)} runs; zones in red at the end "
                  "of one run", fontsize=10)
@@ -210,8 +219,10 @@ def _stats(df: pd.DataFrame, campaign: Campaign) -> list[tuple[str, str, str, st
         v = df[col].to_numpy(dtype=float)
         fin = v[np.isfinite(v)]
         fails = int((~df[f"v.{c.name}"]).sum())
-        q = (lambda p: f"{np.percentile(fin, p):.4g}") if fin.size else (lambda p: "-")
-        rows.append((c.name, c.text(), q(0), q(50), q(5), q(95), f"{fails}"))
+        unit = metric_unit(c.metric)
+        unit = "" if unit in ("-", "count") else f" {unit}"
+        q = (lambda p: f"{np.percentile(fin, p):.4g}{unit}") if fin.size else (lambda p: "-")
+        rows.append((c.name, f"{c.text()}{unit}", q(0), q(50), q(5), q(95), f"{fails}"))
     return rows
 
 
@@ -230,7 +241,7 @@ def write_report(campaign: Campaign, df: pd.DataFrame, records: Sequence[RunReco
     p = plot_worst_trajectories(campaign, worst, trajectories, rep / "worst_trajectories.png")
     if p:
         plots.append(("worst runs on the sphere", p))
-    p = plot_scatter(df, campaign.criteria[0], rep / f"scatter_{campaign.criteria[0].metric}.png")
+    p = plot_scatter(df, campaign.criteria[0], rep / f"scatter_{campaign.criteria[0].metric}.png", campaign)
     if p:
         plots.append((f"{campaign.criteria[0].metric} against the dispersed parameters", p))
     if starts:

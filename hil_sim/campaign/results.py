@@ -47,8 +47,16 @@ def write_tables(df: pd.DataFrame, out_dir: Path) -> tuple[Path, Path]:
 # Statistical verdict
 # ---------------------------------------------------------------------------------------------
 
+# Exit codes of `keepout campaign run|report` (documented in docs/campaign/README.md).
+EXIT_PASS, EXIT_FAIL, EXIT_INCONCLUSIVE = 0, 1, 4
+
+
 @dataclass(frozen=True)
 class Verdict:
+    """PASS: the lower confidence bound reaches the requirement. FAIL: some run failed and the bound does
+    not reach it. INCONCLUSIVE: no run failed, but there are too few runs for the bound to reach the
+    requirement even without a failure (``runs_needed``), so the campaign says nothing either way."""
+
     runs: int
     failures: int
     errors: int
@@ -60,9 +68,29 @@ class Verdict:
     def passed(self) -> bool:
         return self.runs > 0 and self.success_lower_bound >= self.required_success
 
+    @property
+    def inconclusive(self) -> bool:
+        return not self.passed and self.failures == 0
+
+    @property
+    def word(self) -> str:
+        return "PASS" if self.passed else ("INCONCLUSIVE" if self.inconclusive else "FAIL")
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_PASS if self.passed else (EXIT_INCONCLUSIVE if self.inconclusive else EXIT_FAIL)
+
+    @property
+    def runs_needed(self) -> int:
+        return runs_needed(self.required_success, self.confidence)
+
     def text(self) -> str:
-        word = "PASS" if self.passed else "FAIL"
-        return (f"{word}: {self.failures} failed of {self.runs} runs ({self.errors} errors); success probability "
+        req = (f"{100 * self.required_success:.1f} % at {100 * self.confidence:.0f} % confidence")
+        if self.inconclusive:
+            return (f"INCONCLUSIVE: 0 failed of {self.runs} runs, but {self.runs} runs without a failure can only "
+                    f"show a success probability >= {100 * self.success_lower_bound:.2f} %; showing {req} needs "
+                    f"at least {self.runs_needed} runs (--runs {self.runs_needed})")
+        return (f"{self.word}: {self.failures} failed of {self.runs} runs ({self.errors} errors); success probability "
                 f">= {100 * self.success_lower_bound:.2f} % at {100 * self.confidence:.0f} % confidence "
                 f"(required {100 * self.required_success:.1f} %)")
 
@@ -126,15 +154,19 @@ def junit_xml(campaign: Campaign, records: Sequence[RunRecord], path: Path) -> P
         suite.set("time", _time(r.wall_s))
         total, fails, errs, total_time = total + n, fails + f, errs + e, total_time + r.wall_s
     v = verdict(campaign, records)
+    failed = not v.passed and not v.inconclusive
     summary = ET.SubElement(suites, "testsuite", name=f"{campaign.name}.verdict", tests="1",
-                            failures="0" if v.passed else "1", errors="0", time=_time(0.0))
+                            failures="1" if failed else "0", errors="0", skipped="1" if v.inconclusive else "0",
+                            time=_time(0.0))
     case = ET.SubElement(summary, "testcase", name="success_probability", classname=f"{campaign.name}.verdict")
-    if not v.passed:
+    if failed:
         ET.SubElement(case, "failure", type="StatisticalVerdict", message=v.text())
+    elif v.inconclusive:  # not shown either way: too few runs (the exit code says so too)
+        ET.SubElement(case, "skipped", type="InconclusiveVerdict", message=v.text())
     out = ET.SubElement(case, "system-out")
     out.text = v.text()
     suites.set("tests", str(total + 1))
-    suites.set("failures", str(fails + (0 if v.passed else 1)))
+    suites.set("failures", str(fails + (1 if failed else 0)))
     suites.set("errors", str(errs))
     suites.set("time", _time(total_time))
     ET.indent(suites)

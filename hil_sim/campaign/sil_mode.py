@@ -2,8 +2,8 @@
 
 The dispersed mission is written to a YAML file and run like ``keepout sil run``: simulator in this
 worker process, the flight software (``python -m fsw``) and the ground monitor as their own processes,
-lockstep over ``udp_multicast`` with a multicast group and port derived from the run folder's name, so
-runs executing side by side never share a bus. (SocketCAN's vcan0 is one shared bus: a campaign of
+lockstep over ``udp_multicast`` with a multicast group and port derived from the run's id (unique per
+run, `hil_sim.sil.run_id`), so runs executing side by side never share a bus. (SocketCAN's vcan0 is one shared bus: a campaign of
 several concurrent runs cannot use it, so a mission's ``socketcan`` bus is replaced here.)
 
 The run is judged by the same ``fast.judge`` on the run folder's ``truth.npz`` and the FDIR trips and
@@ -29,6 +29,11 @@ def _requirement(summary: dict[str, Any], name: str) -> Any:
     return None
 
 
+class SilRunError(RuntimeError):
+    """The SIL run did not run to its end (not started, crashed, interrupted, telemetry lost): the
+    campaign records it as an error, never as a requirement failure."""
+
+
 def run_sil(mission: Any, seed: int, mode: str = "sil", paths: Sequence[str] = ()) -> RunResult:
     from hil_sim import sil, summary as summary_mod
     from hil_sim.campaign.fast import judge
@@ -36,14 +41,21 @@ def run_sil(mission: Any, seed: int, mode: str = "sil", paths: Sequence[str] = (
 
     data = mission.model_dump(mode="json")
     if not str(data.get("bus", "auto")).startswith("udp_multicast"):
-        data["bus"] = "udp_multicast"  # derived per run folder: concurrent runs never share a bus
+        data["bus"] = "udp_multicast"  # derived per run id: concurrent runs never share a bus
     data["tmtc_ports"] = "auto"  # free UDP ports per run for telemetry and telecommands
     with tempfile.TemporaryDirectory(prefix="keepout-campaign-sil-") as tmp:
         mission_path = Path(tmp) / f"{mission.name}.yaml"
         mission_path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
-        result = sil.run_sil(sil.RunOptions(mission=mission_path, out_root=Path(tmp) / "runs", progress=False))
+        try:
+            result = sil.run_sil(sil.RunOptions(mission=mission_path, out_root=Path(tmp) / "runs", progress=False))
+        except (sil.MissionRejected, sil.RunNotStarted) as exc:
+            raise SilRunError(f"the SIL run could not start: {exc}") from None
         run_dir = Path(result.run_dir)
         report = result.summary or summary_mod._read_json(run_dir / "summary.json")
+        status = report.get("status", "completed")
+        aborted = summary_mod._read_json(run_dir / sil.SIM_STATS_FILE).get("aborted")
+        if status != sil.STATUS_COMPLETED or aborted:
+            raise SilRunError(f"the SIL run did not run to its end: {aborted or status}")
         truth = summary_mod.load_truth(run_dir)
         used_mission = load_mission(run_dir / "mission.yaml")
         trips = [str(m) for m in report.get("fdir_trips", [])]

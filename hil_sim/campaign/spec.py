@@ -15,6 +15,9 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from fsw.dictionary import FDIR_MONITORS
+from keepout_config import config_path
+
 SCHEMA_VERSION = 1
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 PATH_DESCRIPTION = ("key path into the mission, dots between keys and [i] for list items, "
@@ -22,7 +25,8 @@ PATH_DESCRIPTION = ("key path into the mission, dots between keys and [i] for li
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    # allow_inf_nan=False: a NaN or inf bound or sigma would draw NaN missions
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -183,6 +187,12 @@ class WheelFailureDispersion(_Dispersion):
     start_s: ScalarDistribution = Field(description="failure onset, simulated time [s]")
     fault_kind: Literal["drop", "silent"] = "drop"
     message_template: str = Field("RW{n}_CMD", description="DBC message of wheel n (1-based)")
+    expected_fdir_event: Literal[FDIR_MONITORS] | None = Field(  # type: ignore[valid-type]
+        "WHEEL_FAULT", description="FDIR monitor that must trip in a run where a failure was drawn (added to the "
+        "run's requirements.expected_fdir_events, so the isolation is expected and its absence fails); "
+        "null: none expected")
+    detection_s: float = Field(5.0, ge=0, description="a failure starting less than this before the end of the run "
+                               "expects no event (the wheel's command timeout and FDIR persistence take time) [s]")
 
 
 Dispersion = Annotated[Union[ScalarDispersion, VectorDispersion, DirectionDispersion, AttitudeDispersion,
@@ -283,7 +293,7 @@ def resolve_base_mission(campaign_path: str | Path, campaign: Campaign) -> Path:
     return base
 
 
-SCHEMA_PATH = Path(__file__).resolve().parents[2] / "config" / "schema" / "campaign.schema.json"
+SCHEMA_PATH = config_path("schema", "campaign.schema.json")
 
 
 def campaign_json_schema() -> dict[str, Any]:

@@ -126,21 +126,26 @@ def _free_udp_port() -> tuple[socket.socket, int]:
 
 
 def test_process_entry_runs_and_stops_when_the_simulator_is_silent(tmp_path) -> None:
+    from fsw.link_security import downlink_receiver, write_key_file
+
     rx, port = _free_udp_port()
+    key = write_key_file(tmp_path / "link.key")
     cfg = {"flight_software": {"rates": {"lockstep_timeout_s": 0.5}, "law": {"assumption_check": "off"},
-                               "tmtc": {"telemetry_port": port, "telecommand_port": 0}}}
+                               "tmtc": {"telemetry_port": port, "telecommand_port": 0,
+                                        "security": {"key_file": "link.key"}}}}
     path = tmp_path / "mission.yaml"
     path.write_text(yaml.safe_dump(cfg))
     proc = subprocess.run([sys.executable, "-m", "fsw", "--config", str(path), "--bus", "virtual:entry", "--lockstep"],
                           cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
+    downlink = downlink_receiver(key)  # every packet is signed with the mission's key
     events = []
     while True:
         try:
             data = rx.recv(65536)
         except socket.timeout:
             break
-        pkt = decode_tm_packet(DICTIONARY, data)
+        pkt = decode_tm_packet(DICTIONARY, downlink.unprotect(data)[0])
         if pkt.kind == "event":
             events.append(pkt.event)
     rx.close()
@@ -266,3 +271,21 @@ def test_cycle_loops_freeze_the_start_up_heap_before_the_first_cycle(loop, monke
     monkeypatch.setattr("fsw.app.enter_realtime", lambda priority: calls.append("freeze") or [])
     loop.fsw.run_realtime(0.1)
     assert calls == ["freeze", "cycles"]
+
+
+def test_process_entry_refuses_to_run_without_a_private_link_key(tmp_path) -> None:
+    """No key named, or a key file others can read: exit 2 with one line naming the file and the fix."""
+    from fsw.link_security import write_key_file
+
+    path = tmp_path / "mission.yaml"
+    path.write_text(yaml.safe_dump({"flight_software": {"tmtc": {"telecommand_port": 0}}}))
+    proc = subprocess.run([sys.executable, "-m", "fsw", "--config", str(path), "--bus", "virtual:nokey"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "security.key_file" in proc.stderr and "keygen" in proc.stderr
+    assert "Traceback" not in proc.stderr
+    write_key_file(tmp_path / "open.key")
+    os.chmod(tmp_path / "open.key", 0o644)
+    proc = subprocess.run([sys.executable, "-m", "fsw", "--config", str(path), "--bus", "virtual:nokey",
+                           "--key-file", str(tmp_path / "open.key")], cwd=ROOT, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and "open.key" in proc.stderr and "chmod 600" in proc.stderr

@@ -12,7 +12,7 @@ import can
 import pytest
 
 from fsw.bus import E2ESender, Icd, open_bus
-from fsw.bus.transport import udp_endpoint_for_run
+from fsw.bus.transport import random_udp_endpoint
 from hil_sim import bus_cli
 from hil_sim.cli import main as keepout_main
 
@@ -85,7 +85,7 @@ def _log_via_cli(spec: str, tmp_path: Path) -> str:
 
 
 def test_keepout_bus_log_over_udp_multicast(tmp_path: Path) -> None:
-    group, port = udp_endpoint_for_run(f"cli-log-{os.getpid()}")
+    group, port = random_udp_endpoint()
     text = _log_via_cli(f"udp_multicast:{group}:{port}", tmp_path)
     _assert_decoded(_cantools_decode(text))
 

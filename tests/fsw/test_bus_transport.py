@@ -7,7 +7,7 @@ import can
 import pytest
 
 from fsw.bus import transport
-from fsw.bus.transport import (BusSpecError, BusUnavailableError, open_bus, resolve_spec, udp_endpoint_for_run)
+from fsw.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
 
 
 def test_resolve_explicit_specs() -> None:
@@ -19,17 +19,58 @@ def test_resolve_explicit_specs() -> None:
 
 
 @pytest.mark.parametrize("bad", ["can:0", "udp_multicast:239.1.1.1", "udp_multicast:239.1.1.1:x",
-                                 "udp_multicast:239.1.1.1:80", "auto:vcan0", "socketcan:a:b"])
+                                 "udp_multicast:239.1.1.1:80", "auto:vcan0", "socketcan:a:b",
+                                 "udp_multicast:10.0.0.1:45000", "udp_multicast:ff02::1:45000"])
 def test_bad_specs_name_the_accepted_forms(bad: str) -> None:
     with pytest.raises(BusSpecError, match="accepted|GROUP|PORT|auto"):
         resolve_spec(bad)
 
 
-def test_udp_endpoint_depends_on_run_id_only() -> None:
-    a, b = udp_endpoint_for_run("run-a"), udp_endpoint_for_run("run-b")
-    assert a == udp_endpoint_for_run("run-a")
-    assert a[0] != b[0] and a[1] != b[1]
-    assert resolve_spec("udp_multicast", run_id="run-a").spec == f"udp_multicast:{a[0]}:{a[1]}"
+@pytest.mark.parametrize("spec, interface, channel, options", [
+    ("pcan:PCAN_USBBUS1", "pcan", "PCAN_USBBUS1", {}),
+    ("kvaser:0", "kvaser", "0", {}),
+    ("vector:0,app_name=keepout", "vector", "0", {"app_name": "keepout"}),
+    ("slcan:/dev/ttyACM0", "slcan", "/dev/ttyACM0", {}),
+    ("socketcand:can0,host=10.0.0.2,port=29536", "socketcand", "can0", {"host": "10.0.0.2", "port": 29536}),
+])
+def test_any_python_can_interface_is_a_bus_spec(spec: str, interface: str, channel: str, options: dict) -> None:
+    info = resolve_spec(spec)
+    assert (info.spec, info.interface, info.channel, dict(info.options)) == (spec, interface, channel, options)
+
+
+@pytest.mark.parametrize("bad", ["pcan:", "kvaser:0,bitrate", "vector:0,9x=1", "warpdrive:0"])
+def test_bad_hardware_specs_say_what_is_allowed(bad: str) -> None:
+    with pytest.raises(BusSpecError, match="accepted"):
+        resolve_spec(bad)
+
+
+def test_hardware_interface_opens_with_the_mission_bitrate(monkeypatch: pytest.MonkeyPatch) -> None:
+    opened: list[dict] = []
+    real_bus = can.Bus
+
+    def fake_bus(**kwargs):
+        opened.append(kwargs)
+        return real_bus(interface="virtual", channel="hw-stand-in")
+
+    monkeypatch.setattr(transport.can, "Bus", fake_bus)
+    open_bus("kvaser:1,data_bitrate=2000000", bitrate=250000).shutdown()
+    open_bus("pcan:PCAN_USBBUS1,bitrate=125000", bitrate=250000).shutdown()  # the spec's own option wins
+    assert opened == [{"interface": "kvaser", "channel": "1", "bitrate": 250000, "data_bitrate": 2000000},
+                      {"interface": "pcan", "channel": "PCAN_USBBUS1", "bitrate": 125000}]
+
+
+def test_missing_hardware_driver_is_a_clear_bus_unavailable_error() -> None:
+    # no PCAN driver on a test machine: python-can's own message, wrapped with the interface and channel
+    with pytest.raises(BusUnavailableError, match="python-can interface 'pcan' channel 'PCAN_USBBUS1'"):
+        open_bus("pcan:PCAN_USBBUS1", bitrate=500000)
+
+
+def test_udp_endpoint_is_random_per_run_not_derived_from_the_run_name() -> None:
+    # Two runs with the same folder name (started in the same second) must not share a bus.
+    specs = {resolve_spec("udp_multicast", run_id="demo-20261125-120000").spec for _ in range(20)}
+    assert len(specs) == 20
+    ports = {int(s.rsplit(":", 1)[1]) for s in specs}
+    assert len(ports) > 10
 
 
 def test_auto_says_which_transport(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -62,8 +103,9 @@ def _ping(a: can.BusABC, b: can.BusABC, frame_id: int) -> can.Message | None:
 
 
 def test_udp_multicast_runs_do_not_hear_each_other() -> None:
-    a1, a2 = open_bus("udp_multicast", run_id="iso-a"), open_bus("udp_multicast", run_id="iso-a")
-    b1 = open_bus("udp_multicast", run_id="iso-b")
+    spec_a, spec_b = resolve_spec("udp_multicast").spec, resolve_spec("udp_multicast").spec
+    a1, a2 = open_bus(spec_a), open_bus(spec_a)
+    b1 = open_bus(spec_b)
     try:
         assert _ping(a1, a2, 0x123) is not None
         a1.send(can.Message(arbitration_id=0x124, data=b"\x00", is_extended_id=False))
@@ -73,6 +115,37 @@ def test_udp_multicast_runs_do_not_hear_each_other() -> None:
     finally:
         for bus in (a1, a2, b1):
             bus.shutdown()
+
+
+def test_udp_multicast_bus_stays_on_loopback() -> None:
+    """The bus socket sends on lo with TTL 0, joins on lo only and binds the group, not 0.0.0.0."""
+    import socket
+
+    info = resolve_spec("udp_multicast")
+    bus = open_bus(info.spec)
+    try:
+        sock = bus._multicast._socket
+        assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
+        assert socket.inet_ntoa(sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, 4)) == "127.0.0.1"
+        assert sock.getsockname() == (info.channel, info.port)
+        # a unicast datagram to the port from this host is not received (only the group's traffic is)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as intruder:
+            intruder.sendto(b"\x00" * 16, ("127.0.0.1", info.port))
+        assert bus.recv(timeout=0.2) is None
+    finally:
+        bus.shutdown()
+
+
+def test_loopback_bus_talks_to_python_can_udp_multicast_on_the_same_group() -> None:
+    # same wire format as python-can's interface (cantools monitor -i udp_multicast still works here)
+    info = resolve_spec("udp_multicast")
+    ours = open_bus(info.spec)
+    theirs = can.Bus(interface="udp_multicast", channel=info.channel, port=info.port, fd=False)
+    try:
+        assert _ping(ours, theirs, 0x42) is not None
+    finally:
+        ours.shutdown()
+        theirs.shutdown()
 
 
 def test_virtual_channels_are_isolated() -> None:

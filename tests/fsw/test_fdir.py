@@ -114,6 +114,9 @@ def test_target_inside_a_zone_is_rejected_by_telecommand(closing) -> None:
     assert any(n == "CMD_REJECTED" for n, _ in _events(tm))
     np.testing.assert_array_equal(loop.fsw.guidance.target_N, before)
     assert tc.counters["rejected"] == 1 and tc.counters["validation"] == 1
+    # the acknowledgement says why, with the dictionary's reason code
+    assert result.code == "TARGET_IN_KEEP_OUT" and tm.latest("TC_ACK")["ack_tc_seq"] == 1
+    assert DICTIONARY.packet("TC_ACK").channels[-1].enum[tm.latest("TC_ACK")["ack_code"]] == "TARGET_IN_KEEP_OUT"
     ok = tc.handle_datagram(encode_command(DICTIONARY, "SET_TARGET", {"kind": "DIRECTION", "c0": 0.0, "c1": 0.0, "c2": 1.0}, seq_count=2))
     assert ok.accepted and loop.fsw.guidance.target_N == pytest.approx([0, 0, 1])
 

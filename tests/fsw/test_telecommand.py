@@ -97,12 +97,17 @@ def test_accepted_commands_reach_handlers_with_typed_args(setup) -> None:
     assert hk["tc_accepted"] == 4 and hk["tc_rejected"] == 0
 
 
-def _expect(dispatcher: CommandDispatcher, packet: bytes, error: str, match: str = "") -> None:
+def _expect(dispatcher: CommandDispatcher, packet: bytes, error: str, match: str = "", code: str = "") -> None:
+    """A failure of class ``error`` (reason code ``code``): an execution error fails an accepted command,
+    any other error rejects it at acceptance."""
     before = dict(dispatcher.counters)
     result = dispatcher.handle_datagram(packet)
-    assert not result.accepted and result.error == error, result
+    accepted = error == "EXECUTION"
+    assert result.accepted == accepted and not result.completed and result.error == error, result
     assert match in result.reason
-    assert dispatcher.counters["rejected"] == before["rejected"] + 1
+    assert not code or result.code == code, result
+    counter = "failed" if accepted else "rejected"
+    assert dispatcher.counters[counter] == before[counter] + 1
     assert dispatcher.counters[error.lower()] == before[error.lower()] + 1
 
 
@@ -111,15 +116,18 @@ def test_format_errors(setup) -> None:
     good = encode_command(DICTIONARY, "SET_GAINS", [2.0, 5.0, 0.1, 1.5])
     corrupt = bytearray(good)
     corrupt[10] ^= 0x40
-    _expect(dispatcher, bytes(corrupt), "FORMAT", "CRC")
-    _expect(dispatcher, good[:-4], "FORMAT", "length")
-    _expect(dispatcher, good[:5], "FORMAT", "shorter")
-    _expect(dispatcher, good + b"\x00", "FORMAT", "length")
-    _expect(dispatcher, tc_packet_by_hand(TC_APID, 0, b"\x00\x01" + bytes(MAX_TC_PACKET_LEN)), "FORMAT", "longer")
-    _expect(dispatcher, tc_packet_by_hand(0x123, 0, good[6:-2]), "FORMAT", "APID")
-    _expect(dispatcher, tc_packet_by_hand(TC_APID, 0, good[6:-2], packet_type=0), "FORMAT", "expected TC")
-    _expect(dispatcher, tc_packet_by_hand(TC_APID, 0, good[6:-2] + b"\x07"), "FORMAT", "after the last")
-    _expect(dispatcher, tc_packet_by_hand(TC_APID, 0, good[6:-6]), "FORMAT", "truncated")
+    _expect(dispatcher, bytes(corrupt), "FORMAT", "CRC", "CRC_MISMATCH")
+    _expect(dispatcher, good[:-4], "FORMAT", "length", "LENGTH_MISMATCH")
+    _expect(dispatcher, good[:5], "FORMAT", "shorter", "PACKET_TOO_SHORT")
+    _expect(dispatcher, good + b"\x00", "FORMAT", "length", "LENGTH_MISMATCH")
+    _expect(dispatcher, tc_packet_by_hand(TC_APID, 0, b"\x00\x01" + bytes(MAX_TC_PACKET_LEN)), "FORMAT", "longer",
+            "PACKET_TOO_LONG")
+    _expect(dispatcher, tc_packet_by_hand(0x123, 0, good[6:-2]), "FORMAT", "APID", "WRONG_APID")
+    _expect(dispatcher, tc_packet_by_hand(TC_APID, 0, good[6:-2], packet_type=0), "FORMAT", "expected TC",
+            "BAD_HEADER")
+    _expect(dispatcher, tc_packet_by_hand(TC_APID, 0, good[6:-2] + b"\x07"), "FORMAT", "after the last",
+            "TRAILING_BYTES")
+    _expect(dispatcher, tc_packet_by_hand(TC_APID, 0, good[6:-6]), "FORMAT", "truncated", "ARGS_TRUNCATED")
     segmented = bytearray(good[:-2])
     segmented[2] &= 0x3F  # sequence flags 00: continuation segment
     _expect(dispatcher, bytes(segmented) + struct.pack("!H", crc16_ccitt(bytes(segmented))), "FORMAT", "unsegmented")
@@ -130,20 +138,21 @@ def test_format_errors(setup) -> None:
 
 def test_invalid_opcode_errors(setup) -> None:
     dispatcher, recorder, _ = setup
-    _expect(dispatcher, tc_packet_by_hand(TC_APID, 0, b"\x00\x99"), "INVALID_OPCODE", "not in the dictionary")
+    _expect(dispatcher, tc_packet_by_hand(TC_APID, 0, b"\x00\x99"), "INVALID_OPCODE", "not in the dictionary",
+            "UNKNOWN_OPCODE")
     assert dispatcher.last_result is not None and dispatcher.last_result.opcode == 0x99
     bare = CommandDispatcher(DICTIONARY, port=None)  # knows the dictionary, has no handlers
-    _expect(bare, encode_command(DICTIONARY, "NOOP"), "INVALID_OPCODE", "no handler")
+    _expect(bare, encode_command(DICTIONARY, "NOOP"), "INVALID_OPCODE", "no handler", "NO_HANDLER")
 
 
 def test_validation_errors(setup) -> None:
     dispatcher, recorder, _ = setup
     _expect(dispatcher, encode_command(DICTIONARY, "SET_GAINS", [0.0, 5.0, 0.1, 1.5], check_range=False),
-            "VALIDATION", "k1")
+            "VALIDATION", "k1", "ARG_OUT_OF_RANGE")
     _expect(dispatcher, encode_command(DICTIONARY, "SET_GAINS", [1.0, 5.0, float("nan"), 1.5],
-                                       check_range=False), "VALIDATION", "eps")
+                                       check_range=False), "VALIDATION", "eps", "ARG_OUT_OF_RANGE")
     bad_enum = tc_packet_by_hand(TC_APID, 0, struct.pack("!HB", DICTIONARY.command("SET_MODE").opcode, 9))
-    _expect(dispatcher, bad_enum, "VALIDATION", "enum index 9")
+    _expect(dispatcher, bad_enum, "VALIDATION", "enum index 9", "BAD_ENUM")
     # A handler's own check (here: a zero-length target direction) is a validation error too.
     _expect(dispatcher, encode_command(DICTIONARY, "SET_TARGET", ["DIRECTION", 0.0, 0.0, 0.0]), "VALIDATION",
             "norm")
@@ -162,8 +171,71 @@ def test_execution_errors_never_escape(setup) -> None:
 
     dispatcher2.register("NOOP", broken)
     dispatcher2.register("RESET_COUNTERS", refused)
-    _expect(dispatcher2, encode_command(DICTIONARY, "NOOP"), "EXECUTION", "ZeroDivisionError")
+    _expect(dispatcher2, encode_command(DICTIONARY, "NOOP"), "EXECUTION", "ZeroDivisionError", "EXECUTION_FAILED")
     _expect(dispatcher2, encode_command(DICTIONARY, "RESET_COUNTERS"), "EXECUTION", "not converged")
+    assert dispatcher2.counters["accepted"] == 2 and dispatcher2.counters["completed"] == 0
+
+
+class CapturingTelemetry(TelemetrySender):
+    """Telemetry that keeps every packet it would send."""
+
+    def __init__(self) -> None:
+        super().__init__(DICTIONARY, port=None, clock=lambda: 12.5)
+        self.sent: list[bytes] = []
+
+    def _transmit(self, raw: bytes) -> None:
+        self.sent.append(raw)
+        super()._transmit(raw)
+
+
+def _acks(raw_packets: list[bytes]) -> list[tuple[str, int, int, int, str]]:
+    """(report, request id, sequence count, opcode, reason code) of every TC_ACK packet, decoded."""
+    from fsw.telemetry import decode_tm_packet
+
+    decoded = [decode_tm_packet(DICTIONARY, raw) for raw in raw_packets]
+    return [(p.values["ack_report"], p.values["ack_request_id"], p.values["ack_tc_seq"], p.values["ack_opcode"],
+             p.values["ack_code"]) for p in decoded if p.packet == "TC_ACK"]
+
+
+def test_every_telecommand_is_acknowledged_in_telemetry_as_pus_service_1() -> None:
+    telemetry = CapturingTelemetry()
+    dispatcher = CommandDispatcher(DICTIONARY, telemetry, port=None)
+    dispatcher.register("NOOP", lambda: None)
+
+    def broken() -> None:
+        raise RuntimeError("wheel driver lost")
+
+    dispatcher.register("RESET_COUNTERS", broken)
+    dispatcher.register("SET_GAINS", lambda **_: None)
+    noop = encode_command(DICTIONARY, "NOOP", seq_count=7)
+    out_of_range = encode_command(DICTIONARY, "SET_GAINS", [1.0, 5.0, 0.1, 90.0], seq_count=8, check_range=False)
+    reset = encode_command(DICTIONARY, "RESET_COUNTERS", seq_count=9)
+    set_mode = encode_command(DICTIONARY, "SET_MODE", ["SAFE"], seq_count=10)  # in the dictionary, not handled
+    for packet in (noop, out_of_range, reset, set_mode, b"\x17\x00"):
+        dispatcher.handle_datagram(packet)
+
+    def request_id(packet: bytes) -> int:  # PUS: the first four octets of the command, read independently
+        return struct.unpack("!I", packet[:4])[0]
+
+    assert _acks(telemetry.sent) == [
+        ("ACCEPTANCE_SUCCESS", request_id(noop), 7, 0x01, "NONE"),
+        ("COMPLETION_SUCCESS", request_id(noop), 7, 0x01, "NONE"),
+        ("ACCEPTANCE_FAILURE", request_id(out_of_range), 8, 0x05, "ARG_OUT_OF_RANGE"),
+        ("ACCEPTANCE_SUCCESS", request_id(reset), 9, 0x02, "NONE"),
+        ("COMPLETION_FAILURE", request_id(reset), 9, 0x02, "EXECUTION_FAILED"),
+        ("ACCEPTANCE_FAILURE", request_id(set_mode), 10, 0x03, "NO_HANDLER"),
+        ("ACCEPTANCE_FAILURE", 0x17000000, 0, 0, "PACKET_TOO_SHORT"),
+    ]
+    hk = dispatcher.hk_values()
+    assert (hk["tc_accepted"], hk["tc_rejected"], hk["tc_completed"], hk["tc_failed"]) == (2, 3, 1, 1)
+    # every reason code a command can get is documented in the dictionary, with the command
+    documented = DICTIONARY.to_dict()
+    codes = {c["name"] for c in documented["tc_verification"]["reason_codes"]}
+    for command in documented["commands"]:
+        ack = command["acknowledgement"]
+        assert set(ack["acceptance_failure_codes"]) | set(ack["completion_failure_codes"]) <= codes
+    set_target = next(c for c in documented["commands"] if c["name"] == "SET_TARGET")
+    assert "TARGET_IN_KEEP_OUT" in set_target["acknowledgement"]["acceptance_failure_codes"]
 
 
 def test_sender_side_refuses_bad_args_with_the_name() -> None:
@@ -206,15 +278,15 @@ def test_poll_over_a_real_udp_socket_counts_oversized_and_garbage() -> None:
 
 
 class _CountingSocket:
-    """The dispatcher's socket with its recv calls counted (every other call passes through)."""
+    """The dispatcher's socket with its recvmsg calls counted (every other call passes through)."""
 
     def __init__(self, sock: socket.socket) -> None:
         self._sock = sock
         self.recvs = 0
 
-    def recv(self, n: int) -> bytes:
+    def recvmsg(self, *args: Any) -> tuple:
         self.recvs += 1
-        return self._sock.recv(n)
+        return self._sock.recvmsg(*args)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._sock, name)
@@ -320,10 +392,12 @@ def test_random_packets_only_change_counters(data: st.DataObject) -> None:
     stream = [p if data.draw(st.booleans()) else _mutations(p, data) for p in packets]
     for packet in stream:
         result = dispatcher.handle_datagram(packet)  # must not raise
-        assert result.accepted == (result.error is None)
+        assert result.completed == (result.error is None)
     c = dispatcher.counters
     assert c["received"] == len(stream)
     assert c["accepted"] + c["rejected"] == c["received"]
-    assert c["invalid_opcode"] + c["validation"] + c["format"] + c["execution"] == c["rejected"]
+    assert c["completed"] + c["failed"] == c["accepted"]
+    assert c["invalid_opcode"] + c["validation"] + c["format"] + c["execution"] == c["rejected"] + c["failed"]
+    assert c["acks_sent"] == c["received"] + c["accepted"]  # an acceptance report each, a completion report each accepted
     assert len(recorder.calls) == c["accepted"]  # only accepted commands reached a handler
     assert c["execution"] == 0  # the recording handlers never fail

@@ -217,7 +217,7 @@ def test_none_means_no_value() -> None:
 @settings(max_examples=300, deadline=None)
 @given(st.data())
 def test_decoder_and_ground_survive_any_datagram(data: st.DataObject) -> None:
-    from fsw.ground import GroundMonitor
+    from ground.monitor import GroundMonitor
 
     tm = TelemetrySender(DICTIONARY, port=None, clock=lambda: 1.0)
     reason = "x" * data.draw(st.integers(0, 200))

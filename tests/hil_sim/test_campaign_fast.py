@@ -39,7 +39,7 @@ def test_shortened_regression_campaign_runs_end_to_end(campaign_dir):
     assert (df["m.min_margin_deg"] > 0).all()
     xmlschema.XMLSchema(JUNIT_XSD).validate(out / "junit.xml")
     cases = ET.parse(out / "junit.xml").getroot().findall(".//testcase")
-    assert len(cases) == RUNS * 7 + 1  # one per criterion and run, and the verdict
+    assert len(cases) == RUNS * 8 + 1  # one per criterion and run, and the verdict
 
 
 def test_every_dispersion_was_read_back_from_the_run(campaign_dir):
@@ -120,7 +120,61 @@ def test_baseline_save_and_compare_through_the_cli(campaign_dir, tmp_path, capsy
         (moved / name).write_text((out / name).read_text())
     df.assign(**{"m.min_margin_deg": df["m.min_margin_deg"] - 1.0}).to_parquet(moved / "results.parquet")
     assert main(["campaign", "compare", str(moved), "--baseline", str(base)]) == 1
-    assert "MOVED" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "WORSE (larger is better)" in text and text.rstrip().endswith("REGRESSION")
+    # a larger keep-out margin (criterion `>`) and a shorter settling (`<=`) are improvements, not regressions
+    df.assign(**{"m.min_margin_deg": df["m.min_margin_deg"] + 1.0,
+                 "m.settling_time_s": df["m.settling_time_s"] - 1.0}).to_parquet(moved / "results.parquet")
+    assert main(["campaign", "compare", str(moved), "--baseline", str(base)]) == 0
+    text = capsys.readouterr().out
+    assert "IMPROVED" in text and "REGRESSION" not in text and "MOVED" not in text
+
+
+def test_compare_without_a_baseline_is_one_clear_line(campaign_dir, tmp_path, capsys):
+    out, _ = campaign_dir
+    assert main(["campaign", "compare", str(out), "--baseline", str(tmp_path / "none")]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.count("\n") == 1 and "no baseline at" in captured.err and "baseline save" in captured.err
+    assert "Traceback" not in captured.err + captured.out
+    assert main(["campaign", "compare", str(tmp_path), "--baseline", str(tmp_path / "none")]) == 2
+    assert "not a campaign output folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("run", [RUNS, -1, 500])
+def test_rerun_or_shrink_of_a_run_outside_the_campaign_is_an_error(campaign_dir, capsys, run):
+    out, _ = campaign_dir
+    assert main(["campaign", "rerun", str(out), "--run", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert f"run {run} is not a run of" in err and f"runs 0 to {RUNS - 1}" in err
+    assert main(["campaign", "shrink", str(out), "--run", str(run)]) == 2
+    assert f"run {run} is not a run of" in capsys.readouterr().err
+
+
+def test_report_regenerates_the_tables_and_report_of_a_folder(campaign_dir, capsys):
+    out, code = campaign_dir
+    (out / "results.parquet").unlink()
+    assert not (out / "report.html").exists()  # the campaign ran with --no-report
+    assert main(["campaign", "report", str(out)]) == code == 1
+    assert (out / "report.html").exists() and (out / "report.md").exists()
+    assert len(pd.read_parquet(out / "results.parquet")) == RUNS
+    assert "FAIL: 2 failed of 2 runs" in capsys.readouterr().err
+    assert main(["campaign", "report", str(out / "nowhere")]) == 2
+
+
+def test_too_few_passing_runs_exit_inconclusive(tmp_path, capsys):
+    """Two passing runs cannot show 95 % at 95 % confidence: INCONCLUSIVE, exit 4, never 'FAIL: 0 failed'."""
+    import yaml
+    campaign = yaml.safe_load(REGRESSION.read_text())
+    campaign["base_mission"] = str(REGRESSION.parent / campaign["base_mission"])
+    campaign["criteria"] = [c for c in campaign["criteria"] if c["name"] == "keep_out"]
+    path = tmp_path / "keep-out-only.yaml"
+    path.write_text(yaml.safe_dump(campaign))
+    code = main(["campaign", "run", str(path), "--runs", "2", "--workers", "1", "--duration", "12",
+                 "--out", str(tmp_path / "out"), "--no-report"])
+    err = capsys.readouterr().err
+    assert code == 4, err
+    assert "INCONCLUSIVE: 0 failed of 2 runs" in err and "--runs 59" in err and "FAIL" not in err
+    assert (tmp_path / "out" / "verdict.txt").read_text().startswith("INCONCLUSIVE")
 
 
 @pytest.mark.slow

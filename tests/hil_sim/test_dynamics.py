@@ -14,9 +14,7 @@ from gnc.attitude import attitude_error_angle, quat_to_dcm
 from hil_sim.params import DisturbanceParams, SpacecraftParams, WheelParams, WorldParams
 from hil_sim.world import World, WorldBatch
 
-REF_DIR = Path("/work/shared/reference/basilisk")
-if not REF_DIR.exists():  # repository checkouts keep ../shared next to the work tree
-    REF_DIR = Path(__file__).resolve().parents[3] / "shared" / "reference" / "basilisk"
+REF_DIR = Path(__file__).resolve().parents[1] / "data" / "basilisk"  # provenance: its README.md
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from fsw.bus import FswBusDriver, Icd, open_bus
-from fsw.bus.transport import udp_endpoint_for_run
+from fsw.bus.transport import random_udp_endpoint
 from hil_sim.lockstep import RateDampingResponder, Simulator
 from hil_sim.params import SpacecraftParams, WorldParams
 from hil_sim.world import World
@@ -210,7 +210,7 @@ def _run_side_by_side(icd: Icd, specs: list[str], ticks: int = 40) -> None:
 def test_two_lockstep_runs_side_by_side_on_udp_multicast(icd: Icd) -> None:
     specs = []
     for run in ("side-a", "side-b"):
-        group, port = udp_endpoint_for_run(f"{run}-{os.getpid()}")
+        group, port = random_udp_endpoint()
         specs.append(f"udp_multicast:{group}:{port}")
     _run_side_by_side(icd, specs)
 

@@ -104,7 +104,7 @@ def test_yaml_syntax_error_has_a_position(tmp_path):
     text, path, err = _load_edited(tmp_path, ("  semi_major_axis_km: 42164.0\n", "  semi_major_axis_km: [42164.0\n"))
     assert len(err.problems) == 1
     problem = err.problems[0]
-    assert problem.file == str(path) and "YAML syntax error" in problem.message
+    assert problem.file == str(path) and "is not closed" in problem.message
     bad_line, _ = _position(text, "[42164.0")
     assert bad_line <= problem.line <= bad_line + 2  # the parser notices at or just after the bracket
 
@@ -186,3 +186,44 @@ def test_config_validate_cli_prints_every_problem(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"{path}:" in err and "duration_s: Input should be greater than 0" in err and "seedd" in err
     assert main(["config", "validate", str(DEMO)]) == 0
+
+
+# -- YAML syntax errors in plain words, with the fix (issue 14 point 11) -------------------------------
+
+def _syntax_error(tmp_path: Path, old: str, new: str) -> tuple[str, Path, str]:
+    text, path, err = _load_edited(tmp_path, (old, new))
+    assert len(err.problems) == 1, str(err)
+    return text, path, str(err.problems[0])
+
+
+def test_a_tab_says_use_spaces(tmp_path):
+    text, path, msg = _syntax_error(tmp_path, "  inclination_deg: 5.0\n", "\tinclination_deg: 5.0\n")
+    line, col = _position(text, "\tinclination_deg")
+    assert msg == f"{path}:{line}:{col}: a tab character: YAML does not allow tabs here; use spaces for " \
+                  "indentation (and after ':')"
+
+
+def test_a_key_indented_more_than_its_neighbour_names_both(tmp_path):
+    text, path, msg = _syntax_error(tmp_path, "  inclination_deg: 5.0\n", "   inclination_deg: 5.0\n")
+    line, col = _position(text, "inclination_deg: 5.0")
+    prev_line, _ = _position(text, "semi_major_axis_km")
+    assert msg == (f"{path}:{line}:{col}: 'inclination_deg' is indented 3 spaces, more than 'semi_major_axis_km' on "
+                   f"line {prev_line} (2 spaces), which already has a value, so YAML reads this line as part of "
+                   "that value; indent it 2 spaces to line up with 'semi_major_axis_km'")
+
+
+def test_a_key_between_two_columns_names_the_keys_it_could_line_up_with(tmp_path):
+    text, path, msg = _syntax_error(tmp_path, "    bias_B_rad_s:", "   bias_B_rad_s:")
+    line, col = _position(text, "bias_B_rad_s")
+    sibling_line, _ = _position(text, "    bias_random_walk_rad_s_per_sqrt_s")
+    parent_line, _ = _position(text, "  imu:")
+    assert msg.startswith(f"{path}:{line}:{col}: 'bias_B_rad_s' is indented 3 spaces, which lines up with nothing "
+                          f"above it ('bias_random_walk_rad_s_per_sqrt_s' (line {sibling_line}) at 4 spaces, 'imu' (line {parent_line}) at 2 spaces)")
+    assert msg.endswith("indent it 4 spaces to line up with 'bias_random_walk_rad_s_per_sqrt_s' or 2 spaces to "
+                        "line up with 'imu'")
+
+
+def test_an_unclosed_list_points_at_its_bracket(tmp_path):
+    text, path, msg = _syntax_error(tmp_path, "  semi_major_axis_km: 42164.0\n", "  semi_major_axis_km: [42164.0\n")
+    line, col = _position(text, "[42164.0")
+    assert f"the '[' opened at line {line}, column {col} is not closed" in msg and msg.startswith(f"{path}:")

@@ -12,23 +12,24 @@ import numpy as np
 from rich.console import Console
 
 from fsw.dictionary import DICTIONARY, GNC_APID, HK_APID, LimitState
-from fsw.ground import (
+from ground.archive import (
     DECODED_ARCHIVE,
     EVENTS_ARCHIVE,
     LIMITS_ARCHIVE,
     RAW_ARCHIVE,
     SUMMARY_FILE,
-    GroundMonitor,
-    limit_state,
-    main,
     read_channels,
     read_events,
     read_raw_archive,
-    render_tables,
-    run_ground_monitor,
 )
+from ground.cli import main
+from ground.display import limit_state, render_tables
+from ground.monitor import GroundMonitor, run_ground_monitor
+from fsw.link_security import SPI_TM, SecurityAssociation, downlink_receiver, uplink_receiver, write_key_file
 from fsw.telecommand import CommandDispatcher
 from fsw.telemetry import TelemetrySender, encode_tm_packet
+
+RESYNC = DICTIONARY.command("SEC_RESYNC").opcode
 
 
 def _gnc_values(cycle: int) -> list:
@@ -111,17 +112,19 @@ def test_sender_to_monitor_end_to_end_with_events(tmp_path: Path) -> None:
     assert [e["event"] for e in events] == ["KEEP_OUT_MARGIN_LOW"]
 
 
-def test_tc_round_trip_ground_send_to_dispatcher_and_command_event_back() -> None:
-    monitor = GroundMonitor(DICTIONARY, "127.0.0.1", 0)
-    telemetry = TelemetrySender(DICTIONARY, "127.0.0.1", monitor.address[1])
-    dispatcher = CommandDispatcher(DICTIONARY, telemetry, "127.0.0.1", 0)
+def test_tc_round_trip_ground_send_to_dispatcher_and_command_event_back(tmp_path: Path) -> None:
+    key = write_key_file(tmp_path / "link.key")
+    monitor = GroundMonitor(DICTIONARY, "127.0.0.1", 0, security=downlink_receiver(key))
+    telemetry = TelemetrySender(DICTIONARY, "127.0.0.1", monitor.address[1], security=SecurityAssociation(key, SPI_TM))
+    dispatcher = CommandDispatcher(DICTIONARY, telemetry, "127.0.0.1", 0,
+                                   security=uplink_receiver(key, resync_opcode=RESYNC))
     modes: list[str] = []
     dispatcher.register("SET_MODE", lambda mode: modes.append(mode))
     tc_port = dispatcher.address[1]
 
     json_dictionary = str(Path(__file__).resolve().parents[2] / "config" / "telemetry_dictionary.json")
     assert main(["ground", "--dictionary", json_dictionary, "send", "SET_MODE", "POINTING",
-                 "--port", str(tc_port)]) == 0
+                 "--port", str(tc_port), "--no-wait", "--key-file", str(tmp_path / "link.key")]) == 0
     results = []
     deadline = time.monotonic() + 3.0
     while not results and time.monotonic() < deadline:
@@ -129,7 +132,8 @@ def test_tc_round_trip_ground_send_to_dispatcher_and_command_event_back() -> Non
     assert [r.accepted for r in results] == [True]
     assert modes == ["POINTING"]
     assert dispatcher.counters["accepted"] == 1 and dispatcher.hk_values()["tc_accepted"] == 1
-    _receive(monitor, 2)  # CMD_DISPATCHED + CMD_COMPLETED arrive as telemetry
+    _receive(monitor, 4)  # CMD_DISPATCHED, acceptance report, CMD_COMPLETED, completion report
+    assert monitor.stats.decoded == 4 and monitor.stats.forged == 0  # all signed, all verified
     assert [(e.event, e.severity) for e in monitor.events] == [("CMD_DISPATCHED", "COMMAND"),
                                                                ("CMD_COMPLETED", "COMMAND")]
     assert monitor.events[-1].args["command"] == "SET_MODE"
@@ -138,11 +142,14 @@ def test_tc_round_trip_ground_send_to_dispatcher_and_command_event_back() -> Non
     monitor.close()
 
 
-def test_cli_send_rejects_bad_arguments_with_a_clear_message(capsys) -> None:
-    assert main(["ground", "send", "SET_MODE", "SPIN", "--port", "9"]) == 2
+def test_cli_send_rejects_bad_arguments_with_a_clear_message(tmp_path: Path, capsys) -> None:
+    write_key_file(tmp_path / "k")
+    assert main(["ground", "send", "SET_MODE", "SPIN", "--port", "9", "--key-file", str(tmp_path / "k")]) == 2
     assert "mode: 'SPIN' not one of" in capsys.readouterr().err
     assert main(["ground", "send", "WARP", "--port", "9"]) == 2
     assert "unknown command" in capsys.readouterr().err
+    assert main(["ground", "send", "NOOP", "--port", "9"]) == 2  # nothing is sent unsigned
+    assert "no link key" in capsys.readouterr().err
 
 
 def test_monitor_runs_until_stop_event_in_a_thread(tmp_path: Path) -> None:
@@ -198,19 +205,22 @@ def test_run_ground_monitor_as_a_separate_process_on_an_ephemeral_port(tmp_path:
 
 
 def test_cli_monitor_with_duration(tmp_path: Path, capsys) -> None:
-    assert main(["ground", "--port", "0", "--duration", "0.3", "--no-live", "--archive", str(tmp_path)]) == 0
+    write_key_file(tmp_path / "link.key")
+    assert main(["ground", "--port", "0", "--duration", "0.3", "--no-live", "--archive", str(tmp_path),
+                 "--key-file", str(tmp_path / "link.key")]) == 0
     assert "received 0 packets" in capsys.readouterr().out
     assert (tmp_path / SUMMARY_FILE).exists()
 
 
-def test_send_takes_the_telecommand_address_from_the_mission_config(tmp_path: Path) -> None:
-    dispatcher = CommandDispatcher(DICTIONARY, None, "127.0.0.1", 0)
+def test_send_takes_the_telecommand_address_and_key_from_the_mission_config(tmp_path: Path) -> None:
+    key = write_key_file(tmp_path / "link.key")
+    dispatcher = CommandDispatcher(DICTIONARY, None, "127.0.0.1", 0, security=uplink_receiver(key))
     calls: list[str] = []
     dispatcher.register("NOOP", lambda: calls.append("NOOP"))
     mission = tmp_path / "mission.yaml"
     mission.write_text("flight_software:\n  tmtc:\n    telecommand_bind_host: 127.0.0.1\n"
-                       f"    telecommand_port: {dispatcher.address[1]}\n")
-    assert main(["ground", "--config", str(mission), "send", "NOOP"]) == 0
+                       f"    telecommand_port: {dispatcher.address[1]}\n    security: {{key_file: link.key}}\n")
+    assert main(["ground", "--config", str(mission), "send", "NOOP", "--no-wait"]) == 0
     deadline = time.monotonic() + 3.0
     while not calls and time.monotonic() < deadline:
         dispatcher.poll(timeout_s=0.1)

@@ -1,0 +1,87 @@
+"""The ground archive: file names, the raw record format, and readers for plots, summaries and replay.
+
+A run's archive directory holds ``tm_raw.bin`` (records of ``rx_time_s`` float64 + ``length`` u32 +
+packet bytes, big-endian; written before decoding so nothing is lost), ``tm_decoded.jsonl``,
+``events.jsonl``, ``limits.jsonl`` (every YELLOW/RED limit transition) and ``ground_summary.json``.
+With link security ``tm_raw.bin`` holds the authenticated packets in their plain form (security header
+and MAC checked and taken off) and ``tm_rejected.bin`` (same record format) the datagrams that failed
+authentication or anti-replay, as received.
+"""
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Iterator
+
+from fsw.dictionary import DICTIONARY, TelemetryDictionary
+
+if TYPE_CHECKING:
+    from fsw.telemetry import DecodedTm
+
+RAW_RECORD = struct.Struct("!dI")  # rx time (s, UNIX), packet length (bytes)
+RAW_ARCHIVE = "tm_raw.bin"
+DECODED_ARCHIVE = "tm_decoded.jsonl"
+EVENTS_ARCHIVE = "events.jsonl"
+LIMITS_ARCHIVE = "limits.jsonl"  # every yellow/red limit transition seen by the ground
+SUMMARY_FILE = "ground_summary.json"
+REJECTED_ARCHIVE = "tm_rejected.bin"  # datagrams refused by the link security, never decoded as telemetry
+
+
+def read_raw_archive(path: str | Path) -> Iterator[tuple[float, bytes]]:
+    """Yield (rx_time_s, packet bytes) from a ``tm_raw.bin`` archive; stops at a torn final record."""
+    with open(path, "rb") as stream:
+        while True:
+            head = stream.read(RAW_RECORD.size)
+            if len(head) < RAW_RECORD.size:
+                return
+            rx_time_s, length = RAW_RECORD.unpack(head)
+            data = stream.read(length)
+            if len(data) < length:
+                return
+            yield rx_time_s, data
+
+
+def decode_archive(archive_dir: str | Path, dictionary: TelemetryDictionary = DICTIONARY
+                   ) -> Iterator[tuple[float, DecodedTm | None, bytes]]:
+    """Yield (rx_time_s, decoded packet or None if undecodable, raw bytes) from a raw archive."""
+    from fsw.telemetry import TelemetryDecodeError, decode_tm_packet
+
+    for rx_time_s, raw in read_raw_archive(Path(archive_dir) / RAW_ARCHIVE):
+        try:
+            yield rx_time_s, decode_tm_packet(dictionary, raw), raw
+        except (TelemetryDecodeError, ValueError):
+            yield rx_time_s, None, raw
+
+
+def read_channels(archive_dir: str | Path, packet_name: str = "GNC",
+                  dictionary: TelemetryDictionary = DICTIONARY) -> dict[str, Any]:
+    """Time series of one packet's channels from the raw archive, as numpy arrays keyed by channel.
+
+    Also holds ``time_s`` (onboard), ``rx_time_s`` (ground) and ``seq``. Enum channels are arrays of
+    names. For plots and summaries in the SIL run folder.
+    """
+    import numpy as np
+
+    packet = dictionary.packet(packet_name)
+    columns: dict[str, list[Any]] = {name: [] for name in ("time_s", "rx_time_s", "seq")}
+    columns.update({c.name: [] for c in packet.channels})
+    for rx_time_s, decoded, _ in decode_archive(archive_dir, dictionary):
+        if decoded is None or decoded.packet != packet_name:
+            continue
+        columns["time_s"].append(decoded.time_s)
+        columns["rx_time_s"].append(rx_time_s)
+        columns["seq"].append(decoded.seq_count)
+        for name, value in decoded.values.items():
+            columns[name].append(value)
+    return {name: np.asarray(values) for name, values in columns.items()}
+
+
+def read_events(archive_dir: str | Path, dictionary: TelemetryDictionary = DICTIONARY) -> list[dict[str, Any]]:
+    """Every event in the raw archive, decoded (dicts as in ``events.jsonl``)."""
+    events = []
+    for rx_time_s, decoded, _ in decode_archive(archive_dir, dictionary):
+        if decoded is not None and decoded.kind == "event":
+            record = decoded.to_json_dict()
+            record["rx_time_s"] = rx_time_s
+            events.append(record)
+    return events

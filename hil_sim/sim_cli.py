@@ -1,0 +1,163 @@
+"""``keepout sim MISSION --bus SPEC``: the simulator alone, for a processor-in-the-loop bench.
+
+The flight software runs as ``keepout fsw MISSION --bus SPEC`` (on this computer or another one joined
+by a real CAN bus); this command runs the world: the devices on the bus (IMU, star tracker, wheels), the
+truth dynamics, the SYNC ticks and the fault injector, exactly as in ``keepout sil run``, plus the
+mission's telecommand timeline sent to the flight software's telecommand port. Clocks (docs/hil-bench.md):
+
+- lockstep (default): each tick waits for the flight software's CYCLE_DONE; start ``keepout fsw`` first.
+  The first tick waits up to ``--wait-s`` for the flight software to answer.
+- ``--realtime``: SYNC paced to this computer's monotonic clock, never waiting; run the flight software
+  with ``--realtime`` too (it ticks on its own clock; late answers are counted).
+
+Writes ``OUT/truth.npz``, ``OUT/bus.candump.log``, ``OUT/simulator.json`` and ``OUT/truth_check.json``
+(the mission's truth requirements: keep-out margins, settling, final error, wheel speeds). Exit codes: 0
+every truth requirement passes, 1 one fails or the flight software stopped answering, 2 the mission or an
+option is rejected, 3 the bus cannot be opened or no flight software answered the first SYNC, 130 Ctrl-C.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+EXIT_PASS, EXIT_FAIL, EXIT_REJECTED, EXIT_NOT_STARTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+TRUTH_CHECK_FILE = "truth_check.json"
+# requirements judged on truth alone (the rest need the flight software's telemetry, which a bench ground
+# archives separately: `keepout ground --config MISSION`)
+TRUTH_REQUIREMENTS = ("truth recorded", "run completed", "keep-out margin", "settling", "final pointing error",
+                      "peak wheel speed")
+
+
+def add_cli(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "sim", help="run the simulator alone on a bus (HIL bench; pair with `keepout fsw`)",
+        description=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("mission", type=Path, help="mission YAML")
+    p.add_argument("--bus", default=None, help="bus spec (default: the mission's bus): socketcan:can0 | "
+                   "udp_multicast:GROUP:PORT | INTERFACE:CHANNEL[,KEY=VALUE...] for any python-can interface")
+    p.add_argument("--realtime", action="store_true", help="pace SYNC to the clock (default: lockstep)")
+    p.add_argument("--duration", type=float, default=None, metavar="SECONDS", help="override the mission's duration")
+    p.add_argument("--wait-s", type=float, default=120.0,
+                   help="lockstep: how long the first tick waits for the flight software (default 120 s)")
+    p.add_argument("--tc", default=None, metavar="HOST:PORT",
+                   help="send the mission's telecommand timeline here (default: 127.0.0.1 and the mission's "
+                        "flight_software.tmtc.telecommand_port)")
+    p.add_argument("--no-timeline", action="store_true", help="send no telecommands (an operator commands)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="output folder (default: runs/<mission>-sim-<timestamp>)")
+    p.set_defaults(func=_run)
+
+
+def _tc_address(text: str | None, mission) -> tuple[str, int]:
+    if text is None:
+        return "127.0.0.1", mission.flight_software.tmtc.telecommand_port
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise ValueError(f"--tc {text!r}: give HOST:PORT with a port in 1..65535, e.g. 127.0.0.1:50101")
+    return host, int(port)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from fsw.bus.icd import Icd
+    from fsw.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
+    from ground.commanding import CommandSender
+    from hil_sim.lockstep import Simulator
+    from hil_sim.mission import world_params
+    from hil_sim.sil import (CANDUMP_FILE, SIM_STATS_FILE, TRUTH_FILE, CandumpLog, MissionRejected, RunOptions,
+                             Timeline, TruthRecorder, _plain, _run_dir, prepare)
+    from hil_sim.world import World
+
+    try:
+        mission, _ = prepare(RunOptions(mission=args.mission, bus=args.bus, duration_s=args.duration))
+        info = resolve_spec(mission.bus)
+        tc_host, tc_port = _tc_address(args.tc, mission)
+    except (MissionRejected, BusSpecError, ValueError) as exc:
+        print(f"keepout sim: {exc}", file=sys.stderr)
+        return EXIT_REJECTED
+    try:
+        bus = open_bus(info.spec, bitrate=mission.bus_bitrate_bps)
+    except (BusUnavailableError, OSError) as exc:
+        print(f"keepout sim: bus {info.spec} cannot be opened: {exc}", file=sys.stderr)
+        return EXIT_NOT_STARTED
+    out = args.out if args.out is not None else _run_dir(Path("runs"), f"{mission.name}-sim")
+    out.mkdir(parents=True, exist_ok=True)
+    world = World(world_params(mission), seed=mission.seed)
+    gnc_period = 1.0 / mission.flight_software.rates.gnc_rate_hz
+    candump = CandumpLog(out / CANDUMP_FILE, info.channel if info.interface == "socketcan" else "can0")
+    sim = Simulator(world, bus, Icd(), gnc_period_s=gnc_period, dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz,
+                    faults=mission.faults, fault_seed=mission.seed, on_frame=candump)
+    n_ticks = int(round(mission.duration_s / gnc_period))
+    recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels))
+    recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)
+    sender = CommandSender(host=tc_host, port=tc_port)
+    timeline = Timeline(mission, sender)
+    if args.no_timeline:
+        timeline.entries = []
+    print(f"keepout sim: {mission.name} on {info.note}, {'real time' if args.realtime else 'lockstep'}, "
+          f"{n_ticks} ticks; telecommands to {tc_host}:{tc_port}; output {out}", flush=True)
+    code, aborted = EXIT_PASS, ""
+    started = time.monotonic()
+    try:
+        code, aborted = _loop(sim, world, recorder, timeline, n_ticks, args)
+    except KeyboardInterrupt:
+        code, aborted = EXIT_INTERRUPTED, "interrupted"
+    finally:
+        wall_s = time.monotonic() - started
+        bus.shutdown()
+        candump.close()
+        sender.close()
+        recorder.save(out / TRUTH_FILE)
+        stats = {**sim.stats.__dict__, "aborted": aborted, "clock": "realtime" if args.realtime else "lockstep",
+                 "bus": info.spec, "bus_note": info.note, "bitrate_bps": mission.bus_bitrate_bps, "wall_s": wall_s,
+                 "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames,
+                 "telecommands": timeline.sent, "telecommand_errors": timeline.errors}
+        (out / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n")
+    if code == EXIT_NOT_STARTED:
+        return code
+    passed, results = _truth_check(out, mission)
+    for r in results:
+        print(f"  {'PASS' if r['pass'] else 'FAIL'}  {r['name']}: {r['value']} ({r['limit']})")
+    print(f"keepout sim: {sim.tick} ticks in {wall_s:.1f} s wall, {sim.stats.cycle_done_timeouts} unanswered; "
+          f"{'truth requirements pass' if passed else 'a truth requirement FAILED'}; {out}")
+    return code if code != EXIT_PASS else (EXIT_PASS if passed else EXIT_FAIL)
+
+
+def _loop(sim, world, recorder, timeline, n_ticks: int, args: argparse.Namespace) -> tuple[int, str]:
+    """Run the ticks; returns (exit code, why the run ended early or "")."""
+    missed_in_row = 0
+    for k in range(n_ticks):
+        timeline.release(sim.t_s)
+        if args.realtime:
+            before = sim.stats.cycle_done_late
+            sim.run_realtime(1)
+            done = sim.stats.cycle_done_late == before
+        else:
+            sim.begin_tick()
+            done = sim.end_tick(wait_s=args.wait_s if k == 0 else None)
+            if k == 0 and not done:
+                print(f"keepout sim: no flight software answered SYNC(0) within {args.wait_s:.0f} s on {args.bus or 'the mission bus'}: "
+                      "start `keepout fsw MISSION --bus SPEC` first (it waits for the simulator)", file=sys.stderr)
+                return EXIT_NOT_STARTED, "no flight software"
+        recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
+        missed_in_row = 0 if done else missed_in_row + 1
+        if not args.realtime and missed_in_row >= 3:
+            return EXIT_FAIL, f"the flight software answered none of the last 3 ticks (t = {sim.t_s:.1f} s)"
+    return EXIT_PASS, ""
+
+
+def _truth_check(out: Path, mission) -> tuple[bool, list[dict[str, Any]]]:
+    """The mission's requirements that truth alone decides, written to ``truth_check.json``."""
+    from hil_sim.summary import evaluate
+
+    summary, _ = evaluate(out, mission, status="completed")
+    results = [r for r in summary["requirements"] if r["name"].startswith(TRUTH_REQUIREMENTS)]
+    passed = bool(results) and all(r["pass"] for r in results)
+    (out / TRUTH_CHECK_FILE).write_text(json.dumps({"pass": passed, "requirements": results}, indent=1,
+                                                   default=str) + "\n")
+    return passed, results

@@ -1,0 +1,218 @@
+"""Link security (fsw.link_security): MAC, anti-replay window, resynchronisation, key files, the uplink
+that cannot lose a command silently, and the loopback-only telecommand binding."""
+from __future__ import annotations
+
+import os
+import socket
+import stat
+
+import pytest
+
+from fsw.dictionary import DICTIONARY
+from fsw.link_security import (BAD_MAC, MAC_LEN, OUTSIDE_WINDOW, REPLAY, SPI_TC, SPI_TM, UNAUTHENTICATED,
+                               KeyFileError, SecurityAssociation, SecurityError, SequenceFile, downlink_receiver,
+                               load_key_file, uplink_receiver, write_key_file)
+from fsw.telecommand import CommandDispatcher, encode_command
+from fsw.telemetry import TelemetrySender, decode_tm_packet
+
+KEY = bytes(range(32))
+RESYNC = DICTIONARY.command("SEC_RESYNC").opcode
+
+
+def _flight_dispatcher(window: int = 16, port: int | None = None, **kwargs) -> CommandDispatcher:
+    dispatcher = CommandDispatcher(DICTIONARY, None, port=port,
+                                   security=uplink_receiver(KEY, window, resync_opcode=RESYNC), **kwargs)
+    dispatcher.register("NOOP", lambda: None)
+    dispatcher.register("SET_MODE", lambda mode: None)
+    dispatcher.register("RESET_COUNTERS", dispatcher.reset_counters)
+    return dispatcher
+
+
+def _ground() -> SecurityAssociation:
+    return SecurityAssociation(KEY, SPI_TC)
+
+
+def test_protect_then_unprotect_gives_back_the_plain_packet_and_every_altered_byte_is_refused() -> None:
+    plain = encode_command(DICTIONARY, "SET_MODE", ["POINTING"], seq_count=7)
+    secured = _ground().protect(plain, sn=5)
+    assert len(secured) == len(plain) + 22
+    receiver = uplink_receiver(KEY)
+    assert receiver.unprotect(secured) == (plain, 5)
+    for i in range(len(secured) - 2):  # every byte but the CRC (which would make it a format error)
+        forged = bytearray(secured)
+        forged[i] ^= 0x01
+        from fastcrc import crc16
+
+        forged[-2:] = crc16.ibm_3740(bytes(forged[:-2])).to_bytes(2, "big")  # an attacker fixes the CRC
+        with pytest.raises(SecurityError) as exc:
+            uplink_receiver(KEY).unprotect(bytes(forged))
+        assert exc.value.reason in (BAD_MAC, UNAUTHENTICATED, "format"), i
+
+
+def test_other_key_and_other_direction_are_refused() -> None:
+    plain = encode_command(DICTIONARY, "NOOP")
+    with pytest.raises(SecurityError, match="MAC") as exc:
+        uplink_receiver(KEY).unprotect(SecurityAssociation(bytes(32), SPI_TC).protect(plain, sn=1))
+    assert exc.value.reason == BAD_MAC
+    # a telemetry packet signed by the flight software is no telecommand (own SPI, own derived key)
+    tm = TelemetrySender(DICTIONARY, port=None, security=SecurityAssociation(KEY, SPI_TM)).send_channels("HK")
+    with pytest.raises(SecurityError) as exc:
+        uplink_receiver(KEY).unprotect(tm)
+    assert exc.value.reason == UNAUTHENTICATED
+    assert decode_tm_packet(DICTIONARY, downlink_receiver(KEY).unprotect(tm)[0]).packet == "HK"
+
+
+def test_unauthenticated_forged_and_replayed_commands_are_refused_and_counted_by_reason() -> None:
+    """The issue's attacks: plain commands, a forged MAC, one NOOP replayed 481 times."""
+    dispatcher = _flight_dispatcher()
+    ground = _ground()
+    assert not dispatcher.handle_datagram(encode_command(DICTIONARY, "SET_MODE", ["SAFE"])).accepted
+    forged = bytearray(ground.protect(encode_command(DICTIONARY, "SET_MODE", ["SAFE"]), sn=1))
+    forged[-3] ^= 0xFF  # last MAC byte
+    from fastcrc import crc16
+
+    forged[-2:] = crc16.ibm_3740(bytes(forged[:-2])).to_bytes(2, "big")
+    assert dispatcher.handle_datagram(bytes(forged)).error == "SECURITY"
+    noop = ground.protect(encode_command(DICTIONARY, "NOOP", seq_count=1), sn=1)
+    results = [dispatcher.handle_datagram(noop) for _ in range(481)]
+    assert [r.accepted for r in results] == [True] + [False] * 480
+    assert {r.error for r in results[1:]} == {"SECURITY"}
+    hk = dispatcher.hk_values()
+    assert (hk["tc_accepted"], hk["tc_sec_unauthenticated"], hk["tc_sec_bad_mac"], hk["tc_sec_replay"]) == (1, 1, 1, 480)
+    assert hk["tc_sec_last_sn"] == 1
+
+
+def test_reset_counters_does_not_erase_the_security_evidence() -> None:
+    dispatcher = _flight_dispatcher()
+    ground = _ground()
+    replayed = ground.protect(encode_command(DICTIONARY, "NOOP"), sn=1)
+    for _ in range(3024):
+        dispatcher.handle_datagram(replayed)
+    reset = ground.protect(encode_command(DICTIONARY, "RESET_COUNTERS", seq_count=1), sn=2)
+    assert dispatcher.handle_datagram(reset).accepted
+    hk = dispatcher.hk_values()
+    assert hk["tc_rejected"] == 0  # the ordinary counters are reset ...
+    assert hk["tc_sec_replay"] == 3023 and hk["tc_sec_last_sn"] == 2  # ... the security ones are not
+
+
+def test_window_and_authenticated_resynchronisation() -> None:
+    dispatcher = _flight_dispatcher(window=16)
+    ground = _ground()
+
+    def send(command: str, sn: int) -> bool:
+        return dispatcher.handle_datagram(ground.protect(encode_command(DICTIONARY, command), sn=sn)).accepted
+
+    assert send("NOOP", 3)  # a gap within the window: commands lost on the way
+    assert not send("NOOP", 3 + 17)  # too far ahead
+    assert dispatcher.security.counters[OUTSIDE_WINDOW] == 1
+    assert send("SEC_RESYNC", 1000)  # the resync command may jump ...
+    assert dispatcher.hk_values()["tc_sec_resyncs"] == 1
+    assert send("NOOP", 1001)
+    assert not send("SEC_RESYNC", 500)  # ... but never back (that would reopen SNs to replay)
+    assert dispatcher.security.counters[REPLAY] == 1
+    # a resync signed with another key is refused like any forgery
+    other = SecurityAssociation(bytes(32), SPI_TC).protect(encode_command(DICTIONARY, "SEC_RESYNC"), sn=5000)
+    assert not dispatcher.handle_datagram(other).accepted and dispatcher.security.last_sn == 1001
+
+
+def test_key_files_are_private_and_checked(tmp_path) -> None:
+    path = tmp_path / "link.key"
+    key = write_key_file(path)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600 and load_key_file(path) == key and len(key) == 32
+    with pytest.raises(FileExistsError):
+        write_key_file(path)  # never overwrites a key
+    os.chmod(path, 0o640)
+    with pytest.raises(KeyFileError, match="readable by others"):
+        load_key_file(path)
+    bad = tmp_path / "bad.key"
+    bad.write_text("not hex")
+    os.chmod(bad, 0o600)
+    with pytest.raises(KeyFileError, match="bad.key: not a key file"):
+        load_key_file(bad)
+    with pytest.raises(KeyFileError, match="cannot read"):
+        load_key_file(tmp_path / "missing.key")
+    with pytest.raises(KeyFileError, match="regular file"):
+        os.chmod(tmp_path, 0o700)
+        load_key_file(tmp_path)
+
+
+def test_sequence_file_is_shared_by_every_sender_and_only_increases(tmp_path) -> None:
+    a, b = SequenceFile.beside(tmp_path / "k.key"), SequenceFile.beside(tmp_path / "k.key")
+    assert [a.advance(), b.advance(), a.advance()] == [1, 2, 3]
+    assert b.advance(at_least=100) == 101 and a.peek() == 101
+
+
+def test_a_junk_flood_cannot_make_a_command_disappear_silently() -> None:
+    """20 000 junk datagrams around one legitimate SET_MODE into a small socket buffer: every datagram is
+    either handled or counted as dropped by the kernel (SO_RXQ_OVFL), so the command was either
+    executed or its loss shows in housekeeping."""
+    dispatcher = _flight_dispatcher(port=0, rcvbuf_bytes=32 * 1024, budget_s=0.002)
+    executed = []
+    dispatcher._handlers[DICTIONARY.command("SET_MODE").opcode] = lambda mode: executed.append(mode)
+    legit = _ground().protect(encode_command(DICTIONARY, "SET_MODE", ["POINTING"]), sn=1)
+    sent = 0
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as attacker:
+            for i in range(20_000):
+                if i == 10_000:
+                    attacker.sendto(legit, dispatcher.address)
+                attacker.sendto(os.urandom(40), dispatcher.address)
+                sent += 1 + (i == 10_000)
+                if i % 2000 == 0:
+                    dispatcher.poll()  # the GNC cycles go on meanwhile, each within its budget
+        handled = dispatcher.counters["received"]
+        while dispatcher.poll():
+            handled = dispatcher.counters["received"]
+        hk = dispatcher.hk_values()
+        assert handled + hk["tc_uplink_dropped"] == sent
+        assert hk["tc_uplink_dropped"] > 0  # the flood did overflow the buffer ...
+        assert executed == ["POINTING"] or hk["tc_uplink_dropped"] > 0  # ... and a loss is never silent
+    finally:
+        dispatcher.close()
+
+
+def test_a_poll_reads_until_empty_within_its_budget_and_leaves_the_rest_queued() -> None:
+    ground = _ground()
+    commands = [ground.protect(encode_command(DICTIONARY, "NOOP", seq_count=i), sn=i + 1) for i in range(500)]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as uplink:
+        dispatcher = _flight_dispatcher(port=0, window=1000, rcvbuf_bytes=4 * 1024 * 1024, budget_s=1.0)
+        try:
+            for raw in commands:
+                uplink.sendto(raw, dispatcher.address)
+            assert len(dispatcher.poll()) == 500  # all of them in one cycle, not 64
+            assert dispatcher.hk_values()["tc_uplink_deferred"] == 0
+        finally:
+            dispatcher.close()
+        dispatcher = _flight_dispatcher(port=0, window=1000, rcvbuf_bytes=4 * 1024 * 1024, budget_s=0.0)
+        try:
+            for raw in commands:
+                uplink.sendto(raw, dispatcher.address)
+            first = dispatcher.poll()
+            assert len(first) < 500 and dispatcher.hk_values()["tc_uplink_deferred"] == 1  # out of time
+            rest = [r for _ in range(500) for r in dispatcher.poll()]
+            assert len(first) + len(rest) == 500 and all(r.accepted for r in first + rest)  # nothing lost
+            assert dispatcher.hk_values()["tc_uplink_dropped"] == 0
+        finally:
+            dispatcher.close()
+
+
+def test_telecommand_socket_binds_loopback_unless_explicitly_allowed() -> None:
+    from fsw.config import ConfigError, parse_fsw_config
+
+    with pytest.raises(ConfigError, match="telecommand_bind_host '0.0.0.0' is not a loopback address"):
+        parse_fsw_config({"tmtc": {"telecommand_bind_host": "0.0.0.0"}})
+    cfg = parse_fsw_config({"tmtc": {"telecommand_bind_host": "0.0.0.0", "allow_non_loopback": True}})
+    assert any("not loopback" in w for w in cfg.tmtc.warnings())
+    assert parse_fsw_config({"tmtc": {"telecommand_bind_host": "127.0.0.2"}}).tmtc.warnings() == []
+
+
+def test_mac_is_truncated_hmac_sha256() -> None:
+    """Checked against an independent computation of HMAC-SHA256 with the derived key."""
+    import hashlib
+    import hmac
+
+    plain = encode_command(DICTIONARY, "NOOP")
+    secured = SecurityAssociation(KEY, SPI_TC).protect(plain, sn=9)
+    subkey = hmac.new(KEY, b"keepout SDLS TC", hashlib.sha256).digest()
+    assert secured[-2 - MAC_LEN:-2] == hmac.new(subkey, secured[:-2 - MAC_LEN], hashlib.sha256).digest()[:MAC_LEN]
+    assert int.from_bytes(secured[6:8], "big") == SPI_TC and int.from_bytes(secured[8:12], "big") == 9
