@@ -355,9 +355,9 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
                     f"wheel {w + 1}: {float(np.abs(truth['wheel_speed_rad_s'][:, w]).max()):.1f} rad/s of "
                     f"{limits[w]:.0f} rad/s", "% of max")
         rate_frac, rate_t = peak_body_rate_fraction(mission, truth)
-        requirement("peak body rate", 100.0 * rate_frac, f"<= {_num(100.0 * req.max_body_rate_fraction)}",
+        requirement("peak body rate", round(100.0 * rate_frac, 2), f"<= {_num(100.0 * req.max_body_rate_fraction)}",
                     rate_frac <= req.max_body_rate_fraction,
-                    f"true |omega| / configured rate limit, at t = {rate_t:.1f} s", "% of limit")
+                    f"true |omega| / the configured rate limit, at t = {rate_t:.1f} s", "% of max")
     hk = _hk_last(run_dir, ("slips_gnc", "cycles", "fdir_trips", "bus_crc_errors", "bus_alive_errors",
                             "bus_timeouts", "tc_accepted", "tc_rejected"))
     missed = int(sim_stats.get("cycle_done_timeouts", 0)) + int(sim_stats.get("cycle_done_late", 0))
