@@ -21,7 +21,11 @@ best ratio any law could reach at these limits. ratio - lb is what the law and t
 The paper's assumptions are checked at each slew's target with the eps the configuration gives
 (gnc.checks, as `keepout config check` does for a mission's own targets): "ok", eps and kappa_bar.
 
-    .venv/bin/python bench/slew.py [--quick] [--law-only]
+    .venv/bin/python bench/slew.py [--quick] [--law-only] [--jerk-off]
+
+"TV" is the total variation of the wheel torque commands over the slew (sum over cycles and wheels of
+|tau_k - tau_(k-1)|, N m): a smooth slew is a few times the torque limits, a chattering one many times
+that (--jerk-off flies every slew again without the rate command's jerk limit, for comparison).
 
 The flight software plans slews round the zones (pointing.path, fsw.guidance.path_planning). --law-only also runs
 every slew with path planning off, side by side: the paper's law heading straight for the target.
@@ -184,9 +188,11 @@ def what_geometry_allows(mission, t_s: float) -> dict:
             "kappa_bar": float(rep.kappa_bar), "assumptions_ok": bool(rep.ok), "assumption_errors": list(rep.errors)}
 
 
-def slew_mission(base: dict, start, end, path_planning: bool = True) -> dict:
+def slew_mission(base: dict, start, end, path_planning: bool = True, jerk_limit: bool = True) -> dict:
     data = json.loads(json.dumps(base, default=str))
     data["flight_software"].setdefault("pointing", {}).setdefault("path", {})["enabled"] = path_planning
+    if not jerk_limit:
+        data["flight_software"]["control"]["max_command_jerk_deg_s3"] = 0.0
     a, b = unit(*start), unit(*end)
     theta = math.degrees(math.acos(float(np.clip(a @ b, -1, 1))))
     fsw = data["flight_software"]
@@ -200,14 +206,15 @@ def slew_mission(base: dict, start, end, path_planning: bool = True) -> dict:
     return data, theta, t_eig
 
 
-def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: bool = True) -> list[dict]:
+def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: bool = True,
+              jerk_limit: bool = True) -> list[dict]:
     from fsw.guidance.path_planning import path_length_deg
     from hil_sim.campaign.fast import run_fast
     from hil_sim.mission import Mission
 
     rows = []
     for label, start, end in slews:
-        data, theta, t_eig = slew_mission(base, start, end, path_planning)
+        data, theta, t_eig = slew_mission(base, start, end, path_planning, jerk_limit)
         mission = Mission.model_validate(data)
         wall = time.perf_counter()
         result = run_fast(mission, seed=mission.seed)
@@ -225,6 +232,7 @@ def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: boo
                "path_deg": path_deg, "path_ratio": path_deg / theta,
                "ratio": settle / t_eig if math.isfinite(settle) else math.inf,
                "margins_deg": margins, "final_error_deg": m["final_error_deg"], "wall_s": wall,
+               "torque_variation_Nm": m.get("torque_variation_Nm", math.nan),
                "sim_s": result.sim_time_s}
         if geometry:
             geo = what_geometry_allows(mission, 5.0)
@@ -243,6 +251,9 @@ def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: boo
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="only the first two slews")
+    parser.add_argument("--jerk-off", action="store_true",
+                        help="also fly every slew without the rate command's jerk limit (control.max_command_jerk_deg_s3: 0) "
+                             "and record it under 'jerk_off': the torque chatter it removes")
     parser.add_argument("--law-only", action="store_true",
                         help="also fly every slew with path planning off (the law alone) and record it under 'law_only'")
     args = parser.parse_args(argv)
@@ -251,17 +262,19 @@ def main(argv: list[str] | None = None) -> int:
     slews = SLEWS[:2] if args.quick else SLEWS
     rows = run_slews(base, slews)
     print(f"{'slew':38s} {'angle':>6s} {'path':>6s} {'path/':>6s} {'short/':>6s} {'T_eig':>6s} {'settle':>6s} "
-          f"{'ratio':>6s} {'lb':>6s} {'eps':>6s} {'ok':>3s}  margins [deg]")
+          f"{'ratio':>6s} {'lb':>6s} {'eps':>6s} {'ok':>3s} {'TV Nm':>6s}  margins [deg]")
     for r in rows:
         margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
         print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['path_deg']:6.1f} {r['path_ratio']:6.3f} "
               f"{r['shortest_path_ratio']:6.3f} {r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f} "
-              f"{r['ratio_lower_bound']:6.3f} {r['eps']:6.4f} {'yes' if r['assumptions_ok'] else 'NO':>3s}  {margins}")
+              f"{r['ratio_lower_bound']:6.3f} {r['eps']:6.4f} {'yes' if r['assumptions_ok'] else 'NO':>3s} "
+              f"{r['torque_variation_Nm']:6.2f}  {margins}")
     ratios = [r["ratio"] for r in rows]
     min_margin = min(min(r["margins_deg"].values()) for r in rows)
     yaml_law = base["flight_software"]["law"]
     summary = {"median_ratio": statistics.median(ratios), "max_ratio": max(ratios), "min_margin_deg": min_margin,
                "max_ratio_lower_bound": max(r["ratio_lower_bound"] for r in rows),
+               "max_torque_variation_Nm": max(r["torque_variation_Nm"] for r in rows),
                "assumptions_ok": all(r["assumptions_ok"] for r in rows),
                "law": yaml_law, "control": base["flight_software"]["control"],
                "max_rate_deg_s": base["flight_software"]["spacecraft"]["max_rate_deg_s"],
@@ -280,6 +293,14 @@ def main(argv: list[str] | None = None) -> int:
                   f"{r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f}  {margins}")
         report["law_only"] = {"rows": alone, "max_ratio": max(r["ratio"] for r in alone),
                               "min_margin_deg": min(min(r["margins_deg"].values()) for r in alone)}
+    if args.jerk_off:
+        rough = run_slews(base, slews, geometry=False, jerk_limit=False)
+        print("\nwithout the jerk limit (control.max_command_jerk_deg_s3: 0):")
+        for r in rough:
+            margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
+            print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f} "
+                  f"TV {r['torque_variation_Nm']:6.2f} Nm  {margins}")
+        report["jerk_off"] = {"rows": rough, "max_torque_variation_Nm": max(r["torque_variation_Nm"] for r in rough)}
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
     (out / "slew.json").write_text(json.dumps(report, indent=1) + "\n")

@@ -177,6 +177,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         truth = _TruthRows(n_ticks, world)
         truth.record()
         estimates = _EstimateRows(n_ticks + 1)
+        torques = np.zeros((n_ticks + 1, world.n_wheels))
         for _ in range(n_ticks):
             telemetry.now = sim.t_s
             timeline.release(sim.t_s)
@@ -185,9 +186,11 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
             if inputs is not None:
                 fsw.run_cycle(inputs)
                 estimates.record(truth.n - 1, fsw.estimator)  # the estimate of the truth row at this tick
+                torques[truth.n - 1] = fsw.last.wheel_torque_cmd_Nm  # held over the tick that follows
             sim.end_tick(wait_s=0.0)
             truth.record()
         record = truth.arrays()
+        record["wheel_torque_Nm"] = torques[:len(record["t_s"])]
         trips = [str(a.get("monitor", "?")) for _, name, a in telemetry.events if name == "FDIR_TRIPPED"]
         rejected = sum(1 for _, name, _ in telemetry.events if name in ("CMD_REJECTED", "TARGET_REJECTED"))
         metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected)
@@ -248,6 +251,11 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     metrics["min_margin_deg"] = min((float(z.margin_deg.min()) for z in zones), default=math.inf)
     err, segments = summary.error_series(mission, truth, y_N)
     spans = summary.settling(mission, t, err, segments)
+    if "wheel_torque_Nm" in truth:
+        summary.add_torque_variation(spans, t, truth["wheel_torque_Nm"])
+        # the roughest commanded slew [N m]
+        metrics["torque_variation_Nm"] = max((s.get("torque_variation_Nm", math.nan) for s in spans if s["judged"]),
+                                             default=math.nan)
     # the slowest commanded target (inf when one never settled within its span)
     metrics["settling_time_s"] = max((math.inf if s["settling_time_s"] is None else float(s["settling_time_s"])
                                       for s in spans if s["judged"]), default=math.nan)
