@@ -294,6 +294,7 @@ class QuaternionModeConfig(_Strict):
     target_q_NB: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Initial target attitude q_NB (scalar first, normalised); SET_TARGET changes it.")
     law: Literal["auto", "star", "gradient"] = Field("auto", description="'gradient' (all zones must be cones), 'star' (any zones) or 'auto' (gradient when all are cones).")
     zones: list[S3Zone] = Field(default_factory=list, max_length=16, description="Forbidden-attitude zones on S^3.")
+    path: PathGuidanceConfig = Field(default_factory=PathGuidanceConfig, description="Slew path planning on S^3 round the zones' bounding balls (fsw.guidance.attitude_planning): enabled, standoff_deg and lookahead_deg are used, as quaternion angles (half the rotation angle).")
 
     _qn = field_validator("target_q_NB")(lambda v: _unit(v, "target_q_NB"))
 
