@@ -30,6 +30,10 @@ that (--jerk-off flies every slew again without the rate command's jerk limit, f
 The flight software plans slews round the zones (pointing.path, fsw.guidance.path_planning). --law-only also runs
 every slew with path planning off, side by side: the paper's law heading straight for the target.
 
+QUATERNION mode: demo-quaternion's two reorientations, each past a forbidden-attitude zone on S^3, with
+slew planning on S^3 (quaternion.path, fsw.guidance.attitude_planning) and with the law alone: ratio to
+the eigen-axis slew of the same rotation angle, and the margins to the physical S^3 zones.
+
 Prints a table and writes bench/results/slew.json.
 """
 from __future__ import annotations
@@ -248,6 +252,51 @@ def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: boo
     return rows
 
 
+# QUATERNION mode (config/missions/demo-quaternion.yaml): its two reorientations, each past a forbidden-
+# attitude zone on S^3 (label, start q_NB, end q_NB, scalar first)
+QUATERNION_SLEWS = [
+    ("Q1 past the radiator-Sun cone", (0.994465, -0.039614, 0.04721, 0.085095), (0.444925, -0.00554, -0.374227, 0.813612)),
+    ("Q2 past the antenna-lock star", (0.444925, -0.00554, -0.374227, 0.813612), (-0.214345, 0.788442, -0.477302, 0.323416)),
+]
+
+
+def quaternion_slew_mission(base: dict, start, end, path_planning: bool = True) -> tuple[dict, float, float]:
+    """The demo-quaternion mission cut to one slew: at rest on ``start``, ``end`` commanded at 5 s.
+    Returns (mission data, rotation angle [deg], T_eigen [s])."""
+    data = json.loads(json.dumps(base, default=str))
+    fsw = data["flight_software"]
+    fsw["quaternion"].setdefault("path", {})["enabled"] = path_planning
+    a, b = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    theta = 2.0 * math.degrees(math.acos(min(1.0, abs(float(a @ b)))))  # rotation angle
+    t_eig = eigen_axis_time_s(theta, fsw["spacecraft"]["max_rate_deg_s"], fsw["control"]["max_command_accel_deg_s2"])
+    data["initial_state"]["q_NB"] = a.tolist()
+    data["initial_state"]["omega_BN_B_rad_s"] = [0.0, 0.0, 0.0]
+    fsw["quaternion"]["target_q_NB"] = a.tolist()
+    data["timeline"] = [{"t_s": 5.0, "command": "SET_TARGET", "q_target_NB": b.tolist()}]
+    data["duration_s"] = 5.0 + 2.2 * t_eig + 60.0
+    data["faults"] = []
+    return data, theta, t_eig
+
+
+def run_quaternion_slews(base: dict, path_planning: bool) -> list[dict]:
+    from hil_sim.campaign.fast import run_fast
+    from hil_sim.mission import Mission
+
+    rows = []
+    for label, start, end in QUATERNION_SLEWS:
+        data, theta, t_eig = quaternion_slew_mission(base, start, end, path_planning)
+        mission = Mission.model_validate(data)
+        m = run_fast(mission, seed=mission.seed).metrics
+        settle = m["settling_time_s"]
+        rows.append({"slew": label, "rotation_deg": theta, "eigen_axis_s": t_eig, "settling_s": settle,
+                     "ratio": settle / t_eig if math.isfinite(settle) else math.inf,
+                     "margins_deg": {k[len("margin_"):-len("_deg")]: v for k, v in m.items() if k.startswith("margin_")},
+                     "torque_variation_Nm": m.get("torque_variation_Nm", math.nan),
+                     "final_error_deg": m["final_error_deg"]})
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="only the first two slews")
@@ -293,6 +342,17 @@ def main(argv: list[str] | None = None) -> int:
                   f"{r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f}  {margins}")
         report["law_only"] = {"rows": alone, "max_ratio": max(r["ratio"] for r in alone),
                               "min_margin_deg": min(min(r["margins_deg"].values()) for r in alone)}
+    qbase = yaml.safe_load((ROOT / "config" / "missions" / "demo-quaternion.yaml").read_text())
+    qrows = {"planned": run_quaternion_slews(qbase, True), "law_only": run_quaternion_slews(qbase, False)}
+    print(f"\nQUATERNION mode (demo-quaternion; ratio = settling / eigen-axis slew of the same rotation):")
+    print(f"{'slew':38s} {'rot':>6s} {'T_eig':>6s} {'planned':>8s} {'ratio':>6s} {'law':>7s} {'ratio':>6s}  margins planned [deg]")
+    for p, law in zip(qrows["planned"], qrows["law_only"]):
+        margins = " ".join(f"{k}={v:.2f}" for k, v in p["margins_deg"].items())
+        print(f"{p['slew']:38s} {p['rotation_deg']:6.1f} {p['eigen_axis_s']:6.1f} {p['settling_s']:8.1f} "
+              f"{p['ratio']:6.3f} {law['settling_s']:7.1f} {law['ratio']:6.3f}  {margins}")
+    report["quaternion"] = qrows
+    summary["quaternion_max_ratio"] = max(r["ratio"] for r in qrows["planned"])
+    summary["quaternion_min_margin_deg"] = min(min(r["margins_deg"].values()) for r in qrows["planned"])
     if args.jerk_off:
         rough = run_slews(base, slews, geometry=False, jerk_limit=False)
         print("\nwithout the jerk limit (control.max_command_jerk_deg_s3: 0):")
