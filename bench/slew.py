@@ -297,6 +297,14 @@ def run_quaternion_slews(base: dict, path_planning: bool) -> list[dict]:
     return rows
 
 
+def _print_short(rows: list[dict]) -> None:
+    """The comparison rows: angle, path, its ratio, T_eigen, settling, ratio, TV, margins."""
+    for r in rows:
+        margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
+        print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['path_deg']:6.1f} {r['path_ratio']:6.3f} "
+              f"{r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f} TV {r['torque_variation_Nm']:6.2f} Nm  {margins}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="only the first two slews")
@@ -336,10 +344,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.law_only:
         alone = run_slews(base, slews, geometry=False, path_planning=False)
         print("\nthe law alone (pointing.path.enabled: false):")
-        for r in alone:
-            margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
-            print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['path_deg']:6.1f} {r['path_ratio']:6.3f} "
-                  f"{r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f}  {margins}")
+        _print_short(alone)
         report["law_only"] = {"rows": alone, "max_ratio": max(r["ratio"] for r in alone),
                               "min_margin_deg": min(min(r["margins_deg"].values()) for r in alone)}
     qbase = yaml.safe_load((ROOT / "config" / "missions" / "demo-quaternion.yaml").read_text())
@@ -356,10 +361,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.jerk_off:
         rough = run_slews(base, slews, geometry=False, jerk_limit=False)
         print("\nwithout the jerk limit (control.max_command_jerk_deg_s3: 0):")
-        for r in rough:
-            margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
-            print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f} "
-                  f"TV {r['torque_variation_Nm']:6.2f} Nm  {margins}")
+        _print_short(rough)
         report["jerk_off"] = {"rows": rough, "max_torque_variation_Nm": max(r["torque_variation_Nm"] for r in rough)}
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)

@@ -25,7 +25,7 @@ from fsw.guidance.attitude_planning import plan_attitude_path
 from fsw.guidance.common import (
     GuidanceOutput, _make_gradient_law, _make_star_law, _saturate, _unit, signed_margin_deg,
 )
-from fsw.guidance.path_planning import PathFollower, path_length_deg
+from fsw.guidance.path_planning import PathFollower, advance_aim, path_length_deg
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc.attitude import attitude_error_angle, quat_to_dcm_nb, quaternion_rate_command_nb
 
@@ -91,15 +91,10 @@ class QuaternionGuidance:
 
     def _advance_s3_aim(self, x: np.ndarray) -> bool:
         """Move the law's aim along the S^3 path ahead of ``x``; True (the law must be rebuilt) if it moved."""
-        f = self._s3_follower
-        k = f.aim_index(x)
-        if k == self._s3_aim_k:
-            return False
-        if k == len(f.path) - 1:  # the last leg is the paper's law to the real target
-            self._s3_follower, self._s3_aim, self._s3_aim_k = None, self.q_target, -1
-        else:
-            self._s3_aim, self._s3_aim_k = f.path[k], k
-        return True
+        moved, self._s3_follower, aim, self._s3_aim_k = advance_aim(self._s3_follower, x, self._s3_aim_k, self.q_target)
+        if moved:
+            self._s3_aim = aim
+        return moved
 
 
     def _quaternion(self, t_s: float, q: np.ndarray) -> GuidanceOutput:
