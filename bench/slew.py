@@ -199,15 +199,25 @@ def slew_mission(base: dict, start, end, path_planning: bool = True, jerk_limit:
         data["flight_software"]["control"]["max_command_jerk_deg_s3"] = 0.0
     a, b = unit(*start), unit(*end)
     theta = math.degrees(math.acos(float(np.clip(a @ b, -1, 1))))
+    data["flight_software"]["pointing"]["target_N"] = a.tolist()
+    return _one_slew(data, attitude_looking_at(a), {"target_N": b.tolist()}, theta), theta, \
+        eigen_axis_time_s(theta, *_limits(data))
+
+
+def _limits(data: dict) -> tuple[float, float]:
     fsw = data["flight_software"]
-    t_eig = eigen_axis_time_s(theta, fsw["spacecraft"]["max_rate_deg_s"], fsw["control"]["max_command_accel_deg_s2"])
-    data["initial_state"]["q_NB"] = attitude_looking_at(a)
+    return fsw["spacecraft"]["max_rate_deg_s"], fsw["control"]["max_command_accel_deg_s2"]
+
+
+def _one_slew(data: dict, q0: list[float], target: dict, theta_deg: float) -> dict:
+    """``data`` cut to one slew: at rest on ``q0``, SET_TARGET ``target`` at 5 s, no faults, and time to
+    settle (2.2 x the eigen-axis slew of ``theta_deg`` and a minute)."""
+    data["initial_state"]["q_NB"] = q0
     data["initial_state"]["omega_BN_B_rad_s"] = [0.0, 0.0, 0.0]
-    fsw["pointing"]["target_N"] = a.tolist()
-    data["timeline"] = [{"t_s": 5.0, "command": "SET_TARGET", "target_N": b.tolist()}]
-    data["duration_s"] = 5.0 + 2.2 * t_eig + 60.0
+    data["timeline"] = [{"t_s": 5.0, "command": "SET_TARGET", **target}]
+    data["duration_s"] = 5.0 + 2.2 * eigen_axis_time_s(theta_deg, *_limits(data)) + 60.0
     data["faults"] = []
-    return data, theta, t_eig
+    return data
 
 
 def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: bool = True,
@@ -269,14 +279,8 @@ def quaternion_slew_mission(base: dict, start, end, path_planning: bool = True) 
     a, b = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
     a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
     theta = 2.0 * math.degrees(math.acos(min(1.0, abs(float(a @ b)))))  # rotation angle
-    t_eig = eigen_axis_time_s(theta, fsw["spacecraft"]["max_rate_deg_s"], fsw["control"]["max_command_accel_deg_s2"])
-    data["initial_state"]["q_NB"] = a.tolist()
-    data["initial_state"]["omega_BN_B_rad_s"] = [0.0, 0.0, 0.0]
     fsw["quaternion"]["target_q_NB"] = a.tolist()
-    data["timeline"] = [{"t_s": 5.0, "command": "SET_TARGET", "q_target_NB": b.tolist()}]
-    data["duration_s"] = 5.0 + 2.2 * t_eig + 60.0
-    data["faults"] = []
-    return data, theta, t_eig
+    return _one_slew(data, a.tolist(), {"q_target_NB": b.tolist()}, theta), theta, eigen_axis_time_s(theta, *_limits(data))
 
 
 def run_quaternion_slews(base: dict, path_planning: bool) -> list[dict]:
