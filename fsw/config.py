@@ -492,6 +492,24 @@ def load_fsw_config(path: str | Path) -> FswConfig:
     return parse_fsw_config(data, source=str(p), prefix=prefix)
 
 
+def udp_port(text: str) -> int:
+    """argparse type: a UDP port number 1..65535 (a clear error instead of a traceback later)."""
+    import argparse
+
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number; allowed: 1..65535") from None
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a UDP port; allowed: 1..65535")
+    return port
+
+
+def udp_port_or_zero(text: str) -> int:
+    """argparse type: a port to bind, 0..65535 (0: the kernel picks a free one)."""
+    return 0 if text.strip() == "0" else udp_port(text)
+
+
 def load_bus_settings(path: str | Path) -> tuple[str, int | None]:
     """The bus spec and CAN bit rate [bit/s] a mission YAML names (top-level ``bus`` and
     ``bus_bitrate_bps``; ``auto`` and None when absent, as in a bare FswConfig YAML)."""

@@ -122,6 +122,9 @@ def test_cli_monitor_attaches_to_a_run_and_refuses_a_finished_one(tmp_path: Path
     run_dir = tmp_path / "runs" / "demo-1"
     run_dir.mkdir(parents=True)
     _endpoints(port, group).write(run_dir)
+    from fsw.link_security import LINK_KEY_FILE, write_key_file
+
+    write_key_file(run_dir / LINK_KEY_FILE)  # the run's link key, as the SIL makes it
     assert main(["ground", "--run", str(run_dir), "--duration", "0.3", "--no-live"]) == 0
     out = capsys.readouterr().out
     assert f"attached to run test-run, telemetry on {group}:{port} (multicast)" in out
