@@ -294,6 +294,7 @@ class QuaternionModeConfig(_Strict):
     target_q_NB: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Initial target attitude q_NB (scalar first, normalised); SET_TARGET changes it.")
     law: Literal["auto", "star", "gradient"] = Field("auto", description="'gradient' (all zones must be cones), 'star' (any zones) or 'auto' (gradient when all are cones).")
     zones: list[S3Zone] = Field(default_factory=list, max_length=16, description="Forbidden-attitude zones on S^3.")
+    path: PathGuidanceConfig = Field(default_factory=PathGuidanceConfig, description="Slew path planning on S^3 round the zones' bounding balls (fsw.guidance.attitude_planning): enabled, standoff_deg and lookahead_deg are used, as quaternion angles (half the rotation angle).")
 
     _qn = field_validator("target_q_NB")(lambda v: _unit(v, "target_q_NB"))
 
@@ -320,6 +321,14 @@ class ControlConfig(_Strict):
     rate_bandwidth_rad_s: float = Field(1.0, gt=0.0, le=20.0, description="Rate-loop bandwidth kp [rad/s] (keep below ~gnc_rate_hz).")
     feedforward_command_rate: bool = Field(True, description="Add J d(omega_cmd)/dt (finite difference, limited) as feed-forward.")
     max_command_accel_deg_s2: float = Field(0.5, gt=0.0, le=50.0, description="Slew-rate limit on omega_cmd [deg/s^2] (what the wheels can deliver).")
+    max_command_jerk_deg_s3: float | Literal["auto"] = Field("auto", description="Limit on the change of omega_cmd's acceleration [deg/s^3]: the torque command stays smooth when the law's command swings inside an eps-layer. 'auto': rate_bandwidth_rad_s x max_command_accel_deg_s2 (full acceleration in one loop time constant); 0: no jerk limit (the acceleration may reverse every cycle).")
+
+    @field_validator("max_command_jerk_deg_s3")
+    @classmethod
+    def _jerk(cls, v: float | str) -> float | str:
+        if v != "auto" and not (0.0 <= float(v) <= 1000.0):
+            raise ValueError(f"max_command_jerk_deg_s3 must be 'auto' or in [0, 1000] deg/s^3, got {v}")
+        return v
 
 
 # --------------------------------------------------------------------------------------------- FDIR

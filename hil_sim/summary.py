@@ -201,6 +201,21 @@ def settling(mission, t: np.ndarray, err: np.ndarray, segments) -> list[dict[str
     return out
 
 
+def add_torque_variation(spans: list[dict[str, Any]], t: np.ndarray, wheel_torque_Nm: np.ndarray) -> None:
+    """Each settling span gets ``torque_variation_Nm``: the total variation of the wheel torque commands
+    over the span, sum over samples and wheels of |tau_k - tau_(k-1)| [N m]. A smooth slew needs about
+    4 x the torque limit per wheel (up, down, and the same to brake); a chattering one many times that
+    (issue 16.4)."""
+    tau = np.asarray(wheel_torque_Nm, dtype=float)
+    if tau.ndim != 2 or len(tau) != len(t) or len(t) < 2:
+        return
+    steps = np.abs(np.diff(tau, axis=0)).sum(axis=1)  # step k: between samples k and k + 1
+    for k, span in enumerate(spans):
+        last = k == len(spans) - 1
+        sel = (t[1:] > span["commanded_at_s"] + 1e-6) & ((t[1:] < span["until_s"] - 1e-6) | last)
+        span["torque_variation_Nm"] = float(steps[sel].sum())
+
+
 def rate_limit_series(mission, t: np.ndarray) -> np.ndarray:
     """The configured body-rate limit [rad/s] at each time: the flight software's, then each timeline
     SET_GAINS rate limit from its time on."""
@@ -309,6 +324,8 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
         zones += attitude_zone_series(mission, q_lift)
     err, segments = error_series(mission, truth, y_N)
     settle = settling(mission, t, err, segments)
+    if "wheel_torque_Nm" in truth:
+        add_torque_variation(settle, t, truth["wheel_torque_Nm"])
     results: list[dict[str, Any]] = []
 
     def requirement(name: str, value: Any, limit: Any, passed: bool, detail: str = "", unit: str = "") -> None:
