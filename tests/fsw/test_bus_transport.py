@@ -65,13 +65,6 @@ def test_missing_hardware_driver_is_a_clear_bus_unavailable_error() -> None:
         open_bus("pcan:PCAN_USBBUS1", bitrate=500000)
 
 
-def test_udp_endpoint_depends_on_run_id_only() -> None:
-    a, b = udp_endpoint_for_run("run-a"), udp_endpoint_for_run("run-b")
-    assert a == udp_endpoint_for_run("run-a")
-    assert a[0] != b[0] and a[1] != b[1]
-    assert resolve_spec("udp_multicast", run_id="run-a").spec == f"udp_multicast:{a[0]}:{a[1]}"
-
-
 def test_udp_endpoint_is_random_per_run_not_derived_from_the_run_name() -> None:
     # Two runs with the same folder name (started in the same second) must not share a bus.
     specs = {resolve_spec("udp_multicast", run_id="demo-20261125-120000").spec for _ in range(20)}
