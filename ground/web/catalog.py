@@ -130,7 +130,7 @@ def build_objects(dictionary: TelemetryDictionary, title: str = "keepout") -> di
     objects["event_table"] = {
         "identifier": _identifier("event_table"), "name": "Events and acknowledgements", "type": "table",
         "location": f"{NAMESPACE}:{ROOT_KEY}", "composition": [_identifier("events"), _identifier("acks")],
-        "configuration": {"hiddenColumns": {"onboard_s": False}},
+        "configuration": {"hiddenColumns": {"name": True}},
     }
     objects[OVERVIEW_KEY] = _overview()
     objects[ROOT_KEY] = _folder(ROOT_KEY, title, "ROOT",
