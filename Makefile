@@ -7,8 +7,11 @@ BIN := $(VENV)/bin
 
 $(BIN)/keepout: pyproject.toml
 	$(PY) -m venv $(VENV)
-	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e '.[dev,dask]'
+	$(BIN)/pip install --upgrade pip
+	@echo "installing keepout and its dependencies (a minute or two on a fresh machine)"
+	$(BIN)/pip install --progress-bar on -e '.[dev,dask]'
+	@# compile the numba kernels now, so the first run starts flying at once (hil_sim/warmup.py)
+	$(BIN)/python -m hil_sim.warmup
 	touch $(BIN)/keepout
 
 # Open MCT for `keepout ground web`, from the npm registry (pinned in ground/web/package-lock.json).

@@ -116,7 +116,9 @@ class EstimatorConfig(_Strict):
 
     gyro_arw_rad_s_sqrt_hz: float = Field(1e-4, gt=0.0, le=1.0, description="Gyro angle random walk (rate white-noise density) [rad/s/sqrt(Hz)].")
     gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-6, gt=0.0, le=1e-2, description="Gyro bias random walk density [rad/s^2/sqrt(Hz)].")
-    star_tracker_sigma_arcsec: float = Field(20.0, gt=0.0, le=3600.0, description="Star-tracker 1-sigma attitude noise per axis [arcsec].")
+    star_tracker_sigma_arcsec: float = Field(20.0, gt=0.0, le=3600.0, description="Star-tracker 1-sigma attitude noise per axis [arcsec] (the default of the two below).")
+    star_tracker_cross_sigma_arcsec: float | None = Field(None, gt=0.0, le=3600.0, description="Star-tracker 1-sigma noise about each of its two cross-boresight axes (sensor x, y) [arcsec]; default star_tracker_sigma_arcsec.")
+    star_tracker_about_sigma_arcsec: float | None = Field(None, gt=0.0, le=36000.0, description="Star-tracker 1-sigma roll noise about its boresight (sensor z) [arcsec]; default star_tracker_sigma_arcsec.")
     initial_attitude_sigma_deg: float = Field(5.0, gt=0.0, le=180.0, description="Initial attitude 1-sigma per axis after (re)initialisation from the star tracker [deg].")
     initial_bias_sigma_deg_s: float = Field(0.05, gt=0.0, le=10.0, description="Initial gyro bias 1-sigma per axis [deg/s].")
     star_tracker_max_age_s: float = Field(0.5, gt=0.0, le=10.0, description="A star-tracker sample older than this is stale and not used [s].")
@@ -237,6 +239,7 @@ class LawConfig(_Strict):
     margin_deg: float = Field(3.0, ge=0.0, le=30.0, description="The law avoids physical zones inflated by this margin [deg]; see fsw.guidance for how to choose it.")
     merge_gap_deg: float = Field(4.0, ge=0.0, le=30.0, description="Two (inflated) zones whose bounding caps are closer than this gap [deg] are replaced by one conservative cone containing both, with an event. Assumption 1 ties eps to the gap (eps < 1 - cos(gap/2)), so a small gap forces an eps-layer too thin for the loop to turn in; merging trades sky area for a usable layer.")
     retreat_standoff_deg: float = Field(3.0, gt=0.0, le=30.0, description="When the target is unusable (in a zone's eps-layer, or between two zones about to merge around the spacecraft), the law steers to the nearest direction at least this far [deg] outside every (inflated) zone instead. It keeps a parked boresight clear of a zone sweeping towards it and must be at least half of merge_gap_deg, so the substitute never lies in a gap about to merge.")
+    stall_watchdog_s: float = Field(30.0, ge=0.0, le=3600.0, description="Guidance watchdog (fsw.guidance.watchdog): a POINTING slew whose error has not fallen for this long [s], with the law's rate near zero and the boresight outside every eps-layer, raises GUIDANCE_STALLED and is replanned from where the boresight is; 0 disables it.")
     check_period_s: float = Field(10.0, gt=0.0, le=3600.0, description="How often the full assumption check (gnc.checks, incl. the numerical Assumption 2 test) is re-run while zones move [s]; it is re-submitted at once on target/gain/mode/zone-merge changes.")
     check_max_cpu_fraction: float = Field(0.1, gt=0.0, le=1.0, description="CPU budget of the periodic full check in 'process' mode: after a check that took d seconds, the next periodic one waits at least d (1/fraction - 1) seconds of host time, whatever check_period_s says. It binds in lockstep runs faster than real time; checks after a target/gain/mode/zone change are not delayed.")
     assumption_check: Literal["process", "inline", "off"] = Field("process", description="Where the full check runs: 'process' (a worker process, so the seconds it can take never delay a GNC cycle; results only feed telemetry/events), 'inline' (in the housekeeping group; deterministic, for tests), 'off'. The per-cycle eps bound never depends on it.")
@@ -478,6 +481,24 @@ def load_fsw_config(path: str | Path) -> FswConfig:
         data = data["flight_software"] or {}
         prefix = "flight_software."
     return parse_fsw_config(data, source=str(p), prefix=prefix)
+
+
+def udp_port(text: str) -> int:
+    """argparse type: a UDP port number 1..65535 (a clear error instead of a traceback later)."""
+    import argparse
+
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number; allowed: 1..65535") from None
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a UDP port; allowed: 1..65535")
+    return port
+
+
+def udp_port_or_zero(text: str) -> int:
+    """argparse type: a port to bind, 0..65535 (0: the kernel picks a free one)."""
+    return 0 if text.strip() == "0" else udp_port(text)
 
 
 def load_bus_settings(path: str | Path) -> tuple[str, int | None]:

@@ -457,15 +457,21 @@ def run_sil(options: RunOptions) -> RunResult:
     _reserve_summary(run_dir)
     if report is not None:
         (run_dir / "physics_checks.txt").write_text(report.format() + "\n")
-    previous_sigterm = None
-    if threading.current_thread() is threading.main_thread():
-        previous_sigterm = signal.signal(signal.SIGTERM, _raise_terminated)
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous_sigterm = signal.signal(signal.SIGTERM, _raise_terminated) if main_thread else None
     try:
-        status, code = _run(options, mission, run_dir)
+        try:
+            status, code = _run(options, mission, run_dir)
+        except (RunNotStarted, MissionRejected) as exc:  # the folder's summary must not say 'running'
+            _quietly(lambda: _write_reserved_summary(run_dir, {"mission": mission.name, "run_dir": str(run_dir),
+                                                               "status": f"not started: {exc}", "pass": False}))
+            raise
+        if main_thread:  # the run is over: a SIGTERM now must not cut its judgement short
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        return _judge(run_dir, mission, status, code)
     finally:
-        if previous_sigterm is not None:
+        if main_thread:
             signal.signal(signal.SIGTERM, previous_sigterm)
-    return _judge(run_dir, mission, status, code)
 
 
 def _raise_terminated(signum, frame) -> None:  # noqa: ARG001
@@ -577,13 +583,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         missed_in_row = 0
         for _ in range(n_ticks):
             timeline.release(sim.t_s)
-            if options.realtime:
-                before = sim.stats.cycle_done_late
-                sim.run_realtime(1)
-                done = sim.stats.cycle_done_late == before
-            else:
-                sim.begin_tick()
-                done = sim.end_tick()
+            done = sim.run_tick(options.realtime)
             recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
             missed_in_row = 0 if done else missed_in_row + 1
             # a crash shows within FSW_POLL_TICKS ticks (waitpid is a system call: ~15 us in the vcan-vm guest)

@@ -21,6 +21,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +50,8 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
                    help="send the mission's telecommand timeline here (default: 127.0.0.1 and the mission's "
                         "flight_software.tmtc.telecommand_port)")
     p.add_argument("--no-timeline", action="store_true", help="send no telecommands (an operator commands)")
+    p.add_argument("--key-file", default=None, help="link key to sign the telecommands with, the one `keepout fsw` "
+                   "uses (default: the mission's flight_software.tmtc.security.key_file)")
     p.add_argument("--out", type=Path, default=None,
                    help="output folder (default: runs/<mission>-sim-<timestamp>)")
     p.set_defaults(func=_run)
@@ -61,6 +64,27 @@ def _tc_address(text: str | None, mission) -> tuple[str, int]:
     if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
         raise ValueError(f"--tc {text!r}: give HOST:PORT with a port in 1..65535, e.g. 127.0.0.1:50101")
     return host, int(port)
+
+
+@dataclass(frozen=True)
+class _Resync:
+    """A SEC_RESYNC first in the timeline: the flight software may have restarted (its anti-replay window
+    back at 0) while the key's sequence file went on, so the session starts by moving the window."""
+
+    t_s: float = 0.0
+    command: str = "SEC_RESYNC"
+
+
+def _signing(args: argparse.Namespace, mission) -> dict[str, Any]:
+    """CommandSender arguments that sign with the link key (raises ValueError naming what is missing)."""
+    from fsw.link_security import mission_key_path
+    from ground.commanding import signing_sender_args
+
+    key_file = args.key_file or mission_key_path(mission.flight_software.tmtc.security.key_file, args.mission)
+    if key_file is None:
+        raise ValueError(f"{args.mission}: no link key to sign telecommands: pass --key-file FILE (the one "
+                         "`keepout fsw` uses) or name flight_software.tmtc.security.key_file")
+    return signing_sender_args(key_file)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -77,6 +101,8 @@ def _run(args: argparse.Namespace) -> int:
         mission, _ = prepare(RunOptions(mission=args.mission, bus=args.bus, duration_s=args.duration))
         info = resolve_spec(mission.bus)
         tc_host, tc_port = _tc_address(args.tc, mission)
+        # (KeyFileError is a ValueError); no key needed when nothing is sent
+        signing = _signing(args, mission) if mission.timeline and not args.no_timeline else {}
     except (MissionRejected, BusSpecError, ValueError) as exc:
         print(f"keepout sim: {exc}", file=sys.stderr)
         return EXIT_REJECTED
@@ -95,10 +121,12 @@ def _run(args: argparse.Namespace) -> int:
     n_ticks = int(round(mission.duration_s / gnc_period))
     recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels))
     recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)
-    sender = CommandSender(host=tc_host, port=tc_port)
+    sender = CommandSender(host=tc_host, port=tc_port, **signing)
     timeline = Timeline(mission, sender)
     if args.no_timeline:
         timeline.entries = []
+    elif timeline.entries:
+        timeline.entries.insert(0, _Resync())
     print(f"keepout sim: {mission.name} on {info.note}, {'real time' if args.realtime else 'lockstep'}, "
           f"{n_ticks} ticks; telecommands to {tc_host}:{tc_port}; output {out}", flush=True)
     code, aborted = EXIT_PASS, ""
@@ -133,17 +161,12 @@ def _loop(sim, world, recorder, timeline, n_ticks: int, args: argparse.Namespace
     missed_in_row = 0
     for k in range(n_ticks):
         timeline.release(sim.t_s)
-        if args.realtime:
-            before = sim.stats.cycle_done_late
-            sim.run_realtime(1)
-            done = sim.stats.cycle_done_late == before
-        else:
-            sim.begin_tick()
-            done = sim.end_tick(wait_s=args.wait_s if k == 0 else None)
-            if k == 0 and not done:
-                print(f"keepout sim: no flight software answered SYNC(0) within {args.wait_s:.0f} s on {args.bus or 'the mission bus'}: "
-                      "start `keepout fsw MISSION --bus SPEC` first (it waits for the simulator)", file=sys.stderr)
-                return EXIT_NOT_STARTED, "no flight software"
+        done = sim.run_tick(args.realtime, wait_s=args.wait_s if k == 0 else None)
+        if k == 0 and not done and not args.realtime:
+            print(f"keepout sim: no flight software answered SYNC(0) within {args.wait_s:.0f} s on "
+                  f"{args.bus or 'the mission bus'}: start `keepout fsw MISSION --bus SPEC` first (it waits for the "
+                  "simulator)", file=sys.stderr)
+            return EXIT_NOT_STARTED, "no flight software"
         recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
         missed_in_row = 0 if done else missed_in_row + 1
         if not args.realtime and missed_in_row >= 3:

@@ -201,6 +201,30 @@ def settling(mission, t: np.ndarray, err: np.ndarray, segments) -> list[dict[str
     return out
 
 
+def rate_limit_series(mission, t: np.ndarray) -> np.ndarray:
+    """The configured body-rate limit [rad/s] at each time: the flight software's, then each timeline
+    SET_GAINS rate limit from its time on."""
+    limit = np.full(len(t), math.radians(mission.flight_software.spacecraft.max_rate_deg_s))
+    for entry in sorted(mission.timeline, key=lambda e: e.t_s):
+        if entry.command == "SET_GAINS" and entry.rate_limit_deg_s is not None:
+            limit[t >= entry.t_s] = math.radians(entry.rate_limit_deg_s)
+    return limit
+
+
+def peak_body_rate_fraction(mission, truth: dict[str, np.ndarray]) -> tuple[float, float]:
+    """(peak of true |omega_BN_B| / the configured rate limit, its time [s]). Samples before the body rate
+    first comes within the limit (a tumbling start being damped) are not judged."""
+    t = truth["t_s"]
+    if len(t) == 0:
+        return math.nan, math.nan
+    frac = np.linalg.norm(truth["omega_BN_B"], axis=1) / rate_limit_series(mission, t)
+    within = np.flatnonzero(frac <= 1.0)
+    if not len(within):
+        return float(frac.max()), float(t[int(np.argmax(frac))])
+    i = within[0] + int(np.argmax(frac[within[0]:]))
+    return float(frac[i]), float(t[i])
+
+
 def _ground_events(run_dir: Path) -> list[dict[str, Any]]:
     path = run_dir / "ground" / "events.jsonl"
     if not path.exists():
@@ -330,6 +354,10 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
                     peak <= req.max_wheel_speed_fraction,
                     f"wheel {w + 1}: {float(np.abs(truth['wheel_speed_rad_s'][:, w]).max()):.1f} rad/s of "
                     f"{limits[w]:.0f} rad/s", "% of max")
+        rate_frac, rate_t = peak_body_rate_fraction(mission, truth)
+        requirement("peak body rate", 100.0 * rate_frac, f"<= {_num(100.0 * req.max_body_rate_fraction)}",
+                    rate_frac <= req.max_body_rate_fraction,
+                    f"true |omega| / configured rate limit, at t = {rate_t:.1f} s", "% of limit")
     hk = _hk_last(run_dir, ("slips_gnc", "cycles", "fdir_trips", "bus_crc_errors", "bus_alive_errors",
                             "bus_timeouts", "tc_accepted", "tc_rejected"))
     missed = int(sim_stats.get("cycle_done_timeouts", 0)) + int(sim_stats.get("cycle_done_late", 0))

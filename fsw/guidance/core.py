@@ -20,11 +20,12 @@ from fsw.guidance.slew_limits import (
     BRAKING_RESERVE_DEG, allowed_braking_deg, braking_problem, rate_for_distance_deg_s, rule_eps,
 )
 from fsw.guidance.safe import SafeGuidance, _acquisition_rate_B
+from fsw.guidance.watchdog import ProgressWatchdog, StallRecovery
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
 
 
-class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance):
+class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidance, SafeGuidance):
     """Mode logic and guidance laws; `step` runs once per GNC cycle."""
 
     MODES = ("SAFE", "POINTING", "QUATERNION")
@@ -96,6 +97,7 @@ class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance
         self._aim_k = -1
         self._plan_due = True
         self._planned_t = -math.inf
+        self._watchdog = ProgressWatchdog(cfg.law.stall_watchdog_s)
         self.last_t_s = 0.0
 
     # ------------------------------------------------------------------------------ configuration
@@ -109,6 +111,7 @@ class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance
         self._safe_sun = None
         self.mode = mode
         self._drop_path()
+        self._watchdog.reset()
         self._governor_margins = None
         if mode == "SAFE":
             self.safe_phase = "RATE_DAMPING"

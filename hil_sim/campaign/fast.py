@@ -36,7 +36,7 @@ _WORLD_FIELDS = {
     ("orbit",): ("orbit",),
     ("epoch_utc",): ("epoch_utc",),
 }
-_WHEEL_FIELDS = {"Js_kgm2": "Js_kgm2", "max_torque_Nm": "max_torque_Nm", "max_speed_rad_s": "max_speed_rad_s",
+_WHEEL_FIELDS = {"Js_kgm2": "Js_kgm2", "spin_inertia_kgm2": "Js_kgm2", "max_torque_Nm": "max_torque_Nm", "max_speed_rad_s": "max_speed_rad_s",
                  "viscous_friction_Nm_per_rad_s": "viscous_friction_Nm_per_rad_s",
                  "coulomb_friction_Nm": "coulomb_friction_Nm", "axis_B": "axis_B", "failure": "failure"}
 
@@ -226,6 +226,7 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     metrics["final_error_deg"] = float(err[-1])
     limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
     metrics["peak_wheel_speed_fraction"] = float(np.max(np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]))
+    metrics["peak_body_rate_fraction"] = summary.peak_body_rate_fraction(mission, truth)[0]
     # lockstep: a slip is a tick the flight software never answered with CYCLE_DONE (as the SIL counts)
     metrics["cycle_slips"] = float(cycle_slips)
     expected = list(req.expected_fdir_events)

@@ -2,8 +2,8 @@
 
 The dispersed mission is written to a YAML file and run like ``keepout sil run``: simulator in this
 worker process, the flight software (``python -m fsw``) and the ground monitor as their own processes,
-lockstep over ``udp_multicast`` with a multicast group and port derived from the run's id (unique per
-run, `hil_sim.sil.run_id`), so runs executing side by side never share a bus. (SocketCAN's vcan0 is one shared bus: a campaign of
+lockstep over ``udp_multicast`` with a multicast group and port drawn at random for each run
+(`fsw.bus.transport.random_udp_endpoint`), so runs executing side by side never share a bus. (SocketCAN's vcan0 is one shared bus: a campaign of
 several concurrent runs cannot use it, so a mission's ``socketcan`` bus is replaced here.)
 
 The run is judged by the same ``fast.judge`` on the run folder's ``truth.npz`` and the FDIR trips and
@@ -41,7 +41,7 @@ def run_sil(mission: Any, seed: int, mode: str = "sil", paths: Sequence[str] = (
 
     data = mission.model_dump(mode="json")
     if not str(data.get("bus", "auto")).startswith("udp_multicast"):
-        data["bus"] = "udp_multicast"  # derived per run id: concurrent runs never share a bus
+        data["bus"] = "udp_multicast"  # a random group and port per run: concurrent runs never share a bus
     data["tmtc_ports"] = "auto"  # free UDP ports per run for telemetry and telecommands
     with tempfile.TemporaryDirectory(prefix="keepout-campaign-sil-") as tmp:
         mission_path = Path(tmp) / f"{mission.name}.yaml"

@@ -2,28 +2,11 @@
 ignored and counted, unknown identifiers reach housekeeping, replayed device frames are detected."""
 from __future__ import annotations
 
-import itertools
-
 import can
 import pytest
+from test_bus_driver import buses, icd  # noqa: F401  (the virtual-bus pair and the ICD: shared fixtures)
 
-from fsw.bus import E2ESender, FswBusDriver, Icd, open_bus
-
-_channels = itertools.count()
-
-
-@pytest.fixture(scope="module")
-def icd() -> Icd:
-    return Icd()
-
-
-@pytest.fixture
-def buses():
-    channel = f"virtual:hard{next(_channels)}"
-    sim, fsw = open_bus(channel), open_bus(channel)
-    yield sim, fsw
-    sim.shutdown()
-    fsw.shutdown()
+from fsw.bus import E2ESender, FswBusDriver, Icd
 
 
 def _status(i: int) -> dict:

@@ -216,3 +216,23 @@ def test_mac_is_truncated_hmac_sha256() -> None:
     subkey = hmac.new(KEY, b"keepout SDLS TC", hashlib.sha256).digest()
     assert secured[-2 - MAC_LEN:-2] == hmac.new(subkey, secured[:-2 - MAC_LEN], hashlib.sha256).digest()[:MAC_LEN]
     assert int.from_bytes(secured[6:8], "big") == SPI_TC and int.from_bytes(secured[8:12], "big") == 9
+
+
+def test_config_validate_refuses_a_non_loopback_uplink_and_warns_when_it_is_allowed(tmp_path, capsys) -> None:
+    import yaml
+
+    from hil_sim.cli import main
+    from keepout_config import config_path
+
+    mission = yaml.safe_load(config_path("missions", "demo-pointing.yaml").read_text())
+    tmtc = mission["flight_software"].setdefault("tmtc", {})
+    tmtc["telecommand_bind_host"] = "0.0.0.0"
+    path = tmp_path / "open.yaml"
+    path.write_text(yaml.safe_dump(mission))
+    assert main(["config", "validate", str(path)]) != 0
+    assert "not a loopback address" in capsys.readouterr().err
+    tmtc["allow_non_loopback"] = True
+    path.write_text(yaml.safe_dump(mission))
+    assert main(["config", "validate", str(path)]) == 0
+    captured = capsys.readouterr()
+    assert "warning" in captured.err and "0.0.0.0" in captured.err and "valid" in captured.out

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 import pytest
 
 from fsw.dictionary import DICTIONARY
-from fsw.link_security import SPI_TM, SecurityAssociation, load_key_file, uplink_receiver, write_key_file
+from fsw.link_security import SPI_TM, SecurityAssociation, uplink_receiver, write_key_file
 from fsw.telecommand import CommandDispatcher
 from fsw.telemetry import TelemetrySender
 from ground.cli import main
@@ -26,24 +26,23 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-@pytest.fixture(autouse=True)
-def link_key(tmp_path, monkeypatch) -> None:
-    """The link key both ends use, in the working folder (where `--key-file link.key` finds it)."""
-    monkeypatch.chdir(tmp_path)
-    write_key_file(tmp_path / KEY_FILE)
+LINK = {}  # the link key of this module's flight and ground (made once, by _link_key)
 
 
-KEY_FILE = "link.key"
+@pytest.fixture(scope="module", autouse=True)
+def _link_key(tmp_path_factory) -> None:
+    path = tmp_path_factory.mktemp("link") / "link.key"
+    LINK.update(path=str(path), key=write_key_file(path))
 
 
 class Flight:
-    """A dispatcher polled in a thread, acknowledging to ``tm_port``; both directions authenticated with
-    the link key in the working folder."""
+    """A dispatcher polled in a thread, acknowledging to ``tm_port``; link security on, as in flight."""
 
     def __init__(self, tm_port: int, answer: bool = True) -> None:
-        key = load_key_file(KEY_FILE)
-        self.telemetry = TelemetrySender(DICTIONARY, "127.0.0.1", tm_port, security=SecurityAssociation(key, SPI_TM))
-        self.dispatcher = CommandDispatcher(DICTIONARY, self.telemetry, "127.0.0.1", 0, security=uplink_receiver(key))
+        self.telemetry = TelemetrySender(DICTIONARY, "127.0.0.1", tm_port,
+                                         security=SecurityAssociation(LINK["key"], SPI_TM))
+        self.dispatcher = CommandDispatcher(DICTIONARY, self.telemetry, "127.0.0.1", 0,
+                                            security=uplink_receiver(LINK["key"]))
         self.modes: list[str] = []
         self.dispatcher.register("NOOP", lambda: None)
         self.dispatcher.register("SET_MODE", lambda mode: self.modes.append(mode))
@@ -86,7 +85,7 @@ def flight() -> Iterator[tuple[Flight, int]]:
 
 def _send(tc_port: int, tm_port: int, *words: str) -> list[str]:
     return ["ground", "send", *words, "--port", str(tc_port), "--tm-port", str(tm_port), "--timeout", "3",
-            "--key-file", KEY_FILE]
+            "--key-file", LINK["path"]]
 
 
 def test_completed_command_prints_both_reports_and_exits_0(flight, capsys) -> None:
@@ -120,7 +119,7 @@ def test_no_acknowledgement_within_the_timeout_says_so(capsys) -> None:
     silent = Flight(tm_port, answer=False)  # the socket exists, nobody reads it
     try:
         code = main(["ground", "send", "NOOP", "--port", str(silent.tc_port), "--tm-port", str(tm_port),
-                     "--timeout", "0.5", "--key-file", KEY_FILE])
+                     "--timeout", "0.5", "--key-file", LINK["path"]])
     finally:
         silent.close()
     assert code == 5
@@ -129,7 +128,7 @@ def test_no_acknowledgement_within_the_timeout_says_so(capsys) -> None:
 
 def test_command_to_a_port_nobody_serves_exits_non_zero(capsys) -> None:
     code = main(["ground", "send", "NOOP", "--port", str(_free_port()), "--tm-port", str(_free_port()),
-                 "--key-file", KEY_FILE])
+                 "--key-file", LINK["path"]])
     assert code == 1
     assert "nothing listens for telecommands" in capsys.readouterr().err
 

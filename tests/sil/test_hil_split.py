@@ -30,10 +30,14 @@ def _free_port() -> int:
 
 
 def _start_fsw(bus: str, tmp_path: Path) -> tuple[subprocess.Popen, Path, int]:
+    from fsw.link_security import write_key_file
+
     tc_port = _free_port()
     log = tmp_path / "fsw.log"
+    write_key_file(tmp_path / "bench.key")  # the bench's link key: both sides are given it
     proc = subprocess.Popen([*KEEPOUT, "fsw", str(MISSION), "--bus", bus, "--tc-port", str(tc_port),
-                             "--tm-port", str(_free_port()), "--first-sync-timeout-s", "300"],
+                             "--tm-port", str(_free_port()), "--first-sync-timeout-s", "300",
+                             "--key-file", str(tmp_path / "bench.key")],
                             stdout=open(log, "w"), stderr=subprocess.STDOUT, cwd=ROOT)
     deadline = time.monotonic() + 600.0  # a fresh machine compiles the numba kernels on the first start
     while "fsw: ready" not in log.read_text():
@@ -48,7 +52,8 @@ def _fly_split(bus: str, tmp_path: Path, duration_s: float) -> None:
     try:
         out = tmp_path / "sim"
         sim = subprocess.run([*KEEPOUT, "sim", str(MISSION), "--bus", bus, "--duration", str(duration_s),
-                              "--tc", f"127.0.0.1:{tc_port}", "--out", str(out)],
+                              "--tc", f"127.0.0.1:{tc_port}", "--out", str(out),
+                              "--key-file", str(tmp_path / "bench.key")],
                              capture_output=True, text=True, cwd=ROOT, timeout=1200)
         assert sim.returncode == 0, sim.stdout + sim.stderr
         assert fsw.wait(timeout=120) == 0, log.read_text()  # ends by itself once SYNC stops
@@ -59,7 +64,7 @@ def _fly_split(bus: str, tmp_path: Path, duration_s: float) -> None:
     ticks = int(round(duration_s * 10))
     assert stats["ticks"] == ticks and stats["cycle_done"] == ticks and stats["cycle_done_timeouts"] == 0
     assert stats["bus"] == bus and stats["telecommand_errors"] == []
-    assert [c["command"] for c in stats["telecommands"]] == ["SET_TARGET"]  # the first slew's target
+    assert [c["command"] for c in stats["telecommands"]] == ["SEC_RESYNC", "SET_TARGET"]  # the first slew's target
     check = json.loads((out / "truth_check.json").read_text())
     names = {r["name"]: r for r in check["requirements"]}
     assert check["pass"], check
@@ -85,6 +90,14 @@ def test_sim_without_flight_software_says_what_to_start(tmp_path: Path) -> None:
                          capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert sim.returncode == 3, sim.stdout + sim.stderr
     assert "start `keepout fsw MISSION --bus SPEC` first" in sim.stderr and "Traceback" not in sim.stderr
+
+
+@pytest.mark.parametrize("option, value, message", [("--tm-port", "70000", "70000 is not a UDP port"),
+                                                     ("--bitrate", "5", "not a CAN bit rate")])
+def test_bad_fsw_options_are_one_line_errors(option: str, value: str, message: str) -> None:
+    proc = subprocess.run([*KEEPOUT, "fsw", str(MISSION), option, value], capture_output=True, text=True,
+                          cwd=ROOT, timeout=600)
+    assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr
 
 
 @pytest.mark.parametrize("command", ["fsw", "sim"])

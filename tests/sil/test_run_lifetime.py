@@ -154,17 +154,37 @@ def test_ground_killed_mid_run_cannot_pass(tmp_path):
     assert summary["status"].startswith("crashed: ground at t = ") and not summary["pass"], summary["status"]
 
 
+def _udp_drops(port: int) -> int:
+    """The kernel's count of datagrams dropped at the local UDP port (a full receive buffer)."""
+    drops = 0
+    for line in Path("/proc/net/udp").read_text().splitlines()[1:]:
+        fields = line.split()
+        if int(fields[1].split(":")[1], 16) == port:
+            drops += int(fields[-1])
+    return drops
+
+
 @pytest.mark.slow
 def test_ground_that_lost_telemetry_is_judged_incomplete(tmp_path):
-    """The ground stopped (SIGSTOP) for a while: the kernel drops what its socket cannot hold; the run
-    completes, but the judge sees the sequence gaps and the run cannot pass."""
-    proc = _start(tmp_path, 150.0)
+    """The ground stopped (SIGSTOP) and its socket filled (junk datagrams: its buffer holds minutes of
+    telemetry), so the kernel drops the flight software's packets for a few seconds: the run completes,
+    but the judge sees the sequence gaps and the run cannot pass."""
+    import socket
+
+    proc = _start(tmp_path, LONG_S)
     run_dir = _wait_running(proc, tmp_path / "runs")
     ground = [p for p in psutil.Process(proc.pid).children() if "spawn_main" in " ".join(p.cmdline())][0]
+    (port,) = {c.laddr.port for c in ground.net_connections(kind="udp")}
     ground.suspend()
-    time.sleep(8.0)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as junk:
+        deadline = time.monotonic() + 120
+        while _udp_drops(port) < 1000 and time.monotonic() < deadline:
+            for _ in range(1000):
+                junk.sendto(b"\0" * 1024, ("127.0.0.1", port))
+    time.sleep(5.0)  # telemetry sent now finds the socket full
     ground.resume()
-    text, _ = proc.communicate(timeout=600)
+    assert _udp_drops(port) > 0, "the kernel dropped nothing: the test did not make the ground lose telemetry"
+    text, _ = proc.communicate(timeout=900)
     summary = _summary(run_dir)
     assert summary["status"] == "incomplete telemetry", (summary["telemetry_complete"], text)
     assert proc.returncode == sil.EXIT_INCOMPLETE_TELEMETRY and not summary["pass"]
@@ -206,3 +226,16 @@ def test_read_only_out_is_a_clear_error(tmp_path):
                             cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert result.returncode == sil.EXIT_NOT_STARTED and "Permission denied" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_assumption_check_worker_dies_with_a_killed_flight_software():
+    """The worker forked by the checker ends when its parent is SIGKILLed (no `close` runs then)."""
+    code = ("import time\nfrom fsw.assumption_check import AssumptionChecker\n"
+            "c = AssumptionChecker('process'); c.start(); print(c.worker.pid, flush=True); time.sleep(600)")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    worker = psutil.Process(int(proc.stdout.readline()))
+    assert worker.ppid() == proc.pid
+    proc.kill()
+    proc.wait()
+    gone, alive = psutil.wait_procs([worker], timeout=10)
+    assert not alive, "the assumption-check worker outlived the flight software"
