@@ -39,7 +39,7 @@ def ack_point(dictionary: TelemetryDictionary, utc: float, packet: DecodedTm) ->
               packet.time_s)
     failed = ack.report.endswith("FAILURE")
     return {"id": "acks", "utc": utc, "onboard_s": round(packet.time_s, 3), "severity": "WARNING_HI" if failed else "COMMAND",
-            "event": ack.report, "message": ack.describe(dictionary).split("  ", 1)[-1].strip()}
+            "event": ack.report, "message": ack.describe(dictionary).split(ack.report, 1)[-1].strip()}
 
 
 class SkyModel:

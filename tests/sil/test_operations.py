@@ -50,14 +50,9 @@ def _free_udp_port() -> int:
 
 
 def _send(run_dir: Path, *command: str) -> subprocess.CompletedProcess:
-    """`keepout ground send --run RUN_DIR` (waits for the acknowledgement) where the CLI has it; otherwise
-    the run's config and key with --no-wait (the acknowledgement is then checked in the archives)."""
-    help_text = subprocess.run([*KEEPOUT, "ground", "send", "--help"], capture_output=True, text=True).stdout
-    if "--run" in help_text:
-        args = ["ground", "send", "--run", str(run_dir), *command]
-    else:
-        args = ["ground", "--config", str(run_dir / "mission.yaml"), "send", *command, "--no-wait"]
-    return subprocess.run([*KEEPOUT, *args], capture_output=True, text=True, timeout=60)
+    """`keepout ground send --run RUN_DIR COMMAND`: sends, waits for the acknowledgements, prints them."""
+    return subprocess.run([*KEEPOUT, "ground", "send", "--run", str(run_dir), *command, "--timeout", "20"],
+                          capture_output=True, text=True, timeout=120)
 
 
 def _acks(archive: Path) -> list[tuple[str, int]]:
@@ -115,8 +110,9 @@ def test_live_run_two_monitors_open_mct_and_verified_commands(tmp_path: Path) ->
                       f"the cycle value to update from {first}")
 
             results = [_send(run_dir, "NOOP"), _send(run_dir, "SET_MODE", "POINTING")]
-            for result in results:
+            for name, result in zip(("NOOP", "SET_MODE"), results):
                 assert result.returncode == 0, result.stdout + result.stderr
+                assert f"{name}: completed" in result.stdout and "COMPLETION_SUCCESS" in result.stdout
             for name in ("NOOP", "SET_MODE"):
                 _wait_for(lambda: re.search(rf"COMPLETION_SUCCESS\s+{name} seq", page.evaluate(TABLE_TEXT_JS)), 30,
                           f"the page to show {name} completed")
@@ -134,6 +130,7 @@ def test_live_run_two_monitors_open_mct_and_verified_commands(tmp_path: Path) ->
 
         os.killpg(sil.pid, signal.SIGINT)  # end the run as an operator would; it writes its summary
         sil.wait(timeout=180)
+        assert f"attach with `keepout ground --run {run_dir}`" in sil.stdout.read()
         for monitor in monitors:  # attached monitors stop by themselves when the run has finished
             monitor.wait(timeout=60)
             assert monitor.returncode == 0, monitor.stdout.read()
