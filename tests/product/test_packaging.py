@@ -14,7 +14,7 @@ import pytest
 from hil_sim import cli
 
 ROOT = Path(__file__).resolve().parents[2]
-CODE_PACKAGES = ("gnc", "fsw", "hil_sim")
+CODE_PACKAGES = ("gnc", "fsw", "ground", "hil_sim")
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 
 
