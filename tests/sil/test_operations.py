@@ -1,7 +1,7 @@
 """Operating a live run (issue 15, "Done when"): a real-time SIL run, two ground monitors attached with
 `keepout ground --run`, Open MCT (`keepout ground web --run`) in Debian's headless Chromium driven by
 Playwright, telecommands sent with `keepout ground send`, and their acknowledgements seen in the page and
-in every archive. The page's screenshot goes to docs/img/openmct.png (the README shows it).
+in every archive; then the finished run replayed in a new page. The screenshot goes to docs/img/openmct.png.
 
 Everything is real: processes, UDP multicast telemetry, the link key, the browser (the system Chromium;
 Playwright downloads nothing).
@@ -120,20 +120,31 @@ def test_live_run_two_monitors_open_mct_and_verified_commands(tmp_path: Path) ->
             page.wait_for_timeout(1500)  # let the plots and the sky catch up before the picture
             SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(SCREENSHOT))
+
+            # A command to a port nobody serves fails, and says so.
+            nobody = subprocess.run([*KEEPOUT, "ground", "send", "--key-file", str(run_dir / "link.key"),
+                                     "--port", str(_free_udp_port()), "--tm-port", str(_free_udp_port()),
+                                     "--timeout", "1", "NOOP"], capture_output=True, text=True, timeout=60)
+            assert nobody.returncode != 0 and nobody.stderr.strip(), nobody.stdout + nobody.stderr
+
+            os.killpg(sil.pid, signal.SIGINT)  # end the run as an operator would; it writes its summary
+            sil.wait(timeout=180)
+            assert f"attach with `keepout ground --run {run_dir}`" in sil.stdout.read()
+            for monitor in monitors:  # attached monitors stop by themselves when the run has finished
+                monitor.wait(timeout=60)
+                assert monitor.returncode == 0, monitor.stdout.read()
+
+            # The finished run replayed: a new web ground over its archive shows the same acknowledgements.
+            replay = _keepout("ground", "web", "--run", str(run_dir), "--port", "0", cwd=ROOT)
+            processes.append(replay)
+            line = replay.stdout.readline()
+            assert "finished: replay" in line, line
+            page = browser.new_page(viewport={"width": 1600, "height": 1000})
+            page.goto(re.search(r"http://127\.0\.0\.1:\d+/", line).group(0))
+            for name in ("NOOP", "SET_MODE"):
+                _wait_for(lambda: re.search(rf"COMPLETION_SUCCESS\s+{name} seq", page.evaluate(TABLE_TEXT_JS)), 60,
+                          f"the replay to show {name} completed")
             browser.close()
-
-        # A command to a port nobody serves fails, and says so.
-        nobody = subprocess.run([*KEEPOUT, "ground", "send", "--key-file", str(run_dir / "link.key"),
-                                 "--port", str(_free_udp_port()), "--tm-port", str(_free_udp_port()),
-                                 "--timeout", "1", "NOOP"], capture_output=True, text=True, timeout=60)
-        assert nobody.returncode != 0 and nobody.stderr.strip(), nobody.stdout + nobody.stderr
-
-        os.killpg(sil.pid, signal.SIGINT)  # end the run as an operator would; it writes its summary
-        sil.wait(timeout=180)
-        assert f"attach with `keepout ground --run {run_dir}`" in sil.stdout.read()
-        for monitor in monitors:  # attached monitors stop by themselves when the run has finished
-            monitor.wait(timeout=60)
-            assert monitor.returncode == 0, monitor.stdout.read()
     finally:
         for proc in reversed(processes):
             if proc.poll() is None:
