@@ -7,7 +7,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 TEXT_SUFFIXES = {".py", ".md", ".yaml", ".yml", ".toml", ".json", ".txt", ".cfg", ".dbc", ""}
-SKIP_DIRS = {".git", ".venv", "__pycache__", "build", "runs", "campaigns-out", ".pytest_cache"}
+SKIP_DIRS = {".git", ".venv", "__pycache__", "build", "runs", "campaigns-out", ".pytest_cache", ".hypothesis",
+             "node_modules"}  # caches and installed packages: not the repository's files
 
 
 def _files():
