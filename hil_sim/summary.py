@@ -483,10 +483,10 @@ def _cell(value: Any, unit: str = "") -> str:
 def format_summary(summary: dict[str, Any], total_wall_s: float | None = None) -> str:
     """The requirement table and the verdict line. ``total_wall_s``: wall time of the whole command, start-up
     included (the summary's own ``wall_s`` is the simulation loop alone)."""
-    lines = [f"{'requirement':38s} {'value':>18s}  {'limit':22s} result"]
+    lines = [f"{'requirement':38s} {'value':>20s}  {'limit':22s} result"]
     for r in summary["requirements"]:
         unit = r.get("unit", "")
-        lines.append(f"{r['name'][:38]:38s} {_cell(r['value'], unit)[:18]:>18s}  "
+        lines.append(f"{r['name'][:38]:38s} {_cell(r['value'], unit)[:20]:>20s}  "
                      f"{_cell(r['limit'], unit)[:22]:22s} {'PASS' if r['pass'] else 'FAIL'}")
     speed = summary.get("speed_x_realtime")
     status = summary.get("status", "completed")
