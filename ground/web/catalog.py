@@ -130,7 +130,7 @@ def build_objects(dictionary: TelemetryDictionary, title: str = "keepout") -> di
     objects["event_table"] = {
         "identifier": _identifier("event_table"), "name": "Events and acknowledgements", "type": "table",
         "location": f"{NAMESPACE}:{ROOT_KEY}", "composition": [_identifier("events"), _identifier("acks")],
-        "configuration": {"hiddenColumns": {"onboard_s": False}},
+        "configuration": {"hiddenColumns": {"name": True, "onboard_s": True}},
     }
     objects[OVERVIEW_KEY] = _overview()
     objects[ROOT_KEY] = _folder(ROOT_KEY, title, "ROOT",
@@ -146,8 +146,8 @@ def _overview() -> dict[str, Any]:
         return {"id": f"frame-{key}", "domainObjectIdentifier": _identifier(key), "size": size, "noFrame": False}
 
     containers = [
-        {"id": "left", "size": 45, "frames": [frame("key_channels", 45), frame("event_table", 55)]},
-        {"id": "right", "size": 55, "frames": [frame(SKY_KEY, 55), frame("margins", 45)]},
+        {"id": "left", "size": 50, "frames": [frame("key_channels", 36), frame("event_table", 64)]},
+        {"id": "right", "size": 50, "frames": [frame(SKY_KEY, 55), frame("margins", 45)]},
     ]
     return {"identifier": _identifier(OVERVIEW_KEY), "name": "Overview", "type": "flexible-layout",
             "location": f"{NAMESPACE}:{ROOT_KEY}",

@@ -38,8 +38,8 @@ def ack_point(dictionary: TelemetryDictionary, utc: float, packet: DecodedTm) ->
     ack = Ack(v["ack_report"], int(v["ack_request_id"]), int(v["ack_tc_seq"]), int(v["ack_opcode"]), v["ack_code"],
               packet.time_s)
     failed = ack.report.endswith("FAILURE")
-    return {"id": "acks", "utc": utc, "onboard_s": packet.time_s, "severity": "WARNING_HI" if failed else "COMMAND",
-            "event": ack.report, "message": ack.describe(dictionary).split("  ", 1)[-1].strip()}
+    return {"id": "acks", "utc": utc, "onboard_s": round(packet.time_s, 3), "severity": "WARNING_HI" if failed else "COMMAND",
+            "event": ack.report, "message": ack.describe(dictionary).split(ack.report, 1)[-1].strip()}
 
 
 class SkyModel:
@@ -148,7 +148,7 @@ class PointMaker:
         """Event and sky points of one packet (channel points come from ``row``)."""
         utc = rx_time_s * 1000.0
         if packet.kind == "event":
-            point = {"utc": utc, "onboard_s": packet.time_s, "severity": packet.severity, "event": packet.event,
+            point = {"utc": utc, "onboard_s": round(packet.time_s, 3), "severity": packet.severity, "event": packet.event,
                      "message": packet.message}
             keys = ["events", "fdir"] if packet.event in FDIR_EVENTS else ["events"]
             return [{"id": key, **point} for key in keys]

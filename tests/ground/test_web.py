@@ -186,3 +186,15 @@ def test_live_points_reach_subscribers_and_garbage_disconnects_only_its_sender(l
     assert [p["event"] for p in points if p["id"] == "events"] == ["FSW_STARTED"], "the forged event is refused"
     assert run["live"] is True and run["ws_protocol_errors"] == len(GARBAGE)
     assert run["tm_refused_by_link_security"] == 1
+
+
+def test_bad_command_lines_are_one_line_errors(tmp_path: Path, capsys) -> None:
+    from ground.cli import main
+
+    assert main(["ground", "web", "--openmct", str(tmp_path), "--archive", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"--openmct {tmp_path}: no openmct.js there" in err and "Traceback" not in err
+    assert main(["ground", "web", "--archive", str(tmp_path)]) == 2
+    assert f"--archive {tmp_path}: no tm_raw.bin there" in capsys.readouterr().err
+    assert main(["ground", "web", "--run", str(tmp_path)]) == 2
+    assert "no endpoints.json there" in capsys.readouterr().err

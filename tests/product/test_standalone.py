@@ -9,7 +9,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 TEXT_SUFFIXES = {".py", ".md", ".yaml", ".yml", ".toml", ".json", ".txt", ".cfg", ".dbc", ".js", ".html", ""}
 # outside a git checkout: what is not the repository's own (environments, caches, run outputs, npm)
-SKIP_DIRS = {".git", ".venv", "__pycache__", "build", "runs", ".pytest_cache", ".hypothesis", "node_modules"}
+SKIP_DIRS = {".git", ".venv", "__pycache__", "build", "runs", "campaigns-out", ".pytest_cache", ".hypothesis",
+             "node_modules"}
 
 
 def _files():
