@@ -175,12 +175,14 @@ def test_ground_that_lost_telemetry_is_judged_incomplete(tmp_path):
     run_dir = _wait_running(proc, tmp_path / "runs")
     ground = [p for p in psutil.Process(proc.pid).children() if "spawn_main" in " ".join(p.cmdline())][0]
     (port,) = {c.laddr.port for c in ground.net_connections(kind="udp")}
+    link = json.loads((run_dir / "endpoints.json").read_text())  # the run's telemetry group (ground.link)
     ground.suspend()
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as junk:
+        junk.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(link["tm_interface"]))
         deadline = time.monotonic() + 120
         while _udp_drops(port) < 1000 and time.monotonic() < deadline:
             for _ in range(1000):
-                junk.sendto(b"\0" * 1024, ("127.0.0.1", port))
+                junk.sendto(b"\0" * 1024, (link["tm_host"], port))
     time.sleep(5.0)  # telemetry sent now finds the socket full
     ground.resume()
     assert _udp_drops(port) > 0, "the kernel dropped nothing: the test did not make the ground lose telemetry"
