@@ -159,14 +159,19 @@ def main(argv: list[str] | None = None) -> int:
             jobs += [(name, n // k + (c < n % k), args.seed + 1000 * t + c, args.hang_s, folder) for c in range(k)]
         print(f"{len(jobs)} chunks on {args.jobs} worker(s)", file=sys.stderr, flush=True)
         parts: dict[str, list[dict]] = collections.defaultdict(list)
+        planned = collections.Counter(job[0] for job in jobs)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
         with multiprocessing.get_context("fork").Pool(args.jobs) as pool:
             for name, part in pool.imap_unordered(_chunk, jobs):
                 parts[name].append(part)
-    for name in ORDER:
-        if name in parts:
-            results["targets"][name] = _merge(parts[name])
-    results["host_loadavg_after"] = os.getloadavg()
-    results["wall_s"] = time.perf_counter() - started
+                # written after every chunk: an interrupted run still leaves what it measured
+                for done in ORDER:
+                    if done in parts:
+                        results["targets"][done] = {**_merge(parts[done]),
+                                                    "complete": len(parts[done]) == planned[done]}
+                results["host_loadavg_after"] = os.getloadavg()
+                results["wall_s"] = time.perf_counter() - started
+                args.out.write_text(json.dumps(results, indent=1) + "\n")
     print()
     print(f"{'target':<18} {'inputs':>10} {'crashes':>8} {'hangs':>6} {'inputs/s/CPU':>13} {'slowest ms':>11}  outcomes")
     for name, r in results["targets"].items():
@@ -177,8 +182,6 @@ def main(argv: list[str] | None = None) -> int:
             print(f"    crash x{count}: {site}")
     print(f"host: {results['host_cpus']} CPUs, {args.jobs} worker(s), {results['wall_s']:.0f} s wall; load average "
           f"{load_before[0]:.1f} before, {results['host_loadavg_after'][0]:.1f} after")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(results, indent=1) + "\n")
     print(f"wrote {args.out.relative_to(ROOT) if args.out.is_relative_to(ROOT) else args.out}")
     return 0 if all(r["crashes"] == 0 for r in results["targets"].values()) else 1
 

@@ -140,7 +140,7 @@ class SecurityAssociation:
     nothing resets them (RESET_COUNTERS must not erase the evidence of an attack).
     """
 
-    key: bytes
+    key: bytes = field(repr=False)  # never printed (logs, tracebacks)
     spi: int
     window: int = DEFAULT_TC_WINDOW
     resync_opcode: int | None = None

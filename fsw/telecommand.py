@@ -22,7 +22,7 @@ Every telecommand is acknowledged in telemetry as PUS service 1 does (``TC_ACK``
 ``fsw.dictionary.TC_VERIFICATION_DOC``): ACCEPTANCE_SUCCESS or ACCEPTANCE_FAILURE with a reason code,
 then for an accepted command COMPLETION_SUCCESS or COMPLETION_FAILURE, each quoting the command's request
 id and sequence count. Each failure carries a reason code from ``TC_REASON_CODES``; its error class follows
-from the code.
+from the code. With link security only packets that authenticate are answered (see ``_unprotect``).
 """
 from __future__ import annotations
 

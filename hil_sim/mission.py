@@ -12,7 +12,6 @@ components. Every physical key carries its unit in its name (``_deg``, ``_s``, `
 """
 from __future__ import annotations
 
-import copy
 import math
 import re
 from datetime import datetime, timezone
@@ -411,70 +410,25 @@ class Mission(_Model):
 # Each fact written once: the flight software's knowledge defaults to the truth in the file
 # ---------------------------------------------------------------------------------------------
 
-WHEEL_KNOWLEDGE_KEYS = ("axis_B", "max_torque_Nm", "max_speed_rad_s", "spin_inertia_kgm2")
-# where each piece of the flight software's knowledge comes from when the file does not give it
-# (written_once does it; docs/missions.md lists it as the key's default)
-KNOWLEDGE_DEFAULTS = {
-    "flight_software.epoch_utc": "epoch_utc",
-    "flight_software.spacecraft.inertia_B_kgm2": "spacecraft.inertia_B_kgm2",
-    "flight_software.spacecraft.wheels": "spacecraft.wheels (axis_B, max_torque_Nm, max_speed_rad_s, "
-                                         "spin_inertia_kgm2)",
-    "flight_software.spacecraft.star_tracker_q_BS": "spacecraft.star_tracker.q_BS",
-    "flight_software.pointing.boresight_B": "spacecraft.instrument_boresight_B",
-    "flight_software.pointing.target_N": "initial_state.ra_dec_deg, when the initial attitude is given so",
-    "flight_software.orbit.radius_km": "orbit.semi_major_axis_km",
-    "flight_software.orbit.inclination_deg": "orbit.inclination_deg",
-    "flight_software.orbit.raan_deg": "orbit.raan_deg",
-    "flight_software.orbit.arg_latitude_at_epoch_deg": "orbit.arg_perigee_deg + orbit.mean_anomaly_deg",
-}
-
-
 def written_once(data: Any) -> Any:
     """A mission's raw data with every fact the user wrote once filled in where it is needed twice.
 
-    * ``initial_state.ra_dec_deg`` (+ ``roll_deg``) becomes ``initial_state.q_NB``, and the flight
-      software's initial target (``pointing.target_N``), unless given, is that direction (hold it);
-    * the flight software's knowledge that the file does not give separately is the truth written in
-      it: ``epoch_utc``, ``spacecraft.inertia_B_kgm2``, ``spacecraft.wheels`` (axis, torque, speed, spin
-      inertia), the star tracker's ``q_BS``, the instrument boresight and the orbit (circular model:
-      radius = semi-major axis, argument of latitude = argument of perigee + mean anomaly).
+    * the flight software's knowledge the file does not give separately is the truth written in it
+      (`fsw.config.knowledge_from_truth`: epoch, inertia, wheels, star-tracker mounting, boresight, orbit,
+      and the initial pointing as its first target when the initial attitude is given as RA/Dec);
+    * ``initial_state.ra_dec_deg`` (+ ``roll_deg``) becomes ``initial_state.q_NB``.
 
     It works on the values as written, before any campaign dispersion: `hil_sim.campaign` applies it to
     the base mission once, so a dispersion changes the truth alone and the flight software never learns
     the dispersed value. Keys given under ``flight_software`` are never touched; values that are not
     valid are left for validation to report where they are written.
     """
+    from fsw.config import knowledge_from_truth
+
     if not isinstance(data, dict):
         return data
-    out = copy.deepcopy(data)
-    pointed = _attitude_from_ra_dec(out)
-    fsw, sc, orbit = out.get("flight_software"), out.get("spacecraft"), out.get("orbit")
-    if not isinstance(fsw, dict):
-        return out
-    if pointed is not None and isinstance(pointing := _child(fsw, "pointing"), dict):
-        _fill(pointing, "target_N", pointed)  # hold the initial pointing until the first SET_TARGET
-    _fill(fsw, "epoch_utc", out.get("epoch_utc"))
-    if isinstance(sc, dict):
-        known = _child(fsw, "spacecraft")
-        if known is not None:
-            _fill(known, "inertia_B_kgm2", sc.get("inertia_B_kgm2"))
-            wheels = sc.get("wheels")
-            if isinstance(wheels, list) and all(isinstance(w, dict) for w in wheels):
-                _fill(known, "wheels", [{k: w.get(k, w.get("Js_kgm2")) for k in WHEEL_KNOWLEDGE_KEYS
-                                         if k in w or (k == "spin_inertia_kgm2" and "Js_kgm2" in w)} for w in wheels])
-            tracker = sc.get("star_tracker")
-            if isinstance(tracker, dict):
-                _fill(known, "star_tracker_q_BS", tracker.get("q_BS"))
-        pointing = _child(fsw, "pointing")
-        if pointing is not None:
-            _fill(pointing, "boresight_B", sc.get("instrument_boresight_B"))
-    if isinstance(orbit, dict) and isinstance(known_orbit := _child(fsw, "orbit"), dict):
-        _fill(known_orbit, "radius_km", orbit.get("semi_major_axis_km"))
-        _fill(known_orbit, "inclination_deg", orbit.get("inclination_deg"))
-        _fill(known_orbit, "raan_deg", orbit.get("raan_deg"))
-        omega, anomaly = orbit.get("arg_perigee_deg", 0.0), orbit.get("mean_anomaly_deg", 0.0)
-        if _is_number(omega) and _is_number(anomaly):
-            _fill(known_orbit, "arg_latitude_at_epoch_deg", (float(omega) + float(anomaly)) % 360.0)
+    out = knowledge_from_truth(data)
+    _attitude_from_ra_dec(out)
     return out
 
 
@@ -482,36 +436,24 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def _fill(target: dict, key: str, value: Any) -> None:
-    if key not in target and value is not None:
-        target[key] = copy.deepcopy(value)
-
-
-def _child(parent: dict, key: str) -> dict | None:
-    """parent[key] as a dict (created when absent); None when it is something else (left to validation)."""
-    value = parent.setdefault(key, {})
-    return value if isinstance(value, dict) else None
-
-
-def _attitude_from_ra_dec(data: dict) -> list[float] | None:
-    """Replace initial_state.ra_dec_deg (+ roll_deg) by q_NB; return the boresight direction in N."""
+def _attitude_from_ra_dec(data: dict) -> None:
+    """Replace initial_state.ra_dec_deg (+ roll_deg) by q_NB."""
     state, sc = data.get("initial_state"), data.get("spacecraft")
     if not isinstance(state, dict) or "q_NB" in state or "ra_dec_deg" not in state:
-        return None
+        return
     ra_dec, roll = state.get("ra_dec_deg"), state.get("roll_deg", 0.0)
     boresight = sc.get("instrument_boresight_B") if isinstance(sc, dict) else None
     if not (isinstance(ra_dec, (list, tuple)) and len(ra_dec) == 2 and all(map(_is_number, ra_dec))
             and 0 <= ra_dec[0] <= 360 and -90 <= ra_dec[1] <= 90 and _is_number(roll) and abs(roll) <= 360
             and isinstance(boresight, list) and len(boresight) == 3 and all(map(_is_number, boresight))):
-        return None  # validation reports what is wrong, at its key
+        return  # validation reports what is wrong, at its key
     try:
         q = attitude_from_ra_dec(float(ra_dec[0]), float(ra_dec[1]), float(roll), np.asarray(boresight, float))
     except ValueError:
-        return None
+        return
     state["q_NB"] = [float(c) for c in q]
     del state["ra_dec_deg"]
     state.pop("roll_deg", None)
-    return [float(c) for c in ra_dec_to_unit(float(ra_dec[0]), float(ra_dec[1]))]
 
 
 def attitude_from_ra_dec(ra_deg: float, dec_deg: float, roll_deg: float, boresight_B: np.ndarray) -> np.ndarray:

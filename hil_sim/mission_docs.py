@@ -12,8 +12,10 @@ import re
 from pathlib import Path
 from typing import Any
 
-DOCS_PATH = Path(__file__).resolve().parent.parent / "docs" / "missions.md"
-EXAMPLE_PATH = Path(__file__).resolve().parent.parent / "config" / "missions" / "smallsat-example.yaml"
+from keepout_config import config_path
+
+DOCS_PATH = Path(__file__).resolve().parent.parent / "docs" / "missions.md"  # in a checkout (docs/ is not installed)
+EXAMPLE_PATH = config_path("missions", "smallsat-example.yaml")
 
 EXAMPLE_TEXT = """## Worked example: a small satellite
 
@@ -161,7 +163,7 @@ def _unit(key: str, description: str) -> str:
 
 
 def _default(key: str, node: dict, required: set[str], path: str = "") -> str:
-    from hil_sim.mission import KNOWLEDGE_DEFAULTS
+    from fsw.config import KNOWLEDGE_DEFAULTS
 
     if path in KNOWLEDGE_DEFAULTS:
         return f"from the file: {KNOWLEDGE_DEFAULTS[path]}"

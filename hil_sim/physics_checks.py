@@ -611,7 +611,7 @@ def _check_braking(mission, report) -> float:
         problem = braking_problem(rate, accel, bandwidth, margin, rule_eps(eps, cap))
         if problem is not None:
             report.add("error", "braking", f"timeline[{i}] SET_GAINS at {entry.t_s:g} s would be rejected onboard: "
-                       f"{problem}", ("timeline", i))
+                       f"{problem}", ("timeline", i, "rate_limit_deg_s"))
     return first
 
 

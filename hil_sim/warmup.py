@@ -29,11 +29,11 @@ def warm(missions: list[str] | None = None, seconds: float = 2.0, out=sys.stdout
     for k, path in enumerate(paths, 1):
         t0 = time.perf_counter()
         mission = load_mission(path)
+        print(f"[{k}/{len(paths)}] {mission.name}: physics check ...", end="", file=out, flush=True)
         check_mission(mission)
-        short = mission.model_copy(update={"duration_s": seconds})
-        run_fast(short, 0)
-        print(f"[{k}/{len(paths)}] compiled or loaded the kernels of {mission.name} in "
-              f"{time.perf_counter() - t0:.1f} s", file=out, flush=True)
+        print(" closed loop ...", end="", file=out, flush=True)
+        run_fast(mission.model_copy(update={"duration_s": seconds}), 0)
+        print(f" ready ({time.perf_counter() - t0:.1f} s)", file=out, flush=True)
     return time.perf_counter() - start
 
 

@@ -74,8 +74,8 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self._sky_groups: list[list[int]] = []
         self._sky_law_zones: list = []
         self._build_s3_zones()
-        self._s3_law = None
         self._q_lift: np.ndarray | None = None
+        self._drop_s3_path()  # no S^3 path yet: the law heads for the target until one is planned
         # SAFE mode state
         self.safe_phase = "RATE_DAMPING"
         self._damped_s = 0.0
@@ -118,6 +118,7 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
             self._damped_s = 0.0
         if mode == "QUATERNION":
             self._q_lift = None
+            self._drop_s3_path()
         self._checks_dirty = True
 
     def set_gains(self, k1: float, kappa: float, eps: float | str, rate_limit_deg_s: float) -> None:

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from fsw.guidance.common import _angle_deg
-from fsw.guidance.path_planning import PathFollower, path_length_deg, plan_path
+from fsw.guidance.path_planning import PathFollower, advance_aim, path_length_deg, plan_path
 
 
 class PathFollowing:
@@ -84,12 +84,7 @@ class PathFollowing:
 
     def _advance_aim(self, y: np.ndarray) -> bool:
         """Move the law's aim to the path point ahead of the boresight ``y``; True if it moved."""
-        f = self._follower
-        k = f.aim_index(y)
-        if k == self._aim_k:
-            return False
-        if k == len(f.path) - 1:  # the last leg is the paper's law to the real target
-            self._follower, self._aim, self._aim_k = None, self.target_N, -1
-        else:
-            self._aim, self._aim_k = f.path[k], k
-        return True
+        moved, self._follower, aim, self._aim_k = advance_aim(self._follower, y, self._aim_k, self.target_N)
+        if moved:
+            self._aim = aim
+        return moved

@@ -39,7 +39,7 @@ def test_shortened_regression_campaign_runs_end_to_end(campaign_dir):
     assert (df["m.min_margin_deg"] > 0).all()
     xmlschema.XMLSchema(JUNIT_XSD).validate(out / "junit.xml")
     cases = ET.parse(out / "junit.xml").getroot().findall(".//testcase")
-    assert len(cases) == RUNS * 7 + 1  # one per criterion and run, and the verdict
+    assert len(cases) == RUNS * 8 + 1  # one per criterion and run, and the verdict
 
 
 def test_every_dispersion_was_read_back_from_the_run(campaign_dir):

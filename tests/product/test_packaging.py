@@ -131,7 +131,7 @@ def _copy_source(dest: Path) -> Path:
     import shutil
 
     for name in (*CODE_PACKAGES, "config"):
-        shutil.copytree(ROOT / name, dest / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        shutil.copytree(ROOT / name, dest / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "node_modules"))
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(ROOT / name, dest / name)
     return dest

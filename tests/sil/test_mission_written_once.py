@@ -146,3 +146,15 @@ def test_the_example_passes_config_check():
 
     report = check_mission(load_mission(EXAMPLE), step_s=60.0)
     assert report.ok, report.format()
+
+
+def test_the_flight_software_alone_reads_the_same_knowledge(tmp_path):
+    """`keepout fsw MISSION` (python -m fsw) reads the mission file itself: it must know the same facts."""
+    from fsw.config import load_fsw_config
+
+    cfg = load_fsw_config(EXAMPLE)
+    mission = load_mission(EXAMPLE)
+    assert cfg.model_dump() == mission.flight_software.model_dump()
+    raw = yaml.safe_load(EXAMPLE.read_text())
+    assert cfg.spacecraft.inertia_B_kgm2 == raw["spacecraft"]["inertia_B_kgm2"]
+    assert np.allclose(cfg.pointing.target_N, ra_dec_to_unit(*raw["initial_state"]["ra_dec_deg"]))
