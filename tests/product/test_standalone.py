@@ -7,7 +7,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 TEXT_SUFFIXES = {".py", ".md", ".yaml", ".yml", ".toml", ".json", ".txt", ".cfg", ".dbc", ""}
-SKIP_DIRS = {".git", ".venv", "__pycache__", "build", "runs", "campaigns-out", ".pytest_cache"}
+SKIP_DIRS = {".git", ".venv", "__pycache__", "build", "runs", "campaigns-out", ".pytest_cache", ".hypothesis"}
 
 
 def _files():
