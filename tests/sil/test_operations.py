@@ -119,9 +119,10 @@ def test_live_run_two_monitors_open_mct_and_verified_commands(tmp_path: Path) ->
                           f"the page to show {name} completed")
             assert "FSW_STARTED" in page.evaluate(TABLE_TEXT_JS), "the event log shows the flight software's events"
             page.wait_for_timeout(1500)  # let the plots and the sky catch up before the picture
-            SCREENSHOT.parent.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=str(DOCS_SCREENSHOT if os.environ.get("KEEPOUT_UPDATE_SCREENSHOT") == "1"
-                                     else tmp_path / "openmct.png"))
+            screenshot = (DOCS_SCREENSHOT if os.environ.get("KEEPOUT_UPDATE_SCREENSHOT") == "1"
+                          else tmp_path / "openmct.png")
+            page.screenshot(path=str(screenshot))
+            assert screenshot.stat().st_size > 10_000, "a rendered page, not a blank one"
 
             # A command to a port nobody serves fails, and says so.
             nobody = subprocess.run([*KEEPOUT, "ground", "send", "--key-file", str(run_dir / "link.key"),
