@@ -98,6 +98,7 @@ class RunOptions:
     mission: Path = DEFAULT_MISSION
     bus: str | None = None  # override the mission's bus
     duration_s: float | None = None  # override the mission's duration
+    planned_duration_s: float | None = None  # set by prepare(): the mission file's duration when overridden
     realtime: bool = False
     out_root: Path = Path("runs")
     progress: bool = True
@@ -134,6 +135,7 @@ def prepare(options: RunOptions):
         updates["bus"] = options.bus
     if options.duration_s is not None:
         updates["duration_s"] = float(options.duration_s)
+        options.planned_duration_s = mission.duration_s  # the judge needs it: targets past a shortened end
     if updates:
         data = mission.model_dump(mode="json")
         data.update(updates)
@@ -485,7 +487,7 @@ def run_sil(options: RunOptions) -> RunResult:
             raise
         if main_thread:  # the run is over: a SIGTERM now must not cut its judgement short
             signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        return _judge(run_dir, mission, status, code)
+        return _judge(run_dir, mission, status, code, options.planned_duration_s)
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous_sigterm)
@@ -730,12 +732,13 @@ def _write_reserved_summary(run_dir: Path, summary: dict[str, Any]) -> None:
         f.truncate()
 
 
-def _judge(run_dir: Path, mission, status: str, code: int | None) -> RunResult:
+def _judge(run_dir: Path, mission, status: str, code: int | None,
+           planned_duration_s: float | None = None) -> RunResult:
     """Judge what was recorded, write summary.json and the plots; the exit code follows the status."""
     from hil_sim.plots import write_plots
     from hil_sim.summary import evaluate
 
-    summary, series = evaluate(run_dir, mission, status=status)
+    summary, series = evaluate(run_dir, mission, status=status, planned_duration_s=planned_duration_s)
     status = summary["status"]  # 'completed' becomes 'incomplete telemetry' when the ground lost some
     if code is None:
         code = (EXIT_INCOMPLETE_TELEMETRY if status == STATUS_INCOMPLETE

@@ -304,13 +304,16 @@ def telemetry_completeness(ground: dict[str, Any], sim_s: float, rates) -> tuple
     return not problems, "; ".join(problems) or "no gaps; packet counts match the simulated time"
 
 
-def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
-             status: str | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str | None = None,
+             planned_duration_s: float | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
     """(summary dict for JSON, series for plots).
 
     ``status``: how the run ended (hil_sim.sil: ``completed``, ``interrupted``, ``crashed: ...``); a
     completed run whose ground lost telemetry becomes ``incomplete telemetry``. Only a completed run
-    can pass."""
+    can pass. ``planned_duration_s``: the mission file's own duration when the run was shortened
+    (``--duration``): a target whose settling deadline lies beyond the run's end is reported as not
+    judged (it had no chance to settle) instead of failed; the keep-out margins, wheel, rate and
+    event requirements are judged as always."""
     run_dir = Path(run_dir)
     status = status or ("interrupted" if interrupted else "completed")
     req = mission.requirements
@@ -333,6 +336,11 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
         results.append({"name": name, "value": _rounded(value), "unit": unit, "limit": limit, "pass": bool(passed),
                         "detail": detail})
 
+    def not_judged(name: str, why: str) -> None:
+        # a requirement the run could not reach: shown, and kept out of the verdict
+        results.append({"name": name, "value": "not reached", "unit": "", "limit": "-", "pass": True,
+                        "judged": False, "detail": why})
+
     sim_stats = _read_json(run_dir / "simulator.json")
     if len(t) < 2:
         requirement("truth recorded", int(len(t)), ">= 2", False, "the run produced no truth samples", "samples")
@@ -344,7 +352,19 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
             requirement(f"keep-out margin {z.name}", float(z.margin_deg[i]),
                         f"> {_num(req.min_keepout_margin_deg)}", float(z.margin_deg[i]) > req.min_keepout_margin_deg,
                         f"minimum signed margin to the physical {z.kind} zone at t = {t[i]:.1f} s", "deg")
+    t_end = float(t[-1]) if len(t) else 0.0
+    cut_short = planned_duration_s is not None and t_end < planned_duration_s - 1e-6
+    unjudged_last = False
     for s in (s for s in settle if s["judged"]):
+        deadline_s = (s["commanded_at_s"] + req.max_settling_time_s if req.max_settling_time_s is not None
+                      else planned_duration_s if cut_short else s["until_s"])
+        if cut_short and s["settled_at_s"] is None and deadline_s > t_end + 1e-6:
+            s["judged"] = False
+            unjudged_last = s is settle[-1]
+            not_judged(f"settling ({s['target_from']})",
+                       f"the run was shortened to {t_end:.0f} s, before this target's settling deadline at "
+                       f"{deadline_s:.0f} s (commanded at {s['commanded_at_s']:.1f} s)")
+            continue
         ok = s["settled_at_s"] is not None
         # the value is a time after the command, so the limit is one too: the time left before the next
         # target (or the end), or max_settling_time_s when it is shorter
@@ -358,11 +378,14 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
                     f"to within {_num(req.settling_tolerance_deg)} deg of the target commanded at "
                     f"{s['commanded_at_s']:.1f} s; final error "
                     + (f"{final:.4f} deg" if final is not None else "unknown (no samples)"), "s")
+    if unjudged_last:
+        not_judged("final pointing error", "the run was shortened before the last target's settling deadline")
     if len(t):
         final = float(err[-1])
-        requirement("final pointing error", final, f"< {_num(req.max_final_pointing_error_deg)}",
-                    math.isfinite(final) and final < req.max_final_pointing_error_deg,
-                    "truth error to the active target at the end", "deg")
+        if not unjudged_last:
+            requirement("final pointing error", final, f"< {_num(req.max_final_pointing_error_deg)}",
+                        math.isfinite(final) and final < req.max_final_pointing_error_deg,
+                        "truth error to the active target at the end", "deg")
         limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
         frac = np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]
         peak = float(frac.max())
@@ -487,7 +510,7 @@ def format_summary(summary: dict[str, Any], total_wall_s: float | None = None) -
     for r in summary["requirements"]:
         unit = r.get("unit", "")
         lines.append(f"{r['name'][:38]:38s} {_cell(r['value'], unit)[:20]:>20s}  "
-                     f"{_cell(r['limit'], unit)[:22]:22s} {'PASS' if r['pass'] else 'FAIL'}")
+                     f"{_cell(r['limit'], unit)[:22]:22s} {'n/a' if r.get('judged') is False else 'PASS' if r['pass'] else 'FAIL'}")
     speed = summary.get("speed_x_realtime")
     status = summary.get("status", "completed")
     verdict = "PASS" if summary["pass"] else ("FAIL" if status == "completed" else status.split(":")[0].upper())

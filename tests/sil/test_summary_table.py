@@ -71,3 +71,21 @@ def test_rounding_keeps_four_significant_digits():
     assert _rounded(0.000123456) == 0.0001235
     assert _rounded(np.float64(2.5)) == 2.5 and _rounded(np.int64(3)) == 3 and _rounded(True) is True
     assert _rounded(float("inf")) == float("inf")
+
+
+def test_a_shortened_run_does_not_judge_targets_past_its_end_but_still_judges_the_rest(tmp_path):
+    # demo-pointing commands its first slew at 10 s and allows it until the second target at 300 s: a run
+    # shortened to 20 s (`--duration 20`) cannot have settled it, so the row is shown as not reached and
+    # kept out of the verdict; the same run judged as the mission's whole duration fails that row.
+    run_dir, mission = _drifting_run(tmp_path, "demo-pointing")
+    shortened, _ = evaluate(run_dir, mission, planned_duration_s=600.0)
+    full, _ = evaluate(run_dir, mission)
+    rows = {r["name"]: r for r in shortened["requirements"]}
+    settling = rows["settling (timeline[0])"]
+    assert settling["judged"] is False and settling["value"] == "not reached"
+    assert "shortened to 20 s" in settling["detail"] and "deadline at 600 s" in settling["detail"]
+    assert rows["final pointing error"]["judged"] is False
+    assert "peak wheel speed" in rows and "peak body rate" in rows and "keep-out margin sun" in rows
+    full_rows = {r["name"]: r for r in full["requirements"]}
+    assert full_rows["settling (timeline[0])"]["pass"] is False
+    assert "n/a" in format_summary(shortened, total_wall_s=1.0)
