@@ -26,8 +26,9 @@ EPOCH = "2030-03-29T12:00:00Z"
 
 
 def test_braking_distance_is_kinematics_and_the_governor_rate_is_its_inverse() -> None:
-    # 1 deg/s at 0.15 deg/s^2: 1 / 0.3 = 3.33 deg to stop, plus 1 s of loop lag at 1 rad/s = 1 deg
-    assert braking_distance_deg(1.0, 0.15, 1.0) == pytest.approx(1.0 / 0.3 + 1.0)
+    # 1 deg/s at 0.15 deg/s^2: 1 / 0.3 = 3.33 deg to stop, plus 1 s of loop lag at 1 rad/s = 1 deg and the
+    # jerk-limited command's start of the braking, w / (2 kp) = 0.5 deg (fsw.control)
+    assert braking_distance_deg(1.0, 0.15, 1.0) == pytest.approx(1.0 / 0.3 + 1.0 + 0.5)
     for d in (0.1, 2.5, 17.7, 90.0):
         w = rate_for_distance_deg_s(d, 0.11, 0.8)
         assert braking_distance_deg(w, 0.11, 0.8) == pytest.approx(d)
