@@ -7,11 +7,21 @@ BIN := $(VENV)/bin
 
 $(BIN)/keepout: pyproject.toml
 	$(PY) -m venv $(VENV)
-	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e '.[dev,dask]'
+	$(BIN)/pip install --upgrade pip
+	@echo "installing keepout and its dependencies (a minute or two on a fresh machine)"
+	$(BIN)/pip install --progress-bar on -e '.[dev,dask]'
+	@# compile the numba kernels now, so the first run starts flying at once (hil_sim/warmup.py)
+	$(BIN)/python -m hil_sim.warmup
 	touch $(BIN)/keepout
 
-setup: $(BIN)/keepout
+# Open MCT for `keepout ground web`, from the npm registry (pinned in ground/web/package-lock.json).
+OPENMCT := ground/web/node_modules/openmct/dist/openmct.js
+$(OPENMCT): ground/web/package.json ground/web/package-lock.json
+	@command -v npm >/dev/null 2>&1 || { echo "make setup: npm is missing (Debian: apt-get install -y npm)" >&2; exit 1; }
+	npm ci --prefix ground/web --no-audit --no-fund --loglevel=error
+	touch $@
+
+setup: $(BIN)/keepout $(OPENMCT)
 
 demo: setup
 	$(BIN)/keepout sil run
@@ -28,4 +38,4 @@ paper: setup
 	$(BIN)/keepout paper --out docs/paper
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info ground/web/node_modules

@@ -21,10 +21,18 @@ best ratio any law could reach at these limits. ratio - lb is what the law and t
 The paper's assumptions are checked at each slew's target with the eps the configuration gives
 (gnc.checks, as `keepout config check` does for a mission's own targets): "ok", eps and kappa_bar.
 
-    .venv/bin/python bench/slew.py [--quick] [--law-only]
+    .venv/bin/python bench/slew.py [--quick] [--law-only] [--jerk-off]
+
+"TV" is the total variation of the wheel torque commands over the slew (sum over cycles and wheels of
+|tau_k - tau_(k-1)|, N m): a smooth slew is a few times the torque limits, a chattering one many times
+that (--jerk-off flies every slew again without the rate command's jerk limit, for comparison).
 
 The flight software plans slews round the zones (pointing.path, fsw.guidance.path_planning). --law-only also runs
 every slew with path planning off, side by side: the paper's law heading straight for the target.
+
+QUATERNION mode: demo-quaternion's two reorientations, each past a forbidden-attitude zone on S^3, with
+slew planning on S^3 (quaternion.path, fsw.guidance.attitude_planning) and with the law alone: ratio to
+the eigen-axis slew of the same rotation angle, and the margins to the physical S^3 zones.
 
 Prints a table and writes bench/results/slew.json.
 """
@@ -184,30 +192,43 @@ def what_geometry_allows(mission, t_s: float) -> dict:
             "kappa_bar": float(rep.kappa_bar), "assumptions_ok": bool(rep.ok), "assumption_errors": list(rep.errors)}
 
 
-def slew_mission(base: dict, start, end, path_planning: bool = True) -> dict:
+def slew_mission(base: dict, start, end, path_planning: bool = True, jerk_limit: bool = True) -> dict:
     data = json.loads(json.dumps(base, default=str))
     data["flight_software"].setdefault("pointing", {}).setdefault("path", {})["enabled"] = path_planning
+    if not jerk_limit:
+        data["flight_software"]["control"]["max_command_jerk_deg_s3"] = 0.0
     a, b = unit(*start), unit(*end)
     theta = math.degrees(math.acos(float(np.clip(a @ b, -1, 1))))
+    data["flight_software"]["pointing"]["target_N"] = a.tolist()
+    return _one_slew(data, attitude_looking_at(a), {"target_N": b.tolist()}, theta), theta, \
+        eigen_axis_time_s(theta, *_limits(data))
+
+
+def _limits(data: dict) -> tuple[float, float]:
     fsw = data["flight_software"]
-    t_eig = eigen_axis_time_s(theta, fsw["spacecraft"]["max_rate_deg_s"], fsw["control"]["max_command_accel_deg_s2"])
-    data["initial_state"]["q_NB"] = attitude_looking_at(a)
+    return fsw["spacecraft"]["max_rate_deg_s"], fsw["control"]["max_command_accel_deg_s2"]
+
+
+def _one_slew(data: dict, q0: list[float], target: dict, theta_deg: float) -> dict:
+    """``data`` cut to one slew: at rest on ``q0``, SET_TARGET ``target`` at 5 s, no faults, and time to
+    settle (2.2 x the eigen-axis slew of ``theta_deg`` and a minute)."""
+    data["initial_state"]["q_NB"] = q0
     data["initial_state"]["omega_BN_B_rad_s"] = [0.0, 0.0, 0.0]
-    fsw["pointing"]["target_N"] = a.tolist()
-    data["timeline"] = [{"t_s": 5.0, "command": "SET_TARGET", "target_N": b.tolist()}]
-    data["duration_s"] = 5.0 + 2.2 * t_eig + 60.0
+    data["timeline"] = [{"t_s": 5.0, "command": "SET_TARGET", **target}]
+    data["duration_s"] = 5.0 + 2.2 * eigen_axis_time_s(theta_deg, *_limits(data)) + 60.0
     data["faults"] = []
-    return data, theta, t_eig
+    return data
 
 
-def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: bool = True) -> list[dict]:
+def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: bool = True,
+              jerk_limit: bool = True) -> list[dict]:
     from fsw.guidance.path_planning import path_length_deg
     from hil_sim.campaign.fast import run_fast
     from hil_sim.mission import Mission
 
     rows = []
     for label, start, end in slews:
-        data, theta, t_eig = slew_mission(base, start, end, path_planning)
+        data, theta, t_eig = slew_mission(base, start, end, path_planning, jerk_limit)
         mission = Mission.model_validate(data)
         wall = time.perf_counter()
         result = run_fast(mission, seed=mission.seed)
@@ -225,6 +246,7 @@ def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: boo
                "path_deg": path_deg, "path_ratio": path_deg / theta,
                "ratio": settle / t_eig if math.isfinite(settle) else math.inf,
                "margins_deg": margins, "final_error_deg": m["final_error_deg"], "wall_s": wall,
+               "torque_variation_Nm": m.get("torque_variation_Nm", math.nan),
                "sim_s": result.sim_time_s}
         if geometry:
             geo = what_geometry_allows(mission, 5.0)
@@ -240,9 +262,59 @@ def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: boo
     return rows
 
 
+# QUATERNION mode (config/missions/demo-quaternion.yaml): its two reorientations, each past a forbidden-
+# attitude zone on S^3 (label, start q_NB, end q_NB, scalar first)
+QUATERNION_SLEWS = [
+    ("Q1 past the radiator-Sun cone", (0.994465, -0.039614, 0.04721, 0.085095), (0.444925, -0.00554, -0.374227, 0.813612)),
+    ("Q2 past the antenna-lock star", (0.444925, -0.00554, -0.374227, 0.813612), (-0.214345, 0.788442, -0.477302, 0.323416)),
+]
+
+
+def quaternion_slew_mission(base: dict, start, end, path_planning: bool = True) -> tuple[dict, float, float]:
+    """The demo-quaternion mission cut to one slew: at rest on ``start``, ``end`` commanded at 5 s.
+    Returns (mission data, rotation angle [deg], T_eigen [s])."""
+    data = json.loads(json.dumps(base, default=str))
+    fsw = data["flight_software"]
+    fsw["quaternion"].setdefault("path", {})["enabled"] = path_planning
+    a, b = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    theta = 2.0 * math.degrees(math.acos(min(1.0, abs(float(a @ b)))))  # rotation angle
+    fsw["quaternion"]["target_q_NB"] = a.tolist()
+    return _one_slew(data, a.tolist(), {"q_target_NB": b.tolist()}, theta), theta, eigen_axis_time_s(theta, *_limits(data))
+
+
+def run_quaternion_slews(base: dict, path_planning: bool) -> list[dict]:
+    from hil_sim.campaign.fast import run_fast
+    from hil_sim.mission import Mission
+
+    rows = []
+    for label, start, end in QUATERNION_SLEWS:
+        data, theta, t_eig = quaternion_slew_mission(base, start, end, path_planning)
+        mission = Mission.model_validate(data)
+        m = run_fast(mission, seed=mission.seed).metrics
+        settle = m["settling_time_s"]
+        rows.append({"slew": label, "rotation_deg": theta, "eigen_axis_s": t_eig, "settling_s": settle,
+                     "ratio": settle / t_eig if math.isfinite(settle) else math.inf,
+                     "margins_deg": {k[len("margin_"):-len("_deg")]: v for k, v in m.items() if k.startswith("margin_")},
+                     "torque_variation_Nm": m.get("torque_variation_Nm", math.nan),
+                     "final_error_deg": m["final_error_deg"]})
+    return rows
+
+
+def _print_short(rows: list[dict]) -> None:
+    """The comparison rows: angle, path, its ratio, T_eigen, settling, ratio, TV, margins."""
+    for r in rows:
+        margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
+        print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['path_deg']:6.1f} {r['path_ratio']:6.3f} "
+              f"{r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f} TV {r['torque_variation_Nm']:6.2f} Nm  {margins}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="only the first two slews")
+    parser.add_argument("--jerk-off", action="store_true",
+                        help="also fly every slew without the rate command's jerk limit (control.max_command_jerk_deg_s3: 0) "
+                             "and record it under 'jerk_off': the torque chatter it removes")
     parser.add_argument("--law-only", action="store_true",
                         help="also fly every slew with path planning off (the law alone) and record it under 'law_only'")
     args = parser.parse_args(argv)
@@ -251,17 +323,19 @@ def main(argv: list[str] | None = None) -> int:
     slews = SLEWS[:2] if args.quick else SLEWS
     rows = run_slews(base, slews)
     print(f"{'slew':38s} {'angle':>6s} {'path':>6s} {'path/':>6s} {'short/':>6s} {'T_eig':>6s} {'settle':>6s} "
-          f"{'ratio':>6s} {'lb':>6s} {'eps':>6s} {'ok':>3s}  margins [deg]")
+          f"{'ratio':>6s} {'lb':>6s} {'eps':>6s} {'ok':>3s} {'TV Nm':>6s}  margins [deg]")
     for r in rows:
         margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
         print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['path_deg']:6.1f} {r['path_ratio']:6.3f} "
               f"{r['shortest_path_ratio']:6.3f} {r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f} "
-              f"{r['ratio_lower_bound']:6.3f} {r['eps']:6.4f} {'yes' if r['assumptions_ok'] else 'NO':>3s}  {margins}")
+              f"{r['ratio_lower_bound']:6.3f} {r['eps']:6.4f} {'yes' if r['assumptions_ok'] else 'NO':>3s} "
+              f"{r['torque_variation_Nm']:6.2f}  {margins}")
     ratios = [r["ratio"] for r in rows]
     min_margin = min(min(r["margins_deg"].values()) for r in rows)
     yaml_law = base["flight_software"]["law"]
     summary = {"median_ratio": statistics.median(ratios), "max_ratio": max(ratios), "min_margin_deg": min_margin,
                "max_ratio_lower_bound": max(r["ratio_lower_bound"] for r in rows),
+               "max_torque_variation_Nm": max(r["torque_variation_Nm"] for r in rows),
                "assumptions_ok": all(r["assumptions_ok"] for r in rows),
                "law": yaml_law, "control": base["flight_software"]["control"],
                "max_rate_deg_s": base["flight_software"]["spacecraft"]["max_rate_deg_s"],
@@ -274,12 +348,25 @@ def main(argv: list[str] | None = None) -> int:
     if args.law_only:
         alone = run_slews(base, slews, geometry=False, path_planning=False)
         print("\nthe law alone (pointing.path.enabled: false):")
-        for r in alone:
-            margins = " ".join(f"{k}={v:.2f}" for k, v in r["margins_deg"].items())
-            print(f"{r['slew']:38s} {r['angle_deg']:6.1f} {r['path_deg']:6.1f} {r['path_ratio']:6.3f} "
-                  f"{r['eigen_axis_s']:6.1f} {r['settling_s']:6.1f} {r['ratio']:6.3f}  {margins}")
+        _print_short(alone)
         report["law_only"] = {"rows": alone, "max_ratio": max(r["ratio"] for r in alone),
                               "min_margin_deg": min(min(r["margins_deg"].values()) for r in alone)}
+    qbase = yaml.safe_load((ROOT / "config" / "missions" / "demo-quaternion.yaml").read_text())
+    qrows = {"planned": run_quaternion_slews(qbase, True), "law_only": run_quaternion_slews(qbase, False)}
+    print(f"\nQUATERNION mode (demo-quaternion; ratio = settling / eigen-axis slew of the same rotation):")
+    print(f"{'slew':38s} {'rot':>6s} {'T_eig':>6s} {'planned':>8s} {'ratio':>6s} {'law':>7s} {'ratio':>6s}  margins planned [deg]")
+    for p, law in zip(qrows["planned"], qrows["law_only"]):
+        margins = " ".join(f"{k}={v:.2f}" for k, v in p["margins_deg"].items())
+        print(f"{p['slew']:38s} {p['rotation_deg']:6.1f} {p['eigen_axis_s']:6.1f} {p['settling_s']:8.1f} "
+              f"{p['ratio']:6.3f} {law['settling_s']:7.1f} {law['ratio']:6.3f}  {margins}")
+    report["quaternion"] = qrows
+    summary["quaternion_max_ratio"] = max(r["ratio"] for r in qrows["planned"])
+    summary["quaternion_min_margin_deg"] = min(min(r["margins_deg"].values()) for r in qrows["planned"])
+    if args.jerk_off:
+        rough = run_slews(base, slews, geometry=False, jerk_limit=False)
+        print("\nwithout the jerk limit (control.max_command_jerk_deg_s3: 0):")
+        _print_short(rough)
+        report["jerk_off"] = {"rows": rough, "max_torque_variation_Nm": max(r["torque_variation_Nm"] for r in rough)}
     out = ROOT / "bench" / "results"
     out.mkdir(parents=True, exist_ok=True)
     (out / "slew.json").write_text(json.dumps(report, indent=1) + "\n")

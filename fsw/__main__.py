@@ -48,7 +48,7 @@ def add_arguments(p: argparse.ArgumentParser, first_sync_default: float | None =
     p.add_argument("--bus", default=None, help="bus spec: auto | socketcan:vcan0 | udp_multicast[:group:port] | "
                    "virtual[:channel] | INTERFACE:CHANNEL[,KEY=VALUE...] (any python-can interface); default: the "
                    "mission's bus")
-    p.add_argument("--bitrate", type=int, default=None, help="CAN bit rate [bit/s] for a hardware interface "
+    p.add_argument("--bitrate", type=_bitrate, default=None, help="CAN bit rate [bit/s] for a hardware interface "
                    "(default: the mission's bus_bitrate_bps)")
     p.add_argument("--first-sync-timeout-s", type=float, default=first_sync_default,
                    help="lockstep: wait this long for the simulator's first SYNC (default: "
@@ -59,11 +59,24 @@ def add_arguments(p: argparse.ArgumentParser, first_sync_default: float | None =
     mode.add_argument("--realtime", action="store_true", help="tick on the monotonic clock")
     p.add_argument("--duration-s", type=float, default=None, help="real time: stop after this many seconds")
     p.add_argument("--max-ticks", type=int, default=None, help="lockstep: stop after this many ticks")
-    p.add_argument("--tm-port", type=int, default=None, help="override tmtc.telemetry_port")
-    p.add_argument("--tc-port", type=int, default=None, help="override tmtc.telecommand_port (0: ephemeral)")
+    from fsw.config import udp_port, udp_port_or_zero
+
+    p.add_argument("--tm-port", type=udp_port, default=None, help="override tmtc.telemetry_port")
+    p.add_argument("--tc-port", type=udp_port_or_zero, default=None,
+                   help="override tmtc.telecommand_port (0: ephemeral)")
     p.add_argument("--dbc", default=None, help="ICD DBC file (default config/icd/keepout.dbc)")
     p.add_argument("--key-file", default=None,
                    help="link key file (overrides tmtc.security.key_file; relative paths from the current folder)")
+
+
+def _bitrate(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 10000 <= value <= 1000000:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a CAN bit rate; allowed: 10000..1000000 [bit/s]")
+    return value
 
 
 def main(argv: list[str] | None = None) -> int:

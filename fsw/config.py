@@ -116,7 +116,9 @@ class EstimatorConfig(_Strict):
 
     gyro_arw_rad_s_sqrt_hz: float = Field(1e-4, gt=0.0, le=1.0, description="Gyro angle random walk (rate white-noise density) [rad/s/sqrt(Hz)].")
     gyro_bias_rw_rad_s2_sqrt_hz: float = Field(1e-6, gt=0.0, le=1e-2, description="Gyro bias random walk density [rad/s^2/sqrt(Hz)].")
-    star_tracker_sigma_arcsec: float = Field(20.0, gt=0.0, le=3600.0, description="Star-tracker 1-sigma attitude noise per axis [arcsec].")
+    star_tracker_sigma_arcsec: float = Field(20.0, gt=0.0, le=3600.0, description="Star-tracker 1-sigma attitude noise per axis [arcsec] (the default of the two below).")
+    star_tracker_cross_sigma_arcsec: float | None = Field(None, gt=0.0, le=3600.0, description="Star-tracker 1-sigma noise about each of its two cross-boresight axes (sensor x, y) [arcsec]; default star_tracker_sigma_arcsec.")
+    star_tracker_about_sigma_arcsec: float | None = Field(None, gt=0.0, le=36000.0, description="Star-tracker 1-sigma roll noise about its boresight (sensor z) [arcsec]; default star_tracker_sigma_arcsec.")
     initial_attitude_sigma_deg: float = Field(5.0, gt=0.0, le=180.0, description="Initial attitude 1-sigma per axis after (re)initialisation from the star tracker [deg].")
     initial_bias_sigma_deg_s: float = Field(0.05, gt=0.0, le=10.0, description="Initial gyro bias 1-sigma per axis [deg/s].")
     star_tracker_max_age_s: float = Field(0.5, gt=0.0, le=10.0, description="A star-tracker sample older than this is stale and not used [s].")
@@ -237,6 +239,7 @@ class LawConfig(_Strict):
     margin_deg: float = Field(3.0, ge=0.0, le=30.0, description="The law avoids physical zones inflated by this margin [deg]; see fsw.guidance for how to choose it.")
     merge_gap_deg: float = Field(4.0, ge=0.0, le=30.0, description="Two (inflated) zones whose bounding caps are closer than this gap [deg] are replaced by one conservative cone containing both, with an event. Assumption 1 ties eps to the gap (eps < 1 - cos(gap/2)), so a small gap forces an eps-layer too thin for the loop to turn in; merging trades sky area for a usable layer.")
     retreat_standoff_deg: float = Field(3.0, gt=0.0, le=30.0, description="When the target is unusable (in a zone's eps-layer, or between two zones about to merge around the spacecraft), the law steers to the nearest direction at least this far [deg] outside every (inflated) zone instead. It keeps a parked boresight clear of a zone sweeping towards it and must be at least half of merge_gap_deg, so the substitute never lies in a gap about to merge.")
+    stall_watchdog_s: float = Field(30.0, ge=0.0, le=3600.0, description="Guidance watchdog (fsw.guidance.watchdog): a POINTING slew whose error has not fallen for this long [s], with the law's rate near zero and the boresight outside every eps-layer, raises GUIDANCE_STALLED and is replanned from where the boresight is; 0 disables it.")
     check_period_s: float = Field(10.0, gt=0.0, le=3600.0, description="How often the full assumption check (gnc.checks, incl. the numerical Assumption 2 test) is re-run while zones move [s]; it is re-submitted at once on target/gain/mode/zone-merge changes.")
     check_max_cpu_fraction: float = Field(0.1, gt=0.0, le=1.0, description="CPU budget of the periodic full check in 'process' mode: after a check that took d seconds, the next periodic one waits at least d (1/fraction - 1) seconds of host time, whatever check_period_s says. It binds in lockstep runs faster than real time; checks after a target/gain/mode/zone change are not delayed.")
     assumption_check: Literal["process", "inline", "off"] = Field("process", description="Where the full check runs: 'process' (a worker process, so the seconds it can take never delay a GNC cycle; results only feed telemetry/events), 'inline' (in the housekeeping group; deterministic, for tests), 'off'. The per-cycle eps bound never depends on it.")
@@ -291,6 +294,7 @@ class QuaternionModeConfig(_Strict):
     target_q_NB: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Initial target attitude q_NB (scalar first, normalised); SET_TARGET changes it.")
     law: Literal["auto", "star", "gradient"] = Field("auto", description="'gradient' (all zones must be cones), 'star' (any zones) or 'auto' (gradient when all are cones).")
     zones: list[S3Zone] = Field(default_factory=list, max_length=16, description="Forbidden-attitude zones on S^3.")
+    path: PathGuidanceConfig = Field(default_factory=PathGuidanceConfig, description="Slew path planning on S^3 round the zones' bounding balls (fsw.guidance.attitude_planning): enabled, standoff_deg and lookahead_deg are used, as quaternion angles (half the rotation angle).")
 
     _qn = field_validator("target_q_NB")(lambda v: _unit(v, "target_q_NB"))
 
@@ -317,6 +321,14 @@ class ControlConfig(_Strict):
     rate_bandwidth_rad_s: float = Field(1.0, gt=0.0, le=20.0, description="Rate-loop bandwidth kp [rad/s] (keep below ~gnc_rate_hz).")
     feedforward_command_rate: bool = Field(True, description="Add J d(omega_cmd)/dt (finite difference, limited) as feed-forward.")
     max_command_accel_deg_s2: float = Field(0.5, gt=0.0, le=50.0, description="Slew-rate limit on omega_cmd [deg/s^2] (what the wheels can deliver).")
+    max_command_jerk_deg_s3: float | Literal["auto"] = Field("auto", description="Limit on the change of omega_cmd's acceleration [deg/s^3]: the torque command stays smooth when the law's command swings inside an eps-layer. 'auto': rate_bandwidth_rad_s x max_command_accel_deg_s2 (full acceleration in one loop time constant); 0: no jerk limit (the acceleration may reverse every cycle).")
+
+    @field_validator("max_command_jerk_deg_s3")
+    @classmethod
+    def _jerk(cls, v: float | str) -> float | str:
+        if v != "auto" and not (0.0 <= float(v) <= 1000.0):
+            raise ValueError(f"max_command_jerk_deg_s3 must be 'auto' or in [0, 1000] deg/s^3, got {v}")
+        return v
 
 
 # --------------------------------------------------------------------------------------------- FDIR
@@ -458,38 +470,134 @@ class ConfigError(ValueError):
     """A configuration file is missing, unreadable or invalid; the message names the file and key."""
 
 
-def load_fsw_config(path: str | Path) -> FswConfig:
-    """Load an FswConfig from a mission YAML (key ``flight_software:``) or a bare FswConfig YAML."""
+# ---------------------------------------------------------------------------------- mission files
+# Where each piece of knowledge comes from when a mission file does not give it under flight_software
+# (``knowledge_from_truth`` does it; docs/missions.md lists it as the key's default).
+KNOWLEDGE_DEFAULTS = {
+    "flight_software.epoch_utc": "epoch_utc",
+    "flight_software.spacecraft.inertia_B_kgm2": "spacecraft.inertia_B_kgm2",
+    "flight_software.spacecraft.wheels": "spacecraft.wheels (axis_B, max_torque_Nm, max_speed_rad_s, "
+                                         "spin_inertia_kgm2)",
+    "flight_software.spacecraft.star_tracker_q_BS": "spacecraft.star_tracker.q_BS",
+    "flight_software.pointing.boresight_B": "spacecraft.instrument_boresight_B",
+    "flight_software.pointing.target_N": "initial_state.ra_dec_deg, when the initial attitude is given so",
+    "flight_software.orbit.radius_km": "orbit.semi_major_axis_km",
+    "flight_software.orbit.inclination_deg": "orbit.inclination_deg",
+    "flight_software.orbit.raan_deg": "orbit.raan_deg",
+    "flight_software.orbit.arg_latitude_at_epoch_deg": "orbit.arg_perigee_deg + orbit.mean_anomaly_deg",
+}
+WHEEL_KNOWLEDGE_KEYS = ("axis_B", "max_torque_Nm", "max_speed_rad_s", "spin_inertia_kgm2")
+
+
+def knowledge_from_truth(mission: dict) -> dict:
+    """A copy of a mission file's data whose ``flight_software`` section holds, for every piece of
+    knowledge the file does not give there, the truth the file gives (`KNOWLEDGE_DEFAULTS`): each fact is
+    written once. The orbit knowledge is circular: radius = semi-major axis, argument of latitude =
+    argument of perigee + mean anomaly. Keys given under ``flight_software`` are kept; values of the
+    wrong kind are copied as they are, for validation to report."""
+    import copy
+
+    out = copy.deepcopy(mission)
+    fsw, sc, orbit, state = (out.get(k) for k in ("flight_software", "spacecraft", "orbit", "initial_state"))
+    if not isinstance(fsw, dict):
+        return out
+
+    def fill(target: dict | None, key: str, value) -> None:
+        if isinstance(target, dict) and key not in target and value is not None:
+            target[key] = copy.deepcopy(value)
+
+    def child(key: str) -> dict | None:
+        value = fsw.setdefault(key, {})
+        return value if isinstance(value, dict) else None
+
+    fill(fsw, "epoch_utc", out.get("epoch_utc"))
+    if isinstance(sc, dict):
+        known = child("spacecraft")
+        fill(known, "inertia_B_kgm2", sc.get("inertia_B_kgm2"))
+        wheels = sc.get("wheels")
+        if isinstance(wheels, list) and all(isinstance(w, dict) for w in wheels):
+            renamed = [{**w, "spin_inertia_kgm2": w.get("spin_inertia_kgm2", w.get("Js_kgm2"))} for w in wheels]
+            fill(known, "wheels", [{k: w[k] for k in WHEEL_KNOWLEDGE_KEYS if w.get(k) is not None} for w in renamed])
+        if isinstance(sc.get("star_tracker"), dict):
+            fill(known, "star_tracker_q_BS", sc["star_tracker"].get("q_BS"))
+        fill(child("pointing"), "boresight_B", sc.get("instrument_boresight_B"))
+    if isinstance(state, dict) and "q_NB" not in state and _is_ra_dec(state.get("ra_dec_deg")):
+        ra, dec = (math.radians(float(a)) for a in state["ra_dec_deg"])
+        # hold the initial pointing until the first SET_TARGET
+        fill(child("pointing"), "target_N", [math.cos(dec) * math.cos(ra), math.cos(dec) * math.sin(ra), math.sin(dec)])
+    if isinstance(orbit, dict):
+        known_orbit = child("orbit")
+        fill(known_orbit, "radius_km", orbit.get("semi_major_axis_km"))
+        fill(known_orbit, "inclination_deg", orbit.get("inclination_deg"))
+        fill(known_orbit, "raan_deg", orbit.get("raan_deg"))
+        omega, anomaly = orbit.get("arg_perigee_deg", 0.0), orbit.get("mean_anomaly_deg", 0.0)
+        if _finite(omega) and _finite(anomaly):
+            fill(known_orbit, "arg_latitude_at_epoch_deg", (float(omega) + float(anomaly)) % 360.0)
+    return out
+
+
+def _finite(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_ra_dec(value) -> bool:
+    return (isinstance(value, (list, tuple)) and len(value) == 2 and all(_finite(v) for v in value)
+            and 0.0 <= value[0] <= 360.0 and -90.0 <= value[1] <= 90.0)
+
+
+def _read_yaml(p: Path):
+    """The data of a YAML file within the size, depth and alias limits of `fsw.safe_yaml`."""
     import yaml
 
-    p = Path(path)
+    from fsw.safe_yaml import UnreadableFile, load_config_file
+
     try:
-        data = yaml.safe_load(p.read_text())
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read: {exc}") from exc
+        return load_config_file(p)
+    except UnreadableFile as exc:
+        raise ConfigError(f"{p}: cannot read: {exc}") from None
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: not valid YAML: {exc}") from exc
+        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
+
+
+def load_fsw_config(path: str | Path) -> FswConfig:
+    """Load an FswConfig from a mission YAML (key ``flight_software:``) or a bare FswConfig YAML."""
+    p = Path(path)
+    data = _read_yaml(p)
     if data is None:
         data = {}
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping at the top level, got {type(data).__name__}")
     prefix = ""
     if "flight_software" in data:
-        data = data["flight_software"] or {}
+        # a mission file: what its flight_software section leaves out is the truth written in the file
+        data = knowledge_from_truth(data)["flight_software"] or {}
         prefix = "flight_software."
     return parse_fsw_config(data, source=str(p), prefix=prefix)
+
+
+def udp_port(text: str) -> int:
+    """argparse type: a UDP port number 1..65535 (a clear error instead of a traceback later)."""
+    import argparse
+
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number; allowed: 1..65535") from None
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is not a UDP port; allowed: 1..65535")
+    return port
+
+
+def udp_port_or_zero(text: str) -> int:
+    """argparse type: a port to bind, 0..65535 (0: the kernel picks a free one)."""
+    return 0 if text.strip() == "0" else udp_port(text)
 
 
 def load_bus_settings(path: str | Path) -> tuple[str, int | None]:
     """The bus spec and CAN bit rate [bit/s] a mission YAML names (top-level ``bus`` and
     ``bus_bitrate_bps``; ``auto`` and None when absent, as in a bare FswConfig YAML)."""
-    import yaml
-
     p = Path(path)
-    try:
-        data = yaml.safe_load(p.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{p}: cannot read: {exc}") from exc
+    data = _read_yaml(p)
     data = data if isinstance(data, dict) else {}
     bus = data.get("bus", "auto")
     bitrate = data.get("bus_bitrate_bps")

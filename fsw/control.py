@@ -9,8 +9,13 @@ Rate loop (computed torque on the body):
 
     tau_B = J (kp (omega_cmd - omega) + omega_cmd_dot) + omega x (J omega + h_w)
 
-``omega_cmd`` is first slew-rate limited to what the wheels can deliver (``max_command_accel_deg_s2``);
-its finite difference is the feed-forward ``omega_cmd_dot``. Allocation: ``tau_w = -G^+ tau_B`` with the
+``omega_cmd`` is first shaped to what the wheels can deliver: its acceleration is at most
+``max_command_accel_deg_s2`` and changes by at most ``max_command_jerk_deg_s3`` (the jerk); the shaped
+command's acceleration is the feed-forward ``omega_cmd_dot``. Without the jerk limit the law's command,
+which can swing by ten degrees of direction from one cycle to the next inside an eps-layer, made the
+acceleration reverse every cycle and the feed-forward J omega_cmd_dot threw the wheels from one torque
+limit to the other (issue 16.4, design note 13); with it the torque command changes by at most
+J max_jerk dt plus the feedback's share a cycle. Allocation: ``tau_w = -G^+ tau_B`` with the
 minimum-norm pseudo-inverse of the active (non-isolated) wheels; if any wheel exceeds its torque limit the
 whole vector is scaled down by the worst ratio, which keeps the torque direction (the loop slows down
 rather than turning the wrong way).
@@ -55,29 +60,46 @@ def allocate_min_norm(G: np.ndarray, active: np.ndarray, torque_B_Nm: np.ndarray
     return tau * scale, scale
 
 
-@njit("Tuple((f8[::1], f8[::1], f8, f8[::1]))(f8, f8[::1], f8[::1], f8[::1], b1, f8, f8, b1, f8[:, ::1], f8[:, ::1],"
-      " f8[::1], f8[::1], f8[::1], f8[:, ::1], b1)", cache=True)
-def _rate_loop(dt_s, cmd, prev, w, has_prev, max_accel, kp, ff, J, G, Js, wheel_speed, max_torque, M, any_active):
+@njit("Tuple((f8[::1], f8[::1], f8, f8[::1], f8[::1]))(f8, f8[::1], f8[::1], f8[::1], f8[::1], b1, f8, f8, f8, b1,"
+      " f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], b1)", cache=True)
+def _rate_loop(dt_s, cmd, prev, accel_prev, w, has_prev, max_accel, max_jerk, kp, ff, J, G, Js, wheel_speed, max_torque,
+               M, any_active):
     """``RateController.step``'s arithmetic after the inputs are cleaned (one compiled call per cycle: the
-    numpy version cost ~40 us of small-array calls). Returns (torque_B, tau_w, scale, shaped); the
-    expressions and summation orders are those of the numpy reference (tests/fsw/test_control.py)."""
-    step = cmd - prev
-    max_step = max_accel * dt_s
-    norm = math.sqrt(step[0] * step[0] + step[1] * step[1] + step[2] * step[2])
-    if norm > max_step:
-        step *= max_step / norm
+    numpy version cost ~40 us of small-array calls). Returns (torque_B, tau_w, scale, shaped, accel); the
+    expressions and summation orders are those of the numpy reference (tests/fsw/test_control.py).
+
+    ``max_jerk`` 0: the shaped command steps towards ``cmd`` by at most ``max_accel dt`` (its acceleration
+    may reverse from one cycle to the next). ``max_jerk`` > 0: its acceleration heads for
+    ``kp (cmd - shaped)`` (at most ``max_accel``) and changes by at most ``max_jerk dt`` a cycle."""
+    if max_jerk > 0.0:
+        a_des = kp * (cmd - prev)
+        na = math.sqrt(a_des[0] * a_des[0] + a_des[1] * a_des[1] + a_des[2] * a_des[2])
+        if na > max_accel:
+            a_des *= max_accel / na
+        da = a_des - accel_prev
+        nd = math.sqrt(da[0] * da[0] + da[1] * da[1] + da[2] * da[2])
+        if nd > max_jerk * dt_s:
+            da *= max_jerk * dt_s / nd
+        step = (accel_prev + da) * dt_s
+    else:
+        step = cmd - prev
+        max_step = max_accel * dt_s
+        norm = math.sqrt(step[0] * step[0] + step[1] * step[1] + step[2] * step[2])
+        if norm > max_step:
+            step *= max_step / norm
     shaped = prev + step
-    cmd_dot = step / dt_s if (ff and has_prev) else np.zeros(3)
+    accel = step / dt_s
+    cmd_dot = accel if (ff and has_prev) else np.zeros(3)
     h_w = G @ (Js * wheel_speed)
     h = J @ w + h_w
     gyro = np.array([w[1] * h[2] - w[2] * h[1], w[2] * h[0] - w[0] * h[2], w[0] * h[1] - w[1] * h[0]])
     torque = J @ (kp * (shaped - w) + cmd_dot) + gyro
     if not any_active:
-        return torque, np.zeros(G.shape[1]), 0.0, shaped
+        return torque, np.zeros(G.shape[1]), 0.0, shaped, accel
     tau = M @ torque
     ratio = np.max(np.abs(tau) / max_torque)
     scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
-    return torque, tau * scale, scale, shaped
+    return torque, tau * scale, scale, shaped, accel
 
 
 class RateController:
@@ -95,12 +117,16 @@ class RateController:
         self.kp = cfg.control.rate_bandwidth_rad_s
         self.ff = cfg.control.feedforward_command_rate
         self.max_accel = math.radians(cfg.control.max_command_accel_deg_s2)
+        jerk = cfg.control.max_command_jerk_deg_s3
+        # auto: the commanded acceleration changes no faster than the loop follows it (full scale in 1 / kp)
+        self.max_jerk = self.kp * self.max_accel if jerk == "auto" else math.radians(float(jerk))
         self.active = np.ones(self.n, dtype=bool)
         self.M = allocation_matrix(self.G, self.active)
         self.reset()
 
     def reset(self) -> None:
         self._omega_cmd_prev: np.ndarray | None = None
+        self._accel_prev = np.zeros(3)
         self.wheel_speed = np.zeros(self.n)
 
     def isolate(self, wheel: int) -> bool:
@@ -144,8 +170,9 @@ class RateController:
         w = np.ascontiguousarray(omega_BN_B, dtype=float)
         has_prev = self._omega_cmd_prev is not None
         prev = self._omega_cmd_prev if has_prev else w
-        torque, tau_w, scale, shaped = _rate_loop(
-            float(dt_s), cmd, prev, w, has_prev, self.max_accel, float(self.kp), bool(self.ff), self.J, self.G, self.Js,
-            self.wheel_speed, self.max_torque, self.M, bool(self.active.any()))
+        torque, tau_w, scale, shaped, accel = _rate_loop(
+            float(dt_s), cmd, prev, self._accel_prev, w, has_prev, self.max_accel, float(self.max_jerk), float(self.kp),
+            bool(self.ff), self.J, self.G, self.Js, self.wheel_speed, self.max_torque, self.M, bool(self.active.any()))
         self._omega_cmd_prev = shaped
+        self._accel_prev = accel
         return ControlOutput(torque, tau_w, scale, shaped)

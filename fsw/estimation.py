@@ -123,15 +123,15 @@ def mekf_innovation(q, q_meas):
 
 
 @njit(cache=True)
-def mekf_update(q, bias, P, dtheta, sigma_rad):
-    """Fuse one attitude measurement given its innovation (H = [I 0], R = sigma^2 I)."""
-    S = np.ascontiguousarray(P[0:3, 0:3]) + np.eye(3) * sigma_rad * sigma_rad
+def mekf_update(q, bias, P, dtheta, R):
+    """Fuse one attitude measurement given its innovation (H = [I 0], R the 3x3 body-frame noise [rad^2])."""
+    S = np.ascontiguousarray(P[0:3, 0:3]) + R
     K = np.ascontiguousarray(P[:, 0:3]) @ np.linalg.inv(S)
     dx = K @ dtheta
     IKH = np.eye(6)
     IKH[:, 0:3] -= K
     # Joseph form keeps P symmetric positive definite in single steps with large gains.
-    Pn = IKH @ P @ IKH.T + (K * (sigma_rad * sigma_rad)) @ K.T
+    Pn = IKH @ P @ IKH.T + K @ R @ K.T
     Pn = 0.5 * (Pn + Pn.T)
     qn = quat_multiply_nb(q, _rotvec_quat(dx[0:3]))
     qn /= math.sqrt(qn[0] ** 2 + qn[1] ** 2 + qn[2] ** 2 + qn[3] ** 2)
@@ -139,25 +139,35 @@ def mekf_update(q, bias, P, dtheta, sigma_rad):
 
 
 @njit("Tuple((f8[::1], f8[::1], f8[:, ::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8,"
-      " f8[::1], f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8, f8[:, ::1])", cache=True)
-def _mekf_cycle(q, bias, P, prior, prior_dt, omega_meas, dt, sig_v, sig_u, initialized, has_st, q_NS, q_SB,
-                st_latency, max_age, gate_deg, sig_st, P0):
-    """One estimator cycle in one compiled call (``AttitudeEstimator.step`` after propagating through the
-    gyro samples ``prior`` (k, 3), each held ``prior_dt``): the same steps and expressions as the Python
-    version this replaced (tests/fsw/test_estimation.py compares them). ``P0``: the covariance a first
-    star-tracker fix initialises. Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
+      " f8[::1], f8, f8[::1], f8[::1], f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8[:, ::1], f8[:, ::1])",
+      cache=True)
+def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_bridge, bridge_var, sig_v, sig_u,
+                initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg, R_st, P0):
+    """One estimator cycle in one compiled call: propagate through the gyro rates ``prior`` (k, 3), each
+    held ``prior_dt``, then ``omega_prop`` held ``dt``; fuse the star tracker. ``omega_last``: the newest
+    gyro sample (the rate estimate is it minus the bias); ``omega_bridge``: the mean measured rate over
+    the star tracker's latency, which brings its sample to the filter time, and ``bridge_var`` the
+    variance of that mean's white noise per axis [rad^2/s^2]; ``R_st``: the star tracker's noise
+    covariance in body axes [rad^2] (`star_tracker_noise_B`); ``P0``: the covariance a first star-tracker
+    fix initialises. tests/fsw/test_estimation.py compares it with a Python reference.
+    Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
     if initialized and prior.shape[0] > 0:
         q, P = mekf_propagate_many(q, bias, P, prior, prior_dt, sig_v, sig_u)
     used = False
     rejected = False
     innov_deg = np.nan
     if initialized:
-        q, P = mekf_propagate(q, bias, P, omega_meas, dt, sig_v, sig_u)
-    omega = omega_meas - bias
+        q, P = mekf_propagate(q, bias, P, omega_prop, dt, sig_v, sig_u)
+    omega = omega_last - bias
     if has_st:
         q_meas = quat_multiply_nb(q_NS, q_SB)
+        R = R_st.copy()
         if 0.0 < st_latency < max_age:
-            q_meas = quat_multiply_nb(q_meas, _rotvec_quat(omega * st_latency))
+            q_meas = quat_multiply_nb(q_meas, _rotvec_quat((omega_bridge - bias) * st_latency))
+            # the bridge rate's white noise times the latency adds to the measurement noise on every axis
+            lat_var = bridge_var * st_latency * st_latency
+            for i in range(3):
+                R[i, i] += lat_var
         if not initialized:
             q = q_meas / math.sqrt(q_meas[0] ** 2 + q_meas[1] ** 2 + q_meas[2] ** 2 + q_meas[3] ** 2)
             P = P0.copy()
@@ -167,14 +177,34 @@ def _mekf_cycle(q, bias, P, prior, prior_dt, omega_meas, dt, sig_v, sig_u, initi
         else:
             dtheta = mekf_innovation(q, q_meas)
             innov_deg = math.degrees(math.sqrt(dtheta[0] * dtheta[0] + dtheta[1] * dtheta[1] + dtheta[2] * dtheta[2]))
-            trace = P[0, 0] + P[1, 1] + P[2, 2]
-            sigma_pred_deg = math.degrees(math.sqrt(trace + 3 * sig_st ** 2))
+            trace = P[0, 0] + P[1, 1] + P[2, 2] + R[0, 0] + R[1, 1] + R[2, 2]
+            sigma_pred_deg = math.degrees(math.sqrt(trace))
             if innov_deg > max(gate_deg, 4.0 * sigma_pred_deg):
                 rejected = True
             else:
-                q, bias, P = mekf_update(q, bias, P, dtheta, sig_st)
+                q, bias, P = mekf_update(q, bias, P, dtheta, R)
                 used = True
     return q, bias, P, omega, initialized, used, rejected, innov_deg
+
+
+def star_tracker_noise_B(cfg, q_BS: np.ndarray) -> np.ndarray:
+    """The star tracker's attitude noise covariance in body axes [rad^2] (3, 3).
+
+    A tracker measures its cross-boresight axes (sensor x, y) much better than the roll about its
+    boresight (sensor z): hil_sim's model draws a small rotation e_S = (sx n1, sx n2, sz n3) in the sensor
+    frame, which is e_B = C_BS e_S in body axes. So R_B = C_BS diag(sx^2, sx^2, sz^2) C_BS^T, with sx, sz
+    the configured cross- and about-boresight sigmas (each falls back to ``star_tracker_sigma_arcsec``).
+    An isotropic R equal to the roll noise let the filter believe the cross axes it barely knew less well
+    than they were measured, and the reverse for the roll axis (design note 13).
+    """
+    from gnc.attitude import quat_to_dcm
+
+    arcsec = math.pi / (180.0 * 3600.0)
+    cross = cfg.star_tracker_cross_sigma_arcsec or cfg.star_tracker_sigma_arcsec
+    about = cfg.star_tracker_about_sigma_arcsec or cfg.star_tracker_sigma_arcsec
+    C_BS = quat_to_dcm(np.asarray(q_BS, dtype=float) / np.linalg.norm(q_BS))
+    R = C_BS @ np.diag([(cross * arcsec) ** 2, (cross * arcsec) ** 2, (about * arcsec) ** 2]) @ C_BS.T
+    return np.ascontiguousarray(0.5 * (R + R.T))
 
 
 _NO_SAMPLES = np.zeros((0, 3))
@@ -199,7 +229,7 @@ class AttitudeEstimator:
         self.q_SB = np.asarray(q_BS, dtype=float) * np.array([1.0, -1.0, -1.0, -1.0])
         self.sig_v = cfg.gyro_arw_rad_s_sqrt_hz
         self.sig_u = cfg.gyro_bias_rw_rad_s2_sqrt_hz
-        self.sig_st = math.radians(cfg.star_tracker_sigma_arcsec / 3600.0)
+        self.R_st_B = star_tracker_noise_B(cfg, q_BS)
         self.reset()
 
     def reset(self) -> None:
@@ -212,6 +242,7 @@ class AttitudeEstimator:
         self.omega_BN_B = np.zeros(3)
         self.last_innovation_deg = float("nan")
         self.resets = 0
+        self._prev_sample: np.ndarray | None = None  # the last gyro sample, start of the next interval
 
     def _initial_P(self) -> np.ndarray:
         sa = math.radians(self.cfg.initial_attitude_sigma_deg)
@@ -228,25 +259,53 @@ class AttitudeEstimator:
         ``q_NS`` None (blinded, stale, invalid) coasts. ``st_latency_s`` is how old the star-tracker
         sample is with respect to the end of the propagation.
         """
-        return self._cycle(dt_s, _NO_SAMPLES, 0.0, omega_meas_B, q_NS, st_latency_s)
+        omegas = _NO_SAMPLES if omega_meas_B is None else np.asarray(omega_meas_B, dtype=float).reshape(1, 3)
+        return self._cycle(dt_s, omegas, q_NS, st_latency_s)
 
-    def _cycle(self, dt_s: float, prior: np.ndarray, prior_dt_s: float, omega_meas_B: np.ndarray | None,
-               q_NS: np.ndarray | None, st_latency_s: float) -> EstimatorStatus:
-        if omega_meas_B is not None:
-            omega_meas = np.ascontiguousarray(omega_meas_B, dtype=float)
+    def step_samples(self, dt_s: float, omegas_B: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float = 0.0) -> EstimatorStatus:
+        """Like `step` for a tick with several gyro samples (n, 3), evenly spaced, the last at the end."""
+        return self._cycle(dt_s, np.asarray(omegas_B, dtype=float).reshape(-1, 3), q_NS, st_latency_s)
+
+    def _cycle(self, dt_s: float, samples: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float) -> EstimatorStatus:
+        """Propagate over ``dt_s`` through the gyro ``samples`` (n, 3), taken every dt_s / n, the last one
+        now; then fuse the star tracker.
+
+        The gyro gives the rate at sampling instants. Held from one sample to the next (the rate at the
+        end of an interval standing for all of it), every interval is off by half the angular acceleration
+        times its length: 1e-5 rad/s at the demo's 2e-3 rad/s^2 wheel authority, five times the gyro bias
+        and always in the direction of the acceleration, so the bias estimate chased it and the attitude
+        error left its covariance on every slew (design note 13). Each interval is propagated with the
+        mean of the samples at its two ends instead (the trapezoid rule; error second order in the
+        interval). Their noise is shared by two neighbouring intervals with half weight, so the angle
+        random walk over the cycle, and the process noise, are unchanged. The star tracker's latency is
+        bridged the same way, with the mean rate over the latency.
+        """
+        n = samples.shape[0]
+        if n:
+            samples = np.ascontiguousarray(samples, dtype=float)
+            sub = dt_s / n
+            prev = samples[0] if self._prev_sample is None else self._prev_sample  # no earlier sample: hold the first
+            rates = 0.5 * (np.vstack((prev[None, :], samples[:-1])) + samples)
+            self._prev_sample = samples[-1].copy()
+            m = min(n, max(1, round(st_latency_s / sub)))  # the intervals that the latency spans
+            bridge = rates[n - m:].mean(axis=0)
+            bridge_var = self.sig_v * self.sig_v / (m * sub)
+            prior, omega_prop, dt_prop, omega_last = rates[:-1], rates[-1], sub, samples[-1]
         else:
-            omega_meas = self.omega_BN_B + self.bias_B
+            # no valid gyro sample: hold the last bias-corrected rate over the whole cycle
+            self._prev_sample = None
+            omega_last = self.omega_BN_B + self.bias_B
+            prior, omega_prop, dt_prop, bridge = _NO_SAMPLES, omega_last, dt_s, omega_last
+            bridge_var = self.sig_v * self.sig_v / dt_s
         has_st = q_NS is not None
         P0 = self._initial_P() if has_st and not self.initialized else self.P
         (self.q_NB, self.bias_B, self.P, self.omega_BN_B, self.initialized, used, rejected, innov_deg) = _mekf_cycle(
-            self.q_NB, self.bias_B, self.P, prior, float(prior_dt_s), omega_meas, float(dt_s), self.sig_v, self.sig_u,
+            self.q_NB, self.bias_B, self.P, np.ascontiguousarray(prior), float(dt_prop), omega_prop, float(dt_prop),
+            omega_last, bridge, float(bridge_var), self.sig_v, self.sig_u,
             self.initialized, has_st, np.ascontiguousarray(q_NS, dtype=float) if has_st else _NO_QUATERNION,
             np.ascontiguousarray(self.q_SB, dtype=float), float(st_latency_s), self.cfg.star_tracker_max_age_s,
-            self.cfg.innovation_gate_deg, self.sig_st, P0)
-        if used:
-            self.coasting_s = 0.0
-        else:
-            self.coasting_s += dt_s
+            self.cfg.innovation_gate_deg, self.R_st_B, P0)
+        self.coasting_s = 0.0 if used else self.coasting_s + dt_s
         self.last_innovation_deg = innov_deg
         return EstimatorStatus(
             initialized=self.initialized,
@@ -256,20 +315,6 @@ class AttitudeEstimator:
             coasting_s=self.coasting_s,
             cov_trace_deg2=self.cov_trace_deg2,
         )
-
-    def step_samples(self, dt_s: float, omegas_B: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float = 0.0) -> EstimatorStatus:
-        """Like `step` for a tick with several gyro samples (n, 3), each held for dt_s / n."""
-        omegas = np.ascontiguousarray(omegas_B, dtype=float)
-        n = omegas.shape[0]
-        if n > 1 and self.initialized:
-            sub = dt_s / n
-            status = self._cycle(sub, omegas[:-1], sub, omegas[-1], q_NS, st_latency_s)
-            if not status.star_tracker_used:
-                self.coasting_s += dt_s - sub  # step() counted only the last sub-interval
-                status.coasting_s = self.coasting_s
-            status.cov_trace_deg2 = self.cov_trace_deg2
-            return status
-        return self.step(dt_s, omegas[-1] if n else None, q_NS, st_latency_s)
 
     def _attitude_trace(self) -> float:
         # = float(np.trace(self.P[0:3, 0:3])) (same summation order), without numpy's call overhead

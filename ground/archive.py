@@ -29,7 +29,15 @@ REJECTED_ARCHIVE = "tm_rejected.bin"  # datagrams refused by the link security, 
 
 def read_raw_archive(path: str | Path) -> Iterator[tuple[float, bytes]]:
     """Yield (rx_time_s, packet bytes) from a ``tm_raw.bin`` archive; stops at a torn final record."""
+    for rx_time_s, data, _ in raw_records(path):
+        yield rx_time_s, data
+
+
+def raw_records(path: str | Path, offset: int = 0) -> Iterator[tuple[float, bytes, int]]:
+    """Yield (rx_time_s, packet bytes, file offset after the record) from ``offset`` on; stops at a torn
+    final record, so a reader of a growing archive resumes from the last offset it got."""
     with open(path, "rb") as stream:
+        stream.seek(offset)
         while True:
             head = stream.read(RAW_RECORD.size)
             if len(head) < RAW_RECORD.size:
@@ -38,7 +46,8 @@ def read_raw_archive(path: str | Path) -> Iterator[tuple[float, bytes]]:
             data = stream.read(length)
             if len(data) < length:
                 return
-            yield rx_time_s, data
+            offset += RAW_RECORD.size + length
+            yield rx_time_s, data, offset
 
 
 def decode_archive(archive_dir: str | Path, dictionary: TelemetryDictionary = DICTIONARY

@@ -10,12 +10,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from fsw.config import udp_port, udp_port_or_zero
 from fsw.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DEFAULT_TM_PORT, DICTIONARY, TelemetryDictionary
 from fsw.link_security import LINK_KEY_FILE, downlink_receiver, load_key_file
 from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
 from ground.commanding import CommandSender, signing_sender_args
 from ground.link import LOOPBACK, Endpoints, LinkError, find_run, open_telemetry
 from ground.monitor import GroundMonitor
+from ground.web.cli import add_cli as add_web_cli
 
 
 def add_cli(subparsers: Any) -> None:
@@ -31,7 +33,7 @@ def add_cli(subparsers: Any) -> None:
                         help="mission YAML: take telemetry/telecommand addresses from flight_software.tmtc")
     parser.add_argument("--host", default=None,
                         help=f"address to bind for telemetry (default {DEFAULT_HOST} or the mission's)")
-    parser.add_argument("--port", type=_listen_port, default=None,
+    parser.add_argument("--port", type=udp_port_or_zero, default=None,
                         help=f"telemetry UDP port (default {DEFAULT_TM_PORT} or the mission's; 0: any free port)")
     parser.add_argument("--archive", default=None,
                         help="archive directory (raw + decoded; default ground_archive, or with --run a new "
@@ -41,7 +43,7 @@ def add_cli(subparsers: Any) -> None:
     parser.add_argument("--no-live", action="store_true", help="no live table; print events as lines")
     parser.add_argument("--key-file", default=None, help=_KEY_HELP)
     parser.set_defaults(func=_cmd_monitor)
-    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode,xtce,keygen}")
+    sub = parser.add_subparsers(dest="ground_command", metavar="{send,decode,xtce,keygen,web}")
     send = sub.add_parser(
         "send", help="send one telecommand and wait for its acknowledgement, e.g. `keepout ground send SET_MODE "
         "POINTING`", description="Send one telecommand, wait for its acknowledgements in telemetry (acceptance, "
@@ -51,6 +53,9 @@ def add_cli(subparsers: Any) -> None:
         epilog=_command_help(DICTIONARY), formatter_class=argparse.RawDescriptionHelpFormatter)
     send.add_argument("opcode", help="command name (or numeric opcode)")
     send.add_argument("args", nargs="*", help="command arguments in dictionary order")
+    send.add_argument("--run", dest="send_run", default=None, metavar="RUN_DIR",
+                      help="send to a SIL run (its endpoints.json; `latest`: the newest under ./runs) and hear the "
+                           "acknowledgement on its telemetry")
     send.add_argument("--host", dest="tc_host", default=None,
                       help=f"flight software TC address (default {DEFAULT_HOST} or the mission's)")
     send.add_argument("--port", dest="tc_port", type=udp_port, default=None,
@@ -63,7 +68,8 @@ def add_cli(subparsers: Any) -> None:
     send.add_argument("--timeout", type=_positive_seconds, default=5.0,
                       help="how long to wait for the acknowledgements [s] (default 5)")
     send.add_argument("--no-wait", action="store_true", help="send only; do not wait for acknowledgements")
-    send.add_argument("--seq", type=_seq_count, default=0, help="TC sequence count to use (without --seq-file)")
+    send.add_argument("--seq", type=_seq_count, default=None,
+                      help="TC sequence count to use (default 0; with --run the next of RUN_DIR/ground_tc_seq.txt)")
     send.add_argument("--seq-file", default=None,
                       help="file holding the next TC sequence count (incremented per send), so that the "
                            "flight software sees consecutive counts across invocations")
@@ -85,22 +91,7 @@ def add_cli(subparsers: Any) -> None:
                                       "as Yamcs decodes keepout's packets and builds its telecommands.")
     xtce.add_argument("--out", default=None, help="output file (default: standard output)")
     xtce.set_defaults(func=_cmd_xtce)
-
-
-def udp_port(text: str) -> int:
-    """argparse type: a UDP port number 1..65535 (a clear error instead of a traceback later)."""
-    try:
-        port = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a port number; allowed: 1..65535") from None
-    if not 1 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"{port} is not a UDP port; allowed: 1..65535")
-    return port
-
-
-def _listen_port(text: str) -> int:
-    """argparse type: a port to listen on, 0..65535 (0: the kernel picks a free one)."""
-    return 0 if text.strip() == "0" else udp_port(text)
+    add_web_cli(sub)
 
 
 def _positive_seconds(text: str) -> float:
@@ -197,13 +188,20 @@ def _monitor_endpoints(args: argparse.Namespace) -> tuple[Endpoints, Path | None
             raise LinkError("--run takes the addresses from the run's endpoints.json: drop --config/--host/--port")
         run_dir = find_run(args.run)
         return Endpoints.load(run_dir), run_dir
-    addresses = _mission_addresses(args.config)
-    host = args.host if args.host is not None else addresses["tm_host"]
-    port = args.port if args.port is not None else addresses["tm_port"]
+    return _address_endpoints(args.config, args.host, args.port), None
+
+
+def _address_endpoints(config: str | None, tm_host: str | None, tm_port: int | None,
+                       tc_host: str | None = None, tc_port: int | None = None) -> Endpoints:
+    """Endpoints from the mission (``--config``) or the defaults, with the command line's overrides."""
+    addresses = _mission_addresses(config)
+    host = tm_host if tm_host is not None else addresses["tm_host"]
+    port = tm_port if tm_port is not None else addresses["tm_port"]
     multicast = ipaddress.ip_address(host).is_multicast if _is_ip(host) else False
     return Endpoints(run_id="-", tm_transport="udp-multicast" if multicast else "udp", tm_host=host, tm_port=port,
-                     tc_host=addresses["tc_host"], tc_port=addresses["tc_port"], bus="-",
-                     tm_interface=addresses["tm_interface"]), None
+                     tc_host=tc_host if tc_host is not None else addresses["tc_host"],
+                     tc_port=tc_port if tc_port is not None else addresses["tc_port"], bus="-",
+                     tm_interface=addresses["tm_interface"])
 
 
 def _is_ip(host: str) -> bool:
@@ -276,31 +274,30 @@ def _cmd_send(args: argparse.Namespace) -> int:
     from fsw.dictionary import ArgError, DictionaryError
     from ground import verify
 
-    tc_host, tc_port = args.tc_host, args.tc_port
+    run = args.send_run if args.send_run is not None else args.run
     try:
         dictionary = _load_dictionary(args.dictionary)
-        addresses = _mission_addresses(args.config)
-        tc_host = args.tc_host if args.tc_host is not None else addresses["tc_host"]
-        tc_port = args.tc_port if args.tc_port is not None else addresses["tc_port"]
         command: str | int = int(args.opcode, 0) if args.opcode[:1].isdigit() else args.opcode.upper()
         definition = dictionary.command(command)  # unknown command: fail before touching the sequence file
-        key_file = _key_file(args.send_key_file, args.config)
+        endpoints, run_dir = _send_endpoints(args, run)
+        key_file = args.send_key_file or (str(run_dir / LINK_KEY_FILE) if run_dir is not None
+                                          else _key_file(None, args.config))
         signing = signing_sender_args(key_file)
         downlink = downlink_receiver(load_key_file(key_file))
-    except (ArgError, DictionaryError, ValueError) as exc:
+    except (ArgError, DictionaryError, ValueError, LinkError) as exc:  # ValueError: a bad mission config or key
         print(f"keepout ground send: {exc}", file=sys.stderr)
         return verify.EXIT_BAD_INPUT
+    tc_host, tc_port = endpoints.tc_host, endpoints.tc_port
     telemetry = None
     try:
         if not args.no_wait:  # listen before sending: an answer can come back within a millisecond
-            tm_host = args.tm_host if args.tm_host is not None else addresses["tm_host"]
-            tm_port = args.tm_port if args.tm_port is not None else addresses["tm_port"]
-            telemetry = _ack_socket(tm_host, tm_port)
-        seq = args.seq
-        if args.seq_file:
+            telemetry = open_telemetry(endpoints)
+        seq = args.seq if args.seq is not None else 0
+        seq_file = args.seq_file or (run_dir / SEND_SEQ_FILE if run_dir is not None and args.seq is None else None)
+        if seq_file:
             from spacepackets.seqcount import CcsdsFileSeqCountProvider
 
-            seq = CcsdsFileSeqCountProvider(Path(args.seq_file)).get_and_increment()
+            seq = CcsdsFileSeqCountProvider(Path(seq_file)).get_and_increment()
         with CommandSender(dictionary, tc_host, tc_port, seq, **signing) as sender:
             if telemetry is None:
                 packet = sender.send(command, *args.args, check_range=not args.no_check)
@@ -309,13 +306,14 @@ def _cmd_send(args: argparse.Namespace) -> int:
                 return verify.EXIT_COMPLETED
             packet, result = verify.send_verified(sender, telemetry, command, args.args, timeout_s=args.timeout,
                                                   check_range=not args.no_check, downlink=downlink)
-    except (ArgError, DictionaryError, ValueError) as exc:
+    except (ArgError, DictionaryError) as exc:
         print(f"keepout ground send: {exc}", file=sys.stderr)
         return verify.EXIT_BAD_INPUT
-    except _AckListenError as exc:
-        print(f"keepout ground send: {exc}", file=sys.stderr)
+    except LinkError as exc:
+        print(f"keepout ground send: cannot listen for the acknowledgement: {exc}; use --run RUN_DIR for a SIL "
+              "run, --tm-port for another telemetry port, or --no-wait", file=sys.stderr)
         return verify.EXIT_NOT_SENT
-    except OSError as exc:
+    except (OSError, ValueError) as exc:
         print(f"keepout ground send: cannot send to {tc_host}:{tc_port}: {exc}", file=sys.stderr)
         return verify.EXIT_NOT_SENT
     finally:
@@ -332,24 +330,22 @@ def _cmd_send(args: argparse.Namespace) -> int:
     return result.exit_code
 
 
-class _AckListenError(OSError):
-    """The telemetry address to hear the acknowledgement on cannot be opened."""
+SEND_SEQ_FILE = "ground_tc_seq.txt"  # in a run folder: consecutive sequence counts across `send --run` calls
 
 
-def _ack_socket(host: str, port: int):
-    """A socket receiving the flight software's telemetry, for the acknowledgements."""
-    import socket
-
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        sock.bind((host, port))
-    except OSError as exc:
-        sock.close()
-        raise _AckListenError(f"cannot listen for the acknowledgement on {host}:{port}: {exc.strerror or exc}; "
-                              "use --run RUN_DIR for a SIL run, --tm-port for another telemetry port, or "
-                              "--no-wait") from None
-    sock.setblocking(False)
-    return sock
+def _send_endpoints(args: argparse.Namespace, run: str | None) -> tuple[Endpoints, Path | None]:
+    """Where to send (telecommand address) and hear the acknowledgements (telemetry), from ``--run`` or
+    the addresses; raises LinkError or ConfigError with the reason."""
+    if run is None:
+        return _address_endpoints(args.config, args.tm_host, args.tm_port, args.tc_host, args.tc_port), None
+    if args.config or args.tc_host or args.tc_port or args.tm_host or args.tm_port:
+        raise LinkError("--run takes the addresses from the run's endpoints.json: drop --config/--host/--port/"
+                        "--tm-host/--tm-port")
+    run_dir = find_run(run)
+    endpoints = Endpoints.load(run_dir)
+    if endpoints.state == "finished":
+        raise LinkError(f"run {run_dir} has finished: its flight software no longer takes telecommands")
+    return endpoints, run_dir
 
 
 def _cmd_decode(args: argparse.Namespace) -> int:
@@ -378,15 +374,14 @@ def _cmd_decode(args: argparse.Namespace) -> int:
 
 def _cmd_xtce(args: argparse.Namespace) -> int:
     from fsw.dictionary import DictionaryError
-    from ground.xtce import to_xtce
+    from ground.xtce import to_xtce, write_xtce
 
     try:
-        text = to_xtce(_load_dictionary(args.dictionary))
+        dictionary = _load_dictionary(args.dictionary)
         if args.out is None:
-            sys.stdout.write(text)
+            sys.stdout.write(to_xtce(dictionary))
             return 0
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(text, encoding="utf-8")
+        write_xtce(args.out, dictionary)
     except DictionaryError as exc:
         print(f"keepout ground xtce: {exc}", file=sys.stderr)
         return 2

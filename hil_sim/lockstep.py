@@ -275,6 +275,16 @@ class Simulator:
         fsw_cycle()
         return self.end_tick(wait_s=0.0)
 
+    def run_tick(self, realtime: bool, wait_s: float | None = None) -> bool:
+        """One tick, paced to the clock (``realtime``) or in lockstep (waiting up to ``wait_s``, default
+        ``cycle_done_timeout_s``); returns whether the flight software's CYCLE_DONE came in time."""
+        if realtime:
+            late_before = self.stats.cycle_done_late
+            self.run_realtime(1)
+            return self.stats.cycle_done_late == late_before
+        self.begin_tick()
+        return self.end_tick(wait_s)
+
     def run_lockstep(self, n_ticks: int, on_tick: Callable[["Simulator"], None] | None = None) -> SimStats:
         """Multi-process lockstep: each tick waits for CYCLE_DONE(k) (up to cycle_done_timeout_s)."""
         for _ in range(n_ticks):

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
+from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from fsw.config import FswConfig
 from fsw.dictionary import FDIR_MONITORS
@@ -40,6 +40,8 @@ def bounded_vec3(limit: float) -> Any:
     return Annotated[list[Annotated[float, Field(ge=-limit, le=limit)]], Field(min_length=3, max_length=3)]
 
 
+RaDec = Annotated[tuple[Annotated[float, Field(ge=0, le=360)], Annotated[float, Field(ge=-90, le=90)]],
+                  Field(description="[right ascension in [0, 360], declination in [-90, 90]] [deg]")]
 MAX_INERTIA_KGM2 = 1e9  # the ISS is ~1e8 kg m^2
 Matrix3 = Annotated[list[bounded_vec3(MAX_INERTIA_KGM2)], Field(min_length=3, max_length=3)]
 UnitVec3 = Annotated[list[float], Field(min_length=3, max_length=3,
@@ -84,7 +86,9 @@ class WheelTruth(_Model):
     """One reaction wheel as built (maps onto hil_sim.params.WheelParams)."""
 
     axis_B: UnitVec3 = Field(description="spin axis in body axes (normalised on load)")
-    Js_kgm2: float = Field(gt=0, le=10, description="rotor inertia about its spin axis [kg m^2]")
+    spin_inertia_kgm2: float = Field(gt=0, le=10, validation_alias=AliasChoices("spin_inertia_kgm2", "Js_kgm2"),
+                                     description="rotor inertia about its spin axis [kg m^2] (also accepted under "
+                                     "its former name Js_kgm2)")
     max_torque_Nm: float = Field(gt=0, le=10, description="motor torque limit [N m]")
     max_speed_rad_s: float = Field(gt=0, le=1000, description="speed limit [rad/s] (6000 rpm = 628 rad/s)")
     viscous_friction_Nm_per_rad_s: float = Field(0.0, ge=0, le=1, description="viscous friction [N m s/rad]")
@@ -182,20 +186,31 @@ class Orbit(_Model):
 class InitialState(_Model):
     """Truth state at t = 0."""
 
-    q_NB: UnitQuat = Field(description="attitude, scalar first; rotates body vectors into N")
+    q_NB: UnitQuat | None = Field(None, description="attitude, scalar first; rotates body vectors into N. Give "
+                                  "either q_NB or ra_dec_deg (+ roll_deg)")
+    ra_dec_deg: RaDec | None = Field(None, description="where the instrument boresight "
+                                     "(spacecraft.instrument_boresight_B) points at t = 0, as [right ascension, "
+                                     "declination] [deg], like a SET_TARGET; turned into q_NB on load")
+    roll_deg: float = Field(0.0, ge=-360, le=360, description="with ra_dec_deg: rotation about the boresight [deg]; "
+                            "0 turns body +x (body +y if the boresight is along x) as close to celestial north as "
+                            "it goes, positive is right-handed about the boresight")
     omega_BN_B_rad_s: bounded_vec3(1.0) = Field([0.0, 0.0, 0.0], description="body rate [rad/s], each "
                                                 "component within +-1 rad/s (57 deg/s)")
     wheel_speeds_rad_s: list[Annotated[float, Field(ge=-1000, le=1000)]] | None = Field(None, description="one per wheel [rad/s]; default all zero")
+
+    @model_validator(mode="after")
+    def _one_attitude(self) -> "InitialState":
+        if self.q_NB is None and self.ra_dec_deg is None:
+            raise ValueError("give the initial attitude as q_NB, or as ra_dec_deg (+ roll_deg)")
+        if self.q_NB is not None and self.ra_dec_deg is not None:
+            raise ValueError("give the initial attitude once: q_NB or ra_dec_deg (+ roll_deg), not both")
+        return self
 
 
 
 # ---------------------------------------------------------------------------------------------
 # Ground timeline (telecommands sent by the ground monitor at simulated times)
 # ---------------------------------------------------------------------------------------------
-
-RaDec = Annotated[tuple[Annotated[float, Field(ge=0, le=360)], Annotated[float, Field(ge=-90, le=90)]],
-                  Field(description="[right ascension in [0, 360], declination in [-90, 90]] [deg]")]
-
 
 class _Timed(_Model):
     t_s: float = Field(ge=0, le=10 * 86400, description="simulated time at which the ground sends the telecommand [s]")
@@ -267,6 +282,8 @@ class Requirements(_Model):
     max_settling_time_s: float | None = Field(None, gt=0, le=10 * 86400, description="after the last target command [s]")
     max_final_pointing_error_deg: float = Field(0.05, gt=0, le=180, description="truth error at the end [deg]")
     max_wheel_speed_fraction: float = Field(0.9, gt=0, le=1, description="peak |wheel speed| / its limit")
+    max_body_rate_fraction: float = Field(1.05, gt=0, le=10, description="peak true |omega| / the configured "
+                                          "rate limit (5 % allows for sensor noise and sampling)")
     max_cycle_slips: int = Field(0, ge=0)
     expected_fdir_events: list[FdirMonitor] = Field(
         [], description="FDIR monitors that MUST trip during the run (the 'monitor' of FDIR_TRIPPED events, "
@@ -310,7 +327,14 @@ class Mission(_Model):
     timeline: list[TimelineEntry] = Field([], description="telecommands the ground sends, by simulated time")
     faults: list[BusFault] = Field([], description="bus faults to inject")
     requirements: Requirements = Field(default_factory=Requirements)
-    flight_software: FswConfig
+    flight_software: FswConfig = Field(description="the flight software's own configuration: what it knows of "
+                                       "the spacecraft (epoch, inertia, wheels, star-tracker mounting, boresight "
+                                       "and orbit default to the truth written above), its zones, laws and limits")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _written_once(cls, data: Any) -> Any:
+        return written_once(data)
 
     @field_validator("epoch_utc")
     @classmethod
@@ -382,6 +406,84 @@ class Mission(_Model):
         return out
 
 
+# ---------------------------------------------------------------------------------------------
+# Each fact written once: the flight software's knowledge defaults to the truth in the file
+# ---------------------------------------------------------------------------------------------
+
+def written_once(data: Any) -> Any:
+    """A mission's raw data with every fact the user wrote once filled in where it is needed twice.
+
+    * the flight software's knowledge the file does not give separately is the truth written in it
+      (`fsw.config.knowledge_from_truth`: epoch, inertia, wheels, star-tracker mounting, boresight, orbit,
+      and the initial pointing as its first target when the initial attitude is given as RA/Dec);
+    * ``initial_state.ra_dec_deg`` (+ ``roll_deg``) becomes ``initial_state.q_NB``.
+
+    It works on the values as written, before any campaign dispersion: `hil_sim.campaign` applies it to
+    the base mission once, so a dispersion changes the truth alone and the flight software never learns
+    the dispersed value. Keys given under ``flight_software`` are never touched; values that are not
+    valid are left for validation to report where they are written.
+    """
+    from fsw.config import knowledge_from_truth
+
+    if not isinstance(data, dict):
+        return data
+    out = knowledge_from_truth(data)
+    _attitude_from_ra_dec(out)
+    return out
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _attitude_from_ra_dec(data: dict) -> None:
+    """Replace initial_state.ra_dec_deg (+ roll_deg) by q_NB."""
+    state, sc = data.get("initial_state"), data.get("spacecraft")
+    if not isinstance(state, dict) or "q_NB" in state or "ra_dec_deg" not in state:
+        return
+    ra_dec, roll = state.get("ra_dec_deg"), state.get("roll_deg", 0.0)
+    boresight = sc.get("instrument_boresight_B") if isinstance(sc, dict) else None
+    if not (isinstance(ra_dec, (list, tuple)) and len(ra_dec) == 2 and all(map(_is_number, ra_dec))
+            and 0 <= ra_dec[0] <= 360 and -90 <= ra_dec[1] <= 90 and _is_number(roll) and abs(roll) <= 360
+            and isinstance(boresight, list) and len(boresight) == 3 and all(map(_is_number, boresight))):
+        return  # validation reports what is wrong, at its key
+    try:
+        q = attitude_from_ra_dec(float(ra_dec[0]), float(ra_dec[1]), float(roll), np.asarray(boresight, float))
+    except ValueError:
+        return
+    state["q_NB"] = [float(c) for c in q]
+    del state["ra_dec_deg"]
+    state.pop("roll_deg", None)
+
+
+def attitude_from_ra_dec(ra_deg: float, dec_deg: float, roll_deg: float, boresight_B: np.ndarray) -> np.ndarray:
+    """q_NB (scalar first) pointing ``boresight_B`` at (RA, Dec), rolled by ``roll_deg`` about it.
+
+    Roll 0 turns body +x (body +y when the boresight is within 1 deg of x) as close to celestial north
+    as it goes (towards N's x axis when the boresight is at a pole); positive roll is right-handed about
+    the boresight.
+    """
+    from scipy.spatial.transform import Rotation
+
+    b = np.asarray(boresight_B, dtype=float)
+    if not np.linalg.norm(b) > 1e-9:
+        raise ValueError("boresight must be a non-zero vector")
+    b = b / np.linalg.norm(b)
+    ref_B = np.array([1.0, 0.0, 0.0]) if abs(b[0]) < math.cos(math.radians(1.0)) else np.array([0.0, 1.0, 0.0])
+    r_B = ref_B - (ref_B @ b) * b
+    r_B /= np.linalg.norm(r_B)
+    y = ra_dec_to_unit(ra_deg, dec_deg)
+    north = np.array([0.0, 0.0, 1.0]) if abs(y[2]) < 1 - 1e-9 else np.array([1.0, 0.0, 0.0])
+    n = north - (north @ y) * y
+    n /= np.linalg.norm(n)
+    roll = math.radians(roll_deg)
+    n = math.cos(roll) * n + math.sin(roll) * np.cross(y, n)  # rotate about y by roll (right-handed)
+    frame_N = np.column_stack((y, n, np.cross(y, n)))
+    frame_B = np.column_stack((b, r_B, np.cross(b, r_B)))
+    x, y_, z, w = Rotation.from_matrix(frame_N @ frame_B.T).as_quat()
+    return np.array([w, x, y_, z])
+
+
 def world_params(mission: Mission) -> "WorldParams":
     """The truth-model parameters (hil_sim.params.WorldParams) this mission describes."""
     from hil_sim.params import (DisturbanceParams, ImuParams, OrbitParams, SpacecraftParams, StarTrackerParams,
@@ -390,7 +492,7 @@ def world_params(mission: Mission) -> "WorldParams":
     sc = mission.spacecraft
     speeds = mission.initial_state.wheel_speeds_rad_s or [0.0] * len(sc.wheels)
     wheels = tuple(
-        WheelParams(axis_B=tuple(w.axis_B), Js_kgm2=w.Js_kgm2, max_torque_Nm=w.max_torque_Nm,
+        WheelParams(axis_B=tuple(w.axis_B), Js_kgm2=w.spin_inertia_kgm2, max_torque_Nm=w.max_torque_Nm,
                     max_speed_rad_s=w.max_speed_rad_s, viscous_friction_Nm_per_rad_s=w.viscous_friction_Nm_per_rad_s,
                     coulomb_friction_Nm=w.coulomb_friction_Nm, initial_speed_rad_s=speed, failure=w.failure)
         for w, speed in zip(sc.wheels, speeds))

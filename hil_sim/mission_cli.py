@@ -1,4 +1,5 @@
-"""``keepout config schema | validate FILE... | check FILE...``: editor schema, validation, physics report.
+"""``keepout config schema | docs | validate FILE... | check FILE...``: editor schema, reference, validation,
+physics report.
 
 Imports stay light at module level (the CLI imports every area on start); pydantic models and the
 maths load inside the handlers.
@@ -8,6 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Callable
 
 
 def add_cli(subparsers: argparse._SubParsersAction) -> None:
@@ -22,6 +24,13 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
     schema.add_argument("--check", action="store_true",
                         help="do not write: exit 1 when the committed schema differs from the models")
     schema.set_defaults(func=_schema)
+
+    docs = sub.add_parser("docs", help="write docs/missions.md, the mission-file reference, from the schema")
+    docs.add_argument("--out", type=Path, default=None, help="where to write it (default: docs/missions.md); "
+                      "'-' for stdout")
+    docs.add_argument("--check", action="store_true",
+                      help="do not write: exit 1 when the committed reference differs from the models")
+    docs.set_defaults(func=_docs)
 
     validate = sub.add_parser("validate", help="check mission files against the schema; every problem as "
                               "file:line:col key.path: message")
@@ -39,25 +48,36 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
 def _schema(args: argparse.Namespace) -> int:
     import json
 
-    from hil_sim.mission import SCHEMA_PATH, mission_json_schema, write_json_schema
+    from hil_sim.mission import SCHEMA_PATH, mission_json_schema
 
+    return _generated(args, SCHEMA_PATH, lambda: json.dumps(mission_json_schema(), indent=2) + "\n", "schema")
+
+
+def _docs(args: argparse.Namespace) -> int:
+    from hil_sim.mission_docs import DOCS_PATH, mission_docs
+
+    return _generated(args, DOCS_PATH, mission_docs, "docs")
+
+
+def _generated(args: argparse.Namespace, default: Path, text: Callable[[], str], command: str) -> int:
+    """Write (``--out``, '-' for stdout) or ``--check`` a file generated from the mission models."""
+    path = Path(args.out or default)
     if args.check:
-        path = args.out or SCHEMA_PATH
         try:
-            committed = json.loads(Path(path).read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            print(f"{path}: cannot read: {exc}", file=sys.stderr)
+            committed = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            print(f"{path}: cannot read: {exc.strerror or exc}", file=sys.stderr)
             return 1
-        if committed != mission_json_schema():
-            print(f"{path}: out of date with hil_sim/mission.py; run `keepout config schema`", file=sys.stderr)
+        if committed != text():
+            print(f"{path}: out of date with the mission models; run `keepout config {command}`", file=sys.stderr)
             return 1
         print(f"{path}: up to date")
         return 0
-    if args.out is not None and str(args.out) == "-":
-        json.dump(mission_json_schema(), sys.stdout, indent=2)
-        print()
+    if str(args.out) == "-":
+        sys.stdout.write(text())
         return 0
-    path = write_json_schema(args.out) if args.out else write_json_schema()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text(), encoding="utf-8")
     print(f"wrote {path}")
     return 0
 

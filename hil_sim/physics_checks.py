@@ -588,6 +588,33 @@ def _check_quaternion(mission, segments, report, quick: bool = False) -> None:
                        f"bound {eps_max:.4g}, eps in use {_eps_in_use(mission, eps_max):.4g}", eps_max=eps_max)
 
 
+def _check_braking(mission, report) -> float:
+    """The flight software's braking-distance rule (`fsw.guidance.slew_limits.braking_problem`, the one
+    SET_GAINS is judged by onboard) on the configured limits and on every SET_GAINS of the timeline, with
+    the gains in force when it is sent. Returns the braking distance at the configured rate limit [deg]."""
+    from fsw.guidance.slew_limits import braking_distance_deg, braking_problem, rule_eps
+
+    fsw = mission.flight_software
+    accel, bandwidth = fsw.control.max_command_accel_deg_s2, fsw.control.rate_bandwidth_rad_s
+    margin, cap = fsw.law.margin_deg, fsw.law.eps_max_used
+    rate, eps = fsw.spacecraft.max_rate_deg_s, fsw.law.eps
+    problem = braking_problem(rate, accel, bandwidth, margin, rule_eps(eps, cap))
+    if problem is not None:
+        report.add("error", "braking", f"flight_software.spacecraft.max_rate_deg_s: {problem}",
+                   ("flight_software", "spacecraft", "max_rate_deg_s"))
+    first = braking_distance_deg(rate, accel, bandwidth)
+    for i, entry in enumerate(mission.timeline):
+        if entry.command != "SET_GAINS":
+            continue
+        rate = entry.rate_limit_deg_s if entry.rate_limit_deg_s is not None else rate
+        eps = entry.eps if entry.eps is not None else eps
+        problem = braking_problem(rate, accel, bandwidth, margin, rule_eps(eps, cap))
+        if problem is not None:
+            report.add("error", "braking", f"timeline[{i}] SET_GAINS at {entry.t_s:g} s would be rejected onboard: "
+                       f"{problem}", ("timeline", i, "rate_limit_deg_s"))
+    return first
+
+
 def _check_wheels(mission, report) -> None:
     sc = mission.spacecraft
     fsw = mission.flight_software
@@ -612,7 +639,7 @@ def _check_wheels(mission, report) -> None:
                    accel_avail_deg_s2=accel_avail_deg_s2,
                    accel_cmd_deg_s2=accel_cmd)
     speeds = mission.initial_state.wheel_speeds_rad_s or [0.0] * len(sc.wheels)
-    headroom = np.array([w.Js_kgm2 * max(0.0, mission.requirements.max_wheel_speed_fraction * w.max_speed_rad_s
+    headroom = np.array([w.spin_inertia_kgm2 * max(0.0, mission.requirements.max_wheel_speed_fraction * w.max_speed_rad_s
                                          - abs(s)) for w, s in zip(sc.wheels, speeds)])
     # body momentum J omega along d must come from the wheels: reachable |omega| = h(J d)/|J d|
     momentum = wheel_authority(axes, headroom, Jd / np.linalg.norm(Jd, axis=1, keepdims=True))
@@ -625,14 +652,7 @@ def _check_wheels(mission, report) -> None:
                    f"{np.round(d[worst_m], 3).tolist()}, below the rate limit spacecraft.max_rate_deg_s = {rate_limit:g}; "
                    f"lower it to {rate_avail_deg_s:.3g}", ("flight_software", "spacecraft", "max_rate_deg_s"),
                    rate_avail_deg_s=rate_avail_deg_s, rate_limit_deg_s=rate_limit)
-    effective_accel = min(accel_avail_deg_s2, accel_cmd)
-    braking_deg = rate_limit ** 2 / (2 * effective_accel)
-    margin = fsw.law.margin_deg
-    if braking_deg > margin:
-        report.add("warning", "wheels", f"braking from the rate limit {rate_limit:g} deg/s at {effective_accel:.3g} "
-                   f"deg/s^2 takes {braking_deg:.2f} deg, more than law.margin_deg = {margin:g}: the eps-layer must "
-                   "absorb the rest, or the boresight may overshoot into a physical zone", LAW_LOC + ("margin_deg",),
-                   braking_deg=braking_deg)
+    braking_deg = _check_braking(mission, report)
     report.add("info", "wheels", f"worst-axis authority: {accel_avail_deg_s2:.4g} deg/s^2 (commanded "
                f"{accel_cmd:g}), {rate_avail_deg_s:.4g} deg/s momentum-limited rate (limit {rate_limit:g}), braking "
                f"angle {braking_deg:.2f} deg", accel_avail_deg_s2=accel_avail_deg_s2, rate_avail_deg_s=rate_avail_deg_s,

@@ -218,32 +218,49 @@ def ground_process(archive_dir: str, endpoints: dict, port: int, port_queue, rea
     monitor = GroundMonitor(port=None, archive_dir=archive_dir, sock=sock, security=security)
     port_queue.put(monitor.address[1])
     ready.set()
+    failure: OSError | None = None
+    try:
+        _ground_loop(monitor, fsw_started, stop_event, status_queue)
+    except OSError as exc:  # its archive cannot be written (disk full): one line, and the parent judges
+        failure = exc
+    finally:
+        try:
+            monitor.close()
+        except OSError as exc:
+            failure = failure or exc
+    if failure is not None:
+        print(f"keepout ground: {archive_dir}: cannot write the telemetry archive: {failure.strerror or failure}",
+              file=sys.stderr)
+        sys.exit(GROUND_EXIT_CANNOT_WRITE)
+
+
+GROUND_EXIT_CANNOT_WRITE = 5  # the ground process's exit code when its archive cannot be written
+
+
+def _ground_loop(monitor, fsw_started, stop_event, status_queue) -> None:
     last_status = 0.0
     parent = os.getppid()
-    try:
-        while not stop_event.is_set() and os.getppid() == parent:  # an orphaned ground stops by itself
-            if monitor.poll(0.05):
-                # Packets come every few ms in a lockstep run: reading them as they come costs a wake-up
-                # and ~5 system calls each, taken from the simulator and flight software on a 1-CPU host.
-                # The socket holds far more than arrives in GROUND_BATCH_S.
-                time.sleep(GROUND_BATCH_S)
-            if not fsw_started.is_set() and any(e.event == "FSW_STARTED" for e in monitor.events
-                                                if getattr(e, "kind", "") == "event"):
-                fsw_started.set()
-            now = time.monotonic()
-            if now - last_status > 0.25:
-                last_status = now
-                monitor.flush()
-                snapshot = {k: monitor.latest.get(k) for k in STATUS_CHANNELS}
-                try:
-                    status_queue.put_nowait(snapshot)
-                except queue.Full:
-                    pass
-        deadline = time.monotonic() + 1.0
-        while time.monotonic() < deadline and monitor.poll(0.1):
-            pass  # drain what is still in flight
-    finally:
-        monitor.close()
+    while not stop_event.is_set() and os.getppid() == parent:  # an orphaned ground stops by itself
+        if monitor.poll(0.05):
+            # Packets come every few ms in a lockstep run: reading them as they come costs a wake-up
+            # and ~5 system calls each, taken from the simulator and flight software on a 1-CPU host.
+            # The socket holds far more than arrives in GROUND_BATCH_S.
+            time.sleep(GROUND_BATCH_S)
+        if not fsw_started.is_set() and any(e.event == "FSW_STARTED" for e in monitor.events
+                                            if getattr(e, "kind", "") == "event"):
+            fsw_started.set()
+        now = time.monotonic()
+        if now - last_status > 0.25:
+            last_status = now
+            monitor.flush()
+            snapshot = {k: monitor.latest.get(k) for k in STATUS_CHANNELS}
+            try:
+                status_queue.put_nowait(snapshot)
+            except queue.Full:
+                pass
+    deadline = time.monotonic() + 1.0
+    while time.monotonic() < deadline and monitor.poll(0.1):
+        pass  # drain what is still in flight
 
 
 # ---------------------------------------------------------------------------------------------
@@ -457,15 +474,21 @@ def run_sil(options: RunOptions) -> RunResult:
     _reserve_summary(run_dir)
     if report is not None:
         (run_dir / "physics_checks.txt").write_text(report.format() + "\n")
-    previous_sigterm = None
-    if threading.current_thread() is threading.main_thread():
-        previous_sigterm = signal.signal(signal.SIGTERM, _raise_terminated)
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous_sigterm = signal.signal(signal.SIGTERM, _raise_terminated) if main_thread else None
     try:
-        status, code = _run(options, mission, run_dir)
+        try:
+            status, code = _run(options, mission, run_dir)
+        except (RunNotStarted, MissionRejected) as exc:  # the folder's summary must not say 'running'
+            _quietly(lambda: _write_reserved_summary(run_dir, {"mission": mission.name, "run_dir": str(run_dir),
+                                                               "status": f"not started: {exc}", "pass": False}))
+            raise
+        if main_thread:  # the run is over: a SIGTERM now must not cut its judgement short
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        return _judge(run_dir, mission, status, code)
     finally:
-        if previous_sigterm is not None:
+        if main_thread:
             signal.signal(signal.SIGTERM, previous_sigterm)
-    return _judge(run_dir, mission, status, code)
 
 
 def _raise_terminated(signum, frame) -> None:  # noqa: ARG001
@@ -577,13 +600,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         missed_in_row = 0
         for _ in range(n_ticks):
             timeline.release(sim.t_s)
-            if options.realtime:
-                before = sim.stats.cycle_done_late
-                sim.run_realtime(1)
-                done = sim.stats.cycle_done_late == before
-            else:
-                sim.begin_tick()
-                done = sim.end_tick()
+            done = sim.run_tick(options.realtime)
             recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
             missed_in_row = 0 if done else missed_in_row + 1
             # a crash shows within FSW_POLL_TICKS ticks (waitpid is a system call: ~15 us in the vcan-vm guest)
@@ -657,7 +674,8 @@ def _check_alive(fsw_proc: subprocess.Popen, ground, t_s: float, run_dir: Path) 
         raise ProcessCrashed(f"crashed: fsw at t = {t_s:.1f} s (exit code {fsw_proc.returncode}; see "
                              f"{run_dir / FSW_LOG})")
     if not ground.is_alive():
-        raise ProcessCrashed(f"crashed: ground at t = {t_s:.1f} s (exit code {ground.exitcode})")
+        why = ": it could not write its telemetry archive" if ground.exitcode == GROUND_EXIT_CANNOT_WRITE else ""
+        raise ProcessCrashed(f"crashed: ground at t = {t_s:.1f} s (exit code {ground.exitcode}){why}")
 
 
 def _stop_children(fsw_proc: subprocess.Popen | None, ground, stop_event) -> None:

@@ -28,7 +28,16 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
                      help="override the simulated duration [s]")
     run.add_argument("--out", type=Path, default=Path("runs"), help="parent folder of run folders (default: runs)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar (CI logs)")
+    run.add_argument("--max-missed-ticks", type=_positive_int, default=3, metavar="N",
+                     help="ticks in a row the flight software may leave unanswered before the run is ended as "
+                          "hung (default 3; raise it for real-time runs on a busy computer)")
     run.set_defaults(func=_run)
+
+
+def _positive_int(text: str) -> int:
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive whole number")
+    return int(text)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -38,7 +47,8 @@ def _run(args: argparse.Namespace) -> int:
 
     options = RunOptions(mission=args.mission or DEFAULT_MISSION, bus=args.bus, duration_s=args.duration,
                          realtime=args.realtime, out_root=args.out,
-                         progress=not args.no_progress and sys.stdout.isatty(), announce=True)
+                         progress=not args.no_progress and sys.stdout.isatty(), announce=True,
+                         max_consecutive_missed=args.max_missed_ticks)
     try:
         result = run_sil(options)
     except MissionRejected as exc:

@@ -161,17 +161,12 @@ def _loop(sim, world, recorder, timeline, n_ticks: int, args: argparse.Namespace
     missed_in_row = 0
     for k in range(n_ticks):
         timeline.release(sim.t_s)
-        if args.realtime:
-            before = sim.stats.cycle_done_late
-            sim.run_realtime(1)
-            done = sim.stats.cycle_done_late == before
-        else:
-            sim.begin_tick()
-            done = sim.end_tick(wait_s=args.wait_s if k == 0 else None)
-            if k == 0 and not done:
-                print(f"keepout sim: no flight software answered SYNC(0) within {args.wait_s:.0f} s on {args.bus or 'the mission bus'}: "
-                      "start `keepout fsw MISSION --bus SPEC` first (it waits for the simulator)", file=sys.stderr)
-                return EXIT_NOT_STARTED, "no flight software"
+        done = sim.run_tick(args.realtime, wait_s=args.wait_s if k == 0 else None)
+        if k == 0 and not done and not args.realtime:
+            print(f"keepout sim: no flight software answered SYNC(0) within {args.wait_s:.0f} s on "
+                  f"{args.bus or 'the mission bus'}: start `keepout fsw MISSION --bus SPEC` first (it waits for the "
+                  "simulator)", file=sys.stderr)
+            return EXIT_NOT_STARTED, "no flight software"
         recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
         missed_in_row = 0 if done else missed_in_row + 1
         if not args.realtime and missed_in_row >= 3:

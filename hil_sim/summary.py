@@ -201,6 +201,45 @@ def settling(mission, t: np.ndarray, err: np.ndarray, segments) -> list[dict[str
     return out
 
 
+def add_torque_variation(spans: list[dict[str, Any]], t: np.ndarray, wheel_torque_Nm: np.ndarray) -> None:
+    """Each settling span gets ``torque_variation_Nm``: the total variation of the wheel torque commands
+    over the span, sum over samples and wheels of |tau_k - tau_(k-1)| [N m]. A smooth slew needs about
+    4 x the torque limit per wheel (up, down, and the same to brake); a chattering one many times that
+    (issue 16.4)."""
+    tau = np.asarray(wheel_torque_Nm, dtype=float)
+    if tau.ndim != 2 or len(tau) != len(t) or len(t) < 2:
+        return
+    steps = np.abs(np.diff(tau, axis=0)).sum(axis=1)  # step k: between samples k and k + 1
+    for k, span in enumerate(spans):
+        last = k == len(spans) - 1
+        sel = (t[1:] > span["commanded_at_s"] + 1e-6) & ((t[1:] < span["until_s"] - 1e-6) | last)
+        span["torque_variation_Nm"] = float(steps[sel].sum())
+
+
+def rate_limit_series(mission, t: np.ndarray) -> np.ndarray:
+    """The configured body-rate limit [rad/s] at each time: the flight software's, then each timeline
+    SET_GAINS rate limit from its time on."""
+    limit = np.full(len(t), math.radians(mission.flight_software.spacecraft.max_rate_deg_s))
+    for entry in sorted(mission.timeline, key=lambda e: e.t_s):
+        if entry.command == "SET_GAINS" and entry.rate_limit_deg_s is not None:
+            limit[t >= entry.t_s] = math.radians(entry.rate_limit_deg_s)
+    return limit
+
+
+def peak_body_rate_fraction(mission, truth: dict[str, np.ndarray]) -> tuple[float, float]:
+    """(peak of true |omega_BN_B| / the configured rate limit, its time [s]). Samples before the body rate
+    first comes within the limit (a tumbling start being damped) are not judged."""
+    t = truth["t_s"]
+    if len(t) == 0:
+        return math.nan, math.nan
+    frac = np.linalg.norm(truth["omega_BN_B"], axis=1) / rate_limit_series(mission, t)
+    within = np.flatnonzero(frac <= 1.0)
+    if not len(within):
+        return float(frac.max()), float(t[int(np.argmax(frac))])
+    i = within[0] + int(np.argmax(frac[within[0]:]))
+    return float(frac[i]), float(t[i])
+
+
 def _ground_events(run_dir: Path) -> list[dict[str, Any]]:
     path = run_dir / "ground" / "events.jsonl"
     if not path.exists():
@@ -285,6 +324,8 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
         zones += attitude_zone_series(mission, q_lift)
     err, segments = error_series(mission, truth, y_N)
     settle = settling(mission, t, err, segments)
+    if "wheel_torque_Nm" in truth:
+        add_torque_variation(settle, t, truth["wheel_torque_Nm"])
     results: list[dict[str, Any]] = []
 
     def requirement(name: str, value: Any, limit: Any, passed: bool, detail: str = "", unit: str = "") -> None:
@@ -330,6 +371,10 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False,
                     peak <= req.max_wheel_speed_fraction,
                     f"wheel {w + 1}: {float(np.abs(truth['wheel_speed_rad_s'][:, w]).max()):.1f} rad/s of "
                     f"{limits[w]:.0f} rad/s", "% of max")
+        rate_frac, rate_t = peak_body_rate_fraction(mission, truth)
+        requirement("peak body rate", round(100.0 * rate_frac, 2), f"<= {_num(100.0 * req.max_body_rate_fraction)}",
+                    rate_frac <= req.max_body_rate_fraction,
+                    f"true |omega| / the configured rate limit, at t = {rate_t:.1f} s", "% of max")
     hk = _hk_last(run_dir, ("slips_gnc", "cycles", "fdir_trips", "bus_crc_errors", "bus_alive_errors",
                             "bus_timeouts", "tc_accepted", "tc_rejected"))
     missed = int(sim_stats.get("cycle_done_timeouts", 0)) + int(sim_stats.get("cycle_done_late", 0))
@@ -438,10 +483,10 @@ def _cell(value: Any, unit: str = "") -> str:
 def format_summary(summary: dict[str, Any], total_wall_s: float | None = None) -> str:
     """The requirement table and the verdict line. ``total_wall_s``: wall time of the whole command, start-up
     included (the summary's own ``wall_s`` is the simulation loop alone)."""
-    lines = [f"{'requirement':38s} {'value':>18s}  {'limit':22s} result"]
+    lines = [f"{'requirement':38s} {'value':>20s}  {'limit':22s} result"]
     for r in summary["requirements"]:
         unit = r.get("unit", "")
-        lines.append(f"{r['name'][:38]:38s} {_cell(r['value'], unit)[:18]:>18s}  "
+        lines.append(f"{r['name'][:38]:38s} {_cell(r['value'], unit)[:20]:>20s}  "
                      f"{_cell(r['limit'], unit)[:22]:22s} {'PASS' if r['pass'] else 'FAIL'}")
     speed = summary.get("speed_x_realtime")
     status = summary.get("status", "completed")

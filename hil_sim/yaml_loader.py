@@ -11,8 +11,6 @@ editors and terminals turn into clickable links.
 from __future__ import annotations
 
 import difflib
-import os
-import stat
 import types
 import typing
 from dataclasses import dataclass, field
@@ -21,6 +19,9 @@ from typing import Any, TypeVar
 
 import yaml
 from pydantic import BaseModel, ValidationError
+
+from fsw import safe_yaml
+from fsw.safe_yaml import MAX_FILE_BYTES
 
 Loc = tuple[str | int, ...]
 ModelT = TypeVar("ModelT", bound=BaseModel)
@@ -57,7 +58,6 @@ class Marked:
     file: str
     value_marks: dict[Loc, tuple[int, int]] = field(default_factory=dict)  # 1-based (line, col)
     key_marks: dict[Loc, tuple[int, int]] = field(default_factory=dict)
-    nodes_built: int = 0
 
     def mark_for(self, loc: Loc, *, prefer_key: bool = False) -> tuple[int, int]:
         """Best (line, col) for ``loc``: the deepest prefix of it that exists in the document."""
@@ -88,10 +88,6 @@ def _mark(node: yaml.Node) -> tuple[int, int]:
 def _build(node: yaml.Node, loc: Loc, doc: Marked, problems: list[Problem],
            constructor: yaml.constructor.SafeConstructor) -> Any:
     doc.value_marks[loc] = _mark(node)
-    doc.nodes_built += 1
-    if doc.nodes_built > MAX_NODES:  # aliases inside aliases expand geometrically
-        raise _LimitExceeded(f"the document expands to more than {MAX_NODES} values (YAML aliases "
-                             "repeating aliases?); write the values out", node.start_mark)
     if isinstance(node, yaml.MappingNode):
         out: dict[Any, Any] = {}
         for key_node, value_node in node.value:
@@ -119,106 +115,17 @@ def _build(node: yaml.Node, loc: Loc, doc: Marked, problems: list[Problem],
     return constructor.construct_object(node, deep=True)
 
 
-MAX_FILE_BYTES = 4 * 1024 * 1024  # a mission is a few kB; anything this big is a mistake or an attack
-MAX_ALIASES = 100  # YAML aliases (*name) allowed in one file: a mission needs none
-MAX_DEPTH = 32  # nesting of mappings and lists: a mission nests 6 deep
-MAX_NODES = 200_000  # values after alias expansion: stops a "billion laughs" before it costs memory
-
-
 class ConfigFileError(ConfigError):
     """The file itself cannot be read (missing, a directory, a FIFO, unreadable, too large): the
     commands exit 2 for it, as for a rejected mission, rather than 1 (a problem in its content)."""
 
 
 def read_config_text(path: str | Path) -> str:
-    """The text of a config file, refusing anything that could hang or exhaust memory.
-
-    The file is opened non-blocking (opening a FIFO for reading would otherwise wait for a writer
-    forever) and checked with fstat on the open descriptor (no race between a check and the open):
-    only a regular file of at most MAX_FILE_BYTES is read.
-    """
-    name = str(path)
-
-    def fail(message: str) -> ConfigFileError:
-        return ConfigFileError([Problem(name, 1, 1, "", message)])
-
+    """`fsw.safe_yaml.read_config_text`, its refusal as a ConfigFileError naming the file."""
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
-    except FileNotFoundError:
-        raise fail("file not found") from None
-    except IsADirectoryError:
-        raise fail("is a directory; give a YAML file") from None
-    except PermissionError:
-        raise fail("permission denied: the file cannot be read (check its permissions)") from None
-    except OSError as exc:
-        raise fail(f"cannot open: {exc.strerror or exc}") from None
-    try:
-        info = os.fstat(fd)
-        if stat.S_ISDIR(info.st_mode):
-            raise fail("is a directory; give a YAML file")
-        if not stat.S_ISREG(info.st_mode):
-            raise fail("is not a regular file (a FIFO, socket or device); give a YAML file")
-        if info.st_size > MAX_FILE_BYTES:
-            raise fail(f"is {info.st_size / 2**20:.1f} MB; a config file may be at most "
-                       f"{MAX_FILE_BYTES // 2**20} MB")
-        os.set_blocking(fd, True)
-        with os.fdopen(fd, "rb", closefd=True) as handle:
-            fd = -1
-            raw = handle.read(MAX_FILE_BYTES + 1)  # the file may have grown since fstat
-    except OSError as exc:
-        raise fail(f"cannot read: {exc.strerror or exc}") from None
-    finally:
-        if fd >= 0:
-            os.close(fd)
-    if len(raw) > MAX_FILE_BYTES:
-        raise fail(f"is larger than {MAX_FILE_BYTES // 2**20} MB, the limit for a config file")
-    try:
-        return raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise fail(f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-
-
-class _LimitExceeded(yaml.YAMLError):
-    def __init__(self, message: str, mark: Any):
-        super().__init__(message)
-        self.message, self.mark = message, mark
-
-
-class _BoundedLoader(yaml.SafeLoader):
-    """PyYAML's safe loader with the nesting depth and the number of aliases bounded while composing
-    (its composer recurses once per level: 100 k levels would end in a RecursionError)."""
-
-    def __init__(self, stream: str):
-        super().__init__(stream)
-        self._depth = 0
-        self._aliases = 0
-
-    def compose_node(self, parent: Any, index: Any) -> Any:
-        if self.check_event(yaml.AliasEvent):
-            self._aliases += 1
-            if self._aliases > MAX_ALIASES:
-                raise _LimitExceeded(f"more than {MAX_ALIASES} YAML aliases (*name); write the values out",
-                                     self.peek_event().start_mark)
-            return super().compose_node(parent, index)
-        self._depth += 1
-        try:
-            if self._depth > MAX_DEPTH:
-                raise _LimitExceeded(f"nested more than {MAX_DEPTH} levels deep; a mission nests about 6",
-                                     self.peek_event().start_mark)
-            return super().compose_node(parent, index)
-        finally:
-            self._depth -= 1
-
-
-def _compose_all(text: str) -> list[yaml.Node]:
-    loader = _BoundedLoader(text)
-    try:
-        nodes = []
-        while loader.check_node():
-            nodes.append(loader.get_node())
-        return nodes
-    finally:
-        loader.dispose()
+        return safe_yaml.read_config_text(path)
+    except safe_yaml.UnreadableFile as exc:
+        raise ConfigFileError([Problem(str(path), 1, 1, "", str(exc))]) from None
 
 
 def syntax_problem(name: str, text: str, exc: yaml.MarkedYAMLError) -> Problem:
@@ -339,8 +246,8 @@ def load_marked(path: str | Path, text: str | None = None) -> Marked:
         raise ConfigFileError([Problem(name, 1, 1, "", f"larger than {MAX_FILE_BYTES // 2**20} MB, the limit "
                                        "for a config file")])
     try:
-        nodes = _compose_all(text)
-    except _LimitExceeded as exc:
+        nodes = safe_yaml.compose_all(text)
+    except safe_yaml.LimitExceeded as exc:
         raise ConfigError([Problem(name, exc.mark.line + 1, exc.mark.column + 1, "", exc.message)]) from None
     except yaml.MarkedYAMLError as exc:
         raise ConfigError([syntax_problem(name, text, exc)]) from None
@@ -355,13 +262,15 @@ def load_marked(path: str | Path, text: str | None = None) -> Marked:
     if not isinstance(root, yaml.MappingNode):
         raise ConfigError([Problem(name, *_mark(root), "",
                                    f"the top level must be a mapping of keys, got a {root.id}")])
+    try:
+        safe_yaml.check_expansion(root)  # before building: aliases inside aliases expand geometrically
+    except safe_yaml.LimitExceeded as exc:
+        raise ConfigError([Problem(name, exc.mark.line + 1, exc.mark.column + 1, "", exc.message)]) from None
     doc = Marked(data=None, file=name)
     problems: list[Problem] = []
     constructor = yaml.SafeLoader("")  # only its construct_object is used
     try:
         doc.data = _build(root, (), doc, problems, constructor)
-    except _LimitExceeded as exc:
-        problems.append(Problem(name, exc.mark.line + 1, exc.mark.column + 1, "", exc.message))
     except yaml.constructor.ConstructorError as exc:
         mark = exc.problem_mark
         problems.append(Problem(name, mark.line + 1 if mark else 1, mark.column + 1 if mark else 1, "",

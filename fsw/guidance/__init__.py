@@ -25,7 +25,9 @@ Where each behaviour lives (one module per concern):
 * `fsw.guidance.pointing`: POINTING on S^2, the sky zones rebuilt as they move, margins, roll;
 * `fsw.guidance.path_planning`: the shortest slew path round the zones (visibility graph);
 * `fsw.guidance.path_following`: the law's aim moved along that path, replanned when a zone moves onto it;
+* `fsw.guidance.watchdog`: the guidance watchdog, a slew standing still reported and replanned;
 * `fsw.guidance.quaternion`: QUATERNION on S^3, forbidden-attitude zones, the double-cover lift;
+* `fsw.guidance.attitude_planning`: QUATERNION slews planned on S^3 round the zones' bounding balls;
 * `fsw.guidance.safe`: SAFE (rate damping, Sun acquisition) and the no-fix acquisition rotation;
 * `fsw.guidance.common`: the per-cycle output record and small vector helpers.
 

@@ -20,11 +20,12 @@ from fsw.guidance.slew_limits import (
     BRAKING_RESERVE_DEG, allowed_braking_deg, braking_problem, rate_for_distance_deg_s, rule_eps,
 )
 from fsw.guidance.safe import SafeGuidance, _acquisition_rate_B
+from fsw.guidance.watchdog import ProgressWatchdog, StallRecovery
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
 
 
-class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance):
+class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidance, SafeGuidance):
     """Mode logic and guidance laws; `step` runs once per GNC cycle."""
 
     MODES = ("SAFE", "POINTING", "QUATERNION")
@@ -73,8 +74,8 @@ class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance
         self._sky_groups: list[list[int]] = []
         self._sky_law_zones: list = []
         self._build_s3_zones()
-        self._s3_law = None
         self._q_lift: np.ndarray | None = None
+        self._drop_s3_path()  # no S^3 path yet: the law heads for the target until one is planned
         # SAFE mode state
         self.safe_phase = "RATE_DAMPING"
         self._damped_s = 0.0
@@ -96,6 +97,7 @@ class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance
         self._aim_k = -1
         self._plan_due = True
         self._planned_t = -math.inf
+        self._watchdog = ProgressWatchdog(cfg.law.stall_watchdog_s)
         self.last_t_s = 0.0
 
     # ------------------------------------------------------------------------------ configuration
@@ -109,12 +111,14 @@ class Guidance(PointingGuidance, PathFollowing, QuaternionGuidance, SafeGuidance
         self._safe_sun = None
         self.mode = mode
         self._drop_path()
+        self._watchdog.reset()
         self._governor_margins = None
         if mode == "SAFE":
             self.safe_phase = "RATE_DAMPING"
             self._damped_s = 0.0
         if mode == "QUATERNION":
             self._q_lift = None
+            self._drop_s3_path()
         self._checks_dirty = True
 
     def set_gains(self, k1: float, kappa: float, eps: float | str, rate_limit_deg_s: float) -> None:

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from fsw.guidance.common import _angle_deg
-from fsw.guidance.path_planning import PathFollower, path_length_deg, plan_path
+from fsw.guidance.path_planning import PathFollower, advance_aim, path_length_deg, plan_path
 
 
 class PathFollowing:
@@ -17,10 +17,17 @@ class PathFollowing:
 
     # ----------------------------------------------------------------------------- path guidance
     def _drop_path(self) -> None:
-        """Forget the planned path; the next law rebuild plans one for the current target."""
+        """Forget the planned path and the law built for its aim; the next cycle plans from the boresight.
+
+        The law is rebuilt only when its key is cleared (or a zone moved, or the aim advanced). Dropping
+        the path without clearing it left the law steering to the old path point: a mode change back to
+        POINTING during a planned slew (fault-imu-dropout: SAFE at 60 s, POINTING again at 80 s) brought
+        the boresight to the point the path had reached and held it there, 77 deg from the target, until
+        the Moon had moved far enough to force a rebuild 195 s later (design note 13)."""
         self._follower = None
         self._aim, self._aim_k = self.target_N, -1
         self._plan_due = True
+        self._sky_law_key = None
 
     def _plan(self, t_s: float, y: np.ndarray, obstacles: list) -> None:
         """Plan the slew from the boresight ``y`` round ``obstacles`` (the law's zones after merging, and
@@ -39,15 +46,19 @@ class PathFollowing:
             self._follower, self._aim, self._aim_k = None, self.target_N, -1
             return
         replanned = self._follower is not None
-        # far enough ahead that the law's rate, k1 sin(angle to its target), stays at the rate limit
-        saturating = math.degrees(math.asin(min(1.0, 1.25 * self.max_rate_rad_s / self.k1)))
-        self._follower = PathFollower(vertices, max(cfg.lookahead_deg, saturating))
-        self._aim_k = -1
-        self._advance_aim(y)
+        self._follow(vertices, y)
         if not replanned:
             length = path_length_deg(vertices)
             self.events("PATH_PLANNED", length_deg=length, detour_deg=length - _angle_deg(y, self.target_N),
                         legs=len(vertices) - 1)
+
+    def _follow(self, vertices: np.ndarray, y: np.ndarray) -> None:
+        """Fly the path ``vertices`` (boresight ``y`` at its start): the law's aim moves along it."""
+        # far enough ahead that the law's rate, k1 sin(angle to its target), stays at the rate limit
+        saturating = math.degrees(math.asin(min(1.0, 1.25 * self.max_rate_rad_s / self.k1)))
+        self._follower = PathFollower(vertices, max(self.cfg.pointing.path.lookahead_deg, saturating))
+        self._aim_k = -1
+        self._advance_aim(y)
 
     def _path_blocked(self, t_s: float, obstacles: list) -> bool:
         """Every replan_period_s: does a zone (they move) now come within half the standoff of the rest
@@ -73,12 +84,7 @@ class PathFollowing:
 
     def _advance_aim(self, y: np.ndarray) -> bool:
         """Move the law's aim to the path point ahead of the boresight ``y``; True if it moved."""
-        f = self._follower
-        k = f.aim_index(y)
-        if k == self._aim_k:
-            return False
-        if k == len(f.path) - 1:  # the last leg is the paper's law to the real target
-            self._follower, self._aim, self._aim_k = None, self.target_N, -1
-        else:
-            self._aim, self._aim_k = f.path[k], k
-        return True
+        moved, self._follower, aim, self._aim_k = advance_aim(self._follower, y, self._aim_k, self.target_N)
+        if moved:
+            self._aim = aim
+        return moved

@@ -237,3 +237,16 @@ class PathFollower:
         self.index += int(np.argmax(self.path[self.index:] @ y))
         ahead = np.flatnonzero(self.path[self.index:] @ y < self.cos_ahead)
         return len(self.path) - 1 if ahead.size == 0 else self.index + int(ahead[0])
+
+
+def advance_aim(follower: PathFollower, x: np.ndarray, aim_k: int, target: np.ndarray
+                ) -> tuple[bool, PathFollower | None, np.ndarray | None, int]:
+    """The law's aim for the state ``x`` on ``follower``'s path, its index having been ``aim_k``:
+    (moved, follower, aim, index). On the path's last point the path is done: (True, None, target, -1),
+    the last leg being the paper's law to the real target. Unmoved: (False, follower, None, aim_k)."""
+    k = follower.aim_index(x)
+    if k == aim_k:
+        return False, follower, None, aim_k
+    if k == len(follower.path) - 1:
+        return True, None, target, -1
+    return True, follower, follower.path[k], k

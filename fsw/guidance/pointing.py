@@ -157,13 +157,14 @@ class PointingGuidance:
         omega_cmd = _saturate(np.asarray(omega_law), self.max_rate_rad_s)
         if self.slots:
             omega_cmd = self._govern(omega_cmd, out.margins_deg)
+        out.pointing_error_deg = math.degrees(math.acos(max(-1.0, min(1.0, float(y @ self.target_N)))))
+        self._watch_progress(t_s, y, out.pointing_error_deg, omega_cmd, out.active_zone)
         roll_err = self._roll_error(R, y)
         omega_roll = self.cfg.pointing.roll_gain_1_s * roll_err * self.b_B
         # the roll rate is about the boresight, the law's rate normal to it: the roll gets what the rate
         # limit leaves, so the body rate as a whole stays within the limit (at most half of it)
         room = math.sqrt(max(0.0, self.max_rate_rad_s ** 2 - float(omega_cmd @ omega_cmd)))
         out.omega_cmd_BN_B = omega_cmd + _saturate(omega_roll, min(room, 0.5 * self.max_rate_rad_s))
-        out.pointing_error_deg = math.degrees(math.acos(max(-1.0, min(1.0, float(y @ self.target_N)))))
         out.roll_error_deg = math.degrees(roll_err)
         return out
 

@@ -21,9 +21,11 @@ import math
 
 import numpy as np
 
+from fsw.guidance.attitude_planning import plan_attitude_path
 from fsw.guidance.common import (
     GuidanceOutput, _make_gradient_law, _make_star_law, _saturate, _unit, signed_margin_deg,
 )
+from fsw.guidance.path_planning import PathFollower, advance_aim, path_length_deg
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc.attitude import attitude_error_angle, quat_to_dcm_nb, quaternion_rate_command_nb
 
@@ -60,8 +62,39 @@ class QuaternionGuidance:
     def set_target_quaternion(self, q_NB: np.ndarray) -> None:
         self.q_target = _unit(np.asarray(q_NB, dtype=float))
         self._q_lift = None
-        self._s3_law = None
+        self._drop_s3_path()
         self._checks_dirty = True
+
+    def _drop_s3_path(self) -> None:
+        """Forget the S^3 path and the law built for its aim: the next cycle plans from the attitude."""
+        self._s3_follower, self._s3_aim, self._s3_aim_k = None, self.q_target, -1
+        self._s3_plan_due = True
+        self._s3_law = None
+
+    def _plan_s3(self, x: np.ndarray) -> None:
+        """Plan the slew from the lifted attitude ``x`` round the law's zones (`attitude_planning`); follow
+        the path only when the geodesic is blocked."""
+        self._s3_plan_due = False
+        cfg = self.cfg.quaternion.path
+        if not cfg.enabled:
+            return
+        vertices = plan_attitude_path(x, self.q_target, self.s3_law_zones, cfg.standoff_deg)
+        if vertices is None or len(vertices) <= 2:
+            return
+        # far enough ahead that the law's rate, 2 k1 sin(angle to its target), stays at the rate limit
+        saturating = math.degrees(math.asin(min(1.0, 1.25 * self.max_rate_rad_s / (2.0 * self.k1))))
+        self._s3_follower = PathFollower(vertices, max(cfg.lookahead_deg, saturating))
+        self._advance_s3_aim(x)
+        length = path_length_deg(vertices)
+        self.events("PATH_PLANNED", length_deg=length, detour_deg=length - math.degrees(
+            math.acos(max(-1.0, min(1.0, float(x @ self.q_target))))), legs=len(vertices) - 1)
+
+    def _advance_s3_aim(self, x: np.ndarray) -> bool:
+        """Move the law's aim along the S^3 path ahead of ``x``; True (the law must be rebuilt) if it moved."""
+        moved, self._s3_follower, aim, self._s3_aim_k = advance_aim(self._s3_follower, x, self._s3_aim_k, self.q_target)
+        if moved:
+            self._s3_aim = aim
+        return moved
 
 
     def _quaternion(self, t_s: float, q: np.ndarray) -> GuidanceOutput:
@@ -73,15 +106,20 @@ class QuaternionGuidance:
         self._q_lift = x
         out = GuidanceOutput(np.zeros(3), "QUATERNION", q_target_NB=xd.copy())
         if self.s3_law_zones:
+            if self._s3_plan_due:
+                self._plan_s3(x)
+            if self._s3_follower is not None and self._advance_s3_aim(x):
+                self._s3_law = None
+            aim = self._s3_aim
             if self._s3_law is None:
-                eps_max = ZoneGeometry.fast_eps_max(xd, self.s3_law_zones)
+                eps_max = ZoneGeometry.fast_eps_max(aim, self.s3_law_zones)
                 eps = self._eps_for(max(eps_max, 1e-5))
                 self._s3_eps, self._s3_eps_max = eps, eps_max
                 self._current_eps = eps
                 if self.s3_use_gradient:
-                    self._s3_law = _make_gradient_law(xd, self.s3_law_zones, 1.0, eps)
+                    self._s3_law = _make_gradient_law(aim, self.s3_law_zones, 1.0, eps)
                 else:
-                    self._s3_law = _make_star_law(xd, self.s3_law_zones, 1.0, self.kappa, eps)
+                    self._s3_law = _make_star_law(aim, self.s3_law_zones, 1.0, self.kappa, eps)
             u_law, zone = self._s3_law.control_and_zone(x)
             u = self.k1 * np.asarray(u_law, dtype=float)
             out.eps, out.eps_max = self._s3_eps, self._s3_eps_max

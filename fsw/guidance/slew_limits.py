@@ -3,10 +3,12 @@
 The paper's law keeps ``ydot = P(y) u`` outside the inflated zones; the real boresight lags the command.
 Stopping from the rate ``w`` takes the braking distance
 
-    b(w) = w^2 / (2 a) + w / k_p        [angle]
+    b(w) = w^2 / (2 a) + 1.5 w / k_p        [angle]
 
 with ``a`` the angular acceleration the rate loop may command (`control.max_command_accel_deg_s2`, or
-less when the remaining wheels give less) and ``1 / k_p`` the rate loop's lag (``k_p`` its bandwidth).
+less when the remaining wheels give less), ``1 / k_p`` the rate loop's lag (``k_p`` its bandwidth) and
+``w / (2 k_p)`` the command's own jerk-limited start of the braking (`fsw.control`: the acceleration
+reaches ``a`` in ``a / j = 1 / k_p`` with the automatic jerk limit, which costs ``w a / (2 j)``).
 Two rules use it, one function each, shared by the flight software and the ground's `config check`:
 
 * `braking_problem` (command and load-time rule): a rate limit whose braking distance exceeds what the
@@ -31,12 +33,14 @@ import math
 
 BRAKING_RESERVE_DEG = 0.5
 BRAKING_REASON = "BRAKING_DISTANCE"
+# the rate loop's lag (1 / k_p) and the jerk-limited command's (1 / (2 k_p)), in loop time constants
+LAG_TIME_CONSTANTS = 1.5
 
 
 def braking_distance_deg(rate_deg_s: float, accel_deg_s2: float, bandwidth_rad_s: float) -> float:
     """Angle [deg] the body turns while stopping from ``rate_deg_s`` at ``accel_deg_s2`` after the rate
-    loop's lag ``1 / bandwidth_rad_s`` [s]."""
-    return rate_deg_s * rate_deg_s / (2.0 * accel_deg_s2) + rate_deg_s / bandwidth_rad_s
+    loop's and the jerk limit's lag ``1.5 / bandwidth_rad_s`` [s]."""
+    return rate_deg_s * rate_deg_s / (2.0 * accel_deg_s2) + LAG_TIME_CONSTANTS * rate_deg_s / bandwidth_rad_s
 
 
 def rate_for_distance_deg_s(distance_deg: float, accel_deg_s2: float, bandwidth_rad_s: float) -> float:
@@ -44,7 +48,7 @@ def rate_for_distance_deg_s(distance_deg: float, accel_deg_s2: float, bandwidth_
     the positive root of w^2 / (2 a) + w / k_p = d."""
     if not distance_deg > 0.0 or not accel_deg_s2 > 0.0:
         return 0.0
-    lag = 1.0 / bandwidth_rad_s
+    lag = LAG_TIME_CONSTANTS / bandwidth_rad_s
     return accel_deg_s2 * (math.sqrt(lag * lag + 2.0 * distance_deg / accel_deg_s2) - lag)
 
 

@@ -36,7 +36,7 @@ _WORLD_FIELDS = {
     ("orbit",): ("orbit",),
     ("epoch_utc",): ("epoch_utc",),
 }
-_WHEEL_FIELDS = {"Js_kgm2": "Js_kgm2", "max_torque_Nm": "max_torque_Nm", "max_speed_rad_s": "max_speed_rad_s",
+_WHEEL_FIELDS = {"Js_kgm2": "Js_kgm2", "spin_inertia_kgm2": "Js_kgm2", "max_torque_Nm": "max_torque_Nm", "max_speed_rad_s": "max_speed_rad_s",
                  "viscous_friction_Nm_per_rad_s": "viscous_friction_Nm_per_rad_s",
                  "coulomb_friction_Nm": "coulomb_friction_Nm", "axis_B": "axis_B", "failure": "failure"}
 
@@ -91,6 +91,31 @@ class _TruthRows:
         for name, col in self._cols.items():
             out[name] = self.AUX[:n, col:col + 3]
         return {k: np.ascontiguousarray(v) for k, v in out.items()}
+
+
+class _EstimateRows:
+    """The MEKF's attitude and attitude covariance at each tick, to judge its consistency on truth
+    (`hil_sim.consistency`): only fast mode can read the flight software's full covariance."""
+
+    def __init__(self, n_rows: int) -> None:
+        self.rows = np.full(n_rows, -1)
+        self.q = np.zeros((n_rows, 4))
+        self.P = np.zeros((n_rows, 3, 3))
+        self.n = 0
+
+    def record(self, truth_row: int, estimator: Any) -> None:
+        if estimator.initialized and self.n < len(self.rows):
+            self.rows[self.n], self.q[self.n], self.P[self.n] = truth_row, estimator.q_NB, estimator.P[:3, :3]
+            self.n += 1
+
+    def metrics(self, truth: dict[str, np.ndarray]) -> dict[str, float]:
+        """``nees_mean`` and ``nees_band_fraction`` (cycles inside the 95 % chi-square band)."""
+        from hil_sim.consistency import attitude_nees, band_fraction
+
+        keep = self.rows[:self.n] < len(truth["q_NB"])
+        rows = self.rows[:self.n][keep]
+        nees = attitude_nees(truth["q_NB"][rows], self.q[:self.n][keep], self.P[:self.n][keep])
+        return {"nees_mean": float(np.mean(nees)) if nees.size else math.nan, "nees_band_fraction": band_fraction(nees)}
 
 
 class _InProcessSender:
@@ -151,6 +176,8 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         n_ticks = int(round(mission.duration_s / cfg.gnc_period_s))
         truth = _TruthRows(n_ticks, world)
         truth.record()
+        estimates = _EstimateRows(n_ticks + 1)
+        torques = np.zeros((n_ticks + 1, world.n_wheels))
         for _ in range(n_ticks):
             telemetry.now = sim.t_s
             timeline.release(sim.t_s)
@@ -158,12 +185,16 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
             inputs = driver.collect_tick(0.0)
             if inputs is not None:
                 fsw.run_cycle(inputs)
+                estimates.record(truth.n - 1, fsw.estimator)  # the estimate of the truth row at this tick
+                torques[truth.n - 1] = fsw.last.wheel_torque_cmd_Nm  # held over the tick that follows
             sim.end_tick(wait_s=0.0)
             truth.record()
         record = truth.arrays()
+        record["wheel_torque_Nm"] = torques[:len(record["t_s"])]
         trips = [str(a.get("monitor", "?")) for _, name, a in telemetry.events if name == "FDIR_TRIPPED"]
         rejected = sum(1 for _, name, _ in telemetry.events if name in ("CMD_REJECTED", "TARGET_REJECTED"))
         metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected)
+        metrics.update(estimates.metrics(record))
         used = _read_back(paths, mission, world, initial, fsw, timeline.sent, sim)
         return RunResult(metrics=metrics, used=used, trajectory=trajectory, sim_time_s=float(record["t_s"][-1]),
                          events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events if n == "FDIR_TRIPPED"][:200])
@@ -220,12 +251,18 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     metrics["min_margin_deg"] = min((float(z.margin_deg.min()) for z in zones), default=math.inf)
     err, segments = summary.error_series(mission, truth, y_N)
     spans = summary.settling(mission, t, err, segments)
+    if "wheel_torque_Nm" in truth:
+        summary.add_torque_variation(spans, t, truth["wheel_torque_Nm"])
+        # the roughest commanded slew [N m]
+        metrics["torque_variation_Nm"] = max((s.get("torque_variation_Nm", math.nan) for s in spans if s["judged"]),
+                                             default=math.nan)
     # the slowest commanded target (inf when one never settled within its span)
     metrics["settling_time_s"] = max((math.inf if s["settling_time_s"] is None else float(s["settling_time_s"])
                                       for s in spans if s["judged"]), default=math.nan)
     metrics["final_error_deg"] = float(err[-1])
     limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
     metrics["peak_wheel_speed_fraction"] = float(np.max(np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]))
+    metrics["peak_body_rate_fraction"] = summary.peak_body_rate_fraction(mission, truth)[0]
     # lockstep: a slip is a tick the flight software never answered with CYCLE_DONE (as the SIL counts)
     metrics["cycle_slips"] = float(cycle_slips)
     expected = list(req.expected_fdir_events)
@@ -277,7 +314,9 @@ def _used_value(loc, mission, world, initial, fsw, sent_commands, sim) -> Any:
             return [math.degrees(math.atan2(v[1], v[0])) % 360.0,
                     math.degrees(math.asin(max(-1.0, min(1.0, v[2] / np.linalg.norm(v)))))]
     if loc[:1] == ("faults",):
-        used = [{"kind": f.kind, "message": f.message, "start_s": f.start_s, "end_s": f.end_s}
+        # a fault's optional fields (a delay's delay_s, a corruption's bit) only when it has them
+        used = [{"kind": f.kind, "message": f.message, "start_s": f.start_s, "end_s": f.end_s,
+                 **{k: getattr(f, k) for k in ("delay_s", "bit") if getattr(f, k) is not None}}
                 for f in sim.injector.faults] if sim.injector is not None else []
         return dsp.read_path({"faults": used}, loc)
     if loc[:2] == ("spacecraft", "wheels") and len(loc) >= 4 and loc[3] in _WHEEL_FIELDS:

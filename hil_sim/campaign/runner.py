@@ -66,6 +66,11 @@ def build_plan(campaign_path: str | Path, *, mode: str | None = None, runs: int 
         base_model = load_model(base_path, model_class)
     from hil_sim.yaml_loader import load_marked
     base_raw = load_marked(base_path).data
+    if model_class.__name__ == "Mission":
+        # the flight software's knowledge is fixed from the values written in the file, before any
+        # dispersion: a dispersed truth value never reaches the flight software
+        from hil_sim.mission import written_once
+        base_raw = written_once(base_raw)
     nominal = dsp.nominal_values(campaign.dispersions, base_model)
     fn = run_function or resolve_run_function(MODE_RUN_FUNCTIONS[campaign.mode])
     plan = Plan(campaign=campaign, base_raw=base_raw, nominal=nominal, model_class=model_class,

@@ -67,7 +67,9 @@ def _world(initial_wheel_speed: float = 0.0):
 def _controller_for(wp, bandwidth: float):
     from closed_loop_kit import fsw_config_for
 
-    cfg = fsw_config_for(wp, control={"rate_bandwidth_rad_s": bandwidth, "max_command_accel_deg_s2": 5.0})
+    # no jerk limit: these tests measure the loop's own bandwidth, not the command shaping
+    cfg = fsw_config_for(wp, control={"rate_bandwidth_rad_s": bandwidth, "max_command_accel_deg_s2": 5.0,
+                                      "max_command_jerk_deg_s3": 0.0})
     return RateController(cfg)
 
 
@@ -92,7 +94,7 @@ def test_rate_loop_tracks_a_rate_command_on_the_truth_model(wheel_speed: float) 
 
 
 def test_command_slew_rate_limit_and_feed_forward() -> None:
-    cfg = FswConfig(control={"max_command_accel_deg_s2": 1.0, "rate_bandwidth_rad_s": 1.0})
+    cfg = FswConfig(control={"max_command_accel_deg_s2": 1.0, "rate_bandwidth_rad_s": 1.0, "max_command_jerk_deg_s3": 0.0})
     ctrl = RateController(cfg)
     out1 = ctrl.step(0.1, np.radians([10.0, 0, 0]), np.zeros(3))
     assert math.degrees(np.linalg.norm(out1.omega_cmd_shaped_BN_B)) == pytest.approx(0.1)
@@ -103,32 +105,40 @@ def test_command_slew_rate_limit_and_feed_forward() -> None:
     np.testing.assert_allclose(out2.torque_cmd_B_Nm, expected, rtol=1e-9)
 
 
-def _reference_step(ctrl: RateController, prev_cmd, dt, cmd, omega, speeds):
-    """The numpy rate loop the compiled ``_rate_loop`` replaced (as it was), for comparison."""
+def _reference_step(ctrl: RateController, prev_cmd, prev_accel, dt, cmd, omega, speeds):
+    """The rate loop in numpy, for comparison with the compiled ``_rate_loop``: returns
+    (torque, tau, scale, shaped, acceleration of the shaped command)."""
     ws = np.asarray(speeds, dtype=float)
     wheel_speed = np.where(np.isfinite(ws), ws, ctrl.wheel_speed)
     prev = np.asarray(omega, dtype=float) if prev_cmd is None else prev_cmd
-    step = cmd - prev
-    max_step = ctrl.max_accel * dt
-    norm = float(np.linalg.norm(step))
-    if norm > max_step:
-        step *= max_step / norm
+    if ctrl.max_jerk > 0.0:
+        a_des = ctrl.kp * (cmd - prev)
+        a_des *= min(1.0, ctrl.max_accel / max(float(np.linalg.norm(a_des)), 1e-300))
+        da = a_des - prev_accel
+        da *= min(1.0, ctrl.max_jerk * dt / max(float(np.linalg.norm(da)), 1e-300))
+        step = (prev_accel + da) * dt
+    else:
+        step = cmd - prev
+        max_step = ctrl.max_accel * dt
+        norm = float(np.linalg.norm(step))
+        if norm > max_step:
+            step *= max_step / norm
     shaped = prev + step
     cmd_dot = step / dt if (ctrl.ff and prev_cmd is not None) else np.zeros(3)
     w = np.asarray(omega, dtype=float)
     h = ctrl.J @ w + ctrl.G @ (ctrl.Js * wheel_speed)
     torque = ctrl.J @ (ctrl.kp * (shaped - w) + cmd_dot) + np.cross(w, h)
     tau, scale = allocate_min_norm(ctrl.G, ctrl.active, torque, ctrl.max_torque, ctrl.M)
-    return torque, tau, scale, shaped
+    return torque, tau, scale, shaped, step / dt
 
 
-@pytest.mark.parametrize("isolate", [None, 2])
-def test_compiled_rate_loop_matches_the_numpy_reference(isolate) -> None:
+@pytest.mark.parametrize("isolate,jerk", [(None, 0.0), (2, 0.0), (None, "auto"), (2, 3.0)])
+def test_compiled_rate_loop_matches_the_numpy_reference(isolate, jerk) -> None:
     rng = np.random.default_rng(7)
-    ctrl = RateController(FswConfig(control={"max_command_accel_deg_s2": 0.5}))
+    ctrl = RateController(FswConfig(control={"max_command_accel_deg_s2": 0.5, "max_command_jerk_deg_s3": jerk}))
     if isolate is not None:
         assert ctrl.isolate(isolate)
-    prev = None
+    prev, accel = None, np.zeros(3)
     saturated = limited = 0
     for k in range(300):
         cmd = rng.normal(scale=0.05 if k % 3 else 2.0, size=3)
@@ -136,15 +146,45 @@ def test_compiled_rate_loop_matches_the_numpy_reference(isolate) -> None:
         speeds = rng.normal(scale=200.0, size=4)
         if k % 7 == 0:
             speeds[rng.integers(4)] = np.nan  # a missing wheel report keeps the last speed
-        ref = _reference_step(ctrl, prev, 0.1, cmd, omega, speeds)
+        ref = _reference_step(ctrl, prev, accel, 0.1, cmd, omega, speeds)
         out = ctrl.step(0.1, cmd, omega, speeds)
         np.testing.assert_allclose(out.torque_cmd_B_Nm, ref[0], rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(out.wheel_torque_cmd_Nm, ref[1], rtol=1e-12, atol=1e-15)
         assert out.torque_scale == pytest.approx(ref[2], rel=1e-12)
         np.testing.assert_allclose(out.omega_cmd_shaped_BN_B, ref[3], rtol=1e-12, atol=1e-15)
-        prev = ref[3]
+        prev, accel = ref[3], ref[4]
         saturated += ref[2] < 1.0
         limited += not np.allclose(ref[3], cmd)
     assert saturated > 10 and limited > 10  # both limiters were exercised
     if isolate is not None:
         assert np.all(out.wheel_torque_cmd_Nm[isolate] == 0.0)
+
+
+def test_jerk_limit_bounds_the_torque_change_when_the_command_swings_every_cycle() -> None:
+    """The law's command inside an eps-layer can swing by ten degrees of direction from one cycle to the
+    next (the demo's Sun-zone passage). Without a jerk limit the shaped command's acceleration reverses
+    every cycle and the feed-forward J omega_cmd_dot throws the torque from one side to the other; with
+    the automatic limit (full acceleration in one loop time constant) the torque changes by at most
+    J max_jerk dt plus the feedback's share, and the command is still followed on average."""
+    rng = np.random.default_rng(3)
+    base = np.radians([0.8, 0.6, 0.0])
+    swing = [base + np.radians(0.17) * np.array([math.cos(a), math.sin(a), 0.0])
+             for a in rng.uniform(-math.pi, math.pi, size=300)]
+    tv, mean_rate = {}, {}
+    for jerk in (0.0, "auto"):
+        ctrl = RateController(FswConfig(control={"max_command_accel_deg_s2": 0.15, "rate_bandwidth_rad_s": 1.0,
+                                                 "max_command_jerk_deg_s3": jerk}))
+        omega, torques, rates = base.copy(), [], []
+        for cmd in swing:
+            out = ctrl.step(0.1, cmd, omega)
+            omega = out.omega_cmd_shaped_BN_B  # perfect tracking of the shaped command
+            torques.append(out.torque_cmd_B_Nm)
+            rates.append(omega)
+        steps = np.linalg.norm(np.diff(torques[10:], axis=0), axis=1)
+        tv[jerk], mean_rate[jerk] = float(steps.sum()), np.mean(rates[50:], axis=0)
+        if jerk == "auto":
+            J = np.asarray(ctrl.J)
+            bound = np.linalg.norm(J, 2) * (ctrl.max_jerk * 0.1 + ctrl.kp * ctrl.max_accel * 0.1)
+            assert steps.max() <= bound * (1 + 1e-9)
+    assert tv["auto"] < 0.2 * tv[0.0], tv
+    np.testing.assert_allclose(mean_rate["auto"], np.mean(swing[50:], axis=0), atol=math.radians(0.03))

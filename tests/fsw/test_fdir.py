@@ -168,3 +168,17 @@ def test_keep_out_margin_yellow_and_red(closing) -> None:
     trip = _tripped(tm, "KEEP_OUT_MARGIN")
     assert trip and trip[0]["action"] == "ENTER_SAFE"
     assert loop.fsw.mode == "SAFE"
+
+
+def test_keep_out_violation_is_raised_in_safe_mode_from_the_onboard_estimate(closing) -> None:
+    """SAFE keeps out too, so FDIR watches its margins: a boresight inside a zone in SAFE (a zone placed on
+    the initial boresight, body z = N z) raises KEEP_OUT_VIOLATION from the flight software's estimate."""
+    zones = [{"name": "block", "body": "inertial", "direction_N": [0.0, 0.0, 1.0],
+              "geometry": {"shape": "cone", "half_angle_deg": 5.0}}]
+    loop, tm, _ = _setup(fsw_sections={"initial_mode": "SAFE", "pointing": {"target_N": [0.0, 1.0, 0.0],
+                                                                             "zones": zones}})
+    closing(loop)
+    loop.run(10)
+    assert loop.fsw.mode == "SAFE"
+    violations = _events(tm, "KEEP_OUT_VIOLATION")
+    assert violations and violations[0][1]["body"] == "INERTIAL" and violations[0][1]["margin_deg"] < -4.0

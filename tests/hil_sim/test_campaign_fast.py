@@ -10,6 +10,7 @@ import pytest
 import xmlschema
 
 from hil_sim.campaign import dispersions as dsp
+from hil_sim.campaign.spec import load_campaign
 from hil_sim.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -39,7 +40,8 @@ def test_shortened_regression_campaign_runs_end_to_end(campaign_dir):
     assert (df["m.min_margin_deg"] > 0).all()
     xmlschema.XMLSchema(JUNIT_XSD).validate(out / "junit.xml")
     cases = ET.parse(out / "junit.xml").getroot().findall(".//testcase")
-    assert len(cases) == RUNS * 7 + 1
+    criteria = len(load_campaign(REGRESSION).criteria)
+    assert len(cases) == RUNS * criteria + 1  # one per criterion and run, and the verdict
 
 
 def test_every_dispersion_was_read_back_from_the_run(campaign_dir):
@@ -95,7 +97,6 @@ def test_sil_mode_runs_the_three_process_sil_per_run(tmp_path):
     udp_multicast group), judged like fast mode; its dispersions read back from the SIL's config."""
     from hil_sim.campaign.execute import execute_run
     from hil_sim.campaign.runner import build_plan
-    from hil_sim.campaign.spec import load_campaign
 
     campaign = load_campaign(REGRESSION).model_copy(update={"duration_s": 15.0, "mode": "sil"})
     plan, _ = build_plan(REGRESSION, campaign=campaign, runs=1)

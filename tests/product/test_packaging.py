@@ -14,7 +14,7 @@ import pytest
 from hil_sim import cli
 
 ROOT = Path(__file__).resolve().parents[2]
-CODE_PACKAGES = ("gnc", "fsw", "hil_sim")
+CODE_PACKAGES = ("gnc", "fsw", "ground", "hil_sim")
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 
 
@@ -45,6 +45,8 @@ def test_every_code_package_is_in_the_wheel():
     listed = set(PYPROJECT["tool"]["setuptools"]["packages"])
     found = {".".join(p.parent.relative_to(ROOT).parts) for package in CODE_PACKAGES
              for p in (ROOT / package).rglob("__init__.py")}
+    found |= {".".join(("keepout_config", *p.relative_to(ROOT / "config").parts)) for p in
+              (ROOT / "config").rglob("*") if p.is_dir() and p.name != "__pycache__"}
     assert found <= listed, f"packages missing from pyproject.toml [tool.setuptools] packages: {found - listed}"
     assert PYPROJECT["tool"]["setuptools"]["package-dir"]["keepout_config"] == "config"
 
@@ -129,7 +131,7 @@ def _copy_source(dest: Path) -> Path:
     import shutil
 
     for name in (*CODE_PACKAGES, "config"):
-        shutil.copytree(ROOT / name, dest / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        shutil.copytree(ROOT / name, dest / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "node_modules"))
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(ROOT / name, dest / name)
     return dest
@@ -170,6 +172,10 @@ def test_the_built_wheel_runs_from_an_empty_folder(tmp_path):
                           "print(i.DEFAULT_DBC_PATH)")
     for line in where.stdout.split():
         assert Path(line).is_file() and Path(line).is_relative_to(env_dir), where
+    installed = Path(run(py, "-c", "import keepout_config; print(keepout_config.config_path())").stdout.strip())
+    shipped = {p.relative_to(source / "config") for p in (source / "config").rglob("*") if p.is_file()}
+    missing = {p for p in shipped if not (installed / p).is_file() and p.suffix != ".pyc"}
+    assert not missing, f"config files not in the wheel: {missing}"
     init = run(keepout, "init", "proj")
     assert init.returncode == 0, init
     check = run(keepout, "config", "validate", "proj/missions/my-mission.yaml")

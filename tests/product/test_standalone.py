@@ -1,20 +1,28 @@
 """The repository stands alone: no machine's folder in any file, no message pointing outside the package."""
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-TEXT_SUFFIXES = {".py", ".md", ".yaml", ".yml", ".toml", ".json", ".txt", ".cfg", ".dbc", ""}
-SKIP_DIRS = {".git", ".venv", "__pycache__", "build", "runs", "campaigns-out", ".pytest_cache", ".hypothesis"}
+TEXT_SUFFIXES = {".py", ".md", ".yaml", ".yml", ".toml", ".json", ".txt", ".cfg", ".dbc", ".js", ".html", ""}
+# outside a git checkout: what is not the repository's own (environments, caches, run outputs, npm)
+SKIP_DIRS = {".git", ".venv", "__pycache__", "build", "runs", "campaigns-out", ".pytest_cache", ".hypothesis",
+             "node_modules"}
 
 
 def _files():
-    for path in ROOT.rglob("*"):
-        rel = path.relative_to(ROOT)
-        if path.is_file() and not SKIP_DIRS & set(rel.parts) and not rel.parts[0].endswith(".egg-info") \
-                and path.suffix in TEXT_SUFFIXES and path.stat().st_size < 5_000_000:
+    """The repository's files: git's list in a checkout (generated files are not committed), else a walk."""
+    listed = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True)
+    if listed.returncode == 0 and listed.stdout:
+        paths = [ROOT / p for p in listed.stdout.decode().split("\0") if p]
+    else:
+        paths = [p for p in ROOT.rglob("*") if not SKIP_DIRS & set(p.relative_to(ROOT).parts)
+                 and not p.relative_to(ROOT).parts[0].endswith(".egg-info")]
+    for path in paths:
+        if path.is_file() and path.suffix in TEXT_SUFFIXES and path.stat().st_size < 5_000_000:
             yield path
 
 

@@ -92,6 +92,14 @@ def test_sim_without_flight_software_says_what_to_start(tmp_path: Path) -> None:
     assert "start `keepout fsw MISSION --bus SPEC` first" in sim.stderr and "Traceback" not in sim.stderr
 
 
+@pytest.mark.parametrize("option, value, message", [("--tm-port", "70000", "70000 is not a UDP port"),
+                                                     ("--bitrate", "5", "not a CAN bit rate")])
+def test_bad_fsw_options_are_one_line_errors(option: str, value: str, message: str) -> None:
+    proc = subprocess.run([*KEEPOUT, "fsw", str(MISSION), option, value], capture_output=True, text=True,
+                          cwd=ROOT, timeout=600)
+    assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr
+
+
 @pytest.mark.parametrize("command", ["fsw", "sim"])
 def test_bad_bus_spec_is_a_one_line_error(command: str, tmp_path: Path) -> None:
     proc = subprocess.run([*KEEPOUT, command, str(MISSION), "--bus", "warpdrive:0"], capture_output=True,

@@ -107,3 +107,26 @@ def test_schema_cli_check_detects_drift(tmp_path, capsys):
     assert main(["config", "schema", "--check", "--out", str(stale)]) == 1
     assert main(["config", "schema", "--out", str(stale)]) == 0
     assert main(["config", "schema", "--check", "--out", str(stale)]) == 0
+
+
+def test_mission_reference_is_current_and_lists_every_key(tmp_path, capsys):
+    """docs/missions.md is generated from the schema (issue 14 point 12): it is up to date, and every key of
+    every mapping in the schema appears in it with its unit, default and range."""
+    from hil_sim.cli import main
+    from hil_sim.mission_docs import DOCS_PATH, mission_docs
+
+    assert DOCS_PATH.read_text() == mission_docs(), "run `keepout config docs` and commit the result"
+    assert main(["config", "docs", "--check"]) == 0
+    stale = tmp_path / "missions.md"
+    stale.write_text(mission_docs().replace("| `duration_s` |", "| `duration` |"))
+    assert main(["config", "docs", "--check", "--out", str(stale)]) == 1
+    assert "out of date" in capsys.readouterr().err
+    text = DOCS_PATH.read_text()
+    schema = mission_json_schema()
+    for name, definition in schema["definitions"].items():
+        for key in definition.get("properties", {}):
+            assert f"| `{key}` |" in text, f"{name}.{key} missing from docs/missions.md"
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| `")}
+    assert "| s | *required* | (0, 864000] |" in rows["`duration_s`"]
+    assert "| Hz | `100.0` | (0, 2000] |" in rows["`dynamics_rate_hz`"]
+    assert "| from the file: spacecraft.inertia_B_kgm2 |" in text and "| from the file: epoch_utc |" in text

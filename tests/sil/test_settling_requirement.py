@@ -40,3 +40,17 @@ def test_a_mission_whose_only_manoeuvre_is_the_initial_target_is_judged_on_it():
     err = np.full_like(t, 5.0)  # never settles
     spans = settling(mission, t, err, segments)
     assert spans[-1]["judged"] is True and spans[-1]["settled_at_s"] is None
+
+
+def test_torque_variation_is_summed_over_each_commanded_span():
+    from hil_sim.summary import add_torque_variation
+
+    t = np.arange(0.0, 10.0, 0.1)
+    tau = np.zeros((len(t), 2))
+    tau[(t > 2.05) & (t < 3.05), 0] = 0.05     # one 50 mN m pulse on wheel 1 in the first span
+    tau[t > 6.05, 1] = np.where(np.arange((t > 6.05).sum()) % 2, 0.01, -0.01)  # chatter in the second
+    spans = [{"commanded_at_s": 0.0, "until_s": 5.0}, {"commanded_at_s": 5.0, "until_s": 10.0}]
+    add_torque_variation(spans, t, tau)
+    assert spans[0]["torque_variation_Nm"] == 0.1  # up and down
+    n = int((t > 6.05).sum())
+    assert abs(spans[1]["torque_variation_Nm"] - (0.01 + 0.02 * (n - 1))) < 1e-12
