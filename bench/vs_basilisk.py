@@ -82,7 +82,7 @@ def run_basilisk(mission) -> float:
 
     rw_factory = simIncludeRW.rwFactory()
     for w in mission.spacecraft.wheels:
-        rw_factory.create("custom", list(map(float, w.axis_B)), Js=float(w.Js_kgm2), u_max=float(w.max_torque_Nm),
+        rw_factory.create("custom", list(map(float, w.axis_B)), Js=float(w.spin_inertia_kgm2), u_max=float(w.max_torque_Nm),
                           Omega_max=float(w.max_speed_rad_s) / macros.RPM, Omega=0.0)
     wheels = reactionWheelStateEffector.ReactionWheelStateEffector()
     wheels.ModelTag = "rw-cluster"
