@@ -21,7 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
-from fsw.dictionary import DICTIONARY
+import sys
+
+ROOT = Path(__file__).resolve().parents[1]
+# bench/fsw.py would shadow the fsw package: drop this folder from the path, as bench/fsw.py does
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
+sys.path.insert(0, str(ROOT))
+
+from fsw.dictionary import DICTIONARY  # noqa: E402
 from ground.monitor import GroundMonitor, run_ground_monitor
 from fsw.telecommand import CommandDispatcher, encode_command
 from fsw.telemetry import TelemetrySender, decode_tm_packet
