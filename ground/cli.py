@@ -118,10 +118,13 @@ _KEY_HELP = ("link key file (default: the mission's flight_software.tmtc.securit
              "are signed and telemetry verified with it")
 
 
-def _key_file(explicit: str | None, config_path: str | None) -> str:
-    """The link key file to use; raises ValueError (one line) when there is none."""
+def _key_file(explicit: str | None, config_path: str | None, run_dir: Path | None = None) -> str:
+    """The link key file to use: ``--key-file``, a SIL run's own ``RUN_DIR/link.key``, or the mission's;
+    raises ValueError (one line) when there is none."""
     if explicit:
         return explicit
+    if run_dir is not None:
+        return str(run_dir / LINK_KEY_FILE)
     if config_path:
         from fsw.config import load_fsw_config
         from fsw.link_security import mission_key_path
@@ -240,9 +243,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         if run_dir is not None and endpoints.state == "finished":
             raise LinkError(f"run {run_dir} has finished: nothing to attach to; its archive is "
                             f"{run_dir / 'ground'} (browse it with `keepout ground web --run {run_dir}`)")
-        # a SIL run's key is RUN_DIR/link.key (made by the SIL for that run)
-        key_file = args.key_file or (str(run_dir / LINK_KEY_FILE) if run_dir is not None
-                                     else _key_file(None, args.config))
+        key_file = _key_file(args.key_file, args.config, run_dir)
         security = downlink_receiver(load_key_file(key_file))
         sock = open_telemetry(endpoints)
     except (DictionaryError, LinkError, ValueError) as exc:
@@ -280,8 +281,7 @@ def _cmd_send(args: argparse.Namespace) -> int:
         command: str | int = int(args.opcode, 0) if args.opcode[:1].isdigit() else args.opcode.upper()
         definition = dictionary.command(command)  # unknown command: fail before touching the sequence file
         endpoints, run_dir = _send_endpoints(args, run)
-        key_file = args.send_key_file or (str(run_dir / LINK_KEY_FILE) if run_dir is not None
-                                          else _key_file(None, args.config))
+        key_file = _key_file(args.send_key_file, args.config, run_dir)
         signing = signing_sender_args(key_file)
         downlink = downlink_receiver(load_key_file(key_file))
     except (ArgError, DictionaryError, ValueError, LinkError) as exc:  # ValueError: a bad mission config or key
