@@ -9,8 +9,10 @@ Each node behaves like its hardware on the bus:
     sample's age at transmission in ``age_ms``.
 
 Nodes never touch the bus themselves: they hand frames (with the simulation time at which they are due)
-to the simulator, which owns the bus, the SYNC protocol and fault injection. Frames are built through
-the ICD (cantools), each node keeping its own alive counters.
+to the simulator, which owns the bus, the SYNC protocol and fault injection. A node hands each frame as
+the ICD message index and its value row (``Icd.column`` slots); the simulator encodes a tick's frames in
+one compiled call (``E2ESender.burst``). The nodes of one spacecraft share one ``E2ESender`` (each
+message has one sending node, so the alive counters are per message as on the hardware).
 """
 from __future__ import annotations
 
@@ -42,12 +44,43 @@ class WorldLike(Protocol):
 
 
 class PendingFrame(NamedTuple):
-    """A frame due on the bus at simulation time ``due_s``. ``build(t_tx)`` encodes it at transmission.
-    (A NamedTuple: about fifteen are made per GNC tick, a dataclass costs several times more to build.)"""
+    """A frame due on the bus at simulation time ``due_s``: message index ``m`` (``Icd.message_index``)
+    and its value row, fixed (``row``) or made at transmission time (``row_at(t_tx)``, e.g. the star
+    tracker's age). (A NamedTuple: about fifteen are made per GNC tick, a dataclass costs several times
+    more to build.)"""
 
     due_s: float
     source: str
-    build: Any  # Callable[[float], can.Message]
+    m: int
+    row: list | None
+    row_at: Any  # Callable[[float], list] when row is None
+    sender: E2ESender
+
+    def values(self, t_tx: float) -> list:
+        return self.row if self.row is not None else self.row_at(t_tx)
+
+    def build(self, t_tx: float) -> can.Message:
+        """The frame, encoded now for transmission at ``t_tx`` (its alive counter advances)."""
+        return _encode(self.sender, [self.m], [self.values(t_tx)]).message(0)
+
+
+def _encode(sender: E2ESender, idx: Sequence[int], rows: Sequence[list]) -> Any:
+    """One compiled encode of the rows (a FrameBurst)."""
+    return sender.burst(np.array(idx, dtype=np.int64), np.array(rows, dtype=float).reshape(len(idx), -1))
+
+
+def _row_maker(icd: Icd, name: str) -> tuple[int, Any]:
+    """(message index, ``make(**signals) -> value row``) for message ``name``."""
+    width = icd.table.start.shape[1]
+    cols = {sig: icd.column(name, sig) for sig in icd.spec(name).signals}
+
+    def make(**signals: float) -> list:
+        row = [0.0] * width
+        for sig, value in signals.items():
+            row[cols[sig]] = value
+        return row
+
+    return icd.message_index[name], make
 
 
 def _clamp(value: float, lo: float, hi: float) -> tuple[float, bool]:
@@ -77,6 +110,7 @@ class WheelNode:
         self.cmd_name = f"RW{self.index}_CMD"
         self.status_name = f"RW{self.index}_STATUS"
         self._status_ranges: tuple[tuple[float, float], ...] | None = None
+        self.status_m, self._status_row = _row_maker(self.icd, self.status_name)
 
     def on_command(self, signals: dict, t_s: float) -> None:
         """A valid RWn_CMD (already E2E-checked) arrived at simulation time ``t_s``."""
@@ -94,6 +128,10 @@ class WheelNode:
 
     def status_frame(self, status: Any, t_s: float) -> can.Message:
         """RWn_STATUS from the truth wheel status (speed, applied torque, current, temperature, flags)."""
+        return _encode(self.sender, [self.status_m], [self.status_row(status, t_s)]).message(0)
+
+    def status_row(self, status: Any, t_s: float) -> list:
+        """The value row of ``status_frame``."""
         fault = 0
         if status.fault & _WORLD_SPEED_LIMIT:
             fault |= FAULT_OVERSPEED
@@ -113,7 +151,7 @@ class WheelNode:
             if clipped and signal == "speed":
                 values["fault"] |= FAULT_OVERSPEED
         values["temp"] = round(values["temp"])
-        return self.sender.frame(self.status_name, values)
+        return self._status_row(**values)
 
 
 @dataclass
@@ -159,6 +197,11 @@ class ImuNode(_SampledNode):
     def __post_init__(self) -> None:
         super().__post_init__()
         self._range = self.icd.signal_range("IMU_RATE", "omega_x")
+        self._m = self.icd.message_index["IMU_RATE"]
+        cols = [self.icd.column("IMU_RATE", s) for s in ("omega_x", "omega_y", "omega_z", "saturated")]
+        if cols != [2, 3, 4, 5]:  # frames_for writes the row directly in this layout
+            raise ValueError(f"IMU_RATE in {self.icd.path}: expected signals omega_x, omega_y, omega_z, saturated")
+        self._pad = [0.0] * (self.icd.table.start.shape[1] - 6)
 
     def poll(self, world: WorldLike, t_s: float) -> list[PendingFrame]:
         """Sample if a sample is due at ``t_s`` (world at t_s); returns the frame(s) to publish later."""
@@ -177,10 +220,9 @@ class ImuNode(_SampledNode):
                 w[j], saturated = lo, True
             elif w[j] > hi:
                 w[j], saturated = hi, True
-        values = {"omega_x": w[0], "omega_y": w[1], "omega_z": w[2], "saturated": int(saturated)}
+        row = [0.0, 0.0, w[0], w[1], w[2], float(saturated)] + self._pad
         self.samples += 1
-        sender = self.sender
-        return [PendingFrame(t_s + self.latency_s, "IMU", lambda t_tx, v=values: sender.frame("IMU_RATE", v))]
+        return [PendingFrame(t_s + self.latency_s, "IMU", self._m, row, None, self.sender)]
 
 
 @dataclass
@@ -192,6 +234,8 @@ class StarTrackerNode(_SampledNode):
     def __post_init__(self) -> None:
         super().__post_init__()
         self._seq = 0
+        self._a_m, self._a_row = _row_maker(self.icd, "ST_QUAT_A")
+        self._b_m, self._b_row = _row_maker(self.icd, "ST_QUAT_B")
 
     def poll(self, world: WorldLike, t_s: float) -> list[PendingFrame]:
         if not self._sample_due(t_s):
@@ -208,18 +252,16 @@ class StarTrackerNode(_SampledNode):
         self._seq = (self._seq + 1) & 0x0F
         self.samples += 1
         qw, qx, qy, qz = (min(max(c, -1.0), 1.0) for c in q.tolist())  # np.clip to [-1, 1], on floats
-        a = {"q_w": qw, "q_x": qx, "valid": int(valid), "blind_source": int(blind_source), "sample_seq": seq}
-        b_static = {"q_y": qy, "q_z": qz, "sample_seq": seq}
-        t_sample = t_s
-        sender = self.sender
+        a = self._a_row(q_w=qw, q_x=qx, valid=int(valid), blind_source=int(blind_source), sample_seq=seq)
+        t_sample, make_b = t_s, self._b_row
 
-        def build_b(t_tx: float) -> can.Message:
+        def row_b(t_tx: float) -> list:
             age_ms = min(255, max(0, round((t_tx - t_sample) * 1000.0)))
-            return sender.frame("ST_QUAT_B", dict(b_static, age_ms=age_ms))
+            return make_b(q_y=qy, q_z=qz, sample_seq=seq, age_ms=age_ms)
 
         due = t_s + self.latency_s
-        return [PendingFrame(due, "STR", lambda t_tx: sender.frame("ST_QUAT_A", a)),
-                PendingFrame(due, "STR", build_b)]
+        return [PendingFrame(due, "STR", self._a_m, a, None, self.sender),
+                PendingFrame(due, "STR", self._b_m, None, row_b, self.sender)]
 
 
 @dataclass
@@ -250,6 +292,10 @@ class Devices:
     imu: ImuNode
     star_tracker: StarTrackerNode
     pending: list[PendingFrame] = field(default_factory=list)
+    sender: E2ESender | None = None  # the nodes' (shared) sender
+
+    def __post_init__(self) -> None:
+        self.sender = self.sender or self.imu.sender
 
     @classmethod
     def for_world(cls, world: WorldLike, icd: Icd, timing: DeviceTiming | None = None) -> "Devices":
@@ -259,11 +305,13 @@ class Devices:
             raise ValueError(f"the ICD has nodes RW1..RW6; this spacecraft has {n} wheels")
         imu_rate = 1.0 / float(getattr(world, "imu_period_s", 0.01))
         st_rate = 1.0 / float(getattr(world, "star_tracker_period_s", 0.1))
+        sender = E2ESender(icd)
         return cls(
             icd=icd,
-            wheels=[WheelNode(i, icd, timing.wheel_cmd_timeout_s) for i in range(1, n + 1)],
-            imu=ImuNode(icd, imu_rate, timing.imu_latency_s),
-            star_tracker=StarTrackerNode(icd, st_rate, timing.star_tracker_latency_s),
+            wheels=[WheelNode(i, icd, timing.wheel_cmd_timeout_s, sender=sender) for i in range(1, n + 1)],
+            imu=ImuNode(icd, imu_rate, timing.imu_latency_s, sender=sender),
+            star_tracker=StarTrackerNode(icd, st_rate, timing.star_tracker_latency_s, sender=sender),
+            sender=sender,
         )
 
     def sample_sensors(self, world: WorldLike, t_s: float) -> None:
@@ -295,6 +343,11 @@ class Devices:
 
     def frames_due(self, t_s: float) -> list[can.Message]:
         """Sensor frames whose transmission time has come by ``t_s``, oldest first, built at ``t_s``."""
+        idx, rows = self.rows_due(t_s)
+        return _encode(self.sender, idx, rows).messages() if idx else []
+
+    def rows_due(self, t_s: float) -> tuple[list[int], list[list]]:
+        """``frames_due`` as message indices and value rows (not yet encoded)."""
         cut = t_s + _EPS_S
         pending = self.pending
         if all(p.due_s <= cut for p in pending):  # the usual case: everything sampled so far is due
@@ -303,12 +356,18 @@ class Devices:
             due = [p for p in pending if p.due_s <= cut]
             self.pending = [p for p in pending if p.due_s > cut]
         if not due:
-            return []
+            return [], []
         due.sort(key=lambda p: p.due_s)  # stable: keeps A before B
-        return [p.build(t_s) for p in due]
+        return [p.m for p in due], [p.values(t_s) for p in due]
 
     def wheel_status_frames(self, world: WorldLike, t_s: float) -> list[can.Message]:
-        return [node.status_frame(status, t_s) for node, status in zip(self.wheels, world.wheel_status())]
+        idx, rows = self.wheel_status_rows(world, t_s)
+        return _encode(self.sender, idx, rows).messages()
+
+    def wheel_status_rows(self, world: WorldLike, t_s: float) -> tuple[list[int], list[list]]:
+        """``wheel_status_frames`` as message indices and value rows."""
+        return ([node.status_m for node in self.wheels],
+                [node.status_row(status, t_s) for node, status in zip(self.wheels, world.wheel_status())])
 
     def wheel_torques(self, t_s: float) -> np.ndarray:
         return np.array([w.torque_at(t_s) for w in self.wheels])

@@ -123,6 +123,16 @@ class FaultInjector:
         return set(self.icd.spec(message).senders)
 
     # ------------------------------------------------------------------------------------- processing
+    def passes_through(self, t_s: float, direction: str = "tx") -> bool:
+        """True when ``process`` at ``t_s`` would hand every frame on unchanged and add none: no fault
+        window open and no delayed frame of ``direction`` due. The simulator then skips the injector
+        (and the frame-by-frame path it needs) for the tick. Closes the windows ``process`` would."""
+        for i, f in enumerate(self.faults):
+            if f.active(t_s):
+                return False
+            self._stuck_counter.pop(i, None)  # a window that closed releases its frozen counter
+        return not any(t_due <= t_s + 1e-9 for t_due, _ in self._held[direction])
+
     def release(self, t_s: float, direction: str = "tx") -> list[can.Message]:
         """Delayed frames of ``direction`` ("tx": simulator -> bus, "rx": bus -> simulator) due by ``t_s``."""
         held = self._held[direction]

@@ -29,10 +29,12 @@ from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
 import can
+import numpy as np
 
-from fsw.bus.e2e import E2EReceiver
-from fsw.bus.icd import E2ESender, Icd
-from fsw.bus.transport import send_batch
+from fsw.bus.burst import FrameBurst
+from fsw.bus.e2e import CheckedBurst, CheckedFrame, E2EReceiver
+from fsw.bus.icd import Icd
+from fsw.bus.transport import recv_burst, send_batch, send_burst
 from hil_sim.devices import Devices, DeviceTiming, WorldLike
 from hil_sim.faults import FaultInjector
 
@@ -92,7 +94,14 @@ class Simulator:
         self.cycle_done_timeout_s = cycle_done_timeout_s
         self.clock = clock
         self.on_frame = on_frame
-        self._sync_sender = E2ESender(self.icd)
+        self._sync_sender = self.devices.sender  # one sender (alive counters per message) for all SIM nodes
+        self._sync_m = self.icd.message_index["SYNC"]
+        self._sync_row = [0.0] * self.icd.table.start.shape[1]
+        self._sync_cols = [self.icd.column("SYNC", s) for s in ("tick", "frames_following", "period_ms")]
+        self._torque_col = self.icd.column("RW1_CMD", "torque_cmd")
+        self._tick_lsb_col = self.icd.column("RW1_CMD", "tick_lsb")
+        self._done_tick_col = self.icd.column("CYCLE_DONE", "tick")
+        self._rx: CheckedBurst | None = None  # frames read off the bus, not yet handled
         own = self.icd.ids_sent_by(*SIM_NODES)
         watch = [f"RW{i}_CMD" for i in range(1, self.n_wheels + 1)] + ["CYCLE_DONE"]
         self.receiver = E2EReceiver(self.icd, ignore_ids=own, watch=watch)
@@ -128,19 +137,33 @@ class Simulator:
         if self._tick_open:
             raise RuntimeError("begin_tick() called twice without end_tick()")
         t = self.t_s
-        frames = self.devices.frames_due(t) + self.devices.wheel_status_frames(self.world, t)
-        if self.injector:  # without faults it passes the frames through unchanged (no call per frame then)
+        idx, rows = self.devices.rows_due(t)
+        status_idx, status_rows = self.devices.wheel_status_rows(self.world, t)
+        idx, rows = idx + status_idx, rows + status_rows
+        sync = self._sync_row
+        sync[self._sync_cols[0]] = self.tick & 0xFFFFFFFF
+        sync[self._sync_cols[2]] = self.period_ms
+        if self.injector and not self.injector.passes_through(t):
+            # faults active now: the frames one by one through the injector (it edits, drops and adds)
+            frames = self._sync_sender.burst(np.array(idx, dtype=np.int64), np.array(rows)).messages()
             frames = self.injector.process(frames, t)
-        following = sum(1 for m in frames if m.arbitration_id in self.icd.by_id)
-        sync = self._sync_sender.frame("SYNC", {"tick": self.tick & 0xFFFFFFFF,
-                                                "frames_following": min(following, 255),
-                                                "period_ms": self.period_ms})
-        out = self.injector.process([sync], t, extras=False) if self.injector else [sync]
-        # one burst: the flight software wakes once with the whole tick queued, not once per frame
-        self._send_all(out + frames, t)
+            following = sum(1 for m in frames if m.arbitration_id in self.icd.by_id)
+            sync[self._sync_cols[1]] = min(following, 255)
+            sync_frame = self._sync_sender.burst(np.array([self._sync_m]), np.array([sync])).message(0)
+            out = self.injector.process([sync_frame], t, extras=False)
+            # one burst: the flight software wakes once with the whole tick queued, not once per frame
+            self._send_all(out + frames, t)
+            sent = len(out) + len(frames)
+        else:
+            # SYNC first, then the device frames: one compiled encode, one burst (alive counters are per
+            # message, so encoding SYNC with the others gives the bytes it always had)
+            sync[self._sync_cols[1]] = min(len(idx), 255)
+            burst = self._sync_sender.burst(np.array([self._sync_m] + idx, dtype=np.int64), np.array([sync] + rows))
+            self._send_burst(burst, t)
+            sent = len(burst)
         self._tick_open = True
         self._awaiting = self.tick
-        return len(out) + len(frames)
+        return sent
 
     def end_tick(self, wait_s: float | None = None) -> bool:
         """Take the flight software's frames, then step the world over one GNC period.
@@ -187,9 +210,13 @@ class Simulator:
             if k in self._done_ticks:
                 self._done_ticks.discard(k)
                 return True
-            msg = None if wait_first else self.bus.recv(timeout=0.0)  # clock reads only when it is empty
+            rx = self._rx
+            if rx is not None and rx.pos < rx.n:
+                self._handle_next(rx, self.t_s)
+                continue
+            burst = None if wait_first else recv_burst(self.bus, 0.0)  # clock reads only when it is empty
             wait_first = False
-            if msg is None:
+            if burst is None:
                 now = time.monotonic()
                 if deadline is None:
                     deadline = now + wait_s
@@ -197,16 +224,16 @@ class Simulator:
                 if remaining <= 0.0:
                     return False
                 if self._wait_for is None:
-                    msg = self.bus.recv(timeout=remaining)
+                    burst = recv_burst(self.bus, remaining)
                 elif self._wait_for(remaining):
                     # CYCLE_DONE rang: it and the commands sent before it are queued (or arriving: the
                     # kernel may deliver to the doorbell socket first), so this returns at once
-                    msg = self.bus.recv(timeout=remaining)
+                    burst = recv_burst(self.bus, remaining)
                 else:
-                    msg = self.bus.recv(timeout=0.0)  # no CYCLE_DONE in time: take what did come
-                if msg is None:
+                    burst = recv_burst(self.bus, 0.0)  # no CYCLE_DONE in time: take what did come
+                if burst is None:
                     return False
-            self._handle_rx(msg, self.t_s)
+            self._rx = self.receiver.check(burst)
 
     def poll(self, t_s: float) -> int:
         """Handle everything queued now, stamping it with simulation time ``t_s``. Returns the count."""
@@ -214,29 +241,48 @@ class Simulator:
         for msg in self.injector.release(t_s, "rx"):
             self._classify(msg, t_s)
         while True:
-            msg = self.bus.recv(timeout=0.0)
-            if msg is None:
-                return n
-            self._handle_rx(msg, t_s)
+            rx = self._rx
+            if rx is None or rx.pos >= rx.n:
+                burst = recv_burst(self.bus, 0.0)
+                if burst is None:
+                    return n
+                rx = self._rx = self.receiver.check(burst)
+            self._handle_next(rx, t_s)
             n += 1
+
+    def _handle_next(self, rx: CheckedBurst, t_s: float) -> None:
+        """The next frame read off the bus: through the fault injector when faults are active (frame by
+        frame, as a message), else classified from the burst's compiled check."""
+        if self.injector and not self.injector.passes_through(t_s, "rx"):
+            msg = rx.burst.message(rx.pos)
+            rx.pos += 1
+            self._handle_rx(msg, t_s)
+            return
+        msg = rx.burst.message(rx.pos) if self.on_frame is not None else None
+        self._deliver(self.receiver.take(rx, t_s), t_s, msg)
 
     def _handle_rx(self, msg: can.Message, t_s: float) -> None:
         for m in (self.injector.process([msg], t_s, extras=False, direction="rx") if self.injector else [msg]):
             self._classify(m, t_s)
 
     def _classify(self, msg: can.Message, t_s: float) -> None:
-        frame = self.receiver.classify(msg, t_s)
+        checked = self.receiver.check(FrameBurst.from_messages([msg]))
+        self._deliver(self.receiver.take(checked, t_s), t_s, msg)
+
+    def _deliver(self, frame: CheckedFrame | None, t_s: float, msg: can.Message | None) -> None:
         if frame is None:
             return
         if self.on_frame is not None:
             self.on_frame("rx", t_s, msg)
         if not frame.delivered:
             return
+        row = frame.row
         if frame.frame_id in self._cmd_index:
-            self.devices.wheels[self._cmd_index[frame.frame_id]].on_command(frame.signals, t_s)
+            self.devices.wheels[self._cmd_index[frame.frame_id]].on_command(
+                {"torque_cmd": row[self._torque_col], "tick_lsb": row[self._tick_lsb_col]}, t_s)
             self.stats.wheel_commands += 1
         elif frame.frame_id == self._cycle_done_id:
-            tick = int(frame.signals["tick"])
+            tick = int(row[self._done_tick_col])
             self.stats.cycle_done += 1
             if tick == self._awaiting:
                 self._done_ticks.add(tick)
@@ -251,6 +297,19 @@ class Simulator:
         if self.injector:
             due = self.injector.release(t_s, "tx") + self.injector.process(due, t_s, extras=False)
         self._send_all(due, t_s)
+
+    def _send_burst(self, burst: FrameBurst, t_s: float) -> None:
+        """``_send_all`` of a burst: as the burst where the bus carries bursts (in process)."""
+        if self.on_frame is not None:
+            self._send_all(burst.messages(), t_s)
+            return
+        while len(burst):
+            n = send_burst(self.bus, burst, timeout=0.05)
+            self.stats.frames_sent += n
+            if n >= len(burst):
+                return
+            self.stats.tx_errors += 1
+            burst = burst.tail(n + 1)
 
     def _send_all(self, msgs: list[can.Message], t_s: float) -> None:
         """Send ``msgs`` in order (one system call on socketcan); a refused frame (transmit queue full,

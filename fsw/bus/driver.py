@@ -27,9 +27,9 @@ from typing import Callable, NamedTuple, Sequence
 import can
 import numpy as np
 
-from fsw.bus.e2e import E2EReceiver, ReceivedFrame
+from fsw.bus.e2e import CheckedBurst, CheckedFrame, E2EReceiver
 from fsw.bus.icd import E2ESender, Icd
-from fsw.bus.transport import send_batch
+from fsw.bus.transport import recv_burst, send_burst
 
 FSW_NODE = "FSW"
 MAX_WHEELS = 6
@@ -136,6 +136,20 @@ class FswBusDriver:
         self._wheel_index = {icd.spec(f"RW{i}_STATUS").frame_id: i - 1 for i in range(1, n_wheels + 1)}
         self._cmd_ranges = [(f"RW{i}_CMD", *icd.signal_range(f"RW{i}_CMD", "torque_cmd")) for i in range(1, n_wheels + 1)]
         self._st_half: dict[str, tuple[int, dict, float]] = {}
+        # value-row slots (Icd.column) of the signals the driver reads
+        self._col = {(n, sig): icd.column(n, sig) for n in icd.message_names for sig in icd.spec(n).signals}
+        self._imu_cols = [self._col["IMU_RATE", s] for s in ("omega_x", "omega_y", "omega_z", "saturated")]
+        self._wheel_cols = [self._col["RW1_STATUS", s] for s in ("speed", "torque", "current", "temp", "fault")]
+        self._sync_cols = [self._col["SYNC", s] for s in ("tick", "frames_following", "period_ms")]
+        self._imu_id = icd.spec("IMU_RATE").frame_id
+        self._st_ids = {icd.spec(n).frame_id: n for n in ("ST_QUAT_A", "ST_QUAT_B")}
+        # the commands' message indices and value rows (one compiled encode per cycle)
+        self._cmd_idx = np.array([icd.message_index[f"RW{i}_CMD"] for i in range(1, n_wheels + 1)]
+                                 + [icd.message_index["CYCLE_DONE"]], dtype=np.int64)
+        self._cmd_torque_col = self._col["RW1_CMD", "torque_cmd"]
+        self._cmd_tick_col = self._col["RW1_CMD", "tick_lsb"]
+        self._done_tick_col = self._col["CYCLE_DONE", "tick"]
+        self._rx: CheckedBurst | None = None  # frames read off the bus, not yet classified
         # newest samples (real time and lockstep alike)
         self._imu: ImuSample | None = None
         self._imu_rx: float | None = None
@@ -189,15 +203,16 @@ class FswBusDriver:
             if frame is None:
                 return None
             if frame.delivered and frame.frame_id == self._sync_id:
-                if not self._stale_sync(frame.signals):
-                    sync = dict(frame.signals)
+                if not self._stale_sync(frame.row):
+                    sync = frame.row
             elif frame.delivered and frame.frame_id in self._device_ids:
                 self.unexpected_frames += 1  # belongs to no announced tick
-        tick = int(sync["tick"])
-        self.period_s = float(sync["period_ms"]) / 1000.0
+        tick_col, following_col, period_col = self._sync_cols
+        tick = int(sync[tick_col])
+        self.period_s = float(sync[period_col]) / 1000.0
         self.t_tick = tick * self.period_s
         self._start_supervision(self.t_tick)
-        expected = int(sync["frames_following"])
+        expected = int(sync[following_col])
         self._begin_tick()
         received = failed = 0
         while received < expected:
@@ -205,9 +220,9 @@ class FswBusDriver:
             if frame is None:
                 break
             if frame.frame_id == self._sync_id and frame.delivered:
-                if self._stale_sync(frame.signals, tick):
+                if self._stale_sync(frame.row, tick):
                     continue
-                self._pending_sync = dict(frame.signals)  # next tick already started: stop here
+                self._pending_sync = frame.row  # next tick already started: stop here
                 break
             if frame.frame_id in self._device_ids:
                 if frame.delivered:
@@ -220,10 +235,11 @@ class FswBusDriver:
         self.last_tick = tick
         return self._tick_inputs(tick, expected, received)
 
-    def _stale_sync(self, signals: dict, current: int | None = None) -> bool:
-        """A SYNC for a tick at or before the current (or last) one: replayed or stale, counted, ignored."""
+    def _stale_sync(self, row: list, current: int | None = None) -> bool:
+        """A SYNC (value row) for a tick at or before the current (or last) one: replayed or stale, counted,
+        ignored."""
         last = self.last_tick if current is None else current
-        if last is not None and int(signals["tick"]) <= last:
+        if last is not None and int(row[self._sync_cols[0]]) <= last:
             self.stale_syncs += 1
             return True
         return False
@@ -248,33 +264,40 @@ class FswBusDriver:
             frames_expected=expected, frames_received=received,
         )
 
-    def _receive(self, grace_s: float | None = None, apply: bool = True) -> ReceivedFrame | None:
+    def _receive(self, grace_s: float | None = None, apply: bool = True) -> CheckedFrame | None:
         """Next classified frame within the call's timeout (own echoes skipped); None on timeout.
         ``grace_s``: when the queue is empty, wait at most this long (still within the timeout);
-        ``apply``: hand a delivered frame to the samples (False: only classify it)."""
+        ``apply``: hand a delivered frame to the samples (False: only classify it).
+
+        Frames are read off the bus as bursts (everything queued) and checked in one compiled call
+        (``E2EReceiver.check``); they are classified one by one as they are used, so a tick that ends
+        early leaves the rest, unclassified, for the next call, exactly as if they were still queued."""
         while True:
-            # Frames come in bursts after SYNC: try without waiting first, and read the clock only when
-            # the queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest): the
-            # first wait of a call starts the deadline and waits the whole timeout, without a clock read.
-            msg = self.bus.recv(timeout=0.0)
-            if msg is None:
-                if self._timeout_s <= 0.0:
-                    return None
-                if self._deadline is None:
-                    remaining = self._timeout_s
-                    self._deadline = time.monotonic() + remaining
-                else:
-                    remaining = self._deadline - time.monotonic()
-                    if remaining <= 0.0:
+            rx = self._rx
+            if rx is None or rx.pos >= rx.n:
+                # Frames come in bursts after SYNC: try without waiting first, and read the clock only when
+                # the queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest):
+                # the first wait of a call starts the deadline and waits the whole timeout, without a read.
+                burst = recv_burst(self.bus, 0.0)
+                if burst is None:
+                    if self._timeout_s <= 0.0:
                         return None
-                if grace_s is not None:
-                    remaining = min(remaining, grace_s)
-                msg = self.bus.recv(timeout=remaining)
-                if msg is None:
-                    return None
+                    if self._deadline is None:
+                        remaining = self._timeout_s
+                        self._deadline = time.monotonic() + remaining
+                    else:
+                        remaining = self._deadline - time.monotonic()
+                        if remaining <= 0.0:
+                            return None
+                    if grace_s is not None:
+                        remaining = min(remaining, grace_s)
+                    burst = recv_burst(self.bus, remaining)
+                    if burst is None:
+                        return None
+                rx = self._rx = self.receiver.check(burst)
             # Lockstep: frames are stamped with the simulation time of the tick, never the host clock.
             now = self.t_tick
-            frame = self.receiver.classify(msg, now)
+            frame = self.receiver.take(rx, now)
             if frame is None:
                 continue
             if apply:
@@ -294,15 +317,18 @@ class FswBusDriver:
         self._realtime = True
         self._start_supervision(self.clock())
         while True:
-            msg = self.bus.recv(timeout=0.0)
-            if msg is None:
-                break
+            rx = self._rx
+            if rx is None or rx.pos >= rx.n:
+                burst = recv_burst(self.bus, 0.0)
+                if burst is None:
+                    break
+                rx = self._rx = self.receiver.check(burst)
             now = self.clock()
-            frame = self.receiver.classify(msg, now)
+            frame = self.receiver.take(rx, now)
             if frame is not None:
                 if frame.frame_id == self._sync_id and frame.delivered \
-                        and not self._stale_sync(frame.signals, self._rt_sync_tick):
-                    self._rt_sync_tick = int(frame.signals["tick"])
+                        and not self._stale_sync(frame.row, self._rt_sync_tick):
+                    self._rt_sync_tick = int(frame.row[self._sync_cols[0]])
                 self._apply(frame, now)
         now = self.clock()
         self.receiver.check_timeouts(now)
@@ -318,21 +344,24 @@ class FswBusDriver:
         )
 
     # ------------------------------------------------------------------------------ frame -> sample
-    def _apply(self, frame: ReceivedFrame, now: float) -> None:
+    def _apply(self, frame: CheckedFrame, now: float) -> None:
         if not frame.delivered:
             return
-        s = frame.signals
-        name = frame.name
-        if name == "IMU_RATE":
-            sample = ImuSample(np.array([s["omega_x"], s["omega_y"], s["omega_z"]]), bool(s["saturated"]), now)
+        row = frame.row
+        fid = frame.frame_id
+        if fid == self._imu_id:
+            x, y, z, sat = self._imu_cols
+            sample = ImuSample(np.array([row[x], row[y], row[z]]), bool(row[sat]), now)
             self._imu, self._imu_rx = sample, now
             self._imu_batch.append(sample)
-        elif name in ("ST_QUAT_A", "ST_QUAT_B"):
-            self._star_tracker_half(name, s, now)
-        elif frame.frame_id in self._wheel_index:
-            i = self._wheel_index[frame.frame_id]
-            self._wheels[i] = WheelStatus(float(s["speed"]), float(s["torque"]), float(s["current"]),
-                                          float(s["temp"]), int(s["fault"]), now)
+        elif fid in self._st_ids:
+            name = self._st_ids[fid]
+            self._star_tracker_half(name, {sig: row[self._col[name, sig]] for sig in self.icd.spec(name).signals},
+                                    now)
+        elif fid in self._wheel_index:
+            i = self._wheel_index[fid]
+            speed, torque, current, temp, fault = self._wheel_cols
+            self._wheels[i] = WheelStatus(row[speed], row[torque], row[current], row[temp], int(row[fault]), now)
             self._wheels_rx[i] = now
             self._wheels_new[i] = True
 
@@ -358,16 +387,19 @@ class FswBusDriver:
         except can.CanError:
             self.tx_errors += 1
 
-    def _send_all(self, frames: list[can.Message]) -> None:
-        """Send in order as one burst where the bus can (one system call over socketcan: in the emulated
-        guest a call costs 15-30 us). A refused frame is counted and the rest are still tried, exactly as
-        with one send per frame."""
-        while frames:
-            sent = send_batch(self.bus, frames, TX_TIMEOUT_S)
-            if sent >= len(frames):
+    def _send_burst(self, burst) -> None:
+        """Send in order as one burst (one system call over socketcan: in the emulated guest a call costs
+        15-30 us; one queue entry in process). A refused frame is counted and the rest are still tried,
+        exactly as with one send per frame."""
+        while len(burst):
+            try:
+                sent = send_burst(self.bus, burst, TX_TIMEOUT_S)
+            except can.CanError:
+                sent = 0
+            if sent >= len(burst):
                 return
             self.tx_errors += 1
-            frames = frames[sent + 1:]
+            burst = burst.tail(sent + 1)
 
     def send_wheel_torques(self, tick: int, torques_Nm: Sequence[float], cycle_done: bool = False) -> None:
         """Send RW1_CMD..RWn_CMD for ``tick``, and with ``cycle_done`` the lockstep CYCLE_DONE(tick) in
@@ -378,14 +410,16 @@ class FswBusDriver:
         if self._realtime and self._rt_sync_tick is not None:
             tick = self._rt_sync_tick  # the application's cycle count means nothing to the simulator
         tick_lsb = tick & 0xFFFF
-        frames = []
-        for (name, lo, hi), tau in zip(self._cmd_ranges, torques_Nm):
+        n = self.n_wheels
+        with_done = cycle_done and not self._realtime
+        values = np.zeros((n + 1, self.icd.table.start.shape[1]))
+        for i, ((_, lo, hi), tau) in enumerate(zip(self._cmd_ranges, torques_Nm)):
             tau = float(tau)
-            value = 0.0 if not math.isfinite(tau) else min(max(tau, lo), hi)
-            frames.append(self._sender.frame(name, {"torque_cmd": value, "tick_lsb": tick_lsb}))
-        if cycle_done and not self._realtime:
-            frames.append(self._sender.frame("CYCLE_DONE", {"tick": tick & 0xFFFFFFFF}))
-        self._send_all(frames)
+            values[i, self._cmd_torque_col] = 0.0 if not math.isfinite(tau) else min(max(tau, lo), hi)
+        values[:n, self._cmd_tick_col] = tick_lsb
+        values[n, self._done_tick_col] = tick & 0xFFFFFFFF
+        idx = self._cmd_idx if with_done else self._cmd_idx[:n]
+        self._send_burst(self._sender.burst(idx, values[:len(idx)]))
         if self._realtime:
             self._answer_latest_sync()
 

@@ -13,12 +13,18 @@ housekeeping and never reaches the estimator.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Iterable, Mapping, NamedTuple
+
+import numpy as np
+
+from fsw.bus.kernels import BAD_LENGTH_CODE, CANDIDATE, CRC_ERROR_CODE, OUT_OF_RANGE_CODE
 
 if TYPE_CHECKING:  # pragma: no cover
     import can
 
+    from fsw.bus.burst import FrameBurst
     from fsw.bus.icd import Icd
 
 # ---------------------------------------------------------------------------------------------- CRC-8
@@ -93,6 +99,36 @@ class ReceivedFrame(NamedTuple):
         return self.status in DELIVERED
 
 
+class CheckedFrame(NamedTuple):
+    """One frame of a burst as classified by :meth:`E2EReceiver.take`: as :class:`ReceivedFrame`, with the
+    decoded signals of a delivered frame as ``row``, the kernels' value row (``Icd.column`` gives a
+    signal's slot) instead of a dict."""
+
+    name: str | None
+    frame_id: int
+    status: str
+    counter: int | None = None
+    row: list | None = None
+
+    @property
+    def delivered(self) -> bool:
+        return self.status in DELIVERED
+
+
+class CheckedBurst:
+    """A received burst after the compiled check (length, CRC, decode, ranges: no state changed yet);
+    :meth:`E2EReceiver.take` classifies its frames in order, ``pos`` being the next one."""
+
+    __slots__ = ("burst", "ids", "status", "rows", "pos", "n")
+
+    def __init__(self, burst: "FrameBurst", ids: list, status: list, rows: list) -> None:
+        self.burst, self.ids, self.status, self.rows = burst, ids, status, rows
+        self.pos, self.n = 0, len(ids)
+
+
+_CODE_CLASS = {BAD_LENGTH_CODE: BAD_LENGTH, CRC_ERROR_CODE: CRC_ERROR, OUT_OF_RANGE_CODE: OUT_OF_RANGE}
+
+
 @dataclass
 class _SequenceState:
     last_counter: int | None = None
@@ -128,6 +164,51 @@ class E2EReceiver:
         # frame id -> what classify needs for that message (ignored ids are not in it: they take the full path)
         self._fast = {m.frame_id: (m, self.counters[m.name], self._state[m.name], m.codec)
                       for m in self.icd.messages.values() if m.frame_id not in self.ignore_ids}
+        # the compiled check's table without this node's own ids (those take classify's echo path)
+        index_of_id = self.icd.table.index_of_id.copy()
+        index_of_id[[i for i in self.ignore_ids if 0 <= i < len(index_of_id)]] = -1
+        self._table = dataclasses.replace(self.icd.table, index_of_id=index_of_id)
+        self._slots = {m.name: ("E2E_CRC", "E2E_Counter") + m.signals for m in self.icd.messages.values()}
+
+    # ----------------------------------------------------------------------------------- bursts
+    def check(self, burst: "FrameBurst") -> CheckedBurst:
+        """The stateless part of classifying every frame of ``burst``, in one compiled call (see
+        fsw.bus.kernels); :meth:`take` then classifies the frames one by one, in order, as ``classify``."""
+        n = len(burst)
+        status = np.empty(n, dtype=np.int64)
+        values = np.zeros((n, self._table.start.shape[1]))
+        self._table.check(burst.ids, burst.lengths, burst.data, status, values)
+        return CheckedBurst(burst, burst.ids.tolist(), status.tolist(), values.tolist())
+
+    def take(self, checked: CheckedBurst, now_s: float) -> CheckedFrame | None:
+        """Classify the next frame of ``checked`` (received at ``now_s``): the same outcome and counts as
+        ``classify`` of that frame's message; None for the node's own echoed frames."""
+        i = checked.pos
+        checked.pos = i + 1
+        code = checked.status[i]
+        if code == CANDIDATE:
+            spec, counts, state, _ = self._fast[checked.ids[i]]
+            row = checked.rows[i]
+            counter = int(row[1])
+            status = self._sequence(spec, counter)
+            counts[status] += 1
+            if status in DELIVERED:
+                state.last_ok_t = now_s
+                state.timed_out = False
+                return CheckedFrame(spec.name, spec.frame_id, status, counter, row)
+            return CheckedFrame(spec.name, spec.frame_id, status, counter)
+        cls = _CODE_CLASS.get(code)
+        if cls is not None:
+            spec, counts = self._fast[checked.ids[i]][:2]
+            counts[cls] += 1
+            return CheckedFrame(spec.name, spec.frame_id, cls)
+        frame = self.classify(checked.burst.message(i), now_s)  # not in the table: the message path
+        if frame is None:
+            return None
+        row = None
+        if frame.signals is not None:
+            row = [float(frame.signals[name]) for name in self._slots[frame.name]]
+        return CheckedFrame(frame.name, frame.frame_id, frame.status, frame.counter, row)
 
     # ----------------------------------------------------------------------------------- frames
     def classify(self, msg: "can.Message", now_s: float) -> ReceivedFrame | None:

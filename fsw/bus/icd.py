@@ -20,10 +20,14 @@ from typing import Any, Mapping
 
 import can
 import cantools
+import numpy as np
 from keepout_config import config_path
 
 from fsw.bus.e2e import _TABLE as _CRC_TABLE
 from fsw.bus.e2e import crc8_sae_j1850, e2e_crc
+from fsw.bus.burst import FrameBurst
+from fsw.bus.burst import data_frame as _data_frame
+from fsw.bus.kernels import MAX_DLC, CodecTable
 
 DEFAULT_DBC_PATH = config_path("icd", "keepout.dbc")
 
@@ -145,23 +149,37 @@ class _MessageCodec:
             for s in message.signals))
 
 
-def _data_frame(frame_id: int, data: bytearray) -> can.Message:
-    """``can.Message(arbitration_id=frame_id, data=data, is_extended_id=False, is_fd=False)``, slot by slot
-    (the same object state; the keyword constructor is a third of an encode's cost)."""
-    msg = can.Message.__new__(can.Message)
-    msg.timestamp = 0.0
-    msg.arbitration_id = frame_id
-    msg.is_extended_id = False
-    msg.is_remote_frame = False
-    msg.is_error_frame = False
-    msg.channel = None
-    msg.is_fd = False
-    msg.is_rx = True
-    msg.bitrate_switch = False
-    msg.error_state_indicator = False
-    msg.data = data
-    msg.dlc = len(data)
-    return msg
+def _codec_table(specs: list[MessageSpec]) -> CodecTable:
+    """The kernels' signal table (see fsw.bus.kernels) of ``specs``, message index = list position.
+    Messages the per-frame generated codec does not handle are left out of ``index_of_id``."""
+    n_slots = max(len(s.db_message.signals) for s in specs)
+    shape = (len(specs), n_slots)
+    ints = {k: np.zeros(shape, dtype=np.int64) for k in ("start", "length")}
+    floats = {k: np.zeros(shape) for k in ("scale", "offset", "vmin", "vmax", "alo", "ahi")}
+    signed = np.zeros(shape, dtype=np.bool_)
+    index_of_id = np.full(2048, -1, dtype=np.int64)
+    for m, spec in enumerate(specs):
+        by_name = {s.name: s for s in spec.db_message.signals}
+        ordered = [by_name[E2E_CRC_SIGNAL], by_name[E2E_COUNTER_SIGNAL]] + [by_name[n] for n in spec.signals]
+        kinds = {type(getattr(s.conversion, "_conversion", s.conversion)).__name__ for s in ordered}
+        if spec.codec is None or not kinds <= _TABLE_CONVERSIONS:
+            continue
+        index_of_id[spec.frame_id] = m
+        for k, sig in enumerate(ordered):
+            ints["start"][m, k], ints["length"][m, k], signed[m, k] = sig.start, sig.length, sig.is_signed
+            floats["scale"][m, k], floats["offset"][m, k] = float(sig.scale), float(sig.offset)
+            floats["vmin"][m, k], floats["vmax"][m, k] = spec.ranges[sig.name]
+            floats["alo"][m, k], floats["ahi"][m, k] = spec.accept_bounds[sig.name]
+    return CodecTable(index_of_id=index_of_id,
+                      dlc=np.array([s.dlc for s in specs], dtype=np.int64),
+                      seed=np.array([s.crc_seed for s in specs], dtype=np.int64),
+                      nsig=np.array([2 + len(s.signals) for s in specs], dtype=np.int64),
+                      signed=signed, crc_table=np.array(_CRC_TABLE, dtype=np.int64), **ints, **floats)
+
+
+# cantools conversions the kernels repeat exactly (LinearIntegerConversion: integer scale and offset,
+# whose exact-division path gives the same raw values as the float one for the values a frame can hold)
+_TABLE_CONVERSIONS = {"IdentityConversion", "LinearConversion", "LinearIntegerConversion"}
 
 
 def _attribute(message: Any, name: str, default: Any) -> Any:
@@ -199,6 +217,20 @@ class Icd:
             self.messages[spec.name] = spec
             self.by_id[spec.frame_id] = spec
         self.nodes: tuple[str, ...] = tuple(node.name for node in self.db.nodes)
+        # message index m of the compiled kernels (fsw.bus.kernels), in DBC order
+        self.message_names: tuple[str, ...] = tuple(self.messages)
+        self.message_index: dict[str, int] = {name: m for m, name in enumerate(self.message_names)}
+        self.table = _codec_table(list(self.messages.values()))
+
+    def column(self, name: str, signal: str) -> int:
+        """Slot of ``signal`` in the kernels' value rows of message ``name`` (E2E_CRC 0, E2E_Counter 1,
+        then the application signals in DBC order)."""
+        spec = self.spec(name)
+        if signal == E2E_CRC_SIGNAL:
+            return 0
+        if signal == E2E_COUNTER_SIGNAL:
+            return 1
+        return 2 + spec.signals.index(signal)
 
     def _spec(self, message: Any) -> MessageSpec:
         where = f"{self.path}: message {message.name}"
@@ -328,20 +360,55 @@ class Icd:
 
 
 class E2ESender:
-    """Keeps one alive counter per message and builds protected frames through an :class:`Icd`."""
+    """Keeps one alive counter per message and builds protected frames through an :class:`Icd`:
+    one at a time (``frame``) or a whole burst in one compiled call (``burst``)."""
 
     def __init__(self, icd: Icd) -> None:
         self.icd = icd
-        self.counters: dict[str, int] = {name: 0 for name in icd.messages}
-        self.sent: dict[str, int] = {name: 0 for name in icd.messages}
-        self._fast = {name: (spec.codec, spec.frame_id) for name, spec in icd.messages.items() if spec.codec}
+        self._counter = np.zeros(len(icd.message_names), dtype=np.int64)  # by message index (the kernels')
+        self._sent = np.zeros(len(icd.message_names), dtype=np.int64)
+        self._fast = {name: (spec.codec, spec.frame_id, icd.message_index[name])
+                      for name, spec in icd.messages.items() if spec.codec}
+        self._ids = np.array([icd.messages[n].frame_id for n in icd.message_names], dtype=np.int64)
+        self._dlc = icd.table.dlc
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """The next alive counter of each message."""
+        return dict(zip(self.icd.message_names, self._counter.tolist()))
+
+    @property
+    def sent(self) -> dict[str, int]:
+        """Frames built per message."""
+        return dict(zip(self.icd.message_names, self._sent.tolist()))
 
     def frame(self, name: str, signals: Mapping[str, float]) -> can.Message:
-        counter = self.counters[name]
-        codec, frame_id = self._fast.get(name, (None, 0))
+        codec, frame_id, m = self._fast.get(name, (None, 0, -1))
+        if m < 0:
+            m = self.icd.message_index[name]
+        counter = int(self._counter[m])
         data = codec.encode(signals, counter) if codec is not None else None
         # Icd.encode's own steps, one call less per frame; anything the codec refuses takes its checked path
         msg = _data_frame(frame_id, data) if data is not None else self.icd.encode(name, signals, counter)
-        self.counters[name] = (counter + 1) & 0x0F
-        self.sent[name] += 1
+        self._counter[m] = (counter + 1) & 0x0F
+        self._sent[m] += 1
         return msg
+
+    def burst(self, idx: np.ndarray, values: np.ndarray) -> FrameBurst:
+        """The frames of messages ``idx`` (message indices, ``Icd.message_index``) with the application
+        values of row i in slots 2.. of ``values[i]`` (``Icd.column``), in order, as one burst: the same
+        bytes and counters as ``frame`` called row by row. A row the compiled codec refuses (a value out
+        of its DBC range, NaN) goes through ``frame``, which raises the error that names it."""
+        n = len(idx)
+        out = np.zeros((n, MAX_DLC), dtype=np.uint8)
+        done = 0
+        while done < n:
+            done += self.icd.table.encode(idx[done:], values[done:], self._counter, self._sent, out[done:])
+            if done < n:
+                name = self.icd.message_names[idx[done]]
+                spec = self.icd.messages[name]
+                row = values[done].tolist()
+                msg = self.frame(name, {sig: row[2 + j] for j, sig in enumerate(spec.signals)})
+                out[done, :len(msg.data)] = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+                done += 1
+        return FrameBurst(self._ids[idx], out, self._dlc[idx])

@@ -37,6 +37,8 @@ from typing import Any
 import can
 from can.interfaces.virtual import VirtualBus, channels_lock
 
+from fsw.bus.burst import FrameBurst
+
 VCAN_CREATE_COMMANDS = (
     "sudo modprobe vcan",
     "sudo ip link add dev {iface} type vcan",
@@ -229,6 +231,31 @@ def send_batch(bus: can.BusABC, msgs: list[can.Message], timeout: float | None =
     return len(msgs)
 
 
+def send_burst(bus: can.BusABC, burst: FrameBurst, timeout: float | None = None) -> int:
+    """Send a burst's frames in order: as the burst itself on a bus that carries bursts
+    (:class:`LightVirtualBus`), else as ``can.Message`` frames through :func:`send_batch`. Returns how
+    many, from the first, were sent (as ``send_batch``)."""
+    carry = getattr(bus, "send_burst", None)
+    if carry is not None:
+        return int(carry(burst, timeout))
+    return send_batch(bus, burst.messages(), timeout)
+
+
+def recv_burst(bus: can.BusABC, timeout: float | None = 0.0) -> FrameBurst | None:
+    """Every frame queued on ``bus`` now, in order, as one burst (waiting up to ``timeout`` for the
+    first); None when nothing came."""
+    carry = getattr(bus, "recv_burst", None)
+    if carry is not None:
+        return carry(timeout)
+    msg = bus.recv(timeout=timeout)
+    if msg is None:
+        return None
+    msgs = [msg]
+    while (msg := bus.recv(timeout=0.0)) is not None:
+        msgs.append(msg)
+    return FrameBurst.from_messages(msgs)
+
+
 def _copy_message(msg: can.Message) -> can.Message:
     # What VirtualBus.send's deepcopy produces (every slot, data in a new bytearray), ~20x cheaper:
     # deepcopy walks the slots through copyreg for each frame.
@@ -258,6 +285,11 @@ class LightVirtualBus(VirtualBus):
     instead of ``copy.deepcopy``; the receive queue is a ``queue.SimpleQueue`` (no unbounded-size
     bookkeeping; ``rx_queue_size`` is not supported); ``recv`` without filters skips BusABC's filter
     loop and logging call. bench/campaign.py measures the difference per GNC tick.
+
+    Bursts (:mod:`fsw.bus.burst`): ``send_burst`` queues a whole burst as one entry for each receiver
+    (receivers share it: nothing edits a burst once sent, see fsw.bus.burst); ``recv_burst`` returns everything queued as
+    one burst; ``recv`` hands out a queued burst's frames one ``can.Message`` at a time, so a plain
+    python-can reader on the channel sees the same frames as if they had been sent one by one.
     """
 
     def __init__(self, channel: Any = "channel-0", receive_own_messages: bool = False, **kwargs: Any) -> None:
@@ -269,6 +301,42 @@ class LightVirtualBus(VirtualBus):
             position = next(i for i, q in enumerate(self.channel) if q is self.queue)
             self.channel[position] = fast
             self.queue = fast  # type: ignore[assignment]
+        self._spill: list[can.Message] = []  # frames of a burst ``recv`` has begun handing out, reversed
+
+    def send_burst(self, burst: FrameBurst, timeout: float | None = None) -> int:
+        self._check_if_open()
+        for bus_queue in self.channel:
+            if bus_queue is self.queue and not self.receive_own_messages:
+                continue
+            if not isinstance(bus_queue, queue.SimpleQueue):  # a plain VirtualBus: frame by frame
+                for msg in burst.messages():
+                    msg.channel, msg.is_rx, msg.timestamp = self.channel_id, True, time.time()
+                    try:
+                        bus_queue.put(msg, block=True, timeout=timeout)
+                    except queue.Full:
+                        raise can.CanOperationError("Could not send message to one or more recipients")
+                continue
+            bus_queue.put(burst)
+        return len(burst)
+
+    def recv_burst(self, timeout: float | None = 0.0) -> FrameBurst | None:
+        if self._filters is not None or not self._open:
+            return recv_burst(_PlainReader(self), timeout)
+        parts: list[FrameBurst] = []
+        if self._spill:
+            parts.append(FrameBurst.from_messages(self._spill[::-1]))
+            self._spill = []
+        get = self.queue.get_nowait
+        try:
+            if not parts:
+                item = get() if timeout is not None and timeout <= 0.0 else self.queue.get(True, timeout)
+                parts.append(item if type(item) is FrameBurst else FrameBurst.from_messages([item]))
+            while True:
+                item = get()
+                parts.append(item if type(item) is FrameBurst else FrameBurst.from_messages([item]))
+        except queue.Empty:
+            pass
+        return FrameBurst.join(parts) if parts else None
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         self._check_if_open()
@@ -291,9 +359,39 @@ class LightVirtualBus(VirtualBus):
     def recv(self, timeout: float | None = None) -> can.Message | None:
         if self._filters is not None or not self._open:
             return super().recv(timeout)
+        if self._spill:
+            return self._spill.pop()
         try:
             if timeout is not None and timeout <= 0.0:
-                return self.queue.get_nowait()
-            return self.queue.get(block=True, timeout=timeout)
+                msg = self.queue.get_nowait()
+            else:
+                msg = self.queue.get(block=True, timeout=timeout)
         except queue.Empty:
             return None
+        if type(msg) is FrameBurst:
+            return self._hand_out(msg)
+        return msg
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self._spill:
+            return self._spill.pop(), False
+        msg, filtered = super()._recv_internal(timeout)
+        if type(msg) is FrameBurst:  # BusABC.recv's path (filters set): the burst's frames one by one
+            msg = self._hand_out(msg)
+        return msg, filtered
+
+    def _hand_out(self, burst: FrameBurst) -> can.Message:
+        """A burst's frames as messages, stamped as ``send`` stamps them; the first now, the rest queued."""
+        msgs = burst.messages()
+        now = time.time()
+        for msg in msgs:
+            msg.channel, msg.is_rx, msg.timestamp = self.channel_id, True, now
+        self._spill = msgs[:0:-1]
+        return msgs[0]
+
+
+class _PlainReader:
+    """``recv`` of a bus, for ``recv_burst`` on a LightVirtualBus whose filters are set."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        self.recv = bus.recv

@@ -1,0 +1,151 @@
+"""The ICD codec and the E2E check as compiled (numba) kernels over whole bursts of frames.
+
+A GNC tick moves ~22 frames; one Python codec call per frame cost a few microseconds each (bit fields,
+scaling, range checks and the CRC byte loop in Python). Here the DBC is turned into a signal table at load
+time (:class:`CodecTable`, built by :class:`fsw.bus.icd.Icd`) and two kernels walk that table for every
+frame of a burst in one call:
+
+  * :func:`encode_rows`: application values (one row per frame) -> frame bytes with alive counter and
+    E2E CRC in byte 0, the same bytes as ``Icd.encode`` (cantools' arithmetic: ``round((v - offset) /
+    scale)`` with round-half-even, two's complement fields, little-endian layout);
+  * :func:`check_rows`: frame bytes -> the stateless part of the receiver's classification (length, CRC,
+    decode with ``raw * scale + offset``, the accept bounds) and the decoded values.
+
+The stateful part of E2E (alive-counter sequence, counts per class, timeouts) stays in
+:class:`fsw.bus.e2e.E2EReceiver`, in Python: it is a few comparisons per frame and its counters are the
+public housekeeping view. Messages the table cannot describe (big-endian or float signals, multiplexing)
+are marked unsupported and take the per-frame cantools path. tests/fsw/test_bus_kernels.py checks both
+kernels bit-exact against the per-frame codec for every message of the DBC.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+# check_rows' per-frame outcome; CANDIDATE: length, CRC and ranges good, the sequence check is next
+CANDIDATE, NOT_IN_TABLE, BAD_LENGTH_CODE, CRC_ERROR_CODE, OUT_OF_RANGE_CODE = 0, 1, 2, 3, 4
+MAX_DLC = 8
+
+
+@dataclass(frozen=True)
+class CodecTable:
+    """The DBC's signals as arrays, message index m (``Icd.message_index``), signal slot k.
+
+    Slots 0 and 1 are E2E_CRC and E2E_Counter, application signals follow in DBC order (slot 2 + their
+    index in ``MessageSpec.signals``). ``index_of_id``: frame id (11 bit) -> m, -1 when the id is not a
+    message the table supports."""
+
+    index_of_id: np.ndarray   # (2048,) int64
+    dlc: np.ndarray           # (M,) int64
+    seed: np.ndarray          # (M,) int64: CRC-8 register after the data ID bytes
+    nsig: np.ndarray          # (M,) int64
+    start: np.ndarray         # (M, S) int64, bit position (little endian)
+    length: np.ndarray        # (M, S) int64, bits
+    signed: np.ndarray        # (M, S) bool
+    scale: np.ndarray         # (M, S) float64
+    offset: np.ndarray        # (M, S) float64
+    vmin: np.ndarray          # (M, S) float64: the DBC range, enforced before encoding
+    vmax: np.ndarray
+    alo: np.ndarray           # (M, S) float64: the receiver's accept bounds (range +- half an LSB)
+    ahi: np.ndarray
+    crc_table: np.ndarray     # (256,) int64
+
+    def encode(self, idx: np.ndarray, values: np.ndarray, counters: np.ndarray, sent: np.ndarray,
+               out: np.ndarray) -> int:
+        """:func:`encode_rows` over this table."""
+        return encode_rows(idx, values, counters, sent, out, self.dlc, self.seed, self.nsig, self.start, self.length,
+                           self.signed, self.scale, self.offset, self.vmin, self.vmax, self.crc_table)
+
+    def check(self, ids: np.ndarray, lengths: np.ndarray, data: np.ndarray, status: np.ndarray,
+              values: np.ndarray) -> None:
+        """:func:`check_rows` over this table."""
+        check_rows(ids, lengths, data, status, values, self.index_of_id, self.dlc, self.seed, self.nsig,
+                   self.start, self.length, self.signed, self.scale, self.offset, self.alo, self.ahi,
+                   self.crc_table)
+
+
+_I = "int64[::1]"
+_I2 = "int64[:, ::1]"
+_F2 = "float64[:, ::1]"
+
+
+@njit(f"int64({_I}, {_F2}, {_I}, {_I}, uint8[:, ::1], {_I}, {_I}, {_I}, {_I2}, {_I2}, boolean[:, ::1], {_F2}, {_F2}, "
+      f"{_F2}, {_F2}, {_I})", cache=True)
+def encode_rows(idx, values, counters, sent, out, dlc, seed, nsig, start, length, signed, scale, offset, vmin, vmax,
+                crc_table):  # pragma: no cover - compiled
+    """Encode row i of ``values`` (slots 2.. of message ``idx[i]``) into ``out[i, :dlc]`` with the message's
+    alive counter ``counters[m]`` (then advanced mod 16, and ``sent[m]`` counted) and its E2E CRC. Stops at the first row it cannot
+    encode (a value outside its DBC range or NaN, a raw value not fitting its bits, an unsupported message):
+    returns how many rows were encoded; the caller takes the checked per-frame path for that row."""
+    n = idx.shape[0]
+    for i in range(n):
+        m = idx[i]
+        if m < 0:
+            return i
+        word = np.uint64(counters[m] & 15) << np.uint64(8)
+        for k in range(2, nsig[m]):
+            v = values[i, k]
+            if not (vmin[m, k] <= v <= vmax[m, k]):
+                return i
+            r = np.rint((v - offset[m, k]) / scale[m, k])
+            bits = length[m, k]
+            if signed[m, k]:
+                lo, hi = -float(1 << (bits - 1)), float((1 << (bits - 1)) - 1)
+            else:
+                lo, hi = 0.0, float((1 << bits) - 1)
+            if not (lo <= r <= hi):
+                return i
+            mask = (np.uint64(1) << np.uint64(bits)) - np.uint64(1)
+            word |= (np.uint64(np.int64(r)) & mask) << np.uint64(start[m, k])
+        size = dlc[m]
+        for b in range(size):
+            out[i, b] = np.uint8((word >> np.uint64(8 * b)) & np.uint64(255))
+        c = crc_table[seed[m] ^ out[i, 1]]
+        for b in range(2, size):
+            c = crc_table[c ^ out[i, b]]
+        out[i, 0] = np.uint8(c ^ 255)
+        counters[m] = (counters[m] + 1) & 15
+        sent[m] += 1
+    return n
+
+
+@njit(f"void({_I}, {_I}, uint8[:, ::1], {_I}, {_F2}, {_I}, {_I}, {_I}, {_I}, {_I2}, {_I2}, boolean[:, ::1], {_F2}, "
+      f"{_F2}, {_F2}, {_F2}, {_I})", cache=True)
+def check_rows(ids, lengths, data, status, values, index_of_id, dlc, seed, nsig, start, length, signed, scale,
+               offset, alo, ahi, crc_table):  # pragma: no cover - compiled
+    """For frame i (``ids[i]``, ``data[i, :lengths[i]]``; ids < 0 for frames that are not plain classic data
+    frames): ``status[i]`` = NOT_IN_TABLE, BAD_LENGTH, CRC_ERROR, OUT_OF_RANGE or CANDIDATE, and for a
+    candidate ``values[i, :nsig]`` the decoded signals (slot 1: the alive counter)."""
+    for i in range(ids.shape[0]):
+        fid = ids[i]
+        m = index_of_id[fid] if 0 <= fid < index_of_id.shape[0] else -1
+        if m < 0:
+            status[i] = NOT_IN_TABLE
+            continue
+        size = dlc[m]
+        if lengths[i] != size:
+            status[i] = BAD_LENGTH_CODE
+            continue
+        c = crc_table[seed[m] ^ data[i, 1]]
+        for b in range(2, size):
+            c = crc_table[c ^ data[i, b]]
+        if (c ^ 255) != data[i, 0]:
+            status[i] = CRC_ERROR_CODE
+            continue
+        word = np.uint64(0)
+        for b in range(size):
+            word |= np.uint64(data[i, b]) << np.uint64(8 * b)
+        code = CANDIDATE
+        for k in range(nsig[m]):
+            bits = length[m, k]
+            r = np.int64((word >> np.uint64(start[m, k])) & ((np.uint64(1) << np.uint64(bits)) - np.uint64(1)))
+            if signed[m, k] and r >= (np.int64(1) << (bits - 1)):
+                r -= np.int64(1) << bits
+            v = r * scale[m, k] + offset[m, k]
+            if not (alo[m, k] <= v <= ahi[m, k]):
+                code = OUT_OF_RANGE_CODE
+                break
+            values[i, k] = v
+        status[i] = code
