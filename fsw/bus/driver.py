@@ -154,6 +154,7 @@ class FswBusDriver:
         self._imu: ImuSample | None = None
         self._imu_rx: float | None = None
         self._imu_batch: list[ImuSample] = []
+        self._imu_rows: list[list] = []  # lockstep: value rows of this tick's IMU frames
         self._st: StarTrackerSample | None = None
         self._st_rx: float | None = None
         self._st_new = False
@@ -246,15 +247,23 @@ class FswBusDriver:
 
     def _begin_tick(self) -> None:
         self._imu_batch = []
+        self._imu_rows = []
         self._st_new = False
         self._wheels_new = [False] * self.n_wheels
 
     def _tick_inputs(self, tick: int, expected: int, received: int) -> TickInputs:
-        batch = self._imu_batch
-        n = len(batch)
-        # The IMU frames of tick k were sampled over (t_{k-1}, t_k]; spread their times evenly.
-        samples = [ImuSample(s.omega_BN_B, s.saturated, self.t_tick - (n - 1 - i) * self.period_s / n, s.valid)
-                   for i, s in enumerate(batch)]
+        rows = self._imu_rows
+        n = len(rows)
+        samples = []
+        if n:
+            # the tick's gyro samples in one array (one conversion, not one per frame)
+            x, y, z, sat = self._imu_cols
+            omega = np.array([(r[x], r[y], r[z]) for r in rows])
+            # The IMU frames of tick k were sampled over (t_{k-1}, t_k]; spread their times evenly.
+            samples = [ImuSample(omega[i], bool(r[sat]), self.t_tick - (n - 1 - i) * self.period_s / n)
+                       for i, r in enumerate(rows)]
+            self._imu = ImuSample(omega[-1], samples[-1].saturated, self.t_tick)
+            self._imu_rx = self.t_tick
         wheels = [w if new else None for w, new in zip(self._wheels, self._wheels_new)]
         return TickInputs(
             tick=tick, t=self.t_tick, period_s=self.period_s,
@@ -350,6 +359,9 @@ class FswBusDriver:
         row = frame.row
         fid = frame.frame_id
         if fid == self._imu_id:
+            if not self._realtime:
+                self._imu_rows.append(row)  # lockstep: the samples are made per tick (_tick_inputs)
+                return
             x, y, z, sat = self._imu_cols
             sample = ImuSample(np.array([row[x], row[y], row[z]]), bool(row[sat]), now)
             self._imu, self._imu_rx = sample, now

@@ -107,12 +107,9 @@ class CheckedFrame(NamedTuple):
     name: str | None
     frame_id: int
     status: str
+    delivered: bool
     counter: int | None = None
     row: list | None = None
-
-    @property
-    def delivered(self) -> bool:
-        return self.status in DELIVERED
 
 
 class CheckedBurst:
@@ -195,20 +192,20 @@ class E2EReceiver:
             if status in DELIVERED:
                 state.last_ok_t = now_s
                 state.timed_out = False
-                return CheckedFrame(spec.name, spec.frame_id, status, counter, row)
-            return CheckedFrame(spec.name, spec.frame_id, status, counter)
+                return CheckedFrame(spec.name, spec.frame_id, status, True, counter, row)
+            return CheckedFrame(spec.name, spec.frame_id, status, False, counter)
         cls = _CODE_CLASS.get(code)
         if cls is not None:
             spec, counts = self._fast[checked.ids[i]][:2]
             counts[cls] += 1
-            return CheckedFrame(spec.name, spec.frame_id, cls)
+            return CheckedFrame(spec.name, spec.frame_id, cls, False)
         frame = self.classify(checked.burst.message(i), now_s)  # not in the table: the message path
         if frame is None:
             return None
         row = None
         if frame.signals is not None:
             row = [float(frame.signals[name]) for name in self._slots[frame.name]]
-        return CheckedFrame(frame.name, frame.frame_id, frame.status, frame.counter, row)
+        return CheckedFrame(frame.name, frame.frame_id, frame.status, frame.delivered, frame.counter, row)
 
     # ----------------------------------------------------------------------------------- frames
     def classify(self, msg: "can.Message", now_s: float) -> ReceivedFrame | None:
