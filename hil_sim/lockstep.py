@@ -32,7 +32,8 @@ import can
 import numpy as np
 
 from fsw.bus.burst import FrameBurst
-from fsw.bus.e2e import CheckedBurst, CheckedFrame, E2EReceiver
+from fsw.bus.e2e import NO_STOP, CheckedBurst, CheckedFrame, E2EReceiver
+from fsw.bus.kernels import ECHO_CODE
 from fsw.bus.icd import Icd
 from fsw.bus.transport import recv_burst, send_batch, send_burst
 from hil_sim.devices import Devices, DeviceTiming, WorldLike
@@ -212,7 +213,7 @@ class Simulator:
                 return True
             rx = self._rx
             if rx is not None and rx.pos < rx.n:
-                self._handle_next(rx, self.t_s)
+                self._handle_next(rx, self.t_s, k)
                 continue
             burst = None if wait_first else recv_burst(self.bus, 0.0)  # clock reads only when it is empty
             wait_first = False
@@ -247,19 +248,31 @@ class Simulator:
                 if burst is None:
                     return n
                 rx = self._rx = self.receiver.check(burst)
-            self._handle_next(rx, t_s)
-            n += 1
+            n += self._handle_next(rx, t_s)
 
-    def _handle_next(self, rx: CheckedBurst, t_s: float) -> None:
-        """The next frame read off the bus: through the fault injector when faults are active (frame by
-        frame, as a message), else classified from the burst's compiled check."""
+    def _handle_next(self, rx: CheckedBurst, t_s: float, awaited: int | None = None) -> int:
+        """Frames read off the bus: through the fault injector when faults are active (frame by frame, as
+        messages), else classified in one compiled call, up to CYCLE_DONE(``awaited``) when given (later
+        frames stay for later, as if still queued). Returns how many frames were handled."""
         if self.injector and not self.injector.passes_through(t_s, "rx"):
             msg = rx.burst.message(rx.pos)
             rx.pos += 1
             self._handle_rx(msg, t_s)
-            return
-        msg = rx.burst.message(rx.pos) if self.on_frame is not None else None
-        self._deliver(self.receiver.take(rx, t_s), t_s, msg)
+            return 1
+        first = rx.pos
+        stop = NO_STOP if awaited is None else (self._cycle_done_id, self._done_tick_col, awaited, awaited,
+                                                 NO_STOP[4], 0)
+        end = self.receiver.classify_until(rx, t_s, stop)
+        for i in range(first, end):
+            code = rx.codes[i]
+            if code == ECHO_CODE:
+                continue
+            if self.on_frame is not None:
+                self.on_frame("rx", t_s, rx.burst.message(i))
+            if code <= 1:  # delivered
+                fid = rx.ids[i] if i not in rx.fallback else rx.fallback[i].frame_id
+                self._on_delivered(fid, rx.row(i), t_s)
+        return end - first
 
     def _handle_rx(self, msg: can.Message, t_s: float) -> None:
         for m in (self.injector.process([msg], t_s, extras=False, direction="rx") if self.injector else [msg]):
@@ -274,21 +287,23 @@ class Simulator:
             return
         if self.on_frame is not None:
             self.on_frame("rx", t_s, msg)
-        if not frame.delivered:
-            return
-        row = frame.row
-        if frame.frame_id in self._cmd_index:
-            self.devices.wheels[self._cmd_index[frame.frame_id]].on_command(
+        if frame.delivered:
+            self._on_delivered(frame.frame_id, frame.row, t_s)
+
+    def _on_delivered(self, fid: int, row: list, t_s: float) -> None:
+        """A frame from the flight software that passed E2E (id, value row), at simulation time ``t_s``."""
+        if fid in self._cmd_index:
+            self.devices.wheels[self._cmd_index[fid]].on_command(
                 {"torque_cmd": row[self._torque_col], "tick_lsb": row[self._tick_lsb_col]}, t_s)
             self.stats.wheel_commands += 1
-        elif frame.frame_id == self._cycle_done_id:
+        elif fid == self._cycle_done_id:
             tick = int(row[self._done_tick_col])
             self.stats.cycle_done += 1
             if tick == self._awaiting:
                 self._done_ticks.add(tick)
             else:
                 self.stats.stale_cycle_done += 1
-        elif frame.frame_id == self._heartbeat_id:
+        elif fid == self._heartbeat_id:
             self.stats.heartbeats += 1
 
     def _publish_due(self, t_s: float) -> None:

@@ -150,11 +150,15 @@ class FswBusDriver:
         self._cmd_tick_col = self._col["RW1_CMD", "tick_lsb"]
         self._done_tick_col = self._col["CYCLE_DONE", "tick"]
         self._rx: CheckedBurst | None = None  # frames read off the bus, not yet classified
+        self._no_mask = np.zeros(2048, dtype=np.bool_)
+        self._device_mask = np.zeros(2048, dtype=np.bool_)  # classify_until's count of a tick's frames
+        self._device_mask[[i for i in self._device_ids if i < 2048]] = True
         # newest samples (real time and lockstep alike)
         self._imu: ImuSample | None = None
         self._imu_rx: float | None = None
         self._imu_batch: list[ImuSample] = []
-        self._imu_rows: list[list] = []  # lockstep: value rows of this tick's IMU frames
+        self._imu_rows: list[list] = []  # lockstep: value rows of this tick's IMU frames (Python path)
+        self._imu_parts: list[np.ndarray] = []  # lockstep: this tick's IMU value rows, per burst
         self._st: StarTrackerSample | None = None
         self._st_rx: float | None = None
         self._st_new = False
@@ -195,20 +199,29 @@ class FswBusDriver:
         frames of a tick are used at the next tick, as received.
         """
         self._timeout_s = max(0.0, timeout_s)
-        self._deadline = None  # set when the queue first runs empty (see _receive)
+        self._deadline = None  # set when the queue first runs empty (see _next_burst)
         self._realtime = False
         sync = self._pending_sync
         self._pending_sync = None
-        while sync is None:
-            frame = self._receive(apply=False)
-            if frame is None:
-                return None
-            if frame.delivered and frame.frame_id == self._sync_id:
-                if not self._stale_sync(frame.row):
-                    sync = frame.row
-            elif frame.delivered and frame.frame_id in self._device_ids:
-                self.unexpected_frames += 1  # belongs to no announced tick
         tick_col, following_col, period_col = self._sync_cols
+        while sync is None:  # frames before SYNC(k) are classified and not used
+            rx = self._next_burst()
+            if rx is None:
+                return None
+            first = rx.pos
+            after = -math.inf if self.last_tick is None else self.last_tick + 1
+            end = self.receiver.classify_until(rx, self.t_tick, (self._sync_id, tick_col, after, math.inf,
+                                                                 self._no_mask, 0))
+            for i in range(first, end):
+                if rx.codes[i] > 1:
+                    continue  # not delivered
+                fid = rx.ids[i] if not rx.fallback else self._frame_id(rx, i)
+                if fid == self._sync_id:
+                    row = rx.row(i)
+                    if not self._stale_sync(row):
+                        sync = row  # the kernel stopped after it
+                elif fid in self._device_ids:
+                    self.unexpected_frames += 1  # belongs to no announced tick
         tick = int(sync[tick_col])
         self.period_s = float(sync[period_col]) / 1000.0
         self.t_tick = tick * self.period_s
@@ -217,24 +230,43 @@ class FswBusDriver:
         self._begin_tick()
         received = failed = 0
         while received < expected:
-            frame = self._receive(FRAME_GRACE_S if received + failed >= expected else None)
-            if frame is None:
+            rx = self._next_burst(FRAME_GRACE_S if received + failed >= expected else None)
+            if rx is None:
                 break
-            if frame.frame_id == self._sync_id and frame.delivered:
-                if self._stale_sync(frame.row, tick):
-                    continue
-                self._pending_sync = frame.row  # next tick already started: stop here
-                break
-            if frame.frame_id in self._device_ids:
-                if frame.delivered:
-                    received += 1
-                else:
+            first = rx.pos
+            # up to the tick's last announced frame, or a SYNC of a later tick
+            end = self.receiver.classify_until(rx, self.t_tick, (self._sync_id, tick_col, tick + 1, math.inf,
+                                                                 self._device_mask, expected - received))
+            imu_id, device_ids, codes, ids = self._imu_id, self._device_ids, rx.codes, rx.ids
+            imu_rows: list[int] = []
+            for i in range(first, end):
+                fid = ids[i] if not rx.fallback else self._frame_id(rx, i)
+                if codes[i] <= 1:  # delivered
+                    if fid == imu_id and i not in rx.rows:
+                        imu_rows.append(i)  # read from the kernel's value array, once per burst
+                        received += 1
+                    elif fid == self._sync_id:
+                        row = rx.row(i)
+                        if not self._stale_sync(row, tick):
+                            self._pending_sync = row  # next tick already started: stop here
+                    elif fid in device_ids:
+                        received += 1
+                        self._apply_row(fid, rx.row(i), self.t_tick)
+                elif fid in device_ids:
                     failed += 1
+            if imu_rows:
+                self._imu_parts.append(rx.values[imu_rows])
+            if self._pending_sync is not None:
+                break
         if received < expected:
             self.incomplete_ticks += 1
         self.receiver.check_timeouts(self.t_tick)
         self.last_tick = tick
         return self._tick_inputs(tick, expected, received)
+
+    def _frame_id(self, rx: CheckedBurst, i: int) -> int:
+        frame = self.receiver.frame_at(rx, i)
+        return -1 if frame is None else frame.frame_id
 
     def _stale_sync(self, row: list, current: int | None = None) -> bool:
         """A SYNC (value row) for a tick at or before the current (or last) one: replayed or stale, counted,
@@ -248,20 +280,24 @@ class FswBusDriver:
     def _begin_tick(self) -> None:
         self._imu_batch = []
         self._imu_rows = []
+        self._imu_parts = []
         self._st_new = False
         self._wheels_new = [False] * self.n_wheels
 
     def _tick_inputs(self, tick: int, expected: int, received: int) -> TickInputs:
-        rows = self._imu_rows
-        n = len(rows)
         samples = []
-        if n:
-            # the tick's gyro samples in one array (one conversion, not one per frame)
+        if self._imu_rows:  # a frame the Python path classified: its row joins the arrays, in order
+            self._imu_parts.append(np.array(self._imu_rows))
+        if self._imu_parts:
+            # the tick's gyro samples in one array, straight from the decoded frames (not one per frame)
             x, y, z, sat = self._imu_cols
-            omega = np.array([(r[x], r[y], r[z]) for r in rows])
+            rows = self._imu_parts[0] if len(self._imu_parts) == 1 else np.concatenate(self._imu_parts)
+            omega = rows[:, x:z + 1] if (y, z) == (x + 1, x + 2) else rows[:, [x, y, z]]
+            flags = rows[:, sat].tolist()
+            n = len(flags)
             # The IMU frames of tick k were sampled over (t_{k-1}, t_k]; spread their times evenly.
-            samples = [ImuSample(omega[i], bool(r[sat]), self.t_tick - (n - 1 - i) * self.period_s / n)
-                       for i, r in enumerate(rows)]
+            samples = [ImuSample(omega[i], bool(flags[i]), self.t_tick - (n - 1 - i) * self.period_s / n)
+                       for i in range(n)]
             self._imu = ImuSample(omega[-1], samples[-1].saturated, self.t_tick)
             self._imu_rx = self.t_tick
         wheels = [w if new else None for w, new in zip(self._wheels, self._wheels_new)]
@@ -273,45 +309,37 @@ class FswBusDriver:
             frames_expected=expected, frames_received=received,
         )
 
-    def _receive(self, grace_s: float | None = None, apply: bool = True) -> CheckedFrame | None:
-        """Next classified frame within the call's timeout (own echoes skipped); None on timeout.
-        ``grace_s``: when the queue is empty, wait at most this long (still within the timeout);
-        ``apply``: hand a delivered frame to the samples (False: only classify it).
+    def _next_burst(self, grace_s: float | None = None) -> CheckedBurst | None:
+        """The frames read off the bus not yet classified, within the call's timeout; None on timeout.
+        ``grace_s``: when the queue is empty, wait at most this long (still within the timeout).
 
-        Frames are read off the bus as bursts (everything queued) and checked in one compiled call
-        (``E2EReceiver.check``); they are classified one by one as they are used, so a tick that ends
-        early leaves the rest, unclassified, for the next call, exactly as if they were still queued."""
-        while True:
-            rx = self._rx
-            if rx is None or rx.pos >= rx.n:
-                # Frames come in bursts after SYNC: try without waiting first, and read the clock only when
-                # the queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest):
-                # the first wait of a call starts the deadline and waits the whole timeout, without a read.
-                burst = recv_burst(self.bus, 0.0)
-                if burst is None:
-                    if self._timeout_s <= 0.0:
-                        return None
-                    if self._deadline is None:
-                        remaining = self._timeout_s
-                        self._deadline = time.monotonic() + remaining
-                    else:
-                        remaining = self._deadline - time.monotonic()
-                        if remaining <= 0.0:
-                            return None
-                    if grace_s is not None:
-                        remaining = min(remaining, grace_s)
-                    burst = recv_burst(self.bus, remaining)
-                    if burst is None:
-                        return None
-                rx = self._rx = self.receiver.check(burst)
-            # Lockstep: frames are stamped with the simulation time of the tick, never the host clock.
-            now = self.t_tick
-            frame = self.receiver.take(rx, now)
-            if frame is None:
-                continue
-            if apply:
-                self._apply(frame, now)
-            return frame
+        Frames are read off the bus as bursts (everything queued) and classified in compiled calls
+        (``E2EReceiver.classify_until``) that stop where the tick's wait ends: the rest stays unjudged for
+        the next call, exactly as if it were still queued."""
+        rx = self._rx
+        if rx is not None and rx.pos < rx.n:
+            return rx
+        # Frames come in bursts after SYNC: try without waiting first, and read the clock only when the
+        # queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest): the first
+        # wait of a call starts the deadline and waits the whole timeout, without a clock read.
+        burst = recv_burst(self.bus, 0.0)
+        if burst is None:
+            if self._timeout_s <= 0.0:
+                return None
+            if self._deadline is None:
+                remaining = self._timeout_s
+                self._deadline = time.monotonic() + remaining
+            else:
+                remaining = self._deadline - time.monotonic()
+                if remaining <= 0.0:
+                    return None
+            if grace_s is not None:
+                remaining = min(remaining, grace_s)
+            burst = recv_burst(self.bus, remaining)
+            if burst is None:
+                return None
+        self._rx = rx = self.receiver.check(burst)
+        return rx
 
     def _start_supervision(self, now: float) -> None:
         # Timeouts count from the first time the application asks for data, on the clock it uses.
@@ -354,10 +382,11 @@ class FswBusDriver:
 
     # ------------------------------------------------------------------------------ frame -> sample
     def _apply(self, frame: CheckedFrame, now: float) -> None:
-        if not frame.delivered:
-            return
-        row = frame.row
-        fid = frame.frame_id
+        if frame.delivered:
+            self._apply_row(frame.frame_id, frame.row, now)
+
+    def _apply_row(self, fid: int, row: list, now: float) -> None:
+        """A delivered frame (id, value row) into the newest samples."""
         if fid == self._imu_id:
             if not self._realtime:
                 self._imu_rows.append(row)  # lockstep: the samples are made per tick (_tick_inputs)

@@ -13,13 +13,12 @@ housekeeping and never reaches the estimator.
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Iterable, Mapping, NamedTuple
 
 import numpy as np
 
-from fsw.bus.kernels import BAD_LENGTH_CODE, CANDIDATE, CRC_ERROR_CODE, OUT_OF_RANGE_CODE
+from fsw.bus.kernels import ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_FALLBACK, KIND_UNKNOWN, UNKNOWN_CODE
 
 if TYPE_CHECKING:  # pragma: no cover
     import can
@@ -113,24 +112,32 @@ class CheckedFrame(NamedTuple):
 
 
 class CheckedBurst:
-    """A received burst after the compiled check (length, CRC, decode, ranges: no state changed yet);
-    :meth:`E2EReceiver.take` classifies its frames in order, ``pos`` being the next one."""
+    """A received burst being classified (:meth:`E2EReceiver.classify_until`): ``pos`` is the next frame
+    to classify; for each classified frame i, ``codes[i]`` its class code (FRAME_CLASSES index, or
+    kernels.UNKNOWN_CODE / ECHO_CODE) and, when delivered, ``row(i)`` its decoded value row (``values[i]``
+    as the kernel wrote it)."""
 
-    __slots__ = ("burst", "ids", "status", "rows", "pos", "n")
+    __slots__ = ("burst", "ids", "status", "values", "codes", "rows", "pos", "n", "fallback")
 
-    def __init__(self, burst: "FrameBurst", ids: list, status: list, rows: list) -> None:
-        self.burst, self.ids, self.status, self.rows = burst, ids, status, rows
-        self.pos, self.n = 0, len(ids)
+    def __init__(self, burst: "FrameBurst", width: int) -> None:
+        self.burst = burst
+        self.n = n = len(burst)
+        self.ids = burst.ids.tolist()
+        self.status = np.full(n, -1, dtype=np.int64)  # -1: not classified yet
+        self.values = np.zeros((n, width))
+        self.codes: list = [None] * n
+        self.rows: dict[int, list] = {}  # value rows of delivered frames the Python path classified
+        self.pos = 0
+        self.fallback: dict[int, ReceivedFrame | None] = {}  # frames the Python path classified
+
+    def row(self, i: int) -> list:
+        """The value row of delivered frame ``i`` (Python floats)."""
+        return self.rows[i] if i in self.rows else self.values[i].tolist()
 
 
-_CODE_CLASS = {BAD_LENGTH_CODE: BAD_LENGTH, CRC_ERROR_CODE: CRC_ERROR, OUT_OF_RANGE_CODE: OUT_OF_RANGE}
-
-
-@dataclass
-class _SequenceState:
-    last_counter: int | None = None
-    last_ok_t: float | None = None
-    timed_out: bool = False
+CODE_CLASS = FRAME_CLASSES + (UNKNOWN_ID, "own_echo")  # class of each kernels class code
+_NO_MASK = np.zeros(2048, dtype=np.bool_)
+NO_STOP = (-1, 0, 0.0, -1.0, _NO_MASK, 0)  # classify_until: classify everything
 
 
 @dataclass
@@ -141,6 +148,11 @@ class E2EReceiver:
     sender (python-can's udp_multicast does) would otherwise make a node judge its own frames; those are
     counted under ``_bus/own_echo`` and otherwise ignored.
     ``watch``: message names whose silence counts as a timeout (default: every message not ignored).
+
+    Frames are classified in bursts by the compiled kernel (fsw.bus.kernels.classify_rows) on this
+    receiver's sequence state arrays; ``classify`` (one frame) goes the same way. Frames the kernel
+    cannot judge (error, remote and extended frames, messages of a DBC layout outside its table) take
+    the Python path here, on the same state.
     """
 
     icd: "Icd"
@@ -148,7 +160,6 @@ class E2EReceiver:
     watch: Iterable[str] | None = None
     start_t: float = 0.0
     counters: dict[str, dict[str, int]] = field(init=False)
-    _state: dict[str, _SequenceState] = field(init=False)
     _watched: list | None = field(init=False, default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -157,55 +168,107 @@ class E2EReceiver:
         self.watch = tuple(self.watch) if self.watch is not None else tuple(names)
         self.counters = {name: {c: 0 for c in ALL_CLASSES} for name in names}
         self.counters[BUS_KEY] = {UNKNOWN_ID: 0, "own_echo": 0, "error_frame": 0}
-        self._state = {name: _SequenceState(last_ok_t=self.start_t) for name in names}
-        # frame id -> what classify needs for that message (ignored ids are not in it: they take the full path)
-        self._fast = {m.frame_id: (m, self.counters[m.name], self._state[m.name], m.codec)
-                      for m in self.icd.messages.values() if m.frame_id not in self.ignore_ids}
-        # the compiled check's table without this node's own ids (those take classify's echo path)
-        index_of_id = self.icd.table.index_of_id.copy()
-        index_of_id[[i for i in self.ignore_ids if 0 <= i < len(index_of_id)]] = -1
-        self._table = dataclasses.replace(self.icd.table, index_of_id=index_of_id)
+        table = self.icd.table
+        n_messages = len(self.icd.message_names)
+        # sequence state per message index: (last counter or -1, timed out), time of the last valid frame
+        self._seq = np.zeros((n_messages, 2), dtype=np.int64)
+        self._seq[:, 0] = -1
+        self._last_ok_t = np.full(n_messages, float(self.start_t))
+        # frame id -> message index (table messages not ignored), or what else the id is (kernels.KIND_*)
+        kind = np.full(len(table.index_of_id), KIND_UNKNOWN, dtype=np.int64)
+        for spec in self.icd.messages.values():
+            if spec.frame_id not in self.ignore_ids:
+                m = self.icd.message_index[spec.name]
+                kind[spec.frame_id] = m if table.index_of_id[spec.frame_id] == m else KIND_FALLBACK
+        kind[[i for i in self.ignore_ids if 0 <= i < len(kind)]] = KIND_ECHO
+        self._kind_of_id = kind
+        self._width = table.start.shape[1]
+        # frame id -> (spec, its counts, its message index), for the messages this receiver judges
+        self._by_id = {m.frame_id: (m, self.counters[m.name], self.icd.message_index[m.name])
+                       for m in self.icd.messages.values() if m.frame_id not in self.ignore_ids}
         self._slots = {m.name: ("E2E_CRC", "E2E_Counter") + m.signals for m in self.icd.messages.values()}
 
     # ----------------------------------------------------------------------------------- bursts
     def check(self, burst: "FrameBurst") -> CheckedBurst:
-        """The stateless part of classifying every frame of ``burst``, in one compiled call (see
-        fsw.bus.kernels); :meth:`take` then classifies the frames one by one, in order, as ``classify``."""
-        n = len(burst)
-        status = np.empty(n, dtype=np.int64)
-        values = np.zeros((n, self._table.start.shape[1]))
-        self._table.check(burst.ids, burst.lengths, burst.data, status, values)
-        return CheckedBurst(burst, burst.ids.tolist(), status.tolist(), values.tolist())
+        """``burst`` ready to be classified (:meth:`classify_until`, :meth:`take`); nothing judged yet."""
+        return CheckedBurst(burst, self._width)
+
+    def classify_until(self, checked: CheckedBurst, now_s: float, stop: tuple = NO_STOP,
+                       limit: int | None = None) -> int:
+        """Classify the frames of ``checked`` from ``pos`` on (at most ``limit``), received at ``now_s``, in
+        order, up to and including a delivered frame that meets ``stop`` = (frame id, value slot, low,
+        high, id mask, count): that frame id with its slot in [low, high], or the count-th delivered frame
+        whose id is in the mask. Counts them; returns the index after the last one classified (``pos``
+        moves there). Later frames stay unjudged, as if still queued."""
+        n = checked.n if limit is None else min(checked.n, checked.pos + limit)
+        burst = checked.burst
+        ids_arr = burst.ids if n == len(burst.ids) else burst.ids[:n]
+        stop_id, stop_col, stop_lo, stop_hi, mask, left = stop
+        pos = checked.pos
+        while pos < n:
+            end = self.icd.table.classify(ids_arr, burst.lengths, burst.data, checked.status, checked.values, pos,
+                                          now_s, (stop_id, stop_col, stop_lo, stop_hi, mask, left),
+                                          self._kind_of_id, self._seq, self._last_ok_t)
+            self._count(checked, pos, end)
+            if end >= n or checked.status[end] != FALLBACK_CODE:
+                pos = end
+                break
+            # frames the kernel classified count toward the stop rule; then the Python path's frame
+            left -= sum(1 for j in range(pos, end) if checked.codes[j] <= 1 and mask[checked.ids[j]])
+            frame = self._classify_message(burst.message(end), now_s)
+            checked.fallback[end] = frame
+            checked.codes[end] = ECHO_CODE if frame is None else CODE_CLASS.index(frame.status)
+            pos = end + 1
+            if frame is not None and frame.delivered:
+                row = [float(frame.signals[k]) for k in self._slots[frame.name]]
+                checked.rows[end] = row
+                if frame.frame_id == stop_id and stop_lo <= row[stop_col] <= stop_hi:
+                    break
+                if 0 <= frame.frame_id < len(mask) and mask[frame.frame_id]:
+                    left -= 1
+                    if left <= 0:
+                        break
+        checked.pos = pos
+        return pos
+
+    def _count(self, checked: CheckedBurst, first: int, end: int) -> None:
+        """Counts, codes and delivered rows of frames first..end-1, as the kernel classified them."""
+        if end <= first:
+            return
+        codes = checked.status[first:end].tolist()
+        checked.codes[first:end] = codes
+        by_id, bus, ids, classes = self._by_id, self.counters[BUS_KEY], checked.ids, FRAME_CLASSES
+        for j, code in enumerate(codes, first):
+            if code <= 6:
+                by_id[ids[j]][1][classes[code]] += 1
+            elif code == UNKNOWN_CODE:
+                bus[UNKNOWN_ID] += 1
+            else:
+                bus["own_echo"] += 1
 
     def take(self, checked: CheckedBurst, now_s: float) -> CheckedFrame | None:
         """Classify the next frame of ``checked`` (received at ``now_s``): the same outcome and counts as
         ``classify`` of that frame's message; None for the node's own echoed frames."""
         i = checked.pos
-        checked.pos = i + 1
-        code = checked.status[i]
-        if code == CANDIDATE:
-            spec, counts, state, _ = self._fast[checked.ids[i]]
-            row = checked.rows[i]
-            counter = int(row[1])
-            status = self._sequence(spec, counter)
-            counts[status] += 1
-            if status in DELIVERED:
-                state.last_ok_t = now_s
-                state.timed_out = False
-                return CheckedFrame(spec.name, spec.frame_id, status, True, counter, row)
-            return CheckedFrame(spec.name, spec.frame_id, status, False, counter)
-        cls = _CODE_CLASS.get(code)
-        if cls is not None:
-            spec, counts = self._fast[checked.ids[i]][:2]
-            counts[cls] += 1
-            return CheckedFrame(spec.name, spec.frame_id, cls, False)
-        frame = self.classify(checked.burst.message(i), now_s)  # not in the table: the message path
-        if frame is None:
+        self.classify_until(checked, now_s, limit=1)
+        return self.frame_at(checked, i)
+
+    def frame_at(self, checked: CheckedBurst, i: int) -> CheckedFrame | None:
+        """Frame ``i`` of ``checked`` as classified (None for an own echo)."""
+        code = checked.codes[i]
+        if code == ECHO_CODE:
             return None
-        row = None
-        if frame.signals is not None:
-            row = [float(frame.signals[name]) for name in self._slots[frame.name]]
-        return CheckedFrame(frame.name, frame.frame_id, frame.status, frame.delivered, frame.counter, row)
+        if i in checked.fallback:
+            frame = checked.fallback[i]
+            return CheckedFrame(frame.name, frame.frame_id, frame.status, frame.delivered, frame.counter,
+                                checked.rows.get(i))
+        fid = checked.ids[i]
+        if code == UNKNOWN_CODE:
+            return CheckedFrame(None, fid, UNKNOWN_ID, False)
+        spec = self._by_id[fid][0]
+        row = checked.row(i) if code <= 1 else None
+        counter = int(checked.values[i, 1]) if code <= 3 else None
+        return CheckedFrame(spec.name, fid, CODE_CLASS[code], code <= 1, counter, row)
 
     # ----------------------------------------------------------------------------------- frames
     def classify(self, msg: "can.Message", now_s: float) -> ReceivedFrame | None:
@@ -214,56 +277,66 @@ class E2EReceiver:
         Returns None for the node's own echoed frames, else the classification (with decoded signals
         only when delivered).
         """
-        try:  # fast path: a plain data frame of a watched ICD message (attributes as can.Message has them)
-            entry = self._fast.get(msg.arbitration_id)
-            if entry is not None and not (msg.is_error_frame or msg.is_extended_id or msg.is_remote_frame):
-                return self._classify_known(entry, msg, now_s)
-        except AttributeError:
-            pass
+        from fsw.bus.burst import FrameBurst
+
+        checked = self.check(FrameBurst.from_messages([msg]))
+        frame = self.take(checked, now_s)
+        if frame is None:
+            return None
+        signals = None
+        if frame.delivered:
+            signals = dict(zip(self._slots[frame.name], frame.row))
+        return ReceivedFrame(frame.name, frame.frame_id, frame.status, now_s, frame.counter, signals)
+
+    def _classify_message(self, msg: "can.Message", now_s: float) -> ReceivedFrame | None:
+        """The Python path of a frame the kernel does not judge (see the class docstring)."""
         frame_id = int(getattr(msg, "arbitration_id", -1))
         if getattr(msg, "is_error_frame", False):
             self.counters[BUS_KEY]["error_frame"] += 1
             return ReceivedFrame(None, frame_id, UNKNOWN_ID, now_s)
-        if frame_id in self.ignore_ids and not msg.is_extended_id:
+        extended = bool(getattr(msg, "is_extended_id", False))
+        if frame_id in self.ignore_ids and not extended:
             self.counters[BUS_KEY]["own_echo"] += 1
             return None
-        spec = None if (msg.is_extended_id or msg.is_remote_frame) else self.icd.by_id.get(frame_id)
+        spec = None if (extended or getattr(msg, "is_remote_frame", False)) else self.icd.by_id.get(frame_id)
         if spec is None or spec.name not in self.counters:
             self.counters[BUS_KEY][UNKNOWN_ID] += 1
             return ReceivedFrame(None, frame_id, UNKNOWN_ID, now_s)
-        return self._classify_known(self._fast[frame_id], msg, now_s)
+        return self._classify_known(spec, msg, now_s)
 
-    def _classify_known(self, entry: tuple, msg: "can.Message", now_s: float) -> ReceivedFrame:
-        """``classify`` for a data frame whose id is a (not ignored) ICD message: the same steps."""
-        spec, counts, state, codec = entry
+    def _classify_known(self, spec: Any, msg: "can.Message", now_s: float) -> ReceivedFrame:
+        """A data frame of a (not ignored) ICD message, decoded by cantools: the kernel's steps."""
         name, frame_id = spec.name, spec.frame_id
+        counts = self.counters[name]
         data = bytes(msg.data) if msg.data is not None else b""
         if len(data) != spec.dlc:
             counts[BAD_LENGTH] += 1
             return ReceivedFrame(name, frame_id, BAD_LENGTH, now_s)
-        if (codec.crc(data) if codec is not None else e2e_crc(spec.data_id, data[1:])) != data[0]:
+        if e2e_crc(spec.data_id, data[1:]) != data[0]:
             counts[CRC_ERROR] += 1
             return ReceivedFrame(name, frame_id, CRC_ERROR, now_s)
-        signals = codec.unpack_checked(data) if codec is not None else self.icd.decode_checked(spec, data)
+        signals = self.icd.decode_checked(spec, data)
         if signals is None:
             counts[OUT_OF_RANGE] += 1
             return ReceivedFrame(name, frame_id, OUT_OF_RANGE, now_s)
         counter = int(signals["E2E_Counter"])
-        status = self._sequence(spec, counter)
+        m = self.icd.message_index[name]
+        status = self._sequence(m, spec.max_delta_counter, counter)
         counts[status] += 1
         if status in DELIVERED:
-            state.last_ok_t = now_s
-            state.timed_out = False
+            self._last_ok_t[m] = now_s
+            self._seq[m, 1] = 0
             return ReceivedFrame(name, frame_id, status, now_s, counter, signals)
         return ReceivedFrame(name, frame_id, status, now_s, counter)
 
-    def _sequence(self, spec: Any, counter: int) -> str:
-        state = self._state[spec.name]
-        if state.last_counter is None or state.timed_out:
+    def _sequence(self, m: int, max_delta: int, counter: int) -> str:
+        """The alive-counter rules (the kernel's, for the Python path)."""
+        last, timed_out = self._seq[m].tolist()
+        if last < 0 or timed_out:
             # First frame, or first after a timeout: nothing to compare with, (re)start the sequence.
-            state.last_counter = counter
+            self._seq[m, 0] = counter
             return OK
-        delta = (counter - state.last_counter) & 0x0F
+        delta = (counter - last) & 0x0F
         if delta == 0:
             return REPEATED
         if delta >= 16 - OLD_FRAME_WINDOW:
@@ -272,10 +345,10 @@ class E2EReceiver:
             return WRONG_SEQUENCE
         # A forward jump resynchronises on the received counter even when too large, so that one lost
         # burst costs one rejected frame (profile 1's state machine recovers on the next frame).
-        state.last_counter = counter
+        self._seq[m, 0] = counter
         if delta == 1:
             return OK
-        if delta <= spec.max_delta_counter:
+        if delta <= max_delta:
             return OK_SOME_LOST
         return WRONG_SEQUENCE
 
@@ -289,23 +362,22 @@ class E2EReceiver:
         stale = []
         watched = self._watched
         if watched is None:  # called every tick: the lookups are done once
-            watched = self._watched = [(name, self._state[name], self.icd.messages[name].timeout_s + 1e-9,
+            watched = self._watched = [(name, self.icd.message_index[name], self.icd.messages[name].timeout_s + 1e-9,
                                         self.counters[name]) for name in self.watch
                                        if self.icd.messages[name].timeout_s > 0]
-        for name, state, limit, counts in watched:
-            last = state.last_ok_t if state.last_ok_t is not None else self.start_t
-            if now_s - last > limit:
-                if not state.timed_out:
-                    state.timed_out = True
+        last_ok = self._last_ok_t.tolist()
+        for name, m, limit, counts in watched:
+            if now_s - last_ok[m] > limit:
+                if not self._seq[m, 1]:
+                    self._seq[m, 1] = 1
                     counts[TIMEOUT] += 1
                 stale.append(name)
         return stale
 
     def reset_clock(self, now_s: float) -> None:
         """Restart timeout supervision at ``now_s`` (e.g. when a lockstep run starts at tick 0)."""
-        for state in self._state.values():
-            state.last_ok_t = now_s
-            state.timed_out = False
+        self._last_ok_t[:] = now_s
+        self._seq[:, 1] = 0
 
     def totals(self) -> dict[str, int]:
         """Counts per class summed over all messages (plus the bus-level counters)."""

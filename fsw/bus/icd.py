@@ -174,7 +174,8 @@ def _codec_table(specs: list[MessageSpec]) -> CodecTable:
                       dlc=np.array([s.dlc for s in specs], dtype=np.int64),
                       seed=np.array([s.crc_seed for s in specs], dtype=np.int64),
                       nsig=np.array([2 + len(s.signals) for s in specs], dtype=np.int64),
-                      signed=signed, crc_table=np.array(_CRC_TABLE, dtype=np.int64), **ints, **floats)
+                      signed=signed, crc_table=np.array(_CRC_TABLE, dtype=np.int64),
+                      max_delta=np.array([s.max_delta_counter for s in specs], dtype=np.int64), **ints, **floats)
 
 
 # cantools conversions the kernels repeat exactly (LinearIntegerConversion: integer scale and offset,

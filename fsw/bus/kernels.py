@@ -8,14 +8,16 @@ frame of a burst in one call:
   * :func:`encode_rows`: application values (one row per frame) -> frame bytes with alive counter and
     E2E CRC in byte 0, the same bytes as ``Icd.encode`` (cantools' arithmetic: ``round((v - offset) /
     scale)`` with round-half-even, two's complement fields, little-endian layout);
-  * :func:`check_rows`: frame bytes -> the stateless part of the receiver's classification (length, CRC,
-    decode with ``raw * scale + offset``, the accept bounds) and the decoded values.
+  * :func:`classify_rows`: frame bytes -> the receiver's classification (length, CRC, decode with
+    ``raw * scale + offset``, the accept bounds, the alive-counter sequence on the receiver's state
+    arrays) and the decoded values, stopping where the caller's wait ends (a tick's SYNC, its last
+    announced frame, the awaited CYCLE_DONE) so that later frames are classified later, as before.
 
-The stateful part of E2E (alive-counter sequence, counts per class, timeouts) stays in
-:class:`fsw.bus.e2e.E2EReceiver`, in Python: it is a few comparisons per frame and its counters are the
-public housekeeping view. Messages the table cannot describe (big-endian or float signals, multiplexing)
+:class:`fsw.bus.e2e.E2EReceiver` owns the state and keeps the counts per class (its public housekeeping
+view) and the timeouts in Python. Messages the table cannot describe (big-endian or float signals, multiplexing)
 are marked unsupported and take the per-frame cantools path. tests/fsw/test_bus_kernels.py checks both
-kernels bit-exact against the per-frame codec for every message of the DBC.
+kernels bit-exact against the per-frame codec, and the classification against a reference
+implementation of the rules, for every message of the DBC.
 """
 from __future__ import annotations
 
@@ -24,8 +26,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-# check_rows' per-frame outcome; CANDIDATE: length, CRC and ranges good, the sequence check is next
-CANDIDATE, NOT_IN_TABLE, BAD_LENGTH_CODE, CRC_ERROR_CODE, OUT_OF_RANGE_CODE = 0, 1, 2, 3, 4
+# classify_rows' per-frame class codes: fsw.bus.e2e.FRAME_CLASSES in order (0 ok .. 6 out_of_range), then
+UNKNOWN_CODE, ECHO_CODE, FALLBACK_CODE = 7, 8, 9  # unknown id, own echo, judged by the Python path
+OK_CODE, OK_SOME_LOST_CODE, REPEATED_CODE, WRONG_SEQUENCE_CODE = 0, 1, 2, 3
+CRC_ERROR_CODE, BAD_LENGTH_CODE, OUT_OF_RANGE_CODE = 4, 5, 6
+# kind_of_id entries below 0 (>= 0: the message index)
+KIND_UNKNOWN, KIND_ECHO, KIND_FALLBACK = -1, -2, -3
+OLD_FRAME_WINDOW = 3  # see fsw.bus.e2e
 MAX_DLC = 8
 
 
@@ -51,19 +58,22 @@ class CodecTable:
     alo: np.ndarray           # (M, S) float64: the receiver's accept bounds (range +- half an LSB)
     ahi: np.ndarray
     crc_table: np.ndarray     # (256,) int64
+    max_delta: np.ndarray     # (M,) int64: E2EMaxDeltaCounter
+
+    def classify(self, ids: np.ndarray, lengths: np.ndarray, data: np.ndarray, status: np.ndarray,
+                 values: np.ndarray, first: int, now: float, stop: tuple, kind_of_id: np.ndarray, seq: np.ndarray,
+                 last_ok_t: np.ndarray) -> int:
+        """:func:`classify_rows` over this table; ``stop``: (stop_id, stop_col, stop_lo, stop_hi, count_mask,
+        count_left)."""
+        return classify_rows(ids, lengths, data, status, values, first, now, *stop, kind_of_id, self.dlc, self.seed,
+                             self.nsig, self.start, self.length, self.signed, self.scale, self.offset, self.alo,
+                             self.ahi, self.crc_table, self.max_delta, seq, last_ok_t)
 
     def encode(self, idx: np.ndarray, values: np.ndarray, counters: np.ndarray, sent: np.ndarray,
                out: np.ndarray) -> int:
         """:func:`encode_rows` over this table."""
         return encode_rows(idx, values, counters, sent, out, self.dlc, self.seed, self.nsig, self.start, self.length,
                            self.signed, self.scale, self.offset, self.vmin, self.vmax, self.crc_table)
-
-    def check(self, ids: np.ndarray, lengths: np.ndarray, data: np.ndarray, status: np.ndarray,
-              values: np.ndarray) -> None:
-        """:func:`check_rows` over this table."""
-        check_rows(ids, lengths, data, status, values, self.index_of_id, self.dlc, self.seed, self.nsig,
-                   self.start, self.length, self.signed, self.scale, self.offset, self.alo, self.ahi,
-                   self.crc_table)
 
 
 _I = "int64[::1]"
@@ -111,19 +121,38 @@ def encode_rows(idx, values, counters, sent, out, dlc, seed, nsig, start, length
     return n
 
 
-@njit(f"void({_I}, {_I}, uint8[:, ::1], {_I}, {_F2}, {_I}, {_I}, {_I}, {_I}, {_I2}, {_I2}, boolean[:, ::1], {_F2}, "
-      f"{_F2}, {_F2}, {_F2}, {_I})", cache=True)
-def check_rows(ids, lengths, data, status, values, index_of_id, dlc, seed, nsig, start, length, signed, scale,
-               offset, alo, ahi, crc_table):  # pragma: no cover - compiled
-    """For frame i (``ids[i]``, ``data[i, :lengths[i]]``; ids < 0 for frames that are not plain classic data
-    frames): ``status[i]`` = NOT_IN_TABLE, BAD_LENGTH, CRC_ERROR, OUT_OF_RANGE or CANDIDATE, and for a
-    candidate ``values[i, :nsig]`` the decoded signals (slot 1: the alive counter)."""
-    for i in range(ids.shape[0]):
+@njit("int64(int64[::1], int64[::1], uint8[:, ::1], int64[::1], float64[:, ::1], int64, float64, int64, int64, "
+      "float64, float64, boolean[::1], int64, int64[::1], int64[::1], int64[::1], int64[::1], int64[:, ::1], "
+      "int64[:, ::1], boolean[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
+      "int64[::1], int64[::1], int64[:, ::1], float64[::1])", cache=True)
+def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_col, stop_lo, stop_hi, count_mask,
+                  count_left, kind_of_id, dlc, seed, nsig, start, length, signed, scale, offset, alo, ahi,
+                  crc_table, max_delta, seq, last_ok_t):  # pragma: no cover - compiled
+    """The E2E receiver's classification of frames ``first``.. in order (fsw.bus.e2e.E2EReceiver, whose
+    Python docstrings give the rules): ``status[i]`` its class code, ``values[i]`` the decoded signals of a
+    frame that passed the length and CRC checks. Sequence state per message: ``seq[m] = (last counter or
+    -1, timed out)``, ``last_ok_t[m]``; ``kind_of_id[id]``: message index or KIND_*.
+
+    Returns the index after the last frame classified: all of them, or it stops before a frame for the
+    Python path (FALLBACK_CODE: not a plain data frame, or a message outside the table), or after a
+    delivered frame that ends the caller's wait: id ``stop_id`` with slot ``stop_col`` in [stop_lo,
+    stop_hi], or the ``count_left``-th delivered frame whose id is in ``count_mask``."""
+    n = ids.shape[0]
+    for i in range(first, n):
         fid = ids[i]
-        m = index_of_id[fid] if 0 <= fid < index_of_id.shape[0] else -1
+        if fid < 0 or fid >= kind_of_id.shape[0]:
+            status[i] = FALLBACK_CODE
+            return i
+        m = kind_of_id[fid]
         if m < 0:
-            status[i] = NOT_IN_TABLE
-            continue
+            if m == KIND_UNKNOWN:
+                status[i] = UNKNOWN_CODE
+                continue
+            if m == KIND_ECHO:
+                status[i] = ECHO_CODE
+                continue
+            status[i] = FALLBACK_CODE
+            return i
         size = dlc[m]
         if lengths[i] != size:
             status[i] = BAD_LENGTH_CODE
@@ -137,7 +166,7 @@ def check_rows(ids, lengths, data, status, values, index_of_id, dlc, seed, nsig,
         word = np.uint64(0)
         for b in range(size):
             word |= np.uint64(data[i, b]) << np.uint64(8 * b)
-        code = CANDIDATE
+        code = OK_CODE
         for k in range(nsig[m]):
             bits = length[m, k]
             r = np.int64((word >> np.uint64(start[m, k])) & ((np.uint64(1) << np.uint64(bits)) - np.uint64(1)))
@@ -148,4 +177,35 @@ def check_rows(ids, lengths, data, status, values, index_of_id, dlc, seed, nsig,
                 code = OUT_OF_RANGE_CODE
                 break
             values[i, k] = v
+        if code == OUT_OF_RANGE_CODE:
+            status[i] = code
+            continue
+        counter = np.int64(values[i, 1])
+        last = seq[m, 0]
+        if last < 0 or seq[m, 1] != 0:  # first frame, or first after a timeout: (re)start the sequence
+            seq[m, 0] = counter
+        else:
+            delta = (counter - last) & 15
+            if delta == 0:
+                code = REPEATED_CODE
+            elif delta >= 16 - OLD_FRAME_WINDOW:
+                code = WRONG_SEQUENCE_CODE  # an old, delayed frame: the reference stays
+            else:
+                seq[m, 0] = counter
+                if delta == 1:
+                    code = OK_CODE
+                elif delta <= max_delta[m]:
+                    code = OK_SOME_LOST_CODE
+                else:
+                    code = WRONG_SEQUENCE_CODE
         status[i] = code
+        if code <= OK_SOME_LOST_CODE:
+            last_ok_t[m] = now
+            seq[m, 1] = 0
+            if fid == stop_id and stop_lo <= values[i, stop_col] <= stop_hi:
+                return i + 1
+            if count_mask[fid]:
+                count_left -= 1
+                if count_left <= 0:
+                    return i + 1
+    return n

@@ -5,7 +5,7 @@ import can
 import numpy as np
 import pytest
 
-from fsw.bus import E2EReceiver, E2ESender, Icd
+from fsw.bus import E2EReceiver, E2ESender, Icd, e2e_crc
 from fsw.bus.burst import FrameBurst
 from fsw.bus.transport import open_bus, recv_burst, send_burst
 
@@ -76,26 +76,92 @@ def _damaged_frames(icd: Icd, rng: np.random.Generator, sender: E2ESender) -> li
     return msgs
 
 
-def test_burst_classification_matches_classify_frame_by_frame(icd: Icd) -> None:
+class _Reference:
+    """The receiver's rules written out plainly in Python (fsw.bus.e2e's docstrings), frame by frame, with
+    cantools decoding: what the compiled classification must reproduce."""
+
+    def __init__(self, icd: Icd, ignore: frozenset[int]) -> None:
+        self.icd, self.ignore = icd, ignore
+        self.last: dict[str, int | None] = {n: None for n in icd.messages}
+        self.last_ok = {n: 0.0 for n in icd.messages}
+        self.timed_out = {n: False for n in icd.messages}
+        self.counts: dict[tuple[str | None, str], int] = {}
+
+    def _count(self, name: str | None, cls: str) -> str:
+        self.counts[name, cls] = self.counts.get((name, cls), 0) + 1
+        return cls
+
+    def classify(self, msg: can.Message, t: float) -> tuple | None:
+        fid = msg.arbitration_id
+        if fid in self.ignore and not msg.is_extended_id:
+            self._count(None, "own_echo")
+            return None
+        spec = None if msg.is_extended_id else self.icd.by_id.get(fid)
+        if spec is None:
+            return (None, self._count(None, "unknown_id"), None, None)
+        data = bytes(msg.data)
+        if len(data) != spec.dlc:
+            return (spec.name, self._count(spec.name, "bad_length"), None, None)
+        if e2e_crc(spec.data_id, data[1:]) != data[0]:
+            return (spec.name, self._count(spec.name, "crc_error"), None, None)
+        values = spec.db_message.decode(data, decode_choices=False)
+        if any(not lo <= values[k] <= hi for k, (lo, hi) in spec.accept_bounds.items()):
+            return (spec.name, self._count(spec.name, "out_of_range"), None, None)
+        counter, last = values["E2E_Counter"], self.last[spec.name]
+        if last is None or self.timed_out[spec.name]:
+            self.last[spec.name], cls = counter, "ok"
+        else:
+            delta = (counter - last) % 16
+            if delta == 0:
+                cls = "repeated"
+            elif delta >= 13:
+                cls = "wrong_sequence"
+            else:
+                self.last[spec.name] = counter
+                cls = "ok" if delta == 1 else "ok_some_lost" if delta <= spec.max_delta_counter else "wrong_sequence"
+        self._count(spec.name, cls)
+        if cls in ("ok", "ok_some_lost"):
+            self.last_ok[spec.name], self.timed_out[spec.name] = t, False
+            return (spec.name, cls, counter, values)
+        return (spec.name, cls, counter, None)
+
+    def check_timeouts(self, t: float) -> list[str]:
+        stale = []
+        for name in self.icd.messages:
+            if self.icd.spec(name).frame_id in self.ignore:
+                continue
+            if t - self.last_ok[name] > self.icd.spec(name).timeout_s + 1e-9:
+                if not self.timed_out[name]:
+                    self.timed_out[name] = True
+                    self._count(name, "timeout")
+                stale.append(name)
+        return stale
+
+
+def test_burst_classification_follows_the_rules_frame_by_frame(icd: Icd) -> None:
     rng = np.random.default_rng(2)
     sender, own = E2ESender(icd), icd.ids_sent_by("FSW")
-    burst_rx, frame_rx = E2EReceiver(icd, ignore_ids=own), E2EReceiver(icd, ignore_ids=own)
+    burst_rx, one_rx, ref = E2EReceiver(icd, ignore_ids=own), E2EReceiver(icd, ignore_ids=own), _Reference(icd, own)
     for tick in range(1500):
         t = 0.05 * tick
         if tick % 7 == 0:
-            assert burst_rx.check_timeouts(t) == frame_rx.check_timeouts(t)
+            assert burst_rx.check_timeouts(t) == one_rx.check_timeouts(t) == ref.check_timeouts(t)
         msgs = _damaged_frames(icd, rng, sender)
         checked = burst_rx.check(FrameBurst.from_messages(msgs))
         for msg in msgs:
-            ref, got = frame_rx.classify(msg, t), burst_rx.take(checked, t)
-            if ref is None:
-                assert got is None
+            expected, got, one = ref.classify(msg, t), burst_rx.take(checked, t), one_rx.classify(msg, t)
+            if expected is None:
+                assert got is None and one is None
                 continue
-            assert (got.name, got.frame_id, got.status, got.counter) == (ref.name, ref.frame_id, ref.status, ref.counter)
-            if ref.signals is not None:
-                assert got.row[:len(ref.signals)] == [ref.signals[s] for s in ("E2E_CRC", "E2E_Counter",
-                                                                                *icd.spec(ref.name).signals)]
-    assert burst_rx.counters == frame_rx.counters
+            name, status, counter, values = expected
+            assert (got.name, got.status, got.counter) == (name, status, counter) == (one.name, one.status, one.counter)
+            if values is not None:
+                slots = ("E2E_CRC", "E2E_Counter", *icd.spec(name).signals)
+                assert got.row[:len(slots)] == [values[k] for k in slots]
+                assert one.signals == values
+    assert burst_rx.counters == one_rx.counters
+    for (name, cls), n in ref.counts.items():
+        assert burst_rx.counters["_bus" if name is None else name][cls] == n, (name, cls)
     totals = burst_rx.totals()
     for cls in ("ok", "ok_some_lost", "repeated", "wrong_sequence", "crc_error", "bad_length", "out_of_range",
                 "timeout", "unknown_id", "own_echo"):
