@@ -110,7 +110,10 @@ class WheelNode:
         self.cmd_name = f"RW{self.index}_CMD"
         self.status_name = f"RW{self.index}_STATUS"
         self._status_ranges: tuple[tuple[float, float], ...] | None = None
-        self.status_m, self._status_row = _row_maker(self.icd, self.status_name)
+        self.status_m = self.icd.message_index[self.status_name]
+        self._status_cols = [self.icd.column(self.status_name, signal)
+                             for signal in ("speed", "torque", "current", "temp", "fault")]
+        self._status_template = [0.0] * self.icd.table.start.shape[1]
 
     def on_command(self, signals: dict, t_s: float) -> None:
         """A valid RWn_CMD (already E2E-checked) arrived at simulation time ``t_s``."""
@@ -139,19 +142,21 @@ class WheelNode:
             fault |= FAULT_DRIVE
         if self.last_cmd_t is not None and self.timed_out(t_s):
             fault |= FAULT_CMD_TIMEOUT
-        values = {"fault": fault}
         ranges = self._status_ranges
         if ranges is None:
             ranges = self._status_ranges = tuple(self.icd.signal_range(self.status_name, signal)
                                                  for signal in ("speed", "torque", "current", "temp"))
-        for signal, value, (lo, hi) in zip(("speed", "torque", "current", "temp"),
-                                           (status.speed_rad_s, status.torque_Nm, status.current_A, status.temp_C),
-                                           ranges):
-            values[signal], clipped = _clamp(float(value), lo, hi)
-            if clipped and signal == "speed":
-                values["fault"] |= FAULT_OVERSPEED
-        values["temp"] = round(values["temp"])
-        return self._status_row(**values)
+        (speed_lo, speed_hi), torque_range, current_range, temp_range = ranges
+        speed, clipped = _clamp(float(status.speed_rad_s), speed_lo, speed_hi)
+        if clipped:
+            fault |= FAULT_OVERSPEED
+        row = self._status_template.copy()
+        row[self._status_cols[0]] = speed
+        row[self._status_cols[1]] = _clamp(float(status.torque_Nm), *torque_range)[0]
+        row[self._status_cols[2]] = _clamp(float(status.current_A), *current_range)[0]
+        row[self._status_cols[3]] = round(_clamp(float(status.temp_C), *temp_range)[0])
+        row[self._status_cols[4]] = fault
+        return row
 
 
 @dataclass

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Iterable, Mapping, NamedTuple
 
 import numpy as np
 
-from fsw.bus.kernels import ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_FALLBACK, KIND_UNKNOWN, UNKNOWN_CODE
+from fsw.bus.kernels import ECHO_CODE, classify_rows, FALLBACK_CODE, KIND_ECHO, KIND_FALLBACK, KIND_UNKNOWN, UNKNOWN_CODE
 
 if TYPE_CHECKING:  # pragma: no cover
     import can
@@ -183,6 +183,7 @@ class E2EReceiver:
         kind[[i for i in self.ignore_ids if 0 <= i < len(kind)]] = KIND_ECHO
         self._kind_of_id = kind
         self._width = table.start.shape[1]
+        self._table = (table.msg_i, table.sig_i, table.sig_f, table.crc_table, self._seq, self._last_ok_t)
         # frame id -> (spec, its counts, its message index), for the messages this receiver judges
         self._by_id = {m.frame_id: (m, self.counters[m.name], self.icd.message_index[m.name])
                        for m in self.icd.messages.values() if m.frame_id not in self.ignore_ids}
@@ -206,9 +207,8 @@ class E2EReceiver:
         stop_id, stop_col, stop_lo, stop_hi, mask, left = stop
         pos = checked.pos
         while pos < n:
-            end = self.icd.table.classify(ids_arr, burst.lengths, burst.data, checked.status, checked.values, pos,
-                                          now_s, (stop_id, stop_col, stop_lo, stop_hi, mask, left),
-                                          self._kind_of_id, self._seq, self._last_ok_t)
+            end = classify_rows(ids_arr, burst.lengths, burst.data, checked.status, checked.values, pos, now_s,
+                                stop_id, stop_col, stop_lo, stop_hi, mask, left, self._kind_of_id, *self._table)
             self._count(checked, pos, end)
             if end >= n or checked.status[end] != FALLBACK_CODE:
                 pos = end

@@ -60,20 +60,19 @@ class CodecTable:
     crc_table: np.ndarray     # (256,) int64
     max_delta: np.ndarray     # (M,) int64: E2EMaxDeltaCounter
 
-    def classify(self, ids: np.ndarray, lengths: np.ndarray, data: np.ndarray, status: np.ndarray,
-                 values: np.ndarray, first: int, now: float, stop: tuple, kind_of_id: np.ndarray, seq: np.ndarray,
-                 last_ok_t: np.ndarray) -> int:
-        """:func:`classify_rows` over this table; ``stop``: (stop_id, stop_col, stop_lo, stop_hi, count_mask,
-        count_left)."""
-        return classify_rows(ids, lengths, data, status, values, first, now, *stop, kind_of_id, self.dlc, self.seed,
-                             self.nsig, self.start, self.length, self.signed, self.scale, self.offset, self.alo,
-                             self.ahi, self.crc_table, self.max_delta, seq, last_ok_t)
+    def __post_init__(self) -> None:
+        # the kernels take the table packed in three arrays (a compiled call's cost grows with its arguments)
+        object.__setattr__(self, "msg_i", np.ascontiguousarray(np.stack([self.dlc, self.seed, self.nsig,
+                                                                          self.max_delta], axis=1)))
+        object.__setattr__(self, "sig_i", np.ascontiguousarray(np.stack(
+            [self.start, self.length, self.signed.astype(np.int64)], axis=2)))
+        object.__setattr__(self, "sig_f", np.ascontiguousarray(np.stack(
+            [self.scale, self.offset, self.vmin, self.vmax, self.alo, self.ahi], axis=2)))
 
     def encode(self, idx: np.ndarray, values: np.ndarray, counters: np.ndarray, sent: np.ndarray,
                out: np.ndarray) -> int:
         """:func:`encode_rows` over this table."""
-        return encode_rows(idx, values, counters, sent, out, self.dlc, self.seed, self.nsig, self.start, self.length,
-                           self.signed, self.scale, self.offset, self.vmin, self.vmax, self.crc_table)
+        return encode_rows(idx, values, counters, sent, out, self.msg_i, self.sig_i, self.sig_f, self.crc_table)
 
 
 _I = "int64[::1]"
@@ -81,38 +80,40 @@ _I2 = "int64[:, ::1]"
 _F2 = "float64[:, ::1]"
 
 
-@njit(f"int64({_I}, {_F2}, {_I}, {_I}, uint8[:, ::1], {_I}, {_I}, {_I}, {_I2}, {_I2}, boolean[:, ::1], {_F2}, {_F2}, "
-      f"{_F2}, {_F2}, {_I})", cache=True)
-def encode_rows(idx, values, counters, sent, out, dlc, seed, nsig, start, length, signed, scale, offset, vmin, vmax,
-                crc_table):  # pragma: no cover - compiled
+@njit(f"int64({_I}, {_F2}, {_I}, {_I}, uint8[:, ::1], {_I2}, int64[:, :, ::1], float64[:, :, ::1], {_I})",
+      cache=True)
+def encode_rows(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table):  # pragma: no cover - compiled
     """Encode row i of ``values`` (slots 2.. of message ``idx[i]``) into ``out[i, :dlc]`` with the message's
-    alive counter ``counters[m]`` (then advanced mod 16, and ``sent[m]`` counted) and its E2E CRC. Stops at the first row it cannot
-    encode (a value outside its DBC range or NaN, a raw value not fitting its bits, an unsupported message):
-    returns how many rows were encoded; the caller takes the checked per-frame path for that row."""
+    alive counter ``counters[m]`` (then advanced mod 16, and ``sent[m]`` counted) and its E2E CRC. Stops at
+    the first row it cannot encode (a value outside its DBC range or NaN, a raw value not fitting its
+    bits, an unsupported message): returns how many rows were encoded; the caller takes the checked
+    per-frame path for that row. Table: ``msg_i[m] = (dlc, crc seed, signals, max delta)``,
+    ``sig_i[m, k] = (start bit, bits, signed)``, ``sig_f[m, k] = (scale, offset, min, max, accept low,
+    accept high)``."""
     n = idx.shape[0]
     for i in range(n):
         m = idx[i]
         if m < 0:
             return i
         word = np.uint64(counters[m] & 15) << np.uint64(8)
-        for k in range(2, nsig[m]):
+        for k in range(2, msg_i[m, 2]):
             v = values[i, k]
-            if not (vmin[m, k] <= v <= vmax[m, k]):
+            if not (sig_f[m, k, 2] <= v <= sig_f[m, k, 3]):
                 return i
-            r = np.rint((v - offset[m, k]) / scale[m, k])
-            bits = length[m, k]
-            if signed[m, k]:
+            r = np.rint((v - sig_f[m, k, 1]) / sig_f[m, k, 0])
+            bits = sig_i[m, k, 1]
+            if sig_i[m, k, 2]:
                 lo, hi = -float(1 << (bits - 1)), float((1 << (bits - 1)) - 1)
             else:
                 lo, hi = 0.0, float((1 << bits) - 1)
             if not (lo <= r <= hi):
                 return i
             mask = (np.uint64(1) << np.uint64(bits)) - np.uint64(1)
-            word |= (np.uint64(np.int64(r)) & mask) << np.uint64(start[m, k])
-        size = dlc[m]
+            word |= (np.uint64(np.int64(r)) & mask) << np.uint64(sig_i[m, k, 0])
+        size = msg_i[m, 0]
         for b in range(size):
             out[i, b] = np.uint8((word >> np.uint64(8 * b)) & np.uint64(255))
-        c = crc_table[seed[m] ^ out[i, 1]]
+        c = crc_table[msg_i[m, 1] ^ out[i, 1]]
         for b in range(2, size):
             c = crc_table[c ^ out[i, b]]
         out[i, 0] = np.uint8(c ^ 255)
@@ -122,16 +123,15 @@ def encode_rows(idx, values, counters, sent, out, dlc, seed, nsig, start, length
 
 
 @njit("int64(int64[::1], int64[::1], uint8[:, ::1], int64[::1], float64[:, ::1], int64, float64, int64, int64, "
-      "float64, float64, boolean[::1], int64, int64[::1], int64[::1], int64[::1], int64[::1], int64[:, ::1], "
-      "int64[:, ::1], boolean[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], "
-      "int64[::1], int64[::1], int64[:, ::1], float64[::1])", cache=True)
+      "float64, float64, boolean[::1], int64, int64[::1], int64[:, ::1], int64[:, :, ::1], float64[:, :, ::1], "
+      "int64[::1], int64[:, ::1], float64[::1])", cache=True)
 def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_col, stop_lo, stop_hi, count_mask,
-                  count_left, kind_of_id, dlc, seed, nsig, start, length, signed, scale, offset, alo, ahi,
-                  crc_table, max_delta, seq, last_ok_t):  # pragma: no cover - compiled
+                  count_left, kind_of_id, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t):  # pragma: no cover
     """The E2E receiver's classification of frames ``first``.. in order (fsw.bus.e2e.E2EReceiver, whose
     Python docstrings give the rules): ``status[i]`` its class code, ``values[i]`` the decoded signals of a
     frame that passed the length and CRC checks. Sequence state per message: ``seq[m] = (last counter or
-    -1, timed out)``, ``last_ok_t[m]``; ``kind_of_id[id]``: message index or KIND_*.
+    -1, timed out)``, ``last_ok_t[m]``; ``kind_of_id[id]``: message index or KIND_*; the table as in
+    :func:`encode_rows`.
 
     Returns the index after the last frame classified: all of them, or it stops before a frame for the
     Python path (FALLBACK_CODE: not a plain data frame, or a message outside the table), or after a
@@ -153,11 +153,11 @@ def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_
                 continue
             status[i] = FALLBACK_CODE
             return i
-        size = dlc[m]
+        size = msg_i[m, 0]
         if lengths[i] != size:
             status[i] = BAD_LENGTH_CODE
             continue
-        c = crc_table[seed[m] ^ data[i, 1]]
+        c = crc_table[msg_i[m, 1] ^ data[i, 1]]
         for b in range(2, size):
             c = crc_table[c ^ data[i, b]]
         if (c ^ 255) != data[i, 0]:
@@ -167,13 +167,13 @@ def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_
         for b in range(size):
             word |= np.uint64(data[i, b]) << np.uint64(8 * b)
         code = OK_CODE
-        for k in range(nsig[m]):
-            bits = length[m, k]
-            r = np.int64((word >> np.uint64(start[m, k])) & ((np.uint64(1) << np.uint64(bits)) - np.uint64(1)))
-            if signed[m, k] and r >= (np.int64(1) << (bits - 1)):
+        for k in range(msg_i[m, 2]):
+            bits = sig_i[m, k, 1]
+            r = np.int64((word >> np.uint64(sig_i[m, k, 0])) & ((np.uint64(1) << np.uint64(bits)) - np.uint64(1)))
+            if sig_i[m, k, 2] and r >= (np.int64(1) << (bits - 1)):
                 r -= np.int64(1) << bits
-            v = r * scale[m, k] + offset[m, k]
-            if not (alo[m, k] <= v <= ahi[m, k]):
+            v = r * sig_f[m, k, 0] + sig_f[m, k, 1]
+            if not (sig_f[m, k, 4] <= v <= sig_f[m, k, 5]):
                 code = OUT_OF_RANGE_CODE
                 break
             values[i, k] = v
@@ -194,7 +194,7 @@ def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_
                 seq[m, 0] = counter
                 if delta == 1:
                     code = OK_CODE
-                elif delta <= max_delta[m]:
+                elif delta <= msg_i[m, 3]:
                     code = OK_SOME_LOST_CODE
                 else:
                     code = WRONG_SEQUENCE_CODE
