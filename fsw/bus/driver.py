@@ -157,8 +157,7 @@ class FswBusDriver:
         self._imu: ImuSample | None = None
         self._imu_rx: float | None = None
         self._imu_batch: list[ImuSample] = []
-        self._imu_rows: list[list] = []  # lockstep: value rows of this tick's IMU frames (Python path)
-        self._imu_parts: list[np.ndarray] = []  # lockstep: this tick's IMU value rows, per burst
+        self._imu_parts: list[np.ndarray] = []  # lockstep: this tick's IMU value rows, in order
         self._st: StarTrackerSample | None = None
         self._st_rx: float | None = None
         self._st_new = False
@@ -242,9 +241,15 @@ class FswBusDriver:
             for i in range(first, end):
                 fid = ids[i] if not rx.fallback else self._frame_id(rx, i)
                 if codes[i] <= 1:  # delivered
-                    if fid == imu_id and i not in rx.rows:
-                        imu_rows.append(i)  # read from the kernel's value array, once per burst
+                    if fid == imu_id:
                         received += 1
+                        if i not in rx.rows:
+                            imu_rows.append(i)  # read from the kernel's value array, once per run
+                            continue
+                        if imu_rows:  # keep the order: the kernel's rows so far, then this one
+                            self._imu_parts.append(rx.values[imu_rows])
+                            imu_rows = []
+                        self._apply_row(fid, rx.rows[i], self.t_tick)
                     elif fid == self._sync_id:
                         row = rx.row(i)
                         if not self._stale_sync(row, tick):
@@ -279,15 +284,12 @@ class FswBusDriver:
 
     def _begin_tick(self) -> None:
         self._imu_batch = []
-        self._imu_rows = []
         self._imu_parts = []
         self._st_new = False
         self._wheels_new = [False] * self.n_wheels
 
     def _tick_inputs(self, tick: int, expected: int, received: int) -> TickInputs:
         samples = []
-        if self._imu_rows:  # a frame the Python path classified: its row joins the arrays, in order
-            self._imu_parts.append(np.array(self._imu_rows))
         if self._imu_parts:
             # the tick's gyro samples in one array, straight from the decoded frames (not one per frame)
             x, y, z, sat = self._imu_cols
@@ -389,7 +391,7 @@ class FswBusDriver:
         """A delivered frame (id, value row) into the newest samples."""
         if fid == self._imu_id:
             if not self._realtime:
-                self._imu_rows.append(row)  # lockstep: the samples are made per tick (_tick_inputs)
+                self._imu_parts.append(np.array([row]))  # lockstep: the samples are made per tick (_tick_inputs)
                 return
             x, y, z, sat = self._imu_cols
             sample = ImuSample(np.array([row[x], row[y], row[z]]), bool(row[sat]), now)

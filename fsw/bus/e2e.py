@@ -138,6 +138,7 @@ class CheckedBurst:
 CODE_CLASS = FRAME_CLASSES + (UNKNOWN_ID, "own_echo")  # class of each kernels class code
 _NO_MASK = np.zeros(2048, dtype=np.bool_)
 NO_STOP = (-1, 0, 0.0, -1.0, _NO_MASK, 0)  # classify_until: classify everything
+PYTHON_RUN = 2  # classify_until judges this few frames frame by frame in Python (a compiled call costs more)
 
 
 @dataclass
@@ -207,20 +208,24 @@ class E2EReceiver:
         stop_id, stop_col, stop_lo, stop_hi, mask, left = stop
         pos = checked.pos
         while pos < n:
-            end = classify_rows(ids_arr, burst.lengths, burst.data, checked.status, checked.values, pos, now_s,
-                                stop_id, stop_col, stop_lo, stop_hi, mask, left, self._kind_of_id, *self._table)
-            self._count(checked, pos, end)
-            if end >= n or checked.status[end] != FALLBACK_CODE:
-                pos = end
-                break
-            # frames the kernel classified count toward the stop rule; then the Python path's frame
-            left -= sum(1 for j in range(pos, end) if checked.codes[j] <= 1 and mask[checked.ids[j]])
-            frame = self._classify_message(burst.message(end), now_s)
+            if n - pos <= PYTHON_RUN:
+                end = pos  # a frame or two (a SIL reading frames as they arrive): the Python path is cheaper
+            else:
+                end = classify_rows(ids_arr, burst.lengths, burst.data, checked.status, checked.values, pos, now_s,
+                                    stop_id, stop_col, stop_lo, stop_hi, mask, left, self._kind_of_id, *self._table)
+                self._count(checked, pos, end)
+                if end >= n or checked.status[end] != FALLBACK_CODE:
+                    pos = end
+                    break
+                # frames the kernel classified count toward the stop rule; the next one takes the Python path
+                left -= sum(1 for j in range(pos, end) if checked.codes[j] <= 1 and mask[checked.ids[j]])
+            frame = self.classify(burst.message(end), now_s)
             checked.fallback[end] = frame
             checked.codes[end] = ECHO_CODE if frame is None else CODE_CLASS.index(frame.status)
             pos = end + 1
             if frame is not None and frame.delivered:
                 row = [float(frame.signals[k]) for k in self._slots[frame.name]]
+                row += [0.0] * (self._width - len(row))  # the kernels' row width
                 checked.rows[end] = row
                 if frame.frame_id == stop_id and stop_lo <= row[stop_col] <= stop_hi:
                     break
