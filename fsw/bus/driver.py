@@ -204,7 +204,7 @@ class FswBusDriver:
         self._pending_sync = None
         tick_col, following_col, period_col = self._sync_cols
         while sync is None:  # frames before SYNC(k) are classified and not used
-            rx = self._next_burst()
+            rx = self._next_burst(limit=1)  # SYNC(k) comes first
             if rx is None:
                 return None
             first = rx.pos
@@ -229,7 +229,8 @@ class FswBusDriver:
         self._begin_tick()
         received = failed = 0
         while received < expected:
-            rx = self._next_burst(FRAME_GRACE_S if received + failed >= expected else None)
+            rx = self._next_burst(FRAME_GRACE_S if received + failed >= expected else None,
+                                  max(1, expected - received))
             if rx is None:
                 break
             first = rx.pos
@@ -311,9 +312,10 @@ class FswBusDriver:
             frames_expected=expected, frames_received=received,
         )
 
-    def _next_burst(self, grace_s: float | None = None) -> CheckedBurst | None:
+    def _next_burst(self, grace_s: float | None = None, limit: int | None = None) -> CheckedBurst | None:
         """The frames read off the bus not yet classified, within the call's timeout; None on timeout.
-        ``grace_s``: when the queue is empty, wait at most this long (still within the timeout).
+        ``grace_s``: when the queue is empty, wait at most this long (still within the timeout);
+        ``limit``: the frames the caller still expects (``recv_burst``).
 
         Frames are read off the bus as bursts (everything queued) and classified in compiled calls
         (``E2EReceiver.classify_until``) that stop where the tick's wait ends: the rest stays unjudged for
@@ -324,7 +326,7 @@ class FswBusDriver:
         # Frames come in bursts after SYNC: try without waiting first, and read the clock only when the
         # queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest): the first
         # wait of a call starts the deadline and waits the whole timeout, without a clock read.
-        burst = recv_burst(self.bus, 0.0)
+        burst = recv_burst(self.bus, 0.0, limit)
         if burst is None:
             if self._timeout_s <= 0.0:
                 return None
@@ -337,7 +339,7 @@ class FswBusDriver:
                     return None
             if grace_s is not None:
                 remaining = min(remaining, grace_s)
-            burst = recv_burst(self.bus, remaining)
+            burst = recv_burst(self.bus, remaining, limit)
             if burst is None:
                 return None
         self._rx = rx = self.receiver.check(burst)

@@ -241,9 +241,11 @@ def send_burst(bus: can.BusABC, burst: FrameBurst, timeout: float | None = None)
     return send_batch(bus, burst.messages(), timeout)
 
 
-def recv_burst(bus: can.BusABC, timeout: float | None = 0.0) -> FrameBurst | None:
+def recv_burst(bus: can.BusABC, timeout: float | None = 0.0, limit: int | None = None) -> FrameBurst | None:
     """Every frame queued on ``bus`` now, in order, as one burst (waiting up to ``timeout`` for the
-    first); None when nothing came."""
+    first); None when nothing came. ``limit``: on a python-can bus, stop reading after this many frames
+    (the caller expects no more: reading until the queue is empty costs one more system call each time);
+    a bus that carries bursts returns its queued bursts whole."""
     carry = getattr(bus, "recv_burst", None)
     if carry is not None:
         return carry(timeout)
@@ -251,7 +253,7 @@ def recv_burst(bus: can.BusABC, timeout: float | None = 0.0) -> FrameBurst | Non
     if msg is None:
         return None
     msgs = [msg]
-    while (msg := bus.recv(timeout=0.0)) is not None:
+    while (limit is None or len(msgs) < limit) and (msg := bus.recv(timeout=0.0)) is not None:
         msgs.append(msg)
     return FrameBurst.from_messages(msgs)
 
