@@ -1,7 +1,8 @@
 """The spacecraft bus: ICD (DBC via cantools), end-to-end protection, transports, flight-side driver.
 
 ``open_bus(spec)``, ``Icd``, ``E2EReceiver`` and the driver's sample types are re-exported here; heavy
-modules (cantools, python-can) load on first use of this package only.
+modules (cantools, python-can, numba for the burst codec in ``fsw.bus.kernels``) load on first use of this
+package only.
 """
 from fsw.bus.driver import FswBusDriver, ImuSample, LatestInputs, StarTrackerSample, TickInputs, WheelStatus
 from fsw.bus.e2e import E2EReceiver, ReceivedFrame, crc8_sae_j1850, e2e_crc
