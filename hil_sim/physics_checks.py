@@ -357,18 +357,16 @@ def verdict_key(mission: "Mission") -> str:
     from gnc._numba_cache import source_digest
 
     versions = {}
-    for dist in ("numpy", "scipy", "numba", "llvmlite", "pydantic"):
+    for dist in ("numpy", "scipy", "numba", "llvmlite", "pydantic"):  # versions only: no import
         try:
             versions[dist] = metadata.version(dist)
         except metadata.PackageNotFoundError:
             versions[dist] = None
-    try:
-        from llvmlite import binding
-        cpu = binding.get_host_cpu_name()
-    except Exception:  # noqa: BLE001 - no CPU name: the machine type alone
-        cpu = ""
+    from numba.core.registry import cpu_target
+
+    cpu = cpu_target.target_context.codegen().magic_tuple()  # (triple, CPU name, features): numba's own key
     payload = {"format": _CACHE_FORMAT, "mission": mission.model_dump(mode="json"), "sources": source_digest(__file__),
-               "versions": versions, "python": sys.version, "machine": [platform.machine(), cpu]}
+               "versions": versions, "python": sys.version, "machine": [platform.machine(), *cpu]}
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
 
 
