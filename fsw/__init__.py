@@ -4,4 +4,4 @@ Flight code never imports ``hil_sim``: everything it learns about the world come
 or through telecommands.
 """
 
-import gnc  # noqa: F401,E402  first: installs the kernel cache locator (gnc/_numba_cache.py)
+import gnc  # noqa: F401,E402  first: arms the kernel cache locator (gnc/_after_numba.py)

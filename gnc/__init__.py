@@ -5,7 +5,7 @@ No I/O, no clocks, no threads, no globals: numpy in, numpy out. The paper in
 """
 
 # Before any kernel of gnc, fsw or hil_sim is decorated: numba caches them through keepout's locator,
-# stamped with the kernel's whole source closure (see gnc/_numba_cache.py).
-from gnc import _numba_cache
+# stamped with the kernel's whole source closure (gnc/_numba_cache.py), installed when numba loads.
+from gnc import _after_numba
 
-_numba_cache.install()
+_after_numba.arm()

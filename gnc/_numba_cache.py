@@ -223,3 +223,6 @@ def stale_files(folders: list[Path] | None = None) -> list[Path]:
                 live.update(overloads.values())
         stale.extend(p for p in folder.glob("*.nbc") if p.name not in live)
     return sorted(stale)
+
+
+install()  # importing this module is enough (gnc._after_numba imports it when numba loads)

@@ -179,3 +179,16 @@ def test_stale_files_are_the_ones_no_current_kernel_loads(tmp_path, monkeypatch)
 def test_digest_is_stable_and_content_based(name):
     a = nc.source_digest(ROOT / name)
     assert a == nc.source_digest(str(ROOT / name)) and len(a) == 64
+
+
+def test_the_locator_is_installed_when_numba_loads_not_before():
+    """`import gnc` does not import numba (the ground monitor never needs it), yet the first kernel
+    decorated after numba loads goes through the locator, whichever of the two is imported first."""
+    probe = ("import sys, {first}, {second}\n"
+             "import numba.core.caching as c\n"
+             "from gnc._numba_cache import SourceClosureLocator\n"
+             "assert c.CacheImpl._locator_classes[0] is SourceClosureLocator, c.CacheImpl._locator_classes\n")
+    alone = "import sys, gnc\nassert 'numba' not in sys.modules\n"
+    for code in (alone, probe.format(first="gnc", second="numba"), probe.format(first="numba", second="gnc")):
+        subprocess.run([sys.executable, "-c", code], check=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                       timeout=120)
