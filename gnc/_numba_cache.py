@@ -1,22 +1,24 @@
 """Where keepout's compiled numba kernels are cached, and when a cached kernel is still the right one.
 
 Every ``@njit(cache=True)`` kernel in the code packages (gnc, fsw, hil_sim, ground) goes through
-`SourceClosureLocator`, registered first in numba's locator list when ``gnc`` is imported (``fsw`` and
-``hil_sim`` import ``gnc`` first, so no kernel is decorated before it). Kernels added later are covered
-with no edit: the locator takes any function whose file lies in those packages.
+`SourceClosureLocator`, put first in numba's locator list as soon as numba's caching module loads
+(`gnc._after_numba`, armed by ``import gnc``; fsw and hil_sim import gnc first, so no kernel is decorated
+before it). Kernels added later are covered with no edit: the locator takes any function whose file
+lies in those packages.
 
 Why not numba's own locator: it stamps a cache with the content of the kernel's *own* file only. A kernel
 that calls a kernel of another module (the world step calls dynamics, orbit and ephemeris kernels) has
 the callee compiled into it, so after an edit of the callee's file numba would load the old machine code.
 Here the stamp is the SHA-256 of every keepout source file the kernel's module imports, directly or
 through other keepout modules (a static over-approximation: any import line counts, also inside
-functions): change any of them and the kernel compiles again. numba's own index keys add the numba
-version, the Python version, the kernel's bytecode, its argument types and the CPU (name and features),
-so a cache built on another CPU is never loaded: that machine compiles, as with no cache.
+functions; this machinery itself is left out, it compiles into no kernel). Change any of them and the
+kernel compiles again. numba's own index keys add the numba version, the Python version, the kernel's
+bytecode, its argument types and the CPU (name and features), so a cache built on another CPU is never
+loaded: that machine compiles, as with no cache.
 
 Where: ``NUMBA_CACHE_DIR`` if set (as numba), else ``__pycache__`` beside the source when writable (an
-editable checkout, a venv; a built wheel ships these files, see `hil_sim.warmup --wheel`), else the user
-cache folder (``$XDG_CACHE_HOME/keepout/numba``), seeded from the shipped files of that kernel.
+editable checkout, a venv; a wheel built by ``make wheel`` ships these files), else the user cache folder
+(``$XDG_CACHE_HOME/keepout/numba``), seeded from the shipped files of that kernel.
 """
 from __future__ import annotations
 
@@ -35,6 +37,8 @@ _CACHE_IMPL = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImp
 
 PACKAGES = ("gnc", "fsw", "hil_sim", "ground")  # the code packages whose imports make up a kernel's closure
 STAMP_VERSION = 1  # bump when the stamp's meaning changes: every cached kernel is then compiled again
+# the cache machinery: imported by every package's __init__, compiled into no kernel (STAMP_VERSION covers it)
+_NOT_SOURCES = frozenset({"gnc._numba_cache", "gnc._after_numba"})
 
 _ROOT = Path(__file__).resolve().parent.parent  # the folder holding the packages (checkout or site-packages)
 # `import a.b as c, d` and `from .x import (y, z)`, also indented (imports inside functions count)
@@ -94,8 +98,9 @@ def _direct_imports(path: Path) -> tuple[str, ...]:
         if parts[0] not in PACKAGES:
             continue
         for k in range(1, len(parts) + 1):
-            if _file_of(".".join(parts[:k])) is not None:
-                found.add(".".join(parts[:k]))
+            module = ".".join(parts[:k])
+            if module not in _NOT_SOURCES and _file_of(module) is not None:
+                found.add(module)
     return tuple(sorted(found))
 
 
