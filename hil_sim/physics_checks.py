@@ -342,6 +342,7 @@ def check_mission(mission: "Mission", step_s: float | None = None, *, quick: boo
 
 CACHE_ENV = "KEEPOUT_PHYSICS_CACHE"  # "off": always run the checks; a folder: keep the verdicts there
 _CACHE_FORMAT = 1  # bump when the stored report's layout or meaning changes
+CACHE_MAX_VERDICTS = 512  # the newest are kept (a few kB each): missions, sources and versions change
 
 
 def verdict_key(mission: "Mission") -> str:
@@ -409,9 +410,17 @@ def check_mission_cached(mission: "Mission") -> PhysicsReport:
         tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
         tmp.write_text(json.dumps({"key": key, "mission": mission.name, "report": report.to_dict()}))
         os.replace(tmp, path)  # atomic: two runs at once never read half a file
+        _trim(folder)
     except OSError:
         pass
     return report
+
+
+def _trim(folder: "Path") -> None:
+    """Delete all but the CACHE_MAX_VERDICTS newest verdicts."""
+    files = sorted(folder.glob("*.json"), key=lambda p: p.stat().st_mtime, reverse=True)
+    for old in files[CACHE_MAX_VERDICTS:]:
+        old.unlink(missing_ok=True)
 
 
 def _eps_in_use(mission: "Mission", eps_max: float) -> float:

@@ -69,3 +69,17 @@ def test_corrupt_cache_or_off_runs_the_checks(counted, monkeypatch, tmp_path):
     pc.check_mission_cached(_mission())
     pc.check_mission_cached(_mission())
     assert len(counted) == 4
+
+
+def test_only_the_newest_verdicts_are_kept(counted, monkeypatch, tmp_path):
+    import os
+
+    monkeypatch.setattr(pc, "CACHE_MAX_VERDICTS", 2)
+    base = _mission().duration_s
+    for k, fraction in enumerate((0.5, 0.25, 0.125)):
+        pc.check_mission_cached(_mission(duration_s=base * fraction))
+        for path in (tmp_path / "verdicts").iterdir():  # distinct times whatever the file system's resolution
+            if path.name == f"{pc.verdict_key(_mission(duration_s=base * fraction))}.json":
+                os.utime(path, (1e9 + k, 1e9 + k))
+    kept = {p.name for p in (tmp_path / "verdicts").iterdir()}
+    assert kept == {f"{pc.verdict_key(_mission(duration_s=base * f))}.json" for f in (0.25, 0.125)}
