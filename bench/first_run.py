@@ -13,8 +13,9 @@ Scenarios, each a fresh process:
   compiles (the fallback of a machine with another CPU).
 
 Time to first tick: the run is started through ``python -c`` that wraps `hil_sim.lockstep.Simulator.run_tick`
-to print the wall clock of its first call, then calls the ``keepout`` entry point (`hil_sim.cli.main`)
-with the same arguments; measured from just before the process is started.
+(and the physics check and the flight software's start, for the split) to print the wall clock of their
+calls, then calls the ``keepout`` entry point (`hil_sim.cli.main`) with the same arguments; measured from
+just before the process is started.
 
     .venv/bin/python bench/first_run.py [--wheel dist/keepout-*.whl] [--duration 120] [--other-cpu]
 
@@ -36,16 +37,27 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PROBE = """\
 import sys, time
-import hil_sim.lockstep as lockstep
-real = lockstep.Simulator.run_tick
-def run_tick(self, *args, **kwargs):
-    if not getattr(lockstep, "_first_tick_seen", False):
-        lockstep._first_tick_seen = True
-        print(f"FIRST_TICK_WALL {time.time():.6f}", file=sys.stderr, flush=True)
-    return real(self, *args, **kwargs)
-lockstep.Simulator.run_tick = run_tick
+def mark(name):
+    print(f"PHASE {name} {time.time():.6f}", file=sys.stderr, flush=True)
+mark("python_started")
+import hil_sim.lockstep as lockstep, hil_sim.physics_checks as checks, hil_sim.sil as sil
+def wrap(owner, attr, before, after=None, once=False):
+    real = getattr(owner, attr)
+    def wrapper(*args, **kwargs):
+        if not (once and getattr(wrapper, "seen", False)):
+            wrapper.seen = True
+            mark(before)
+        result = real(*args, **kwargs)
+        if after:
+            mark(after)
+        return result
+    setattr(owner, attr, wrapper)
+wrap(checks, "check_mission", "check_start", "check_end")
+wrap(sil, "_start_fsw", "fsw_spawn")
+wrap(lockstep.Simulator, "run_tick", "first_tick", once=True)
 from hil_sim.cli import main
 sys.argv[0] = "keepout"
+mark("imports_done")
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -70,13 +82,16 @@ def one_run(python: Path, folder: Path, duration: float, env: dict[str, str]) ->
     t0 = time.time()
     proc = subprocess.run([str(python), "-c", PROBE, *args], cwd=folder, env=env, capture_output=True, text=True)
     total = time.time() - t0
-    first = [float(line.split()[1]) for line in proc.stderr.splitlines() if line.startswith("FIRST_TICK_WALL")]
+    # seconds from the start of the command to each phase (check_*: absent when the verdict was kept)
+    phases = {line.split()[1]: float(line.split()[2]) - t0 for line in proc.stderr.splitlines()
+              if line.startswith("PHASE ")}
     summaries = sorted(folder.glob("runs/*/summary.json"), key=lambda p: p.stat().st_mtime)
     summary = json.loads(summaries[-1].read_text()) if summaries else {}
-    if proc.returncode != 0 or not first:
+    if proc.returncode != 0 or "first_tick" not in phases:
         raise RuntimeError(f"run failed (exit {proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return {"first_tick_s": first[0] - t0, "total_wall_s": total, "flying_wall_s": summary.get("wall_s"),
-            "pass": summary.get("pass"), "exit_code": proc.returncode, "host_load_1min": load}
+    return {"first_tick_s": phases["first_tick"], "total_wall_s": total, "flying_wall_s": summary.get("wall_s"),
+            "check_s": phases["check_end"] - phases["check_start"] if "check_end" in phases else 0.0,
+            "phases_s": phases, "pass": summary.get("pass"), "exit_code": proc.returncode, "host_load_1min": load}
 
 
 def main() -> int:
@@ -110,9 +125,13 @@ def main() -> int:
     load_after = os.getloadavg()
     print(f"\n`keepout sil run --duration {args.duration:g}` from {wheel.name} in a fresh venv (install {install_s:.0f} s), "
           f"host load {load_before[0]:.1f} -> {load_after[0]:.1f} on {os.cpu_count()} CPUs")
-    print(f"| scenario | first tick [s] | total wall [s] | flying [s] | load | pass |\n| --- | --- | --- | --- | --- | --- |")
+    print("| scenario | first tick [s] | of it: imports / physics check / to FSW start / FSW start [s] | total wall [s] "
+          "| flying [s] | load | pass |\n| --- | --- | --- | --- | --- | --- | --- |")
     for name, r in rows.items():
-        print(f"| {name} | {r['first_tick_s']:.1f} | {r['total_wall_s']:.1f} | {r['flying_wall_s']:.1f} | "
+        p = r["phases_s"]
+        split = (f"{p['imports_done']:.1f} / {r['check_s']:.1f} / {p['fsw_spawn'] - p['imports_done'] - r['check_s']:.1f}"
+                 f" / {p['first_tick'] - p['fsw_spawn']:.1f}")
+        print(f"| {name} | {r['first_tick_s']:.1f} | {split} | {r['total_wall_s']:.1f} | {r['flying_wall_s']:.1f} | "
               f"{r['host_load_1min']:.1f} | {r['pass']} |")
     result = {"command": f"keepout sil run --duration {args.duration:g}", "wheel": wheel.name,
               "wheel_bytes": wheel.stat().st_size, "install_s": install_s, "host_load_before": load_before,
