@@ -75,13 +75,22 @@ def fresh_venv(wheel: Path, where: Path) -> tuple[Path, float]:
     return where / "bin" / "python", time.perf_counter() - start
 
 
+def _kernel_files(venv: Path, env: dict[str, str]) -> set[Path]:
+    """Every compiled-kernel data file the run could load or write: the install's, NUMBA_CACHE_DIR's, the
+    user cache's."""
+    roots = [venv, Path(env["XDG_CACHE_HOME"])] + ([Path(env["NUMBA_CACHE_DIR"])] if env.get("NUMBA_CACHE_DIR") else [])
+    return {p for root in roots if root.exists() for p in root.rglob("*.nbc")}
+
+
 def one_run(python: Path, folder: Path, duration: float, env: dict[str, str]) -> dict:
     folder.mkdir(parents=True, exist_ok=True)
     args = ["sil", "run", "--duration", str(duration), "--no-progress"]
     load = os.getloadavg()[0]
+    before = _kernel_files(python.parent.parent, env)
     t0 = time.time()
     proc = subprocess.run([str(python), "-c", PROBE, *args], cwd=folder, env=env, capture_output=True, text=True)
     total = time.time() - t0
+    compiled = len(_kernel_files(python.parent.parent, env) - before)  # kernels compiled (and saved) by the run
     # seconds from the start of the command to each phase (check_*: absent when the verdict was kept)
     phases = {line.split()[1]: float(line.split()[2]) - t0 for line in proc.stderr.splitlines()
               if line.startswith("PHASE ")}
@@ -91,7 +100,8 @@ def one_run(python: Path, folder: Path, duration: float, env: dict[str, str]) ->
         raise RuntimeError(f"run failed (exit {proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
     return {"first_tick_s": phases["first_tick"], "total_wall_s": total, "flying_wall_s": summary.get("wall_s"),
             "check_s": phases["check_end"] - phases["check_start"] if "check_end" in phases else 0.0,
-            "phases_s": phases, "pass": summary.get("pass"), "exit_code": proc.returncode, "host_load_1min": load}
+            "phases_s": phases, "kernels_compiled": compiled, "pass": summary.get("pass"),
+            "exit_code": proc.returncode, "host_load_1min": load}
 
 
 def main() -> int:
@@ -126,13 +136,13 @@ def main() -> int:
     print(f"\n`keepout sil run --duration {args.duration:g}` from {wheel.name} in a fresh venv (install {install_s:.0f} s), "
           f"host load {load_before[0]:.1f} -> {load_after[0]:.1f} on {os.cpu_count()} CPUs")
     print("| scenario | first tick [s] | of it: imports / physics check / to FSW start / FSW start [s] | total wall [s] "
-          "| flying [s] | load | pass |\n| --- | --- | --- | --- | --- | --- | --- |")
+          "| flying [s] | kernels compiled | load | pass |\n| --- | --- | --- | --- | --- | --- | --- | --- |")
     for name, r in rows.items():
         p = r["phases_s"]
         split = (f"{p['imports_done']:.1f} / {r['check_s']:.1f} / {p['fsw_spawn'] - p['imports_done'] - r['check_s']:.1f}"
                  f" / {p['first_tick'] - p['fsw_spawn']:.1f}")
         print(f"| {name} | {r['first_tick_s']:.1f} | {split} | {r['total_wall_s']:.1f} | {r['flying_wall_s']:.1f} | "
-              f"{r['host_load_1min']:.1f} | {r['pass']} |")
+              f"{r['kernels_compiled']} | {r['host_load_1min']:.1f} | {r['pass']} |")
     result = {"command": f"keepout sil run --duration {args.duration:g}", "wheel": wheel.name,
               "wheel_bytes": wheel.stat().st_size, "install_s": install_s, "host_load_before": load_before,
               "host_load_after": load_after, "cpus": os.cpu_count(), "scenarios": rows}
