@@ -70,7 +70,8 @@ class LimitMonitor:
         if self.state == "DISABLED" or value is None:
             return None
         self.last_value = float(value)
-        if self.beyond(value):
+        limit = self.rule.limit  # `beyond`, inline: fifteen monitors run every cycle
+        if (value < limit) if self.below else (value > limit):
             self.count += 1
             if self.state == "TRIPPED":
                 return None

@@ -151,7 +151,7 @@ class PointingGuidance:
             out.margins_deg, out.margin_min_deg = self._sky_margins(y)
             out.zones_merged = any(len(g) > 1 for g in self._sky_groups)
             out.zone_count = len(self.slots)
-            out.zone_bodies = [_BODY_CODES[s.body] for s in self.slots]
+            out.zone_bodies = self._slot_body_codes()
             governor_rate = self._governor_rate(out.margins_deg)
         out.assumptions_ok = self.assumptions_ok
         # the law's rate b^x R^T k1 u within the rate limit and the governor's rate; the roll rate is about
@@ -166,6 +166,13 @@ class PointingGuidance:
         out.roll_error_deg = math.degrees(c[5])
         return out
 
+
+    def _slot_body_codes(self) -> list[str]:
+        """Telemetry code of each slot's body (the slots are fixed at start-up): one list, read-only by use."""
+        codes = getattr(self, "_body_codes", None)
+        if codes is None:
+            codes = self._body_codes = [_BODY_CODES[s.body] for s in self.slots]
+        return codes
 
     def _squeezed(self, y: np.ndarray, factor: float) -> bool:
         """True if the boresight is within factor x the standoff of both zones of a close pair that could
