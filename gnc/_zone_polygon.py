@@ -70,32 +70,13 @@ def edge_midpoints(edges: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 @njit(cache=True)
-def nearest_on_boundary(x, edges, mids, reach, b_out):
-    """min over edges of the arc separation; fills the nearest boundary point b_out.
-
-    Exact, with most edges skipped: the arc whose midpoint is nearest x gives an upper bound d0 on the
-    minimum (an angle theta0 = acos(1 - d0)); an arc whose midpoint is farther than theta0 + ``reach`` (its
-    half-length and a rounding slack, `edge_midpoints`) from x cannot come nearer than theta0, so only the
-    others are evaluated, in index order as in a full pass: same minimum, same nearest point. Needs a unit
-    x (|x|^2 within 1e-12 of 1), else every edge is evaluated."""
-    n = edges.shape[0]
-    tmp = np.empty(3)
-    cos_min = -2.0  # evaluate every edge
-    cosines = np.empty(n)
-    if abs(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] - 1.0) <= 1e-12:
-        k0, c0 = 0, -2.0
-        for k in range(n):
-            c = x[0] * mids[k, 0] + x[1] * mids[k, 1] + x[2] * mids[k, 2]
-            cosines[k] = c
-            if c > c0:
-                k0, c0 = k, c
-        d0 = _edge_nearest(x, edges[k0], tmp)
-        limit = math.acos(max(-1.0, min(1.0, 1.0 - d0))) + reach
-        if limit < math.pi:
-            cos_min = math.cos(limit)
+def _nearest_of_edges(x, edges, cosines, cos_min, b_out):
+    """min over the edges k with cosines[k] >= cos_min (all of them for cos_min = -inf), in index order;
+    fills the nearest boundary point b_out."""
     best = 1e300
-    for k in range(n):
-        if cos_min > -2.0 and cosines[k] < cos_min:
+    tmp = np.empty(3)
+    for k in range(edges.shape[0]):
+        if cosines[k] < cos_min:
             continue
         d = _edge_nearest(x, edges[k], tmp)
         if d < best:
@@ -107,18 +88,34 @@ def nearest_on_boundary(x, edges, mids, reach, b_out):
 
 
 @njit(cache=True)
+def nearest_on_boundary(x, edges, mids, reach, b_out):
+    """min over edges of the arc separation; fills the nearest boundary point b_out.
+
+    Exact, with most edges skipped: the arc whose midpoint is nearest x gives an upper bound d0 on the
+    minimum (an angle theta0 = acos(1 - d0)); an arc whose midpoint is farther than theta0 + ``reach`` (its
+    half-length and a rounding slack, `edge_midpoints`) from x cannot come nearer than theta0, so only the
+    others are evaluated, in index order as in a full pass: same minimum, same nearest point. Needs a unit
+    x (|x|^2 within 1e-12 of 1), else every edge is evaluated."""
+    n = edges.shape[0]
+    cosines = np.zeros(n)
+    cos_min = -math.inf  # evaluate every edge
+    if abs(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] - 1.0) <= 1e-12:
+        k0, c0 = 0, -2.0
+        for k in range(n):
+            c = x[0] * mids[k, 0] + x[1] * mids[k, 1] + x[2] * mids[k, 2]
+            cosines[k] = c
+            if c > c0:
+                k0, c0 = k, c
+        limit = math.acos(max(-1.0, min(1.0, 1.0 - _edge_nearest(x, edges[k0], np.empty(3))))) + reach
+        if limit < math.pi:
+            cos_min = math.cos(limit)
+    return _nearest_of_edges(x, edges, cosines, cos_min, b_out)
+
+
+@njit(cache=True)
 def nearest_on_boundary_full(x, edges, b_out):
     """`nearest_on_boundary` evaluating every edge (the reference the culled one is tested against)."""
-    best = 1e300
-    tmp = np.empty(3)
-    for k in range(edges.shape[0]):
-        d = _edge_nearest(x, edges[k], tmp)
-        if d < best:
-            best = d
-            b_out[0] = tmp[0]
-            b_out[1] = tmp[1]
-            b_out[2] = tmp[2]
-    return best
+    return _nearest_of_edges(x, edges, np.zeros(edges.shape[0]), -math.inf, b_out)
 
 
 @njit(cache=True)
