@@ -121,16 +121,24 @@ def pointing_command_nb(q, y, b, u_law, k1, max_rate, governor_rate, target, rol
 
 
 @njit(cache=True)
+def _row_dot(path, k, y):
+    c = 0.0
+    for i in range(y.shape[0]):
+        c += path[k, i] * y[i]
+    return c
+
+
+@njit(cache=True)
 def aim_index_nb(path, start, y, cos_ahead):
     """(nearest index from ``start`` on, aim index): the first path point at or after ``start`` with the
     largest cosine to ``y``, then the first point from there whose cosine is below ``cos_ahead`` (the
-    path's last index when none is)."""
+    path's last index when none is). Any dimension: S^2 (boresight paths) and S^3 (attitude paths)."""
     best_k, best_c = start, -math.inf
     for k in range(start, path.shape[0]):
-        c = path[k, 0] * y[0] + path[k, 1] * y[1] + path[k, 2] * y[2]
+        c = _row_dot(path, k, y)
         if c > best_c:
             best_k, best_c = k, c
     for k in range(best_k, path.shape[0]):
-        if path[k, 0] * y[0] + path[k, 1] * y[1] + path[k, 2] * y[2] < cos_ahead:
+        if _row_dot(path, k, y) < cos_ahead:
             return best_k, k
     return best_k, path.shape[0] - 1

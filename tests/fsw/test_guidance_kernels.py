@@ -85,9 +85,10 @@ def test_sky_directions_are_the_interpolated_unit_vectors() -> None:
 
 def test_aim_index_is_argmax_then_first_point_beyond_the_look_ahead() -> None:
     rng = np.random.default_rng(2)
-    for _ in range(200):
-        path = np.ascontiguousarray(sample_path(rng))
-        y = _unit(rng.standard_normal(3))
+    for k in range(400):
+        dim = 3 if k % 2 else 4  # boresight paths on S^2, attitude paths on S^3
+        path = np.ascontiguousarray(sample_path(rng, dim))
+        y = _unit(rng.standard_normal(dim))
         start = int(rng.integers(0, len(path)))
         cos_ahead = math.cos(math.radians(rng.uniform(1.0, 30.0)))
         nearest = start + int(np.argmax(path[start:] @ y))
@@ -96,9 +97,10 @@ def test_aim_index_is_argmax_then_first_point_beyond_the_look_ahead() -> None:
         assert tuple(aim_index_nb(path, start, y, cos_ahead)) == (nearest, aim)
 
 
-def sample_path(rng) -> np.ndarray:
-    """A random great-circle path of 40-200 points, 0.5 deg apart."""
-    a = _unit(rng.standard_normal(3))
-    e = _unit(np.cross(a, rng.standard_normal(3)))
+def sample_path(rng, dim: int) -> np.ndarray:
+    """A random great-circle path on S^(dim-1) of 40-200 points, 0.5 deg apart."""
+    a = _unit(rng.standard_normal(dim))
+    v = rng.standard_normal(dim)
+    e = _unit(v - (v @ a) * a)
     s = np.radians(0.5) * np.arange(int(rng.integers(40, 200)))
     return np.cos(s)[:, None] * a + np.sin(s)[:, None] * e
