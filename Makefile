@@ -3,14 +3,14 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo test test-vcan paper bench clean
+.PHONY: setup demo test test-vcan paper bench wheel clean
 
 $(BIN)/keepout: pyproject.toml
 	$(PY) -m venv $(VENV)
-	$(BIN)/pip install --upgrade pip
-	@echo "installing keepout and its dependencies (a minute or two on a fresh machine)"
+	$(BIN)/pip install --progress-bar on --upgrade pip
+	@echo "installing keepout and its dependencies (a minute or two on a fresh machine; pip shows each download)"
 	$(BIN)/pip install --progress-bar on -e '.[dev,dask]'
-	@# compile the numba kernels now, so the first run starts flying at once (hil_sim/warmup.py)
+	@echo "compiling the numba kernels now, so the first run starts flying at once (hil_sim/warmup.py)"
 	$(BIN)/python -m hil_sim.warmup
 	touch $(BIN)/keepout
 
@@ -18,7 +18,8 @@ $(BIN)/keepout: pyproject.toml
 OPENMCT := ground/web/node_modules/openmct/dist/openmct.js
 $(OPENMCT): ground/web/package.json ground/web/package-lock.json
 	@command -v npm >/dev/null 2>&1 || { echo "make setup: npm is missing (Debian: apt-get install -y npm)" >&2; exit 1; }
-	npm ci --prefix ground/web --no-audit --no-fund --loglevel=error
+	@echo "installing Open MCT for the web display (npm)"
+	npm ci --prefix ground/web --no-audit --no-fund --progress=true --loglevel=http
 	touch $@
 
 setup: $(BIN)/keepout $(OPENMCT)
@@ -37,5 +38,13 @@ test-vcan: setup
 paper: setup
 	$(BIN)/keepout paper --out docs/paper
 
+# The wheel as users get it, with the compiled kernels of its own sources (gnc/_numba_cache.py): a first
+# run on a machine with this CPU and Python loads them instead of compiling. build/ goes first: setuptools
+# would otherwise pack files left there by an earlier build.
+wheel: setup
+	$(BIN)/python -m hil_sim.warmup --prune
+	rm -rf build dist
+	$(BIN)/python -m pip wheel --no-deps -w dist .
+
 clean:
-	rm -rf $(VENV) build *.egg-info ground/web/node_modules
+	rm -rf $(VENV) build dist *.egg-info ground/web/node_modules

@@ -35,7 +35,10 @@ WHEEL_FAULT_MASK = 0x02 | 0x04
 
 def _norm(v: list[float]) -> float:
     """Euclidean norm of a short list of floats (numpy's call overhead is most of a 3-vector's norm)."""
-    return math.sqrt(sum(x * x for x in v))
+    total = 0.0
+    for x in v:
+        total += x * x
+    return math.sqrt(total)
 
 
 _statm: tuple[int, int, int] | None = None  # (pid, descriptor of /proc/<pid>/statm, page size)
@@ -193,6 +196,10 @@ class FlightSoftware:
         self._st_outage_start = 0.0
         self._target_reached = False
         self._rt_t0: float | None = None
+        # sensors heard from at least once (their FDIR monitors are armed from then on)
+        self._imu_seen = False
+        self._st_seen = False
+        self._wheel_seen = [False] * self.n_wheels
         self.inject_overrun_s = 0.0  # test hook: busy-wait this long in the next GNC cycle
         self.last: CycleRecord | None = None
         self.mode_reason = "INIT"
@@ -346,7 +353,7 @@ class FlightSoftware:
                 pass
 
         # ---- sensors
-        imu_samples = list(getattr(inputs, "imu_samples", []) or [])
+        imu_samples = getattr(inputs, "imu_samples", None) or ()
         imu = inputs.imu
         if realtime:
             age = inputs.imu_age_s
@@ -397,25 +404,30 @@ class FlightSoftware:
 
         # ---- FDIR (sensor monitors are armed once the sensor has been heard from: a flight software
         # started before its devices must not trip on silence)
-        corrupt = self._corrupt_deltas()
-        residual_off = self.wheel_residual.update(dt, speeds, ctrl.wheel_torque_cmd_Nm) & self.control.active
-        self._imu_seen = getattr(self, "_imu_seen", False) or imu is not None
+        imu_corrupt, st_corrupt = self._corrupt_deltas()
+        residual_off = (self.wheel_residual.update(dt, speeds, ctrl.wheel_torque_cmd_Nm) & self.control.active).tolist()
+        self._imu_seen = self._imu_seen or imu is not None
         # a tracker that answers but is blind (Sun/Moon/rate) has been heard: its silence is then a fault
-        self._st_seen = getattr(self, "_st_seen", False) or st is not None
-        seen = getattr(self, "_wheel_seen", [False] * self.n_wheels)
-        self._wheel_seen = [a or (w is not None) for a, w in zip(seen, wheels)]
+        self._st_seen = self._st_seen or st is not None
+        seen = self._wheel_seen
+        wheel_fault, wheel_ratio = [], []
+        for i, (w, s, m) in enumerate(zip(wheels, speed_list, self.control.max_speed.tolist())):
+            if w is None:
+                wheel_fault.append(seen[i] or residual_off[i])
+                wheel_ratio.append(abs(s) / m if math.isfinite(s) else math.nan)  # s is NaN: no status
+                continue
+            seen[i] = True
+            fault = int(w.fault)
+            wheel_fault.append(bool(fault & WHEEL_FAULT_MASK) or residual_off[i])
+            wheel_ratio.append(max(abs(s) / m, 1.0 if fault & WHEEL_OVERSPEED else 0.0) if math.isfinite(s) else math.nan)
         fin = FdirInputs(
             imu_missing=imu is None and self._imu_seen,
-            imu_corrupt_frames=corrupt["IMU"],
+            imu_corrupt_frames=imu_corrupt,
             st_missing=(not st_fresh) and self._st_seen,
-            st_corrupt_frames=corrupt["STAR_TRACKER"],
+            st_corrupt_frames=st_corrupt,
             innovation_deg=status.innovation_deg if status is not None else None,
-            wheel_fault=[(w is None and armed) or (w is not None and bool(int(w.fault) & WHEEL_FAULT_MASK))
-                         or bool(off) for w, armed, off in zip(wheels, self._wheel_seen, residual_off)],
-            wheel_speed_ratio=[
-                max(abs(s) / m, 1.0 if (w is not None and int(w.fault) & WHEEL_OVERSPEED) else 0.0) if math.isfinite(s) else math.nan
-                for s, m, w in zip(speed_list, self.control.max_speed.tolist(), wheels)
-            ],
+            wheel_fault=wheel_fault,
+            wheel_speed_ratio=wheel_ratio,
             wheel_speed_rad_s=speed_list,
             margins_deg=g.margins_deg,  # every mode: SAFE keeps out too, so a violation is one in SAFE
             zone_bodies=g.zone_bodies,
@@ -446,7 +458,8 @@ class FlightSoftware:
             self._event("ST_RECOVERED", outage_s=self.t_s - self._st_outage_start)
         self._st_was_valid = st_fresh
 
-    def _corrupt_deltas(self) -> dict[str, int]:
+    def _corrupt_deltas(self) -> tuple[int, int]:
+        """(IMU, star tracker) frames rejected by E2E since the last cycle."""
         counters = self.driver.counters
         if counters is not self._corrupt_src:
             # the per-message counter dicts live as long as the receiver: look them up once
@@ -455,12 +468,15 @@ class FlightSoftware:
                 "IMU": [counters[m] for m in ("IMU_RATE",) if m in counters],
                 "STAR_TRACKER": [counters[m] for m in ("ST_QUAT_A", "ST_QUAT_B") if m in counters],
             }
-        out = {}
+        out = []
         for sensor, dicts in self._corrupt_dicts.items():
-            total = sum(c.get(k, 0) for c in dicts for k in _CORRUPT_CLASSES)
-            out[sensor] = max(0, total - self._corrupt_prev[sensor])
+            total = 0
+            for c in dicts:
+                for k in _CORRUPT_CLASSES:
+                    total += c.get(k, 0)
+            out.append(max(0, total - self._corrupt_prev[sensor]))
             self._corrupt_prev[sensor] = total
-        return out
+        return out[0], out[1]
 
     def _execute(self, action) -> None:
         a = action.action

@@ -122,6 +122,7 @@ class RateController:
         self.max_jerk = self.kp * self.max_accel if jerk == "auto" else math.radians(float(jerk))
         self.active = np.ones(self.n, dtype=bool)
         self.M = allocation_matrix(self.G, self.active)
+        self._any_active = True
         self.reset()
 
     def reset(self) -> None:
@@ -139,6 +140,7 @@ class RateController:
             return False
         self.active = trial
         self.M = allocation_matrix(self.G, self.active)
+        self._any_active = bool(self.active.any())
         return True
 
     # share of the worst-axis torque the slew may use: the rest is for feedback, gyroscopic terms and
@@ -172,7 +174,7 @@ class RateController:
         prev = self._omega_cmd_prev if has_prev else w
         torque, tau_w, scale, shaped, accel = _rate_loop(
             float(dt_s), cmd, prev, self._accel_prev, w, has_prev, self.max_accel, float(self.max_jerk), float(self.kp),
-            bool(self.ff), self.J, self.G, self.Js, self.wheel_speed, self.max_torque, self.M, bool(self.active.any()))
+            bool(self.ff), self.J, self.G, self.Js, self.wheel_speed, self.max_torque, self.M, self._any_active)
         self._omega_cmd_prev = shaped
         self._accel_prev = accel
         return ControlOutput(torque, tau_w, scale, shaped)

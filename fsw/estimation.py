@@ -125,11 +125,28 @@ def mekf_innovation(q, q_meas):
 @njit(cache=True)
 def mekf_update(q, bias, P, dtheta, R):
     """Fuse one attitude measurement given its innovation (H = [I 0], R the 3x3 body-frame noise [rad^2])."""
-    S = np.ascontiguousarray(P[0:3, 0:3]) + R
-    K = np.ascontiguousarray(P[:, 0:3]) @ np.linalg.inv(S)
+    return mekf_update_lagged(q, bias, P, dtheta, R, 0.0)
+
+
+@njit(cache=True)
+def mekf_update_lagged(q, bias, P, dtheta, R, lag):
+    """Fuse an attitude measurement taken ``lag`` [s] ago and brought to the filter time with the
+    bias-corrected gyro rate: H = [I, lag I].
+
+    Bridging the sample with (omega_meas - bias_est) over the lag rotates it by the bias error times
+    the lag as well: the innovation is dtheta + dbias lag + noise. Right after a (re)initialisation the
+    bias is uncertain to ~1e-3 rad/s, and 0.1 s of it is ~20 arcsec, four times the tracker's
+    cross-boresight noise: with H = [I 0] the filter took that for attitude error and left start-up
+    with a bias error outside its covariance (design note 13)."""
+    H = np.zeros((3, 6))
+    for i in range(3):
+        H[i, i] = 1.0
+        H[i, 3 + i] = lag
+    PHt = P @ H.T
+    S = H @ PHt + R
+    K = PHt @ np.linalg.inv(S)
     dx = K @ dtheta
-    IKH = np.eye(6)
-    IKH[:, 0:3] -= K
+    IKH = np.eye(6) - K @ H
     # Joseph form keeps P symmetric positive definite in single steps with large gains.
     Pn = IKH @ P @ IKH.T + K @ R @ K.T
     Pn = 0.5 * (Pn + Pn.T)
@@ -162,7 +179,9 @@ def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_b
     if has_st:
         q_meas = quat_multiply_nb(q_NS, q_SB)
         R = R_st.copy()
+        lag = 0.0
         if 0.0 < st_latency < max_age:
+            lag = st_latency
             q_meas = quat_multiply_nb(q_meas, _rotvec_quat((omega_bridge - bias) * st_latency))
             # the bridge rate's white noise times the latency adds to the measurement noise on every axis
             lat_var = bridge_var * st_latency * st_latency
@@ -182,7 +201,7 @@ def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_b
             if innov_deg > max(gate_deg, 4.0 * sigma_pred_deg):
                 rejected = True
             else:
-                q, bias, P = mekf_update(q, bias, P, dtheta, R)
+                q, bias, P = mekf_update_lagged(q, bias, P, dtheta, R, lag)
                 used = True
     return q, bias, P, omega, initialized, used, rejected, innov_deg
 

@@ -27,11 +27,11 @@ lost), ``isolate_wheel_safe`` (isolate and enter SAFE).
 """
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 _ACTION_CODES = {
     "none": "EVENT_ONLY",
@@ -70,7 +70,8 @@ class LimitMonitor:
         if self.state == "DISABLED" or value is None:
             return None
         self.last_value = float(value)
-        if self.beyond(value):
+        limit = self.rule.limit  # `beyond`, inline: fifteen monitors run every cycle
+        if (value < limit) if self.below else (value > limit):
             self.count += 1
             if self.state == "TRIPPED":
                 return None
@@ -103,32 +104,66 @@ class WheelSpeedResidual:
 
     def __init__(self, spin_inertia_kgm2: np.ndarray, window: int = 10, abs_limit_rad_s: float = 2.0,
                  rel_limit: float = 0.5):
-        self.Js = np.asarray(spin_inertia_kgm2, dtype=float)
+        self.Js = np.ascontiguousarray(spin_inertia_kgm2, dtype=float)
         self.window = window
-        self.abs_limit = abs_limit_rad_s
-        self.rel_limit = rel_limit
-        self._rows: deque = deque(maxlen=window)
-        self._prev_speed: np.ndarray | None = None
-        self._prev_cmd = np.zeros(len(self.Js))
+        self.abs_limit = float(abs_limit_rad_s)
+        self.rel_limit = float(rel_limit)
+        n = len(self.Js)
+        # the window as a ring of rows (measured change, predicted change); state[0] the next row to
+        # write, state[1] the rows held
+        self._measured = np.zeros((window, n))
+        self._predicted = np.zeros((window, n))
+        self._state = np.zeros(2, dtype=np.int64)
+        self._prev_speed = np.zeros(n)
+        self._prev_cmd = np.zeros(n)
+        self._started = False
 
     def update(self, dt_s: float, speed_rad_s: np.ndarray, torque_cmd_Nm: np.ndarray) -> np.ndarray:
         """Feed this cycle's measured speeds (NaN: no status) and the torques just commanded; returns the
         wheels whose residual over the window is beyond limit (bool per wheel)."""
-        speed = np.asarray(speed_rad_s, dtype=float)
-        if self._prev_speed is not None:
-            self._rows.append((speed - self._prev_speed, self._prev_cmd * dt_s / self.Js))
-        self._prev_speed, self._prev_cmd = speed, np.asarray(torque_cmd_Nm, dtype=float).copy()
-        if len(self._rows) < self.window:
-            return np.zeros(len(self.Js), dtype=bool)
-        measured = np.sum([r[0] for r in self._rows], axis=0)
-        predicted = np.sum([r[1] for r in self._rows], axis=0)
-        residual = np.abs(measured - predicted)
-        # NaN (a missing status) compares False: the missing status is its own fault
-        return residual > self.abs_limit + self.rel_limit * np.abs(predicted)
+        speed = np.ascontiguousarray(speed_rad_s, dtype=float)
+        cmd = np.ascontiguousarray(torque_cmd_Nm, dtype=float)
+        off = _residual_step(float(dt_s), speed, cmd, self._started, self._prev_speed, self._prev_cmd, self.Js,
+                             self._measured, self._predicted, self._state, self.abs_limit, self.rel_limit)
+        self._started = True
+        return off
 
     def forget(self) -> None:
         """Start the window again (after an isolation the other wheels' commands change abruptly)."""
-        self._rows.clear()
+        self._state[:] = 0
+
+
+@njit(cache=True)
+def _residual_step(dt_s, speed, cmd, started, prev_speed, prev_cmd, Js, measured, predicted, state, abs_limit,
+                   rel_limit):
+    """`WheelSpeedResidual.update` in one compiled call: append this cycle's row to the ring, keep the
+    speeds and commands for the next, and compare the window's sums (oldest row first, as numpy summed
+    the rows of the window it kept) with the limits."""
+    window, n = measured.shape
+    if started:
+        k = state[0]
+        for j in range(n):
+            measured[k, j] = speed[j] - prev_speed[j]
+            predicted[k, j] = prev_cmd[j] * dt_s / Js[j]
+        state[0] = (k + 1) % window
+        state[1] = min(state[1] + 1, window)
+    for j in range(n):
+        prev_speed[j] = speed[j]
+        prev_cmd[j] = cmd[j]
+    off = np.zeros(n, dtype=np.bool_)
+    if state[1] < window:
+        return off
+    first = state[0]  # the oldest row: the ring is full
+    for j in range(n):
+        m = measured[first, j]
+        p = predicted[first, j]
+        for r in range(1, window):
+            k = (first + r) % window
+            m += measured[k, j]
+            p += predicted[k, j]
+        # NaN (a missing status) compares False: the missing status is its own fault
+        off[j] = abs(m - p) > abs_limit + rel_limit * abs(p)
+    return off
 
 
 @dataclass

@@ -3,3 +3,9 @@
 No I/O, no clocks, no threads, no globals: numpy in, numpy out. The paper in
 ``shared/paper`` (constrained stabilization on the n-sphere) is the specification.
 """
+
+# Before any kernel of gnc, fsw or hil_sim is decorated: numba caches them through keepout's locator,
+# stamped with the kernel's whole source closure (gnc/_numba_cache.py), installed when numba loads.
+from gnc import _after_numba
+
+_after_numba.arm()

@@ -54,12 +54,30 @@ def _edge_nearest(x, edge, out):
     return db
 
 
+# Angle [rad] added to the culling bound of `nearest_on_boundary`: covers the rounding of the edge values,
+# of x . mid and of acos (at most ~1e-8 rad), so an edge is only skipped when it is certainly farther.
+_CULL_SLACK_RAD = 1e-6
+
+
+def edge_midpoints(edges: np.ndarray) -> tuple[np.ndarray, float]:
+    """(unit midpoint of every arc (n, 3), largest half-arc angle + slack [rad]): the culling data of
+    `nearest_on_boundary`. Every point of arc k is within its half-arc angle of the arc's midpoint."""
+    a, b = edges[:, 0:3], edges[:, 3:6]
+    s = a + b
+    ns = np.linalg.norm(s, axis=1)
+    half = np.arctan2(np.linalg.norm(a - b, axis=1), ns)
+    return np.ascontiguousarray(s / ns[:, None]), float(half.max()) + _CULL_SLACK_RAD
+
+
 @njit(cache=True)
-def nearest_on_boundary(x, edges, b_out):
-    """min over edges of the arc separation; fills the nearest boundary point b_out."""
+def _nearest_of_edges(x, edges, cosines, cos_min, b_out):
+    """min over the edges k with cosines[k] >= cos_min (all of them for cos_min = -inf), in index order;
+    fills the nearest boundary point b_out."""
     best = 1e300
     tmp = np.empty(3)
     for k in range(edges.shape[0]):
+        if cosines[k] < cos_min:
+            continue
         d = _edge_nearest(x, edges[k], tmp)
         if d < best:
             best = d
@@ -67,6 +85,37 @@ def nearest_on_boundary(x, edges, b_out):
             b_out[1] = tmp[1]
             b_out[2] = tmp[2]
     return best
+
+
+@njit(cache=True)
+def nearest_on_boundary(x, edges, mids, reach, b_out):
+    """min over edges of the arc separation; fills the nearest boundary point b_out.
+
+    Exact, with most edges skipped: the arc whose midpoint is nearest x gives an upper bound d0 on the
+    minimum (an angle theta0 = acos(1 - d0)); an arc whose midpoint is farther than theta0 + ``reach`` (its
+    half-length and a rounding slack, `edge_midpoints`) from x cannot come nearer than theta0, so only the
+    others are evaluated, in index order as in a full pass: same minimum, same nearest point. Needs a unit
+    x (|x|^2 within 1e-12 of 1), else every edge is evaluated."""
+    n = edges.shape[0]
+    cosines = np.zeros(n)
+    cos_min = -math.inf  # evaluate every edge
+    if abs(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] - 1.0) <= 1e-12:
+        k0, c0 = 0, -2.0
+        for k in range(n):
+            c = x[0] * mids[k, 0] + x[1] * mids[k, 1] + x[2] * mids[k, 2]
+            cosines[k] = c
+            if c > c0:
+                k0, c0 = k, c
+        limit = math.acos(max(-1.0, min(1.0, 1.0 - _edge_nearest(x, edges[k0], np.empty(3))))) + reach
+        if limit < math.pi:
+            cos_min = math.cos(limit)
+    return _nearest_of_edges(x, edges, cosines, cos_min, b_out)
+
+
+@njit(cache=True)
+def nearest_on_boundary_full(x, edges, b_out):
+    """`nearest_on_boundary` evaluating every edge (the reference the culled one is tested against)."""
+    return _nearest_of_edges(x, edges, np.zeros(edges.shape[0]), -math.inf, b_out)
 
 
 @njit(cache=True)
@@ -97,23 +146,23 @@ def contains_point(x, vertices, c, B, plane_normal, plane_offset):
 
 
 @njit(cache=True)
-def signed_separation_one(x, edges, vertices, c, B, plane_normal, plane_offset, clamp):
+def signed_separation_one(x, edges, mids, reach, vertices, c, B, plane_normal, plane_offset, clamp):
     """Signed separation of one x (negative inside); clamp=True gives 0 inside."""
     inside = contains_point(x, vertices, c, B, plane_normal, plane_offset)
     if inside and clamp:
         return 0.0
     b = np.empty(3)
-    d = nearest_on_boundary(x, edges, b)
+    d = nearest_on_boundary(x, edges, mids, reach, b)
     return -d if inside else d
 
 
 @njit(cache=True)
-def signed_separation_batch(X, edges, vertices, c, B, plane_normal, plane_offset, clamp):
+def signed_separation_batch(X, edges, mids, reach, vertices, c, B, plane_normal, plane_offset, clamp):
     m = X.shape[0]
     out = np.empty(m)
     b = np.empty(3)
     for r in range(m):
-        d = nearest_on_boundary(X[r], edges, b)
+        d = nearest_on_boundary(X[r], edges, mids, reach, b)
         if contains_point(X[r], vertices, c, B, plane_normal, plane_offset):
             out[r] = 0.0 if clamp else -d
         else:

@@ -409,8 +409,10 @@ class StarShapedLaw(_SphereLaw):
         return self._u(*self._nearest_layer(x))
 
     def control_and_zone(self, x) -> tuple[np.ndarray, int | None]:
-        x = _check_state(x, self.dim)
-        i, d = self._nearest_layer(x)
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape != (self.dim,):
+            raise ValueError(f"state x must have shape ({self.dim},), got {x.shape}")
+        i, d = self._nearest_layer(x)  # checks |x| = 1 (as `_check_state` does) in its compiled screen
         return self._u(i, d), (None if i < 0 else i)
 
     def layer_separations(self, X) -> tuple[np.ndarray, np.ndarray]:

@@ -342,8 +342,9 @@ class StarZone(Zone):
         m /= np.linalg.norm(m, axis=1, keepdims=True)
         zone.vertices_sphere = P
         zone._edges = np.ascontiguousarray(np.hstack([P, Pn, m]))
-        zone._poly_args = (zone._edges, zone.vertices, np.ascontiguousarray(c), np.ascontiguousarray(B),
-                           zone.plane_normal, zone.plane_offset)
+        zone._mids, zone._reach = _poly.edge_midpoints(zone._edges)
+        zone._poly_args = (zone._edges, zone._mids, zone._reach, zone.vertices, np.ascontiguousarray(c),
+                           np.ascontiguousarray(B), zone.plane_normal, zone.plane_offset)
         return zone
 
     @classmethod
@@ -416,7 +417,7 @@ class StarZone(Zone):
             return 0.5 * float(np.sum((arr - b) ** 2)), b
         if self.shape == "polygon":
             b = np.empty(3)
-            d = _poly.nearest_on_boundary(arr, self._edges, b)
+            d = _poly.nearest_on_boundary(arr, self._edges, self._mids, self._reach, b)
             return float(d), b
         return self._radial.nearest(arr)
 
@@ -447,8 +448,7 @@ class StarZone(Zone):
         if self.shape == "superellipsoid":
             return _se.signed_separation_batch(arr, *self._se_args, False)
         if self.shape == "polygon":
-            return _poly.signed_separation_batch(arr, self._edges, self.vertices, self.center_point, self.basis,
-                                                 self.plane_normal, self.plane_offset, False)
+            return _poly.signed_separation_batch(arr, *self._poly_args, False)
         return np.array([self.signed_separation(row) for row in arr])
 
     def separation_batch(self, X: ArrayLike) -> NDArray[np.float64]:
@@ -456,8 +456,7 @@ class StarZone(Zone):
         if self.shape == "superellipsoid":
             return _se.signed_separation_batch(arr, *self._se_args, True)
         if self.shape == "polygon":
-            return _poly.signed_separation_batch(arr, self._edges, self.vertices, self.center_point, self.basis,
-                                                 self.plane_normal, self.plane_offset, True)
+            return _poly.signed_separation_batch(arr, *self._poly_args, True)
         return np.maximum(0.0, self.signed_separation_batch(arr))
 
     def boundary(self, num: int) -> NDArray[np.float64]:

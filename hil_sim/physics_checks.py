@@ -18,6 +18,11 @@ the whole run, because the Sun, Moon and Earth zones move:
 
 `gnc.checks.check_assumptions` does the paper's maths; this module supplies the zones over time and
 turns the results into messages with the times, zone names and numbers.
+
+`check_mission_cached` (what `keepout sil run` calls) keeps each verdict in the user cache, keyed on the
+mission's full validated content, the source of every keepout module the checks import and the numeric
+libraries' versions: the checks are a pure function of these, so a second run of the same mission skips
+seconds of numerical search and gets the very report the search would give.
 """
 from __future__ import annotations
 
@@ -30,6 +35,8 @@ import numpy as np
 from gnc.wheels import fibonacci_sphere, wheel_authority
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from hil_sim.mission import Mission
 
 MAX_SWEEP_SAMPLES = 240
@@ -64,6 +71,7 @@ class Finding:
 class PhysicsReport:
     findings: list[Finding] = field(default_factory=list)
     samples: int = 0
+    reused_from: str | None = None  # the cache file this verdict was read from (check_mission_cached)
 
     @property
     def ok(self) -> bool:
@@ -89,12 +97,23 @@ class PhysicsReport:
         verdict = "PASS" if self.ok else "FAIL"
         lines.append(f"{verdict}: {len(self.errors)} error(s), {len(self.warnings)} warning(s), "
                      f"{self.samples} time sample(s) checked")
+        if self.reused_from:
+            lines.append(f"(verdict of an earlier check of the same mission content with the same keepout sources "
+                         f"and libraries: {self.reused_from})")
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
         return {"ok": self.ok, "samples": self.samples,
                 "findings": [{"level": f.level, "check": f.check, "message": f.message, "numbers": f.numbers,
                               "key": None if f.loc is None else list(f.loc)} for f in self.findings]}
+
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "PhysicsReport":
+        """The inverse of `to_dict`."""
+        return cls([Finding(f["level"], f["check"], f["message"], dict(f["numbers"]),
+                            None if f["key"] is None else tuple(f["key"])) for f in data["findings"]],
+                   int(data["samples"]))
 
 
 def d_s_to_deg(d_s: float) -> float:
@@ -319,6 +338,89 @@ def check_mission(mission: "Mission", step_s: float | None = None, *, quick: boo
     if not report.findings:
         report.add("info", "summary", "no problems found")
     return report
+
+
+CACHE_ENV = "KEEPOUT_PHYSICS_CACHE"  # "off": always run the checks; a folder: keep the verdicts there
+_CACHE_FORMAT = 1  # bump when the stored report's layout or meaning changes
+CACHE_MAX_VERDICTS = 512  # the newest are kept (a few kB each): missions, sources and versions change
+
+
+def verdict_key(mission: "Mission") -> str:
+    """SHA-256 of everything `check_mission` depends on: the validated mission (every field, defaults
+    included), the keepout sources the checks import (`gnc._numba_cache.source_digest`), the numeric
+    libraries and the CPU (floating point may differ in the last bit between CPUs)."""
+    import hashlib
+    import json
+    import platform
+    import sys
+    from importlib import metadata
+
+    from gnc._numba_cache import source_digest
+
+    versions = {}
+    for dist in ("numpy", "scipy", "numba", "llvmlite", "pydantic"):  # versions only: no import
+        try:
+            versions[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            versions[dist] = None
+    from numba.core.registry import cpu_target
+
+    cpu = cpu_target.target_context.codegen().magic_tuple()  # (triple, CPU name, features): numba's own key
+    payload = {"format": _CACHE_FORMAT, "mission": mission.model_dump(mode="json"), "sources": source_digest(__file__),
+               "versions": versions, "python": sys.version, "machine": [platform.machine(), *cpu]}
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _verdict_folder() -> "Path | None":
+    import os
+    from pathlib import Path
+
+    from gnc._numba_cache import user_cache_dir
+
+    setting = os.environ.get(CACHE_ENV, "")
+    if setting.lower() == "off":
+        return None
+    return Path(setting) if setting else user_cache_dir() / "physics_checks"
+
+
+def check_mission_cached(mission: "Mission") -> PhysicsReport:
+    """`check_mission(mission)`, or its stored verdict for the same `verdict_key` (see the module doc).
+
+    A missing, unreadable or foreign cache file means the checks run; a cache that cannot be written
+    is left alone. ``KEEPOUT_PHYSICS_CACHE=off`` always runs them."""
+    import json
+    import os
+
+    folder = _verdict_folder()
+    if folder is None:
+        return check_mission(mission)
+    key = verdict_key(mission)
+    path = folder / f"{key}.json"
+    try:
+        data = json.loads(path.read_text())
+        if data.get("key") == key:
+            report = PhysicsReport.from_dict(data["report"])
+            report.reused_from = str(path)
+            return report
+    except (OSError, ValueError, KeyError, TypeError):
+        pass  # absent or unreadable: check
+    report = check_mission(mission)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps({"key": key, "mission": mission.name, "report": report.to_dict()}))
+        os.replace(tmp, path)  # atomic: two runs at once never read half a file
+        _trim(folder)
+    except OSError:
+        pass
+    return report
+
+
+def _trim(folder: "Path") -> None:
+    """Delete all but the CACHE_MAX_VERDICTS newest verdicts."""
+    files = sorted(folder.glob("*.json"), key=lambda p: p.stat().st_mtime, reverse=True)
+    for old in files[CACHE_MAX_VERDICTS:]:
+        old.unlink(missing_ok=True)
 
 
 def _eps_in_use(mission: "Mission", eps_max: float) -> float:

@@ -123,7 +123,7 @@ class RunResult:
 def prepare(options: RunOptions):
     """Load + check the mission; return (mission, physics report). Raises MissionRejected."""
     from hil_sim.mission import load_mission_marked
-    from hil_sim.physics_checks import check_mission
+    from hil_sim.physics_checks import check_mission_cached
     from hil_sim.yaml_loader import ConfigError
 
     try:
@@ -146,7 +146,7 @@ def prepare(options: RunOptions):
             raise MissionRejected(f"command-line override rejected: {exc}") from None
     report = None
     if not options.skip_physics_checks:
-        report = check_mission(mission)
+        report = check_mission_cached(mission)  # a verdict kept per mission content and code, or the checks
         if not report.ok:
             raise MissionRejected(f"{options.mission}: physics checks failed:\n{report.format(doc, errors_only=True)}")
     return mission, report

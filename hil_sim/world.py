@@ -142,17 +142,26 @@ def _aux_at(t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
 @njit(cache=True, error_model="numpy")
 def _world_period_kernel(X, D, TEMP, G, W, B, U_SEQ, NORMALS_SEQ, dt_sub, n_sub, U_APPLIED, FLAGS, DECAY, GM,
                          HAS_COULOMB, WORK, T_END, ORB, sun_c, moon_c, eph_t0, eph_h, AUX,
-                         IMU_DUE, IMU_DT, IMU_NORMALS, BIAS, GYRO_P, GYRO_SEQ, SAT_SEQ,
+                         IMU_DUE, CLOCK, IMU_NORMALS, BIAS, GYRO_P, GYRO_SEQ, SAT_SEQ,
                          ST_DUE, ST_P, ST_BASIS, ST_NORMALS, ST_Q, ST_VALID, ST_BLIND, ST_Q_SEQ, ST_VALID_SEQ,
                          ST_BLIND_SEQ):
-    """J steps of ``_world_step_kernel`` (U_SEQ[j], NORMALS_SEQ[j], ending at T_END[j]), each followed by a
-    gyro sample where IMU_DUE[j] and a star-tracker sample where ST_DUE[j] (normals in the order the
-    one-call-per-step path draws them). One compiled call per GNC period instead of ~2 per dynamics step.
+    """J steps of ``_world_step_kernel`` (U_SEQ[j], NORMALS_SEQ[j]), each followed by a gyro sample where
+    IMU_DUE[j] and a star-tracker sample where ST_DUE[j]. One compiled call per GNC period instead of ~2 per
+    dynamics step, with the per-period bookkeeping inside too (Python's per-call cost is the budget here).
+
+    CLOCK: (t before the period, dt, IMU period, time of the last gyro sample or NaN); out: [3] = the time
+    of the last gyro sample taken. T_END: out: each step's end time, accumulated as J one-step calls would. IMU_NORMALS / ST_NORMALS: one row per sample due (in
+    order), as the one-call-per-step path draws them.
     Returns the number of steps done (< J: U_SEQ[j] not finite, nothing of step j applied)."""
     # AUX (orbit, Sun/Moon/Earth directions) only where it is read: at star-tracker samples and at the end
     # of the period (or of the last step done); the same values as evaluating it after every step.
     J = U_SEQ.shape[0]
+    t, dt = CLOCK[0], CLOCK[1]
+    for j in range(J):
+        t = t + dt
+        T_END[j] = t
     aux_step = -1
+    i_imu = i_st = 0
     for j in range(J):
         if not dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_SEQ[j], NORMALS_SEQ[j], dt_sub, n_sub, U_APPLIED,
                                        FLAGS, DECAY, GM, HAS_COULOMB, WORK):
@@ -163,10 +172,14 @@ def _world_period_kernel(X, D, TEMP, G, W, B, U_SEQ, NORMALS_SEQ, dt_sub, n_sub,
             _aux_at(T_END[j], ORB, sun_c, moon_c, eph_t0, eph_h, AUX)
             aux_step = j
         if IMU_DUE[j]:
-            sen.gyro_sample_batch(X, BIAS, GYRO_P, IMU_NORMALS[j], IMU_DT[j], GYRO_SEQ[j], SAT_SEQ[j])
+            imu_dt = CLOCK[2] if math.isnan(CLOCK[3]) else T_END[j] - CLOCK[3]
+            CLOCK[3] = T_END[j]
+            sen.gyro_sample_batch(X, BIAS, GYRO_P, IMU_NORMALS[i_imu], imu_dt, GYRO_SEQ[j], SAT_SEQ[j])
+            i_imu += 1
         if ST_DUE[j]:
-            sen.star_tracker_sample_batch(X, ST_P, ST_BASIS, AUX, AUX_SUN, AUX_MOON, ST_NORMALS[j], ST_Q, ST_VALID,
-                                          ST_BLIND)
+            sen.star_tracker_sample_batch(X, ST_P, ST_BASIS, AUX, AUX_SUN, AUX_MOON, ST_NORMALS[i_st], ST_Q,
+                                          ST_VALID, ST_BLIND)
+            i_st += 1
             ST_Q_SEQ[j] = ST_Q
             ST_VALID_SEQ[j] = ST_VALID
             ST_BLIND_SEQ[j] = ST_BLIND
@@ -239,6 +252,8 @@ class WorldBatch:
         self.ST_BLIND = np.zeros(M, dtype=np.int64)
 
         self._period_out: tuple[np.ndarray, ...] | None = None
+        self._t_end = np.zeros(0)
+        self._clock = np.array([0.0, 0.0, self.imu_period_s[0], math.nan])  # see _world_period_kernel
         self._no_normals_rows = np.zeros((0, M * 3))
         self._t = 0.0
         self._advance(0.0, np.zeros((M, N)), 0)
@@ -250,12 +265,12 @@ class WorldBatch:
         (seconds, in which the flight software would wait for a SYNC)."""
         M, N = self.n_runs, self.n_wheels
         none = np.zeros(0, dtype=np.bool_)
-        self._period_kernel(np.zeros((0, M, N)), np.zeros((0, M * 3)), 0.0, 0, np.zeros(0), none, np.zeros(0),
+        self._period_kernel(np.zeros((0, M, N)), np.zeros((0, M * 3)), 0.0, 0, np.zeros(0), none, np.zeros(4),
                             np.zeros((0, M * 6)), none, np.zeros((0, M * 3)),
                             (np.zeros((0, M, 3)), np.zeros((0, M), dtype=np.bool_), np.zeros((0, M, 4)),
                              np.zeros((0, M), dtype=np.bool_), np.zeros((0, M), dtype=np.int64)))
 
-    def _period_kernel(self, u_seq, normals, dt_sub, n_sub, t_end, imu_due, imu_dt, imu_normals, st_due, st_normals,
+    def _period_kernel(self, u_seq, normals, dt_sub, n_sub, t_end, imu_due, clock, imu_normals, st_due, st_normals,
                        out) -> int:
         """``_world_period_kernel`` on this batch's state; ``out``: (gyro, sat, st_q, st_valid, st_blind)."""
         eph = self.ephemeris
@@ -265,7 +280,7 @@ class WorldBatch:
         return _world_period_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_seq, normals, dt_sub, n_sub,
                                     self.U_APPLIED, self.FLAGS, decay, gm, has_coulomb, self._work, t_end, self.ORB,
                                     sun_c, moon_c, eph_t0, eph.node_spacing_s, self.AUX,
-                                    imu_due, imu_dt, imu_normals, self.BIAS, self.GYRO_P, gyro, sat,
+                                    imu_due, clock, imu_normals, self.BIAS, self.GYRO_P, gyro, sat,
                                     st_due, self.ST_P, self.ST_BASIS, st_normals, self.ST_Q, self.ST_VALID,
                                     self.ST_BLIND, st_q, st_valid, st_blind)
 
@@ -304,27 +319,19 @@ class WorldBatch:
         Returns gyro (J, M, 3), saturated (J, M), star-tracker q (J, M, 4), valid (J, M), blind (J, M);
         rows where the sensor was not due are left unset."""
         J, M = len(u_seq), self.n_runs
-        t_end = np.empty(J)
-        t = self._t
-        imu_dt = np.zeros(J)
-        t_last_imu = self._t_last_imu
-        for j in range(J):
-            t = t + dt_s  # the same accumulation as j calls of _advance
-            t_end[j] = t
-            if imu_due[j]:
-                imu_dt[j] = self.imu_period_s[0] if t_last_imu is None else t - t_last_imu
-                t_last_imu = t
         eph = self.ephemeris
-        if t_end[-1] >= eph.t_end_s or self._t < eph.t_start_s:
-            eph.ensure(self._t, t_end[-1])
+        t_last = self._t + J * dt_s  # the ephemeris table's reach: a bound, the kernel accumulates exactly
+        if t_last + dt_s >= eph.t_end_s or self._t < eph.t_start_s:
+            eph.ensure(self._t, t_last + dt_s)
         if self._has_random_disturbance and n_sub > 0:
             normals = self.normals_disturbance.take_rows(n_sub * M * 3, J)
         else:
             normals = self._no_normals_rows
             if normals.shape[0] != J:
                 normals = self._no_normals_rows = np.zeros((J, self._no_normals.size))
-        imu_normals = self._sampled_normals(self.normals_imu, M * 6, imu_due)
-        st_normals = self._sampled_normals(self.normals_star_tracker, M * 3, st_due)
+        # one row per sample due, in order: the numbers J one-step calls would draw
+        imu_normals = self.normals_imu.take_rows(M * 6, int(np.count_nonzero(imu_due)))
+        st_normals = self.normals_star_tracker.take_rows(M * 3, int(np.count_nonzero(st_due)))
         dt_sub = dt_s / n_sub if n_sub else 0.0
         if dt_sub != self._coef_dt:
             self._coef = dyn.step_coefficients(self.W, self.B, dt_sub)
@@ -333,33 +340,22 @@ class WorldBatch:
             # outputs reused from period to period (callers copy what they keep, as with GYRO_OUT)
             self._period_out = (np.zeros((J, M, 3)), np.zeros((J, M), dtype=np.bool_), np.zeros((J, M, 4)),
                                 np.zeros((J, M), dtype=np.bool_), np.zeros((J, M), np.int64))
+            self._t_end = np.zeros(J)
         gyro, sat, st_q, st_valid, st_blind = self._period_out
-        done = self._period_kernel(u_seq, normals, dt_sub, n_sub, t_end, imu_due, imu_dt, imu_normals, st_due,
+        t_end, clock = self._t_end, self._clock
+        clock[0], clock[1] = self._t, dt_s
+        clock[3] = math.nan if self._t_last_imu is None else self._t_last_imu
+        done = self._period_kernel(u_seq, normals, dt_sub, n_sub, t_end, imu_due, clock, imu_normals, st_due,
                                    st_normals, self._period_out)
         if done:
             self._t = float(t_end[done - 1])
-            if done == J:
-                self._t_last_imu = t_last_imu
-            else:
-                last_imu = np.flatnonzero(imu_due[:done])
-                if last_imu.size:
-                    self._t_last_imu = float(t_end[last_imu[-1]])
+            if not math.isnan(clock[3]):
+                self._t_last_imu = float(clock[3])
             if imu_due[done - 1]:
                 self.GYRO_OUT[:], self.GYRO_SAT[:] = gyro[done - 1], sat[done - 1]
         if done < J:
             raise ValueError(f"step: wheel_torque_cmd_Nm must be finite, got {u_seq[done].tolist()!r}")
         return gyro, sat, st_q, st_valid, st_blind
-
-    @staticmethod
-    def _sampled_normals(stream: NormalStream, n: int, due: np.ndarray) -> np.ndarray:
-        """(J, n) normals: row j from the stream where due[j] (in order), else zeros."""
-        k = int(np.count_nonzero(due))
-        if k == len(due):
-            return stream.take_rows(n, k)
-        rows = np.zeros((len(due), n))
-        if k:
-            rows[due] = stream.take_rows(n, k)
-        return rows
 
     def step(self, dt_s: float, wheel_torque_cmd_Nm: np.ndarray) -> None:
         """Advance all runs by dt_s (split into equal RK4 sub-steps <= max_integration_step_s) with the motor

@@ -40,6 +40,15 @@ def signed_margin_deg(zone, x: np.ndarray) -> float:
 
 
 
+def _nan_constant(n: int) -> np.ndarray:
+    a = np.full(n, np.nan)
+    a.flags.writeable = False  # shared by every output that has no such vector: nobody may write into it
+    return a
+
+
+_NAN3, _NAN4 = _nan_constant(3), _nan_constant(4)
+
+
 @dataclass
 class GuidanceOutput:
     omega_cmd_BN_B: np.ndarray
@@ -53,13 +62,13 @@ class GuidanceOutput:
     pointing_error_deg: float = float("nan")
     att_error_deg: float = float("nan")
     roll_error_deg: float = float("nan")
-    boresight_N: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
-    target_N: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
-    q_target_NB: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
+    boresight_N: np.ndarray = field(default_factory=lambda: _NAN3)
+    target_N: np.ndarray = field(default_factory=lambda: _NAN3)
+    q_target_NB: np.ndarray = field(default_factory=lambda: _NAN4)
     zones_merged: bool = False
     assumptions_ok: bool = True
-    sun_N: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
-    moon_N: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    sun_N: np.ndarray = field(default_factory=lambda: _NAN3)
+    moon_N: np.ndarray = field(default_factory=lambda: _NAN3)
     zone_count: int = 0
     zone_bodies: list[str] = field(default_factory=list)
 

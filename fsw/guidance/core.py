@@ -161,15 +161,19 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         since the last cycle; a zone being left is not a reason to slow down (the law pushes out of it).
         ``angle_per_margin``: body rotation per degree of margin (2 on S^3, where the quaternion's angle is
         half the rotation's)."""
+        rate = self._governor_rate(margins_deg, angle_per_margin)
+        return omega_BN_B if rate < 0.0 else _saturate(omega_BN_B, rate)
+
+    def _governor_rate(self, margins_deg: list[float], angle_per_margin: float = 1.0) -> float:
+        """`_govern`'s rate limit [rad/s] for this cycle's margins, -1 when no zone is being approached."""
         prev, self._governor_margins = self._governor_margins, list(margins_deg)
         if prev is None or len(prev) != len(margins_deg):
-            return omega_BN_B
+            return -1.0
         closing = [m for m, p in zip(margins_deg, prev) if m < p]
         if not closing:
-            return omega_BN_B
+            return -1.0
         room = angle_per_margin * min(closing) - BRAKING_RESERVE_DEG
-        rate = math.radians(rate_for_distance_deg_s(room, self.accel_deg_s2, self.bandwidth_rad_s))
-        return _saturate(omega_BN_B, rate)
+        return math.radians(rate_for_distance_deg_s(room, self.accel_deg_s2, self.bandwidth_rad_s))
 
     def target_violation(self, kind: str, value: np.ndarray) -> tuple[int, float] | None:
         """(zone index, margin deg) when a candidate target lies inside an (inflated) zone, else None."""

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from fsw.guidance.common import _norm
+from fsw.guidance._kernels import sky_directions_nb
 from gnc.ephemeris import EARTH_RADIUS_KM, julian_date_tdb, moon_position_N_km, sun_position_N_km
 
 EPHEMERIS_NODE_S = 10.0
@@ -19,7 +19,7 @@ class SkyEphemeris:
     def __init__(self, cfg):
         self.jd0 = julian_date_tdb(cfg.epoch_utc)
         o = cfg.orbit
-        self.radius_km = o.radius_km
+        self.radius_km = float(o.radius_km)
         self.n_rad_s = math.sqrt(_MU_EARTH_KM3_S2 / o.radius_km**3)
         i, raan = math.radians(o.inclination_deg), math.radians(o.raan_deg)
         self.u0 = math.radians(o.arg_latitude_at_epoch_deg)
@@ -53,7 +53,6 @@ class SkyEphemeris:
         f = t_s / EPHEMERIS_NODE_S - k
         s0, m0 = self._geocentric(k)
         s1, m1 = self._geocentric(k + 1)
-        r = self.position_N_km(t_s)
-        sun = s0 + f * (s1 - s0) - r
-        moon = m0 + f * (m1 - m0) - r
-        return {"sun": sun / _norm(sun), "moon": moon / _norm(moon), "earth": -r / _norm(r)}
+        d = sky_directions_nb(float(t_s), self.u0, self.n_rad_s, self.radius_km, self.p_hat, self.q_hat, f,
+                              s0, s1, m0, m1)
+        return {"sun": d[0], "moon": d[1], "earth": d[2]}

@@ -18,6 +18,7 @@ import math
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from fsw.guidance._kernels import aim_index_nb
 from gnc.sky_zones import cap_of
 
 # a polygon about the kernel in one gnomonic chart needs every vertex inside the hemisphere (the Earth
@@ -228,15 +229,15 @@ class PathFollower:
     STEP_DEG = 0.5
 
     def __init__(self, vertices: np.ndarray, lookahead_deg: float):
-        self.path = densify(vertices, self.STEP_DEG)
+        self.path = np.ascontiguousarray(densify(vertices, self.STEP_DEG), dtype=float)
         self.cos_ahead = math.cos(math.radians(lookahead_deg))
         self.index = 0
 
     def aim_index(self, y: np.ndarray) -> int:
-        """Index in ``path`` of the law's target for boresight ``y`` (the last index: the path's end)."""
-        self.index += int(np.argmax(self.path[self.index:] @ y))
-        ahead = np.flatnonzero(self.path[self.index:] @ y < self.cos_ahead)
-        return len(self.path) - 1 if ahead.size == 0 else self.index + int(ahead[0])
+        """Index in ``path`` of the law's target for boresight ``y`` (the last index: the path's end).
+        Every cycle of a planned slew: one compiled pass (`fsw.guidance._kernels.aim_index_nb`)."""
+        self.index, aim = aim_index_nb(self.path, self.index, np.ascontiguousarray(y, dtype=float), self.cos_ahead)
+        return int(aim)
 
 
 def advance_aim(follower: PathFollower, x: np.ndarray, aim_k: int, target: np.ndarray

@@ -14,12 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fsw.guidance.common import (
-    _BODY_CODES, GuidanceOutput, _angle_deg, _make_star_law, _saturate, signed_margin_deg,
-)
+from fsw.guidance._kernels import boresight_nb, pointing_command_nb
+from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _angle_deg, _make_star_law, signed_margin_deg
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
-from gnc.attitude import pointing_rate_command_nb, quat_to_dcm_nb
 
 ZONE_REBUILD_TOL_DEG = 0.1  # extra inflation of the law's zones covering their motion between rebuilds
 LAW_REBUILD_TRIGGER_DEG = 0.08
@@ -48,6 +46,7 @@ class _SkySlot:
     built_center_law: np.ndarray | None = None
     phys: object | None = None
     law: object | None = None
+    phys_drift_deg: float = 0.0  # angle between center_N and built_center, this cycle
 
 
 class PointingGuidance:
@@ -72,10 +71,12 @@ class PointingGuidance:
             if s.built_center is None:
                 s.phys, s.law = s.builder_phys.build(c), s.builder_law.build(c)
                 s.built_center, s.built_center_law = c.copy(), c.copy()
+                s.phys_drift_deg = _angle_deg(c, s.built_center)
                 first = True
                 continue
+            s.phys_drift_deg = _angle_deg(c, s.built_center)
             law_drift = _angle_deg(c, s.built_center_law) / LAW_REBUILD_TRIGGER_DEG
-            phys_drift = _angle_deg(c, s.built_center) / PHYS_REBUILD_TOL_DEG
+            phys_drift = s.phys_drift_deg / PHYS_REBUILD_TOL_DEG
             for drift, kind in ((law_drift, "law"), (phys_drift, "phys")):
                 if drift >= 1.0 and drift > worst:
                     worst, worst_kind, worst_slot = drift, kind, s
@@ -87,24 +88,24 @@ class PointingGuidance:
             else:
                 worst_slot.phys = worst_slot.builder_phys.build(c)
                 worst_slot.built_center = c.copy()
+                worst_slot.phys_drift_deg = _angle_deg(c, worst_slot.built_center)
         return first or worst_kind == "law"
 
 
     def _sky_margins(self, y_N: np.ndarray) -> tuple[list[float], float]:
-        """Signed physical margins [deg], conservative: minus the zone's drift since it was built."""
-        margins = []
-        for s in self.slots:
-            margins.append(signed_margin_deg(s.phys, y_N) - _angle_deg(s.center_N, s.built_center))
+        """Signed physical margins [deg], conservative: minus the zone's drift since it was built (as
+        `_update_sky` found it this cycle)."""
+        margins = [signed_margin_deg(s.phys, y_N) - s.phys_drift_deg for s in self.slots]
         return margins, (min(margins) if margins else float("nan"))
 
 
     def _pointing(self, t_s: float, q: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
         rebuilt = self._update_sky(t_s)
-        R = quat_to_dcm_nb(q)
-        y = R @ self.b_B
-        out = GuidanceOutput(np.zeros(3), "POINTING", boresight_N=y, target_N=self.target_N.copy())
+        y = boresight_nb(q, self.b_B)
+        out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
         out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
-        u = self.k1 * self.target_N
+        u_law = self.target_N
+        governor_rate = -1.0
         if self.slots:
             # escape from the gap of an unmergeable pair: start inside the standoff of both zones, end
             # once 1.5 standoffs clear of one of them (the hysteresis keeps it from flickering)
@@ -145,29 +146,33 @@ class PointingGuidance:
                 self._sky_law = _make_star_law(target, merged, 1.0, self.kappa, eps)
                 self._sky_law_key = True
             u_law, zone = self._sky_law.control_and_zone(y)
-            u = self.k1 * np.asarray(u_law, dtype=float)
             out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
             out.active_zone = -1 if zone is None else self._sky_groups[zone][0]
             out.margins_deg, out.margin_min_deg = self._sky_margins(y)
             out.zones_merged = any(len(g) > 1 for g in self._sky_groups)
             out.zone_count = len(self.slots)
-            out.zone_bodies = [_BODY_CODES[s.body] for s in self.slots]
+            out.zone_bodies = self._slot_body_codes()
+            governor_rate = self._governor_rate(out.margins_deg)
         out.assumptions_ok = self.assumptions_ok
-        omega_law = pointing_rate_command_nb(q, self.b_B, np.ascontiguousarray(u))
-        omega_cmd = _saturate(np.asarray(omega_law), self.max_rate_rad_s)
-        if self.slots:
-            omega_cmd = self._govern(omega_cmd, out.margins_deg)
-        out.pointing_error_deg = math.degrees(math.acos(max(-1.0, min(1.0, float(y @ self.target_N)))))
-        self._watch_progress(t_s, y, out.pointing_error_deg, omega_cmd, out.active_zone)
-        roll_err = self._roll_error(R, y)
-        omega_roll = self.cfg.pointing.roll_gain_1_s * roll_err * self.b_B
-        # the roll rate is about the boresight, the law's rate normal to it: the roll gets what the rate
-        # limit leaves, so the body rate as a whole stays within the limit (at most half of it)
-        room = math.sqrt(max(0.0, self.max_rate_rad_s ** 2 - float(omega_cmd @ omega_cmd)))
-        out.omega_cmd_BN_B = omega_cmd + _saturate(omega_roll, min(room, 0.5 * self.max_rate_rad_s))
-        out.roll_error_deg = math.degrees(roll_err)
+        # the law's rate b^x R^T k1 u within the rate limit and the governor's rate; the roll rate is about
+        # the boresight, the law's rate normal to it: the roll gets what the rate limit leaves, so the body
+        # rate as a whole stays within the limit (at most half of it). One compiled call (`_kernels`).
+        c = pointing_command_nb(q, y, self.b_B, np.ascontiguousarray(u_law, dtype=float), self.k1,
+                                self.max_rate_rad_s, governor_rate, self.target_N, self.roll_axis_B,
+                                self.roll_ref_N, self.cfg.pointing.roll_gain_1_s)
+        out.pointing_error_deg = float(c[4])
+        self._watch_progress(t_s, y, out.pointing_error_deg, float(c[3]), out.active_zone)
+        out.omega_cmd_BN_B = c[:3]
+        out.roll_error_deg = math.degrees(c[5])
         return out
 
+
+    def _slot_body_codes(self) -> list[str]:
+        """Telemetry code of each slot's body (the slots are fixed at start-up): one list, read-only by use."""
+        codes = getattr(self, "_body_codes", None)
+        if codes is None:
+            codes = self._body_codes = [_BODY_CODES[s.body] for s in self.slots]
+        return codes
 
     def _squeezed(self, y: np.ndarray, factor: float) -> bool:
         """True if the boresight is within factor x the standoff of both zones of a close pair that could
@@ -224,14 +229,3 @@ class PointingGuidance:
         for a, b in sorted(old_pairs - new_pairs):
             self.events("ZONES_SPLIT", zone_a=a, zone_b=b)
 
-    def _roll_error(self, R: np.ndarray, y_N: np.ndarray) -> float:
-        """Angle [rad] about the boresight from roll_axis_B's projection to the reference's projection."""
-        b = self.b_B
-        ref_N = self.roll_ref_N
-        if abs(float(ref_N @ y_N)) > 0.95:  # reference nearly along the boresight: use another axis
-            ref_N = np.array([1.0, 0.0, 0.0]) if abs(y_N[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        r_B = R.T @ ref_N
-        a = self.roll_axis_B - (self.roll_axis_B @ b) * b
-        r = r_B - (r_B @ b) * b
-        axr = (a[1] * r[2] - a[2] * r[1], a[2] * r[0] - a[0] * r[2], a[0] * r[1] - a[1] * r[0])
-        return math.atan2(b[0] * axr[0] + b[1] * axr[1] + b[2] * axr[2], float(a @ r))

@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _angle_deg, _norm, _saturate
+from fsw.guidance.common import GuidanceOutput, _angle_deg, _norm, _saturate
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc.attitude import pointing_rate_command_nb, quat_to_dcm_nb
 
@@ -55,7 +55,7 @@ class SafeGuidance:
             self._update_sky(t_s)
             out.margins_deg, out.margin_min_deg = self._sky_margins(out.boresight_N)
             out.zone_count = len(self.slots)
-            out.zone_bodies = [_BODY_CODES[s.body] for s in self.slots]
+            out.zone_bodies = self._slot_body_codes()
         if self.safe_phase == "RATE_DAMPING":
             self._damped_s = self._damped_s + dt_s if rate < math.radians(sc.damping_exit_rate_deg_s) else 0.0
             if self._damped_s >= 1.0:

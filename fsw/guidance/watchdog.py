@@ -76,11 +76,12 @@ def detour_waypoint(y: np.ndarray, target: np.ndarray, obstacles: list, standoff
 class StallRecovery:
     """Mixin of `fsw.guidance.Guidance`: the POINTING watchdog and its replan."""
 
-    def _watch_progress(self, t_s: float, y: np.ndarray, error_deg: float, omega_law: np.ndarray,
+    def _watch_progress(self, t_s: float, y: np.ndarray, error_deg: float, law_rate_rad_s: float,
                         active_zone: int) -> None:
-        """Run the watchdog on this cycle's law rate; on a stall raise the event and replan from ``y``."""
+        """Run the watchdog on this cycle's law rate (the norm of the law's rate command, after the rate
+        limit and the governor); on a stall raise the event and replan from ``y``."""
         holding = self._occulted >= 0 or self._escaping
-        if not self._watchdog.update(t_s, error_deg, _norm(omega_law), self.max_rate_rad_s, active_zone >= 0,
+        if not self._watchdog.update(t_s, error_deg, law_rate_rad_s, self.max_rate_rad_s, active_zone >= 0,
                                      holding):
             return
         obstacles = list(self._sky_law_zones) + list(self.sky_geometry.pending)

@@ -134,7 +134,7 @@ class _ReferenceMekf:
         return self.step_samples(dt, np.zeros((0, 3)) if omega_meas is None else np.reshape(omega_meas, (1, 3)), q_NS, lat)
 
     def step_samples(self, dt, omegas, q_NS, lat=0.0):
-        from fsw.estimation import _rotvec_quat, mekf_innovation, mekf_propagate, mekf_update
+        from fsw.estimation import _rotvec_quat, mekf_innovation, mekf_propagate, mekf_update_lagged
         from gnc.attitude import quat_multiply_nb
 
         e = self.e
@@ -160,7 +160,9 @@ class _ReferenceMekf:
         if q_NS is not None:
             q_meas = quat_multiply_nb(np.asarray(q_NS, dtype=float), e.q_SB)
             R = e.R_st_B.copy()
+            lag = 0.0
             if 0.0 < lat < e.cfg.star_tracker_max_age_s:
+                lag = lat
                 q_meas = quat_multiply_nb(q_meas, _rotvec_quat((bridge - e.bias_B) * lat))
                 R += np.eye(3) * bridge_var * lat ** 2
             if not e.initialized:
@@ -172,7 +174,7 @@ class _ReferenceMekf:
                 if innov > max(e.cfg.innovation_gate_deg, 4.0 * sigma_pred):
                     rejected = True
                 else:
-                    e.q_NB, e.bias_B, e.P = mekf_update(e.q_NB, e.bias_B, e.P, dtheta, R)
+                    e.q_NB, e.bias_B, e.P = mekf_update_lagged(e.q_NB, e.bias_B, e.P, dtheta, R, lag)
                     used = True
         e.coasting_s = 0.0 if used else e.coasting_s + dt
         return used, rejected, innov

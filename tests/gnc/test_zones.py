@@ -376,6 +376,36 @@ def test_star_polygon_closed_form_against_dense_edges():
     assert np.all(np.arccos(np.clip(B @ axis, -1, 1)) <= half)
 
 
+def test_polygon_edge_culling_gives_the_full_pass_minimum_and_nearest_point_exactly():
+    """`nearest_on_boundary` skips edges by a midpoint bound; it must return the very numbers of the pass
+    over every edge (same minimum, same nearest point), for fine sky polygons, coarse stars with long
+    edges, and points on and next to the vertices (ties between the two edges of a vertex)."""
+    from gnc import _zone_polygon as poly
+    from gnc.sky_zones import SkyZoneBuilder
+
+    se = {"shape": "superellipse", "semi_axes_deg": [40.0, 30.0], "exponent": 1.5, "orientation_deg": 20.0}
+    zones = [SkyZoneBuilder(se, 3.1).build(np.array([0.3, 0.5, 0.8])),
+             StarZone.polygon([0.2, 0.4, -0.9], None, _star_outline(5, 0.5, 0.18, 0.3)),
+             StarZone.polygon([0.0, 1.0, 0.0], None, [[0.2, -0.05], [0.0, 0.15], [-0.2, -0.05]])]
+    rng = np.random.default_rng(7)
+    skipped = 0
+    for zone in zones:
+        V = zone.vertices_sphere
+        near = V[rng.integers(0, len(V), 400)] + rng.normal(0.0, 1e-7, (400, 3))
+        X = np.vstack([sample_uniform(3, 2000, rng), near / np.linalg.norm(near, axis=1, keepdims=True), V])
+        for x in X:
+            b_cull, b_full = np.empty(3), np.empty(3)
+            d_cull = poly.nearest_on_boundary(x, zone._edges, zone._mids, zone._reach, b_cull)
+            assert d_cull == poly.nearest_on_boundary_full(x, zone._edges, b_full)
+            assert np.array_equal(b_cull, b_full)
+        # the bound does skip edges (else it is only overhead): most arcs of a fine polygon are far
+        x = X[0]
+        c = zone._mids @ x
+        d0 = poly.nearest_on_boundary(x, zone._edges, zone._mids, zone._reach, np.empty(3))
+        skipped += int(np.sum(c < math.cos(math.acos(1.0 - d0) + zone._reach)))
+    assert skipped > 300
+
+
 def test_polygon_rejects_self_intersecting_star():
     ang = 4 * np.pi * np.arange(5) / 5  # pentagram {5/2}: winds twice
     V = 0.4 * np.stack([np.cos(ang), np.sin(ang)], axis=1)

@@ -1,13 +1,19 @@
 """MEKF consistency (issue 16.5): the normalised estimation error squared (NEES) of the attitude, judged
 on truth against the filter's own covariance (hil_sim.consistency), over the 600 s pointing demo and over
-a campaign of noise realisations, in the campaign's fast mode (the real flight software and truth models).
+a campaign (config/campaigns/nees.yaml: seeds, initial conditions, gyro bias, epoch and target dispersed,
+the sensor models known exactly), in the campaign's fast mode (the real flight software and truth models).
 
-A consistent filter puts 95 % of its NEES samples inside the two-sided 95 % chi-square(3) band; that is
-an expectation, and over 600 s of 10 Hz samples whose errors stay correlated for tens of seconds the
-fraction of one run scatters by about +-2 %. The bounds below are what the filter reaches (the demo at its
-own seed: 0.949, mean 2.99; issue 16.5 asks for 0.95), with that scatter; the filter before issue 16.5
-had a fraction of 0.74 and a mean NEES of 7.2 on the demo (the star tracker's roll
-noise taken for its cross-boresight noise, and the gyro samples held over their intervals).
+The issue's criterion: at least 95 % of the NEES samples inside the two-sided 95 % chi-square(3) band.
+That is what a consistent filter reaches on average, not a bound it can keep: one run's fraction scatters
+by about +-1.5 % (its 6000 samples are correlated over ~20 s, the star tracker's roll error, to hundreds
+of seconds, the gyro bias), a campaign's pooled fraction by about +-0.6 %, and even a covariance 20 %
+too large only lifts the expectation to 95.7 %. So the bounds below sit just under 95 %, at what the
+filter reaches with that scatter (measured: the demo 0.946 at its seed, mean NEES 3.01; the campaign's
+pooled samples 0.949, mean 3.20; design note 13), and the means say more than the fractions: an
+over-confident filter (the one before issue 16.5: 0.74, mean 7.2) is far outside them. Bar-Shalom's
+ensemble test (Estimation with Applications to Tracking and Navigation, sec. 5.4.2) adds the one whose
+statistics are exact: at each cycle the NEES averaged over the N independent runs, times N, is
+chi-square(3 N) for a consistent filter, so it stays inside that band at most cycles.
 """
 from __future__ import annotations
 
@@ -18,11 +24,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from hil_sim.campaign.fast import run_fast
 from hil_sim.consistency import attitude_nees, band_fraction, nees_band
-from hil_sim.mission import load_mission
 
-DEMO = Path(__file__).resolve().parents[2] / "config" / "missions" / "demo-pointing.yaml"
+ROOT = Path(__file__).resolve().parents[2]
+DEMO = ROOT / "config" / "missions" / "demo-pointing.yaml"
+CAMPAIGN = ROOT / "config" / "campaigns" / "nees.yaml"
 
 
 def test_nees_of_errors_drawn_from_the_covariance_is_chi_square_3():
@@ -41,27 +47,88 @@ def test_nees_of_errors_drawn_from_the_covariance_is_chi_square_3():
     assert abs(band_fraction(nees) - 0.95) < 0.006
     lo, hi = nees_band()
     assert (lo, hi) == pytest.approx((chi2.ppf(0.025, 3), chi2.ppf(0.975, 3)))
+    assert nees_band(runs=8) == pytest.approx((chi2.ppf(0.025, 24) / 8, chi2.ppf(0.975, 24) / 8))
     assert band_fraction(4.0 * nees) < 0.8  # a covariance 4 x too small is caught
 
 
+def test_lagged_update_is_the_kalman_update_with_the_bias_seen_through_the_latency():
+    """A star-tracker sample ``lag`` old, bridged with the bias-corrected gyro rate, also measures the
+    bias error times the lag: H = [I, lag I]. The compiled update equals the dense Kalman update with
+    that H, and a bias error alone (no attitude error) is corrected in the bias, not in the attitude."""
+    from fsw.estimation import mekf_update, mekf_update_lagged
+
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(6, 6))
+    P = A @ A.T * 1e-8 + np.diag([1e-9] * 3 + [1e-6] * 3)  # a bias known to 1e-3 rad/s, as at start-up
+    R = np.diag([2e-10, 6e-10, 6e-10])
+    q, bias, dtheta, lag = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(3), rng.normal(size=3) * 3e-5, 0.1
+    H = np.hstack([np.eye(3), lag * np.eye(3)])
+    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    _, b, Pn = mekf_update_lagged(q, bias, P, dtheta, R, lag)
+    np.testing.assert_allclose(b, (K @ dtheta)[3:], rtol=1e-9)
+    np.testing.assert_allclose(Pn, (np.eye(6) - K @ H) @ P, rtol=1e-7, atol=1e-22)
+    # lag 0 is the plain update
+    for got, want in zip(mekf_update_lagged(q, bias, P, dtheta, R, 0.0), mekf_update(q, bias, P, dtheta, R)):
+        np.testing.assert_array_equal(got, want)
+    # a pure bias error db seen through a 0.1 s lag: the update attributes it to the bias
+    P0 = np.diag([1e-12] * 3 + [1e-6] * 3)
+    db = np.array([2e-4, -1e-4, 5e-5])
+    q1, b1, _ = mekf_update_lagged(q, bias, P0, db * lag, np.eye(3) * 1e-14, lag)
+    np.testing.assert_allclose(b1, db, rtol=1e-3)
+    assert np.linalg.norm(q1[1:]) < 1e-3 * np.linalg.norm(db * lag)
+
+
 @pytest.mark.slow
-def test_mekf_is_consistent_over_the_demo_and_a_campaign():
+def test_mekf_is_consistent_over_the_demo():
+    from hil_sim.campaign.fast import run_fast
+    from hil_sim.mission import load_mission
+
     mission = load_mission(DEMO)
     demo = run_fast(mission, mission.seed).metrics
     print(f"\ndemo 600 s: NEES mean {demo['nees_mean']:.2f}, inside the 95 % band {demo['nees_band_fraction']:.3f}")
-    assert 0.93 <= demo["nees_band_fraction"] and 2.5 < demo["nees_mean"] < 3.6
-    # a campaign: four more noise realisations of the first 300 s (both slews' start, the Sun zone)
-    short = mission.model_copy(update={"duration_s": 300.0})
-    runs = [run_fast(short, seed).metrics for seed in (1, 2, 3, 4)]
-    fractions = [r["nees_band_fraction"] for r in runs]
-    means = [r["nees_mean"] for r in runs]
-    print("campaign: band fractions", [round(f, 3) for f in fractions], "means", [round(m, 2) for m in means])
-    # measured: 0.95, 0.93, 0.89, 0.94 (means 3.5, 3.3, 3.7, 3.6: the first 300 s, with the start-up
-    # transient and the first slew, are still a little over-confident; design note 13)
-    assert min(fractions) >= 0.87 and np.mean(fractions) >= 0.91
-    assert max(means) < 4.2
-    # the campaign's average NEES inside the band of the average of independent runs (each run's time
-    # mean counted as one sample: its many correlated samples are not independent)
-    lo, hi = nees_band(runs=len(runs) + 1)
-    overall = float(np.mean(means + [demo["nees_mean"]]))
-    assert lo < overall < hi
+    assert demo["nees_band_fraction"] >= 0.93
+    assert 2.6 < demo["nees_mean"] < 3.5
+
+
+@pytest.mark.slow
+def test_mekf_is_consistent_over_a_campaign():
+    from hil_sim.campaign.execute import execute_run
+    from hil_sim.campaign.fast import _EstimateRows
+    from hil_sim.campaign.runner import build_plan
+
+    plan, _ = build_plan(CAMPAIGN)
+    runs = plan.campaign.runs
+    # each run's per-cycle NEES, read where fast mode computes its metrics
+    series: list[np.ndarray] = []
+    original = _EstimateRows.metrics
+
+    def keep(self, truth):
+        keep = self.rows[:self.n] < len(truth["q_NB"])
+        rows = self.rows[:self.n][keep]
+        series.append(attitude_nees(truth["q_NB"][rows], self.q[:self.n][keep], self.P[:self.n][keep]))
+        return original(self, truth)
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(_EstimateRows, "metrics", keep)
+    try:
+        records = [execute_run(plan, i) for i in range(runs)]
+    finally:
+        mp.undo()
+    assert all(r.status == "pass" for r in records), [(r.run, r.status, r.error) for r in records]
+    fractions = [r.metrics["nees_band_fraction"] for r in records]
+    means = [r.metrics["nees_mean"] for r in records]
+    pooled = np.concatenate(series)
+    print("\ncampaign: band fractions", [round(f, 3) for f in fractions], "means", [round(m, 2) for m in means])
+    print(f"pooled: {pooled.size} samples, mean {pooled.mean():.2f}, inside the band {band_fraction(pooled):.3f}")
+    assert band_fraction(pooled) >= 0.94
+    assert 2.7 < pooled.mean() < 3.5
+    assert min(fractions) >= 0.90
+
+    # Bar-Shalom: the NEES averaged over the runs at each cycle (the first star-tracker fix comes at the
+    # same cycle in every run), inside the band of an average of N chi-square(3) variables
+    n = min(len(s) for s in series)
+    ensemble = np.mean([s[-n:] for s in series], axis=0)
+    lo, hi = nees_band(runs=runs)
+    inside = float(np.mean((ensemble > lo) & (ensemble < hi)))
+    print(f"ensemble NEES over {runs} runs: mean {ensemble.mean():.2f}, band [{lo:.2f}, {hi:.2f}], inside {inside:.3f}")
+    assert inside >= 0.93  # measured 0.951
