@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from itertools import repeat
 
 import numpy as np
 
@@ -192,6 +193,10 @@ class FlightSoftware:
         self._corrupt_prev = {"IMU": 0, "STAR_TRACKER": 0}
         self._corrupt_src: dict | None = None
         self._corrupt_dicts: dict[str, list[dict]] = {}
+        self._hk_src: dict | None = None  # the driver's counters that _hk_dicts lists
+        self._hk_src_len = 0
+        self._hk_dicts: list[dict] = []
+        self._max_speed_list = self.control.max_speed.tolist()  # fixed at start-up
         self._st_was_valid = True
         self._st_outage_start = 0.0
         self._target_reached = False
@@ -411,7 +416,7 @@ class FlightSoftware:
         self._st_seen = self._st_seen or st is not None
         seen = self._wheel_seen
         wheel_fault, wheel_ratio = [], []
-        for i, (w, s, m) in enumerate(zip(wheels, speed_list, self.control.max_speed.tolist())):
+        for i, (w, s, m) in enumerate(zip(wheels, speed_list, self._max_speed_list)):
             if w is None:
                 wheel_fault.append(seen[i] or residual_off[i])
                 wheel_ratio.append(abs(s) / m if math.isfinite(s) else math.nan)  # s is NaN: no status
@@ -583,14 +588,16 @@ class FlightSoftware:
 
     def hk_values(self) -> dict:
         ex = self.executive
-        per_class: dict[str, int] = {}  # every class summed over the messages, in one pass
-        for name, c in self.driver.counters.items():
-            if not name.startswith("_"):
-                for k, n in c.items():
-                    per_class[k] = per_class.get(k, 0) + n
+        counters = self.driver.counters
+        if counters is not self._hk_src or len(counters) != self._hk_src_len:
+            # the per-message counter dicts live as long as the receiver: list the messages' ones once
+            self._hk_src, self._hk_src_len = counters, len(counters)
+            self._hk_dicts = [c for name, c in counters.items() if not name.startswith("_")]
+        dicts = self._hk_dicts
 
         def total(*classes):
-            return sum(per_class.get(k, 0) for k in classes)
+            # each class summed over the messages in C (map over dict.get): the same integers as a loop
+            return sum([sum(map(dict.get, dicts, repeat(k), repeat(0))) for k in classes])
         tm = self.telemetry.counters
         values = {
             "uptime_s": time.monotonic() - self._start_wall,

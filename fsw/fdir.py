@@ -229,7 +229,11 @@ class Fdir:
             actions.append(FdirAction(rule.action, mon.monitor, wheel))
 
     def _run(self, mon: LimitMonitor, value: float | None, actions: list[FdirAction], wheel: int | None = None) -> str | None:
-        res = mon.update(value)
+        return self._changed(mon, value, actions, wheel, mon.update(value))
+
+    def _changed(self, mon: LimitMonitor, value: float | None, actions: list[FdirAction], wheel: int | None = None,
+                 res: str | None = None) -> str | None:
+        """The trip's event and action, or the clearing's event, for ``res`` = ``mon.update(value)``."""
         if res == "tripped":
             self._trip(mon, value, actions, wheel)
         elif res == "cleared":
@@ -237,13 +241,15 @@ class Fdir:
         return res
 
     def evaluate(self, x: FdirInputs) -> list[FdirAction]:
+        # `_run` only where a monitor changed state: fifteen monitors run every cycle and almost never do
         actions: list[FdirAction] = []
-        self.stale_counts["IMU"] = self.stale_counts["IMU"] + 1 if x.imu_missing else 0
-        self.stale_counts["STAR_TRACKER"] = self.stale_counts["STAR_TRACKER"] + 1 if x.st_missing else 0
+        stale = self.stale_counts
+        stale["IMU"] = stale["IMU"] + 1 if x.imu_missing else 0
+        stale["STAR_TRACKER"] = stale["STAR_TRACKER"] + 1 if x.st_missing else 0
         if self._run(self.imu_stale, 1.0 if x.imu_missing else 0.0, actions) == "tripped":
-            self.event("SENSOR_STALE", sensor="IMU", cycles=self.stale_counts["IMU"])
+            self.event("SENSOR_STALE", sensor="IMU", cycles=stale["IMU"])
         if self._run(self.st_stale, 1.0 if x.st_missing else 0.0, actions) == "tripped":
-            self.event("SENSOR_STALE", sensor="STAR_TRACKER", cycles=self.stale_counts["STAR_TRACKER"])
+            self.event("SENSOR_STALE", sensor="STAR_TRACKER", cycles=stale["STAR_TRACKER"])
         if x.imu_corrupt_frames:
             self.event("SENSOR_CORRUPT", sensor="IMU", count=x.imu_corrupt_frames)
         if x.st_corrupt_frames:
@@ -253,13 +259,18 @@ class Fdir:
         if x.innovation_deg is not None and x.innovation_deg == x.innovation_deg:  # not NaN
             if self._run(self.innovation, x.innovation_deg, actions) == "tripped":
                 self.event("INNOVATION_HIGH", innovation_deg=x.innovation_deg)
+        monitors = self.wheel_fault
         for i, faulty in enumerate(x.wheel_fault):
-            if self._run(self.wheel_fault[i], 1.0 if faulty else 0.0, actions, wheel=i) == "tripped":
+            value = 1.0 if faulty else 0.0
+            res = monitors[i].update(value)
+            if res is not None and self._changed(monitors[i], value, actions, i, res) == "tripped":
                 self.event("WHEEL_FAULT", wheel=i + 1, fault=1)
+        monitors = self.wheel_speed
         for i, ratio in enumerate(x.wheel_speed_ratio):
             if ratio != ratio:
                 continue
-            if self._run(self.wheel_speed[i], ratio, actions, wheel=i) == "tripped":
+            res = monitors[i].update(ratio)
+            if res is not None and self._changed(monitors[i], ratio, actions, i, res) == "tripped":
                 self.event("WHEEL_SPEED_LIMIT", wheel=i + 1, speed_rad_s=x.wheel_speed_rad_s[i] if i < len(x.wheel_speed_rad_s) else ratio)
         if x.margins_deg:
             finite = [(m, k) for k, m in enumerate(x.margins_deg) if m == m]

@@ -215,6 +215,9 @@ class PointingGuidance:
             occ = ZoneGeometry.occulting(aim, zones, eps, pending)
             if occ >= 0 and occ_then >= 0 and clear(x):
                 return x, occ
+            if occ < 0:  # what retreat_target answers for a usable target, without looking again
+                self._substitute = (aim, aim, t_s, -1)
+                return aim, -1
         x, occ = ZoneGeometry.retreat_target(aim, zones, eps, standoff, avoid=pending, near=y)
         self._substitute = (aim, x, t_s, occ)
         return x, occ
