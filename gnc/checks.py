@@ -142,6 +142,9 @@ def zone_pair_separation(zi, zj, samples: int | None = None) -> tuple[float, np.
     return dist, a, b
 
 
+RAY_DIRECTION_GROUPS = 120  # ~30 rays of the 3,600 per group on S^2
+
+
 def _tangent_basis(x_d: np.ndarray) -> np.ndarray:
     """Orthonormal basis (n, n+1) of the tangent space at x_d."""
     dim = x_d.shape[0]
@@ -169,45 +172,84 @@ def _ray_directions(x_d: np.ndarray, count: int) -> np.ndarray:
     return coords @ basis
 
 
+# Margins of the exact culling in `_ray_windows` (see there): far above the rounding of a few products.
+_CULL_MARGIN = 1e-9
+_CULL_MARGIN_SQ = 1e-12
+
+
+def _direction_clusters(V: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Group the ray directions round ``count`` of themselves (evenly spread, so the groups are compact).
+
+    Returns (centres (m, dim), radii (m,) with |v - centre| <= radius for every member v, order (members
+    listed group by group, indices into V), starts (m + 1,): group j is order[starts[j]:starts[j + 1]]).
+    """
+    centres = np.ascontiguousarray(V[:: max(1, V.shape[0] // count)])
+    label = np.argmax(V @ centres.T, axis=1)
+    order = np.argsort(label, kind="stable")
+    starts = np.searchsorted(label[order], np.arange(centres.shape[0] + 1))
+    gap = np.linalg.norm(V - centres[label], axis=1)
+    radii = np.zeros(centres.shape[0])
+    np.maximum.at(radii, label, gap)
+    return centres, radii * (1.0 + 1e-9) + 1e-12, order, starts
+
+
 @njit(cache=True)
-def _ray_windows(V, Bd, x_d, cos_eps, lo, hi):
-    """For each ray direction V[k]: smallest and largest t in [0, pi] within theta_eps of a sample Bd[l].
+def _ray_windows(V, Bd, x_d, cos_eps, lo, hi, centres, radii, order, starts):
+    """For each ray direction V[k]: smallest and largest t in [0, pi] within theta_eps of a sample Bd[l],
+    folded into lo[k] (min) and hi[k] (max).
 
     r_v(t)^T b = a_x cos t + a_v sin t = A cos(t - phi): within theta_eps for |t - phi| <= alpha,
-    alpha = arccos(cos_eps / A); the window may wrap past t = +-pi, hence the three shifts.
+    alpha = arccos(cos_eps / A); the window may wrap past t = +-pi, hence the three shifts. A pair (v, b)
+    with A < cos_eps adds nothing. Most do: the directions come in groups (`_direction_clusters`), and a
+    group is skipped for b when a bound proves A < cos_eps for all its members. The bound is exact, not a
+    heuristic: |a_v| = |b.v| <= |b.c| + |b| rho for centre c and radius rho >= |v - c| (Cauchy-Schwarz), and
+    a group is skipped only when (bound + _CULL_MARGIN)^2 < cos_eps^2 - a_x^2 - _CULL_MARGIN_SQ, margins
+    far above the rounding of these sums; every pair left is computed exactly as before, and min/max do not
+    depend on the order, so lo and hi are bit-identical to the full double loop.
     """
     nb = Bd.shape[0]
     dim = Bd.shape[1]
     two_pi = 2.0 * np.pi
-    for k in range(V.shape[0]):
-        best_lo = np.inf
-        best_hi = -np.inf
-        for l in range(nb):
-            a_x = 0.0
-            a_v = 0.0
-            for c in range(dim):
-                a_x += Bd[l, c] * x_d[c]
-                a_v += Bd[l, c] * V[k, c]
-            A = np.sqrt(a_x * a_x + a_v * a_v)
-            if A < cos_eps or A == 0.0:
-                continue
-            r = cos_eps / A
-            alpha = np.arccos(r if r > -1.0 else -1.0)
-            phi = np.arctan2(a_v, a_x)
-            for shift in (-two_pi, 0.0, two_pi):
-                t_lo = phi + shift - alpha
-                t_hi = phi + shift + alpha
-                if t_lo < 0.0:
-                    t_lo = 0.0
-                if t_hi > np.pi:
-                    t_hi = np.pi
-                if t_lo <= t_hi:
-                    if t_lo < best_lo:
-                        best_lo = t_lo
-                    if t_hi > best_hi:
-                        best_hi = t_hi
-        lo[k] = best_lo
-        hi[k] = best_hi
+    cos_eps_sq = cos_eps * cos_eps
+    for l in range(nb):
+        a_x = 0.0
+        norm_b_sq = 0.0
+        for c in range(dim):
+            a_x += Bd[l, c] * x_d[c]
+            norm_b_sq += Bd[l, c] * Bd[l, c]
+        need = cos_eps_sq - a_x * a_x - _CULL_MARGIN_SQ  # a pair can count only if a_v^2 >= about this
+        norm_b = np.sqrt(norm_b_sq)
+        for j in range(centres.shape[0]):
+            if need > 0.0:
+                bc = 0.0
+                for c in range(dim):
+                    bc += Bd[l, c] * centres[j, c]
+                bound = abs(bc) + norm_b * radii[j] + _CULL_MARGIN
+                if bound * bound < need:
+                    continue
+            for m in range(starts[j], starts[j + 1]):
+                k = order[m]
+                a_v = 0.0
+                for c in range(dim):
+                    a_v += Bd[l, c] * V[k, c]
+                A = np.sqrt(a_x * a_x + a_v * a_v)
+                if A < cos_eps or A == 0.0:
+                    continue
+                r = cos_eps / A
+                alpha = np.arccos(r if r > -1.0 else -1.0)
+                phi = np.arctan2(a_v, a_x)
+                for shift in (-two_pi, 0.0, two_pi):
+                    t_lo = phi + shift - alpha
+                    t_hi = phi + shift + alpha
+                    if t_lo < 0.0:
+                        t_lo = 0.0
+                    if t_hi > np.pi:
+                        t_hi = np.pi
+                    if t_lo <= t_hi:
+                        if t_lo < lo[k]:
+                            lo[k] = t_lo
+                        if t_hi > hi[k]:
+                            hi[k] = t_hi
 
 
 def r_sets_overlap(
@@ -239,12 +281,14 @@ def r_sets_overlap(
     lo = np.full((m, V.shape[0]), np.inf)
     hi = np.full((m, V.shape[0]), -np.inf)
     spacing = 0.0
+    V = np.ascontiguousarray(V)
+    clusters = _direction_clusters(V, RAY_DIRECTION_GROUPS)
     for i, zone in enumerate(zones):
         Bd = np.asarray(zone.boundary(boundary_samples), dtype=float)
         if Bd.shape[0] > 1:
             nn = np.partition(Bd[: min(400, len(Bd))] @ Bd.T, -2, axis=1)[:, -2]  # nearest other sample
             spacing = max(spacing, float(np.max(np.arccos(np.clip(nn, -1, 1)))))
-        _ray_windows(np.ascontiguousarray(V), np.ascontiguousarray(Bd), x_d, cos_eps, lo[i], hi[i])
+        _ray_windows(V, np.ascontiguousarray(Bd), x_d, cos_eps, lo[i], hi[i], *clusters)
     intervals = np.empty((m, V.shape[0], 2))
     for i, zone in enumerate(zones):
         hit = hi[i] >= lo[i]
