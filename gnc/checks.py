@@ -24,7 +24,7 @@ Every message names the zone indices and the numbers involved.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from numba import njit
@@ -177,6 +177,15 @@ _CULL_MARGIN = 1e-9
 _CULL_MARGIN_SQ = 1e-12
 
 
+def _extremes_first(Bd: np.ndarray, x_d: np.ndarray) -> np.ndarray:
+    """Sample indices alternating nearest to and farthest from x_d, inwards (see `_ray_windows`)."""
+    by_distance = np.argsort(-(Bd @ x_d), kind="stable")
+    out = np.empty_like(by_distance)
+    out[0::2] = by_distance[: (len(by_distance) + 1) // 2]
+    out[1::2] = by_distance[::-1][: len(by_distance) // 2]
+    return out
+
+
 def _direction_clusters(V: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Group the ray directions round ``count`` of themselves (evenly spread, so the groups are compact).
 
@@ -194,7 +203,7 @@ def _direction_clusters(V: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarr
 
 
 @njit(cache=True)
-def _ray_windows(V, Bd, x_d, cos_eps, lo, hi, centres, radii, order, starts):
+def _ray_windows(V, Bd, x_d, cos_eps, lo, hi, centres, radii, order, starts, sample_order):
     """For each ray direction V[k]: smallest and largest t in [0, pi] within theta_eps of a sample Bd[l],
     folded into lo[k] (min) and hi[k] (max).
 
@@ -206,12 +215,28 @@ def _ray_windows(V, Bd, x_d, cos_eps, lo, hi, centres, radii, order, starts):
     a group is skipped only when (bound + _CULL_MARGIN)^2 < cos_eps^2 - a_x^2 - _CULL_MARGIN_SQ, margins
     far above the rounding of these sums; every pair left is computed exactly as before, and min/max do not
     depend on the order, so lo and hi are bit-identical to the full double loop.
+
+    Of the pairs that do meet the layer, most cannot widen the window found so far. With a_v > 0 (phi in
+    (0, pi)) and cos_eps > 0 (alpha <= pi/2) only the unshifted window can meet [0, pi], and its ends need
+    no arc function: with S = sqrt(A^2 - cos_eps^2), cos(phi -+ alpha) = (a_x cos_eps +- a_v S) / A^2 and
+    sin(phi -+ alpha) = (a_v cos_eps -+ a_x S) / A^2. The pair is skipped when these prove
+    0 <= phi - alpha and lo + mu < phi - alpha (via cos, monotone on [0, pi]), and phi + alpha < hi - mu with
+    phi + alpha <= pi, each with margins; mu = 1e-7 rad far exceeds the rounding of phi and alpha, which is
+    below 1e-11 rad where S / A >= 1e-4 (pairs with smaller S are always computed). Visiting the samples
+    nearest to and farthest from x_d first (sample_order) makes the windows nearly final early. With
+    a_v <= 0 (phi in [-pi, 0], the half circle through -v) the pair adds nothing when
+    sin(phi + alpha) < 0 and sin(phi - alpha) < 0 (its window and the 2 pi-shifted one miss [0, pi]).
     """
     nb = Bd.shape[0]
     dim = Bd.shape[1]
+    nv = V.shape[0]
     two_pi = 2.0 * np.pi
     cos_eps_sq = cos_eps * cos_eps
-    for l in range(nb):
+    mu = 1e-7
+    skips = cos_eps > 0.0
+    cos_lo = np.full(nv, -2.0)  # cos(lo[k] + mu); -2: no skip yet
+    cos_hi = np.full(nv, 2.0)  # cos(hi[k] - mu); 2: no skip yet
+    for l in sample_order:
         a_x = 0.0
         norm_b_sq = 0.0
         for c in range(dim):
@@ -235,9 +260,25 @@ def _ray_windows(V, Bd, x_d, cos_eps, lo, hi, centres, radii, order, starts):
                 A = np.sqrt(a_x * a_x + a_v * a_v)
                 if A < cos_eps or A == 0.0:
                     continue
+                if skips:
+                    A_sq = A * A
+                    S = np.sqrt(max(A_sq - cos_eps_sq, 0.0))
+                    tol = _CULL_MARGIN
+                    if S < 1e-4 * A:
+                        pass  # alpha too ill-conditioned for the bounds: compute
+                    elif a_v <= 0.0:
+                        # phi in [-pi, 0]: nothing unless phi + alpha >= 0 or phi - alpha <= -pi
+                        if (a_v * cos_eps + a_x * S) / A_sq < -tol and (a_v * cos_eps - a_x * S) / A_sq < -tol:
+                            continue
+                    else:
+                        lo_ok = (a_v * cos_eps - a_x * S) / A_sq > tol and (a_x * cos_eps + a_v * S) / A_sq < cos_lo[k] - tol
+                        hi_ok = (a_v * cos_eps + a_x * S) / A_sq > tol and (a_x * cos_eps - a_v * S) / A_sq > cos_hi[k] + tol
+                        if lo_ok and hi_ok:
+                            continue  # the window [phi - alpha, phi + alpha] lies inside (lo, hi)
                 r = cos_eps / A
                 alpha = np.arccos(r if r > -1.0 else -1.0)
                 phi = np.arctan2(a_v, a_x)
+                lo_k, hi_k = lo[k], hi[k]
                 for shift in (-two_pi, 0.0, two_pi):
                     t_lo = phi + shift - alpha
                     t_hi = phi + shift + alpha
@@ -250,6 +291,10 @@ def _ray_windows(V, Bd, x_d, cos_eps, lo, hi, centres, radii, order, starts):
                             lo[k] = t_lo
                         if t_hi > hi[k]:
                             hi[k] = t_hi
+                if lo[k] != lo_k:
+                    cos_lo[k] = np.cos(lo[k] + mu) if lo[k] + mu < np.pi else -2.0
+                if hi[k] != hi_k:
+                    cos_hi[k] = np.cos(hi[k] - mu) if hi[k] - mu > 0.0 else 2.0
 
 
 def r_sets_overlap(
@@ -288,7 +333,8 @@ def r_sets_overlap(
         if Bd.shape[0] > 1:
             nn = np.partition(Bd[: min(400, len(Bd))] @ Bd.T, -2, axis=1)[:, -2]  # nearest other sample
             spacing = max(spacing, float(np.max(np.arccos(np.clip(nn, -1, 1)))))
-        _ray_windows(V, np.ascontiguousarray(Bd), x_d, cos_eps, lo[i], hi[i], *clusters)
+        Bd = np.ascontiguousarray(Bd)
+        _ray_windows(V, Bd, x_d, cos_eps, lo[i], hi[i], *clusters, _extremes_first(Bd, x_d))
     intervals = np.empty((m, V.shape[0], 2))
     for i, zone in enumerate(zones):
         hit = hi[i] >= lo[i]
@@ -410,7 +456,7 @@ def _fmt(v: np.ndarray) -> str:
 def check_assumptions(
     target,
     zones: Sequence,
-    eps: float,
+    eps: float | Callable[[float], float],
     kappa: float | None = None,
     *,
     law: str | None = None,
@@ -420,6 +466,8 @@ def check_assumptions(
 
     law: "star" (StarShapedLaw) or "gradient" (GradientLaw, conic zones). Default: "gradient" when every
     zone is a cone and no kappa is given, else "star". Assumption 2 and kappa_bar belong to the star law.
+    eps may be a function of eps_max (the eps the flight software would pick): the check then runs once
+    instead of a probe for eps_max and a second full check (the pair separations are the costly part).
     """
     x_d = np.asarray(target, dtype=float)
     if x_d.ndim != 1 or abs(np.linalg.norm(x_d) - 1.0) > 1e-6:
@@ -431,7 +479,8 @@ def check_assumptions(
     for i, z in enumerate(zones):
         if int(z.dim) != x_d.shape[0]:
             raise ValueError(f"zone {i} lives in R^{z.dim}, the target in R^{x_d.shape[0]}")
-    eps = float(eps)
+    eps_of = eps if callable(eps) else None  # chosen from eps_max below
+    eps = float("nan") if eps_of is not None else float(eps)
     if law is None:
         law = "gradient" if (kappa is None and all(_is_cone(z) for z in zones)) else "star"
     if law not in ("star", "gradient"):
@@ -443,7 +492,7 @@ def check_assumptions(
     warnings: list[str] = []
     notes: list[str] = []
 
-    if not eps > 0.0:
+    if eps_of is None and not eps > 0.0:
         errors.append(f"eps = {eps} must be > 0")
 
     # -- x_d outside U, eps_bar ------------------------------------------------------------------
@@ -486,6 +535,10 @@ def check_assumptions(
         delta = 0.0
     one_minus_cos_delta = 1.0 - float(np.cos(delta))
     eps_max = min(target_sep, one_minus_cos_delta)
+    if eps_of is not None:
+        eps = float(eps_of(eps_max))
+        if not eps > 0.0:
+            errors.insert(0, f"eps = {eps} must be > 0")  # where the check on a given eps puts it
     if len(zones) > 1 and worst_pair is not None:
         notes.append(
             f"Assumption 1: delta = {np.degrees(delta):.4f} deg (closest pair: zones {worst_pair[0]} and {worst_pair[1]}, "

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from gnc.checks import RAY_DIRECTION_GROUPS, _direction_clusters, _ray_directions, _ray_windows
+from gnc.checks import RAY_DIRECTION_GROUPS, _direction_clusters, _extremes_first, _ray_directions, _ray_windows
 from gnc.zones import ConicZone, StarZone
 
 
@@ -56,21 +56,29 @@ def both(x_d, Bd, eps, directions, groups=RAY_DIRECTION_GROUPS):
     V = np.ascontiguousarray(_ray_directions(x_d, directions))
     Bd = np.ascontiguousarray(Bd, dtype=float)
     cos_eps = float(np.cos(np.arccos(1.0 - eps)))
-    out = []
-    for fast in (False, True):
+    lo0, hi0 = np.full(len(V), np.inf), np.full(len(V), -np.inf)
+    reference_ray_windows(V, Bd, x_d, cos_eps, lo0, hi0)
+    # the skips must be exact whatever order the samples come in: the one used, the natural one, a random one
+    orders = (_extremes_first(Bd, x_d), np.arange(len(Bd)), np.random.default_rng(len(Bd)).permutation(len(Bd)))
+    fast = []
+    for sample_order in orders:
         lo, hi = np.full(len(V), np.inf), np.full(len(V), -np.inf)
-        if fast:
-            _ray_windows(V, Bd, x_d, cos_eps, lo, hi, *_direction_clusters(V, groups))
-        else:
-            reference_ray_windows(V, Bd, x_d, cos_eps, lo, hi)
-        out.append((lo, hi))
-    return out
+        _ray_windows(V, Bd, x_d, cos_eps, lo, hi, *_direction_clusters(V, groups), sample_order)
+        fast.append((lo, hi))
+    return (lo0, hi0), fast
 
 
 def assert_identical(ref, fast):
-    (lo0, hi0), (lo1, hi1) = ref, fast
-    assert np.array_equal(lo0, lo1) and np.array_equal(hi0, hi1)
+    lo0, hi0 = ref
+    for lo1, hi1 in fast:
+        assert np.array_equal(lo0, lo1) and np.array_equal(hi0, hi1)
     assert np.isfinite(lo0).any()  # the case is not vacuous: some ray meets the layer
+
+
+def test_extremes_first_is_a_permutation():
+    Bd = ConicZone(unit(np.array([1.0, 0.2, 0.1])), 0.4).boundary(501)
+    order = _extremes_first(Bd, np.array([0.0, 0.0, 1.0]))
+    assert np.array_equal(np.sort(order), np.arange(501))
 
 
 def unit(v):
@@ -131,3 +139,34 @@ def test_samples_on_the_target_and_its_antipode():
     Bd = np.vstack([x_d, -x_d, unit(x_d + 1e-8), unit(np.array([1.0, 0.0, 0.0]))])
     for eps in (1e-12, 1e-3, 0.9, 1.5):
         assert_identical(*both(x_d, Bd, eps, 720))
+
+
+def two_step(x_d, zones, pick, kappa):
+    """The old way: a probe for eps_max, then the full check at the eps picked from it."""
+    from gnc.checks import check_assumptions
+
+    probe = check_assumptions(x_d, zones, 1e-9, kappa=None, check_r_sets=False, law="star")
+    return check_assumptions(x_d, zones, pick(float(probe.eps_max)), kappa=kappa, law="star")
+
+
+@pytest.mark.parametrize("pick", [lambda e: 0.5 * e, lambda e: min(0.5 * e, 0.004), lambda e: 2.0 * e, lambda e: 0.0])
+def test_eps_chosen_from_eps_max_in_one_pass_matches_the_probe_then_check(pick):
+    from gnc.checks import check_assumptions
+
+    def sph(polar_deg, az_deg):
+        p, a = np.radians(polar_deg), np.radians(az_deg)
+        return np.array([np.sin(p) * np.cos(a), np.sin(p) * np.sin(a), np.cos(p)])
+
+    x_d = np.array([0.0, 0.0, 1.0])
+    cases = [
+        [ConicZone(sph(60, 0), np.radians(10)), ConicZone(sph(105, 35), np.radians(30))],  # shadowing
+        [ConicZone(sph(60, 0), np.radians(10)), ConicZone(sph(120, 0), np.radians(10))],
+        [StarZone.superellipsoid(sph(95, 60), None, [0.6, 0.42], 0.6), ConicZone(sph(40, 200), 0.3)],
+        [ConicZone(sph(30, 0), 0.4), ConicZone(sph(35, 10), 0.4)],  # overlapping: delta = 0
+    ]
+    for zones in cases:
+        old, new = two_step(x_d, zones, pick, 1.0), check_assumptions(x_d, zones, pick, kappa=1.0, law="star")
+        assert new.summary() == old.summary()
+        assert (new.errors, new.warnings, new.eps_max, new.kappa_bar, new.pair_separations) == \
+            (old.errors, old.warnings, old.eps_max, old.kappa_bar, old.pair_separations)
+        assert new.kappa_bar_per_zone == old.kappa_bar_per_zone
