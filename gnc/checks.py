@@ -268,12 +268,15 @@ def _ray_windows(V, Bd, x_d, cos_eps, lo, hi, centres, radii, order, starts, sam
                         pass  # alpha too ill-conditioned for the bounds: compute
                     elif a_v <= 0.0:
                         # phi in [-pi, 0]: nothing unless phi + alpha >= 0 or phi - alpha <= -pi
-                        if (a_v * cos_eps + a_x * S) / A_sq < -tol and (a_v * cos_eps - a_x * S) / A_sq < -tol:
+                        # (the quotients by A^2 > 0 are compared as products: the margins cover the rounding)
+                        if a_v * cos_eps + a_x * S < -tol * A_sq and a_v * cos_eps - a_x * S < -tol * A_sq:
                             continue
                     else:
-                        lo_ok = (a_v * cos_eps - a_x * S) / A_sq > tol and (a_x * cos_eps + a_v * S) / A_sq < cos_lo[k] - tol
-                        hi_ok = (a_v * cos_eps + a_x * S) / A_sq > tol and (a_x * cos_eps - a_v * S) / A_sq > cos_hi[k] + tol
-                        if lo_ok and hi_ok:
+                        lo_ok = (a_v * cos_eps - a_x * S > tol * A_sq
+                                 and a_x * cos_eps + a_v * S < (cos_lo[k] - tol) * A_sq)
+                        hi_ok = lo_ok and (a_v * cos_eps + a_x * S > tol * A_sq
+                                           and a_x * cos_eps - a_v * S > (cos_hi[k] + tol) * A_sq)
+                        if hi_ok:
                             continue  # the window [phi - alpha, phi + alpha] lies inside (lo, hi)
                 r = cos_eps / A
                 alpha = np.arccos(r if r > -1.0 else -1.0)
