@@ -170,3 +170,14 @@ def test_eps_chosen_from_eps_max_in_one_pass_matches_the_probe_then_check(pick):
         assert (new.errors, new.warnings, new.eps_max, new.kappa_bar, new.pair_separations) == \
             (old.errors, old.warnings, old.eps_max, old.kappa_bar, old.pair_separations)
         assert new.kappa_bar_per_zone == old.kappa_bar_per_zone
+
+
+def test_second_largest_per_row_is_the_partition_order_statistic():
+    from gnc.checks import _second_largest_per_row
+
+    rng = np.random.default_rng(3)
+    Bd = ConicZone(unit(np.array([0.2, 0.5, 0.8])), 0.7).boundary(3000)
+    cases = [Bd[:400] @ Bd.T, rng.standard_normal((50, 97)), np.round(rng.standard_normal((40, 30)), 1),
+             np.ones((3, 5)), np.array([[2.0, 2.0, 1.0], [1.0, 3.0, 3.0], [-0.0, 0.0, -1.0]])]
+    for M in cases:
+        assert np.array_equal(_second_largest_per_row(M), np.partition(M, -2, axis=1)[:, -2])
