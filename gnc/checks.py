@@ -24,7 +24,8 @@ Every message names the zone indices and the numbers involved.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from functools import lru_cache
+from typing import Callable, Sequence
 
 import numpy as np
 from numba import njit
@@ -142,6 +143,9 @@ def zone_pair_separation(zi, zj, samples: int | None = None) -> tuple[float, np.
     return dist, a, b
 
 
+RAY_DIRECTION_GROUPS = 120  # ~30 rays of the 3,600 per group on S^2
+
+
 def _tangent_basis(x_d: np.ndarray) -> np.ndarray:
     """Orthonormal basis (n, n+1) of the tangent space at x_d."""
     dim = x_d.shape[0]
@@ -169,45 +173,158 @@ def _ray_directions(x_d: np.ndarray, count: int) -> np.ndarray:
     return coords @ basis
 
 
+# Margins of the exact culling in `_ray_windows` (see there): far above the rounding of a few products.
+_CULL_MARGIN = 1e-9
+_CULL_MARGIN_SQ = 1e-12
+
+
+def _extremes_first(Bd: np.ndarray, x_d: np.ndarray) -> np.ndarray:
+    """Sample indices alternating nearest to and farthest from x_d, inwards (see `_ray_windows`)."""
+    by_distance = np.argsort(-(Bd @ x_d), kind="stable")
+    out = np.empty_like(by_distance)
+    out[0::2] = by_distance[: (len(by_distance) + 1) // 2]
+    out[1::2] = by_distance[::-1][: len(by_distance) // 2]
+    return out
+
+
+def _direction_clusters(V: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Group the ray directions round ``count`` of themselves (evenly spread, so the groups are compact).
+
+    Returns (centres (m, dim), radii (m,) with |v - centre| <= radius for every member v, order (members
+    listed group by group, indices into V), starts (m + 1,): group j is order[starts[j]:starts[j + 1]]).
+    """
+    centres = np.ascontiguousarray(V[:: max(1, V.shape[0] // count)])
+    label = np.argmax(V @ centres.T, axis=1)
+    order = np.argsort(label, kind="stable")
+    starts = np.searchsorted(label[order], np.arange(centres.shape[0] + 1))
+    gap = np.linalg.norm(V - centres[label], axis=1)
+    radii = np.zeros(centres.shape[0])
+    np.maximum.at(radii, label, gap)
+    return centres, radii * (1.0 + 1e-9) + 1e-12, order, starts
+
+
 @njit(cache=True)
-def _ray_windows(V, Bd, x_d, cos_eps, lo, hi):
-    """For each ray direction V[k]: smallest and largest t in [0, pi] within theta_eps of a sample Bd[l].
+def _ray_windows(V, Bd, x_d, cos_eps, lo, hi, centres, radii, order, starts, sample_order):
+    """For each ray direction V[k]: smallest and largest t in [0, pi] within theta_eps of a sample Bd[l],
+    folded into lo[k] (min) and hi[k] (max).
 
     r_v(t)^T b = a_x cos t + a_v sin t = A cos(t - phi): within theta_eps for |t - phi| <= alpha,
-    alpha = arccos(cos_eps / A); the window may wrap past t = +-pi, hence the three shifts.
+    alpha = arccos(cos_eps / A); the window may wrap past t = +-pi, hence the three shifts. A pair (v, b)
+    with A < cos_eps adds nothing. Most do: the directions come in groups (`_direction_clusters`), and a
+    group is skipped for b when a bound proves A < cos_eps for all its members. The bound is exact, not a
+    heuristic: |a_v| = |b.v| <= |b.c| + |b| rho for centre c and radius rho >= |v - c| (Cauchy-Schwarz), and
+    a group is skipped only when (bound + _CULL_MARGIN)^2 < cos_eps^2 - a_x^2 - _CULL_MARGIN_SQ, margins
+    far above the rounding of these sums; every pair left is computed exactly as before, and min/max do not
+    depend on the order, so lo and hi are bit-identical to the full double loop.
+
+    Of the pairs that do meet the layer, most cannot widen the window found so far. With a_v > 0 (phi in
+    (0, pi)) and cos_eps > 0 (alpha <= pi/2) only the unshifted window can meet [0, pi], and its ends need
+    no arc function: with S = sqrt(A^2 - cos_eps^2), cos(phi -+ alpha) = (a_x cos_eps +- a_v S) / A^2 and
+    sin(phi -+ alpha) = (a_v cos_eps -+ a_x S) / A^2. The pair is skipped when these prove
+    0 <= phi - alpha and lo + mu < phi - alpha (via cos, monotone on [0, pi]), and phi + alpha < hi - mu with
+    phi + alpha <= pi, each with margins; mu = 1e-7 rad far exceeds the rounding of phi and alpha, which is
+    below 1e-11 rad where S / A >= 1e-4 (pairs with smaller S are always computed). Visiting the samples
+    nearest to and farthest from x_d first (sample_order) makes the windows nearly final early. With
+    a_v <= 0 (phi in [-pi, 0], the half circle through -v) the pair adds nothing when
+    sin(phi + alpha) < 0 and sin(phi - alpha) < 0 (its window and the 2 pi-shifted one miss [0, pi]).
     """
     nb = Bd.shape[0]
     dim = Bd.shape[1]
+    nv = V.shape[0]
     two_pi = 2.0 * np.pi
-    for k in range(V.shape[0]):
-        best_lo = np.inf
-        best_hi = -np.inf
-        for l in range(nb):
-            a_x = 0.0
-            a_v = 0.0
-            for c in range(dim):
-                a_x += Bd[l, c] * x_d[c]
-                a_v += Bd[l, c] * V[k, c]
-            A = np.sqrt(a_x * a_x + a_v * a_v)
-            if A < cos_eps or A == 0.0:
-                continue
-            r = cos_eps / A
-            alpha = np.arccos(r if r > -1.0 else -1.0)
-            phi = np.arctan2(a_v, a_x)
-            for shift in (-two_pi, 0.0, two_pi):
-                t_lo = phi + shift - alpha
-                t_hi = phi + shift + alpha
-                if t_lo < 0.0:
-                    t_lo = 0.0
-                if t_hi > np.pi:
-                    t_hi = np.pi
-                if t_lo <= t_hi:
-                    if t_lo < best_lo:
-                        best_lo = t_lo
-                    if t_hi > best_hi:
-                        best_hi = t_hi
-        lo[k] = best_lo
-        hi[k] = best_hi
+    cos_eps_sq = cos_eps * cos_eps
+    mu = 1e-7
+    skips = cos_eps > 0.0
+    cos_lo = np.full(nv, -2.0)  # cos(lo[k] + mu); -2: no skip yet
+    cos_hi = np.full(nv, 2.0)  # cos(hi[k] - mu); 2: no skip yet
+    for l in sample_order:
+        a_x = 0.0
+        norm_b_sq = 0.0
+        for c in range(dim):
+            a_x += Bd[l, c] * x_d[c]
+            norm_b_sq += Bd[l, c] * Bd[l, c]
+        need = cos_eps_sq - a_x * a_x - _CULL_MARGIN_SQ  # a pair can count only if a_v^2 >= about this
+        norm_b = np.sqrt(norm_b_sq)
+        for j in range(centres.shape[0]):
+            if need > 0.0:
+                bc = 0.0
+                for c in range(dim):
+                    bc += Bd[l, c] * centres[j, c]
+                bound = abs(bc) + norm_b * radii[j] + _CULL_MARGIN
+                if bound * bound < need:
+                    continue
+            for m in range(starts[j], starts[j + 1]):
+                k = order[m]
+                a_v = 0.0
+                for c in range(dim):
+                    a_v += Bd[l, c] * V[k, c]
+                A = np.sqrt(a_x * a_x + a_v * a_v)
+                if A < cos_eps or A == 0.0:
+                    continue
+                if skips:
+                    A_sq = A * A
+                    S = np.sqrt(max(A_sq - cos_eps_sq, 0.0))
+                    tol = _CULL_MARGIN
+                    if S < 1e-4 * A:
+                        pass  # alpha too ill-conditioned for the bounds: compute
+                    elif a_v <= 0.0:
+                        # phi in [-pi, 0]: nothing unless phi + alpha >= 0 or phi - alpha <= -pi
+                        # (the quotients by A^2 > 0 are compared as products: the margins cover the rounding)
+                        if a_v * cos_eps + a_x * S < -tol * A_sq and a_v * cos_eps - a_x * S < -tol * A_sq:
+                            continue
+                    else:
+                        lo_ok = (a_v * cos_eps - a_x * S > tol * A_sq
+                                 and a_x * cos_eps + a_v * S < (cos_lo[k] - tol) * A_sq)
+                        hi_ok = lo_ok and (a_v * cos_eps + a_x * S > tol * A_sq
+                                           and a_x * cos_eps - a_v * S > (cos_hi[k] + tol) * A_sq)
+                        if hi_ok:
+                            continue  # the window [phi - alpha, phi + alpha] lies inside (lo, hi)
+                r = cos_eps / A
+                alpha = np.arccos(r if r > -1.0 else -1.0)
+                phi = np.arctan2(a_v, a_x)
+                lo_k, hi_k = lo[k], hi[k]
+                for shift in (-two_pi, 0.0, two_pi):
+                    t_lo = phi + shift - alpha
+                    t_hi = phi + shift + alpha
+                    if t_lo < 0.0:
+                        t_lo = 0.0
+                    if t_hi > np.pi:
+                        t_hi = np.pi
+                    if t_lo <= t_hi:
+                        if t_lo < lo[k]:
+                            lo[k] = t_lo
+                        if t_hi > hi[k]:
+                            hi[k] = t_hi
+                if lo[k] != lo_k:
+                    cos_lo[k] = np.cos(lo[k] + mu) if lo[k] + mu < np.pi else -2.0
+                if hi[k] != hi_k:
+                    cos_hi[k] = np.cos(hi[k] - mu) if hi[k] - mu > 0.0 else 2.0
+
+
+@njit(cache=True)
+def _second_largest_per_row(M):
+    """The second largest value of each row (a repeated maximum counts twice), as
+    ``np.partition(M, -2, axis=1)[:, -2]`` gives it, in one pass instead of a partial sort."""
+    out = np.empty(M.shape[0])
+    for r in range(M.shape[0]):
+        first = -np.inf
+        second = -np.inf
+        for x in M[r]:
+            if x > first:
+                second = first
+                first = x
+            elif x > second:
+                second = x
+        out[r] = second
+    return out
+
+
+@lru_cache(maxsize=8)
+def _rays_and_groups(x_d_bytes: bytes, dim: int, directions: int) -> tuple[np.ndarray, tuple]:
+    """The ray directions at x_d and their groups: a pure function of x_d, kept for the next time sample
+    of the same target (the zones move, the target does not)."""
+    V = np.ascontiguousarray(_ray_directions(np.frombuffer(x_d_bytes, dtype=float, count=dim).copy(), directions))
+    return V, _direction_clusters(V, RAY_DIRECTION_GROUPS)
 
 
 def r_sets_overlap(
@@ -232,7 +349,7 @@ def r_sets_overlap(
         directions = 3600 if dim == 3 else 4000
     if boundary_samples is None:
         boundary_samples = 3000 if dim == 3 else 6000
-    V = _ray_directions(x_d, directions)
+    V, clusters = _rays_and_groups(np.ascontiguousarray(x_d, dtype=float).tobytes(), dim, directions)
     theta_eps = float(np.arccos(1.0 - eps))
     cos_eps = float(np.cos(theta_eps))
     m = len(zones)
@@ -242,9 +359,10 @@ def r_sets_overlap(
     for i, zone in enumerate(zones):
         Bd = np.asarray(zone.boundary(boundary_samples), dtype=float)
         if Bd.shape[0] > 1:
-            nn = np.partition(Bd[: min(400, len(Bd))] @ Bd.T, -2, axis=1)[:, -2]  # nearest other sample
+            nn = _second_largest_per_row(Bd[: min(400, len(Bd))] @ Bd.T)  # nearest other sample
             spacing = max(spacing, float(np.max(np.arccos(np.clip(nn, -1, 1)))))
-        _ray_windows(np.ascontiguousarray(V), np.ascontiguousarray(Bd), x_d, cos_eps, lo[i], hi[i])
+        Bd = np.ascontiguousarray(Bd)
+        _ray_windows(V, Bd, x_d, cos_eps, lo[i], hi[i], *clusters, _extremes_first(Bd, x_d))
     intervals = np.empty((m, V.shape[0], 2))
     for i, zone in enumerate(zones):
         hit = hi[i] >= lo[i]
@@ -366,7 +484,7 @@ def _fmt(v: np.ndarray) -> str:
 def check_assumptions(
     target,
     zones: Sequence,
-    eps: float,
+    eps: float | Callable[[float], float],
     kappa: float | None = None,
     *,
     law: str | None = None,
@@ -376,6 +494,8 @@ def check_assumptions(
 
     law: "star" (StarShapedLaw) or "gradient" (GradientLaw, conic zones). Default: "gradient" when every
     zone is a cone and no kappa is given, else "star". Assumption 2 and kappa_bar belong to the star law.
+    eps may be a function of eps_max (the eps the flight software would pick): the check then runs once
+    instead of a probe for eps_max and a second full check (the pair separations are the costly part).
     """
     x_d = np.asarray(target, dtype=float)
     if x_d.ndim != 1 or abs(np.linalg.norm(x_d) - 1.0) > 1e-6:
@@ -387,7 +507,8 @@ def check_assumptions(
     for i, z in enumerate(zones):
         if int(z.dim) != x_d.shape[0]:
             raise ValueError(f"zone {i} lives in R^{z.dim}, the target in R^{x_d.shape[0]}")
-    eps = float(eps)
+    eps_of = eps if callable(eps) else None  # chosen from eps_max below
+    eps = float("nan") if eps_of is not None else float(eps)
     if law is None:
         law = "gradient" if (kappa is None and all(_is_cone(z) for z in zones)) else "star"
     if law not in ("star", "gradient"):
@@ -399,7 +520,7 @@ def check_assumptions(
     warnings: list[str] = []
     notes: list[str] = []
 
-    if not eps > 0.0:
+    if eps_of is None and not eps > 0.0:
         errors.append(f"eps = {eps} must be > 0")
 
     # -- x_d outside U, eps_bar ------------------------------------------------------------------
@@ -442,6 +563,10 @@ def check_assumptions(
         delta = 0.0
     one_minus_cos_delta = 1.0 - float(np.cos(delta))
     eps_max = min(target_sep, one_minus_cos_delta)
+    if eps_of is not None:
+        eps = float(eps_of(eps_max))
+        if not eps > 0.0:
+            errors.insert(0, f"eps = {eps} must be > 0")  # where the check on a given eps puts it
     if len(zones) > 1 and worst_pair is not None:
         notes.append(
             f"Assumption 1: delta = {np.degrees(delta):.4f} deg (closest pair: zones {worst_pair[0]} and {worst_pair[1]}, "

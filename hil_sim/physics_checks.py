@@ -447,11 +447,12 @@ def _check_assumptions_at(mission, zones, where: _Where, kappa, report, seen, la
 
     law = mission.flight_software.law
     target = where.seg.target
-    # first the eps interval alone (cheap), then the full check with the eps the flight software would use
-    probe = check_assumptions(target, zones, 1e-9, kappa=None, law=law_name, check_r_sets=False)
-    eps_max = float(probe.eps_max)
-    eps = _eps_in_use(mission, eps_max) if eps_max > 0 else 1e-9
-    rep = check_assumptions(target, zones, eps, kappa=kappa if law_name == "star" else None, law=law_name)
+    def eps_for(eps_max: float) -> float:  # the eps the flight software would use
+        return _eps_in_use(mission, eps_max) if eps_max > 0 else 1e-9
+
+    rep = check_assumptions(target, zones, eps_for, kappa=kappa if law_name == "star" else None, law=law_name)
+    eps_max = float(rep.eps_max)
+    eps = eps_for(eps_max)
     kappa_low = (rep.kappa_bar is not None and math.isfinite(float(rep.kappa_bar)) and kappa is not None
                  and kappa <= float(rep.kappa_bar))
     found = False
