@@ -62,7 +62,7 @@ def boresight_N(q_NB: np.ndarray, b_B: np.ndarray) -> np.ndarray:
     """Rows: R(q_NB) b_B for every quaternion row (scalar first)."""
     from gnc.attitude import quat_to_dcm
 
-    return np.einsum("nij,j->ni", np.stack([quat_to_dcm(q) for q in q_NB]), b_B) if len(q_NB) else np.zeros((0, 3))
+    return np.einsum("nij,j->ni", quat_to_dcm(q_NB), b_B) if len(q_NB) else np.zeros((0, 3))
 
 
 def _signed_margins(zone, X: np.ndarray) -> np.ndarray:
