@@ -383,11 +383,12 @@ def _verdict_folder() -> "Path | None":
     return Path(setting) if setting else user_cache_dir() / "physics_checks"
 
 
-def check_mission_cached(mission: "Mission") -> PhysicsReport:
+def check_mission_cached(mission: "Mission", refresh: bool = False) -> PhysicsReport:
     """`check_mission(mission)`, or its stored verdict for the same `verdict_key` (see the module doc).
 
     A missing, unreadable or foreign cache file means the checks run; a cache that cannot be written
-    is left alone. ``KEEPOUT_PHYSICS_CACHE=off`` always runs them."""
+    is left alone. ``KEEPOUT_PHYSICS_CACHE=off`` always runs them. ``refresh``: run them and store the
+    verdict even if one is kept (the warm-up: it must compile every kernel the checks use, for the wheel)."""
     import json
     import os
 
@@ -397,7 +398,7 @@ def check_mission_cached(mission: "Mission") -> PhysicsReport:
     key = verdict_key(mission)
     path = folder / f"{key}.json"
     try:
-        data = json.loads(path.read_text())
+        data = {} if refresh else json.loads(path.read_text())
         if data.get("key") == key:
             report = PhysicsReport.from_dict(data["report"])
             report.reused_from = str(path)

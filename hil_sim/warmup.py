@@ -35,7 +35,7 @@ def warm(missions: list[str] | None = None, seconds: float = 2.0, out=sys.stdout
         t0 = time.perf_counter()
         mission = load_mission(path)
         print(f"[{k}/{len(paths)}] {mission.name}: physics check ...", end="", file=out, flush=True)
-        check_mission_cached(mission)
+        check_mission_cached(mission, refresh=True)  # a kept verdict would skip compiling the checks' kernels
         print(" closed loop ...", end="", file=out, flush=True)
         run_fast(mission.model_copy(update={"duration_s": seconds}), 0)
         print(f" ready ({time.perf_counter() - t0:.1f} s)", file=out, flush=True)

@@ -83,3 +83,12 @@ def test_only_the_newest_verdicts_are_kept(counted, monkeypatch, tmp_path):
                 os.utime(path, (1e9 + k, 1e9 + k))
     kept = {p.name for p in (tmp_path / "verdicts").iterdir()}
     assert kept == {f"{pc.verdict_key(_mission(duration_s=base * f))}.json" for f in (0.25, 0.125)}
+
+
+def test_the_warm_up_checks_again_even_with_a_kept_verdict(counted):
+    """The warm-up (`refresh=True`) must run the checks, so their kernels compile into the cache a wheel
+    ships; a kept verdict would skip them. The stored verdict is the fresh one."""
+    pc.check_mission_cached(_mission())
+    fresh = pc.check_mission_cached(_mission(), refresh=True)
+    assert len(counted) == 2 and fresh.reused_from is None
+    assert pc.check_mission_cached(_mission()).to_dict() == fresh.to_dict() and len(counted) == 2
