@@ -1,6 +1,8 @@
 """keepout.gnc: the pure mathematics of constrained attitude guidance on S^n.
 
-No I/O, no clocks, no threads, no globals: numpy in, numpy out. The paper in
+No I/O, no clocks, no threads, no globals: numpy in, numpy out. The one exception is packaging, not
+maths: ``_numba_cache`` and ``_after_numba`` (design note 17) arm numba's kernel cache locator here,
+because every package with kernels imports gnc first. The paper in
 ``shared/paper`` (constrained stabilization on the n-sphere) is the specification.
 """
 

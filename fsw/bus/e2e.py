@@ -151,9 +151,10 @@ class E2EReceiver:
     ``watch``: message names whose silence counts as a timeout (default: every message not ignored).
 
     Frames are classified in bursts by the compiled kernel (fsw.bus.kernels.classify_rows) on this
-    receiver's sequence state arrays; ``classify`` (one frame) goes the same way. Frames the kernel
-    cannot judge (error, remote and extended frames, messages of a DBC layout outside its table) take
-    the Python path here, on the same state.
+    receiver's sequence state arrays. ``classify`` (one frame), runs of one or two frames, and frames the
+    kernel cannot judge (error, remote and extended frames, messages of a DBC layout outside its table)
+    take the Python path here, on the same state: the same rules, checked against one reference in
+    tests/fsw/test_bus_kernels.py.
     """
 
     icd: "Icd"
