@@ -17,13 +17,15 @@ message has one sending node, so the alive counters are per message as on the ha
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol, Sequence
 
 import can
 import numpy as np
 
 from fsw.bus.icd import E2ESender, Icd
+from hil_sim import device_kernels as dk
+from hil_sim.device_kernels import WS_APPLIED, WS_CMD, WS_LAST_T, WS_TICK
 
 # Fault bits of RWn_STATUS.fault (see the DBC comment).
 FAULT_OVERSPEED, FAULT_CMD_TIMEOUT, FAULT_DRIVE = 1, 2, 4
@@ -91,21 +93,20 @@ def _clamp(value: float, lo: float, hi: float) -> tuple[float, bool]:
     return value, False
 
 
-@dataclass
 class WheelNode:
-    """Reaction wheel drive electronics, node RW``index`` (1-based)."""
+    """Reaction wheel drive electronics, node RW``index`` (1-based).
 
-    index: int
-    icd: Icd
-    cmd_timeout_s: float = 0.3
-    sender: E2ESender | None = None
-    torque_cmd_Nm: float = 0.0
-    last_cmd_t: float | None = None
-    commands_applied: int = 0
-    last_cmd_tick: int | None = None
+    Its command state (held torque, time and tick of the last command, commands applied) lives in one row
+    of a float array (``state``: ``hil_sim.device_kernels`` WS_* columns; the Devices' ``wheel_state`` row
+    of this wheel), which the compiled tick kernels read and write too."""
 
-    def __post_init__(self) -> None:
-        self.sender = self.sender or E2ESender(self.icd)
+    def __init__(self, index: int, icd: Icd, cmd_timeout_s: float = 0.3, sender: E2ESender | None = None,
+                 state: np.ndarray | None = None) -> None:
+        self.index = index
+        self.icd = icd
+        self.cmd_timeout_s = cmd_timeout_s
+        self.sender = sender or E2ESender(self.icd)
+        self.state = state if state is not None else np.array([0.0, math.nan, 0.0, math.nan])
         self.name = f"RW{self.index}"
         self.cmd_name = f"RW{self.index}_CMD"
         self.status_name = f"RW{self.index}_STATUS"
@@ -115,15 +116,36 @@ class WheelNode:
                              for signal in ("speed", "torque", "current", "temp", "fault")]
         self._status_template = [0.0] * self.icd.table.start.shape[1]
 
+    @property
+    def torque_cmd_Nm(self) -> float:
+        return float(self.state[WS_CMD])
+
+    @property
+    def last_cmd_t(self) -> float | None:
+        """Simulation time of the last valid command, None before the first."""
+        t = float(self.state[WS_LAST_T])
+        return None if math.isnan(t) else t
+
+    @property
+    def commands_applied(self) -> int:
+        return int(self.state[WS_APPLIED])
+
+    @property
+    def last_cmd_tick(self) -> int | None:
+        tick = float(self.state[WS_TICK])
+        return None if math.isnan(tick) else int(tick)
+
     def on_command(self, signals: dict, t_s: float) -> None:
         """A valid RWn_CMD (already E2E-checked) arrived at simulation time ``t_s``."""
-        self.torque_cmd_Nm = float(signals["torque_cmd"])
-        self.last_cmd_tick = int(signals["tick_lsb"])
-        self.last_cmd_t = t_s
-        self.commands_applied += 1
+        state = self.state
+        state[WS_CMD] = float(signals["torque_cmd"])
+        state[WS_TICK] = int(signals["tick_lsb"])
+        state[WS_LAST_T] = t_s
+        state[WS_APPLIED] += 1.0
 
     def timed_out(self, t_s: float) -> bool:
-        return self.last_cmd_t is None or t_s - self.last_cmd_t > self.cmd_timeout_s + _EPS_S
+        last = self.last_cmd_t
+        return last is None or t_s - last > self.cmd_timeout_s + _EPS_S
 
     def torque_at(self, t_s: float) -> float:
         """Motor torque command in force at ``t_s`` [N m] (0 before the first command and after a timeout)."""
@@ -172,7 +194,15 @@ class _SampledNode:
     def __post_init__(self) -> None:
         self.sender = self.sender or E2ESender(self.icd)
         self.period_s = 1.0 / self.rate_hz
-        self.next_due_s = 0.0
+        self.clock = np.array([0.0, self.period_s])  # [next due time, period]: the tick kernels' view
+
+    @property
+    def next_due_s(self) -> float:
+        return float(self.clock[0])
+
+    @next_due_s.setter
+    def next_due_s(self, value: float) -> None:
+        self.clock[0] = value
 
     def _sample_due(self, t_s: float) -> bool:
         """True (and the next due time advanced past ``t_s``) when a sample is due at ``t_s``."""
@@ -238,9 +268,20 @@ class StarTrackerNode(_SampledNode):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        self._seq = 0
+        self.seq_state = np.zeros(1, dtype=np.int64)  # the next sample_seq (the tick kernels' view)
         self._a_m, self._a_row = _row_maker(self.icd, "ST_QUAT_A")
         self._b_m, self._b_row = _row_maker(self.icd, "ST_QUAT_B")
+        self.a_cols = [self.icd.column("ST_QUAT_A", s) for s in ("q_w", "q_x", "valid", "blind_source", "sample_seq")]
+        self.b_cols = [self.icd.column("ST_QUAT_B", s) for s in ("q_y", "q_z", "sample_seq")]
+        self.age_col = self.icd.column("ST_QUAT_B", "age_ms")
+
+    @property
+    def _seq(self) -> int:
+        return int(self.seq_state[0])
+
+    @_seq.setter
+    def _seq(self, value: int) -> None:
+        self.seq_state[0] = value
 
     def poll(self, world: WorldLike, t_s: float) -> list[PendingFrame]:
         if not self._sample_due(t_s):
@@ -258,15 +299,24 @@ class StarTrackerNode(_SampledNode):
         self.samples += 1
         qw, qx, qy, qz = (min(max(c, -1.0), 1.0) for c in q.tolist())  # np.clip to [-1, 1], on floats
         a = self._a_row(q_w=qw, q_x=qx, valid=int(valid), blind_source=int(blind_source), sample_seq=seq)
-        t_sample, make_b = t_s, self._b_row
-
-        def row_b(t_tx: float) -> list:
-            age_ms = min(255, max(0, round((t_tx - t_sample) * 1000.0)))
-            return make_b(q_y=qy, q_z=qz, sample_seq=seq, age_ms=age_ms)
-
+        row_b = _AgeRow(t_s, self._b_row(q_y=qy, q_z=qz, sample_seq=seq, age_ms=0), self.age_col)
         due = t_s + self.latency_s
         return [PendingFrame(due, "STR", self._a_m, a, None, self.sender),
                 PendingFrame(due, "STR", self._b_m, None, row_b, self.sender)]
+
+
+class _AgeRow:
+    """The value row of ST_QUAT_B: fixed but for ``age_ms``, the sample's age at transmission ``t_tx``."""
+
+    __slots__ = ("t_sample", "row", "age_col")
+
+    def __init__(self, t_sample: float, row: list, age_col: int) -> None:
+        self.t_sample, self.row, self.age_col = t_sample, row, age_col
+
+    def __call__(self, t_tx: float) -> list:
+        row = self.row.copy()
+        row[self.age_col] = min(255, max(0, round((t_tx - self.t_sample) * 1000.0)))
+        return row
 
 
 @dataclass
@@ -288,19 +338,47 @@ class DeviceTiming:
                 raise ValueError(f"DeviceTiming.{name}: must be a finite number >= 0 [s], got {value!r}")
 
 
-@dataclass
 class Devices:
-    """All nodes of one spacecraft: the wheels, the IMU and the star tracker."""
+    """All nodes of one spacecraft: the wheels, the IMU and the star tracker.
 
-    icd: Icd
-    wheels: list[WheelNode]
-    imu: ImuNode
-    star_tracker: StarTrackerNode
-    pending: list[PendingFrame] = field(default_factory=list)
-    sender: E2ESender | None = None  # the nodes' (shared) sender
+    Frames sampled but not yet due wait in an array queue (see ``hil_sim.device_kernels``). With a
+    ``hil_sim.world.World`` a GNC period (``step_world``) and a tick's frames (``tick_rows``) take a few
+    compiled calls; any other world goes through the nodes' Python (``sample_sensors``, ``wheel_status_rows``),
+    on the same state and with the same frames."""
 
-    def __post_init__(self) -> None:
-        self.sender = self.sender or self.imu.sender
+    def __init__(self, icd: Icd, wheels: list[WheelNode], imu: ImuNode, star_tracker: StarTrackerNode,
+                 sender: E2ESender | None = None) -> None:
+        self.icd = icd
+        self.wheels = wheels
+        self.imu = imu
+        self.star_tracker = star_tracker
+        self.sender = sender or self.imu.sender  # the nodes' (shared) sender
+        n = len(wheels)
+        # the wheels' command state, one row each (WheelNode.state is a view of its row)
+        self.wheel_state = np.empty((n, 4))
+        for i, w in enumerate(wheels):
+            self.wheel_state[i] = w.state
+            w.state = self.wheel_state[i]
+        self.wheel_timeout_s = np.array([w.cmd_timeout_s for w in wheels], dtype=float)
+        self.width = width = icd.table.start.shape[1]
+        cap = 64
+        self.q_due, self.q_m = np.zeros(cap), np.zeros(cap, dtype=np.int64)
+        self.q_rows, self.q_ts = np.zeros((cap, width)), np.zeros(cap)
+        self.q_n = np.zeros(1, dtype=np.int64)
+        self._out_idx, self._out_rows = np.zeros(0, dtype=np.int64), np.zeros((0, width))
+        self._status_ms = np.array([w.status_m for w in wheels], dtype=np.int64)
+        self._world_key: Any = None
+        self._world_fast: tuple | None = None
+        self._plan: tuple | None = None
+        st = star_tracker
+        self._st_ms = np.array([st._a_m, st._b_m], dtype=np.int64)
+        self._st_cols = np.array(st.a_cols + st.b_cols, dtype=np.int64)
+        self._imu_range = imu._range
+
+    @property
+    def pending_count(self) -> int:
+        """Frames sampled and not yet handed out (``rows_due``)."""
+        return int(self.q_n[0])
 
     @classmethod
     def for_world(cls, world: WorldLike, icd: Icd, timing: DeviceTiming | None = None) -> "Devices":
@@ -319,14 +397,90 @@ class Devices:
             sender=sender,
         )
 
+    # ------------------------------------------------------------------------------- the queue
+    def _reserve(self, extra: int) -> None:
+        """Room for ``extra`` more queued rows."""
+        n, cap = int(self.q_n[0]), self.q_due.shape[0]
+        if n + extra <= cap:
+            return
+        cap = max(2 * cap, n + extra)
+        for name in ("q_due", "q_m", "q_rows", "q_ts"):
+            old = getattr(self, name)
+            new = np.zeros((cap,) + old.shape[1:], dtype=old.dtype)
+            new[:n] = old[:n]
+            setattr(self, name, new)
+
+    def _push(self, frames: list[PendingFrame]) -> None:
+        """Queue frames made by the nodes' Python (``poll``)."""
+        if not frames:
+            return
+        self._reserve(len(frames))
+        for p in frames:
+            n = int(self.q_n[0])
+            self.q_due[n], self.q_m[n] = p.due_s, p.m
+            if p.row is not None:
+                self.q_rows[n], self.q_ts[n] = p.row, math.nan
+            elif isinstance(p.row_at, _AgeRow):
+                self.q_rows[n], self.q_ts[n] = p.row_at.row, p.row_at.t_sample
+            else:  # pragma: no cover - every node's row_at is an _AgeRow
+                raise TypeError(f"cannot queue a frame whose row is made by {p.row_at!r}")
+            self.q_n[0] = n + 1
+
+    def _out(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Output rows for ``n`` frames (reused from call to call)."""
+        if self._out_idx.shape[0] < n:
+            self._out_idx, self._out_rows = np.zeros(n, dtype=np.int64), np.zeros((n, self.width))
+        return self._out_idx, self._out_rows
+
+    # ------------------------------------------------------------------------------- sampling
     def sample_sensors(self, world: WorldLike, t_s: float) -> None:
         """Called with the world at ``t_s`` (after each dynamics step): sensors sample when due."""
-        self.pending.extend(self.imu.poll(world, t_s))
-        self.pending.extend(self.star_tracker.poll(world, t_s))
+        self._push(self.imu.poll(world, t_s))
+        self._push(self.star_tracker.poll(world, t_s))
+
+    def _fast_world(self, world: Any) -> tuple | None:
+        """The arrays the tick kernels read of a ``hil_sim.world.World`` (None for any other world)."""
+        if world is self._world_key:
+            return self._world_fast
+        from hil_sim import dynamics as dyn
+        from hil_sim.world import World
+        self._world_key = world
+        if type(world) is World and world.batch.n_runs == 1:
+            b = world.batch
+            self._world_fast = (b, b.X, b.U_APPLIED, b.W[dyn.W_KT], b.TEMP, b.FLAGS)
+        else:
+            self._world_fast = None
+        return self._world_fast
 
     def step_world(self, world: Any, dt_s: float, times_s: Sequence[float]) -> None:
         """``world.step(dt_s, wheel_torques(times_s[j]))`` then ``sample_sensors(world, times_s[j + 1])``
-        for each step j, through the world's one-call ``advance_sampled`` (the same numbers and frames)."""
+        for each step j, through the world's one-call ``advance_sampled`` (the same numbers and frames).
+        With a ``hil_sim.world.World``: three compiled calls (commands and due flags, world, frame rows)."""
+        fast = self._fast_world(world)
+        if fast is None:
+            self._step_world_python(world, dt_s, times_s)
+            return
+        times = np.asarray(times_s, dtype=float)
+        steps = times.shape[0] - 1
+        plan = self._plan
+        if plan is None or plan[0].shape[0] != steps:
+            plan = self._plan = (np.zeros((steps, 1, len(self.wheels))), np.zeros(steps, dtype=np.bool_),
+                                 np.zeros(steps, dtype=np.bool_))
+        u_seq, imu_due, st_due = plan
+        imu, st = self.imu, self.star_tracker
+        counts = dk.plan_period(times, imu.clock, st.clock, imu_due, st_due, self.wheel_state, self.wheel_timeout_s,
+                                u_seq)
+        gyro, sat, q, valid, blind = world.advance_planned(dt_s, u_seq, imu_due, st_due, counts // 1000,
+                                                           counts % 1000)
+        self._reserve(3 * steps)
+        lo, hi = self._imu_range
+        counts = dk.queue_samples(times, imu_due, gyro, sat, imu.latency_s, lo, hi, imu._m, st_due, q, valid, blind,
+                                  st.latency_s, self._st_ms, self._st_cols, st.seq_state, self.q_due, self.q_m,
+                                  self.q_rows, self.q_ts, self.q_n)
+        imu.samples += counts // 1000
+        st.samples += counts % 1000
+
+    def _step_world_python(self, world: Any, dt_s: float, times_s: Sequence[float]) -> None:
         steps = len(times_s) - 1
         first = [w.torque_at(times_s[0]) for w in self.wheels]
         if first == [w.torque_at(times_s[-2]) for w in self.wheels]:
@@ -342,9 +496,45 @@ class Devices:
         gyro_rows, sat_rows = gyro.tolist(), sat.tolist()  # plain floats for the frames (one conversion)
         for j in range(steps):
             if imu_due[j]:
-                self.pending.extend(self.imu.frames_for(gyro_rows[j], sat_rows[j], times_s[j + 1]))
+                self._push(self.imu.frames_for(gyro_rows[j], sat_rows[j], times_s[j + 1]))
             if st_due[j]:
-                self.pending.extend(self.star_tracker.frames_for(q[j], valid[j], blind[j], times_s[j + 1]))
+                self._push(self.star_tracker.frames_for(q[j], valid[j], blind[j], times_s[j + 1]))
+
+    # ------------------------------------------------------------------------------- frames out
+    def tick_rows(self, world: Any, t_s: float, tick: int, period_ms: int, sync_m: int,
+                  sync_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
+        """A tick's frames as rows (one compiled call): SYNC(tick) in row 0, then ``rows_due(t_s)`` and
+        ``wheel_status_rows(world, t_s)``; returns (message indices, rows, count) or None when ``world``
+        is not a ``hil_sim.world.World`` (then the caller takes the Python path)."""
+        fast = self._fast_world(world)
+        if fast is None:
+            return None
+        _, X, U_APPLIED, W_KT, TEMP, FLAGS = fast
+        idx, rows = self._out(1 + int(self.q_n[0]) + len(self.wheels))
+        n = dk.tick_rows(t_s, (float(tick), float(period_ms)), sync_m, sync_cols, self.q_due, self.q_m, self.q_rows,
+                         self.q_ts, self.q_n, self.star_tracker.age_col, X, U_APPLIED, W_KT, TEMP, FLAGS,
+                         self.wheel_state, self.wheel_timeout_s, self._status_ms, self._status_cols(),
+                         self._status_ranges(), idx, rows)
+        return idx, rows, n
+
+    def _status_cols(self) -> np.ndarray:
+        cols = getattr(self, "_status_cols_arr", None)
+        if cols is None:
+            w = self.wheels[0]
+            if any(node._status_cols != w._status_cols for node in self.wheels):  # pragma: no cover - ICD layout
+                raise ValueError("RWn_STATUS messages differ in layout")
+            cols = self._status_cols_arr = np.array(w._status_cols, dtype=np.int64)
+        return cols
+
+    def _status_ranges(self) -> np.ndarray:
+        ranges = getattr(self, "_status_ranges_arr", None)
+        if ranges is None:
+            per_wheel = [tuple(self.icd.signal_range(w.status_name, s) for s in ("speed", "torque", "current", "temp"))
+                         for w in self.wheels]
+            if any(r != per_wheel[0] for r in per_wheel):  # pragma: no cover - ICD layout
+                raise ValueError("RWn_STATUS messages differ in ranges")
+            ranges = self._status_ranges_arr = np.array(per_wheel[0], dtype=float)
+        return ranges
 
     def frames_due(self, t_s: float) -> list[can.Message]:
         """Sensor frames whose transmission time has come by ``t_s``, oldest first, built at ``t_s``."""
@@ -353,17 +543,10 @@ class Devices:
 
     def rows_due(self, t_s: float) -> tuple[list[int], list[list]]:
         """``frames_due`` as message indices and value rows (not yet encoded)."""
-        cut = t_s + _EPS_S
-        pending = self.pending
-        if all(p.due_s <= cut for p in pending):  # the usual case: everything sampled so far is due
-            due, self.pending = pending, []
-        else:
-            due = [p for p in pending if p.due_s <= cut]
-            self.pending = [p for p in pending if p.due_s > cut]
-        if not due:
-            return [], []
-        due.sort(key=lambda p: p.due_s)  # stable: keeps A before B
-        return [p.m for p in due], [p.values(t_s) for p in due]
+        idx, rows = self._out(int(self.q_n[0]))
+        k = dk.take_due(t_s, self.q_due, self.q_m, self.q_rows, self.q_ts, self.q_n, self.star_tracker.age_col,
+                        idx, rows, 0)
+        return idx[:k].tolist(), rows[:k].tolist()
 
     def wheel_status_frames(self, world: WorldLike, t_s: float) -> list[can.Message]:
         idx, rows = self.wheel_status_rows(world, t_s)

@@ -36,6 +36,7 @@ from fsw.bus.e2e import NO_STOP, CheckedBurst, CheckedFrame, E2EReceiver
 from fsw.bus.kernels import ECHO_CODE
 from fsw.bus.icd import Icd
 from fsw.bus.transport import recv_burst, send_batch, send_burst
+from hil_sim.device_kernels import apply_received
 from hil_sim.devices import Devices, DeviceTiming, WorldLike
 from hil_sim.faults import FaultInjector
 
@@ -89,6 +90,7 @@ class Simulator:
         self.period_ms = int(round(period_ms))
         self.n_sub = n_sub
         self.dt_s = gnc_period_s / n_sub
+        self._j_dt = np.arange(n_sub + 1) * self.dt_s  # j * dt_s, j = 0..n_sub
         self.devices = Devices.for_world(world, self.icd, timing)
         self.n_wheels = len(self.devices.wheels)
         self.injector = FaultInjector(self.icd, faults, seed=fault_seed)
@@ -99,6 +101,7 @@ class Simulator:
         self._sync_m = self.icd.message_index["SYNC"]
         self._sync_row = [0.0] * self.icd.table.start.shape[1]
         self._sync_cols = [self.icd.column("SYNC", s) for s in ("tick", "frames_following", "period_ms")]
+        self._sync_cols_arr = np.array(self._sync_cols, dtype=np.int64)
         self._torque_col = self.icd.column("RW1_CMD", "torque_cmd")
         self._tick_lsb_col = self.icd.column("RW1_CMD", "tick_lsb")
         self._done_tick_col = self.icd.column("CYCLE_DONE", "tick")
@@ -109,6 +112,11 @@ class Simulator:
         self._cmd_index = {self.icd.spec(f"RW{i}_CMD").frame_id: i - 1 for i in range(1, self.n_wheels + 1)}
         self._cycle_done_id = self.icd.spec("CYCLE_DONE").frame_id
         self._heartbeat_id = self.icd.spec("FSW_HEARTBEAT").frame_id
+        # frame id -> wheel (0-based) of its command, -1 for any other id (the received-frames kernel's table)
+        self._cmd_wheel_of_id = np.full(len(self.icd.table.index_of_id), -1, dtype=np.int64)
+        for fid, w in self._cmd_index.items():
+            self._cmd_wheel_of_id[fid] = w
+        self._rx_counts = np.zeros(4, dtype=np.int64)
         # Lockstep waits wake only for CYCLE_DONE where the bus can filter wake-ups (socketcan): the wheel
         # commands before it queue without a context switch each (see _receive_until_done).
         self._wait_for = getattr(bus, "wait_for", None)
@@ -138,15 +146,23 @@ class Simulator:
         if self._tick_open:
             raise RuntimeError("begin_tick() called twice without end_tick()")
         t = self.t_s
-        idx, rows = self.devices.rows_due(t)
-        status_idx, status_rows = self.devices.wheel_status_rows(self.world, t)
-        idx, rows = idx + status_idx, rows + status_rows
         sync = self._sync_row
         sync[self._sync_cols[0]] = self.tick & 0xFFFFFFFF
         sync[self._sync_cols[2]] = self.period_ms
+        # the tick's rows in one compiled call where the world allows (SYNC in row 0, then the device rows)
+        out = self.devices.tick_rows(self.world, t, sync[self._sync_cols[0]], self.period_ms, self._sync_m,
+                                     self._sync_cols_arr)
+        if out is None:
+            idx, rows = self.devices.rows_due(t)
+            status_idx, status_rows = self.devices.wheel_status_rows(self.world, t)
+            idx, rows = idx + status_idx, rows + status_rows
         if self.injector and not self.injector.passes_through(t):
             # faults active now: the frames one by one through the injector (it edits, drops and adds)
-            frames = self._sync_sender.burst(np.array(idx, dtype=np.int64), np.array(rows)).messages()
+            if out is None:
+                frames = self._sync_sender.burst(np.array(idx, dtype=np.int64), np.array(rows)).messages()
+            else:
+                out_idx, out_rows, n = out
+                frames = self._sync_sender.burst(out_idx[1:n], out_rows[1:n]).messages()
             frames = self.injector.process(frames, t)
             following = sum(1 for m in frames if m.arbitration_id in self.icd.by_id)
             sync[self._sync_cols[1]] = min(following, 255)
@@ -158,8 +174,13 @@ class Simulator:
         else:
             # SYNC first, then the device frames: one compiled encode, one burst (alive counters are per
             # message, so encoding SYNC with the others gives the bytes it always had)
-            sync[self._sync_cols[1]] = min(len(idx), 255)
-            burst = self._sync_sender.burst(np.array([self._sync_m] + idx, dtype=np.int64), np.array([sync] + rows))
+            if out is None:
+                sync[self._sync_cols[1]] = min(len(idx), 255)
+                burst = self._sync_sender.burst(np.array([self._sync_m] + idx, dtype=np.int64),
+                                                np.array([sync] + rows))
+            else:
+                out_idx, out_rows, n = out
+                burst = self._sync_sender.burst(out_idx[:n], out_rows[:n])
             self._send_burst(burst, t)
             sent = len(burst)
         self._tick_open = True
@@ -186,7 +207,8 @@ class Simulator:
         """Step the world over [t_k, t_k + T] in dynamics steps; ``paced(j)`` runs before step j (real time)."""
         if paced is None and hasattr(self.world, "advance_sampled"):
             # not paced: the whole period in one compiled call (same numbers as the loop below)
-            self.devices.step_world(self.world, self.dt_s, [self._sub_t(j) for j in range(self.n_sub + 1)])
+            # _sub_t(j) for j = 0..n_sub: (t0 + k T) + j dt, the same sums on an array
+            self.devices.step_world(self.world, self.dt_s, (self.t0_s + self.tick * self.period_s) + self._j_dt)
         else:
             for j in range(self.n_sub):
                 if paced is not None:
@@ -263,6 +285,23 @@ class Simulator:
         stop = NO_STOP if awaited is None else (self._cycle_done_id, self._done_tick_col, awaited, awaited,
                                                  NO_STOP[4], 0)
         end = self.receiver.classify_until(rx, t_s, stop)
+        if self.on_frame is None and not rx.fallback:
+            # every frame judged by the compiled classifier: the delivered ones applied in one compiled call
+            # (a CYCLE_DONE returns to here, in order, for its tick)
+            counts = self._rx_counts
+            i = first
+            while i < end:
+                i = apply_received(rx.status, rx.burst.ids, rx.values, i, end, self._cmd_wheel_of_id,
+                                   self._torque_col, self._tick_lsb_col, self._cycle_done_id, self._done_tick_col,
+                                   self._heartbeat_id, t_s, self.devices.wheel_state, counts)
+                if counts[2]:
+                    counts[2] = 0
+                    self._on_cycle_done(int(counts[3]))
+            if counts[0] or counts[1]:
+                self.stats.wheel_commands += int(counts[0])
+                self.stats.heartbeats += int(counts[1])
+                counts[0] = counts[1] = 0
+            return end - first
         for i in range(first, end):
             code = rx.codes[i]
             if code == ECHO_CODE:
@@ -297,14 +336,16 @@ class Simulator:
                 {"torque_cmd": row[self._torque_col], "tick_lsb": row[self._tick_lsb_col]}, t_s)
             self.stats.wheel_commands += 1
         elif fid == self._cycle_done_id:
-            tick = int(row[self._done_tick_col])
-            self.stats.cycle_done += 1
-            if tick == self._awaiting:
-                self._done_ticks.add(tick)
-            else:
-                self.stats.stale_cycle_done += 1
+            self._on_cycle_done(int(row[self._done_tick_col]))
         elif fid == self._heartbeat_id:
             self.stats.heartbeats += 1
+
+    def _on_cycle_done(self, tick: int) -> None:
+        self.stats.cycle_done += 1
+        if tick == self._awaiting:
+            self._done_ticks.add(tick)
+        else:
+            self.stats.stale_cycle_done += 1
 
     def _publish_due(self, t_s: float) -> None:
         """Real time: sensor frames go out when due (between SYNCs), as on the hardware bus."""

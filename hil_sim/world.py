@@ -312,12 +312,14 @@ class WorldBatch:
         self._t = t_end
 
     def advance_sampled(self, dt_s: float, n_sub: int, u_seq: np.ndarray, imu_due: np.ndarray,
-                        st_due: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                        st_due: np.ndarray, n_imu: int | None = None,
+                        n_st: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """J = len(u_seq) steps of dt_s (n_sub RK4 sub-steps each), commands u_seq[j] (M, N), each step
         followed by ``imu_sample_arrays()`` where imu_due[j] and ``star_tracker_sample_arrays()`` where
         st_due[j]: the same numbers, bit for bit, as those calls one by one, in one compiled call.
         Returns gyro (J, M, 3), saturated (J, M), star-tracker q (J, M, 4), valid (J, M), blind (J, M);
-        rows where the sensor was not due are left unset."""
+        rows where the sensor was not due are left unset. ``n_imu``/``n_st``: the number of True flags in
+        imu_due/st_due when the caller has counted them."""
         J, M = len(u_seq), self.n_runs
         eph = self.ephemeris
         t_last = self._t + J * dt_s  # the ephemeris table's reach: a bound, the kernel accumulates exactly
@@ -330,8 +332,12 @@ class WorldBatch:
             if normals.shape[0] != J:
                 normals = self._no_normals_rows = np.zeros((J, self._no_normals.size))
         # one row per sample due, in order: the numbers J one-step calls would draw
-        imu_normals = self.normals_imu.take_rows(M * 6, int(np.count_nonzero(imu_due)))
-        st_normals = self.normals_star_tracker.take_rows(M * 3, int(np.count_nonzero(st_due)))
+        if n_imu is None:
+            n_imu = int(np.count_nonzero(imu_due))
+        if n_st is None:
+            n_st = int(np.count_nonzero(st_due))
+        imu_normals = self.normals_imu.take_rows(M * 6, n_imu)
+        st_normals = self.normals_star_tracker.take_rows(M * 3, n_st)
         dt_sub = dt_s / n_sub if n_sub else 0.0
         if dt_sub != self._coef_dt:
             self._coef = dyn.step_coefficients(self.W, self.B, dt_sub)
@@ -495,6 +501,18 @@ class World:
             dt_s, self._last_n_sub, u.reshape(u.shape[0], 1, self.n_wheels), np.asarray(imu_due, dtype=np.bool_),
             np.asarray(st_due, dtype=np.bool_))
         return gyro[:, 0], sat[:, 0], q[:, 0], valid[:, 0], blind[:, 0]
+
+    def advance_planned(self, dt_s: float, u_seq: np.ndarray, imu_due: np.ndarray, st_due: np.ndarray, n_imu: int,
+                        n_st: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``advance_sampled`` with its inputs already as the batch takes them (the devices' tick kernels
+        make them): u_seq (J, 1, N) float64, imu_due/st_due (J,) bool with n_imu/n_st True. Returns the
+        batch's outputs (run axis kept: gyro (J, 1, 3), ...)."""
+        if not dt_s > 0.0:
+            raise ValueError(f"step: dt_s must be > 0, got {dt_s!r}")
+        if dt_s != self._last_dt:
+            self._last_dt = dt_s
+            self._last_n_sub = max(1, math.ceil(dt_s / self.batch.max_step_s - 1e-9))
+        return self.batch.advance_sampled(dt_s, self._last_n_sub, u_seq, imu_due, st_due, n_imu, n_st)
 
     def imu_sample(self) -> sen.ImuSample:
         omega, sat = self.batch.imu_sample_arrays()

@@ -1,0 +1,296 @@
+"""Compiled kernels of the simulator side of a GNC tick (``hil_sim.devices``, ``hil_sim.lockstep``).
+
+Each kernel does, on arrays, what the Python of the device nodes does frame by frame or wheel by wheel
+(``ImuNode.frames_for``, ``StarTrackerNode.frames_for``, ``WheelNode.status_row``, ``_SampledNode.due_flags``,
+``WheelNode.torque_at``, ``Devices.rows_due``, ``Simulator._on_delivered``), with the same arithmetic in the
+same order (no fastmath), so the frames are bit for bit those of the Python path; tests/hil_sim/
+test_device_kernels.py checks them against it. Python's per-call cost is the budget of a fast-mode tick
+(~0.1 ms of it was these per-frame calls), hence a handful of compiled calls per tick instead.
+
+The pending-frame queue (frames sampled, not yet due) is held as arrays: ``Q_DUE`` (C,) due time,
+``Q_M`` (C,) message index, ``Q_ROWS`` (C, width) value row, ``Q_TS`` (C,) the sample time of a row whose
+``age_ms`` is set at transmission (ST_QUAT_B), else NaN; ``Q_N[0]`` is the number queued (in queue order).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_EPS_S = 1e-9
+# RWn_STATUS.fault bits and hil_sim.world.WheelStatus.fault bits (as in hil_sim.devices)
+_FAULT_OVERSPEED, _FAULT_CMD_TIMEOUT, _FAULT_DRIVE = 1, 2, 4
+_WORLD_STUCK, _WORLD_NO_TORQUE, _WORLD_SPEED_LIMIT = 1, 2, 4
+# WHEEL_STATE columns: held torque command, time of the last command (NaN: none yet), commands applied,
+# tick_lsb of the last command (NaN: none yet)
+WS_CMD, WS_LAST_T, WS_APPLIED, WS_TICK = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def due_flags_kernel(times_s, next_due, period, out, offset):
+    """``_SampledNode.due_flags``: out[offset + j] for each time; returns the new next due time."""
+    nxt = next_due
+    for j in range(times_s.shape[0]):
+        t_s = times_s[j]
+        if t_s + _EPS_S < nxt:
+            out[offset + j] = False
+        else:
+            k = math.floor((t_s - nxt + _EPS_S) / period) + 1
+            if k < 1:
+                k = 1
+            nxt += period * k
+            out[offset + j] = True
+    return nxt
+
+
+@njit(cache=True)
+def plan_period(times_s, imu_clock, st_clock, imu_due, st_due, wheel_state, timeout_s, u_seq):
+    """Before one world period: the sensors' due flags at times_s[1:] (``due_flags``; each clock = [next due,
+    period], the next due time advanced in place) and the wheel commands u_seq[j, 0, i] =
+    ``torque_at(times_s[j])`` of each wheel (0 before its first command and after its timeout_s[i]).
+    Returns the number of IMU samples due * 1000 + star-tracker samples due."""
+    J = times_s.shape[0] - 1
+    imu_clock[0] = due_flags_kernel(times_s[1:], imu_clock[0], imu_clock[1], imu_due, 0)
+    st_clock[0] = due_flags_kernel(times_s[1:], st_clock[0], st_clock[1], st_due, 0)
+    for j in range(J):
+        t = times_s[j]
+        for i in range(wheel_state.shape[0]):
+            last = wheel_state[i, WS_LAST_T]
+            if math.isnan(last) or t - last > timeout_s[i] + _EPS_S:
+                u_seq[j, 0, i] = 0.0
+            else:
+                u_seq[j, 0, i] = wheel_state[i, WS_CMD]
+    n_imu = 0
+    n_st = 0
+    for j in range(J):
+        if imu_due[j]:
+            n_imu += 1
+        if st_due[j]:
+            n_st += 1
+    return n_imu * 1000 + n_st
+
+
+@njit(cache=True)
+def queue_samples(times_s, imu_due, gyro, sat, imu_lat, imu_lo, imu_hi, imu_m, st_due, q, valid, blind, st_lat,
+                  st_ms, st_cols, st_seq, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N):
+    """After one world period: the IMU_RATE row of each gyro sample (``ImuNode.frames_for``) and the
+    ST_QUAT_A/B rows of each star-tracker sample (``StarTrackerNode.frames_for``) taken at times_s[j + 1],
+    appended to the queue in sample order. gyro (J, 1, 3), sat (J, 1), q (J, 1, 4), valid/blind (J, 1);
+    st_ms = (A, B message index); st_cols = A's (q_w, q_x, valid, blind_source, sample_seq), B's (q_y, q_z,
+    sample_seq); st_seq[0]: the next sample_seq. The caller leaves room for 3 rows per step.
+    Returns (IMU samples, star-tracker samples) as imu * 1000 + st."""
+    n = Q_N[0]
+    width = Q_ROWS.shape[1]
+    n_imu = 0
+    n_st = 0
+    for j in range(times_s.shape[0] - 1):
+        t_s = times_s[j + 1]
+        if imu_due[j]:
+            saturated = sat[j, 0]
+            w0, w1, w2 = gyro[j, 0, 0], gyro[j, 0, 1], gyro[j, 0, 2]
+            if w0 < imu_lo:
+                w0, saturated = imu_lo, True
+            elif w0 > imu_hi:
+                w0, saturated = imu_hi, True
+            if w1 < imu_lo:
+                w1, saturated = imu_lo, True
+            elif w1 > imu_hi:
+                w1, saturated = imu_hi, True
+            if w2 < imu_lo:
+                w2, saturated = imu_lo, True
+            elif w2 > imu_hi:
+                w2, saturated = imu_hi, True
+            for c in range(width):
+                Q_ROWS[n, c] = 0.0
+            Q_ROWS[n, 2] = w0
+            Q_ROWS[n, 3] = w1
+            Q_ROWS[n, 4] = w2
+            Q_ROWS[n, 5] = 1.0 if saturated else 0.0
+            Q_DUE[n] = t_s + imu_lat
+            Q_M[n] = imu_m
+            Q_TS[n] = np.nan
+            n += 1
+            n_imu += 1
+        if st_due[j]:
+            q0, q1, q2, q3 = q[j, 0, 0], q[j, 0, 1], q[j, 0, 2], q[j, 0, 3]
+            if q0 < 0:  # same rotation, canonical sign
+                q0, q1, q2, q3 = -q0, -q1, -q2, -q3
+            # min(max(c, -1.0), 1.0) as Python evaluates it (a NaN passes through)
+            q0 = -1.0 if -1.0 > q0 else q0
+            q0 = 1.0 if 1.0 < q0 else q0
+            q1 = -1.0 if -1.0 > q1 else q1
+            q1 = 1.0 if 1.0 < q1 else q1
+            q2 = -1.0 if -1.0 > q2 else q2
+            q2 = 1.0 if 1.0 < q2 else q2
+            q3 = -1.0 if -1.0 > q3 else q3
+            q3 = 1.0 if 1.0 < q3 else q3
+            seq = st_seq[0]
+            st_seq[0] = (seq + 1) & 0x0F
+            due = t_s + st_lat
+            for c in range(width):
+                Q_ROWS[n, c] = 0.0
+                Q_ROWS[n + 1, c] = 0.0
+            Q_ROWS[n, st_cols[0]] = q0
+            Q_ROWS[n, st_cols[1]] = q1
+            Q_ROWS[n, st_cols[2]] = 1.0 if valid[j, 0] else 0.0
+            Q_ROWS[n, st_cols[3]] = float(blind[j, 0])
+            Q_ROWS[n, st_cols[4]] = float(seq)
+            Q_DUE[n] = due
+            Q_M[n] = st_ms[0]
+            Q_TS[n] = np.nan
+            Q_ROWS[n + 1, st_cols[5]] = q2
+            Q_ROWS[n + 1, st_cols[6]] = q3
+            Q_ROWS[n + 1, st_cols[7]] = float(seq)
+            Q_DUE[n + 1] = due
+            Q_M[n + 1] = st_ms[1]
+            Q_TS[n + 1] = t_s
+            n += 2
+            n_st += 1
+    Q_N[0] = n
+    return n_imu * 1000 + n_st
+
+
+@njit(cache=True)
+def take_due(t_s, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N, age_col, OUT_IDX, OUT_ROWS, start):
+    """``Devices.rows_due(t_s)``: the queued rows due by t_s, in due order (stable: queue order among equal
+    due times), written to OUT_IDX/OUT_ROWS from ``start`` with a transmission-time row's age_ms (slot
+    ``age_col``) set for t_s; the rest stay queued in order. Returns how many were written."""
+    n = Q_N[0]
+    cut = t_s + _EPS_S
+    width = Q_ROWS.shape[1]
+    order = np.empty(n, np.int64)
+    k = 0
+    for i in range(n):
+        if Q_DUE[i] <= cut:
+            # insertion sort by due time, after any equal one (stable)
+            p = k
+            while p > 0 and Q_DUE[order[p - 1]] > Q_DUE[i]:
+                order[p] = order[p - 1]
+                p -= 1
+            order[p] = i
+            k += 1
+    for r in range(k):
+        i = order[r]
+        OUT_IDX[start + r] = Q_M[i]
+        for c in range(width):
+            OUT_ROWS[start + r, c] = Q_ROWS[i, c]
+        if not math.isnan(Q_TS[i]):
+            age = np.rint((t_s - Q_TS[i]) * 1000.0)  # round(): half to even, as Python's
+            if age < 0.0:
+                age = 0.0
+            if age > 255.0:
+                age = 255.0
+            OUT_ROWS[start + r, age_col] = age
+    if k:
+        m = 0
+        for i in range(n):
+            if not Q_DUE[i] <= cut:
+                if m != i:
+                    Q_DUE[m] = Q_DUE[i]
+                    Q_M[m] = Q_M[i]
+                    Q_TS[m] = Q_TS[i]
+                    for c in range(width):
+                        Q_ROWS[m, c] = Q_ROWS[i, c]
+                m += 1
+        Q_N[0] = m
+    return k
+
+
+@njit(cache=True)
+def wheel_status_rows(t_s, X, U_APPLIED, W_KT, TEMP, FLAGS, wheel_state, timeout_s, status_ms, cols, ranges,
+                      OUT_IDX, OUT_ROWS, start):
+    """``Devices.wheel_status_rows`` of run 0 of a WorldBatch (``World.wheel_status`` then
+    ``WheelNode.status_row`` per wheel), from ``start``. cols: (speed, torque, current, temp, fault) slots;
+    ranges (4, 2): speed, torque, current, temp limits. Returns the number of wheels."""
+    N = wheel_state.shape[0]
+    width = OUT_ROWS.shape[1]
+    for i in range(N):
+        r = start + i
+        speed = X[7 + i, 0]
+        applied = U_APPLIED[i, 0]
+        current = applied / W_KT[i, 0]
+        temp = TEMP[i, 0]
+        flags = FLAGS[i, 0]
+        fault = 0
+        if flags & _WORLD_SPEED_LIMIT:
+            fault |= _FAULT_OVERSPEED
+        if flags & (_WORLD_STUCK | _WORLD_NO_TORQUE):
+            fault |= _FAULT_DRIVE
+        last = wheel_state[i, WS_LAST_T]
+        if not math.isnan(last) and t_s - last > timeout_s[i] + _EPS_S:
+            fault |= _FAULT_CMD_TIMEOUT
+        # _clamp: lo if value < lo, hi if value > hi (a NaN passes through)
+        if speed < ranges[0, 0]:
+            speed = ranges[0, 0]
+            fault |= _FAULT_OVERSPEED
+        elif speed > ranges[0, 1]:
+            speed = ranges[0, 1]
+            fault |= _FAULT_OVERSPEED
+        if applied < ranges[1, 0]:
+            applied = ranges[1, 0]
+        elif applied > ranges[1, 1]:
+            applied = ranges[1, 1]
+        if current < ranges[2, 0]:
+            current = ranges[2, 0]
+        elif current > ranges[2, 1]:
+            current = ranges[2, 1]
+        if temp < ranges[3, 0]:
+            temp = ranges[3, 0]
+        elif temp > ranges[3, 1]:
+            temp = ranges[3, 1]
+        for c in range(width):
+            OUT_ROWS[r, c] = 0.0
+        OUT_IDX[r] = status_ms[i]
+        OUT_ROWS[r, cols[0]] = speed
+        OUT_ROWS[r, cols[1]] = applied
+        OUT_ROWS[r, cols[2]] = current
+        OUT_ROWS[r, cols[3]] = np.rint(temp)  # round(): half to even, as Python's
+        OUT_ROWS[r, cols[4]] = float(fault)
+    return N
+
+
+@njit(cache=True)
+def tick_rows(t_s, sync, sync_m, sync_cols, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N, age_col, X, U_APPLIED, W_KT, TEMP, FLAGS,
+              wheel_state, timeout_s, status_ms, status_cols, ranges, OUT_IDX, OUT_ROWS):
+    """The frames of ``Simulator.begin_tick`` as rows: from row 1 the sensor rows due by t_s (``take_due``)
+    then the wheel statuses (``wheel_status_rows``), in row 0 SYNC with sync = (tick, period_ms) and
+    frames_following = min(rows after it, 255). Returns the number of rows (SYNC included)."""
+    n = 1 + take_due(t_s, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N, age_col, OUT_IDX, OUT_ROWS, 1)
+    n += wheel_status_rows(t_s, X, U_APPLIED, W_KT, TEMP, FLAGS, wheel_state, timeout_s, status_ms, status_cols,
+                           ranges, OUT_IDX, OUT_ROWS, n)
+    for c in range(OUT_ROWS.shape[1]):
+        OUT_ROWS[0, c] = 0.0
+    OUT_IDX[0] = sync_m
+    OUT_ROWS[0, sync_cols[0]] = sync[0]
+    OUT_ROWS[0, sync_cols[1]] = float(min(n - 1, 255))
+    OUT_ROWS[0, sync_cols[2]] = sync[1]
+    return n
+
+
+@njit(cache=True)
+def apply_received(status, ids, values, first, end, cmd_wheel_of_id, torque_col, tick_lsb_col, cycle_done_id,
+                   done_tick_col, heartbeat_id, t_s, wheel_state, counts):
+    """``Simulator._on_delivered`` for the kernel-classified frames first..end-1 of a received burst (class
+    code <= 1: delivered), in order: a wheel command is taken by its wheel (``wheel_state``), heartbeats
+    are counted, and at a CYCLE_DONE it stops (its tick in counts[3]) so that the caller judges the tick.
+    counts: [wheel commands, heartbeats, CYCLE_DONE seen (0/1), its tick]. Returns the index after the
+    last frame handled."""
+    for i in range(first, end):
+        if status[i] > 1:
+            continue
+        fid = ids[i]
+        w = cmd_wheel_of_id[fid] if 0 <= fid < cmd_wheel_of_id.shape[0] else -1
+        if w >= 0:
+            wheel_state[w, WS_CMD] = values[i, torque_col]
+            wheel_state[w, WS_TICK] = values[i, tick_lsb_col]
+            wheel_state[w, WS_LAST_T] = t_s
+            wheel_state[w, WS_APPLIED] += 1.0
+            counts[0] += 1
+        elif fid == cycle_done_id:
+            counts[2] = 1
+            counts[3] = np.int64(values[i, done_tick_col])
+            return i + 1
+        elif fid == heartbeat_id:
+            counts[1] += 1
+    return end
