@@ -18,6 +18,8 @@ import math
 import numpy as np
 from numba import njit
 
+from hil_sim.world import _world_period_kernel
+
 _EPS_S = 1e-9
 # RWn_STATUS.fault bits and hil_sim.world.WheelStatus.fault bits (as in hil_sim.devices)
 _FAULT_OVERSPEED, _FAULT_CMD_TIMEOUT, _FAULT_DRIVE = 1, 2, 4
@@ -294,3 +296,40 @@ def apply_received(status, ids, values, first, end, cmd_wheel_of_id, torque_col,
         elif fid == heartbeat_id:
             counts[1] += 1
     return end
+
+
+@njit(cache=True)
+def period_fused(times_s, imu_clock, st_clock, imu_due, st_due, wheel_state, timeout_s, u_seq,
+                 dist_buf, dist_pos, dist_n, no_normals, imu_buf, imu_pos, st_buf, st_pos, n_runs,
+                 X, D, TEMP, G, W, B, dt_sub, n_sub, U_APPLIED, FLAGS, DECAY, GM, HAS_COULOMB, WORK, T_END, ORB, sun_c,
+                 moon_c, eph_t0, eph_h, AUX, CLOCK, BIAS, GYRO_P, GYRO_SEQ, SAT_SEQ, ST_P, ST_BASIS, ST_Q, ST_VALID,
+                 ST_BLIND, ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ,
+                 imu_lat, imu_lo, imu_hi, imu_m, st_lat, st_ms, st_cols, st_seq, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N, out):
+    """One GNC period of ``Devices.step_world`` in one call: ``plan_period``, then the world's
+    ``_world_period_kernel`` with its normals read from the streams' buffers where they stand (what
+    ``NormalStream.take_rows`` would slice: dist_n numbers per step when dist_n > 0, else the zero rows
+    ``no_normals``; 6 * n_runs per gyro sample; 3 * n_runs per star-tracker sample; the caller checked that
+    the buffers hold them), then ``queue_samples``. out: [steps done, gyro samples, star-tracker samples]
+    (the caller advances the streams); nothing is queued when a step was refused (steps done < J)."""
+    J = times_s.shape[0] - 1
+    counts = plan_period(times_s, imu_clock, st_clock, imu_due, st_due, wheel_state, timeout_s, u_seq)
+    n_imu = counts // 1000
+    n_st = counts % 1000
+    if dist_n > 0:
+        normals = dist_buf[dist_pos:dist_pos + dist_n * J].reshape((J, dist_n))
+    else:
+        normals = no_normals
+    k_imu = 6 * n_runs
+    imu_normals = imu_buf[imu_pos:imu_pos + k_imu * n_imu].reshape((n_imu, k_imu))
+    k_st = 3 * n_runs
+    st_normals = st_buf[st_pos:st_pos + k_st * n_st].reshape((n_st, k_st))
+    done = _world_period_kernel(X, D, TEMP, G, W, B, u_seq, normals, dt_sub, n_sub, U_APPLIED, FLAGS, DECAY, GM,
+                                HAS_COULOMB, WORK, T_END, ORB, sun_c, moon_c, eph_t0, eph_h, AUX, imu_due, CLOCK,
+                                imu_normals, BIAS, GYRO_P, GYRO_SEQ, SAT_SEQ, st_due, ST_P, ST_BASIS, st_normals, ST_Q,
+                                ST_VALID, ST_BLIND, ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ)
+    out[0] = done
+    out[1] = n_imu
+    out[2] = n_st
+    if done == J:
+        queue_samples(times_s, imu_due, GYRO_SEQ, SAT_SEQ, imu_lat, imu_lo, imu_hi, imu_m, st_due, ST_Q_SEQ,
+                      ST_VALID_SEQ, ST_BLIND_SEQ, st_lat, st_ms, st_cols, st_seq, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N)

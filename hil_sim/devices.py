@@ -370,10 +370,33 @@ class Devices:
         self._world_key: Any = None
         self._world_fast: tuple | None = None
         self._plan: tuple | None = None
+        self._tick_args: tuple | None = None  # tick_rows' kernel arguments (see there)
+        self._fused_args: list | None = None  # _step_fused's kernel arguments (see there)
         st = star_tracker
         self._st_ms = np.array([st._a_m, st._b_m], dtype=np.int64)
         self._st_cols = np.array(st.a_cols + st.b_cols, dtype=np.int64)
-        self._imu_range = imu._range
+        lo, hi = imu._range
+        self._imu_range = (float(lo), float(hi))
+        self._warm_kernels()
+
+    def _warm_kernels(self) -> None:
+        """Call the kernels a run may reach only later (the three-call period path when a normal stream
+        refills, ``take_due`` of real-time runs) once with nothing to do and the types a run passes, so that
+        they compile (or load) here, at set-up, and with the warm-up (hil_sim.warmup), not inside a tick."""
+        steps = 0
+        u_seq, none = np.zeros((steps, 1, len(self.wheels))), np.zeros(steps, dtype=np.bool_)
+        times = np.zeros(steps + 1)
+        dk.plan_period(times, self.imu.clock.copy(), self.star_tracker.clock.copy(), none, none, self.wheel_state,
+                       self.wheel_timeout_s, u_seq)
+        lo, hi = self._imu_range
+        dk.queue_samples(times, none, np.zeros((steps, 1, 3)), np.zeros((steps, 1), dtype=np.bool_), 0.0, lo, hi,
+                         0, none, np.zeros((steps, 1, 4)), np.zeros((steps, 1), dtype=np.bool_),
+                         np.zeros((steps, 1), dtype=np.int64), 0.0, self._st_ms, self._st_cols,
+                         self.star_tracker.seq_state.copy(), self.q_due, self.q_m, self.q_rows, self.q_ts,
+                         self.q_n.copy())
+        idx, rows = self._out(1)
+        dk.take_due(-math.inf, self.q_due, self.q_m, self.q_rows, self.q_ts, np.zeros(1, dtype=np.int64),
+                    self.star_tracker.age_col, idx, rows, 0)
 
     @property
     def pending_count(self) -> int:
@@ -404,6 +427,7 @@ class Devices:
         if n + extra <= cap:
             return
         cap = max(2 * cap, n + extra)
+        self._tick_args = None  # the queue's arrays change
         for name in ("q_due", "q_m", "q_rows", "q_ts"):
             old = getattr(self, name)
             new = np.zeros((cap,) + old.shape[1:], dtype=old.dtype)
@@ -468,17 +492,64 @@ class Devices:
                                  np.zeros(steps, dtype=np.bool_))
         u_seq, imu_due, st_due = plan
         imu, st = self.imu, self.star_tracker
+        if steps and self._step_fused(world, fast[0], dt_s, times, steps):
+            return
         counts = dk.plan_period(times, imu.clock, st.clock, imu_due, st_due, self.wheel_state, self.wheel_timeout_s,
                                 u_seq)
         gyro, sat, q, valid, blind = world.advance_planned(dt_s, u_seq, imu_due, st_due, counts // 1000,
                                                            counts % 1000)
         self._reserve(3 * steps)
         lo, hi = self._imu_range
-        counts = dk.queue_samples(times, imu_due, gyro, sat, imu.latency_s, lo, hi, imu._m, st_due, q, valid, blind,
-                                  st.latency_s, self._st_ms, self._st_cols, st.seq_state, self.q_due, self.q_m,
+        counts = dk.queue_samples(times, imu_due, gyro, sat, float(imu.latency_s), lo, hi, imu._m, st_due, q, valid,
+                                  blind, float(st.latency_s), self._st_ms, self._st_cols, st.seq_state, self.q_due, self.q_m,
                                   self.q_rows, self.q_ts, self.q_n)
         imu.samples += counts // 1000
         st.samples += counts % 1000
+
+    def _step_fused(self, world: Any, b: Any, dt_s: float, times: np.ndarray, steps: int) -> bool:
+        """``step_world`` in one compiled call (``device_kernels.period_fused``) when the world's normal
+        streams hold the period's numbers in their buffers (else False, nothing done: the caller takes
+        the three-call path, whose draws refill them)."""
+        M = b.n_runs
+        n_sub = world.sub_steps(dt_s)
+        nd, ni, ns = b.normals_disturbance, b.normals_imu, b.normals_star_tracker
+        dist_n = n_sub * M * 3 if b._has_random_disturbance and n_sub > 0 else 0
+        if (nd._pos + dist_n * steps > nd._buf.size or ni._pos + 6 * M * steps > ni._buf.size
+                or ns._pos + 3 * M * steps > ns._buf.size):
+            return False
+        wargs = b.prepare_period(dt_s, n_sub, steps)
+        self._reserve(3 * steps)
+        args = self._fused_args
+        if args is None or args[-1] is not wargs or args[-2] is not self.q_due or args[-3] != (dt_s, n_sub):
+            no_normals = b._no_normals_rows
+            if no_normals.shape[0] != steps:
+                no_normals = b._no_normals_rows = np.zeros((steps, b._no_normals.size))
+            u_seq, imu_due, st_due = self._plan
+            imu, st = self.imu, self.star_tracker
+            lo, hi = self._imu_range
+            w = wargs
+            args = self._fused_args = [
+                None, imu.clock, st.clock, imu_due, st_due, self.wheel_state, self.wheel_timeout_s, u_seq,
+                None, 0, dist_n, no_normals, None, 0, None, 0, M,
+                w[0], w[1], w[2], w[3], w[4], w[5], w[8], w[9], w[10], w[11], w[12], w[13], w[14], w[15], w[16], w[17],
+                w[18], w[19], w[20], w[21], w[22], w[24], w[26], w[27], w[28], w[29], w[31], w[32], w[34], w[35],
+                w[36], w[37], w[38], w[39],
+                float(imu.latency_s), lo, hi, imu._m, float(st.latency_s), self._st_ms, self._st_cols, st.seq_state, self.q_due,
+                self.q_m, self.q_rows, self.q_ts, self.q_n, np.zeros(3, dtype=np.int64),
+                (dt_s, n_sub), self.q_due, wargs]
+        args[0] = times
+        args[8], args[9], args[12], args[13], args[14], args[15] = nd._buf, nd._pos, ni._buf, ni._pos, ns._buf, ns._pos
+        out = args[-4]
+        dk.period_fused(*args[:-3])
+        done, n_imu, n_st = out.tolist()
+        # the draws take_rows would have made (made before the kernel: also when a step is refused)
+        nd._pos += dist_n * steps
+        ni._pos += 6 * M * n_imu
+        ns._pos += 3 * M * n_st
+        b.finish_period(done, args[7], args[3])
+        self.imu.samples += n_imu
+        self.star_tracker.samples += n_st
+        return True
 
     def _step_world_python(self, world: Any, dt_s: float, times_s: Sequence[float]) -> None:
         steps = len(times_s) - 1
@@ -506,16 +577,19 @@ class Devices:
         """A tick's frames as rows (one compiled call): SYNC(tick) in row 0, then ``rows_due(t_s)`` and
         ``wheel_status_rows(world, t_s)``; returns (message indices, rows, count) or None when ``world``
         is not a ``hil_sim.world.World`` (then the caller takes the Python path)."""
-        fast = self._fast_world(world)
-        if fast is None:
-            return None
-        _, X, U_APPLIED, W_KT, TEMP, FLAGS = fast
-        idx, rows = self._out(1 + int(self.q_n[0]) + len(self.wheels))
-        n = dk.tick_rows(t_s, (float(tick), float(period_ms)), sync_m, sync_cols, self.q_due, self.q_m, self.q_rows,
-                         self.q_ts, self.q_n, self.star_tracker.age_col, X, U_APPLIED, W_KT, TEMP, FLAGS,
-                         self.wheel_state, self.wheel_timeout_s, self._status_ms, self._status_cols(),
-                         self._status_ranges(), idx, rows)
-        return idx, rows, n
+        args = self._tick_args
+        if args is None or args[0] is not world or args[-2].shape[0] < 1 + int(self.q_n[0]) + len(self.wheels):
+            fast = self._fast_world(world)
+            if fast is None:
+                return None
+            _, X, U_APPLIED, W_KT, TEMP, FLAGS = fast
+            idx, rows = self._out(1 + int(self.q_n[0]) + len(self.wheels) + 16)
+            args = self._tick_args = (world, sync_m, sync_cols, self.q_due, self.q_m, self.q_rows, self.q_ts, self.q_n,
+                                      self.star_tracker.age_col, X, U_APPLIED, W_KT, TEMP, FLAGS, self.wheel_state,
+                                      self.wheel_timeout_s, self._status_ms, self._status_cols(), self._status_ranges(),
+                                      idx, rows)
+        n = dk.tick_rows(t_s, (float(tick), float(period_ms)), *args[1:])
+        return args[-2], args[-1], n
 
     def _status_cols(self) -> np.ndarray:
         cols = getattr(self, "_status_cols_arr", None)

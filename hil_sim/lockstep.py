@@ -223,8 +223,10 @@ class Simulator:
 
     # ---------------------------------------------------------------------------------- receiving
     def _receive_until_done(self, k: int, wait_s: float) -> bool:
-        for msg in self.injector.release(self.t_s, "rx"):  # flight-software frames delayed by a fault
-            self._classify(msg, self.t_s)
+        t_s = self.t_s
+        if self.injector:  # (without faults nothing is ever held)
+            for msg in self.injector.release(t_s, "rx"):  # flight-software frames delayed by a fault
+                self._classify(msg, t_s)
         # With a doorbell (socketcan) a waiting tick starts with the wait: this tick's answer comes after this
         # tick's SYNC, which has just been sent (earlier frames still queued are read after the wake-up).
         wait_first = self._wait_for is not None and wait_s > 0.0
@@ -235,7 +237,7 @@ class Simulator:
                 return True
             rx = self._rx
             if rx is not None and rx.pos < rx.n:
-                self._handle_next(rx, self.t_s, k)
+                self._handle_next(rx, t_s, k)
                 continue
             burst = None if wait_first else recv_burst(self.bus, 0.0)  # clock reads only when it is empty
             wait_first = False

@@ -186,6 +186,9 @@ def _world_period_kernel(X, D, TEMP, G, W, B, U_SEQ, NORMALS_SEQ, dt_sub, n_sub,
     return J
 
 
+_A_TABLE = 40  # slot of the ephemeris table in WorldBatch._period_kernel_args (after the kernel's 40 arguments)
+
+
 class WorldBatch:
     """M runs stepped together. All runs share the epoch and the number of wheels; any other parameter may
     differ per run (dispersions). Outputs and properties have a leading run axis (M, ...); the dynamics
@@ -252,6 +255,7 @@ class WorldBatch:
         self.ST_BLIND = np.zeros(M, dtype=np.int64)
 
         self._period_out: tuple[np.ndarray, ...] | None = None
+        self._kernel_args: list | None = None  # see _period_kernel_args
         self._t_end = np.zeros(0)
         self._clock = np.array([0.0, 0.0, self.imu_period_s[0], math.nan])  # see _world_period_kernel
         self._no_normals_rows = np.zeros((0, M * 3))
@@ -321,10 +325,6 @@ class WorldBatch:
         rows where the sensor was not due are left unset. ``n_imu``/``n_st``: the number of True flags in
         imu_due/st_due when the caller has counted them."""
         J, M = len(u_seq), self.n_runs
-        eph = self.ephemeris
-        t_last = self._t + J * dt_s  # the ephemeris table's reach: a bound, the kernel accumulates exactly
-        if t_last + dt_s >= eph.t_end_s or self._t < eph.t_start_s:
-            eph.ensure(self._t, t_last + dt_s)
         if self._has_random_disturbance and n_sub > 0:
             normals = self.normals_disturbance.take_rows(n_sub * M * 3, J)
         else:
@@ -338,6 +338,21 @@ class WorldBatch:
             n_st = int(np.count_nonzero(st_due))
         imu_normals = self.normals_imu.take_rows(M * 6, n_imu)
         st_normals = self.normals_star_tracker.take_rows(M * 3, n_st)
+        args = self.prepare_period(dt_s, n_sub, J)
+        args[6], args[7] = u_seq, normals
+        args[23], args[25], args[30], args[33] = imu_due, imu_normals, st_due, st_normals
+        self.finish_period(_world_period_kernel(*args[:_A_TABLE]), u_seq, imu_due)
+        return self._period_out
+
+    def prepare_period(self, dt_s: float, n_sub: int, J: int) -> list:
+        """What ``advance_sampled`` does before drawing the period's normals and calling the kernel (the
+        ephemeris table's reach, the step coefficients, the outputs, the clock), with the kernel's arguments
+        (``_period_kernel_args``, dt and sub-steps set) returned."""
+        eph = self.ephemeris
+        t_last = self._t + J * dt_s  # the ephemeris table's reach: a bound, the kernel accumulates exactly
+        if t_last + dt_s >= eph.t_end_s or self._t < eph.t_start_s:
+            eph.ensure(self._t, t_last + dt_s)
+        M = self.n_runs
         dt_sub = dt_s / n_sub if n_sub else 0.0
         if dt_sub != self._coef_dt:
             self._coef = dyn.step_coefficients(self.W, self.B, dt_sub)
@@ -347,21 +362,44 @@ class WorldBatch:
             self._period_out = (np.zeros((J, M, 3)), np.zeros((J, M), dtype=np.bool_), np.zeros((J, M, 4)),
                                 np.zeros((J, M), dtype=np.bool_), np.zeros((J, M), np.int64))
             self._t_end = np.zeros(J)
-        gyro, sat, st_q, st_valid, st_blind = self._period_out
-        t_end, clock = self._t_end, self._clock
+        table = eph.table  # one read: consistent even if another thread extends the table
+        args = self._kernel_args
+        if (args is None or args[_A_TABLE] is not table or args[_A_TABLE + 1] is not self._coef
+                or args[16] is not self._t_end):
+            args = self._kernel_args = self._period_kernel_args(table)
+        args[8], args[9] = dt_sub, n_sub
+        clock = self._clock
         clock[0], clock[1] = self._t, dt_s
         clock[3] = math.nan if self._t_last_imu is None else self._t_last_imu
-        done = self._period_kernel(u_seq, normals, dt_sub, n_sub, t_end, imu_due, clock, imu_normals, st_due,
-                                   st_normals, self._period_out)
+        return args
+
+    def finish_period(self, done: int, u_seq: np.ndarray, imu_due: np.ndarray) -> None:
+        """After the period kernel did ``done`` of len(u_seq) steps: the clock and the last gyro sample;
+        ValueError if a step was refused (a command not finite)."""
         if done:
-            self._t = float(t_end[done - 1])
+            clock = self._clock
+            self._t = float(self._t_end[done - 1])
             if not math.isnan(clock[3]):
                 self._t_last_imu = float(clock[3])
             if imu_due[done - 1]:
+                gyro, sat = self._period_out[0], self._period_out[1]
                 self.GYRO_OUT[:], self.GYRO_SAT[:] = gyro[done - 1], sat[done - 1]
-        if done < J:
+        if done < len(u_seq):
             raise ValueError(f"step: wheel_torque_cmd_Nm must be finite, got {u_seq[done].tolist()!r}")
-        return gyro, sat, st_q, st_valid, st_blind
+
+    def _period_kernel_args(self, table: tuple) -> list:
+        """``_world_period_kernel``'s arguments on this batch's state, as ``_period_kernel`` passes them, with
+        the per-period ones (commands, normals, dt, due flags: slots 6-9, 23, 25, 30, 33) to be filled in,
+        then the ephemeris table and the step coefficients they were made from (slots _A_TABLE, _A_TABLE + 1).
+        Rebuilt when the step coefficients, the period's length or the table change."""
+        eph = self.ephemeris
+        eph_t0, sun_c, moon_c = table
+        decay, gm, has_coulomb = self._coef
+        gyro, sat, st_q, st_valid, st_blind = self._period_out
+        return [self.X, self.D, self.TEMP, self.G, self.W, self.B, None, None, 0.0, 0, self.U_APPLIED, self.FLAGS,
+                decay, gm, has_coulomb, self._work, self._t_end, self.ORB, sun_c, moon_c, eph_t0, eph.node_spacing_s,
+                self.AUX, None, self._clock, None, self.BIAS, self.GYRO_P, gyro, sat, None, self.ST_P, self.ST_BASIS,
+                None, self.ST_Q, self.ST_VALID, self.ST_BLIND, st_q, st_valid, st_blind, table, self._coef]
 
     def step(self, dt_s: float, wheel_torque_cmd_Nm: np.ndarray) -> None:
         """Advance all runs by dt_s (split into equal RK4 sub-steps <= max_integration_step_s) with the motor
@@ -501,6 +539,15 @@ class World:
             dt_s, self._last_n_sub, u.reshape(u.shape[0], 1, self.n_wheels), np.asarray(imu_due, dtype=np.bool_),
             np.asarray(st_due, dtype=np.bool_))
         return gyro[:, 0], sat[:, 0], q[:, 0], valid[:, 0], blind[:, 0]
+
+    def sub_steps(self, dt_s: float) -> int:
+        """RK4 sub-steps of a step of ``dt_s`` (each <= max_integration_step_s)."""
+        if dt_s != self._last_dt:
+            if not dt_s > 0.0:
+                raise ValueError(f"step: dt_s must be > 0, got {dt_s!r}")
+            self._last_dt = dt_s
+            self._last_n_sub = max(1, math.ceil(dt_s / self.batch.max_step_s - 1e-9))
+        return self._last_n_sub
 
     def advance_planned(self, dt_s: float, u_seq: np.ndarray, imu_due: np.ndarray, st_due: np.ndarray, n_imu: int,
                         n_st: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
