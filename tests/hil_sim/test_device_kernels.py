@@ -1,0 +1,190 @@
+"""The simulator's tick kernels (hil_sim.device_kernels) against the Python of the device nodes they replace."""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from fsw.bus.icd import Icd
+from hil_sim import device_kernels as dk
+from hil_sim.devices import Devices, ImuNode, StarTrackerNode, WheelNode
+from hil_sim.params import WorldParams
+from hil_sim.world import World
+
+
+@pytest.fixture(scope="module")
+def icd() -> Icd:
+    return Icd()
+
+
+def _reference_rows_due(pending: list, t_s: float) -> tuple[list, list, list]:
+    """The list-based ``Devices.rows_due`` of before the array queue (sorted by due time, stable)."""
+    cut = t_s + 1e-9
+    due = [p for p in pending if p.due_s <= cut]
+    rest = [p for p in pending if p.due_s > cut]
+    due.sort(key=lambda p: p.due_s)
+    return [p.m for p in due], [p.values(t_s) for p in due], rest
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_plan_period_matches_due_flags_and_torque_at(icd: Icd, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    imu_ref, st_ref = ImuNode(icd, 100.0), StarTrackerNode(icd, 7.0)
+    imu, st = ImuNode(icd, 100.0), StarTrackerNode(icd, 7.0)
+    wheels = [WheelNode(i, icd, cmd_timeout_s=0.25) for i in range(1, 5)]
+    state = np.stack([w.state for w in wheels])
+    timeouts = np.array([w.cmd_timeout_s for w in wheels])
+    t = 0.0
+    for _ in range(200):
+        times = t + np.arange(11) * 0.01
+        if rng.random() < 0.1:
+            times = times + 0.05  # a gap: several periods skipped at once
+        for i, w in enumerate(wheels):  # commands now and then; some wheels go silent (timeouts)
+            if rng.random() < 0.3 * (i + 1) / 4:
+                w.on_command({"torque_cmd": rng.normal(), "tick_lsb": int(rng.integers(256))}, times[0] - 0.01)
+        state[:] = np.stack([w.state for w in wheels])
+        imu_due, st_due = np.zeros(10, dtype=np.bool_), np.zeros(10, dtype=np.bool_)
+        u = np.full((10, 1, 4), np.nan)
+        counts = dk.plan_period(times, imu.clock, st.clock, imu_due, st_due, state, timeouts, u)
+        ref_imu = imu_ref.due_flags(times[1:].tolist())
+        ref_st = st_ref.due_flags(times[1:].tolist())
+        assert imu_due.tolist() == ref_imu and st_due.tolist() == ref_st
+        assert imu.next_due_s == imu_ref.next_due_s and st.next_due_s == st_ref.next_due_s
+        assert counts == sum(ref_imu) * 1000 + sum(ref_st)
+        ref_u = [[w.torque_at(tj) for w in wheels] for tj in times[:-1].tolist()]
+        assert u[:, 0, :].tolist() == ref_u
+        t = float(times[-1])
+
+
+def test_queue_and_take_due_match_the_nodes_frames(icd: Icd) -> None:
+    rng = np.random.default_rng(5)
+    world = SimpleNamespace(n_wheels=4, imu_period_s=0.01, star_tracker_period_s=0.1)
+    devices = Devices.for_world(world, icd)
+    ref_imu = ImuNode(icd, 100.0, latency_s=0.003)
+    ref_st = StarTrackerNode(icd, 10.0, latency_s=0.05)
+    devices.imu.latency_s, devices.star_tracker.latency_s = 0.003, 0.05
+    lo, hi = devices._imu_range
+    pending: list = []
+    t = 0.0
+    for k in range(60):
+        J = 10
+        times = t + np.arange(J + 1) * 0.01
+        imu_due = rng.random(J) < 0.8
+        st_due = rng.random(J) < 0.2
+        gyro = rng.normal(0.0, 0.5 * hi, (J, 1, 3))
+        gyro[rng.random((J, 1, 3)) < 0.05] = np.nan
+        sat = rng.random((J, 1)) < 0.1
+        q = rng.normal(0.0, 0.6, (J, 1, 4))  # components beyond +-1 and negative scalar parts
+        valid = rng.random((J, 1)) < 0.5
+        blind = rng.integers(0, 4, (J, 1))
+        devices._reserve(3 * J)
+        counts = dk.queue_samples(times, imu_due, gyro, sat, 0.003, lo, hi, devices.imu._m, st_due, q, valid, blind,
+                                  0.05, devices._st_ms, devices._st_cols, devices.star_tracker.seq_state,
+                                  devices.q_due, devices.q_m, devices.q_rows, devices.q_ts, devices.q_n)
+        assert counts == int(imu_due.sum()) * 1000 + int(st_due.sum())
+        for j in range(J):
+            if imu_due[j]:
+                pending += ref_imu.frames_for(gyro[j, 0].tolist(), bool(sat[j, 0]), float(times[j + 1]))
+            if st_due[j]:
+                pending += ref_st.frames_for(q[j, 0], bool(valid[j, 0]), int(blind[j, 0]), float(times[j + 1]))
+        t_tx = float(times[-1]) + (0.004 if k % 3 == 0 else 0.0)
+        idx, rows = devices.rows_due(t_tx)
+        ref_idx, ref_rows, pending = _reference_rows_due(pending, t_tx)
+        assert idx == ref_idx
+        np.testing.assert_array_equal(np.array(rows).reshape(len(idx), -1), np.array(ref_rows).reshape(len(idx), -1))
+        assert devices.pending_count == len(pending)
+        t = float(times[-1])
+
+
+def test_wheel_status_rows_match_status_row(icd: Icd) -> None:
+    rng = np.random.default_rng(9)
+    N = 4
+    wheels = [WheelNode(i, icd, cmd_timeout_s=0.3) for i in range(1, N + 1)]
+    wheels[1].on_command({"torque_cmd": 0.01, "tick_lsb": 3}, 0.0)
+    wheels[2].on_command({"torque_cmd": 0.01, "tick_lsb": 3}, 0.95)
+    state = np.stack([w.state for w in wheels])
+    timeouts = np.array([w.cmd_timeout_s for w in wheels])
+    ranges = np.array([icd.signal_range("RW1_STATUS", s) for s in ("speed", "torque", "current", "temp")])
+    cols = np.array(wheels[0]._status_cols, dtype=np.int64)
+    status_ms = np.array([w.status_m for w in wheels], dtype=np.int64)
+    width = icd.table.start.shape[1]
+    for _ in range(200):
+        X = np.zeros((7 + N, 1))
+        X[7:, 0] = rng.normal(0.0, 1.5 * ranges[0, 1], N)
+        applied = rng.normal(0.0, 1.5 * ranges[1, 1], (N, 1))
+        kt = rng.uniform(0.01, 0.1, (N, 1))
+        temp = np.round(rng.uniform(ranges[3, 0] - 20, ranges[3, 1] + 20, (N, 1)) * 2) / 2  # ties at .5
+        flags = rng.integers(0, 16, (N, 1))
+        idx, rows = np.zeros(N + 2, dtype=np.int64), np.zeros((N + 2, width))
+        t_s = 1.0 + rng.random() * 0.5
+        n = dk.wheel_status_rows(t_s, X, applied, kt, temp, flags, state, timeouts, status_ms, cols, ranges, idx, rows, 1)
+        assert n == N
+        for i, w in enumerate(wheels):
+            status = SimpleNamespace(speed_rad_s=X[7 + i, 0], torque_Nm=applied[i, 0], current_A=applied[i, 0] / kt[i, 0],
+                                     temp_C=temp[i, 0], fault=int(flags[i, 0]))
+            assert idx[1 + i] == w.status_m
+            assert rows[1 + i].tolist() == w.status_row(status, t_s)
+
+
+def test_apply_received_matches_on_command(icd: Icd) -> None:
+    wheels = [WheelNode(i, icd) for i in range(1, 4)]
+    state = np.stack([w.state for w in wheels])
+    width = icd.table.start.shape[1]
+    cmd_ids = [icd.spec(f"RW{i}_CMD").frame_id for i in range(1, 4)]
+    done_id, hb_id = icd.spec("CYCLE_DONE").frame_id, icd.spec("FSW_HEARTBEAT").frame_id
+    lookup = np.full(len(icd.table.index_of_id), -1, dtype=np.int64)
+    lookup[cmd_ids] = [0, 1, 2]
+    torque_col, tick_col = icd.column("RW1_CMD", "torque_cmd"), icd.column("RW1_CMD", "tick_lsb")
+    done_col = icd.column("CYCLE_DONE", "tick")
+    ids = np.array([cmd_ids[0], cmd_ids[1], hb_id, cmd_ids[2], cmd_ids[0], done_id, cmd_ids[1]], dtype=np.int64)
+    status = np.array([0, 4, 0, 1, 0, 0, 0], dtype=np.int64)  # frame 1: a CRC error, not delivered
+    values = np.zeros((len(ids), width))
+    for i, fid in enumerate(ids):
+        values[i, torque_col], values[i, tick_col] = 0.001 * (i + 1), i
+    values[5, done_col] = 41.0
+    counts = np.zeros(4, dtype=np.int64)
+    end = dk.apply_received(status, ids, values, 0, len(ids), lookup, torque_col, tick_col, done_id, done_col, hb_id,
+                            2.5, state, counts)
+    assert end == 6 and counts.tolist() == [3, 1, 1, 41]  # stops after CYCLE_DONE, its tick handed back
+    for i in (0, 3, 4):  # the delivered commands, in order, through the Python path
+        w = wheels[lookup[ids[i]]]
+        w.on_command({"torque_cmd": values[i, torque_col], "tick_lsb": values[i, tick_col]}, 2.5)
+    np.testing.assert_array_equal(state, np.stack([w.state for w in wheels]))
+
+
+def test_one_call_period_matches_the_three_call_path(icd: Icd) -> None:
+    """Devices.step_world's fused call and its three-call path: the same world, the same queued rows."""
+    base = WorldParams()
+    sc = replace(base.spacecraft, disturbance=replace(base.spacecraft.disturbance, random_std_Nm=1e-6))
+    params = replace(base, spacecraft=sc)  # random disturbance: a third normal stream to serve
+    worlds = [World(params, seed=4), World(params, seed=4)]
+    devs = [Devices.for_world(w, icd) for w in worlds]
+    devs[1]._step_fused = lambda *a: False  # the three-call path throughout
+    rng = np.random.default_rng(3)
+    took = []
+    step_fused = devs[0]._step_fused
+    devs[0]._step_fused = lambda *a: took.append(step_fused(*a)) or took[-1]
+    for k in range(120):
+        times = worlds[0].t + np.arange(11) * 0.01
+        cmd = rng.normal(0.0, 0.01, worlds[0].n_wheels)
+        for d in devs:
+            for i, w in enumerate(d.wheels):
+                if k % 7 != i:  # a wheel left without command now and then
+                    w.on_command({"torque_cmd": float(cmd[i]), "tick_lsb": k & 0xFF}, float(times[0]))
+        devs[0].step_world(worlds[0], 0.01, times)
+        devs[1].step_world(worlds[1], 0.01, times.copy())
+        a, b = worlds[0].batch, worlds[1].batch
+        assert a._t == b._t and a._t_last_imu == b._t_last_imu
+        for name in ("X", "TEMP", "U_APPLIED", "FLAGS", "AUX", "GYRO_OUT", "ST_Q"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        for name in ("q_due", "q_m", "q_rows", "q_ts", "q_n"):
+            np.testing.assert_array_equal(getattr(devs[0], name), getattr(devs[1], name))
+        ia, ra = devs[0].rows_due(float(times[-1]))
+        ib, rb = devs[1].rows_due(float(times[-1]))
+        assert ia == ib and ra == rb
+    assert sum(took) > 60 and not all(took)  # both paths taken (the three-call one when a stream refills)
+    assert devs[0].imu.samples == devs[1].imu.samples and devs[0].star_tracker.samples == devs[1].star_tracker.samples
+    assert math.isfinite(worlds[0].t)
