@@ -552,6 +552,8 @@ class Devices:
         return True
 
     def _step_world_python(self, world: Any, dt_s: float, times_s: Sequence[float]) -> None:
+        if isinstance(times_s, np.ndarray):
+            times_s = times_s.tolist()  # plain floats in the frames, as the nodes' Python makes them
         steps = len(times_s) - 1
         first = [w.torque_at(times_s[0]) for w in self.wheels]
         if first == [w.torque_at(times_s[-2]) for w in self.wheels]:
