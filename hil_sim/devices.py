@@ -501,8 +501,8 @@ class Devices:
         self._reserve(3 * steps)
         lo, hi = self._imu_range
         counts = dk.queue_samples(times, imu_due, gyro, sat, float(imu.latency_s), lo, hi, imu._m, st_due, q, valid,
-                                  blind, float(st.latency_s), self._st_ms, self._st_cols, st.seq_state, self.q_due, self.q_m,
-                                  self.q_rows, self.q_ts, self.q_n)
+                                  blind, float(st.latency_s), self._st_ms, self._st_cols, st.seq_state, self.q_due,
+                                  self.q_m, self.q_rows, self.q_ts, self.q_n)
         imu.samples += counts // 1000
         st.samples += counts % 1000
 
@@ -534,8 +534,8 @@ class Devices:
                 w[0], w[1], w[2], w[3], w[4], w[5], w[8], w[9], w[10], w[11], w[12], w[13], w[14], w[15], w[16], w[17],
                 w[18], w[19], w[20], w[21], w[22], w[24], w[26], w[27], w[28], w[29], w[31], w[32], w[34], w[35],
                 w[36], w[37], w[38], w[39],
-                float(imu.latency_s), lo, hi, imu._m, float(st.latency_s), self._st_ms, self._st_cols, st.seq_state, self.q_due,
-                self.q_m, self.q_rows, self.q_ts, self.q_n, np.zeros(3, dtype=np.int64),
+                float(imu.latency_s), lo, hi, imu._m, float(st.latency_s), self._st_ms, self._st_cols, st.seq_state,
+                self.q_due, self.q_m, self.q_rows, self.q_ts, self.q_n, np.zeros(3, dtype=np.int64),
                 (dt_s, n_sub), self.q_due, wargs]
         args[0] = times
         args[8], args[9], args[12], args[13], args[14], args[15] = nd._buf, nd._pos, ni._buf, ni._pos, ns._buf, ns._pos

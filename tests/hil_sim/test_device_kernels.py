@@ -120,11 +120,12 @@ def test_wheel_status_rows_match_status_row(icd: Icd) -> None:
         flags = rng.integers(0, 16, (N, 1))
         idx, rows = np.zeros(N + 2, dtype=np.int64), np.zeros((N + 2, width))
         t_s = 1.0 + rng.random() * 0.5
-        n = dk.wheel_status_rows(t_s, X, applied, kt, temp, flags, state, timeouts, status_ms, cols, ranges, idx, rows, 1)
+        n = dk.wheel_status_rows(t_s, X, applied, kt, temp, flags, state, timeouts, status_ms, cols, ranges, idx, rows,
+                                 1)
         assert n == N
         for i, w in enumerate(wheels):
-            status = SimpleNamespace(speed_rad_s=X[7 + i, 0], torque_Nm=applied[i, 0], current_A=applied[i, 0] / kt[i, 0],
-                                     temp_C=temp[i, 0], fault=int(flags[i, 0]))
+            status = SimpleNamespace(speed_rad_s=X[7 + i, 0], torque_Nm=applied[i, 0],
+                                     current_A=applied[i, 0] / kt[i, 0], temp_C=temp[i, 0], fault=int(flags[i, 0]))
             assert idx[1 + i] == w.status_m
             assert rows[1 + i].tolist() == w.status_row(status, t_s)
 
