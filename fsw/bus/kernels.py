@@ -285,7 +285,8 @@ def _start_tick(st, ft, cfg, values, i, seq, last_ok_t):  # pragma: no cover - c
     st[S_PHASE] = PHASE_TICK if following > 0 else PHASE_DONE
 
 
-@njit(cache=True)
+@njit("void(int64[::1], float64[::1], int64[::1], float64[::1], int64[:, ::1], float64[::1], int64[:, ::1], int64)",
+      cache=True)  # (a signature: compiled at import, also where no tick of the warm-up closes incomplete)
 def finish_tick(st, ft, watch, watch_limit, seq, last_ok_t, tally, n_codes):  # pragma: no cover - compiled
     """The end of a lockstep tick: incomplete or not, the timeouts (E2EReceiver.check_timeouts' rule: one
     counted when a watched message goes silent for longer than its limit, re-armed by a valid frame), and
