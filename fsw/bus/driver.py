@@ -16,10 +16,16 @@ cannot close a tick early. A SYNC whose tick is not after the last one (a replay
 counted (``stale_syncs``) and ignored, and in lockstep a device frame that arrives outside every
 announced tick (after a tick closed, before the next SYNC: replayed, injected or late) is counted
 (``unexpected_frames``) and not used. See docs/bus.md for what E2E can and cannot stop.
+
+A lockstep tick costs a handful of Python calls whatever its frames: one compiled call per burst read
+(``fsw.bus.kernels.collect_rows``) classifies the frames on the receiver's state, counts them, keeps the
+tick's bookkeeping and writes the decoded samples into this driver's arrays; the counts reach the
+receiver's per-message counters once per tick, and ``TickInputs`` holds the gyro samples as one array
+(its ``ImuSample`` list is built when first read). The wheel commands and CYCLE_DONE are limited and
+encoded by one compiled call (``kernels.command_rows``). Real time reads frame by frame, as they arrive.
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable, NamedTuple, Sequence
@@ -198,9 +204,6 @@ class FswBusDriver:
         self._cmd_tick_col = self._col["RW1_CMD", "tick_lsb"]
         self._done_tick_col = self._col["CYCLE_DONE", "tick"]
         self._rx: CheckedBurst | _LockstepRx | None = None  # frames read off the bus, not yet classified
-        self._no_mask = np.zeros(2048, dtype=np.bool_)
-        self._device_mask = np.zeros(2048, dtype=np.bool_)  # classify_until's count of a tick's frames
-        self._device_mask[[i for i in self._device_ids if i < 2048]] = True
         # newest samples (real time and lockstep alike)
         self._imu: ImuSample | None = None
         self._imu_rx: float | None = None
@@ -439,10 +442,6 @@ class FswBusDriver:
             return None
         self._rx = rx = self._lockstep_rx(burst)
         return rx
-
-    def _frame_id(self, rx: CheckedBurst, i: int) -> int:
-        frame = self.receiver.frame_at(rx, i)
-        return -1 if frame is None else frame.frame_id
 
     def _stale_sync(self, row: list, current: int | None = None) -> bool:
         """A SYNC (value row) for a tick at or before the current (or last) one: replayed or stale, counted,
