@@ -220,9 +220,6 @@ class FswBusDriver:
         self.t_tick = 0.0
         self.period_s = 0.0
         self.last_tick: int | None = None
-        self.incomplete_ticks = 0
-        self.stale_syncs = 0
-        self.unexpected_frames = 0
         self.tx_errors = 0
         self._init_lockstep(icd, n_wheels)
 
@@ -230,7 +227,6 @@ class FswBusDriver:
         """The arrays of the compiled lockstep tick (kernels.collect_rows): its state, what it does with each
         frame id, the signals' slots, and the tick's decoded samples."""
         self._st_i = np.zeros(K.S_SIZE, dtype=np.int64)  # kernels.S_*: phase, counts, pending SYNC, samples
-        self._ft = np.zeros(K.F_SIZE)  # kernels.F_*: t_tick, period, star tracker sample, wheel times
         col = self._col
         cfg = np.zeros(K.C_SIZE, dtype=np.int64)
         for slot, key in ((K.C_TICK, ("SYNC", "tick")), (K.C_FOLLOWING, ("SYNC", "frames_following")),
@@ -248,7 +244,6 @@ class FswBusDriver:
         self._n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE
         cfg[K.C_N_CODES] = self._n_codes
         cfg[K.C_BUS_ROW] = len(icd.message_names)
-        self._cfg = cfg
         role = np.full(2048, K.ROLE_NONE, dtype=np.int64)
         role[[i for i in self._device_ids if 0 <= i < 2048]] = K.ROLE_DEVICE
         role[self._sync_id] = K.ROLE_SYNC
@@ -257,17 +252,28 @@ class FswBusDriver:
         role[icd.spec("ST_QUAT_B").frame_id] = K.ROLE_ST_B
         for fid, w in self._wheel_index.items():
             role[fid] = K.ROLE_WHEEL + w
-        self._role = role
+        kind_of_id, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t = self.receiver.kernel_state
+        self._watch, watch_limit = self.receiver.watched_timeouts()
+        cfg[K.C_OFF_KIND] = K.C_SIZE
+        cfg[K.C_OFF_ROLE] = cfg[K.C_OFF_KIND] + len(kind_of_id)
+        cfg[K.C_OFF_CRC] = cfg[K.C_OFF_ROLE] + len(role)
+        cfg[K.C_OFF_WATCH] = cfg[K.C_OFF_CRC] + len(crc_table)
+        cfg[K.C_N_WATCH] = len(self._watch)
+        self._consts = np.concatenate([cfg, kind_of_id, role, crc_table, self._watch])  # (kernels: C_OFF_*)
+        self._cfg = self._consts[:K.C_SIZE]
+        self._ft = np.zeros(K.F_SIZE + len(watch_limit))  # kernels.F_*, then the watched messages' limits
+        self._ft[K.F_SIZE:] = watch_limit
+        self._watch_limit = self._ft[K.F_SIZE:]
+        self._table = (msg_i, sig_i, sig_f, seq, last_ok_t)
         self._st_ab = {icd.spec("ST_QUAT_A").frame_id: 0, icd.spec("ST_QUAT_B").frame_id: 1}
         width = icd.table.start.shape[1]
         self._width = width
         self._imu_buf = np.zeros((64, 4))  # the tick's gyro rows (x, y, z, saturated); grows when full
-        self._st_half = np.zeros((2, width))  # the star tracker's halves (A, B) waiting for their pair
-        self._wheel_buf = np.zeros((n_wheels, 5))  # each wheel's newest status row
+        # the star tracker's halves (A, B) waiting for their pair, then each wheel's newest status row
+        self._rows = np.zeros((2 + n_wheels, max(width, 5)))
+        self._st_half, self._wheel_buf = self._rows[:2], self._rows[2:]
         self._tally = np.zeros(((len(icd.message_names) + 1) * self._n_codes, 2), dtype=np.int64)
         self._tally_targets = self.receiver.tally_targets(self._n_codes)
-        self._watch, self._watch_limit = self.receiver.watched_timeouts()
-        self._kstate = self.receiver.kernel_state
         self._status_buf = np.zeros(64, dtype=np.int64)  # a lockstep burst's class codes and value rows
         self._values_buf = np.zeros((64, width))
         self._no_frames = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 8), dtype=np.uint8))
@@ -282,6 +288,34 @@ class FswBusDriver:
     @property
     def _supervision_started(self) -> bool:
         return bool(self._st_i[K.S_SUPERVISED])
+
+    # the driver's counts live in the compiled tick's state (kernels.S_*), which counts them as it goes
+    @property
+    def incomplete_ticks(self) -> int:
+        """Lockstep ticks closed with fewer than their announced frames."""
+        return int(self._st_i[K.S_INCOMPLETE])
+
+    @incomplete_ticks.setter
+    def incomplete_ticks(self, n: int) -> None:
+        self._st_i[K.S_INCOMPLETE] = n
+
+    @property
+    def stale_syncs(self) -> int:
+        """SYNC frames for a tick at or before the current (or last) one."""
+        return int(self._st_i[K.S_STALE])
+
+    @stale_syncs.setter
+    def stale_syncs(self, n: int) -> None:
+        self._st_i[K.S_STALE] = n
+
+    @property
+    def unexpected_frames(self) -> int:
+        """Delivered device frames outside every announced tick (lockstep)."""
+        return int(self._st_i[K.S_UNEXPECTED])
+
+    @unexpected_frames.setter
+    def unexpected_frames(self, n: int) -> None:
+        self._st_i[K.S_UNEXPECTED] = n
 
     # ------------------------------------------------------------------------------------ counters
     @property
@@ -309,17 +343,19 @@ class FswBusDriver:
         self._deadline = None  # set when the queue first runs empty (see _next_burst)
         self._realtime = False
         st = self._st_i
-        st[:K.S_RESET] = 0  # PHASE_SYNC, nothing counted yet
+        st[K.S_PHASE] = K.PHASE_SYNC
         rx = self._rx
         if rx is not None and type(rx) is not _LockstepRx:
-            self._rx = rx = self._lockstep_rx(rx.burst.tail(rx.pos)) if rx.pos < rx.n else None
+            rx = self._lockstep_rx(rx.burst.tail(rx.pos)) if rx.pos < rx.n else None
         if st[K.S_PENDING]:  # SYNC(k) came while finishing the last tick: start k with no frame read
             ids, lengths, data = self._no_frames
             self._collect(ids, lengths, data, 0, K.NO_FID)
         phase = int(st[K.S_PHASE])
         while phase != K.PHASE_DONE:
             if phase == K.PHASE_SYNC:
-                rx = self._next_lockstep_burst(None, 1)  # SYNC(k) comes first
+                if rx is None or rx.pos >= rx.n:  # SYNC(k) comes first
+                    burst = self._wait_burst(None, 1)
+                    rx = None if burst is None else self._lockstep_rx(burst)
                 if rx is None:
                     self._settle()
                     return None
@@ -328,12 +364,11 @@ class FswBusDriver:
                 rx = self._next_lockstep_burst(FRAME_GRACE_S if received + failed >= expected else None,
                                                max(1, expected - received))
                 if rx is None:  # the tick closes incomplete
-                    K.finish_tick(st, self._ft, self._watch, self._watch_limit, self._kstate[5], self._kstate[6],
+                    K.finish_tick(st, self._ft, self._watch, self._watch_limit, self._table[3], self._table[4],
                                   self._tally, self._n_codes)
                     break
             burst = rx.burst
-            end = self._collect(burst.ids, burst.lengths, burst.data, rx.pos, K.NO_FID)
-            rx.pos = end
+            end = rx.pos = self._collect(burst.ids, burst.lengths, burst.data, rx.pos, K.NO_FID)
             while end < rx.n and self._status_buf[end] == K.FALLBACK_CODE:
                 end = rx.pos = self._collect_fallback(rx, end)
             phase = int(st[K.S_PHASE])
@@ -341,14 +376,13 @@ class FswBusDriver:
 
     def _collect(self, ids: np.ndarray, lengths: np.ndarray, data: np.ndarray, first: int, first_fid: int) -> int:
         """kernels.collect_rows on frames ``first``.. (growing the gyro rows when the kernel asks)."""
-        kind_of_id, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t = self._kstate
+        msg_i, sig_i, sig_f, seq, last_ok_t = self._table
         st = self._st_i
         while True:
             end = K.collect_rows(ids, lengths, data, self._status_buf, self._values_buf, first, first_fid, st,
-                                 self._ft, self._cfg, self._role, kind_of_id, msg_i, sig_i, sig_f, crc_table, seq,
-                                 last_ok_t, self._imu_buf, self._st_half, self._wheel_buf, self._tally, self._watch,
-                                 self._watch_limit)
-            if not st[K.S_GROW]:
+                                 self._ft, self._consts, msg_i, sig_i, sig_f, seq, last_ok_t, self._imu_buf,
+                                 self._rows, self._tally)
+            if end >= len(ids) or not st[K.S_GROW]:
                 return end
             st[K.S_GROW] = 0
             self._imu_buf = np.concatenate([self._imu_buf, np.zeros_like(self._imu_buf)])
@@ -380,15 +414,13 @@ class FswBusDriver:
         vals = self._st_i.tolist()
         k = vals[K.S_NTALLY]
         if k:
+            self._st_i[K.S_NTALLY] = 0
             targets = self._tally_targets
             for key, count in self._tally[:k].tolist():
                 counts, cls = targets[key]
                 counts[cls] += count
-        self.unexpected_frames += vals[K.S_UNEXPECTED]
-        self.stale_syncs += vals[K.S_STALE]
         if vals[K.S_PHASE] != K.PHASE_DONE:
             return None
-        self.incomplete_ticks += vals[K.S_INCOMPLETE]
         tick = vals[K.S_TICK]
         self.last_tick = tick
         fl = self._ft.tolist()
@@ -416,7 +448,7 @@ class FswBusDriver:
             wheels: list[WheelStatus | None] = [None] * nw
             for w in range(nw):
                 if new[w]:
-                    speed, torque, current, temp, fault = rows[w]
+                    speed, torque, current, temp, fault = rows[w][:5]
                     t_w = fl[K.F_WHEEL_T + w]
                     wheels[w] = self._wheels[w] = WheelStatus(speed, torque, current, temp, int(fault), t_w)
                     self._wheels_rx[w] = t_w
@@ -426,22 +458,20 @@ class FswBusDriver:
                           vals[K.S_RECEIVED], imu_omega_BN_B=omega, imu_saturated=flags)
 
     def _lockstep_rx(self, burst: FrameBurst) -> "_LockstepRx":
-        n = len(burst)
+        n = len(burst.ids)
         if n > len(self._status_buf):
             size = max(n, 2 * len(self._status_buf))
             self._status_buf = np.zeros(size, dtype=np.int64)
             self._values_buf = np.zeros((size, self._width))
-        return _LockstepRx(burst, n)
+        self._rx = rx = _LockstepRx(burst, n)
+        return rx
 
     def _next_lockstep_burst(self, grace_s: float | None, limit: int) -> "_LockstepRx | None":
         rx = self._rx
         if rx is not None and rx.pos < rx.n:
             return rx
         burst = self._wait_burst(grace_s, limit)
-        if burst is None:
-            return None
-        self._rx = rx = self._lockstep_rx(burst)
-        return rx
+        return None if burst is None else self._lockstep_rx(burst)
 
     def _stale_sync(self, row: list, current: int | None = None) -> bool:
         """A SYNC (value row) for a tick at or before the current (or last) one: replayed or stale, counted,

@@ -226,17 +226,22 @@ def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_
 ROLE_NONE, ROLE_DEVICE, ROLE_SYNC, ROLE_IMU, ROLE_ST_A, ROLE_ST_B = -1, 0, 1, 2, 3, 4
 ROLE_WHEEL = 10  # + wheel index (0-based)
 # collect_rows' integer state (st) slots
-# (the first S_RESET slots start each collect_tick at 0: PHASE_SYNC, counts of this call)
+# (S_NTALLY: pairs in ``tally`` not yet added to the counters; S_UNEXPECTED, S_STALE, S_INCOMPLETE: the
+# driver's running counts)
 (S_PHASE, S_NTALLY, S_UNEXPECTED, S_STALE, S_INCOMPLETE, S_GROW, S_HAS_LAST, S_LAST, S_TICK, S_EXPECTED,
  S_RECEIVED, S_FAILED, S_PENDING, S_P_TICK, S_P_FOLLOWING, S_SUPERVISED, S_IMU_N, S_ST_HAVE_A, S_ST_HAVE_B,
  S_ST_SEQ_A, S_ST_SEQ_B, S_ST_NEW, S_ST_VALID, S_ST_BLIND, S_WHEEL_NEW) = range(25)
-S_RESET = S_GROW + 1
 NO_FID = -(1 << 40)  # collect_rows' first_fid when frame ``first`` is not judged yet
 S_SIZE = S_WHEEL_NEW + 6
 # ... and its configuration slots (cfg): value-row columns of the signals the driver reads
 (C_TICK, C_FOLLOWING, C_PERIOD, C_IMU_X, C_IMU_Y, C_IMU_Z, C_IMU_SAT, C_QW, C_QX, C_VALID, C_BLIND, C_SEQ_A,
- C_QY, C_QZ, C_SEQ_B, C_AGE, C_SPEED, C_TORQUE, C_CURRENT, C_TEMP, C_FAULT, C_N_CODES, C_BUS_ROW) = range(23)
-C_SIZE = C_BUS_ROW + 1
+ C_QY, C_QZ, C_SEQ_B, C_AGE, C_SPEED, C_TORQUE, C_CURRENT, C_TEMP, C_FAULT, C_N_CODES, C_BUS_ROW,
+ C_OFF_KIND, C_OFF_ROLE, C_OFF_CRC, C_OFF_WATCH, C_N_WATCH) = range(28)
+C_SIZE = C_N_WATCH + 1
+# The constant integer arrays travel as one (``consts``: cfg, then kind_of_id, role_of_id, the CRC table and
+# the watched messages at the C_OFF_* offsets; a compiled call's cost grows with its arguments), the
+# watched messages' timeout limits at the end of ``ft`` (F_SIZE on) and the star tracker halves and wheel
+# rows in one array (``rows``: halves A, B, then one row per wheel).
 # ... and its float state (ft) slots
 F_T_TICK, F_PERIOD, F_P_PERIOD_MS, F_ST_T, F_ST_Q = 0, 1, 2, 3, 4  # F_ST_Q..F_ST_Q+3: q_NS
 F_WHEEL_T = 8  # + wheel index: the time of each wheel's newest status
@@ -325,11 +330,10 @@ def star_tracker_pair(st, ft, cfg, st_half, now):  # pragma: no cover - compiled
 
 
 @njit("int64(int64[::1], int64[::1], uint8[:, ::1], int64[::1], float64[:, ::1], int64, int64, int64[::1], "
-      "float64[::1], int64[::1], int64[::1], int64[::1], int64[:, ::1], int64[:, :, ::1], float64[:, :, ::1], "
-      "int64[::1], int64[:, ::1], float64[::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], int64[:, ::1], "
-      "int64[::1], float64[::1])", cache=True)
-def collect_rows(ids, lengths, data, status, values, first, first_fid, st, ft, cfg, role_of_id, kind_of_id, msg_i, sig_i,
-                 sig_f, crc_table, seq, last_ok_t, imu, st_half, wheels, tally, watch, watch_limit):  # pragma: no cover
+      "float64[::1], int64[::1], int64[:, ::1], int64[:, :, ::1], float64[:, :, ::1], int64[:, ::1], float64[::1], "
+      "float64[:, ::1], float64[:, ::1], int64[:, ::1])", cache=True)
+def collect_rows(ids, lengths, data, status, values, first, first_fid, st, ft, consts, msg_i, sig_i, sig_f, seq,
+                 last_ok_t, imu, rows, tally):  # pragma: no cover - compiled
     """FswBusDriver.collect_tick's work on frames ``first``.. of a burst, in one call: each frame classified as
     :func:`classify_rows` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``) and counted
     in ``tally`` ((message row * n_codes + code, count) pairs, ``st[S_NTALLY]`` of them), then what the
@@ -346,6 +350,14 @@ def collect_rows(ids, lengths, data, status, values, first, first_fid, st, ft, c
 
     Returns the index after the last frame handled: where the tick closed or the burst ended, or before a
     frame for the Python path (``status`` FALLBACK_CODE) or a gyro frame with ``imu`` full (``st[S_GROW]``)."""
+    cfg = consts[:C_SIZE]
+    kind_of_id = consts[cfg[C_OFF_KIND]:cfg[C_OFF_ROLE]]
+    role_of_id = consts[cfg[C_OFF_ROLE]:cfg[C_OFF_CRC]]
+    crc_table = consts[cfg[C_OFF_CRC]:cfg[C_OFF_WATCH]]
+    watch = consts[cfg[C_OFF_WATCH]:cfg[C_OFF_WATCH] + cfg[C_N_WATCH]]
+    watch_limit = ft[F_SIZE:F_SIZE + cfg[C_N_WATCH]]
+    st_half = rows[:2]
+    wheels = rows[2:]
     n = ids.shape[0]
     n_codes = cfg[C_N_CODES]
     bus_row = cfg[C_BUS_ROW]
