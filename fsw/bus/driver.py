@@ -26,6 +26,7 @@ encoded by one compiled call (``kernels.command_rows``). Real time reads frame b
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable, NamedTuple, Sequence
@@ -91,19 +92,22 @@ class TickInputs:
     ``complete`` is False when fewer than the announced frames arrived before the timeout.
 
     ``imu_omega_BN_B`` is the tick's gyro rates as one (n, 3) array [rad/s] (the ``omega_BN_B`` of
-    ``imu_samples``, in order): the driver fills it from the decoded frames and builds the ``ImuSample``
-    objects of ``imu_samples`` only when that list is first read.
+    ``imu_samples``, in order), ``wheel_speed_rad_s`` the wheels' speeds (NaN: no status this tick): the
+    driver fills them from the decoded frames and builds the ``ImuSample`` / ``WheelStatus`` objects of
+    ``imu_samples`` and ``wheels`` only when those lists are first read.
     """
 
-    __slots__ = ("tick", "t", "period_s", "imu", "star_tracker", "wheels", "_imu_samples", "frames_expected",
-                 "frames_received", "_imu_omega", "_imu_saturated")
+    __slots__ = ("tick", "t", "period_s", "imu", "star_tracker", "_wheels", "_imu_samples", "frames_expected",
+                 "frames_received", "_imu_omega", "_imu_saturated", "_wheel_rows", "_wheel_new")
 
     def __init__(self, tick: int, t: float, period_s: float, imu: ImuSample | None,
                  star_tracker: StarTrackerSample | None, wheels: list[WheelStatus | None],
                  imu_samples: list[ImuSample] | None = None, frames_expected: int = 0, frames_received: int = 0,
-                 *, imu_omega_BN_B: np.ndarray | None = None, imu_saturated: list | None = None) -> None:
+                 *, imu_omega_BN_B: np.ndarray | None = None, imu_saturated: list | None = None,
+                 wheel_rows: np.ndarray | None = None, wheel_new: list | None = None) -> None:
         self.tick, self.t, self.period_s = tick, t, period_s
-        self.imu, self.star_tracker, self.wheels = imu, star_tracker, wheels
+        self.imu, self.star_tracker, self._wheels = imu, star_tracker, wheels
+        self._wheel_rows, self._wheel_new = wheel_rows, wheel_new
         self.frames_expected, self.frames_received = frames_expected, frames_received
         if imu_samples is None and imu_omega_BN_B is None:
             imu_samples = []
@@ -129,6 +133,34 @@ class TickInputs:
     @imu_samples.setter
     def imu_samples(self, samples: list[ImuSample]) -> None:
         self._imu_samples, self._imu_omega = samples, None
+
+    @property
+    def wheels(self) -> list[WheelStatus | None]:
+        wheels = self._wheels
+        if wheels is None and self._wheel_new is not None:
+            new, rows = self._wheel_new, self._wheel_rows
+            wheels = [None] * len(new)
+            if rows is not None:
+                t = self.t
+                for w, r in enumerate(rows.tolist()):
+                    if new[w]:
+                        wheels[w] = WheelStatus(r[0], r[1], r[2], r[3], int(r[4]), t)
+            self._wheels = wheels
+        return wheels
+
+    @wheels.setter
+    def wheels(self, wheels: list[WheelStatus | None]) -> None:
+        self._wheels, self._wheel_rows = wheels, None
+
+    @property
+    def wheel_speed_rad_s(self) -> np.ndarray:
+        """Each wheel's speed reported this tick [rad/s], NaN for a wheel that reported nothing (the
+        ``speed_rad_s`` of ``wheels`` as one array)."""
+        if self._wheel_rows is not None and self._wheels is None:
+            speeds = self._wheel_rows[:, 0].copy()
+            speeds[[not x for x in self._wheel_new]] = np.nan
+            return speeds
+        return np.array([math.nan if w is None else float(w.speed_rad_s) for w in self.wheels], dtype=float)
 
     @property
     def imu_omega_BN_B(self) -> np.ndarray:
@@ -210,8 +242,6 @@ class FswBusDriver:
         self._imu_batch: list[ImuSample] = []
         self._st: StarTrackerSample | None = None
         self._st_rx: float | None = None
-        self._wheels: list[WheelStatus | None] = [None] * n_wheels
-        self._wheels_rx: list[float | None] = [None] * n_wheels
         self._timeout_s = 0.0  # collect_tick's timeout, and its deadline once a wait has begun
         self._deadline: float | None = None
         self._realtime = False  # set by collect_latest: frames answer the newest SYNC seen (module docstring)
@@ -263,6 +293,7 @@ class FswBusDriver:
         self._cfg = self._consts[:K.C_SIZE]
         self._ft = np.zeros(K.F_SIZE + len(watch_limit))  # kernels.F_*, then the watched messages' limits
         self._ft[K.F_SIZE:] = watch_limit
+        self._ft[K.F_WHEEL_T:K.F_WHEEL_T + MAX_WHEELS] = np.nan  # no status from that wheel yet
         self._watch_limit = self._ft[K.F_SIZE:]
         self._table = (msg_i, sig_i, sig_f, seq, last_ok_t)
         self._st_ab = {icd.spec("ST_QUAT_A").frame_id: 0, icd.spec("ST_QUAT_B").frame_id: 1}
@@ -443,19 +474,11 @@ class FswBusDriver:
             self._st_rx = t
         nw = self.n_wheels
         new = vals[K.S_WHEEL_NEW:K.S_WHEEL_NEW + nw]
-        if any(new):
-            rows = self._wheel_buf.tolist()
-            wheels: list[WheelStatus | None] = [None] * nw
-            for w in range(nw):
-                if new[w]:
-                    speed, torque, current, temp, fault = rows[w][:5]
-                    t_w = fl[K.F_WHEEL_T + w]
-                    wheels[w] = self._wheels[w] = WheelStatus(speed, torque, current, temp, int(fault), t_w)
-                    self._wheels_rx[w] = t_w
-        else:
-            wheels = [None] * nw
-        return TickInputs(tick, t, period_s, imu, st_sample, wheels, None if n else [], vals[K.S_EXPECTED],
-                          vals[K.S_RECEIVED], imu_omega_BN_B=omega, imu_saturated=flags)
+        # the wheels' rows as they are now (WheelStatus objects only when ``wheels`` is read)
+        rows = self._wheel_buf[:, :5].copy() if any(new) else None
+        return TickInputs(tick, t, period_s, imu, st_sample, None, None if n else [], vals[K.S_EXPECTED],
+                          vals[K.S_RECEIVED], imu_omega_BN_B=omega, imu_saturated=flags, wheel_rows=rows,
+                          wheel_new=new)
 
     def _lockstep_rx(self, burst: FrameBurst) -> "_LockstepRx":
         n = len(burst.ids)
@@ -559,7 +582,7 @@ class FswBusDriver:
         return LatestInputs(
             t=now, imu=self._imu, imu_age_s=age(self._imu_rx),
             star_tracker=self._st, star_tracker_age_s=age(self._st_rx),
-            wheels=list(self._wheels), wheel_ages_s=[age(r) for r in self._wheels_rx],
+            wheels=self._newest_wheels(), wheel_ages_s=[age(r) for r in self._wheels_rx()],
             imu_samples=list(self._imu_batch),
         )
 
@@ -580,9 +603,17 @@ class FswBusDriver:
             self._star_tracker_half(self._st_ab[fid], row, now)
         elif fid in self._wheel_index:
             i = self._wheel_index[fid]
-            speed, torque, current, temp, fault = self._wheel_cols
-            self._wheels[i] = WheelStatus(row[speed], row[torque], row[current], row[temp], int(row[fault]), now)
-            self._wheels_rx[i] = now
+            self._wheel_buf[i, :5] = [row[c] for c in self._wheel_cols]  # speed, torque, current, temp, fault
+            self._ft[K.F_WHEEL_T + i] = now
+
+    def _wheels_rx(self) -> list[float | None]:
+        """The time of each wheel's newest status (None: none yet)."""
+        return [None if t != t else t for t in self._ft[K.F_WHEEL_T:K.F_WHEEL_T + self.n_wheels].tolist()]
+
+    def _newest_wheels(self) -> list[WheelStatus | None]:
+        """Each wheel's newest status (lockstep and real time keep it in the same rows)."""
+        return [None if t is None else WheelStatus(r[0], r[1], r[2], r[3], int(r[4]), t)
+                for r, t in zip(self._wheel_buf.tolist(), self._wheels_rx())]
 
     def _star_tracker_half(self, half: int, row: list, now: float) -> None:
         """Half ``half`` (0: ST_QUAT_A, 1: ST_QUAT_B) of a star tracker sample: the sample once both halves
