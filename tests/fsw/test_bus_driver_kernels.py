@@ -220,6 +220,10 @@ def test_collect_tick_matches_the_frame_by_frame_reference(icd: Icd, seed: int) 
             bus.bursts.append(FrameBurst.from_messages(frames[i:i + size]))
             i += size
         got, want = driver.collect_tick(0.0), ref.collect_tick()
+        if got is not None:  # the arrays the samples are built from, read before the lists
+            speeds = got.wheel_speed_rad_s.tolist()
+            assert got.imu_omega_BN_B.tolist() == [s[0] for s in want[3]]
+            assert [None if s != s else s for s in speeds] == [None if w is None else w[0] for w in want[5]]
         assert _view(got) == (None if want is None else (
             want[0], want[1], want[2], want[3], want[4],
             [None if w is None else w for w in want[5]], want[6], want[7]))
