@@ -191,6 +191,43 @@ class E2EReceiver:
                        for m in self.icd.messages.values() if m.frame_id not in self.ignore_ids}
         self._slots = {m.name: ("E2E_CRC", "E2E_Counter") + m.signals for m in self.icd.messages.values()}
 
+    @property
+    def kernel_state(self) -> tuple:
+        """(kind_of_id, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t): the arrays a compiled caller
+        (fsw.bus.kernels.collect_rows) classifies with, this receiver's own sequence state included."""
+        return (self._kind_of_id,) + self._table
+
+    def tally_targets(self, n_codes: int) -> list:
+        """For each key ``row * n_codes + code`` of a compiled caller's tally (row: message index, or the
+        number of messages for the bus-level counts; code: a kernels class code, or kernels.TIMEOUT_CODE),
+        the (counts dict, class) it adds to, None where there is none."""
+        from fsw.bus.kernels import TIMEOUT_CODE
+        names = self.icd.message_names
+        targets: list = [None] * ((len(names) + 1) * n_codes)
+        for m, name in enumerate(names):
+            counts = self.counters.get(name)
+            if counts is None:
+                continue  # ignored (own) messages are never judged
+            for code, cls in enumerate(FRAME_CLASSES):
+                targets[m * n_codes + code] = (counts, cls)
+            targets[m * n_codes + TIMEOUT_CODE] = (counts, TIMEOUT)
+        bus = self.counters[BUS_KEY]
+        targets[len(names) * n_codes + UNKNOWN_CODE] = (bus, UNKNOWN_ID)
+        targets[len(names) * n_codes + ECHO_CODE] = (bus, "own_echo")
+        return targets
+
+    def watched_timeouts(self) -> tuple[np.ndarray, np.ndarray]:
+        """The watched messages with a timeout (message indices) and their limits [s], as check_timeouts
+        judges them."""
+        watched = [(self.icd.message_index[name], self.icd.messages[name].timeout_s + 1e-9) for name in self.watch
+                   if self.icd.messages[name].timeout_s > 0]
+        return (np.array([m for m, _ in watched], dtype=np.int64),
+                np.array([lim for _, lim in watched], dtype=np.float64))
+
+    def slots(self, name: str) -> tuple[str, ...]:
+        """The value-row slots of message ``name`` (E2E_CRC, E2E_Counter, its signals)."""
+        return self._slots[name]
+
     # ----------------------------------------------------------------------------------- bursts
     def check(self, burst: "FrameBurst") -> CheckedBurst:
         """``burst`` ready to be classified (:meth:`classify_until`, :meth:`take`); nothing judged yet."""

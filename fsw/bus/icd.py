@@ -395,14 +395,15 @@ class E2ESender:
         self._sent[m] += 1
         return msg
 
-    def burst(self, idx: np.ndarray, values: np.ndarray) -> FrameBurst:
+    def burst(self, idx: np.ndarray, values: np.ndarray, out: np.ndarray | None = None, done: int = 0) -> FrameBurst:
         """The frames of messages ``idx`` (message indices, ``Icd.message_index``) with the application
         values of row i in slots 2.. of ``values[i]`` (``Icd.column``), in order, as one burst: the same
         bytes and counters as ``frame`` called row by row. A row the compiled codec refuses (a value out
-        of its DBC range, NaN) goes through ``frame``, which raises the error that names it."""
+        of its DBC range, NaN) goes through ``frame``, which raises the error that names it. ``out`` with
+        ``done``: its first ``done`` rows are encoded already (by a compiled caller that stopped there)."""
         n = len(idx)
-        out = np.zeros((n, MAX_DLC), dtype=np.uint8)
-        done = 0
+        if out is None:
+            out = np.zeros((n, MAX_DLC), dtype=np.uint8)
         while done < n:
             done += self.icd.table.encode(idx[done:], values[done:], self._counter, self._sent, out[done:])
             if done < n:

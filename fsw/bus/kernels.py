@@ -80,17 +80,9 @@ _I2 = "int64[:, ::1]"
 _F2 = "float64[:, ::1]"
 
 
-@njit(f"int64({_I}, {_F2}, {_I}, {_I}, uint8[:, ::1], {_I2}, int64[:, :, ::1], float64[:, :, ::1], {_I})",
-      cache=True)
-def encode_rows(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table):  # pragma: no cover - compiled
-    """Encode row i of ``values`` (slots 2.. of message ``idx[i]``) into ``out[i, :dlc]`` with the message's
-    alive counter ``counters[m]`` (then advanced mod 16, and ``sent[m]`` counted) and its E2E CRC. Stops at
-    the first row it cannot encode (a value outside its DBC range or NaN, a raw value not fitting its
-    bits, an unsupported message): returns how many rows were encoded; the caller takes the checked
-    per-frame path for that row. Table: ``msg_i[m] = (dlc, crc seed, signals, max delta)``,
-    ``sig_i[m, k] = (start bit, bits, signed)``, ``sig_f[m, k] = (scale, offset, min, max, accept low,
-    accept high)``."""
-    n = idx.shape[0]
+@njit(cache=True)
+def encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table, n):  # pragma: no cover - compiled
+    """:func:`encode_rows` over its first ``n`` rows (the one implementation, also for :func:`command_rows`)."""
     for i in range(n):
         m = idx[i]
         if m < 0:
@@ -120,6 +112,70 @@ def encode_rows(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table
         counters[m] = (counters[m] + 1) & 15
         sent[m] += 1
     return n
+
+
+@njit(f"int64({_I}, {_F2}, {_I}, {_I}, uint8[:, ::1], {_I2}, int64[:, :, ::1], float64[:, :, ::1], {_I})",
+      cache=True)
+def encode_rows(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table):  # pragma: no cover - compiled
+    """Encode row i of ``values`` (slots 2.. of message ``idx[i]``) into ``out[i, :dlc]`` with the message's
+    alive counter ``counters[m]`` (then advanced mod 16, and ``sent[m]`` counted) and its E2E CRC. Stops at
+    the first row it cannot encode (a value outside its DBC range or NaN, a raw value not fitting its
+    bits, an unsupported message): returns how many rows were encoded; the caller takes the checked
+    per-frame path for that row. Table: ``msg_i[m] = (dlc, crc seed, signals, max delta)``,
+    ``sig_i[m, k] = (start bit, bits, signed)``, ``sig_f[m, k] = (scale, offset, min, max, accept low,
+    accept high)``."""
+    return encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table, idx.shape[0])
+
+
+@njit(cache=True)
+def judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t):  # pragma: no cover
+    """The class code of frame ``i`` of message index ``m`` (a plain data frame of a table message), received at
+    ``now``: length, CRC, decode into ``values[i]`` with the accept bounds, then the alive-counter rules on
+    ``seq[m]``; a delivered frame sets ``last_ok_t[m]`` and re-arms the timeout. The one implementation of the
+    rules for :func:`classify_rows` and :func:`collect_rows`."""
+    size = msg_i[m, 0]
+    if lengths[i] != size:
+        return BAD_LENGTH_CODE
+    c = crc_table[msg_i[m, 1] ^ data[i, 1]]
+    for b in range(2, size):
+        c = crc_table[c ^ data[i, b]]
+    if (c ^ 255) != data[i, 0]:
+        return CRC_ERROR_CODE
+    word = np.uint64(0)
+    for b in range(size):
+        word |= np.uint64(data[i, b]) << np.uint64(8 * b)
+    for k in range(msg_i[m, 2]):
+        bits = sig_i[m, k, 1]
+        r = np.int64((word >> np.uint64(sig_i[m, k, 0])) & ((np.uint64(1) << np.uint64(bits)) - np.uint64(1)))
+        if sig_i[m, k, 2] and r >= (np.int64(1) << (bits - 1)):
+            r -= np.int64(1) << bits
+        v = r * sig_f[m, k, 0] + sig_f[m, k, 1]
+        if not (sig_f[m, k, 4] <= v <= sig_f[m, k, 5]):
+            return OUT_OF_RANGE_CODE
+        values[i, k] = v
+    code = OK_CODE
+    counter = np.int64(values[i, 1])
+    last = seq[m, 0]
+    if last < 0 or seq[m, 1] != 0:  # first frame, or first after a timeout: (re)start the sequence
+        seq[m, 0] = counter
+    else:
+        delta = (counter - last) & 15
+        if delta == 0:
+            code = REPEATED_CODE
+        elif delta >= 16 - OLD_FRAME_WINDOW:
+            code = WRONG_SEQUENCE_CODE  # an old, delayed frame: the reference stays
+        else:
+            seq[m, 0] = counter
+            if delta == 1:
+                code = OK_CODE
+            elif delta <= msg_i[m, 3]:
+                code = OK_SOME_LOST_CODE
+            else:
+                code = WRONG_SEQUENCE_CODE
+    if code <= OK_SOME_LOST_CODE:
+        last_ok_t[m] = now
+        seq[m, 1] = 0
+    return code
 
 
 @njit("int64(int64[::1], int64[::1], uint8[:, ::1], int64[::1], float64[:, ::1], int64, float64, int64, int64, "
@@ -153,55 +209,9 @@ def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_
                 continue
             status[i] = FALLBACK_CODE
             return i
-        size = msg_i[m, 0]
-        if lengths[i] != size:
-            status[i] = BAD_LENGTH_CODE
-            continue
-        c = crc_table[msg_i[m, 1] ^ data[i, 1]]
-        for b in range(2, size):
-            c = crc_table[c ^ data[i, b]]
-        if (c ^ 255) != data[i, 0]:
-            status[i] = CRC_ERROR_CODE
-            continue
-        word = np.uint64(0)
-        for b in range(size):
-            word |= np.uint64(data[i, b]) << np.uint64(8 * b)
-        code = OK_CODE
-        for k in range(msg_i[m, 2]):
-            bits = sig_i[m, k, 1]
-            r = np.int64((word >> np.uint64(sig_i[m, k, 0])) & ((np.uint64(1) << np.uint64(bits)) - np.uint64(1)))
-            if sig_i[m, k, 2] and r >= (np.int64(1) << (bits - 1)):
-                r -= np.int64(1) << bits
-            v = r * sig_f[m, k, 0] + sig_f[m, k, 1]
-            if not (sig_f[m, k, 4] <= v <= sig_f[m, k, 5]):
-                code = OUT_OF_RANGE_CODE
-                break
-            values[i, k] = v
-        if code == OUT_OF_RANGE_CODE:
-            status[i] = code
-            continue
-        counter = np.int64(values[i, 1])
-        last = seq[m, 0]
-        if last < 0 or seq[m, 1] != 0:  # first frame, or first after a timeout: (re)start the sequence
-            seq[m, 0] = counter
-        else:
-            delta = (counter - last) & 15
-            if delta == 0:
-                code = REPEATED_CODE
-            elif delta >= 16 - OLD_FRAME_WINDOW:
-                code = WRONG_SEQUENCE_CODE  # an old, delayed frame: the reference stays
-            else:
-                seq[m, 0] = counter
-                if delta == 1:
-                    code = OK_CODE
-                elif delta <= msg_i[m, 3]:
-                    code = OK_SOME_LOST_CODE
-                else:
-                    code = WRONG_SEQUENCE_CODE
+        code = judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t)
         status[i] = code
         if code <= OK_SOME_LOST_CODE:
-            last_ok_t[m] = now
-            seq[m, 1] = 0
             if fid == stop_id and stop_lo <= values[i, stop_col] <= stop_hi:
                 return i + 1
             if count_mask[fid]:
@@ -209,3 +219,261 @@ def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_
                 if count_left <= 0:
                     return i + 1
     return n
+
+
+# ------------------------------------------------------------------------------ the driver's lockstep tick
+# role_of_id[id] for collect_rows: what the flight-side driver does with a delivered frame of that id
+ROLE_NONE, ROLE_DEVICE, ROLE_SYNC, ROLE_IMU, ROLE_ST_A, ROLE_ST_B = -1, 0, 1, 2, 3, 4
+ROLE_WHEEL = 10  # + wheel index (0-based)
+# collect_rows' integer state (st) slots
+# (S_NTALLY: pairs in ``tally`` not yet added to the counters; S_UNEXPECTED, S_STALE, S_INCOMPLETE: the
+# driver's running counts)
+(S_PHASE, S_NTALLY, S_UNEXPECTED, S_STALE, S_INCOMPLETE, S_GROW, S_HAS_LAST, S_LAST, S_TICK, S_EXPECTED,
+ S_RECEIVED, S_FAILED, S_PENDING, S_P_TICK, S_P_FOLLOWING, S_SUPERVISED, S_IMU_N, S_ST_HAVE_A, S_ST_HAVE_B,
+ S_ST_SEQ_A, S_ST_SEQ_B, S_ST_NEW, S_ST_VALID, S_ST_BLIND, S_WHEEL_NEW) = range(25)
+NO_FID = -(1 << 40)  # collect_rows' first_fid when frame ``first`` is not judged yet
+S_SIZE = S_WHEEL_NEW + 6
+# ... and its configuration slots (cfg): value-row columns of the signals the driver reads
+(C_TICK, C_FOLLOWING, C_PERIOD, C_IMU_X, C_IMU_Y, C_IMU_Z, C_IMU_SAT, C_QW, C_QX, C_VALID, C_BLIND, C_SEQ_A,
+ C_QY, C_QZ, C_SEQ_B, C_AGE, C_SPEED, C_TORQUE, C_CURRENT, C_TEMP, C_FAULT, C_N_CODES, C_BUS_ROW,
+ C_OFF_KIND, C_OFF_ROLE, C_OFF_CRC, C_OFF_WATCH, C_N_WATCH) = range(28)
+C_SIZE = C_N_WATCH + 1
+# The constant integer arrays travel as one (``consts``: cfg, then kind_of_id, role_of_id, the CRC table and
+# the watched messages at the C_OFF_* offsets; a compiled call's cost grows with its arguments), the
+# watched messages' timeout limits at the end of ``ft`` (F_SIZE on) and the star tracker halves and wheel
+# rows in one array (``rows``: halves A, B, then one row per wheel).
+# ... and its float state (ft) slots
+F_T_TICK, F_PERIOD, F_P_PERIOD_MS, F_ST_T, F_ST_Q = 0, 1, 2, 3, 4  # F_ST_Q..F_ST_Q+3: q_NS
+F_WHEEL_T = 8  # + wheel index: the time of each wheel's newest status
+F_SIZE = F_WHEEL_T + 6
+PHASE_SYNC, PHASE_TICK, PHASE_DONE = 0, 1, 2  # waiting for SYNC(k) / for tick k's frames / tick closed
+TIMEOUT_CODE = 10  # tally code of a timeout (the tally's other codes are the class codes above)
+
+
+@njit(cache=True)
+def _tally(tally, st, key):  # pragma: no cover - compiled
+    # one more of ``key`` (message row * n_codes + code) in the (key, count) pairs of this tick
+    k = st[S_NTALLY]
+    for j in range(k):
+        if tally[j, 0] == key:
+            tally[j, 1] += 1
+            return
+    tally[k, 0] = key
+    tally[k, 1] = 1
+    st[S_NTALLY] = k + 1
+
+
+@njit(cache=True)
+def _start_tick(st, ft, cfg, values, i, seq, last_ok_t):  # pragma: no cover - compiled
+    # SYNC(k) in row i of ``values`` (or the pending one when i < 0) starts tick k
+    if i >= 0:
+        tick = np.int64(values[i, cfg[C_TICK]])
+        following = np.int64(values[i, cfg[C_FOLLOWING]])
+        period_ms = values[i, cfg[C_PERIOD]]
+    else:
+        tick, following, period_ms = st[S_P_TICK], st[S_P_FOLLOWING], ft[F_P_PERIOD_MS]
+        st[S_PENDING] = 0
+    ft[F_PERIOD] = period_ms / 1000.0
+    ft[F_T_TICK] = tick * ft[F_PERIOD]
+    if st[S_SUPERVISED] == 0:  # timeouts count from the first tick (FswBusDriver._start_supervision)
+        last_ok_t[:] = ft[F_T_TICK]
+        seq[:, 1] = 0
+        st[S_SUPERVISED] = 1
+    st[S_TICK] = tick
+    st[S_EXPECTED] = following
+    st[S_RECEIVED] = 0
+    st[S_FAILED] = 0
+    st[S_IMU_N] = 0
+    st[S_ST_NEW] = 0
+    for w in range(6):
+        st[S_WHEEL_NEW + w] = 0
+    st[S_PHASE] = PHASE_TICK if following > 0 else PHASE_DONE
+
+
+@njit("void(int64[::1], float64[::1], int64[::1], float64[::1], int64[:, ::1], float64[::1], int64[:, ::1], int64)",
+      cache=True)  # (a signature: compiled at import, also where no tick of the warm-up closes incomplete)
+def finish_tick(st, ft, watch, watch_limit, seq, last_ok_t, tally, n_codes):  # pragma: no cover - compiled
+    """The end of a lockstep tick: incomplete or not, the timeouts (E2EReceiver.check_timeouts' rule: one
+    counted when a watched message goes silent for longer than its limit, re-armed by a valid frame), and
+    the tick becomes the last one."""
+    if st[S_RECEIVED] < st[S_EXPECTED]:
+        st[S_INCOMPLETE] += 1
+    now = ft[F_T_TICK]
+    for j in range(watch.shape[0]):
+        m = watch[j]
+        if now - last_ok_t[m] > watch_limit[j]:
+            if seq[m, 1] == 0:
+                seq[m, 1] = 1
+                _tally(tally, st, m * n_codes + TIMEOUT_CODE)
+    st[S_LAST] = st[S_TICK]
+    st[S_HAS_LAST] = 1
+    st[S_PHASE] = PHASE_DONE
+
+
+@njit(cache=True)
+def star_tracker_pair(st, ft, cfg, st_half, now):  # pragma: no cover - compiled
+    """A star tracker sample once both halves (ST_QUAT_A, ST_QUAT_B value rows in ``st_half``) of one
+    ``sample_seq`` are in: q_NS (q_w, q_x from A; q_y, q_z from B), valid and blind source from A, time of
+    validity ``now`` - B's age; the halves are then cleared."""
+    if st[S_ST_HAVE_A] == 0 or st[S_ST_HAVE_B] == 0 or st[S_ST_SEQ_A] != st[S_ST_SEQ_B]:
+        return
+    ft[F_ST_Q] = st_half[0, cfg[C_QW]]
+    ft[F_ST_Q + 1] = st_half[0, cfg[C_QX]]
+    ft[F_ST_Q + 2] = st_half[1, cfg[C_QY]]
+    ft[F_ST_Q + 3] = st_half[1, cfg[C_QZ]]
+    ft[F_ST_T] = now - st_half[1, cfg[C_AGE]] / 1000.0
+    st[S_ST_VALID] = 1 if st_half[0, cfg[C_VALID]] != 0.0 else 0
+    st[S_ST_BLIND] = np.int64(st_half[0, cfg[C_BLIND]])
+    st[S_ST_NEW] = 1
+    st[S_ST_HAVE_A] = 0
+    st[S_ST_HAVE_B] = 0
+
+
+@njit("int64(int64[::1], int64[::1], uint8[:, ::1], int64[::1], float64[:, ::1], int64, int64, int64[::1], "
+      "float64[::1], int64[::1], int64[:, ::1], int64[:, :, ::1], float64[:, :, ::1], int64[:, ::1], float64[::1], "
+      "float64[:, ::1], float64[:, ::1], int64[:, ::1])", cache=True)
+def collect_rows(ids, lengths, data, status, values, first, first_fid, st, ft, consts, msg_i, sig_i, sig_f, seq,
+                 last_ok_t, imu, rows, tally):  # pragma: no cover - compiled
+    """FswBusDriver.collect_tick's work on frames ``first``.. of a burst, in one call: each frame classified as
+    :func:`classify_rows` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``) and counted
+    in ``tally`` ((message row * n_codes + code, count) pairs, ``st[S_NTALLY]`` of them), then what the
+    driver does with it, by phase (``st[S_PHASE]``):
+
+      * waiting for SYNC(k): a delivered SYNC after the last tick starts tick k (t_k = k * period, the
+        timeout supervision on the first tick); one at or before it is stale (counted); a delivered device
+        frame belongs to no announced tick (counted unexpected);
+      * tick k: a delivered device frame is received (the gyro's into ``imu`` rows (x, y, z, saturated),
+        the star tracker's halves into ``st_half`` (a sample when both halves of one ``sample_seq`` are
+        in), a wheel's status into ``wheels`` (speed, torque, current, temp, fault)), one that fails E2E
+        counts as failed; a SYNC of a later tick is kept pending and closes the tick, an older one is
+        stale; the announced count of received frames closes it. A closed tick runs :func:`finish_tick`.
+
+    Returns the index after the last frame handled: where the tick closed or the burst ended, or before a
+    frame for the Python path (``status`` FALLBACK_CODE) or a gyro frame with ``imu`` full (``st[S_GROW]``)."""
+    cfg = consts[:C_SIZE]
+    kind_of_id = consts[cfg[C_OFF_KIND]:cfg[C_OFF_ROLE]]
+    role_of_id = consts[cfg[C_OFF_ROLE]:cfg[C_OFF_CRC]]
+    crc_table = consts[cfg[C_OFF_CRC]:cfg[C_OFF_WATCH]]
+    watch = consts[cfg[C_OFF_WATCH]:cfg[C_OFF_WATCH] + cfg[C_N_WATCH]]
+    watch_limit = ft[F_SIZE:F_SIZE + cfg[C_N_WATCH]]
+    st_half = rows[:2]
+    wheels = rows[2:]
+    n = ids.shape[0]
+    n_codes = cfg[C_N_CODES]
+    bus_row = cfg[C_BUS_ROW]
+    n_kind = kind_of_id.shape[0]
+    i = first
+    if st[S_PHASE] == PHASE_SYNC and st[S_PENDING] != 0:
+        _start_tick(st, ft, cfg, values, -1, seq, last_ok_t)  # a SYNC seen while finishing the last tick
+    while i < n and st[S_PHASE] != PHASE_DONE:
+        now = ft[F_T_TICK]
+        if i == first and first_fid != NO_FID:  # judged by the Python path: status[i], values[i] and counts set
+            fid = first_fid
+            code = status[i]
+            role = role_of_id[fid] if 0 <= fid < role_of_id.shape[0] else ROLE_NONE
+        else:
+            fid = ids[i]
+            if fid < 0 or fid >= n_kind:
+                status[i] = FALLBACK_CODE
+                return i
+            m = kind_of_id[fid]
+            role = role_of_id[fid]
+            if m == KIND_FALLBACK:
+                status[i] = FALLBACK_CODE
+                return i
+            if m < 0:
+                code = UNKNOWN_CODE if m == KIND_UNKNOWN else ECHO_CODE
+                status[i] = code
+                _tally(tally, st, bus_row * n_codes + code)
+            else:
+                if role == ROLE_IMU and st[S_PHASE] == PHASE_TICK and st[S_IMU_N] >= imu.shape[0]:
+                    st[S_GROW] = 1
+                    return i
+                code = judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t)
+                status[i] = code
+                _tally(tally, st, m * n_codes + code)
+        i += 1
+        j = i - 1
+        if code > OK_SOME_LOST_CODE:
+            if st[S_PHASE] == PHASE_TICK and role >= ROLE_DEVICE:
+                st[S_FAILED] += 1
+            continue
+        if st[S_PHASE] == PHASE_SYNC:
+            if role == ROLE_SYNC:
+                if st[S_HAS_LAST] != 0 and np.int64(values[j, cfg[C_TICK]]) <= st[S_LAST]:
+                    st[S_STALE] += 1
+                else:
+                    _start_tick(st, ft, cfg, values, j, seq, last_ok_t)
+            elif role >= ROLE_DEVICE:
+                st[S_UNEXPECTED] += 1
+            continue
+        # PHASE_TICK
+        if role == ROLE_SYNC:
+            tk = np.int64(values[j, cfg[C_TICK]])
+            if tk <= st[S_TICK]:
+                st[S_STALE] += 1
+            else:  # the next tick already started: keep its SYNC, close this one
+                st[S_PENDING] = 1
+                st[S_P_TICK] = tk
+                st[S_P_FOLLOWING] = np.int64(values[j, cfg[C_FOLLOWING]])
+                ft[F_P_PERIOD_MS] = values[j, cfg[C_PERIOD]]
+                st[S_PHASE] = PHASE_DONE
+            continue
+        if role < ROLE_DEVICE:
+            continue
+        st[S_RECEIVED] += 1
+        if role == ROLE_IMU:
+            k = st[S_IMU_N]
+            imu[k, 0] = values[j, cfg[C_IMU_X]]
+            imu[k, 1] = values[j, cfg[C_IMU_Y]]
+            imu[k, 2] = values[j, cfg[C_IMU_Z]]
+            imu[k, 3] = values[j, cfg[C_IMU_SAT]]
+            st[S_IMU_N] = k + 1
+        elif role == ROLE_ST_A or role == ROLE_ST_B:
+            h = role - ROLE_ST_A
+            for c in range(values.shape[1]):
+                st_half[h, c] = values[j, c]
+            st[S_ST_HAVE_A + h] = 1
+            st[S_ST_SEQ_A + h] = np.int64(values[j, cfg[C_SEQ_A if h == 0 else C_SEQ_B]])
+            star_tracker_pair(st, ft, cfg, st_half, now)
+        elif role >= ROLE_WHEEL:
+            w = role - ROLE_WHEEL
+            wheels[w, 0] = values[j, cfg[C_SPEED]]
+            wheels[w, 1] = values[j, cfg[C_TORQUE]]
+            wheels[w, 2] = values[j, cfg[C_CURRENT]]
+            wheels[w, 3] = values[j, cfg[C_TEMP]]
+            wheels[w, 4] = values[j, cfg[C_FAULT]]
+            ft[F_WHEEL_T + w] = now
+            st[S_WHEEL_NEW + w] = 1
+        if st[S_RECEIVED] >= st[S_EXPECTED]:
+            st[S_PHASE] = PHASE_DONE
+    if st[S_PHASE] == PHASE_DONE:  # (never called once the tick is closed)
+        finish_tick(st, ft, watch, watch_limit, seq, last_ok_t, tally, n_codes)
+    return i
+
+
+@njit("int64(float64[::1], int64, int64, boolean, float64[:, ::1], int64[::1], int64[::1], float64[:, ::1], "
+      "int64[::1], int64[::1], uint8[:, ::1], int64[:, ::1], int64[:, :, ::1], float64[:, :, ::1], int64[::1])",
+      cache=True)
+def command_rows(torques, tick_lsb, done_tick, with_done, limits, idx, cols, values, counters, sent, out, msg_i,
+                 sig_i, sig_f, crc_table):  # pragma: no cover - compiled
+    """FswBusDriver.send_wheel_torques' frames in one call: wheel i's command row (``torques[i]`` limited to
+    ``limits[i]`` = (low, high), NaN or infinite sent as 0, and ``tick_lsb``) and, ``with_done``, the
+    CYCLE_DONE row (``done_tick``) into ``values`` (slots ``cols`` = torque, tick_lsb, CYCLE_DONE's tick),
+    then encoded as :func:`encode_rows` does (messages ``idx``). Returns the rows encoded (as
+    encode_rows: fewer when one cannot be)."""
+    n = torques.shape[0]
+    values[:, :] = 0.0
+    for i in range(n):
+        tau = torques[i]
+        if not np.isfinite(tau):
+            tau = 0.0
+        else:  # min(max(tau, low), high), as Python's min and max pick
+            if limits[i, 0] > tau:
+                tau = limits[i, 0]
+            if limits[i, 1] < tau:
+                tau = limits[i, 1]
+        values[i, cols[0]] = tau
+        values[i, cols[1]] = tick_lsb
+    values[n, cols[2]] = done_tick
+    return encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table, n + 1 if with_done else n)
