@@ -22,9 +22,9 @@ import numpy as np
 
 from fsw.assumption_check import AssumptionChecker
 from fsw.control import RateController
-from fsw.estimation import AttitudeEstimator
+from fsw.estimation import _NO_SAMPLES, AttitudeEstimator
 from fsw.executive import Executive
-from fsw.fdir import Fdir, FdirInputs, WheelSpeedResidual
+from fsw.fdir import Fdir, WheelSpeedResidual
 from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
@@ -196,7 +196,7 @@ class FlightSoftware:
         self._hk_src: dict | None = None  # the driver's counters that _hk_dicts lists
         self._hk_src_len = 0
         self._hk_dicts: list[dict] = []
-        self._max_speed_list = self.control.max_speed.tolist()  # fixed at start-up
+        self._max_speed = np.ascontiguousarray(self.control.max_speed, dtype=float)  # fixed at start-up
         self._st_was_valid = True
         self._st_outage_start = 0.0
         self._target_reached = False
@@ -204,7 +204,7 @@ class FlightSoftware:
         # sensors heard from at least once (their FDIR monitors are armed from then on)
         self._imu_seen = False
         self._st_seen = False
-        self._wheel_seen = [False] * self.n_wheels
+        self._wheel_seen = np.zeros(self.n_wheels, dtype=np.bool_)
         self.inject_overrun_s = 0.0  # test hook: busy-wait this long in the next GNC cycle
         self.last: CycleRecord | None = None
         self.mode_reason = "INIT"
@@ -366,7 +366,8 @@ class FlightSoftware:
                 imu = None
         if imu is not None and not getattr(imu, "valid", True):
             imu = None
-        imu_samples = [s for s in imu_samples if getattr(s, "valid", True)] or ([imu] if imu is not None else [])
+        imu_samples = [s.omega_BN_B for s in imu_samples if getattr(s, "valid", True)] or (
+            [imu.omega_BN_B] if imu is not None else None)
         st = inputs.star_tracker
         st_latency = 0.0
         st_fresh = st is not None and st.valid
@@ -380,7 +381,7 @@ class FlightSoftware:
             nq = _norm(np.asarray(st.q_NS, dtype=float).tolist())
             if not (0.9 < nq < 1.1):
                 st_fresh = False
-        wheels = list(inputs.wheels)
+        wheels = inputs.wheels
         if realtime:
             ages = inputs.wheel_ages_s
             wheels = [w if (w is not None and a is not None and a < 3 * dt) else None for w, a in zip(wheels, ages)]
@@ -388,18 +389,16 @@ class FlightSoftware:
         # ---- estimation (propagate across every IMU sample of the tick)
         est = self.estimator
         q_st = (np.asarray(st.q_NS, dtype=float) / nq) if st_fresh else None
-        if imu_samples:
-            status = est.step_samples(dt, np.array([smp.omega_BN_B for smp in imu_samples]), q_st, st_latency)
-        else:
-            status = est.step(dt, None, q_st, st_latency)
+        samples = _NO_SAMPLES if imu_samples is None else np.array(imu_samples, dtype=float).reshape(-1, 3)
+        innovation_deg = est._tick(dt, samples, q_st, st_latency)
         self._st_events(st, st_fresh)
 
         # ---- guidance and control
         q_est = est.q_NB if est.initialized else None
         omega = est.omega_BN_B
         g = self.guidance.step(self.t_s, dt, q_est, omega)
-        speed_list = [float(w.speed_rad_s) if w is not None else math.nan for w in wheels]
-        speeds = np.array(speed_list)
+        speeds = np.array([w.speed_rad_s if w is not None else math.nan for w in wheels], dtype=float)
+        faults = np.array([w.fault if w is not None else -1 for w in wheels], dtype=np.int64)  # -1: no status
         ctrl = self.control.step(dt, g.omega_cmd_BN_B, omega, speeds)
         try:
             self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm.tolist(), cycle_done=not realtime)
@@ -410,35 +409,19 @@ class FlightSoftware:
         # ---- FDIR (sensor monitors are armed once the sensor has been heard from: a flight software
         # started before its devices must not trip on silence)
         imu_corrupt, st_corrupt = self._corrupt_deltas()
-        residual_off = (self.wheel_residual.update(dt, speeds, ctrl.wheel_torque_cmd_Nm) & self.control.active).tolist()
+        # per wheel, in one compiled call: the speed residual, the fault flags, the heard-from marks
+        wheel_fault, wheel_ratio = self.wheel_residual.monitor_values(
+            dt, speeds, faults, ctrl.wheel_torque_cmd_Nm, self.control.active, self._wheel_seen, self._max_speed,
+            WHEEL_FAULT_MASK, WHEEL_OVERSPEED)
         self._imu_seen = self._imu_seen or imu is not None
         # a tracker that answers but is blind (Sun/Moon/rate) has been heard: its silence is then a fault
         self._st_seen = self._st_seen or st is not None
-        seen = self._wheel_seen
-        wheel_fault, wheel_ratio = [], []
-        for i, (w, s, m) in enumerate(zip(wheels, speed_list, self._max_speed_list)):
-            if w is None:
-                wheel_fault.append(seen[i] or residual_off[i])
-                wheel_ratio.append(abs(s) / m if math.isfinite(s) else math.nan)  # s is NaN: no status
-                continue
-            seen[i] = True
-            fault = int(w.fault)
-            wheel_fault.append(bool(fault & WHEEL_FAULT_MASK) or residual_off[i])
-            wheel_ratio.append(max(abs(s) / m, 1.0 if fault & WHEEL_OVERSPEED else 0.0) if math.isfinite(s) else math.nan)
-        fin = FdirInputs(
-            imu_missing=imu is None and self._imu_seen,
-            imu_corrupt_frames=imu_corrupt,
-            st_missing=(not st_fresh) and self._st_seen,
-            st_corrupt_frames=st_corrupt,
-            innovation_deg=status.innovation_deg if status is not None else None,
-            wheel_fault=wheel_fault,
-            wheel_speed_ratio=wheel_ratio,
-            wheel_speed_rad_s=speed_list,
-            margins_deg=g.margins_deg,  # every mode: SAFE keeps out too, so a violation is one in SAFE
-            zone_bodies=g.zone_bodies,
-            slipped=slipped_before,
-        )
-        for action in self.fdir.evaluate(fin):
+        actions = self.fdir.evaluate_arrays(
+            imu is None and self._imu_seen, imu_corrupt, (not st_fresh) and self._st_seen, st_corrupt,
+            innovation_deg, wheel_fault, wheel_ratio, speeds,
+            g.margins_deg,  # every mode: SAFE keeps out too, so a violation is one in SAFE
+            g.zone_bodies, slipped_before)
+        for action in actions:
             self._execute(action)
 
         # ---- target reached (event once per target)
@@ -451,7 +434,7 @@ class FlightSoftware:
         self.last = CycleRecord(self.t_s, g.mode, est.q_NB.copy(), g.omega_cmd_BN_B, ctrl.wheel_torque_cmd_Nm,
                                 g.margins_deg, g.margin_min_deg, g.pointing_error_deg, g.att_error_deg, exec_ms)
         if self.cycle % self.cfg.tmtc.gnc_packet_every_n_cycles == 0:
-            self._send_gnc_tm(g, ctrl, speed_list, imu is not None, st, st_fresh, status, exec_ms)
+            self._send_gnc_tm(g, ctrl, speeds, imu is not None, st, st_fresh, exec_ms)
         self.cycle += 1
 
     def _st_events(self, st, st_fresh: bool) -> None:
@@ -515,11 +498,11 @@ class FlightSoftware:
         return not second
 
     # ---------------------------------------------------------------------------------- telemetry
-    def _send_gnc_tm(self, g, ctrl, speeds, imu_valid, st, st_fresh, status, exec_ms) -> None:
+    def _send_gnc_tm(self, g, ctrl, speeds, imu_valid, st, st_fresh, exec_ms) -> None:
         est = self.estimator
         nw = self.n_wheels
         margins = list(g.margins_deg)[:6] + [float("nan")] * (6 - min(6, len(g.margins_deg)))
-        wheel_speed = list(speeds) + [math.nan] * (6 - nw)
+        wheel_speed = speeds.tolist() + [math.nan] * (6 - nw)
         wheel_tau = ctrl.wheel_torque_cmd_Nm.tolist() + [0.0] * (6 - nw)
         values = {
             "cycle": self.cycle,

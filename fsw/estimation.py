@@ -206,6 +206,59 @@ def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_b
     return q, bias, P, omega, initialized, used, rejected, innov_deg
 
 
+@njit(cache=True)
+def _round_half_even(x):
+    """Python's ``round(x)`` of a float (ties to even) as an integer."""
+    r = math.floor(x)
+    d = x - r
+    if d > 0.5 or (d == 0.5 and r % 2.0 != 0.0):
+        r += 1.0
+    return int(r)
+
+
+@njit("Tuple((f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[::1],"
+      " f8[:, ::1], f8[::1], b1, f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8[:, ::1], f8[:, ::1])", cache=True)
+def _estimator_cycle(q, bias, P, omega, samples, prev_sample, has_prev, dt_s, sig_v, sig_u, initialized, has_st, q_NS,
+                     q_SB, st_latency, max_age, gate_deg, R_st, P0):
+    """`AttitudeEstimator._cycle` in one compiled call: the trapezoid rates of the gyro ``samples`` (n, 3),
+    the bridge over the star tracker's latency, then `_mekf_cycle`; the expressions and summation orders
+    of the numpy version it replaces (tests/fsw/test_estimation.py). ``omega``: the last rate estimate;
+    ``prev_sample``: the last gyro sample of the previous cycle (``has_prev`` False: none).
+    Returns (q, bias, P, omega, the new previous sample, initialized, used, rejected, innovation_deg); the
+    new previous sample is NaN when this cycle had no gyro sample."""
+    n = samples.shape[0]
+    if n:
+        sub = dt_s / n
+        rates = np.empty((n, 3))
+        for j in range(3):
+            # no earlier sample: hold the first
+            p0 = prev_sample[j] if has_prev else samples[0, j]
+            rates[0, j] = 0.5 * (p0 + samples[0, j])
+            for k in range(1, n):
+                rates[k, j] = 0.5 * (samples[k - 1, j] + samples[k, j])
+        new_prev = samples[n - 1].copy()
+        m = min(n, max(1, _round_half_even(st_latency / sub)))  # the intervals that the latency spans
+        bridge = np.empty(3)
+        for j in range(3):
+            # numpy's mean over axis 0: the rows added in order, then divided by their count
+            acc = rates[n - m, j]
+            for k in range(n - m + 1, n):
+                acc += rates[k, j]
+            bridge[j] = acc / m
+        bridge_var = sig_v * sig_v / (m * sub)
+        q, bias, P, omega, initialized, used, rejected, innov = _mekf_cycle(
+            q, bias, P, rates[:n - 1], sub, rates[n - 1].copy(), sub, new_prev, bridge, bridge_var, sig_v, sig_u,
+            initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg, R_st, P0)
+        return q, bias, P, omega, new_prev, initialized, used, rejected, innov
+    # no valid gyro sample: hold the last bias-corrected rate over the whole cycle
+    omega_last = omega + bias
+    bridge_var = sig_v * sig_v / dt_s
+    q, bias, P, omega, initialized, used, rejected, innov = _mekf_cycle(
+        q, bias, P, np.zeros((0, 3)), dt_s, omega_last, dt_s, omega_last, omega_last, bridge_var, sig_v, sig_u,
+        initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg, R_st, P0)
+    return q, bias, P, omega, np.full(3, np.nan), initialized, used, rejected, innov
+
+
 def star_tracker_noise_B(cfg, q_BS: np.ndarray) -> np.ndarray:
     """The star tracker's attitude noise covariance in body axes [rad^2] (3, 3).
 
@@ -228,6 +281,7 @@ def star_tracker_noise_B(cfg, q_BS: np.ndarray) -> np.ndarray:
 
 _NO_SAMPLES = np.zeros((0, 3))
 _NO_QUATERNION = np.array([1.0, 0.0, 0.0, 0.0])
+_NO_SAMPLE = np.full(3, np.nan)
 
 
 @dataclass
@@ -261,6 +315,8 @@ class AttitudeEstimator:
         self.omega_BN_B = np.zeros(3)
         self.last_innovation_deg = float("nan")
         self.resets = 0
+        self.star_tracker_used = False  # this cycle's star-tracker sample was fused
+        self.innovation_rejected = False  # this cycle's star-tracker sample was gated out
         self._prev_sample: np.ndarray | None = None  # the last gyro sample, start of the next interval
 
     def _initial_P(self) -> np.ndarray:
@@ -299,41 +355,35 @@ class AttitudeEstimator:
         random walk over the cycle, and the process noise, are unchanged. The star tracker's latency is
         bridged the same way, with the mean rate over the latency.
         """
-        n = samples.shape[0]
-        if n:
-            samples = np.ascontiguousarray(samples, dtype=float)
-            sub = dt_s / n
-            prev = samples[0] if self._prev_sample is None else self._prev_sample  # no earlier sample: hold the first
-            rates = 0.5 * (np.vstack((prev[None, :], samples[:-1])) + samples)
-            self._prev_sample = samples[-1].copy()
-            m = min(n, max(1, round(st_latency_s / sub)))  # the intervals that the latency spans
-            bridge = rates[n - m:].mean(axis=0)
-            bridge_var = self.sig_v * self.sig_v / (m * sub)
-            prior, omega_prop, dt_prop, omega_last = rates[:-1], rates[-1], sub, samples[-1]
-        else:
-            # no valid gyro sample: hold the last bias-corrected rate over the whole cycle
-            self._prev_sample = None
-            omega_last = self.omega_BN_B + self.bias_B
-            prior, omega_prop, dt_prop, bridge = _NO_SAMPLES, omega_last, dt_s, omega_last
-            bridge_var = self.sig_v * self.sig_v / dt_s
-        has_st = q_NS is not None
-        P0 = self._initial_P() if has_st and not self.initialized else self.P
-        (self.q_NB, self.bias_B, self.P, self.omega_BN_B, self.initialized, used, rejected, innov_deg) = _mekf_cycle(
-            self.q_NB, self.bias_B, self.P, np.ascontiguousarray(prior), float(dt_prop), omega_prop, float(dt_prop),
-            omega_last, bridge, float(bridge_var), self.sig_v, self.sig_u,
-            self.initialized, has_st, np.ascontiguousarray(q_NS, dtype=float) if has_st else _NO_QUATERNION,
-            np.ascontiguousarray(self.q_SB, dtype=float), float(st_latency_s), self.cfg.star_tracker_max_age_s,
-            self.cfg.innovation_gate_deg, self.R_st_B, P0)
-        self.coasting_s = 0.0 if used else self.coasting_s + dt_s
-        self.last_innovation_deg = innov_deg
+        self._tick(float(dt_s), np.ascontiguousarray(samples, dtype=float),
+                   None if q_NS is None else np.ascontiguousarray(q_NS, dtype=float), float(st_latency_s))
         return EstimatorStatus(
             initialized=self.initialized,
-            star_tracker_used=used,
-            innovation_deg=innov_deg,
-            innovation_rejected=rejected,
+            star_tracker_used=self.star_tracker_used,
+            innovation_deg=self.last_innovation_deg,
+            innovation_rejected=self.innovation_rejected,
             coasting_s=self.coasting_s,
             cov_trace_deg2=self.cov_trace_deg2,
         )
+
+    def _tick(self, dt_s: float, samples: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float) -> float:
+        """`_cycle` without the status: one compiled call (`_estimator_cycle`) and the attribute sets. The
+        GNC cycle calls it directly with ``samples`` a C-contiguous float (n, 3) array and ``q_NS`` a
+        contiguous float quaternion or None. Returns the innovation [deg] (NaN when none this cycle)."""
+        has_st = q_NS is not None
+        P0 = self._initial_P() if has_st and not self.initialized else self.P
+        prev = self._prev_sample
+        (self.q_NB, self.bias_B, self.P, self.omega_BN_B, new_prev, self.initialized, used, self.innovation_rejected,
+         innov_deg) = _estimator_cycle(
+            self.q_NB, self.bias_B, self.P, self.omega_BN_B, samples, prev if prev is not None else _NO_SAMPLE,
+            prev is not None, dt_s, self.sig_v, self.sig_u, self.initialized, has_st,
+            q_NS if has_st else _NO_QUATERNION, np.ascontiguousarray(self.q_SB, dtype=float), st_latency_s, self.cfg.star_tracker_max_age_s,
+            self.cfg.innovation_gate_deg, self.R_st_B, P0)
+        self._prev_sample = new_prev if samples.shape[0] else None
+        self.star_tracker_used = used
+        self.coasting_s = 0.0 if used else self.coasting_s + dt_s
+        self.last_innovation_deg = innov_deg
+        return innov_deg
 
     def _attitude_trace(self) -> float:
         # = float(np.trace(self.P[0:3, 0:3])) (same summation order), without numpy's call overhead
