@@ -322,3 +322,24 @@ def test_round_half_even_is_pythons_round() -> None:
     xs += list(np.random.default_rng(1).uniform(0.0, 40.0, 500)) + [i / 2 for i in range(60)]
     for x in xs:
         assert _round_half_even(float(x)) == round(float(x)), x
+
+
+def test_in_place_propagation_is_bit_identical_to_mekf_propagate() -> None:
+    """`_propagate_in_place` (no allocation) against `mekf_propagate`, equal to the last bit, including
+    rates equal to the bias (the small-angle branch of the rotation vector) and zero rates."""
+    from fsw.estimation import _propagate_in_place, mekf_propagate
+
+    rng = np.random.default_rng(9)
+    PP = np.empty((6, 6))
+    for k in range(400):
+        L = rng.normal(scale=1e-3, size=(6, 6))
+        P = L @ L.T + np.eye(6) * 1e-9
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        bias = rng.normal(scale=1e-3, size=3)
+        omega = (bias.copy(), np.zeros(3), bias + 1e-14, rng.normal(scale=0.05, size=3))[k % 4]
+        dt = (0.01, float(rng.uniform(0.001, 0.2)))[k % 2]
+        qn, Pn = mekf_propagate(q, bias, P, omega, dt, 1e-4, 1e-6)
+        q2, P2 = q.copy(), P.copy()
+        _propagate_in_place(q2, bias, P2, omega, dt, 1e-4, 1e-6, PP)
+        assert np.array_equal(q2, qn) and np.array_equal(P2, Pn), k
