@@ -192,7 +192,7 @@ class FlightSoftware:
         self._check_budget_free_at = -math.inf  # host monotonic time from which a periodic check may start
         self._corrupt_prev = {"IMU": 0, "STAR_TRACKER": 0}
         self._corrupt_src: dict | None = None
-        self._corrupt_dicts: dict[str, list[dict]] = {}
+        self._corrupt_dicts: dict[str, tuple[list[dict], list[str]]] = {}
         self._hk_src: dict | None = None  # the driver's counters that _hk_dicts lists
         self._hk_src_len = 0
         self._hk_dicts: list[dict] = []
@@ -450,21 +450,23 @@ class FlightSoftware:
         """(IMU, star tracker) frames rejected by E2E since the last cycle."""
         counters = self.driver.counters
         if counters is not self._corrupt_src:
-            # the per-message counter dicts live as long as the receiver: look them up once
+            # the per-message counter dicts live as long as the receiver: look them up once, as the
+            # (dict, class) pairs each sensor's total sums
             self._corrupt_src = counters
             self._corrupt_dicts = {
-                "IMU": [counters[m] for m in ("IMU_RATE",) if m in counters],
-                "STAR_TRACKER": [counters[m] for m in ("ST_QUAT_A", "ST_QUAT_B") if m in counters],
+                sensor: ([counters[m] for m in msgs if m in counters for _ in _CORRUPT_CLASSES],
+                         [k for m in msgs if m in counters for k in _CORRUPT_CLASSES])
+                for sensor, msgs in (("IMU", ("IMU_RATE",)), ("STAR_TRACKER", ("ST_QUAT_A", "ST_QUAT_B")))
             }
-        out = []
-        for sensor, dicts in self._corrupt_dicts.items():
-            total = 0
-            for c in dicts:
-                for k in _CORRUPT_CLASSES:
-                    total += c.get(k, 0)
-            out.append(max(0, total - self._corrupt_prev[sensor]))
-            self._corrupt_prev[sensor] = total
-        return out[0], out[1]
+        prev = self._corrupt_prev
+        imu_dicts, imu_keys = self._corrupt_dicts["IMU"]
+        st_dicts, st_keys = self._corrupt_dicts["STAR_TRACKER"]
+        # integer sums in C (map over dict.get): the same totals as a loop
+        imu_total = sum(map(dict.get, imu_dicts, imu_keys, repeat(0)))
+        st_total = sum(map(dict.get, st_dicts, st_keys, repeat(0)))
+        imu, st = max(0, imu_total - prev["IMU"]), max(0, st_total - prev["STAR_TRACKER"])
+        prev["IMU"], prev["STAR_TRACKER"] = imu_total, st_total
+        return imu, st
 
     def _execute(self, action) -> None:
         a = action.action

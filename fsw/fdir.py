@@ -369,9 +369,10 @@ class Fdir:
     def states(self) -> dict[str, str]:
         """Worst state per dictionary monitor (HK channels fdir_<monitor>)."""
         out: dict[str, str] = {}
+        codes = self._bank.state.tolist()
         for m in self.all_monitors():
             cur = out.get(m.monitor)
-            state = m.state
+            state = _STATES[codes[m._i]]
             if cur is None or _STATE_RANK[state] > _STATE_RANK[cur]:
                 out[m.monitor] = state
         return out
