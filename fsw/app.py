@@ -409,16 +409,15 @@ class FlightSoftware:
         # ---- FDIR (sensor monitors are armed once the sensor has been heard from: a flight software
         # started before its devices must not trip on silence)
         imu_corrupt, st_corrupt = self._corrupt_deltas()
-        # per wheel, in one compiled call: the speed residual, the fault flags, the heard-from marks
-        wheel_fault, wheel_ratio = self.wheel_residual.monitor_values(
-            dt, speeds, faults, ctrl.wheel_torque_cmd_Nm, self.control.active, self._wheel_seen, self._max_speed,
-            WHEEL_FAULT_MASK, WHEEL_OVERSPEED)
         self._imu_seen = self._imu_seen or imu is not None
         # a tracker that answers but is blind (Sun/Moon/rate) has been heard: its silence is then a fault
         self._st_seen = self._st_seen or st is not None
-        actions = self.fdir.evaluate_arrays(
-            imu is None and self._imu_seen, imu_corrupt, (not st_fresh) and self._st_seen, st_corrupt,
-            innovation_deg, wheel_fault, wheel_ratio, speeds,
+        # one compiled call: per wheel the speed residual, the fault flags and the heard-from marks, then
+        # every monitor
+        actions = self.fdir.evaluate_cycle(
+            self.wheel_residual, dt, speeds, faults, ctrl.wheel_torque_cmd_Nm, self.control.active, self._wheel_seen,
+            self._max_speed, WHEEL_FAULT_MASK, WHEEL_OVERSPEED,
+            imu is None and self._imu_seen, imu_corrupt, (not st_fresh) and self._st_seen, st_corrupt, innovation_deg,
             g.margins_deg,  # every mode: SAFE keeps out too, so a violation is one in SAFE
             g.zone_bodies, slipped_before)
         for action in actions:

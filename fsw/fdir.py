@@ -58,40 +58,54 @@ _DISABLED, _NOMINAL, _PERSISTING, _TRIPPED = 0, 1, 2, 3
 _NO_CHANGE, _TRIPPED_NOW, _CLEARED_NOW = 0, 1, 2
 
 
+# rows of MonitorBank.f (floats) and MonitorBank.i (integers): two arrays cross into the compiled pass,
+# not nine
+_F_LIMIT, _F_LAST, _F_VALUE = 0, 1, 2
+_I_PERSIST, _I_BELOW, _I_STATE, _I_COUNT, _I_TRIPS, _I_RESULT = 0, 1, 2, 3, 4, 5
+
+
 class MonitorBank:
     """The state of a set of limit monitors as arrays, so that one compiled call (`_monitor_pass`) runs
-    them all each cycle; each `LimitMonitor` is a view of one index."""
+    them all each cycle; each `LimitMonitor` is a view of one index. ``f`` (3, n): limit, last value,
+    this cycle's value (NaN: not evaluated); ``i`` (6, n): persistence, below (1: trips below the limit),
+    state code, count, trips, this cycle's result (0 no change, 1 tripped, 2 cleared)."""
 
     def __init__(self, rules, below) -> None:
         n = len(rules)
-        self.limit = np.array([float(r.limit) for r in rules], dtype=float)
-        self.persistence = np.array([int(r.persistence_cycles) for r in rules], dtype=np.int64)
-        self.below = np.array([bool(b) for b in below], dtype=np.bool_)
-        self.state = np.array([_NOMINAL if r.enabled else _DISABLED for r in rules], dtype=np.int64)
-        self.count = np.zeros(n, dtype=np.int64)
-        self.trips = np.zeros(n, dtype=np.int64)
-        self.last_value = np.full(n, np.nan)
-        self.result = np.zeros(n, dtype=np.int64)
+        self.f = np.full((3, n), np.nan)
+        self.f[_F_LIMIT] = [float(r.limit) for r in rules]
+        self.i = np.zeros((6, n), dtype=np.int64)
+        self.i[_I_PERSIST] = [int(r.persistence_cycles) for r in rules]
+        self.i[_I_BELOW] = [1 if b else 0 for b in below]
+        self.i[_I_STATE] = [_NOMINAL if r.enabled else _DISABLED for r in rules]
+        # row views, for reading (and LimitMonitor's Python update)
+        self.limit, self.last_value, self.values = self.f[_F_LIMIT], self.f[_F_LAST], self.f[_F_VALUE]
+        self.persistence, self.state, self.count, self.trips, self.result = (
+            self.i[_I_PERSIST], self.i[_I_STATE], self.i[_I_COUNT], self.i[_I_TRIPS], self.i[_I_RESULT])
 
     def run(self, values: np.ndarray) -> np.ndarray:
         """One cycle's values (NaN: not evaluated this cycle); returns the result per monitor
         (0 no change, 1 tripped, 2 cleared), an array reused every cycle."""
-        _monitor_pass(values, self.limit, self.persistence, self.below, self.state, self.count, self.trips,
-                      self.last_value, self.result)
+        self.values[:] = values
+        _monitor_pass(self.f, self.i)
         return self.result
 
 
-@njit("void(f8[::1], f8[::1], i8[::1], b1[::1], i8[::1], i8[::1], i8[::1], f8[::1], i8[::1])", cache=True)
-def _monitor_pass(values, limit, persistence, below, state, count, trips, last_value, result):
-    """`LimitMonitor.update` for every monitor of a bank in one call (the same comparisons and
-    transitions); a NaN value is 'not evaluated this cycle' (no monitor is fed a NaN value otherwise)."""
+@njit("void(f8[:, ::1], i8[:, ::1])", cache=True)
+def _monitor_pass(f, ints):
+    """`LimitMonitor.update` for every monitor of a bank (`MonitorBank`'s ``f`` and ``i``) on the values
+    in ``f[_F_VALUE]``, in one call: the same comparisons and transitions. A NaN value is 'not evaluated
+    this cycle' (no monitor is fed a NaN value otherwise)."""
+    limit, last_value, values = f[_F_LIMIT], f[_F_LAST], f[_F_VALUE]
+    persistence, below, state, count, trips, result = (ints[_I_PERSIST], ints[_I_BELOW], ints[_I_STATE],
+                                                       ints[_I_COUNT], ints[_I_TRIPS], ints[_I_RESULT])
     for i in range(values.shape[0]):
         result[i] = _NO_CHANGE
         value = values[i]
         if state[i] == _DISABLED or value != value:
             continue
         last_value[i] = value
-        if (value < limit[i]) if below[i] else (value > limit[i]):
+        if (value < limit[i]) if below[i] != 0 else (value > limit[i]):
             count[i] += 1
             if state[i] == _TRIPPED:
                 continue
@@ -351,7 +365,6 @@ class Fdir:
         self.keepout_yellow = LimitMonitor("KEEP_OUT_MARGIN", f.keepout_yellow, below=True, bank=bank, index=k)
         self.keepout_red = LimitMonitor("KEEP_OUT_MARGIN", f.keepout_red, below=True, bank=bank, index=k + 1)
         self.cycle_slip = LimitMonitor("CYCLE_SLIP", f.cycle_slip, bank=bank, index=k + 2)
-        self._values = np.full(len(rules), np.nan)  # the cycle's monitored values, written by _fdir_pass
         self._all_wheels = np.ones(n_wheels, dtype=np.bool_)  # evaluate_arrays: every wheel is evaluated
         self.stale_counts = {"IMU": 0, "STAR_TRACKER": 0}
 
@@ -418,29 +431,51 @@ class Fdir:
                               wheel_fault, self._all_wheels, wheel_speed_ratio, wheel_speed_rad_s, margins_deg,
                               zone_bodies, slipped)
 
-    def _evaluate(self, imu_missing, imu_corrupt_frames, st_missing, st_corrupt_frames, innovation_deg, wheel_fault,
-                  wheel_evaluated, wheel_speed_ratio, wheel_speed_rad_s, margins_deg, zone_bodies, slipped):
+    def evaluate_cycle(self, residual: WheelSpeedResidual, dt_s: float, wheel_speed_rad_s: np.ndarray,
+                       wheel_fault_flags: np.ndarray, wheel_torque_cmd_Nm: np.ndarray, wheel_active: np.ndarray,
+                       wheel_seen: np.ndarray, max_speed_rad_s: np.ndarray, fault_mask: int, overspeed_bit: int,
+                       imu_missing: bool, imu_corrupt_frames: int, st_missing: bool, st_corrupt_frames: int,
+                       innovation_deg: float, margins_deg, zone_bodies: list[str], slipped: bool) -> list[FdirAction]:
+        """`WheelSpeedResidual.monitor_values` then `evaluate_arrays` on its values, in one compiled call
+        (`_fdir_cycle`): the GNC cycle's FDIR. Arguments as theirs. Returns the actions to take."""
+        self._count_stale(imu_missing, st_missing)
+        r = residual
+        worst_k, changed = _fdir_cycle(
+            float(dt_s), wheel_speed_rad_s, wheel_fault_flags, wheel_torque_cmd_Nm, wheel_active, wheel_seen,
+            max_speed_rad_s, r._started, r._prev_speed, r._prev_cmd, r.Js, r._measured, r._predicted, r._state,
+            r.abs_limit, r.rel_limit, int(fault_mask), int(overspeed_bit), bool(imu_missing), bool(st_missing),
+            float(imu_corrupt_frames), float(st_corrupt_frames), float(innovation_deg), _margins_array(margins_deg),
+            bool(slipped), self._bank.f, self._bank.i)
+        r._started = True
+        if not changed and not imu_corrupt_frames and not st_corrupt_frames:
+            return []  # the usual cycle: no monitor changed state, nothing to report
+        return self._report(imu_corrupt_frames, st_corrupt_frames, innovation_deg, wheel_speed_rad_s, margins_deg,
+                            zone_bodies, worst_k)
+
+    def _count_stale(self, imu_missing: bool, st_missing: bool) -> None:
         stale = self.stale_counts
         stale["IMU"] = stale["IMU"] + 1 if imu_missing else 0
         stale["STAR_TRACKER"] = stale["STAR_TRACKER"] + 1 if st_missing else 0
+
+    def _evaluate(self, imu_missing, imu_corrupt_frames, st_missing, st_corrupt_frames, innovation_deg, wheel_fault,
+                  wheel_evaluated, wheel_speed_ratio, wheel_speed_rad_s, margins_deg, zone_bodies, slipped):
+        self._count_stale(imu_missing, st_missing)
         b = self._bank
-        margins = margins_deg if type(margins_deg) is np.ndarray else np.array(margins_deg, dtype=float)
         worst_k, changed = _fdir_pass(
             bool(imu_missing), bool(st_missing), float(imu_corrupt_frames), float(st_corrupt_frames),
-            float(innovation_deg), wheel_fault, wheel_evaluated, wheel_speed_ratio,
-            np.ascontiguousarray(margins, dtype=float), bool(slipped), self._values,
-            b.limit, b.persistence, b.below, b.state, b.count, b.trips, b.last_value, b.result)
+            float(innovation_deg), np.ascontiguousarray(wheel_fault, dtype=np.bool_), wheel_evaluated,
+            np.ascontiguousarray(wheel_speed_ratio, dtype=float), _margins_array(margins_deg), bool(slipped), b.f, b.i)
         if not changed and not imu_corrupt_frames and not st_corrupt_frames:
             return []  # the usual cycle: no monitor changed state, nothing to report
-        return self._report(imu_corrupt_frames, st_corrupt_frames, innovation_deg, wheel_speed_ratio,
-                            wheel_speed_rad_s, margins_deg, zone_bodies, worst_k)
+        return self._report(imu_corrupt_frames, st_corrupt_frames, innovation_deg, wheel_speed_rad_s, margins_deg,
+                            zone_bodies, worst_k)
 
-    def _report(self, imu_corrupt_frames, st_corrupt_frames, innovation_deg, wheel_speed_ratio, wheel_speed_rad_s,
-                margins_deg, zone_bodies, worst_k) -> list[FdirAction]:
+    def _report(self, imu_corrupt_frames, st_corrupt_frames, innovation_deg, wheel_speed_rad_s, margins_deg,
+                zone_bodies, worst_k) -> list[FdirAction]:
         """The events and actions of the monitors that changed state this cycle, in evaluation order."""
         actions: list[FdirAction] = []
         res = self._bank.result.tolist()
-        values = self._values.tolist()
+        values = self._bank.values.tolist()
         stale = self.stale_counts
         if self._changed(self.imu_stale, values[0], actions, None, res[0]) == _TRIPPED_NOW:
             self.event("SENSOR_STALE", sensor="IMU", cycles=stale["IMU"])
@@ -462,7 +497,7 @@ class Fdir:
             r = res[5 + n + i]
             if r == _NO_CHANGE:
                 continue
-            ratio = float(wheel_speed_ratio[i])
+            ratio = values[5 + n + i]
             if self._changed(mon, ratio, actions, i, r) == _TRIPPED_NOW:
                 speed = float(wheel_speed_rad_s[i]) if i < len(wheel_speed_rad_s) else ratio
                 self.event("WHEEL_SPEED_LIMIT", wheel=i + 1, speed_rad_s=speed)
@@ -478,14 +513,20 @@ class Fdir:
         return actions
 
 
-@njit("Tuple((i8, i8))(b1, b1, f8, f8, f8, b1[::1], b1[::1], f8[::1], f8[::1], b1, f8[::1], f8[::1], i8[::1],"
-      " b1[::1], i8[::1], i8[::1], i8[::1], f8[::1], i8[::1])", cache=True)
+def _margins_array(margins_deg) -> np.ndarray:
+    """The guidance's margins (a list, or already an array) as a contiguous float array."""
+    if type(margins_deg) is np.ndarray and margins_deg.dtype == np.float64 and margins_deg.flags.c_contiguous:
+        return margins_deg
+    return np.array(margins_deg, dtype=float)
+
+
+@njit("Tuple((i8, i8))(b1, b1, f8, f8, f8, b1[::1], b1[::1], f8[::1], f8[::1], b1, f8[:, ::1], i8[:, ::1])", cache=True)
 def _fdir_pass(imu_missing, st_missing, imu_corrupt, st_corrupt, innovation_deg, wheel_fault, wheel_evaluated,
-               wheel_ratio, margins_deg, slipped, values, limit, persistence, below, state, count, trips, last_value,
-               result):
-    """`Fdir`'s monitored values for one cycle, written into ``values`` (NaN: not evaluated), and the
-    monitors run on them (`_monitor_pass`). Returns (the zone of the smallest finite margin, -1 when there
-    is none; the number of monitors that tripped or cleared)."""
+               wheel_ratio, margins_deg, slipped, f, ints):
+    """`Fdir`'s monitored values for one cycle, written into the bank's value row (NaN: not evaluated),
+    and the monitors run on them (`_monitor_pass`). Returns (the zone of the smallest finite margin, -1
+    when there is none; the number of monitors that tripped or cleared)."""
+    values = f[_F_VALUE]
     n = wheel_fault.shape[0]
     values[0] = 1.0 if imu_missing else 0.0
     values[1] = 1.0 if st_missing else 0.0
@@ -505,9 +546,24 @@ def _fdir_pass(imu_missing, st_missing, imu_corrupt, st_corrupt, innovation_deg,
     values[5 + 2 * n] = worst
     values[6 + 2 * n] = worst
     values[7 + 2 * n] = 1.0 if slipped else 0.0
-    _monitor_pass(values, limit, persistence, below, state, count, trips, last_value, result)
+    _monitor_pass(f, ints)
+    result = ints[_I_RESULT]
     changed = 0
     for i in range(result.shape[0]):
         if result[i] != _NO_CHANGE:
             changed += 1
     return worst_k, changed
+
+
+@njit("Tuple((i8, i8))(f8, f8[::1], i8[::1], f8[::1], b1[::1], b1[::1], f8[::1], b1, f8[::1], f8[::1], f8[::1],"
+      " f8[:, ::1], f8[:, ::1], i8[::1], f8, f8, i8, i8, b1, b1, f8, f8, f8, f8[::1], b1, f8[:, ::1], i8[:, ::1])",
+      cache=True)
+def _fdir_cycle(dt_s, speed, fault_flags, cmd, active, seen, max_speed, started, prev_speed, prev_cmd, Js, measured,
+                predicted, state, abs_limit, rel_limit, fault_mask, overspeed_bit, imu_missing, st_missing, imu_corrupt,
+                st_corrupt, innovation_deg, margins_deg, slipped, f, ints):
+    """`Fdir.evaluate_cycle`: `_wheel_monitor_values` and `_fdir_pass` in one compiled call."""
+    fault, ratio = _wheel_monitor_values(dt_s, speed, fault_flags, cmd, active, seen, max_speed, started, prev_speed,
+                                         prev_cmd, Js, measured, predicted, state, abs_limit, rel_limit, fault_mask,
+                                         overspeed_bit)
+    return _fdir_pass(imu_missing, st_missing, imu_corrupt, st_corrupt, innovation_deg, fault,
+                      np.ones(fault.shape[0], dtype=np.bool_), ratio, margins_deg, slipped, f, ints)
