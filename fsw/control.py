@@ -60,15 +60,16 @@ def allocate_min_norm(G: np.ndarray, active: np.ndarray, torque_B_Nm: np.ndarray
     return tau * scale, scale
 
 
-@njit("Tuple((f8[::1], f8[::1], f8, f8[::1], f8[::1], f8[::1]))(f8, f8[::1], f8[::1], f8[::1], f8[::1], b1, f8, f8, f8,"
+@njit("Tuple((f8[::1], f8[::1], f8, f8[::1]))(f8, f8[::1], f8[::1], f8[::1], f8[::1], b1, f8, f8, f8,"
       " b1, f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], b1)", cache=True)
 def _rate_loop(dt_s, cmd, prev, accel_prev, w, has_prev, max_accel, max_jerk, kp, ff, J, G, Js, measured_speed,
                last_speed, max_torque, M, any_active):
     """``RateController.step``'s arithmetic (one compiled call per cycle: the numpy version cost ~40 us of
     small-array calls). ``measured_speed``: this cycle's wheel speeds, NaN where none was reported (the
-    last known, ``last_speed``, is kept for it). Returns (torque_B, tau_w, scale, shaped, accel, the wheel
-    speeds used); the expressions and summation orders are those of the numpy reference
-    (tests/fsw/test_control.py).
+    last known, ``last_speed``, is kept for it). Returns (torque_B, tau_w, scale, shaped); the controller's
+    state is updated in place (fewer arrays to hand back): ``accel_prev`` becomes the shaped command's
+    acceleration, ``last_speed`` the wheel speeds used. The expressions and summation orders are those of
+    the numpy reference (tests/fsw/test_control.py).
 
     ``max_jerk`` 0: the shaped command steps towards ``cmd`` by at most ``max_accel dt`` (its acceleration
     may reverse from one cycle to the next). ``max_jerk`` > 0: its acceleration heads for
@@ -91,21 +92,24 @@ def _rate_loop(dt_s, cmd, prev, accel_prev, w, has_prev, max_accel, max_jerk, kp
             step *= max_step / norm
     shaped = prev + step
     accel = step / dt_s
-    wheel_speed = np.empty(measured_speed.shape[0])
+    for i in range(3):
+        accel_prev[i] = accel[i]  # read above (jerk limit) before it is overwritten here
+    wheel_speed = last_speed
     for i in range(wheel_speed.shape[0]):
         s = measured_speed[i]
-        wheel_speed[i] = s if math.isfinite(s) else last_speed[i]
+        if math.isfinite(s):
+            wheel_speed[i] = s
     cmd_dot = accel if (ff and has_prev) else np.zeros(3)
     h_w = G @ (Js * wheel_speed)
     h = J @ w + h_w
     gyro = np.array([w[1] * h[2] - w[2] * h[1], w[2] * h[0] - w[0] * h[2], w[0] * h[1] - w[1] * h[0]])
     torque = J @ (kp * (shaped - w) + cmd_dot) + gyro
     if not any_active:
-        return torque, np.zeros(G.shape[1]), 0.0, shaped, accel, wheel_speed
+        return torque, np.zeros(G.shape[1]), 0.0, shaped
     tau = M @ torque
     ratio = np.max(np.abs(tau) / max_torque)
     scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
-    return torque, tau * scale, scale, shaped, accel, wheel_speed
+    return torque, tau * scale, scale, shaped
 
 
 class RateController:
@@ -178,9 +182,8 @@ class RateController:
         w = np.ascontiguousarray(omega_BN_B, dtype=float)
         has_prev = self._omega_cmd_prev is not None
         prev = self._omega_cmd_prev if has_prev else w
-        torque, tau_w, scale, shaped, accel, self.wheel_speed = _rate_loop(
+        torque, tau_w, scale, shaped = _rate_loop(
             float(dt_s), cmd, prev, self._accel_prev, w, has_prev, self.max_accel, float(self.max_jerk), float(self.kp),
             bool(self.ff), self.J, self.G, self.Js, ws, self.wheel_speed, self.max_torque, self.M, self._any_active)
         self._omega_cmd_prev = shaped
-        self._accel_prev = accel
         return ControlOutput(torque, tau_w, scale, shaped)
