@@ -125,10 +125,10 @@ def _tick_breakdown(duration: float) -> dict:
     timed(FlightSoftware, "run_cycle", "fsw_cycle")
     timed(lockstep.Simulator, "end_tick", "world_step_and_commands_in")
     # parts of the phases above
-    timed(estimation.AttitudeEstimator, "step_samples", "fsw_cycle.estimation")
+    timed(estimation.AttitudeEstimator, "_tick", "fsw_cycle.estimation")  # what the GNC cycle calls
     timed(guidance.Guidance, "step", "fsw_cycle.guidance")
     timed(control.RateController, "step", "fsw_cycle.control")
-    timed(fdir.Fdir, "evaluate", "fsw_cycle.fdir")
+    timed(fdir.Fdir, "evaluate_cycle", "fsw_cycle.fdir")  # residual, wheel values and every monitor
     timed(FswBusDriver, "send_wheel_torques", "fsw_cycle.wheel_commands_out")
     timed(FlightSoftware, "_send_gnc_tm", "fsw_cycle.telemetry")
     timed(devices.Devices, "step_world", "world_step_and_commands_in.world_and_sensors")

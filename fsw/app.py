@@ -22,9 +22,9 @@ import numpy as np
 
 from fsw.assumption_check import AssumptionChecker
 from fsw.control import RateController
-from fsw.estimation import AttitudeEstimator
+from fsw.estimation import _NO_SAMPLES, AttitudeEstimator
 from fsw.executive import Executive
-from fsw.fdir import Fdir, FdirInputs, WheelSpeedResidual
+from fsw.fdir import Fdir, WheelSpeedResidual
 from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
@@ -192,11 +192,11 @@ class FlightSoftware:
         self._check_budget_free_at = -math.inf  # host monotonic time from which a periodic check may start
         self._corrupt_prev = {"IMU": 0, "STAR_TRACKER": 0}
         self._corrupt_src: dict | None = None
-        self._corrupt_dicts: dict[str, list[dict]] = {}
+        self._corrupt_dicts: dict[str, tuple[list[dict], list[str]]] = {}
         self._hk_src: dict | None = None  # the driver's counters that _hk_dicts lists
         self._hk_src_len = 0
         self._hk_dicts: list[dict] = []
-        self._max_speed_list = self.control.max_speed.tolist()  # fixed at start-up
+        self._max_speed = np.ascontiguousarray(self.control.max_speed, dtype=float)  # fixed at start-up
         self._st_was_valid = True
         self._st_outage_start = 0.0
         self._target_reached = False
@@ -204,7 +204,7 @@ class FlightSoftware:
         # sensors heard from at least once (their FDIR monitors are armed from then on)
         self._imu_seen = False
         self._st_seen = False
-        self._wheel_seen = [False] * self.n_wheels
+        self._wheel_seen = np.zeros(self.n_wheels, dtype=np.bool_)
         self.inject_overrun_s = 0.0  # test hook: busy-wait this long in the next GNC cycle
         self.last: CycleRecord | None = None
         self.mode_reason = "INIT"
@@ -366,7 +366,8 @@ class FlightSoftware:
                 imu = None
         if imu is not None and not getattr(imu, "valid", True):
             imu = None
-        imu_samples = [s for s in imu_samples if getattr(s, "valid", True)] or ([imu] if imu is not None else [])
+        imu_samples = [s.omega_BN_B for s in imu_samples if getattr(s, "valid", True)] or (
+            [imu.omega_BN_B] if imu is not None else None)
         st = inputs.star_tracker
         st_latency = 0.0
         st_fresh = st is not None and st.valid
@@ -380,7 +381,7 @@ class FlightSoftware:
             nq = _norm(np.asarray(st.q_NS, dtype=float).tolist())
             if not (0.9 < nq < 1.1):
                 st_fresh = False
-        wheels = list(inputs.wheels)
+        wheels = inputs.wheels
         if realtime:
             ages = inputs.wheel_ages_s
             wheels = [w if (w is not None and a is not None and a < 3 * dt) else None for w, a in zip(wheels, ages)]
@@ -388,18 +389,16 @@ class FlightSoftware:
         # ---- estimation (propagate across every IMU sample of the tick)
         est = self.estimator
         q_st = (np.asarray(st.q_NS, dtype=float) / nq) if st_fresh else None
-        if imu_samples:
-            status = est.step_samples(dt, np.array([smp.omega_BN_B for smp in imu_samples]), q_st, st_latency)
-        else:
-            status = est.step(dt, None, q_st, st_latency)
+        samples = _NO_SAMPLES if imu_samples is None else np.array(imu_samples, dtype=float).reshape(-1, 3)
+        innovation_deg = est._tick(dt, samples, q_st, st_latency)
         self._st_events(st, st_fresh)
 
         # ---- guidance and control
         q_est = est.q_NB if est.initialized else None
         omega = est.omega_BN_B
         g = self.guidance.step(self.t_s, dt, q_est, omega)
-        speed_list = [float(w.speed_rad_s) if w is not None else math.nan for w in wheels]
-        speeds = np.array(speed_list)
+        speeds = np.array([w.speed_rad_s if w is not None else math.nan for w in wheels], dtype=float)
+        faults = np.array([w.fault if w is not None else -1 for w in wheels], dtype=np.int64)  # -1: no status
         ctrl = self.control.step(dt, g.omega_cmd_BN_B, omega, speeds)
         try:
             self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm.tolist(), cycle_done=not realtime)
@@ -410,35 +409,18 @@ class FlightSoftware:
         # ---- FDIR (sensor monitors are armed once the sensor has been heard from: a flight software
         # started before its devices must not trip on silence)
         imu_corrupt, st_corrupt = self._corrupt_deltas()
-        residual_off = (self.wheel_residual.update(dt, speeds, ctrl.wheel_torque_cmd_Nm) & self.control.active).tolist()
         self._imu_seen = self._imu_seen or imu is not None
         # a tracker that answers but is blind (Sun/Moon/rate) has been heard: its silence is then a fault
         self._st_seen = self._st_seen or st is not None
-        seen = self._wheel_seen
-        wheel_fault, wheel_ratio = [], []
-        for i, (w, s, m) in enumerate(zip(wheels, speed_list, self._max_speed_list)):
-            if w is None:
-                wheel_fault.append(seen[i] or residual_off[i])
-                wheel_ratio.append(abs(s) / m if math.isfinite(s) else math.nan)  # s is NaN: no status
-                continue
-            seen[i] = True
-            fault = int(w.fault)
-            wheel_fault.append(bool(fault & WHEEL_FAULT_MASK) or residual_off[i])
-            wheel_ratio.append(max(abs(s) / m, 1.0 if fault & WHEEL_OVERSPEED else 0.0) if math.isfinite(s) else math.nan)
-        fin = FdirInputs(
-            imu_missing=imu is None and self._imu_seen,
-            imu_corrupt_frames=imu_corrupt,
-            st_missing=(not st_fresh) and self._st_seen,
-            st_corrupt_frames=st_corrupt,
-            innovation_deg=status.innovation_deg if status is not None else None,
-            wheel_fault=wheel_fault,
-            wheel_speed_ratio=wheel_ratio,
-            wheel_speed_rad_s=speed_list,
-            margins_deg=g.margins_deg,  # every mode: SAFE keeps out too, so a violation is one in SAFE
-            zone_bodies=g.zone_bodies,
-            slipped=slipped_before,
-        )
-        for action in self.fdir.evaluate(fin):
+        # one compiled call: per wheel the speed residual, the fault flags and the heard-from marks, then
+        # every monitor
+        actions = self.fdir.evaluate_cycle(
+            self.wheel_residual, dt, speeds, faults, ctrl.wheel_torque_cmd_Nm, self.control.active, self._wheel_seen,
+            self._max_speed, WHEEL_FAULT_MASK, WHEEL_OVERSPEED,
+            imu is None and self._imu_seen, imu_corrupt, (not st_fresh) and self._st_seen, st_corrupt, innovation_deg,
+            g.margins_deg,  # every mode: SAFE keeps out too, so a violation is one in SAFE
+            g.zone_bodies, slipped_before)
+        for action in actions:
             self._execute(action)
 
         # ---- target reached (event once per target)
@@ -451,7 +433,7 @@ class FlightSoftware:
         self.last = CycleRecord(self.t_s, g.mode, est.q_NB.copy(), g.omega_cmd_BN_B, ctrl.wheel_torque_cmd_Nm,
                                 g.margins_deg, g.margin_min_deg, g.pointing_error_deg, g.att_error_deg, exec_ms)
         if self.cycle % self.cfg.tmtc.gnc_packet_every_n_cycles == 0:
-            self._send_gnc_tm(g, ctrl, speed_list, imu is not None, st, st_fresh, status, exec_ms)
+            self._send_gnc_tm(g, ctrl, speeds, imu is not None, st, st_fresh, exec_ms)
         self.cycle += 1
 
     def _st_events(self, st, st_fresh: bool) -> None:
@@ -467,21 +449,23 @@ class FlightSoftware:
         """(IMU, star tracker) frames rejected by E2E since the last cycle."""
         counters = self.driver.counters
         if counters is not self._corrupt_src:
-            # the per-message counter dicts live as long as the receiver: look them up once
+            # the per-message counter dicts live as long as the receiver: look them up once, as the
+            # (dict, class) pairs each sensor's total sums
             self._corrupt_src = counters
             self._corrupt_dicts = {
-                "IMU": [counters[m] for m in ("IMU_RATE",) if m in counters],
-                "STAR_TRACKER": [counters[m] for m in ("ST_QUAT_A", "ST_QUAT_B") if m in counters],
+                sensor: ([counters[m] for m in msgs if m in counters for _ in _CORRUPT_CLASSES],
+                         [k for m in msgs if m in counters for k in _CORRUPT_CLASSES])
+                for sensor, msgs in (("IMU", ("IMU_RATE",)), ("STAR_TRACKER", ("ST_QUAT_A", "ST_QUAT_B")))
             }
-        out = []
-        for sensor, dicts in self._corrupt_dicts.items():
-            total = 0
-            for c in dicts:
-                for k in _CORRUPT_CLASSES:
-                    total += c.get(k, 0)
-            out.append(max(0, total - self._corrupt_prev[sensor]))
-            self._corrupt_prev[sensor] = total
-        return out[0], out[1]
+        prev = self._corrupt_prev
+        imu_dicts, imu_keys = self._corrupt_dicts["IMU"]
+        st_dicts, st_keys = self._corrupt_dicts["STAR_TRACKER"]
+        # integer sums in C (map over dict.get): the same totals as a loop
+        imu_total = sum(map(dict.get, imu_dicts, imu_keys, repeat(0)))
+        st_total = sum(map(dict.get, st_dicts, st_keys, repeat(0)))
+        imu, st = max(0, imu_total - prev["IMU"]), max(0, st_total - prev["STAR_TRACKER"])
+        prev["IMU"], prev["STAR_TRACKER"] = imu_total, st_total
+        return imu, st
 
     def _execute(self, action) -> None:
         a = action.action
@@ -515,11 +499,11 @@ class FlightSoftware:
         return not second
 
     # ---------------------------------------------------------------------------------- telemetry
-    def _send_gnc_tm(self, g, ctrl, speeds, imu_valid, st, st_fresh, status, exec_ms) -> None:
+    def _send_gnc_tm(self, g, ctrl, speeds, imu_valid, st, st_fresh, exec_ms) -> None:
         est = self.estimator
         nw = self.n_wheels
         margins = list(g.margins_deg)[:6] + [float("nan")] * (6 - min(6, len(g.margins_deg)))
-        wheel_speed = list(speeds) + [math.nan] * (6 - nw)
+        wheel_speed = speeds.tolist() + [math.nan] * (6 - nw)
         wheel_tau = ctrl.wheel_torque_cmd_Nm.tolist() + [0.0] * (6 - nw)
         values = {
             "cycle": self.cycle,

@@ -60,13 +60,16 @@ def allocate_min_norm(G: np.ndarray, active: np.ndarray, torque_B_Nm: np.ndarray
     return tau * scale, scale
 
 
-@njit("Tuple((f8[::1], f8[::1], f8, f8[::1], f8[::1]))(f8, f8[::1], f8[::1], f8[::1], f8[::1], b1, f8, f8, f8, b1,"
-      " f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], b1)", cache=True)
-def _rate_loop(dt_s, cmd, prev, accel_prev, w, has_prev, max_accel, max_jerk, kp, ff, J, G, Js, wheel_speed, max_torque,
-               M, any_active):
-    """``RateController.step``'s arithmetic after the inputs are cleaned (one compiled call per cycle: the
-    numpy version cost ~40 us of small-array calls). Returns (torque_B, tau_w, scale, shaped, accel); the
-    expressions and summation orders are those of the numpy reference (tests/fsw/test_control.py).
+@njit("Tuple((f8[::1], f8[::1], f8, f8[::1]))(f8, f8[::1], f8[::1], f8[::1], f8[::1], b1, f8, f8, f8,"
+      " b1, f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], b1)", cache=True)
+def _rate_loop(dt_s, cmd, prev, accel_prev, w, has_prev, max_accel, max_jerk, kp, ff, J, G, Js, measured_speed,
+               last_speed, max_torque, M, any_active):
+    """``RateController.step``'s arithmetic (one compiled call per cycle: the numpy version cost ~40 us of
+    small-array calls). ``measured_speed``: this cycle's wheel speeds, NaN where none was reported (the
+    last known, ``last_speed``, is kept for it). Returns (torque_B, tau_w, scale, shaped); the controller's
+    state is updated in place (fewer arrays to hand back): ``accel_prev`` becomes the shaped command's
+    acceleration, ``last_speed`` the wheel speeds used. The expressions and summation orders are those of
+    the numpy reference (tests/fsw/test_control.py).
 
     ``max_jerk`` 0: the shaped command steps towards ``cmd`` by at most ``max_accel dt`` (its acceleration
     may reverse from one cycle to the next). ``max_jerk`` > 0: its acceleration heads for
@@ -89,17 +92,24 @@ def _rate_loop(dt_s, cmd, prev, accel_prev, w, has_prev, max_accel, max_jerk, kp
             step *= max_step / norm
     shaped = prev + step
     accel = step / dt_s
+    for i in range(3):
+        accel_prev[i] = accel[i]  # read above (jerk limit) before it is overwritten here
+    wheel_speed = last_speed
+    for i in range(wheel_speed.shape[0]):
+        s = measured_speed[i]
+        if math.isfinite(s):
+            wheel_speed[i] = s
     cmd_dot = accel if (ff and has_prev) else np.zeros(3)
     h_w = G @ (Js * wheel_speed)
     h = J @ w + h_w
     gyro = np.array([w[1] * h[2] - w[2] * h[1], w[2] * h[0] - w[0] * h[2], w[0] * h[1] - w[1] * h[0]])
     torque = J @ (kp * (shaped - w) + cmd_dot) + gyro
     if not any_active:
-        return torque, np.zeros(G.shape[1]), 0.0, shaped, accel
+        return torque, np.zeros(G.shape[1]), 0.0, shaped
     tau = M @ torque
     ratio = np.max(np.abs(tau) / max_torque)
     scale = 1.0 if ratio <= 1.0 else 1.0 / ratio
-    return torque, tau * scale, scale, shaped, accel
+    return torque, tau * scale, scale, shaped
 
 
 class RateController:
@@ -165,16 +175,15 @@ class RateController:
         return int(sum(1 << i for i in range(self.n) if not self.active[i]))
 
     def step(self, dt_s: float, omega_cmd_BN_B: np.ndarray, omega_BN_B: np.ndarray, wheel_speed_rad_s: np.ndarray | None = None) -> ControlOutput:
-        if wheel_speed_rad_s is not None:
-            ws = np.asarray(wheel_speed_rad_s, dtype=float)
-            self.wheel_speed = np.where(np.isfinite(ws), ws, self.wheel_speed)
+        """One cycle of the rate loop; ``wheel_speed_rad_s`` (NaN for a wheel without a report, None: no
+        reports at all) keeps the last known speed where there is none."""
+        ws = self.wheel_speed if wheel_speed_rad_s is None else np.ascontiguousarray(wheel_speed_rad_s, dtype=float)
         cmd = np.ascontiguousarray(omega_cmd_BN_B, dtype=float)
         w = np.ascontiguousarray(omega_BN_B, dtype=float)
         has_prev = self._omega_cmd_prev is not None
         prev = self._omega_cmd_prev if has_prev else w
-        torque, tau_w, scale, shaped, accel = _rate_loop(
+        torque, tau_w, scale, shaped = _rate_loop(
             float(dt_s), cmd, prev, self._accel_prev, w, has_prev, self.max_accel, float(self.max_jerk), float(self.kp),
-            bool(self.ff), self.J, self.G, self.Js, self.wheel_speed, self.max_torque, self.M, self._any_active)
+            bool(self.ff), self.J, self.G, self.Js, ws, self.wheel_speed, self.max_torque, self.M, self._any_active)
         self._omega_cmd_prev = shaped
-        self._accel_prev = accel
         return ControlOutput(torque, tau_w, scale, shaped)

@@ -96,6 +96,83 @@ def mekf_propagate(q, bias, P, omega_meas, dt, sig_v, sig_u):
 
 
 @njit(cache=True)
+def _propagate_in_place(q, bias, P, omega_meas, dt, sig_v, sig_u, PP):
+    """`mekf_propagate` overwriting ``q`` (4,) and ``P`` (6, 6) with the propagated ones, ``PP`` (6, 6)
+    scratch: no array is allocated (ten samples a cycle made some hundred small allocations). The
+    expressions and their order are `mekf_propagate`'s, `_rotvec_quat`'s and `quat_multiply_nb`'s
+    written out, so the results are equal to the last bit (tests/fsw/test_estimation.py)."""
+    w0 = omega_meas[0] - bias[0]
+    w1 = omega_meas[1] - bias[1]
+    w2 = omega_meas[2] - bias[2]
+    # _rotvec_quat(w * dt)
+    p0 = w0 * dt
+    p1 = w1 * dt
+    p2 = w2 * dt
+    ang = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    if ang < 1e-12:
+        r0 = 1.0
+        r1 = 0.5 * p0
+        r2 = 0.5 * p1
+        r3 = 0.5 * p2
+    else:
+        s = math.sin(0.5 * ang) / ang
+        r0 = math.cos(0.5 * ang)
+        r1 = s * p0
+        r2 = s * p1
+        r3 = s * p2
+    n = math.sqrt(r0 ** 2 + r1 ** 2 + r2 ** 2 + r3 ** 2)
+    r0 = r0 / n
+    r1 = r1 / n
+    r2 = r2 / n
+    r3 = r3 / n
+    # quat_multiply_nb(q, r), then normalised
+    a0 = q[0] * r0 - q[1] * r1 - q[2] * r2 - q[3] * r3
+    a1 = q[0] * r1 + q[1] * r0 + q[2] * r3 - q[3] * r2
+    a2 = q[0] * r2 - q[1] * r3 + q[2] * r0 + q[3] * r1
+    a3 = q[0] * r3 + q[1] * r2 - q[2] * r1 + q[3] * r0
+    nq = math.sqrt(a0 ** 2 + a1 ** 2 + a2 ** 2 + a3 ** 2)
+    q[0] = a0 / nq
+    q[1] = a1 / nq
+    q[2] = a2 / nq
+    q[3] = a3 / nq
+    # A = I - [w x] dt, element by element as np.eye(3) - _skew(w) * dt
+    A00 = 1.0 - 0.0 * dt
+    A01 = 0.0 - (-w2) * dt
+    A02 = 0.0 - w1 * dt
+    A10 = 0.0 - w2 * dt
+    A11 = 1.0 - 0.0 * dt
+    A12 = 0.0 - (-w0) * dt
+    A20 = 0.0 - (-w1) * dt
+    A21 = 0.0 - w0 * dt
+    A22 = 1.0 - 0.0 * dt
+    for j in range(6):
+        PP[0, j] = A00 * P[0, j] + A01 * P[1, j] + A02 * P[2, j] - dt * P[3, j]
+        PP[1, j] = A10 * P[0, j] + A11 * P[1, j] + A12 * P[2, j] - dt * P[4, j]
+        PP[2, j] = A20 * P[0, j] + A21 * P[1, j] + A22 * P[2, j] - dt * P[5, j]
+        PP[3, j] = P[3, j]
+        PP[4, j] = P[4, j]
+        PP[5, j] = P[5, j]
+    for i in range(6):
+        P[i, 0] = PP[i, 0] * A00 + PP[i, 1] * A01 + PP[i, 2] * A02 - dt * PP[i, 3]
+        P[i, 1] = PP[i, 0] * A10 + PP[i, 1] * A11 + PP[i, 2] * A12 - dt * PP[i, 4]
+        P[i, 2] = PP[i, 0] * A20 + PP[i, 1] * A21 + PP[i, 2] * A22 - dt * PP[i, 5]
+        P[i, 3] = PP[i, 3]
+        P[i, 4] = PP[i, 4]
+        P[i, 5] = PP[i, 5]
+    qa = sig_v * sig_v * dt + sig_u * sig_u * dt ** 3 / 3.0
+    qc = -sig_u * sig_u * dt * dt / 2.0
+    qb = sig_u * sig_u * dt
+    for i in range(3):
+        P[i, i] += qa
+        P[i, 3 + i] += qc
+        P[3 + i, i] += qc
+        P[3 + i, 3 + i] += qb
+    for i in range(6):
+        for j in range(i + 1, 6):
+            P[i, j] = P[j, i] = 0.5 * (P[i, j] + P[j, i])
+
+
+@njit(cache=True)
 def mekf_propagate_many(q, bias, P, omegas, dt, sig_v, sig_u):
     """Propagate through consecutive gyro samples omegas (n, 3), each held for ``dt`` [s]."""
     for k in range(omegas.shape[0]):
@@ -155,26 +232,14 @@ def mekf_update_lagged(q, bias, P, dtheta, R, lag):
     return qn, bias + dx[3:6], Pn
 
 
-@njit("Tuple((f8[::1], f8[::1], f8[:, ::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8,"
-      " f8[::1], f8, f8[::1], f8[::1], f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8[:, ::1], f8[:, ::1])",
-      cache=True)
-def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_bridge, bridge_var, sig_v, sig_u,
-                initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg, R_st, P0):
-    """One estimator cycle in one compiled call: propagate through the gyro rates ``prior`` (k, 3), each
-    held ``prior_dt``, then ``omega_prop`` held ``dt``; fuse the star tracker. ``omega_last``: the newest
-    gyro sample (the rate estimate is it minus the bias); ``omega_bridge``: the mean measured rate over
-    the star tracker's latency, which brings its sample to the filter time, and ``bridge_var`` the
-    variance of that mean's white noise per axis [rad^2/s^2]; ``R_st``: the star tracker's noise
-    covariance in body axes [rad^2] (`star_tracker_noise_B`); ``P0``: the covariance a first star-tracker
-    fix initialises. tests/fsw/test_estimation.py compares it with a Python reference.
-    Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
-    if initialized and prior.shape[0] > 0:
-        q, P = mekf_propagate_many(q, bias, P, prior, prior_dt, sig_v, sig_u)
+@njit(cache=True)
+def _mekf_fuse(q, bias, P, omega_last, omega_bridge, bridge_var, initialized, has_st, q_NS, q_SB, st_latency, max_age,
+               gate_deg, R_st, P0):
+    """`_mekf_cycle` after the propagation: the rate estimate and the star tracker's fusion (same
+    arguments, same returns)."""
     used = False
     rejected = False
     innov_deg = np.nan
-    if initialized:
-        q, P = mekf_propagate(q, bias, P, omega_prop, dt, sig_v, sig_u)
     omega = omega_last - bias
     if has_st:
         q_meas = quat_multiply_nb(q_NS, q_SB)
@@ -206,6 +271,90 @@ def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_b
     return q, bias, P, omega, initialized, used, rejected, innov_deg
 
 
+@njit("Tuple((f8[::1], f8[::1], f8[:, ::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8,"
+      " f8[::1], f8, f8[::1], f8[::1], f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8[:, ::1], f8[:, ::1])",
+      cache=True)
+def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_bridge, bridge_var, sig_v, sig_u,
+                initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg, R_st, P0):
+    """One estimator cycle in one compiled call: propagate through the gyro rates ``prior`` (k, 3), each
+    held ``prior_dt``, then ``omega_prop`` held ``dt``; fuse the star tracker. ``omega_last``: the newest
+    gyro sample (the rate estimate is it minus the bias); ``omega_bridge``: the mean measured rate over
+    the star tracker's latency, which brings its sample to the filter time, and ``bridge_var`` the
+    variance of that mean's white noise per axis [rad^2/s^2]; ``R_st``: the star tracker's noise
+    covariance in body axes [rad^2] (`star_tracker_noise_B`); ``P0``: the covariance a first star-tracker
+    fix initialises. tests/fsw/test_estimation.py compares it with a Python reference.
+    Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
+    if initialized and prior.shape[0] > 0:
+        q, P = mekf_propagate_many(q, bias, P, prior, prior_dt, sig_v, sig_u)
+    if initialized:
+        q, P = mekf_propagate(q, bias, P, omega_prop, dt, sig_v, sig_u)
+    return _mekf_fuse(q, bias, P, omega_last, omega_bridge, bridge_var, initialized, has_st, q_NS, q_SB, st_latency,
+                      max_age, gate_deg, R_st, P0)
+
+
+@njit(cache=True)
+def _round_half_even(x):
+    """Python's ``round(x)`` of a float (ties to even) as an integer."""
+    r = math.floor(x)
+    d = x - r
+    if d > 0.5 or (d == 0.5 and r % 2.0 != 0.0):
+        r += 1.0
+    return int(r)
+
+
+@njit("Tuple((f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[::1],"
+      " f8[:, ::1], f8[::1], b1, f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8[:, ::1], f8[:, ::1])", cache=True)
+def _estimator_cycle(q, bias, P, omega, samples, prev_sample, has_prev, dt_s, sig_v, sig_u, initialized, has_st, q_NS,
+                     q_SB, st_latency, max_age, gate_deg, R_st, P0):
+    """`AttitudeEstimator._cycle` in one compiled call: the trapezoid rates of the gyro ``samples`` (n, 3),
+    the bridge over the star tracker's latency, then `_mekf_cycle`; the expressions and summation orders
+    of the numpy version it replaces (tests/fsw/test_estimation.py). ``omega``: the last rate estimate;
+    ``prev_sample``: the last gyro sample of the previous cycle (``has_prev`` False: none).
+    Returns (q, bias, P, omega, the new previous sample, initialized, used, rejected, innovation_deg); the
+    new previous sample is NaN when this cycle had no gyro sample."""
+    n = samples.shape[0]
+    if n:
+        sub = dt_s / n
+        rates = np.empty((n, 3))
+        for j in range(3):
+            # no earlier sample: hold the first
+            p0 = prev_sample[j] if has_prev else samples[0, j]
+            rates[0, j] = 0.5 * (p0 + samples[0, j])
+            for k in range(1, n):
+                rates[k, j] = 0.5 * (samples[k - 1, j] + samples[k, j])
+        new_prev = samples[n - 1].copy()
+        m = min(n, max(1, _round_half_even(st_latency / sub)))  # the intervals that the latency spans
+        bridge = np.empty(3)
+        for j in range(3):
+            # numpy's mean over axis 0: the rows added in order, then divided by their count
+            acc = rates[n - m, j]
+            for k in range(n - m + 1, n):
+                acc += rates[k, j]
+            bridge[j] = acc / m
+        bridge_var = sig_v * sig_v / (m * sub)
+        if initialized:
+            q = q.copy()
+            P = P.copy()
+            PP = np.empty((6, 6))
+            for k in range(n):
+                _propagate_in_place(q, bias, P, rates[k], sub, sig_v, sig_u, PP)
+        q, bias, P, omega, initialized, used, rejected, innov = _mekf_fuse(
+            q, bias, P, new_prev, bridge, bridge_var, initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg,
+            R_st, P0)
+        return q, bias, P, omega, new_prev, initialized, used, rejected, innov
+    # no valid gyro sample: hold the last bias-corrected rate over the whole cycle
+    omega_last = omega + bias
+    bridge_var = sig_v * sig_v / dt_s
+    if initialized:
+        q = q.copy()
+        P = P.copy()
+        _propagate_in_place(q, bias, P, omega_last, dt_s, sig_v, sig_u, np.empty((6, 6)))
+    q, bias, P, omega, initialized, used, rejected, innov = _mekf_fuse(
+        q, bias, P, omega_last, omega_last, bridge_var, initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg,
+        R_st, P0)
+    return q, bias, P, omega, np.full(3, np.nan), initialized, used, rejected, innov
+
+
 def star_tracker_noise_B(cfg, q_BS: np.ndarray) -> np.ndarray:
     """The star tracker's attitude noise covariance in body axes [rad^2] (3, 3).
 
@@ -228,6 +377,7 @@ def star_tracker_noise_B(cfg, q_BS: np.ndarray) -> np.ndarray:
 
 _NO_SAMPLES = np.zeros((0, 3))
 _NO_QUATERNION = np.array([1.0, 0.0, 0.0, 0.0])
+_NO_SAMPLE = np.full(3, np.nan)
 
 
 @dataclass
@@ -261,6 +411,8 @@ class AttitudeEstimator:
         self.omega_BN_B = np.zeros(3)
         self.last_innovation_deg = float("nan")
         self.resets = 0
+        self.star_tracker_used = False  # this cycle's star-tracker sample was fused
+        self.innovation_rejected = False  # this cycle's star-tracker sample was gated out
         self._prev_sample: np.ndarray | None = None  # the last gyro sample, start of the next interval
 
     def _initial_P(self) -> np.ndarray:
@@ -299,41 +451,35 @@ class AttitudeEstimator:
         random walk over the cycle, and the process noise, are unchanged. The star tracker's latency is
         bridged the same way, with the mean rate over the latency.
         """
-        n = samples.shape[0]
-        if n:
-            samples = np.ascontiguousarray(samples, dtype=float)
-            sub = dt_s / n
-            prev = samples[0] if self._prev_sample is None else self._prev_sample  # no earlier sample: hold the first
-            rates = 0.5 * (np.vstack((prev[None, :], samples[:-1])) + samples)
-            self._prev_sample = samples[-1].copy()
-            m = min(n, max(1, round(st_latency_s / sub)))  # the intervals that the latency spans
-            bridge = rates[n - m:].mean(axis=0)
-            bridge_var = self.sig_v * self.sig_v / (m * sub)
-            prior, omega_prop, dt_prop, omega_last = rates[:-1], rates[-1], sub, samples[-1]
-        else:
-            # no valid gyro sample: hold the last bias-corrected rate over the whole cycle
-            self._prev_sample = None
-            omega_last = self.omega_BN_B + self.bias_B
-            prior, omega_prop, dt_prop, bridge = _NO_SAMPLES, omega_last, dt_s, omega_last
-            bridge_var = self.sig_v * self.sig_v / dt_s
-        has_st = q_NS is not None
-        P0 = self._initial_P() if has_st and not self.initialized else self.P
-        (self.q_NB, self.bias_B, self.P, self.omega_BN_B, self.initialized, used, rejected, innov_deg) = _mekf_cycle(
-            self.q_NB, self.bias_B, self.P, np.ascontiguousarray(prior), float(dt_prop), omega_prop, float(dt_prop),
-            omega_last, bridge, float(bridge_var), self.sig_v, self.sig_u,
-            self.initialized, has_st, np.ascontiguousarray(q_NS, dtype=float) if has_st else _NO_QUATERNION,
-            np.ascontiguousarray(self.q_SB, dtype=float), float(st_latency_s), self.cfg.star_tracker_max_age_s,
-            self.cfg.innovation_gate_deg, self.R_st_B, P0)
-        self.coasting_s = 0.0 if used else self.coasting_s + dt_s
-        self.last_innovation_deg = innov_deg
+        self._tick(float(dt_s), np.ascontiguousarray(samples, dtype=float),
+                   None if q_NS is None else np.ascontiguousarray(q_NS, dtype=float), float(st_latency_s))
         return EstimatorStatus(
             initialized=self.initialized,
-            star_tracker_used=used,
-            innovation_deg=innov_deg,
-            innovation_rejected=rejected,
+            star_tracker_used=self.star_tracker_used,
+            innovation_deg=self.last_innovation_deg,
+            innovation_rejected=self.innovation_rejected,
             coasting_s=self.coasting_s,
             cov_trace_deg2=self.cov_trace_deg2,
         )
+
+    def _tick(self, dt_s: float, samples: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float) -> float:
+        """`_cycle` without the status: one compiled call (`_estimator_cycle`) and the attribute sets. The
+        GNC cycle calls it directly with ``samples`` a C-contiguous float (n, 3) array and ``q_NS`` a
+        contiguous float quaternion or None. Returns the innovation [deg] (NaN when none this cycle)."""
+        has_st = q_NS is not None
+        P0 = self._initial_P() if has_st and not self.initialized else self.P
+        prev = self._prev_sample
+        (self.q_NB, self.bias_B, self.P, self.omega_BN_B, new_prev, self.initialized, used, self.innovation_rejected,
+         innov_deg) = _estimator_cycle(
+            self.q_NB, self.bias_B, self.P, self.omega_BN_B, samples, prev if prev is not None else _NO_SAMPLE,
+            prev is not None, dt_s, self.sig_v, self.sig_u, self.initialized, has_st,
+            q_NS if has_st else _NO_QUATERNION, np.ascontiguousarray(self.q_SB, dtype=float), st_latency_s, self.cfg.star_tracker_max_age_s,
+            self.cfg.innovation_gate_deg, self.R_st_B, P0)
+        self._prev_sample = new_prev if samples.shape[0] else None
+        self.star_tracker_used = used
+        self.coasting_s = 0.0 if used else self.coasting_s + dt_s
+        self.last_innovation_deg = innov_deg
+        return innov_deg
 
     def _attitude_trace(self) -> float:
         # = float(np.trace(self.P[0:3, 0:3])) (same summation order), without numpy's call overhead
