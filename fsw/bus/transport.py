@@ -249,6 +249,11 @@ def recv_burst(bus: can.BusABC, timeout: float | None = 0.0, limit: int | None =
     carry = getattr(bus, "recv_burst", None)
     if carry is not None:
         return carry(timeout)
+    queued = getattr(bus, "recv_queued", None)
+    if queued is not None:  # a bus that reads everything queued in one call (no filters set): one call here
+        msgs = queued(timeout, limit)
+        if msgs is not None:  # None: the bus cannot (software filters set): frame by frame below
+            return FrameBurst.from_messages(msgs) if msgs else None
     msg = bus.recv(timeout=timeout)
     if msg is None:
         return None
