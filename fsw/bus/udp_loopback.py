@@ -36,6 +36,7 @@ import math
 import select
 import socket
 import struct
+import sys
 import time
 from collections import deque
 from typing import Any, Sequence
@@ -82,6 +83,54 @@ def _drop_source_port(sock: socket.socket, port: int) -> None:
     )
     fprog = _SockFprog(len(program), ctypes.cast(program, ctypes.POINTER(_SockFilter)))
     sock.setsockopt(socket.SOL_SOCKET, SO_ATTACH_FILTER, bytes(fprog))  # the kernel copies the program now
+
+
+BATCH = 64  # datagrams per sendmmsg (a lockstep tick has ~20)
+_MSG_DONTWAIT = int(socket.MSG_DONTWAIT)
+_libc = ctypes.CDLL("libc.so.6", use_errno=True) if sys.platform.startswith("linux") else None
+
+
+class _IoVec(ctypes.Structure):
+    _fields_ = [("iov_base", ctypes.c_void_p), ("iov_len", ctypes.c_size_t)]
+
+
+class _MsgHdr(ctypes.Structure):
+    _fields_ = [("msg_name", ctypes.c_void_p), ("msg_namelen", ctypes.c_uint32),
+                ("msg_iov", ctypes.POINTER(_IoVec)), ("msg_iovlen", ctypes.c_size_t),
+                ("msg_control", ctypes.c_void_p), ("msg_controllen", ctypes.c_size_t),
+                ("msg_flags", ctypes.c_int)]
+
+
+class _MMsgHdr(ctypes.Structure):
+    _fields_ = [("msg_hdr", _MsgHdr), ("msg_len", ctypes.c_uint)]
+
+
+if _libc is not None:
+    _libc.sendmmsg.argtypes = [ctypes.c_int, ctypes.POINTER(_MMsgHdr), ctypes.c_uint, ctypes.c_int]
+
+
+class _TxSlots:
+    """BATCH iovecs and mmsghdrs (no address: the sender socket is connected to the group)."""
+
+    def __init__(self) -> None:
+        self.iov = (_IoVec * BATCH)()
+        self.hdr = (_MMsgHdr * BATCH)()
+        for i in range(BATCH):
+            h = self.hdr[i].msg_hdr
+            h.msg_iov = ctypes.pointer(self.iov[i])
+            h.msg_iovlen = 1
+
+
+def _sendmmsg(fd: int, slots: _TxSlots | None, datagrams: list[bytes]) -> int:
+    """Queue ``datagrams`` (at most BATCH) in one sendmmsg(); returns how many, from the first, were sent
+    (0 when the socket has no room now, or without sendmmsg: the caller sends the rest one by one)."""
+    if _libc is None or slots is None:
+        return 0
+    iov = slots.iov
+    for i, data in enumerate(datagrams):  # the bytes objects stay alive (the list) during the call
+        iov[i].iov_base = ctypes.cast(ctypes.c_char_p(data), ctypes.c_void_p).value
+        iov[i].iov_len = len(data)
+    return max(0, _libc.sendmmsg(fd, slots.hdr, len(datagrams), _MSG_DONTWAIT))
 
 
 def _sender_socket(group_port: int) -> socket.socket:
@@ -157,8 +206,11 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
             self._multicast.shutdown()
             raise can.CanInitializationError(f"udp_multicast {channel}:{port}: cannot set up the sender: {exc}") \
                 from exc
-        self._tx_timeout: float | None = None
-        self._destination = (channel, port)
+        self._tx.connect((channel, port))  # send() and sendmmsg() without an address per datagram
+        self._tx.setblocking(False)
+        self._tx_poller = select.poll()
+        self._tx_poller.register(self._tx.fileno(), select.POLLOUT)
+        self._tx_slots = _TxSlots() if _libc is not None else None
         self._packer = msgpack.Packer(use_bin_type=True)
         self._stamped = bool(self._multicast.timestamp_nanosecond)
         rx.setblocking(False)  # recv reads until the socket is empty; waiting is a poll
@@ -166,6 +218,7 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
         self._poller = select.poll()
         self._poller.register(rx.fileno(), select.POLLIN)
         self._rx: deque[can.Message] = deque()
+        self._was_empty = False  # the last read found the socket empty
 
     # ------------------------------------------------------------------------------------- receive
     def recv(self, timeout: float | None = None) -> can.Message | None:
@@ -197,9 +250,12 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
 
     def _fill(self, timeout: float | None) -> bool:
         """Queue every datagram the socket holds; if none, wait up to ``timeout`` (None: for ever) for one."""
-        if self._read_all():
+        waiting = timeout is None or timeout > 0.0
+        # After an empty read (a recv(0) just before, typically) a waiting call polls first: poll() reports
+        # what arrived since, and the read that would fail again is saved.
+        if not (waiting and self._was_empty) and self._read_all():
             return True
-        if timeout is not None and timeout <= 0.0:
+        if not waiting:
             return False
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
@@ -220,6 +276,7 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
                     data = sock.recv(MAX_DATAGRAM)
                     ancillary = ()
             except (BlockingIOError, InterruptedError):
+                self._was_empty = n == 0
                 return n
             except OSError as exc:
                 raise can.CanOperationError(f"Failed to receive via IP/UDP socket: {exc}") from exc
@@ -291,29 +348,51 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
             "dlc": msg.dlc, "data": msg.data, "is_fd": msg.is_fd, "bitrate_switch": msg.bitrate_switch,
             "error_state_indicator": msg.error_state_indicator})
 
-    def _sendto(self, data: bytes, timeout: float | None) -> None:
-        if timeout != self._tx_timeout:
-            self._tx_timeout = timeout
-            self._tx.settimeout(timeout)
-        try:
-            if self._tx.sendto(data, self._destination) < len(data):
-                raise TimeoutError()
-        except TimeoutError:
-            raise can.CanTimeoutError() from None
-        except OSError as error:
-            raise can.CanOperationError("failed to send via socket") from error
+    def _send_one(self, data: bytes, timeout: float | None) -> None:
+        """Send one datagram: at once when the socket has room (no wait for writability first: that is a
+        poll per frame), else waiting up to ``timeout`` (None: for ever) for room."""
+        tx = self._tx
+        deadline = None
+        while True:
+            try:
+                if tx.send(data) < len(data):
+                    raise can.CanTimeoutError()
+                return
+            except (BlockingIOError, InterruptedError):
+                pass
+            except OSError as error:
+                raise can.CanOperationError("failed to send via socket") from error
+            if timeout is not None:
+                deadline = deadline if deadline is not None else time.monotonic() + timeout
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    raise can.CanTimeoutError()
+            ms = -1 if timeout is None else max(0, math.ceil(remaining * 1000.0))
+            self._tx_poller.poll(ms)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        self._sendto(self._pack(msg), timeout)
+        self._send_one(self._pack(msg), timeout)
 
     def send_batch(self, msgs: Sequence[can.Message], timeout: float | None = None) -> int:
-        """Send ``msgs`` in order; returns how many, from the first, were sent (fewer when one was refused)."""
-        for i, msg in enumerate(msgs):
+        """Send ``msgs`` in order, one sendmmsg() per BATCH frames (the receiver wakes with the burst
+        queued, not once per frame); returns how many, from the first, were sent (fewer when one was
+        refused: queue still full after ``timeout``, or a frame that cannot be packed)."""
+        sent = 0
+        while sent < len(msgs):
+            chunk = msgs[sent:sent + BATCH]
             try:
-                self._sendto(self._pack(msg), timeout)
+                datagrams = [self._pack(m) for m in chunk]
             except can.CanError:
-                return i
-        return len(msgs)
+                datagrams = []
+            n = _sendmmsg(self._tx.fileno(), self._tx_slots, datagrams) if datagrams else 0
+            sent += n
+            if n < len(chunk):  # queue full (or a frame refused): one by one, waiting for room
+                try:
+                    self._send_one(self._pack(chunk[n]), timeout)
+                except can.CanError:
+                    return sent
+                sent += 1
+        return sent
 
     def shutdown(self) -> None:
         try:
