@@ -47,11 +47,10 @@ if TYPE_CHECKING:
 
 # A backwards jump larger than this is read as a flight-software restart, not as 16000 lost packets.
 MAX_PLAUSIBLE_GAP = SEQ_MODULO // 2
+ARCHIVE_BUFFER_BYTES = 1 << 20  # per-packet archives: one write() per MB, or per flush
 
 
 @dataclass
-ARCHIVE_BUFFER_BYTES = 1 << 20  # per-packet archives: one write() per MB, or per flush
-
 class Gap:
     apid: int
     expected: int
