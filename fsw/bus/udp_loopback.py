@@ -257,13 +257,19 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
             return True
         if not waiting:
             return False
-        deadline = None if timeout is None else time.monotonic() + timeout
+        # the clock is read only when a wake-up brought nothing to read (rare): not once or twice a wait
+        remaining, deadline = timeout, None
         while True:
-            ms = -1 if deadline is None else max(0, math.ceil((deadline - time.monotonic()) * 1000.0))
-            if self._poller.poll(ms) and self._read_all():
-                return True
-            if deadline is not None and time.monotonic() >= deadline:
+            ms = -1 if remaining is None else max(0, math.ceil(remaining * 1000.0))
+            if not self._poller.poll(ms):  # (interrupted: Python retries with the time left)
                 return False
+            if self._read_all():
+                return True
+            if remaining is not None:
+                deadline = deadline if deadline is not None else time.monotonic() + remaining
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    return False
 
     def _read_all(self) -> int:
         sock, rx, stamped = self._rx_sock, self._rx, self._stamped
