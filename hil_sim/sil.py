@@ -332,7 +332,10 @@ class CandumpLog:
         if ident is None:
             ident = self._prefix[key] = (f"{msg.arbitration_id:08X}#" if msg.is_extended_id
                                          else f"{msg.arbitration_id:03X}#")
-        self._file.write(self._stamp + ident + bytes(msg.data).hex().upper() + "\n")
+        data = msg.data
+        # bytearray (every received and encoded frame) has hex() itself: no copy into bytes first
+        self._file.write(self._stamp + ident + (data if type(data) is bytearray else bytes(data)).hex().upper()
+                         + "\n")
         self.frames += 1
 
     def close(self) -> None:
@@ -431,6 +434,10 @@ class _Progress:
         self.progress.start()
         self.progress.console.print(f"bus: {bus_note}")
         self.task = self.progress.add_task("SIL", total=duration_s, speed="", channels="")
+
+    def due(self) -> bool:
+        """Whether ``update`` would redraw now (enabled, and 0.2 s since the last redraw)."""
+        return self.enabled and time.monotonic() - self._last >= 0.2
 
     def update(self, t_s: float, wall_s: float, truth_error_deg: float, status_queue, force: bool = False) -> None:
         if not self.enabled:
@@ -614,7 +621,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
                 abort_reason = (f"the flight software answered none of the last {missed_in_row} ticks "
                                 f"(t = {sim.t_s:.1f} s): run ended early")
                 break
-            if progress.enabled:
+            if progress.enabled and progress.due():  # the truth error only for a redraw (5 a second)
                 progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s),
                                 status_queue)
         progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s), status_queue,
