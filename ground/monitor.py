@@ -47,7 +47,6 @@ if TYPE_CHECKING:
 
 # A backwards jump larger than this is read as a flight-software restart, not as 16000 lost packets.
 MAX_PLAUSIBLE_GAP = SEQ_MODULO // 2
-ARCHIVE_BUFFER_BYTES = 1 << 20  # per-packet archives: one write() per MB, or per flush
 
 
 @dataclass
@@ -159,13 +158,9 @@ class GroundMonitor:
         self._limited: dict[str, list[tuple[str, Any, float, float]]] = {}
         if self.archive_dir is not None:
             self.archive_dir.mkdir(parents=True, exist_ok=True)
-            # The two per-packet archives take ~3 kB a packet: with the default 8 kB buffer that was a write()
-            # every few packets, a system call to the host's file system in the vcan-vm guest. The loops
-            # that run a monitor (``run``, the SIL's ground process) flush every 0.25-1 s.
-            self._raw = open(self.archive_dir / RAW_ARCHIVE, "ab", buffering=ARCHIVE_BUFFER_BYTES)
+            self._raw = open(self.archive_dir / RAW_ARCHIVE, "ab")
             if write_decoded:  # long soaks may keep raw + events only and decode later (`ground decode`)
-                self._decoded = open(self.archive_dir / DECODED_ARCHIVE, "a", encoding="utf-8",
-                                     buffering=ARCHIVE_BUFFER_BYTES)
+                self._decoded = open(self.archive_dir / DECODED_ARCHIVE, "a", encoding="utf-8")
             self._events = open(self.archive_dir / EVENTS_ARCHIVE, "a", encoding="utf-8")
             self._limits = open(self.archive_dir / LIMITS_ARCHIVE, "a", encoding="utf-8")
             if security is not None:
