@@ -6,7 +6,9 @@ config/missions/demo-pointing.yaml, shortened with --duration. Two figures per r
 * loop speed: simulated time / wall time of the lockstep loop (summary.json ``speed_x_realtime``),
   the SIL's sustained rate (goal >= 100x real time, issue 17);
 * end to end: simulated time / wall time of the whole command, including process start-up, numba
-  cache loading, the physics checks, the summary and the plots.
+  cache loading, the physics checks, the summary and the plots;
+* CPU ms per tick of each process during the loop (simulator.json ``loop_cpu_s``): on a loaded host the
+  wall figures swing with the load, these much less; on one CPU (the guest) their sum is the tick.
 
 Transports: udp_multicast on this host; socketcan:vcan0 inside ../shared/tools/vcan-vm (the host
 kernel has no CAN; the guest is one CPU of this host), one guest boot per run. ``--both`` alternates a
@@ -44,7 +46,12 @@ def one_run(bus: str, duration: float, out: Path) -> dict:
     if not runs or not (runs[-1] / "summary.json").exists():
         raise RuntimeError(f"run failed (exit {proc.returncode}):\n{proc.stdout}\n{proc.stderr}")
     summary = json.loads((runs[-1] / "summary.json").read_text())
-    return {"exit_code": proc.returncode, "bus": summary["bus"], "simulated_s": summary["simulated_s"],
+    stats = json.loads((runs[-1] / "simulator.json").read_text())
+    ticks = max(1, int(stats.get("ticks", 0)))
+    cpu = stats.get("loop_cpu_s") or {}
+    # CPU per tick of each process in the loop: noisy hosts change the wall time, much less these
+    cpu_ms = {k: (None if v is None else 1e3 * v / ticks) for k, v in cpu.items()}
+    return {"cpu_ms_per_tick": cpu_ms, "exit_code": proc.returncode, "bus": summary["bus"], "simulated_s": summary["simulated_s"],
             "loop_wall_s": summary["wall_s"], "loop_speed_x": summary["speed_x_realtime"],
             "total_wall_s": wall, "end_to_end_speed_x": summary["simulated_s"] / wall,
             "cycle_done_timeouts": summary["simulator"]["cycle_done_timeouts"], "pass": summary["pass"]}
@@ -76,23 +83,44 @@ def _host_run(bus: str, duration: float) -> dict:
 
 def _table(rows: list[dict]) -> None:
     print(f"{'bus':34s} {'where':22s} {'sim s':>6s} {'loop wall s':>11s} {'loop x':>7s} {'total wall s':>12s} "
-          f"{'total x':>7s} {'host load':>9s}")
+          f"{'total x':>7s} {'host load':>9s}  CPU ms/tick: sim   fsw ground   sum")
     for r in rows:
+        cpu = r.get("cpu_ms_per_tick") or {}
+        parts = [cpu.get(k) for k in ("simulator", "fsw", "ground")]
+        total = sum(parts) if parts and None not in parts else None
+        cells = " ".join("     -" if v is None else f"{v:6.3f}" for v in (*parts, total))
         print(f"{r['bus']:34s} {r['where']:22s} {r['simulated_s']:6.0f} {r['loop_wall_s']:11.1f} "
               f"{r['loop_speed_x']:7.1f} {r['total_wall_s']:12.1f} {r['end_to_end_speed_x']:7.1f} "
-              f"{r['host_load_1min']:9.1f}")
+              f"{r['host_load_1min']:9.1f}             {cells}")
 
 
 GOAL_X = 100.0  # issue 17: lockstep demo-pointing at >= 100x real time, over udp_multicast and socketcan
 
 
+def _median_cpu(rows: list[dict]) -> dict:
+    """Median CPU ms per tick of each process (and of their sum: the loop's wall time on one CPU)."""
+    out = {}
+    for k in ("simulator", "fsw", "ground"):
+        values = [r["cpu_ms_per_tick"].get(k) for r in rows if r.get("cpu_ms_per_tick")]
+        values = [v for v in values if v is not None]
+        out[k] = statistics.median(values) if values else None
+    sums = [sum(r["cpu_ms_per_tick"].values()) for r in rows
+            if r.get("cpu_ms_per_tick") and None not in r["cpu_ms_per_tick"].values()]
+    out["sum"] = statistics.median(sums) if sums else None
+    return out
+
+
 def _result(bus: str, duration: float, rows: list[dict]) -> dict:
     loop = statistics.median(r["loop_speed_x"] for r in rows)
+    cpu = _median_cpu(rows)
+    if cpu["sum"] is not None:
+        print(f"{bus}: median CPU ms per tick: simulator {cpu['simulator']:.3f}, fsw {cpu['fsw']:.3f}, ground "
+              f"{cpu['ground']:.3f}, sum {cpu['sum']:.3f}")
     total = statistics.median(r["end_to_end_speed_x"] for r in rows)
     print(f"{bus}: median loop speed x{loop:.1f} real time (goal >= {GOAL_X:.0f}), end to end x{total:.1f}; median host "
           f"load {statistics.median(r['host_load_1min'] for r in rows):.1f} on {os.cpu_count()} CPUs")
     return {"bus": bus, "duration_s": duration, "runs": rows, "median_loop_speed_x": loop,
-            "median_end_to_end_speed_x": total, "goal_x": GOAL_X, "goal_met": loop >= GOAL_X,
+            "median_end_to_end_speed_x": total, "median_cpu_ms_per_tick": cpu, "goal_x": GOAL_X, "goal_met": loop >= GOAL_X,
             "median_host_load_1min": statistics.median(r["host_load_1min"] for r in rows),
             "host_cpus": os.cpu_count(), "guest_cpus": 1 if bus.startswith("socketcan") else None}
 

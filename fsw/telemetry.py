@@ -130,11 +130,20 @@ class DecodedTm:
         out: dict[str, Any] = {"apid": self.apid, "seq": self.seq_count, "time_s": _json_float(self.time_s),
                                "kind": self.kind, "packet": self.packet}
         if self.kind == "channels":
-            out["values"] = {k: _json_float(v) for k, v in self.values.items()}
+            # _json_float of every value without a call per value: the ground archives every packet (74
+            # channels, one or two of them NaN in most packets)
+            values = self.values
+            out["values"] = plain = dict(values)
+            for k, v in values.items():
+                if isinstance(v, float) and (v != v or v in _INFINITIES):
+                    plain[k] = str(v)
         else:
             out.update(event=self.event, severity=self.severity, message=self.message,
                        args={k: _json_float(v) for k, v in self.args.items()})
         return out
+
+
+_INFINITIES = (math.inf, -math.inf)
 
 
 def _json_float(value: Any) -> Any:

@@ -332,7 +332,10 @@ class CandumpLog:
         if ident is None:
             ident = self._prefix[key] = (f"{msg.arbitration_id:08X}#" if msg.is_extended_id
                                          else f"{msg.arbitration_id:03X}#")
-        self._file.write(self._stamp + ident + bytes(msg.data).hex().upper() + "\n")
+        data = msg.data
+        # bytearray (every received and encoded frame) has hex() itself: no copy into bytes first
+        self._file.write(self._stamp + ident + (data if type(data) is bytearray else bytes(data)).hex().upper()
+                         + "\n")
         self.frames += 1
 
     def close(self) -> None:
@@ -431,6 +434,10 @@ class _Progress:
         self.progress.start()
         self.progress.console.print(f"bus: {bus_note}")
         self.task = self.progress.add_task("SIL", total=duration_s, speed="", channels="")
+
+    def due(self) -> bool:
+        """Whether ``update`` would redraw now (enabled, and 0.2 s since the last redraw)."""
+        return self.enabled and time.monotonic() - self._last >= 0.2
 
     def update(self, t_s: float, wall_s: float, truth_error_deg: float, status_queue, force: bool = False) -> None:
         if not self.enabled:
@@ -535,6 +542,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
     status, code = STATUS_COMPLETED, None
     abort_reason = ""
     started_wall = time.monotonic()
+    cpu_at_start: dict | None = None
     progress = _Progress(False, 0.0, "")
     running = False  # the flight software has started: from here on every end of the run is judged
     try:
@@ -599,6 +607,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         boresight_B = np.asarray(mission.spacecraft.instrument_boresight_B)
         error_of = _truth_error_function(mission, boresight_B)
         started_wall = time.monotonic()
+        cpu_at_start = _loop_cpu_s(fsw_proc, ground)
         missed_in_row = 0
         for _ in range(n_ticks):
             timeline.release(sim.t_s)
@@ -612,7 +621,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
                 abort_reason = (f"the flight software answered none of the last {missed_in_row} ticks "
                                 f"(t = {sim.t_s:.1f} s): run ended early")
                 break
-            if progress.enabled:
+            if progress.enabled and progress.due():  # the truth error only for a redraw (5 a second)
                 progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s),
                                 status_queue)
         progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s), status_queue,
@@ -637,6 +646,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         previous_term = (signal.signal(signal.SIGTERM, signal.SIG_IGN)
                          if threading.current_thread() is threading.main_thread() else None)
         wall_s = time.monotonic() - started_wall
+        loop_cpu_s = _loop_cpu_s(fsw_proc, ground, since=cpu_at_start) if cpu_at_start else {}
         progress.stop()
         _stop_children(fsw_proc, ground, stop_event)
         if (run_dir / ENDPOINTS_FILE).exists():
@@ -647,7 +657,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
             _quietly(lambda: recorder.save(run_dir / TRUTH_FILE))
         if sim is not None:
             stats = {**sim.stats.__dict__, "aborted": abort_reason, "clock": "realtime" if options.realtime else "lockstep", "bus": info.spec, "bus_note": info.note, "wall_s": wall_s,
-                     "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
+                     "loop_cpu_s": loop_cpu_s, "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
                      "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
                      "faults_injected": [list(map(_plain, e)) if isinstance(e, tuple) else _plain(e)
                                          for e in getattr(sim.injector, "log", [])],
@@ -658,6 +668,29 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         if previous_term is not None:
             signal.signal(signal.SIGTERM, previous_term)
     return status, code
+
+
+def _process_cpu_s(pid: int | None) -> float | None:
+    """CPU time [s] (user + system) process ``pid`` has used so far, from /proc (None where unreadable)."""
+    if pid is None:
+        return None
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _loop_cpu_s(fsw_proc, ground, since: dict | None = None) -> dict[str, float | None]:
+    """CPU time [s] of the simulator (this process), the flight software and the ground monitor: so far,
+    or since ``since`` (the lockstep loop's share: on a one-CPU host, e.g. the vcan-vm guest, their sum is
+    the loop's wall time). Two /proc reads: taken at the loop's start and end only."""
+    now = {"simulator": time.process_time(), "fsw": _process_cpu_s(getattr(fsw_proc, "pid", None)),
+           "ground": _process_cpu_s(getattr(ground, "pid", None))}
+    if since is None:
+        return now
+    return {k: (None if v is None or since.get(k) is None else v - since[k]) for k, v in now.items()}
 
 
 def _start_fsw(run_dir: Path, bus_spec: str) -> subprocess.Popen:

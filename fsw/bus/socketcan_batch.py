@@ -172,6 +172,21 @@ class BatchSocketcanBus(SocketcanBus):
             return self._rx.popleft()
         return None
 
+    def recv_queued(self, timeout: float | None = 0.0, limit: int | None = None) -> list[can.Message] | None:
+        """Every frame queued now (waiting up to ``timeout`` for the first), at most ``limit``; [] when
+        nothing came: what ``recv`` would return call after call, in one call. None when software filters
+        are set (then only ``recv`` reads)."""
+        if not self._is_filtered:
+            return None
+        rx = self._rx
+        if not rx and not self._fill(timeout):
+            return []
+        if limit is None or len(rx) <= limit:
+            out = list(rx)
+            rx.clear()
+            return out
+        return [rx.popleft() for _ in range(limit)]
+
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         if self._rx or self._fill(timeout):
             return self._rx.popleft(), self._is_filtered

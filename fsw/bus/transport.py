@@ -32,12 +32,14 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import can
+import numpy as np
 from can.interfaces.virtual import VirtualBus, channels_lock
 
 from fsw.bus.burst import FrameBurst
+from fsw.bus.kernels import MAX_DLC
 
 VCAN_CREATE_COMMANDS = (
     "sudo modprobe vcan",
@@ -249,6 +251,11 @@ def recv_burst(bus: can.BusABC, timeout: float | None = 0.0, limit: int | None =
     carry = getattr(bus, "recv_burst", None)
     if carry is not None:
         return carry(timeout)
+    queued = getattr(bus, "recv_queued", None)
+    if queued is not None:  # a bus that reads everything queued in one call (no filters set): one call here
+        msgs = queued(timeout, limit)
+        if msgs is not None:  # None: the bus cannot (software filters set): frame by frame below
+            return burst_of_messages(msgs) if msgs else None
     msg = bus.recv(timeout=timeout)
     if msg is None:
         return None
@@ -256,6 +263,31 @@ def recv_burst(bus: can.BusABC, timeout: float | None = 0.0, limit: int | None =
     while (limit is None or len(msgs) < limit) and (msg := bus.recv(timeout=0.0)) is not None:
         msgs.append(msg)
     return FrameBurst.from_messages(msgs)
+
+
+_ZERO_ROW = bytes(MAX_DLC)
+
+
+def burst_of_messages(msgs: Sequence[can.Message]) -> FrameBurst:
+    """``FrameBurst.from_messages(msgs)`` (the same arrays and list), built with one array call per column
+    instead of a numpy row assignment per frame (a lockstep SIL reads ~22 frames a tick); a burst with any
+    frame that is not a plain classic data frame takes ``from_messages`` itself."""
+    ids: list[int] = []
+    lengths: list[int] = []
+    rows = bytearray()
+    for msg in msgs:
+        data = msg.data
+        kind = type(data)
+        if (msg.is_error_frame or msg.is_extended_id or msg.is_remote_frame or (kind is not bytearray and kind is not bytes)
+                or len(data) > MAX_DLC or type(msg.arbitration_id) is not int):
+            return FrameBurst.from_messages(msgs)
+        ids.append(msg.arbitration_id)
+        lengths.append(len(data))
+        rows += data
+        rows += _ZERO_ROW[len(data):]
+    n = len(ids)
+    return FrameBurst(np.array(ids, dtype=np.int64), np.frombuffer(rows, dtype=np.uint8).reshape(n, MAX_DLC),
+                      np.array(lengths, dtype=np.int64), list(msgs))
 
 
 def _copy_message(msg: can.Message) -> can.Message:

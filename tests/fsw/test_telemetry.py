@@ -317,3 +317,23 @@ def test_tm_packets_are_the_bytes_spacepackets_builds(apid: int, seq: int, time_
                                data_len=len(sec) + len(payload) + 1, sec_header_flag=True)
     body = SpacePacket(header, sec_header=sec, user_data=payload).pack()
     assert _frame(apid, seq, time_s, payload) == bytes(body) + struct.pack("!H", crc16_ccitt_bitwise(bytes(body)))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.dictionaries(st.text(min_size=1, max_size=8),
+                       st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-2**70, 2**70),
+                                 st.booleans(), st.text(max_size=8)), max_size=80),
+       st.floats(allow_nan=True, allow_infinity=True))
+def test_channel_record_is_json_float_of_every_value(values: dict, time_s: float) -> None:
+    """to_json_dict rewrites exactly the non-finite floats as strings, as _json_float of each value does."""
+    import json
+
+    from fsw.telemetry import DecodedTm, _json_float
+
+    packet = DecodedTm(GNC_APID, 7, time_s, "channels", "GNC", dict(values))
+    record = packet.to_json_dict()
+    assert record["values"] == {k: _json_float(v) for k, v in values.items()} or \
+        json.dumps(record["values"]) == json.dumps({k: _json_float(v) for k, v in values.items()})
+    assert list(record["values"]) == list(values)
+    assert json.dumps(record, allow_nan=False)  # strict JSON: every NaN/inf became a string
+    assert packet.values == values  # the packet's own values are not touched
