@@ -18,7 +18,9 @@ import math
 import numpy as np
 from numba import njit
 
+from gnc._zone_polygon import signed_separation_one
 from gnc.attitude import pointing_rate_command_nb, quat_to_dcm_nb
+from gnc.zones import _cone_signed
 
 
 @njit(cache=True)
@@ -142,3 +144,239 @@ def aim_index_nb(path, start, y, cos_ahead):
         if _row_dot(path, k, y) < cos_ahead:
             return best_k, k
     return best_k, path.shape[0] - 1
+
+
+# ------------------------------------------------------------------------------------------------
+# POINTING in one call (design note 15): the zones as arrays, the sky update's drifts, the law, the
+# margins, the governor and the command.
+#
+# A zone set (the slots' physical zones, or the law's merged zones) is packed by `pack_zones` into a
+# table with a row per zone and the polygons' arcs, arc midpoints and plane vertices stacked:
+#   ZT_KIND 0 cone, 1 polygon; ZT_START/ZT_COUNT its rows in the stacked arrays; ZT_REACH; ZT_C the
+#   plane's centre point c; ZT_B the plane basis B (3 x 2, row-major); ZT_NORMAL / ZT_OFFSET the plane;
+#   ZT_AXIS / ZT_HALF a cone's axis and half-angle. The kernels call the zones' own compiled separations
+#   (`gnc.zones._cone_signed`, `gnc._zone_polygon.signed_separation_one`) on these rows: the same numbers.
+ZT_KIND, ZT_START, ZT_COUNT, ZT_REACH, ZT_C, ZT_B, ZT_NORMAL, ZT_OFFSET, ZT_AXIS, ZT_HALF = 0, 1, 2, 3, 4, 7, 13, 16, 17, 20
+ZT_WIDTH = 21
+
+
+@njit(cache=True)
+def zone_signed_nb(x, tab, edges, mids, verts, z, clamp):
+    """Signed separation of ``x`` from packed zone ``z`` (``clamp``: 0 inside, as ``separation``)."""
+    if tab[z, ZT_KIND] == 0.0:
+        return _cone_signed(x, tab[z, ZT_AXIS:ZT_AXIS + 3], tab[z, ZT_HALF], clamp)
+    s = int(tab[z, ZT_START])
+    e = s + int(tab[z, ZT_COUNT])
+    B = np.empty((3, 2))
+    for i in range(3):
+        B[i, 0] = tab[z, ZT_B + 2 * i]
+        B[i, 1] = tab[z, ZT_B + 2 * i + 1]
+    return signed_separation_one(x, edges[s:e], mids[s:e], tab[z, ZT_REACH], verts[s:e], tab[z, ZT_C:ZT_C + 3], B,
+                                 tab[z, ZT_NORMAL:ZT_NORMAL + 3], tab[z, ZT_OFFSET], clamp)
+
+
+@njit(cache=True)
+def zone_separations_nb(x, tab, edges, mids, verts):
+    """``separation(x)`` (0 inside) of every packed zone."""
+    out = np.empty(tab.shape[0])
+    for z in range(tab.shape[0]):
+        out[z] = zone_signed_nb(x, tab, edges, mids, verts, z, True)
+    return out
+
+
+def pack_zones(zones: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """(table, arcs, arc midpoints, plane vertices) of cones and polygon star zones; None when a zone is
+    of another kind (those keep the Python law)."""
+    tab = np.zeros((len(zones), ZT_WIDTH))
+    edges, mids, verts = [np.zeros((0, 9))], [np.zeros((0, 3))], [np.zeros((0, 2))]
+    start = 0
+    for i, z in enumerate(zones):
+        if getattr(z, "half_angle", None) is not None and hasattr(z, "_axis"):
+            tab[i, ZT_KIND] = 0.0
+            tab[i, ZT_AXIS:ZT_AXIS + 3] = z._axis
+            tab[i, ZT_HALF] = z.half_angle
+            continue
+        if getattr(z, "shape", None) != "polygon" or getattr(z, "dim", 0) != 3:
+            return None
+        e, m, reach, v, c, B, normal, offset = z._poly_args
+        n = e.shape[0]
+        tab[i, ZT_KIND] = 1.0
+        tab[i, ZT_START], tab[i, ZT_COUNT], tab[i, ZT_REACH] = start, n, reach
+        tab[i, ZT_C:ZT_C + 3] = c
+        tab[i, ZT_B:ZT_B + 6] = np.asarray(B).reshape(6)
+        tab[i, ZT_NORMAL:ZT_NORMAL + 3] = normal
+        tab[i, ZT_OFFSET] = offset
+        edges.append(e)
+        mids.append(m)
+        verts.append(v)
+        start += n
+    return (tab, np.ascontiguousarray(np.concatenate(edges)), np.ascontiguousarray(np.concatenate(mids)),
+            np.ascontiguousarray(np.concatenate(verts)))
+
+
+# law vector rows (one per merged zone): cap axis (3), cap cosine, (k1 / kappa) g (3)
+LV_CAP_AXIS, LV_CAP_COS, LV_KERNEL = 0, 3, 4
+LV_WIDTH = 7
+
+# scalar parameters of `pointing_step_nb` (one float vector, filled by the guidance)
+(FP_T, FP_U0, FP_N, FP_RADIUS, FP_F, FP_K1, FP_MAX_RATE, FP_ROLL_GAIN, FP_ACCEL, FP_BANDWIDTH, FP_EPS,
+ FP_COS_AHEAD, FP_START, FP_AIM_K, FP_NPREV, FP_STEADY, FP_FOLLOW) = range(17)
+FP_TARGET, FP_ROLL_AXIS, FP_ROLL_REF, FP_LAW_TARGET, FP_B = 17, 20, 23, 26, 29
+FP_WIDTH = 32
+
+# result layout of `pointing_step_nb`
+(R_DIRS, R_Y, R_COMPLETE, R_WORST, R_WORST_KIND, R_NEAREST, R_AIM, R_OMEGA, R_LAW_RATE, R_ERROR, R_ROLL,
+ R_ZONE, R_GOVERNOR, R_MARGIN_MIN, R_LAW_ERROR) = 0, 9, 12, 13, 14, 15, 16, 17, 20, 21, 22, 23, 24, 25, 26
+R_DRIFT = 27  # then the slots' drifts, then their margins
+
+LAW_REBUILD_TRIGGER_DEG = 0.08
+PHYS_REBUILD_TOL_DEG = 0.5
+_BRAKING_RESERVE_DEG = 0.5  # slew_limits.BRAKING_RESERVE_DEG (tested equal)
+_LAG_TIME_CONSTANTS = 1.5  # slew_limits.LAG_TIME_CONSTANTS (tested equal)
+
+
+@njit(cache=True)
+def angle_deg_nb(a, b):
+    """`common._angle_deg`: the angle [deg] between unit vectors."""
+    return math.degrees(math.acos(max(-1.0, min(1.0, a[0] * b[0] + a[1] * b[1] + a[2] * b[2]))))
+
+
+@njit(cache=True)
+def d_s_to_deg_nb(d_s):
+    """`common.d_s_to_deg`."""
+    mag = math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - abs(d_s)))))
+    return mag if d_s >= 0 else -mag
+
+
+@njit(cache=True)
+def rate_for_distance_nb(distance_deg, accel_deg_s2, bandwidth_rad_s):
+    """`slew_limits.rate_for_distance_deg_s`."""
+    if not distance_deg > 0.0 or not accel_deg_s2 > 0.0:
+        return 0.0
+    lag = _LAG_TIME_CONSTANTS / bandwidth_rad_s
+    return accel_deg_s2 * (math.sqrt(lag * lag + 2.0 * distance_deg / accel_deg_s2) - lag)
+
+
+@njit(cache=True)
+def star_law_nb(y, eps, law_target, lv, tab, edges, mids, verts, u):
+    """`gnc.laws.StarShapedLaw.control_and_zone` (k1 = 1, the guidance's law) on packed zones: fills ``u``,
+    returns the active zone (-1 outside every eps-layer), -2 when ``y`` is not a unit vector."""
+    n2 = 0.0
+    for k in range(3):
+        n2 += y[k] * y[k]
+    if not abs(n2 - 1.0) <= 2.0 * 1e-6:
+        return -2
+    best_i, best_d = -1, np.inf
+    for i in range(lv.shape[0]):
+        c = 0.0
+        for k in range(3):
+            c += y[k] * lv[i, LV_CAP_AXIS + k]
+        if c >= lv[i, LV_CAP_COS]:
+            d = zone_signed_nb(y, tab, edges, mids, verts, i, True)
+            if d < best_d:
+                best_i, best_d = i, d
+    if best_d > eps:
+        for k in range(3):
+            u[k] = 1.0 * law_target[k]
+        return -1
+    a = best_d / eps
+    b = 1.0 - a
+    for k in range(3):
+        u[k] = a * (1.0 * law_target[k]) - b * lv[best_i, LV_KERNEL + k]
+    return best_i
+
+
+@njit(cache=True)
+def pointing_law_nb(q, y, fp, lv, law_tab, law_edges, law_mids, law_verts, phys_tab, phys_edges, phys_mids,
+                    phys_verts, drift, prev, res):
+    """The law's ``u`` and zone, the slots' margins (less their drift), the governor's rate and the command
+    (`pointing_command_nb`) into ``res`` (layout R_*). The margins go to ``res[R_DRIFT + n:]``."""
+    n = phys_tab.shape[0]
+    u = np.empty(3)
+    zone = star_law_nb(y, fp[FP_EPS], fp[FP_LAW_TARGET:FP_LAW_TARGET + 3], lv, law_tab, law_edges, law_mids,
+                       law_verts, u)
+    res[R_LAW_ERROR] = 1.0 if zone == -2 else 0.0
+    if zone == -2:
+        return
+    res[R_ZONE] = zone
+    m0 = R_DRIFT + n
+    mmin = np.nan
+    for i in range(n):
+        m = d_s_to_deg_nb(zone_signed_nb(y, phys_tab, phys_edges, phys_mids, phys_verts, i, False)) - drift[i]
+        res[m0 + i] = m
+        if i == 0 or m < mmin:
+            mmin = m
+    res[R_MARGIN_MIN] = mmin
+    # the governor (`Guidance._governor_rate`): the nearest zone being approached
+    governor = -1.0
+    if fp[FP_NPREV] == n:
+        found = False
+        closest = 0.0
+        for i in range(n):
+            m = res[m0 + i]
+            if m < prev[i] and (not found or m < closest):
+                closest, found = m, True
+        if found:
+            room = 1.0 * closest - _BRAKING_RESERVE_DEG
+            governor = math.radians(rate_for_distance_nb(room, fp[FP_ACCEL], fp[FP_BANDWIDTH]))
+    res[R_GOVERNOR] = governor
+    c = pointing_command_nb(q, y, fp[FP_B:FP_B + 3], u, fp[FP_K1], fp[FP_MAX_RATE], governor,
+                            fp[FP_TARGET:FP_TARGET + 3], fp[FP_ROLL_AXIS:FP_ROLL_AXIS + 3],
+                            fp[FP_ROLL_REF:FP_ROLL_REF + 3], fp[FP_ROLL_GAIN])
+    for k in range(3):
+        res[R_OMEGA + k] = c[k]
+    res[R_LAW_RATE] = c[3]
+    res[R_ERROR] = c[4]
+    res[R_ROLL] = c[5]
+
+
+@njit(cache=True)
+def pointing_step_nb(q, fp, eph, slot_body, slot_geo, path, lv, law_tab, law_edges, law_mids, law_verts,
+                     phys_tab, phys_edges, phys_mids, phys_verts, prev):
+    """One POINTING cycle in steady state (`PointingGuidance._pointing`): the sky directions, every slot's
+    drift and the rebuild it calls for, the boresight, the path follower's aim; then, when no zone needs a
+    rebuild, the law is current (``fp[FP_STEADY]``) and the aim stays, `pointing_law_nb`
+    (``res[R_COMPLETE]`` = 1). Otherwise the guidance finishes the cycle in Python (``res[R_COMPLETE]`` = 0).
+
+    ``slot_body``: per slot 0 Sun, 1 Moon, 2 Earth, 3 fixed; ``slot_geo`` (n, 3, 3): per slot the fixed
+    centre, the centre the physical zone and the law zone were built at."""
+    n = slot_body.shape[0]
+    res = np.empty(R_DRIFT + 2 * n)
+    d = sky_directions_nb(fp[FP_T], fp[FP_U0], fp[FP_N], fp[FP_RADIUS], eph[0], eph[1], fp[FP_F], eph[2], eph[3],
+                          eph[4], eph[5])
+    for i in range(3):
+        for k in range(3):
+            res[R_DIRS + 3 * i + k] = d[i, k]
+    # `_update_sky`: every slot's drift; the largest drift past its trigger is rebuilt (Python)
+    worst, worst_kind, worst_slot = 0.0, -1, -1
+    for s in range(n):
+        body = slot_body[s]
+        c = slot_geo[s, 0] if body == 3 else d[body]
+        phys = angle_deg_nb(c, slot_geo[s, 1])
+        res[R_DRIFT + s] = phys
+        law_drift = angle_deg_nb(c, slot_geo[s, 2]) / LAW_REBUILD_TRIGGER_DEG
+        phys_drift = phys / PHYS_REBUILD_TOL_DEG
+        if law_drift >= 1.0 and law_drift > worst:
+            worst, worst_kind, worst_slot = law_drift, 0, s
+        if phys_drift >= 1.0 and phys_drift > worst:
+            worst, worst_kind, worst_slot = phys_drift, 1, s
+    res[R_WORST] = worst_slot
+    res[R_WORST_KIND] = worst_kind
+    y = boresight_nb(q, fp[FP_B:FP_B + 3])
+    for k in range(3):
+        res[R_Y + k] = y[k]
+    res[R_COMPLETE] = 0.0
+    res[R_NEAREST] = fp[FP_START]
+    res[R_AIM] = fp[FP_AIM_K]
+    if worst_slot >= 0 or fp[FP_STEADY] == 0.0:
+        return res
+    if fp[FP_FOLLOW] != 0.0:
+        nearest, aim = aim_index_nb(path, int(fp[FP_START]), y, fp[FP_COS_AHEAD])
+        res[R_NEAREST] = nearest
+        res[R_AIM] = aim
+        if aim != int(fp[FP_AIM_K]):
+            return res
+    pointing_law_nb(q, y, fp, lv, law_tab, law_edges, law_mids, law_verts, phys_tab, phys_edges, phys_mids,
+                    phys_verts, res[R_DRIFT:R_DRIFT + n], prev, res)
+    res[R_COMPLETE] = 1.0
+    return res

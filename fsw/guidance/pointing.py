@@ -14,14 +14,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fsw.guidance._kernels import boresight_nb, pointing_command_nb
+from fsw.guidance._kernels import (
+    FP_AIM_K, FP_B, FP_LAW_TARGET, FP_NPREV, FP_ROLL_AXIS, FP_ROLL_REF, FP_TARGET, FP_WIDTH, LV_CAP_AXIS,
+    LV_CAP_COS, LV_KERNEL, LV_WIDTH, R_COMPLETE, R_DRIFT, R_ERROR, R_LAW_ERROR, R_LAW_RATE, R_MARGIN_MIN,
+    R_NEAREST, R_OMEGA, R_ROLL, R_WORST, R_WORST_KIND, R_Y, R_ZONE, boresight_nb, pack_zones,
+    pointing_command_nb, pointing_law_nb, pointing_step_nb, zone_separations_nb,
+)
 from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _angle_deg, _make_star_law, signed_margin_deg
+from fsw.guidance.ephemeris import EPHEMERIS_NODE_S
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
+from gnc.laws import StarShapedLaw, _unit_vector
 
 ZONE_REBUILD_TOL_DEG = 0.1  # extra inflation of the law's zones covering their motion between rebuilds
 LAW_REBUILD_TRIGGER_DEG = 0.08
 PHYS_REBUILD_TOL_DEG = 0.5
+_BODY_INDEX = {"sun": 0, "moon": 1, "earth": 2, "inertial": 3}  # rows of `sky_directions_nb`; 3: a fixed centre
+_NO_PATH = np.zeros((1, 3))
+_NO_MARGINS = np.zeros(0)
+_NO_LAW = (np.zeros((0, 7)), np.zeros((0, 21)), np.zeros((0, 9)), np.zeros((0, 3)), np.zeros((0, 2)))
 
 
 def _warm_batch_kernels(builders: list) -> None:
@@ -69,6 +80,7 @@ class PointingGuidance:
             c = s.fixed_center if s.fixed_center is not None else dirs[s.body]
             s.center_N = c
             if s.built_center is None:
+                self._sky_pack = None
                 s.phys, s.law = s.builder_phys.build(c), s.builder_law.build(c)
                 s.built_center, s.built_center_law = c.copy(), c.copy()
                 s.phys_drift_deg = _angle_deg(c, s.built_center)
@@ -81,6 +93,7 @@ class PointingGuidance:
                 if drift >= 1.0 and drift > worst:
                     worst, worst_kind, worst_slot = drift, kind, s
         if worst_slot is not None:
+            self._sky_pack = None
             c = worst_slot.center_N
             if worst_kind == "law":
                 worst_slot.law = worst_slot.builder_law.build(c)
@@ -100,8 +113,23 @@ class PointingGuidance:
 
 
     def _pointing(self, t_s: float, q: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
-        rebuilt = self._update_sky(t_s)
-        y = boresight_nb(q, self.b_B)
+        pack = self._sky_pack_now()
+        if pack is None:
+            rebuilt = self._update_sky(t_s)
+            y = boresight_nb(q, self.b_B)
+        else:
+            # steady state in one compiled call (design note 15); when a zone must be rebuilt, the law is
+            # stale or the aim moves on, the kernel stops after the sky and the boresight and the cycle
+            # goes on below, in the order of the Python it replaces
+            steady = (self._sky_law_key is not None and self._law_pack is not None and not self._escaping
+                      and not self.sky_geometry.unmerged
+                      and not (self._follower is not None
+                               and t_s - self._planned_t >= self.cfg.pointing.path.replan_period_s))
+            res = self._pointing_step(t_s, q, pack, steady)
+            if res[R_COMPLETE] != 0.0:
+                return self._pointing_output(t_s, res, res[R_Y:R_Y + 3], pack)
+            rebuilt = self._apply_sky(res)
+            y = res[R_Y:R_Y + 3]
         out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
         out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
         u_law = self.target_N
@@ -116,35 +144,16 @@ class PointingGuidance:
                     self._escape_event_t = t_s
                     self.events("ASSUMPTION_VIOLATED", reason="boresight between two close zones that cannot merge: steering out of the gap")
             if rebuilt or self._sky_law_key is None or self._aim_moved(t_s, y):
-                zones = [s.law for s in self.slots]
-                geometry = self.sky_geometry
-                merged, groups = geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
-                if groups != self._sky_groups:
-                    self._report_merge(self._sky_groups, groups)
-                    self._checks_dirty = True
-                self._sky_groups = groups
-                self._sky_law_zones = merged
-                if self._plan_due or self._path_blocked(t_s, merged + geometry.pending):
-                    self._plan(t_s, y, merged + geometry.pending)
-                aim = self._aim
-                eps_max = ZoneGeometry.fast_eps_max(aim, merged, geometry.unmerged)
-                eps = self._eps_for(max(eps_max, 1e-5))
-                target, occ = self._substitute_target(t_s, merged, eps, geometry.pending, y, aim)
-                if occ != self._occulted:
-                    if occ >= len(merged) and not self._escaping:
-                        self.events("ASSUMPTION_VIOLATED", reason="target between two zones closing around the boresight: steering out of the gap")
-                    elif 0 <= occ < len(merged):
-                        self.events("ASSUMPTION_VIOLATED", reason=f"target in the eps-layer of zone {occ}: steering to the nearest safe direction")
-                    self._occulted = occ
-                    self._checks_dirty = True
-                if occ >= 0:
-                    eps_max = ZoneGeometry.fast_eps_max(target, merged, geometry.unmerged)
-                    eps = self._eps_for(max(eps_max, 1e-5))
-                self._sky_target = target
-                self._sky_eps, self._sky_eps_max = eps, eps_max
-                self._current_eps = eps
-                self._sky_law = _make_star_law(target, merged, 1.0, self.kappa, eps)
-                self._sky_law_key = True
+                self._rebuild_sky_law(t_s, y)
+            pack = self._sky_pack_now()
+            if pack is not None and self._law_pack is not None:
+                n = len(self.slots)
+                res = np.empty(R_DRIFT + 2 * n)
+                drift = np.array([s.phys_drift_deg for s in self.slots])
+                pointing_law_nb(q, y, self._fill_params(t_s, 0.0, pack), *self._law_pack[:5], *pack[2], drift,
+                                *self._governor_prev(), res)
+                res[R_DRIFT:R_DRIFT + n] = drift
+                return self._pointing_output(t_s, res, y, pack, out)
             u_law, zone = self._sky_law.control_and_zone(y)
             out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
             out.active_zone = -1 if zone is None else self._sky_groups[zone][0]
@@ -164,6 +173,234 @@ class PointingGuidance:
         self._watch_progress(t_s, y, out.pointing_error_deg, float(c[3]), out.active_zone)
         out.omega_cmd_BN_B = c[:3]
         out.roll_error_deg = math.degrees(c[5])
+        return out
+
+    def _rebuild_sky_law(self, t_s: float, y: np.ndarray) -> None:
+        """The law for the zones as they are now, the boresight ``y`` and the aim: merging, the path check,
+        eps, the substitute target. What only depends on the zones is kept while they stay the same objects
+        (merge without a close pair, the pairwise eps bound, the law's zone arrays)."""
+        zones = [s.law for s in self.slots]
+        geometry = self.sky_geometry
+        merged, groups = self._merge_law_zones(zones, y)
+        if groups != self._sky_groups:
+            self._report_merge(self._sky_groups, groups)
+            self._checks_dirty = True
+        self._sky_groups = groups
+        self._sky_group_first = [g[0] for g in groups]
+        self._sky_zones_merged = any(len(g) > 1 for g in groups)
+        self._sky_law_zones = merged
+        if self._plan_due or self._path_blocked(t_s, merged + geometry.pending):
+            self._plan(t_s, y, merged + geometry.pending)
+        aim = self._aim
+        zpack = self._law_zones_pack(merged)
+        seps = None if zpack is None else zone_separations_nb(aim, *zpack).tolist()
+        eps_max = self._fast_eps_max(aim, merged, geometry.unmerged, seps)
+        eps = self._eps_for(max(eps_max, 1e-5))
+        target, occ = self._substitute_target(t_s, merged, eps, geometry.pending, y, aim, seps)
+        if occ != self._occulted:
+            if occ >= len(merged) and not self._escaping:
+                self.events("ASSUMPTION_VIOLATED", reason="target between two zones closing around the boresight: steering out of the gap")
+            elif 0 <= occ < len(merged):
+                self.events("ASSUMPTION_VIOLATED", reason=f"target in the eps-layer of zone {occ}: steering to the nearest safe direction")
+            self._occulted = occ
+            self._checks_dirty = True
+        if occ >= 0:
+            eps_max = ZoneGeometry.fast_eps_max(target, merged, geometry.unmerged)
+            eps = self._eps_for(max(eps_max, 1e-5))
+        self._sky_target = target
+        self._sky_eps, self._sky_eps_max = eps, eps_max
+        self._current_eps = eps
+        self._set_sky_law(target, merged, eps, zpack)
+        self._sky_law_key = True
+
+    def _merge_law_zones(self, zones: list, y: np.ndarray) -> tuple[list, list[list[int]]]:
+        """`ZoneGeometry.merge` of the law's zones, kept while they are the same objects and no two of
+        them came within the merge gap: the merge then returns them as they are, whatever the boresight."""
+        geometry = self.sky_geometry
+        kept = self._merge_kept
+        if kept is not None and len(kept) == len(zones) and all(a is b for a, b in zip(kept, zones)):
+            geometry.pending, geometry.unmerged = [], []
+            return list(zones), [[i] for i in range(len(zones))]
+        merged, groups = geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
+        # every group alone and no pair refused: no pair of zones came within the merge gap
+        apart = all(len(g) == 1 for g in groups) and not geometry.unmerged and not geometry.pending
+        self._merge_kept = tuple(zones) if apart else None
+        return merged, groups
+
+    def _law_zones_pack(self, merged: list):
+        """`pack_zones` of the law's zones, kept while they are the same objects."""
+        kept = self._law_zones_kept
+        if kept is not None and len(kept[0]) == len(merged) and all(a is b for a, b in zip(kept[0], merged)):
+            return kept[1]
+        pack = pack_zones(merged)
+        self._law_zones_kept = (tuple(merged), pack, {}, {})
+        return pack
+
+    def _fast_eps_max(self, aim: np.ndarray, merged: list, unmerged: list, seps: list[float] | None) -> float:
+        """`ZoneGeometry.fast_eps_max` with the pairwise bound kept for the same zones (it only depends on
+        them) and the aim's separations ``seps`` already computed."""
+        kept = self._law_zones_kept
+        if seps is None or kept is None or kept[1] is None:
+            return ZoneGeometry.fast_eps_max(aim, merged, unmerged)
+        key = tuple(sorted(tuple(sorted(p)) for p in unmerged))
+        bound = kept[2].get(key)
+        if bound is None:
+            bound = kept[2][key] = ZoneGeometry.pair_bound(merged, unmerged)
+        for d in seps:
+            bound = min(bound, d)
+        return bound
+
+    def _set_sky_law(self, target: np.ndarray, merged: list, eps: float, zpack) -> None:
+        """The star-shaped law on ``merged`` towards ``target``: its arrays for `pointing_step_nb` (the zone
+        part kept for the same zones, eps and kappa), or the `gnc.laws.StarShapedLaw` itself for zones the
+        kernels do not know."""
+        if zpack is None:
+            self._sky_law = _make_star_law(target, merged, 1.0, self.kappa, eps)
+            self._law_pack = None
+            return
+        laws = self._law_zones_kept[3]
+        key = (eps, self.kappa)
+        lv = laws.get(key)
+        if lv is None:
+            law = StarShapedLaw(target, merged, k1=1.0, kappa=self.kappa, eps=eps)  # validates zones and eps
+            lv = np.empty((len(merged), LV_WIDTH))
+            lv[:, LV_CAP_AXIS:LV_CAP_AXIS + 3] = law._cap_axes
+            lv[:, LV_CAP_COS] = law._cap_cos
+            for i, g in enumerate(law._k1_kernels_over_kappa):
+                lv[i, LV_KERNEL:LV_KERNEL + 3] = g
+            if len(laws) > 8:
+                laws.clear()
+            laws[key] = lv
+            law_target = law.target
+        else:
+            law_target = _unit_vector(target, "target")
+        self._sky_law = None
+        self._law_pack = (lv, *zpack, law_target, float(eps))
+
+    def _sky_pack_now(self):
+        """(slot bodies, slot centres, packed physical zones) for the compiled cycle, or None: the Python
+        path (no zones, a zone not built yet, an ephemeris replaced by a test, zones the kernels do not know)."""
+        pack = self._sky_pack
+        if pack is not None:
+            return pack if "directions" not in vars(self.ephem) else None
+        if not self.slots or "directions" in vars(self.ephem) or any(s.built_center is None for s in self.slots):
+            return None
+        phys = pack_zones([s.phys for s in self.slots])
+        if phys is None:
+            return None
+        n = len(self.slots)
+        body = np.array([_BODY_INDEX[s.body] for s in self.slots], dtype=np.int64)
+        geo = np.zeros((n, 3, 3))
+        for i, s in enumerate(self.slots):
+            if s.fixed_center is not None:
+                geo[i, 0] = s.fixed_center
+            geo[i, 1] = s.built_center
+            geo[i, 2] = s.built_center_law
+        self._sky_pack = pack = (body, geo, phys)
+        return pack
+
+    def _fill_params(self, t_s: float, steady: float, pack) -> np.ndarray:
+        """The scalar and small-vector inputs of `pointing_step_nb` (layout FP_*)."""
+        e = self.ephem
+        k = math.floor(t_s / EPHEMERIS_NODE_S)
+        f = t_s / EPHEMERIS_NODE_S - k  # as `SkyEphemeris.directions`
+        if k != self._eph_k:
+            s0, m0 = e._geocentric(k)
+            s1, m1 = e._geocentric(k + 1)
+            self._eph = np.array([e.p_hat, e.q_hat, s0, s1, m0, m1], dtype=float)
+            self._eph_k = k
+        fp = self._fp
+        f_ = self._follower
+        law = self._law_pack
+        fp[:FP_TARGET] = (float(t_s), e.u0, e.n_rad_s, e.radius_km, f, self.k1, self.max_rate_rad_s,
+                          self.cfg.pointing.roll_gain_1_s, self.accel_deg_s2, self.bandwidth_rad_s,
+                          law[6] if law is not None else 0.0, f_.cos_ahead if f_ is not None else 0.0,
+                          f_.index if f_ is not None else 0, self._aim_k, -1.0, steady,
+                          1.0 if f_ is not None else 0.0)
+        fp[FP_TARGET:FP_TARGET + 3] = self.target_N
+        fp[FP_ROLL_AXIS:FP_ROLL_AXIS + 3] = self.roll_axis_B
+        fp[FP_ROLL_REF:FP_ROLL_REF + 3] = self.roll_ref_N
+        if law is not None:
+            fp[FP_LAW_TARGET:FP_LAW_TARGET + 3] = law[5]
+        fp[FP_B:FP_B + 3] = self.b_B
+        return fp
+
+    def _governor_prev(self) -> tuple[np.ndarray]:
+        """Last cycle's margins for the governor (`_governor_rate`) as an array; sets FP_NPREV."""
+        prev = self._governor_margins
+        if prev is None:
+            self._fp[FP_NPREV] = -1.0
+            return (_NO_MARGINS,)
+        self._fp[FP_NPREV] = len(prev)
+        kept = self._governor_kept
+        if kept is not None and kept[0] is prev:
+            return (kept[1],)
+        return (np.array(prev, dtype=float),)
+
+    def _pointing_step(self, t_s: float, q: np.ndarray, pack, steady: bool) -> np.ndarray:
+        fp = self._fill_params(t_s, 1.0 if steady else 0.0, pack)
+        law = self._law_pack or _NO_LAW
+        f = self._follower
+        return pointing_step_nb(q, fp, self._eph, pack[0], pack[1], f.path if f is not None else _NO_PATH,
+                                *law[:5], *pack[2], *self._governor_prev())
+
+    def _apply_sky(self, res: np.ndarray) -> bool:
+        """`_update_sky` from the kernel's sky: the slots' centres and drifts, and the one rebuild it asks
+        for. True if a law zone was rebuilt."""
+        dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
+        self._dirs = dirs
+        for i, s in enumerate(self.slots):
+            s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
+            s.phys_drift_deg = float(res[R_DRIFT + i])
+        w = int(res[R_WORST])
+        if w < 0:
+            return False
+        slot = self.slots[w]
+        c = slot.center_N
+        self._sky_pack = None
+        if res[R_WORST_KIND] == 0.0:
+            slot.law = slot.builder_law.build(c)
+            slot.built_center_law = c.copy()
+            return True
+        slot.phys = slot.builder_phys.build(c)
+        slot.built_center = c.copy()
+        slot.phys_drift_deg = _angle_deg(c, slot.built_center)
+        return False
+
+    def _pointing_output(self, t_s: float, res: np.ndarray, y: np.ndarray, pack,
+                         out: GuidanceOutput | None = None) -> GuidanceOutput:
+        """The cycle's output from `pointing_law_nb`'s results; the governor's and the watchdog's state."""
+        if res[R_LAW_ERROR] != 0.0:
+            raise ValueError(f"state x must be a unit vector on S^2, |x|^2 = {float(y @ y)!r}")
+        n = len(self.slots)
+        if out is None:  # the whole cycle was compiled: the sky as `_update_sky` leaves it
+            dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
+            self._dirs = dirs
+            drift = res[R_DRIFT:R_DRIFT + n].tolist()
+            for i, s in enumerate(self.slots):
+                s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
+                s.phys_drift_deg = drift[i]
+            follower = self._follower
+            if follower is not None:
+                follower.index = int(res[R_NEAREST])
+            out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy(),
+                                 sun_N=dirs["sun"], moon_N=dirs["moon"])
+        out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
+        zone = int(res[R_ZONE])
+        out.active_zone = -1 if zone < 0 else self._sky_group_first[zone]
+        margins_arr = res[R_DRIFT + n:R_DRIFT + 2 * n]
+        margins = margins_arr.tolist()
+        out.margins_deg, out.margin_min_deg = margins, float(res[R_MARGIN_MIN])
+        out.zones_merged = self._sky_zones_merged
+        out.zone_count = n
+        out.zone_bodies = self._slot_body_codes()
+        self._governor_margins = kept = list(margins)
+        self._governor_kept = (kept, margins_arr)
+        out.assumptions_ok = self.assumptions_ok
+        out.pointing_error_deg = float(res[R_ERROR])
+        self._watch_progress(t_s, y, out.pointing_error_deg, float(res[R_LAW_RATE]), out.active_zone)
+        out.omega_cmd_BN_B = res[R_OMEGA:R_OMEGA + 3]
+        out.roll_error_deg = math.degrees(res[R_ROLL])
         return out
 
 
@@ -188,7 +425,7 @@ class PointingGuidance:
 
 
     def _substitute_target(self, t_s: float, zones: list, eps: float, pending: list, y: np.ndarray,
-                           aim: np.ndarray) -> tuple[np.ndarray, int]:
+                           aim: np.ndarray, seps: list[float] | None = None) -> tuple[np.ndarray, int]:
         """`ZoneGeometry.retreat_target` for the law's aim (the commanded target, or the point ahead on
         the planned path), reusing the last substitute while it is
         still clear of every zone by the standoff (a search costs milliseconds; zones rebuild every ~1 s
@@ -198,7 +435,8 @@ class PointingGuidance:
         While the boresight is squeezed between two close zones that could not merge (`_squeezed`), or
         inside the would-be merged shape of such a pair, it first gets out: the law target is then the
         nearest direction clear of every zone by the standoff, on the commanded target's side. Such a pair
-        leaves the law no admissible eps between its zones, so that is the one place it must not stay."""
+        leaves the law no admissible eps between its zones, so that is the one place it must not stay.
+        ``seps``: the zones' separations from ``aim`` when already computed."""
         standoff = self.cfg.law.retreat_standoff_deg
         d_free = ZoneGeometry.clear_separation(standoff, eps)
         clear = lambda x: all(float(z.separation(x)) > d_free for z in list(zones) + list(pending))  # noqa: E731
@@ -212,13 +450,17 @@ class PointingGuidance:
         kept = self._substitute
         if kept is not None and kept[0] is aim and t_s - kept[2] < self.SUBSTITUTE_REFRESH_S:
             _, x, _, occ_then = kept
-            occ = ZoneGeometry.occulting(aim, zones, eps, pending)
+            occ = (ZoneGeometry.occulting(aim, zones, eps, pending) if seps is None
+                   else ZoneGeometry.occulting_from(seps, aim, eps, pending))
             if occ >= 0 and occ_then >= 0 and clear(x):
                 return x, occ
             if occ < 0:  # what retreat_target answers for a usable target, without looking again
                 self._substitute = (aim, aim, t_s, -1)
                 return aim, -1
-        x, occ = ZoneGeometry.retreat_target(aim, zones, eps, standoff, avoid=pending, near=y)
+        if seps is not None and ZoneGeometry.occulting_from(seps, aim, eps, pending) < 0:
+            x, occ = aim, -1  # what retreat_target answers for a usable target
+        else:
+            x, occ = ZoneGeometry.retreat_target(aim, zones, eps, standoff, avoid=pending, near=y)
         self._substitute = (aim, x, t_s, occ)
         return x, occ
 
