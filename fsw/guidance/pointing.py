@@ -15,16 +15,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from fsw.guidance._kernels import (
-    FP_AIM_K, FP_B, FP_LAW_TARGET, FP_NPREV, FP_ROLL_AXIS, FP_ROLL_REF, FP_TARGET, FP_WIDTH, LV_CAP_AXIS,
-    LV_CAP_COS, LV_KERNEL, LV_WIDTH, R_COMPLETE, R_DRIFT, R_ERROR, R_LAW_ERROR, R_LAW_RATE, R_MARGIN_MIN,
-    R_NEAREST, R_OMEGA, R_ROLL, R_WORST, R_WORST_KIND, R_Y, R_ZONE, boresight_nb, pack_zones,
-    pointing_command_nb, pointing_law_nb, pointing_step_nb, zone_separations_nb,
+    ARC_WIDTH, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
+    FP_T, FP_U0, R_COMPLETE, R_DRIFT, R_ERROR, R_LAW_ERROR, R_LAW_RATE, R_MARGIN_MIN, R_NEAREST, R_OMEGA,
+    R_ROLL, R_WORST, R_WORST_KIND, R_Y, R_ZONE, SG_BODY, SG_BUILT, SG_BUILT_LAW, SG_FIXED, ZT_CAP_AXIS,
+    ZT_CAP_COS, ZT_KERNEL, ZT_WIDTH, boresight_nb, pack_zones, pointing_command_nb, pointing_law_nb,
+    pointing_step_nb, zone_separations_nb,
 )
 from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _angle_deg, _make_star_law, signed_margin_deg
 from fsw.guidance.ephemeris import EPHEMERIS_NODE_S
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
-from gnc.laws import StarShapedLaw, _unit_vector
+from gnc.laws import _cap_skip_cosines, _positive, _unit_vector, _zone_list
 
 ZONE_REBUILD_TOL_DEG = 0.1  # extra inflation of the law's zones covering their motion between rebuilds
 LAW_REBUILD_TRIGGER_DEG = 0.08
@@ -32,7 +33,7 @@ PHYS_REBUILD_TOL_DEG = 0.5
 _BODY_INDEX = {"sun": 0, "moon": 1, "earth": 2, "inertial": 3}  # rows of `sky_directions_nb`; 3: a fixed centre
 _NO_PATH = np.zeros((1, 3))
 _NO_MARGINS = np.zeros(0)
-_NO_LAW = (np.zeros((0, 7)), np.zeros((0, 21)), np.zeros((0, 9)), np.zeros((0, 3)), np.zeros((0, 2)))
+_NO_LAW = (np.zeros((0, ZT_WIDTH)), np.zeros((0, ARC_WIDTH)))
 
 
 def _warm_batch_kernels(builders: list) -> None:
@@ -150,10 +151,15 @@ class PointingGuidance:
                 n = len(self.slots)
                 res = np.empty(R_DRIFT + 2 * n)
                 drift = np.array([s.phys_drift_deg for s in self.slots])
-                pointing_law_nb(q, y, self._fill_params(t_s, 0.0, pack), *self._law_pack[:5], *pack[2], drift,
-                                *self._governor_prev(), res)
+                fp = self._fill_params(t_s, 0.0)
+                prev = self._governor_prev(fp)
+                law = self._law_pack
+                pointing_law_nb(q, y, fp, self.target_N, self.roll_axis_B, self.roll_ref_N, law[0], law[1],
+                                pack[1], pack[2], drift, prev, res)
                 res[R_DRIFT:R_DRIFT + n] = drift
                 return self._pointing_output(t_s, res, y, pack, out)
+            if self._sky_law is None:  # the law as arrays only so far (`_set_sky_law`): the same law as an object
+                self._sky_law = _make_star_law(self._sky_target, self._sky_law_zones, 1.0, self.kappa, self._sky_eps)
             u_law, zone = self._sky_law.control_and_zone(y)
             out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
             out.active_zone = -1 if zone is None else self._sky_groups[zone][0]
@@ -251,31 +257,34 @@ class PointingGuidance:
         return bound
 
     def _set_sky_law(self, target: np.ndarray, merged: list, eps: float, zpack) -> None:
-        """The star-shaped law on ``merged`` towards ``target``: its arrays for `pointing_step_nb` (the zone
-        part kept for the same zones, eps and kappa), or the `gnc.laws.StarShapedLaw` itself for zones the
-        kernels do not know."""
+        """The star-shaped law on ``merged`` towards ``target`` (`gnc.laws.StarShapedLaw` with k1 = 1, its
+        checks and arrays): as arrays for `pointing_step_nb`, the zones' part kept for the same zones, eps
+        and kappa; or the law object itself for zones the kernels do not know."""
         if zpack is None:
             self._sky_law = _make_star_law(target, merged, 1.0, self.kappa, eps)
             self._law_pack = None
             return
+        law_target = _unit_vector(target, "target")
         laws = self._law_zones_kept[3]
         key = (eps, self.kappa)
-        lv = laws.get(key)
-        if lv is None:
-            law = StarShapedLaw(target, merged, k1=1.0, kappa=self.kappa, eps=eps)  # validates zones and eps
-            lv = np.empty((len(merged), LV_WIDTH))
-            lv[:, LV_CAP_AXIS:LV_CAP_AXIS + 3] = law._cap_axes
-            lv[:, LV_CAP_COS] = law._cap_cos
-            for i, g in enumerate(law._k1_kernels_over_kappa):
-                lv[i, LV_KERNEL:LV_KERNEL + 3] = g
+        tab = laws.get(key)
+        if tab is None:
+            _zone_list(merged, 3)
+            k1, kappa, eps = _positive(1.0, "k1"), _positive(self.kappa, "kappa"), _positive(eps, "eps")
+            if eps >= 2.0:
+                raise ValueError(f"eps must be < 2 (the largest separation on the sphere), got {eps}")
+            kernels = np.ascontiguousarray([np.asarray(z.kernel, dtype=float) for z in merged])
+            axes, cosines = _cap_skip_cosines(merged, eps, 3)
+            tab = zpack[0].copy()
+            tab[:, ZT_CAP_AXIS:ZT_CAP_AXIS + 3] = axes
+            tab[:, ZT_CAP_COS] = cosines
+            for i, g in enumerate(kernels):
+                tab[i, ZT_KERNEL:ZT_KERNEL + 3] = np.ascontiguousarray((k1 / kappa) * g)
             if len(laws) > 8:
                 laws.clear()
-            laws[key] = lv
-            law_target = law.target
-        else:
-            law_target = _unit_vector(target, "target")
+            laws[key] = tab
         self._sky_law = None
-        self._law_pack = (lv, *zpack, law_target, float(eps))
+        self._law_pack = (tab, zpack[1], law_target, float(eps))
 
     def _sky_pack_now(self):
         """(slot bodies, slot centres, packed physical zones) for the compiled cycle, or None: the Python
@@ -288,19 +297,19 @@ class PointingGuidance:
         phys = pack_zones([s.phys for s in self.slots])
         if phys is None:
             return None
-        n = len(self.slots)
-        body = np.array([_BODY_INDEX[s.body] for s in self.slots], dtype=np.int64)
-        geo = np.zeros((n, 3, 3))
+        geo = np.zeros((len(self.slots), 4, 3))
         for i, s in enumerate(self.slots):
             if s.fixed_center is not None:
-                geo[i, 0] = s.fixed_center
-            geo[i, 1] = s.built_center
-            geo[i, 2] = s.built_center_law
-        self._sky_pack = pack = (body, geo, phys)
+                geo[i, SG_FIXED] = s.fixed_center
+            geo[i, SG_BUILT] = s.built_center
+            geo[i, SG_BUILT_LAW] = s.built_center_law
+            geo[i, SG_BODY, 0] = _BODY_INDEX[s.body]
+        self._sky_pack = pack = (geo, *phys)
         return pack
 
-    def _fill_params(self, t_s: float, steady: float, pack) -> np.ndarray:
-        """The scalar and small-vector inputs of `pointing_step_nb` (layout FP_*)."""
+    def _fill_params(self, t_s: float, steady: float) -> np.ndarray:
+        """The scalar inputs of `pointing_step_nb` (layout FP_*): the cycle's, and the rest again when one
+        of the values they come from was replaced."""
         e = self.ephem
         k = math.floor(t_s / EPHEMERIS_NODE_S)
         f = t_s / EPHEMERIS_NODE_S - k  # as `SkyEphemeris.directions`
@@ -310,39 +319,47 @@ class PointingGuidance:
             self._eph = np.array([e.p_hat, e.q_hat, s0, s1, m0, m1], dtype=float)
             self._eph_k = k
         fp = self._fp
-        f_ = self._follower
+        follower = self._follower
         law = self._law_pack
-        fp[:FP_TARGET] = (float(t_s), e.u0, e.n_rad_s, e.radius_km, f, self.k1, self.max_rate_rad_s,
-                          self.cfg.pointing.roll_gain_1_s, self.accel_deg_s2, self.bandwidth_rad_s,
-                          law[6] if law is not None else 0.0, f_.cos_ahead if f_ is not None else 0.0,
-                          f_.index if f_ is not None else 0, self._aim_k, -1.0, steady,
-                          1.0 if f_ is not None else 0.0)
-        fp[FP_TARGET:FP_TARGET + 3] = self.target_N
-        fp[FP_ROLL_AXIS:FP_ROLL_AXIS + 3] = self.roll_axis_B
-        fp[FP_ROLL_REF:FP_ROLL_REF + 3] = self.roll_ref_N
-        if law is not None:
-            fp[FP_LAW_TARGET:FP_LAW_TARGET + 3] = law[5]
-        fp[FP_B:FP_B + 3] = self.b_B
+        key = self._fp_key
+        if (key is None or key[0] is not self.k1 or key[1] is not self.max_rate_rad_s or key[2] is not law
+                or key[3] is not follower or key[4] is not self.accel_deg_s2 or key[5] is not self.bandwidth_rad_s):
+            self._fp_key = (self.k1, self.max_rate_rad_s, law, follower, self.accel_deg_s2, self.bandwidth_rad_s)
+            fp[FP_U0:FP_LAW_TARGET] = (e.u0, e.n_rad_s, e.radius_km, self.k1, self.max_rate_rad_s,
+                                       self.cfg.pointing.roll_gain_1_s, self.accel_deg_s2, self.bandwidth_rad_s,
+                                       law[3] if law is not None else 0.0,
+                                       follower.cos_ahead if follower is not None else 0.0,
+                                       1.0 if follower is not None else 0.0)
+            if law is not None:
+                fp[FP_LAW_TARGET:FP_LAW_TARGET + 3] = law[2]
+            fp[FP_B:FP_B + 3] = self.b_B
+        fp[FP_T] = t_s
+        fp[FP_F] = f
+        fp[FP_STEADY] = steady
+        if follower is not None:
+            fp[FP_START] = follower.index
+            fp[FP_AIM_K] = self._aim_k
         return fp
 
-    def _governor_prev(self) -> tuple[np.ndarray]:
+    def _governor_prev(self, fp: np.ndarray) -> np.ndarray:
         """Last cycle's margins for the governor (`_governor_rate`) as an array; sets FP_NPREV."""
         prev = self._governor_margins
         if prev is None:
-            self._fp[FP_NPREV] = -1.0
-            return (_NO_MARGINS,)
-        self._fp[FP_NPREV] = len(prev)
+            fp[FP_NPREV] = -1.0
+            return _NO_MARGINS
+        fp[FP_NPREV] = len(prev)
         kept = self._governor_kept
         if kept is not None and kept[0] is prev:
-            return (kept[1],)
-        return (np.array(prev, dtype=float),)
+            return kept[1]
+        return np.array(prev, dtype=float)
 
     def _pointing_step(self, t_s: float, q: np.ndarray, pack, steady: bool) -> np.ndarray:
-        fp = self._fill_params(t_s, 1.0 if steady else 0.0, pack)
+        fp = self._fill_params(t_s, 1.0 if steady else 0.0)
+        prev = self._governor_prev(fp)
         law = self._law_pack or _NO_LAW
         f = self._follower
-        return pointing_step_nb(q, fp, self._eph, pack[0], pack[1], f.path if f is not None else _NO_PATH,
-                                *law[:5], *pack[2], *self._governor_prev())
+        return pointing_step_nb(q, fp, self._eph, self.target_N, self.roll_axis_B, self.roll_ref_N, pack[0],
+                                f.path if f is not None else _NO_PATH, law[0], law[1], pack[1], pack[2], prev)
 
     def _apply_sky(self, res: np.ndarray) -> bool:
         """`_update_sky` from the kernel's sky: the slots' centres and drifts, and the one rebuild it asks
