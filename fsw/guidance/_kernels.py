@@ -226,7 +226,8 @@ FP_WIDTH = 23
 # result layout of `pointing_step_nb`
 (R_DIRS, R_Y, R_COMPLETE, R_WORST, R_WORST_KIND, R_NEAREST, R_AIM, R_OMEGA, R_LAW_RATE, R_ERROR, R_ROLL,
  R_ZONE, R_GOVERNOR, R_MARGIN_MIN, R_LAW_ERROR) = 0, 9, 12, 13, 14, 15, 16, 17, 20, 21, 22, 23, 24, 25, 26
-R_DRIFT = 27  # then the slots' drifts, then their margins
+R_AIM_DONE = 27  # 1 when R_NEAREST and R_AIM are this cycle's
+R_DRIFT = 28  # then the slots' drifts, then their margins
 
 # slot rows of `pointing_step_nb`'s ``slot_geo`` (n, 4, 3)
 SG_FIXED, SG_BUILT, SG_BUILT_LAW, SG_BODY = 0, 1, 2, 3
@@ -369,12 +370,14 @@ def pointing_step_nb(q, fp, eph, target, roll_axis, roll_ref, slot_geo, path, la
     res[R_COMPLETE] = 0.0
     res[R_NEAREST] = fp[FP_START]
     res[R_AIM] = fp[FP_AIM_K]
+    res[R_AIM_DONE] = 0.0
     if worst_slot >= 0 or fp[FP_STEADY] == 0.0:
         return res
     if fp[FP_FOLLOW] != 0.0:
         nearest, aim = aim_index_nb(path, int(fp[FP_START]), y, fp[FP_COS_AHEAD])
         res[R_NEAREST] = nearest
         res[R_AIM] = aim
+        res[R_AIM_DONE] = 1.0
         if aim != int(fp[FP_AIM_K]):
             return res
     pointing_law_nb(q, y, fp, target, roll_axis, roll_ref, law_tab, law_arcs, phys_tab, phys_arcs,

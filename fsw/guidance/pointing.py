@@ -15,13 +15,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from fsw.guidance._kernels import (
-    ARC_WIDTH, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
+    ARC_WIDTH, R_AIM, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
     FP_T, FP_U0, R_COMPLETE, R_DRIFT, R_ERROR, R_LAW_ERROR, R_LAW_RATE, R_MARGIN_MIN, R_NEAREST, R_OMEGA,
-    R_ROLL, R_WORST, R_WORST_KIND, R_Y, R_ZONE, SG_BODY, SG_BUILT, SG_BUILT_LAW, SG_FIXED, ZT_CAP_AXIS,
+    R_ROLL, R_AIM_DONE, R_WORST, R_WORST_KIND, R_Y, R_ZONE, SG_BODY, SG_BUILT, SG_BUILT_LAW, SG_FIXED, ZT_CAP_AXIS,
     ZT_CAP_COS, ZT_KERNEL, ZT_WIDTH, boresight_nb, pack_zones, pointing_command_nb, pointing_law_nb,
     pointing_step_nb, zone_separations_nb,
 )
-from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _angle_deg, _make_star_law, signed_margin_deg
+from fsw.guidance.common import (
+    _BODY_CODES, GuidanceOutput, _angle_deg, _make_star_law, pointing_output, signed_margin_deg,
+)
 from fsw.guidance.ephemeris import EPHEMERIS_NODE_S
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
@@ -144,7 +146,8 @@ class PointingGuidance:
                 if escaping and t_s - self._escape_event_t >= 60.0:
                     self._escape_event_t = t_s
                     self.events("ASSUMPTION_VIOLATED", reason="boresight between two close zones that cannot merge: steering out of the gap")
-            if rebuilt or self._sky_law_key is None or self._aim_moved(t_s, y):
+            if rebuilt or self._sky_law_key is None or (
+                    self._aim_from(res) if pack is not None and res[R_AIM_DONE] != 0.0 else self._aim_moved(t_s, y)):
                 self._rebuild_sky_law(t_s, y)
             pack = self._sky_pack_now()
             if pack is not None and self._law_pack is not None:
@@ -257,34 +260,42 @@ class PointingGuidance:
         return bound
 
     def _set_sky_law(self, target: np.ndarray, merged: list, eps: float, zpack) -> None:
-        """The star-shaped law on ``merged`` towards ``target`` (`gnc.laws.StarShapedLaw` with k1 = 1, its
-        checks and arrays): as arrays for `pointing_step_nb`, the zones' part kept for the same zones, eps
-        and kappa; or the law object itself for zones the kernels do not know."""
+        """The star-shaped law on ``merged`` towards ``target`` (`gnc.laws.StarShapedLaw` with k1 = 1: its
+        checks and its arrays, computed as its constructor does): as arrays for `pointing_step_nb`, the
+        zones' part kept for the same zones and kappa; or the law object itself for zones the kernels do
+        not know."""
         if zpack is None:
             self._sky_law = _make_star_law(target, merged, 1.0, self.kappa, eps)
             self._law_pack = None
             return
         law_target = _unit_vector(target, "target")
+        eps = _positive(eps, "eps")
+        if eps >= 2.0:
+            raise ValueError(f"eps must be < 2 (the largest separation on the sphere), got {eps}")
         laws = self._law_zones_kept[3]
-        key = (eps, self.kappa)
-        tab = laws.get(key)
-        if tab is None:
+        base = laws.get(self.kappa)
+        if base is None:
             _zone_list(merged, 3)
-            k1, kappa, eps = _positive(1.0, "k1"), _positive(self.kappa, "kappa"), _positive(eps, "eps")
-            if eps >= 2.0:
-                raise ValueError(f"eps must be < 2 (the largest separation on the sphere), got {eps}")
+            k1, kappa = _positive(1.0, "k1"), _positive(self.kappa, "kappa")
             kernels = np.ascontiguousarray([np.asarray(z.kernel, dtype=float) for z in merged])
-            axes, cosines = _cap_skip_cosines(merged, eps, 3)
             tab = zpack[0].copy()
-            tab[:, ZT_CAP_AXIS:ZT_CAP_AXIS + 3] = axes
-            tab[:, ZT_CAP_COS] = cosines
+            halves = []
+            # `gnc.laws._cap_skip_cosines`: the axes here, the cosines (they depend on eps) below
+            for i, zone in enumerate(merged):
+                axis, half_angle = zone.bounding_cap
+                axis = np.asarray(axis, dtype=float)
+                tab[i, ZT_CAP_AXIS:ZT_CAP_AXIS + 3] = axis / math.sqrt(axis.dot(axis))
+                halves.append(float(half_angle))
             for i, g in enumerate(kernels):
                 tab[i, ZT_KERNEL:ZT_KERNEL + 3] = np.ascontiguousarray((k1 / kappa) * g)
-            if len(laws) > 8:
-                laws.clear()
-            laws[key] = tab
+            base = laws[self.kappa] = (tab, halves)
+        tab, halves = base[0].copy(), base[1]
+        theta_eps = float(np.arccos(1.0 - eps))
+        for i, half_angle in enumerate(halves):
+            reach = half_angle + theta_eps + 1e-9
+            tab[i, ZT_CAP_COS] = np.cos(reach) if reach < np.pi else -2.0  # -2: never skip
         self._sky_law = None
-        self._law_pack = (tab, zpack[1], law_target, float(eps))
+        self._law_pack = (tab, zpack[1], law_target, eps)
 
     def _sky_pack_now(self):
         """(slot bodies, slot centres, packed physical zones) for the compiled cycle, or None: the Python
@@ -361,6 +372,19 @@ class PointingGuidance:
         return pointing_step_nb(q, fp, self._eph, self.target_N, self.roll_axis_B, self.roll_ref_N, pack[0],
                                 f.path if f is not None else _NO_PATH, law[0], law[1], pack[1], pack[2], prev)
 
+    def _aim_from(self, res: np.ndarray) -> bool:
+        """`_aim_moved` (`advance_aim`) with the path index the kernel found this cycle."""
+        f = self._follower
+        f.index = int(res[R_NEAREST])
+        k = int(res[R_AIM])
+        if k == self._aim_k:
+            return False
+        if k == len(f.path) - 1:  # the path is done: the last leg is the paper's law to the real target
+            self._follower, self._aim, self._aim_k = None, self.target_N, -1
+        else:
+            self._aim, self._aim_k = f.path[k], k
+        return True
+
     def _apply_sky(self, res: np.ndarray) -> bool:
         """`_update_sky` from the kernel's sky: the slots' centres and drifts, and the one rebuild it asks
         for. True if a law zone was rebuilt."""
@@ -386,11 +410,17 @@ class PointingGuidance:
 
     def _pointing_output(self, t_s: float, res: np.ndarray, y: np.ndarray, pack,
                          out: GuidanceOutput | None = None) -> GuidanceOutput:
-        """The cycle's output from `pointing_law_nb`'s results; the governor's and the watchdog's state."""
+        """The cycle's output from `pointing_law_nb`'s results (into ``out`` when the cycle went through
+        Python, which made it); the sky as `_update_sky` leaves it, the governor's and the watchdog's state."""
         if res[R_LAW_ERROR] != 0.0:
             raise ValueError(f"state x must be a unit vector on S^2, |x|^2 = {float(y @ y)!r}")
         n = len(self.slots)
-        if out is None:  # the whole cycle was compiled: the sky as `_update_sky` leaves it
+        zone = int(res[R_ZONE])
+        active = -1 if zone < 0 else self._sky_group_first[zone]
+        margins_arr = res[R_DRIFT + n:R_DRIFT + 2 * n]
+        margins = margins_arr.tolist()
+        error = float(res[R_ERROR])
+        if out is None:  # the whole cycle was compiled
             dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
             self._dirs = dirs
             drift = res[R_DRIFT:R_DRIFT + n].tolist()
@@ -400,24 +430,24 @@ class PointingGuidance:
             follower = self._follower
             if follower is not None:
                 follower.index = int(res[R_NEAREST])
-            out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy(),
-                                 sun_N=dirs["sun"], moon_N=dirs["moon"])
-        out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
-        zone = int(res[R_ZONE])
-        out.active_zone = -1 if zone < 0 else self._sky_group_first[zone]
-        margins_arr = res[R_DRIFT + n:R_DRIFT + 2 * n]
-        margins = margins_arr.tolist()
-        out.margins_deg, out.margin_min_deg = margins, float(res[R_MARGIN_MIN])
-        out.zones_merged = self._sky_zones_merged
-        out.zone_count = n
-        out.zone_bodies = self._slot_body_codes()
+            out = pointing_output(res[R_OMEGA:R_OMEGA + 3], "POINTING", y, self.target_N.copy(), dirs["sun"],
+                                  dirs["moon"], active, self._sky_eps, self._sky_eps_max, margins,
+                                  float(res[R_MARGIN_MIN]), error, math.degrees(res[R_ROLL]),
+                                  self._sky_zones_merged, self.assumptions_ok, n, self._slot_body_codes())
+        else:
+            out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
+            out.active_zone = active
+            out.margins_deg, out.margin_min_deg = margins, float(res[R_MARGIN_MIN])
+            out.zones_merged = self._sky_zones_merged
+            out.zone_count = n
+            out.zone_bodies = self._slot_body_codes()
+            out.assumptions_ok = self.assumptions_ok
+            out.pointing_error_deg = error
+            out.omega_cmd_BN_B = res[R_OMEGA:R_OMEGA + 3]
+            out.roll_error_deg = math.degrees(res[R_ROLL])
         self._governor_margins = kept = list(margins)
         self._governor_kept = (kept, margins_arr)
-        out.assumptions_ok = self.assumptions_ok
-        out.pointing_error_deg = float(res[R_ERROR])
-        self._watch_progress(t_s, y, out.pointing_error_deg, float(res[R_LAW_RATE]), out.active_zone)
-        out.omega_cmd_BN_B = res[R_OMEGA:R_OMEGA + 3]
-        out.roll_error_deg = math.degrees(res[R_ROLL])
+        self._watch_progress(t_s, y, error, float(res[R_LAW_RATE]), active)
         return out
 
 
