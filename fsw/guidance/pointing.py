@@ -22,7 +22,7 @@ from fsw.guidance._kernels import (
     pointing_step_nb, zone_separations_nb,
 )
 from fsw.guidance.common import (
-    _BODY_CODES, GuidanceOutput, _angle_deg, _make_star_law, pointing_output, signed_margin_deg,
+    _BODY_CODES, _NAN3, GuidanceOutput, _angle_deg, _make_star_law, pointing_output, signed_margin_deg,
 )
 from fsw.guidance.ephemeris import EPHEMERIS_NODE_S
 from fsw.guidance.zone_merging import ZoneGeometry
@@ -130,13 +130,12 @@ class PointingGuidance:
                                and t_s - self._planned_t >= self.cfg.pointing.path.replan_period_s))
             res = self._pointing_step(t_s, q, pack, steady)
             if res[R_COMPLETE] != 0.0:
-                return self._pointing_output(t_s, res, res[R_Y:R_Y + 3], pack)
+                return self._pointing_output(t_s, res, res[R_Y:R_Y + 3], True)
             rebuilt = self._apply_sky(res)
             y = res[R_Y:R_Y + 3]
-        out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
-        out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
         u_law = self.target_N
         governor_rate = -1.0
+        out = None
         if self.slots:
             # escape from the gap of an unmergeable pair: start inside the standoff of both zones, end
             # once 1.5 standoffs clear of one of them (the hysteresis keeps it from flickering)
@@ -159,8 +158,9 @@ class PointingGuidance:
                 law = self._law_pack
                 pointing_law_nb(q, y, fp, self.target_N, self.roll_axis_B, self.roll_ref_N, law[0], law[1],
                                 pack[1], pack[2], drift, prev, res)
-                res[R_DRIFT:R_DRIFT + n] = drift
-                return self._pointing_output(t_s, res, y, pack, out)
+                return self._pointing_output(t_s, res, y, False)
+            out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
+            out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
             if self._sky_law is None:  # the law as arrays only so far (`_set_sky_law`): the same law as an object
                 self._sky_law = _make_star_law(self._sky_target, self._sky_law_zones, 1.0, self.kappa, self._sky_eps)
             u_law, zone = self._sky_law.control_and_zone(y)
@@ -171,6 +171,9 @@ class PointingGuidance:
             out.zone_count = len(self.slots)
             out.zone_bodies = self._slot_body_codes()
             governor_rate = self._governor_rate(out.margins_deg)
+        else:
+            out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
+            out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
         out.assumptions_ok = self.assumptions_ok
         # the law's rate b^x R^T k1 u within the rate limit and the governor's rate; the roll rate is about
         # the boresight, the law's rate normal to it: the roll gets what the rate limit leaves, so the body
@@ -408,19 +411,13 @@ class PointingGuidance:
         slot.phys_drift_deg = _angle_deg(c, slot.built_center)
         return False
 
-    def _pointing_output(self, t_s: float, res: np.ndarray, y: np.ndarray, pack,
-                         out: GuidanceOutput | None = None) -> GuidanceOutput:
-        """The cycle's output from `pointing_law_nb`'s results (into ``out`` when the cycle went through
-        Python, which made it); the sky as `_update_sky` leaves it, the governor's and the watchdog's state."""
+    def _pointing_output(self, t_s: float, res: np.ndarray, y: np.ndarray, compiled_sky: bool) -> GuidanceOutput:
+        """The cycle's output from `pointing_law_nb`'s results; the governor's and the watchdog's state, and
+        with ``compiled_sky`` (the whole cycle was one call) the sky as `_update_sky` leaves it."""
         if res[R_LAW_ERROR] != 0.0:
             raise ValueError(f"state x must be a unit vector on S^2, |x|^2 = {float(y @ y)!r}")
         n = len(self.slots)
-        zone = int(res[R_ZONE])
-        active = -1 if zone < 0 else self._sky_group_first[zone]
-        margins_arr = res[R_DRIFT + n:R_DRIFT + 2 * n]
-        margins = margins_arr.tolist()
-        error = float(res[R_ERROR])
-        if out is None:  # the whole cycle was compiled
+        if compiled_sky:
             dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
             self._dirs = dirs
             drift = res[R_DRIFT:R_DRIFT + n].tolist()
@@ -430,21 +427,17 @@ class PointingGuidance:
             follower = self._follower
             if follower is not None:
                 follower.index = int(res[R_NEAREST])
-            out = pointing_output(res[R_OMEGA:R_OMEGA + 3], "POINTING", y, self.target_N.copy(), dirs["sun"],
-                                  dirs["moon"], active, self._sky_eps, self._sky_eps_max, margins,
-                                  float(res[R_MARGIN_MIN]), error, math.degrees(res[R_ROLL]),
-                                  self._sky_zones_merged, self.assumptions_ok, n, self._slot_body_codes())
         else:
-            out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
-            out.active_zone = active
-            out.margins_deg, out.margin_min_deg = margins, float(res[R_MARGIN_MIN])
-            out.zones_merged = self._sky_zones_merged
-            out.zone_count = n
-            out.zone_bodies = self._slot_body_codes()
-            out.assumptions_ok = self.assumptions_ok
-            out.pointing_error_deg = error
-            out.omega_cmd_BN_B = res[R_OMEGA:R_OMEGA + 3]
-            out.roll_error_deg = math.degrees(res[R_ROLL])
+            dirs = self._dirs
+        zone = int(res[R_ZONE])
+        active = -1 if zone < 0 else self._sky_group_first[zone]
+        margins_arr = res[R_DRIFT + n:R_DRIFT + 2 * n]
+        margins = margins_arr.tolist()
+        error = float(res[R_ERROR])
+        out = pointing_output(res[R_OMEGA:R_OMEGA + 3], "POINTING", y, self.target_N.copy(),
+                              dirs.get("sun", _NAN3), dirs.get("moon", _NAN3), active, self._sky_eps,
+                              self._sky_eps_max, margins, float(res[R_MARGIN_MIN]), error, math.degrees(res[R_ROLL]),
+                              self._sky_zones_merged, self.assumptions_ok, n, self._slot_body_codes())
         self._governor_margins = kept = list(margins)
         self._governor_kept = (kept, margins_arr)
         self._watch_progress(t_s, y, error, float(res[R_LAW_RATE]), active)
