@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fsw.guidance._kernels import (
-    ARC_WIDTH, R_AIM, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
+    ARC_WIDTH, R_AIM, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_EPS, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
     FP_T, FP_U0, R_COMPLETE, R_DRIFT, R_ERROR, R_LAW_ERROR, R_LAW_RATE, R_MARGIN_MIN, R_NEAREST, R_OMEGA,
     R_ROLL, R_AIM_DONE, R_WORST, R_WORST_KIND, R_Y, R_ZONE, SG_BODY, SG_BUILT, SG_BUILT_LAW, SG_FIXED, ZT_CAP_AXIS,
     ZT_CAP_COS, ZT_KERNEL, ZT_WIDTH, boresight_nb, pack_zones, pointing_command_nb, pointing_law_nb,
@@ -334,19 +334,21 @@ class PointingGuidance:
             self._eph_k = k
         fp = self._fp
         follower = self._follower
-        law = self._law_pack
         key = self._fp_key
-        if (key is None or key[0] is not self.k1 or key[1] is not self.max_rate_rad_s or key[2] is not law
-                or key[3] is not follower or key[4] is not self.accel_deg_s2 or key[5] is not self.bandwidth_rad_s):
-            self._fp_key = (self.k1, self.max_rate_rad_s, law, follower, self.accel_deg_s2, self.bandwidth_rad_s)
-            fp[FP_U0:FP_LAW_TARGET] = (e.u0, e.n_rad_s, e.radius_km, self.k1, self.max_rate_rad_s,
-                                       self.cfg.pointing.roll_gain_1_s, self.accel_deg_s2, self.bandwidth_rad_s,
-                                       law[3] if law is not None else 0.0,
-                                       follower.cos_ahead if follower is not None else 0.0,
-                                       1.0 if follower is not None else 0.0)
-            if law is not None:
-                fp[FP_LAW_TARGET:FP_LAW_TARGET + 3] = law[2]
+        if (key is None or key[0] is not self.k1 or key[1] is not self.max_rate_rad_s or key[2] is not follower
+                or key[3] is not self.accel_deg_s2 or key[4] is not self.bandwidth_rad_s):
+            self._fp_key = (self.k1, self.max_rate_rad_s, follower, self.accel_deg_s2, self.bandwidth_rad_s)
+            fp[FP_U0:FP_EPS] = (e.u0, e.n_rad_s, e.radius_km, self.k1, self.max_rate_rad_s,
+                                self.cfg.pointing.roll_gain_1_s, self.accel_deg_s2, self.bandwidth_rad_s)
+            fp[FP_COS_AHEAD] = follower.cos_ahead if follower is not None else 0.0
+            fp[FP_FOLLOW] = 1.0 if follower is not None else 0.0
             fp[FP_B:FP_B + 3] = self.b_B
+        law = self._law_pack
+        if law is not self._fp_law:  # a new law: its eps and target
+            self._fp_law = law
+            if law is not None:
+                fp[FP_EPS] = law[3]
+                fp[FP_LAW_TARGET:FP_LAW_TARGET + 3] = law[2]
         fp[FP_T] = t_s
         fp[FP_F] = f
         fp[FP_STEADY] = steady
