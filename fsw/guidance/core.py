@@ -86,6 +86,7 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self._eph = None
         self._fp_key = None
         self._fp_law = None
+        self._zone_facts_kept: dict[int, tuple] = {}
         self._sky_groups: list[list[int]] = []
         self._sky_law_zones: list = []
         self._build_s3_zones()

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fsw.guidance._kernels import (
-    ARC_WIDTH, R_AIM, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_EPS, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
+    ZT_COUNT, ZT_KIND, ZT_START, ARC_WIDTH, R_AIM, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_EPS, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
     FP_T, FP_U0, R_COMPLETE, R_DRIFT, R_ERROR, R_LAW_ERROR, R_LAW_RATE, R_MARGIN_MIN, R_NEAREST, R_OMEGA,
     R_ROLL, R_AIM_DONE, R_WORST, R_WORST_KIND, R_Y, R_ZONE, SG_BODY, SG_BUILT, SG_BUILT_LAW, SG_FIXED, ZT_CAP_AXIS,
     ZT_CAP_COS, ZT_KERNEL, ZT_WIDTH, boresight_nb, pack_zones, pointing_command_nb, pointing_law_nb,
@@ -225,26 +225,61 @@ class PointingGuidance:
         self._set_sky_law(target, merged, eps, zpack)
         self._sky_law_key = True
 
+    def _zone_facts(self, zone) -> tuple:
+        """What the guidance derives from one zone object (immutable), kept while it is in use: (its
+        bounding cap as `sky_zones.cap_of` gives it, its `pack_zones` row and arcs or None, the law's cap
+        axis and half-angle and kernel as `gnc.laws.StarShapedLaw` computes them)."""
+        facts = self._zone_facts_kept.get(id(zone))
+        if facts is not None and facts[0] is zone:
+            return facts[1]
+        if len(self._zone_facts_kept) > 64:
+            self._zone_facts_kept.clear()
+        cap = sky_zones.cap_of(zone)
+        pack = pack_zones([zone])
+        axis, half_angle = zone.bounding_cap
+        axis = np.asarray(axis, dtype=float)
+        law = (axis / math.sqrt(axis.dot(axis)), float(half_angle), np.asarray(zone.kernel, dtype=float))
+        facts = (cap, pack, law)
+        self._zone_facts_kept[id(zone)] = (zone, facts)
+        return facts
+
     def _merge_law_zones(self, zones: list, y: np.ndarray) -> tuple[list, list[list[int]]]:
-        """`ZoneGeometry.merge` of the law's zones, kept while they are the same objects and no two of
-        them came within the merge gap: the merge then returns them as they are, whatever the boresight."""
+        """`ZoneGeometry.merge` of the law's zones. When no two of them come within the merge gap (its
+        first test, on the same caps), the merge returns them as they are, whatever the boresight: then
+        without calling it (and at once while they stay the same objects)."""
         geometry = self.sky_geometry
         kept = self._merge_kept
-        if kept is not None and len(kept) == len(zones) and all(a is b for a, b in zip(kept, zones)):
-            geometry.pending, geometry.unmerged = [], []
-            return list(zones), [[i] for i in range(len(zones))]
-        merged, groups = geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
-        # every group alone and no pair refused: no pair of zones came within the merge gap
-        apart = all(len(g) == 1 for g in groups) and not geometry.unmerged and not geometry.pending
-        self._merge_kept = tuple(zones) if apart else None
-        return merged, groups
+        if not (kept is not None and len(kept) == len(zones) and all(a is b for a, b in zip(kept, zones))):
+            caps = [self._zone_facts(z)[0] for z in zones]
+            gap = geometry.merge_gap_rad
+            for gi in range(len(zones)):
+                for gj in range(gi + 1, len(zones)):
+                    (ai, ri), (aj, rj) = caps[gi], caps[gj]
+                    d = math.acos(max(-1.0, min(1.0, float(ai @ aj))))
+                    if not d - ri - rj >= gap:  # a close pair: the merge decides
+                        self._merge_kept = None
+                        return geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
+            self._merge_kept = tuple(zones)
+        geometry.pending, geometry.unmerged = [], []
+        return list(zones), [[i] for i in range(len(zones))]
 
     def _law_zones_pack(self, merged: list):
-        """`pack_zones` of the law's zones, kept while they are the same objects."""
+        """`pack_zones` of the law's zones (from each zone's packed row), kept while they are the same
+        objects."""
         kept = self._law_zones_kept
         if kept is not None and len(kept[0]) == len(merged) and all(a is b for a, b in zip(kept[0], merged)):
             return kept[1]
-        pack = pack_zones(merged)
+        packs = [self._zone_facts(z)[1] for z in merged]
+        if any(p is None for p in packs):
+            pack = None
+        else:
+            tab = np.concatenate([p[0] for p in packs])
+            start = 0
+            for i in range(len(packs)):
+                if tab[i, ZT_KIND] != 0.0:
+                    tab[i, ZT_START] = start
+                    start += int(tab[i, ZT_COUNT])
+            pack = (tab, np.ascontiguousarray(np.concatenate([p[1] for p in packs])))
         self._law_zones_kept = (tuple(merged), pack, {}, {})
         return pack
 
@@ -276,27 +311,29 @@ class PointingGuidance:
         if eps >= 2.0:
             raise ValueError(f"eps must be < 2 (the largest separation on the sphere), got {eps}")
         laws = self._law_zones_kept[3]
-        base = laws.get(self.kappa)
-        if base is None:
-            _zone_list(merged, 3)
-            k1, kappa = _positive(1.0, "k1"), _positive(self.kappa, "kappa")
-            kernels = np.ascontiguousarray([np.asarray(z.kernel, dtype=float) for z in merged])
-            tab = zpack[0].copy()
-            halves = []
-            # `gnc.laws._cap_skip_cosines`: the axes here, the cosines (they depend on eps) below
-            for i, zone in enumerate(merged):
-                axis, half_angle = zone.bounding_cap
-                axis = np.asarray(axis, dtype=float)
-                tab[i, ZT_CAP_AXIS:ZT_CAP_AXIS + 3] = axis / math.sqrt(axis.dot(axis))
-                halves.append(float(half_angle))
-            for i, g in enumerate(kernels):
-                tab[i, ZT_KERNEL:ZT_KERNEL + 3] = np.ascontiguousarray((k1 / kappa) * g)
-            base = laws[self.kappa] = (tab, halves)
-        tab, halves = base[0].copy(), base[1]
-        theta_eps = float(np.arccos(1.0 - eps))
-        for i, half_angle in enumerate(halves):
-            reach = half_angle + theta_eps + 1e-9
-            tab[i, ZT_CAP_COS] = np.cos(reach) if reach < np.pi else -2.0  # -2: never skip
+        tab = laws.get((self.kappa, eps))
+        if tab is None:
+            base = laws.get(self.kappa)
+            if base is None:
+                _zone_list(merged, 3)
+                k1, kappa = _positive(1.0, "k1"), _positive(self.kappa, "kappa")
+                tab = zpack[0].copy()
+                halves = []
+                # `gnc.laws._cap_skip_cosines`: the axes here, the cosines (they depend on eps) below
+                for i, zone in enumerate(merged):
+                    axis, half_angle, g = self._zone_facts(zone)[2]
+                    tab[i, ZT_CAP_AXIS:ZT_CAP_AXIS + 3] = axis
+                    halves.append(half_angle)
+                    tab[i, ZT_KERNEL:ZT_KERNEL + 3] = np.ascontiguousarray((k1 / kappa) * g)
+                base = laws[self.kappa] = (tab, halves)
+            tab, halves = base[0].copy(), base[1]
+            theta_eps = float(np.arccos(1.0 - eps))
+            for i, half_angle in enumerate(halves):
+                reach = half_angle + theta_eps + 1e-9
+                tab[i, ZT_CAP_COS] = np.cos(reach) if reach < np.pi else -2.0  # -2: never skip
+            if len(laws) > 32:
+                laws.clear()
+            laws[(self.kappa, eps)] = tab
         self._sky_law = None
         self._law_pack = (tab, zpack[1], law_target, eps)
 
