@@ -9,7 +9,11 @@ from numpy's dot in the last bit, since numpy's dot may use fused multiply-adds)
 * `boresight_nb`: ``y_N = R_NB(q) b_B``;
 * `pointing_command_nb`: POINTING's body-rate command from the law's ``u``: ``b^x R^T k1 u``, the rate
   limit and the governor's rate, the pointing error, and the roll law about the boresight;
-* `aim_index_nb`: `PathFollower.aim_index` (pure pursuit along the planned path).
+* `aim_index_nb`: `PathFollower.aim_index` (pure pursuit along the planned path);
+* `pointing_step_nb`: a whole POINTING cycle in steady state (the sky directions, the zones' drifts,
+  the boresight, the aim, then `pointing_law_nb`: the star law on the packed law zones, the margins on the
+  packed physical zones, the governor and `pointing_command_nb`); it stops after the sky and the boresight
+  when a zone must be rebuilt, the law is stale or the aim moves on, and the guidance finishes in Python.
 """
 from __future__ import annotations
 
@@ -158,7 +162,8 @@ def aim_index_nb(path, start, y, cos_ahead):
 # ZT_CAP_COS the bounding-cap screen and ZT_KERNEL (k1 / kappa) g of `gnc.laws.StarShapedLaw`. The kernels
 # call the zones' own compiled separations (`gnc.zones._cone_signed`,
 # `gnc._zone_polygon.signed_separation_one`) on these rows: the same numbers.
-ZT_KIND, ZT_START, ZT_COUNT, ZT_REACH, ZT_C, ZT_B, ZT_NORMAL, ZT_OFFSET, ZT_AXIS, ZT_HALF = 0, 1, 2, 3, 4, 7, 13, 16, 17, 20
+ZT_KIND, ZT_START, ZT_COUNT, ZT_REACH, ZT_C, ZT_B = 0, 1, 2, 3, 4, 7
+ZT_NORMAL, ZT_OFFSET, ZT_AXIS, ZT_HALF = 13, 16, 17, 20
 ZT_CAP_AXIS, ZT_CAP_COS, ZT_KERNEL = 21, 24, 25
 ZT_WIDTH = 28
 ARC_WIDTH = 14

@@ -15,11 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from fsw.guidance._kernels import (
-    ZT_COUNT, ZT_KIND, ZT_START, ARC_WIDTH, R_AIM, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_EPS, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
-    FP_T, FP_U0, R_COMPLETE, R_DRIFT, R_ERROR, R_LAW_ERROR, R_LAW_RATE, R_MARGIN_MIN, R_NEAREST, R_OMEGA,
-    R_ROLL, R_AIM_DONE, R_WORST, R_WORST_KIND, R_Y, R_ZONE, SG_BODY, SG_BUILT, SG_BUILT_LAW, SG_FIXED, ZT_CAP_AXIS,
-    ZT_CAP_COS, ZT_KERNEL, ZT_WIDTH, boresight_nb, pack_zones, pointing_command_nb, pointing_law_nb,
-    pointing_step_nb, zone_separations_nb,
+    ARC_WIDTH, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_EPS, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
+    FP_T, FP_U0, R_AIM, R_AIM_DONE, R_COMPLETE, R_DRIFT, R_ERROR, R_LAW_ERROR, R_LAW_RATE, R_MARGIN_MIN,
+    R_NEAREST, R_OMEGA, R_ROLL, R_WORST, R_WORST_KIND, R_Y, R_ZONE, SG_BODY, SG_BUILT, SG_BUILT_LAW, SG_FIXED,
+    ZT_CAP_AXIS, ZT_CAP_COS, ZT_COUNT, ZT_KERNEL, ZT_KIND, ZT_START, ZT_WIDTH, boresight_nb, pack_zones,
+    pointing_command_nb, pointing_law_nb, pointing_step_nb, zone_separations_nb,
 )
 from fsw.guidance.common import (
     _BODY_CODES, _NAN3, GuidanceOutput, _angle_deg, _make_star_law, pointing_output, signed_margin_deg,
@@ -27,7 +27,7 @@ from fsw.guidance.common import (
 from fsw.guidance.ephemeris import EPHEMERIS_NODE_S
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
-from gnc.laws import _cap_skip_cosines, _positive, _unit_vector, _zone_list
+from gnc.laws import _positive, _unit_vector, _zone_list
 
 ZONE_REBUILD_TOL_DEG = 0.1  # extra inflation of the law's zones covering their motion between rebuilds
 LAW_REBUILD_TRIGGER_DEG = 0.08
