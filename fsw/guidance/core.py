@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from fsw.assumption_check import CheckResult
+from fsw.guidance._kernels import FP_WIDTH
 from fsw.guidance.common import GuidanceOutput, _saturate, _unit, signed_margin_deg
 from fsw.guidance.ephemeris import SkyEphemeris
 from fsw.guidance.path_following import PathFollowing
@@ -71,6 +72,21 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
             _warm_batch_kernels([s.builder_law for s in self.slots])
         self._sky_law = None
         self._sky_law_key = None
+        # the compiled POINTING cycle's packed state (`PointingGuidance._pointing`): the slots and their
+        # zones, the law's zones and law, what is kept while the zones stay the same objects
+        self._sky_pack = None
+        self._law_pack = None
+        self._merge_kept = None
+        self._law_zones_kept = None
+        self._governor_kept = None
+        self._sky_group_first: list[int] = []
+        self._sky_zones_merged = False
+        self._fp = np.zeros(FP_WIDTH)
+        self._eph_k = None
+        self._eph = None
+        self._fp_key = None
+        self._fp_law = None
+        self._zone_facts_kept: dict[int, tuple] = {}
         self._sky_groups: list[list[int]] = []
         self._sky_law_zones: list = []
         self._build_s3_zones()

@@ -14,14 +14,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fsw.guidance._kernels import boresight_nb, pointing_command_nb
-from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _angle_deg, _make_star_law, signed_margin_deg
+from fsw.guidance._kernels import (
+    ARC_WIDTH, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_EPS, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
+    FP_T, FP_U0, R_AIM, R_AIM_DONE, R_COMPLETE, R_DRIFT, R_ERROR, R_LAW_ERROR, R_LAW_RATE, R_MARGIN_MIN,
+    R_NEAREST, R_OMEGA, R_ROLL, R_WORST, R_WORST_KIND, R_Y, R_ZONE, SG_BODY, SG_BUILT, SG_BUILT_LAW, SG_FIXED,
+    ZT_CAP_AXIS, ZT_CAP_COS, ZT_COUNT, ZT_KERNEL, ZT_KIND, ZT_START, ZT_WIDTH, boresight_nb, pack_zones,
+    pointing_command_nb, pointing_law_nb, pointing_step_nb, zone_separations_nb,
+)
+from fsw.guidance.common import (
+    _BODY_CODES, _NAN3, GuidanceOutput, _angle_deg, _make_star_law, pointing_output, signed_margin_deg,
+)
+from fsw.guidance.ephemeris import EPHEMERIS_NODE_S
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
+from gnc.laws import _positive, _unit_vector, _zone_list
 
 ZONE_REBUILD_TOL_DEG = 0.1  # extra inflation of the law's zones covering their motion between rebuilds
 LAW_REBUILD_TRIGGER_DEG = 0.08
 PHYS_REBUILD_TOL_DEG = 0.5
+_BODY_INDEX = {"sun": 0, "moon": 1, "earth": 2, "inertial": 3}  # rows of `sky_directions_nb`; 3: a fixed centre
+_NO_PATH = np.zeros((1, 3))
+_NO_MARGINS = np.zeros(0)
+_NO_LAW = (np.zeros((0, ZT_WIDTH)), np.zeros((0, ARC_WIDTH)))
 
 
 def _warm_batch_kernels(builders: list) -> None:
@@ -69,6 +83,7 @@ class PointingGuidance:
             c = s.fixed_center if s.fixed_center is not None else dirs[s.body]
             s.center_N = c
             if s.built_center is None:
+                self._sky_pack = None
                 s.phys, s.law = s.builder_phys.build(c), s.builder_law.build(c)
                 s.built_center, s.built_center_law = c.copy(), c.copy()
                 s.phys_drift_deg = _angle_deg(c, s.built_center)
@@ -81,6 +96,7 @@ class PointingGuidance:
                 if drift >= 1.0 and drift > worst:
                     worst, worst_kind, worst_slot = drift, kind, s
         if worst_slot is not None:
+            self._sky_pack = None
             c = worst_slot.center_N
             if worst_kind == "law":
                 worst_slot.law = worst_slot.builder_law.build(c)
@@ -100,12 +116,26 @@ class PointingGuidance:
 
 
     def _pointing(self, t_s: float, q: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
-        rebuilt = self._update_sky(t_s)
-        y = boresight_nb(q, self.b_B)
-        out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
-        out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
+        pack = self._sky_pack_now()
+        if pack is None:
+            rebuilt = self._update_sky(t_s)
+            y = boresight_nb(q, self.b_B)
+        else:
+            # steady state in one compiled call (design note 15); when a zone must be rebuilt, the law is
+            # stale or the aim moves on, the kernel stops after the sky and the boresight and the cycle
+            # goes on below, in the order of the Python it replaces
+            steady = (self._sky_law_key is not None and self._law_pack is not None and not self._escaping
+                      and not self.sky_geometry.unmerged
+                      and not (self._follower is not None
+                               and t_s - self._planned_t >= self.cfg.pointing.path.replan_period_s))
+            res = self._pointing_step(t_s, q, pack, steady)
+            if res[R_COMPLETE] != 0.0:
+                return self._pointing_output(t_s, res, res[R_Y:R_Y + 3], True)
+            rebuilt = self._apply_sky(res)
+            y = res[R_Y:R_Y + 3]
         u_law = self.target_N
         governor_rate = -1.0
+        out = None
         if self.slots:
             # escape from the gap of an unmergeable pair: start inside the standoff of both zones, end
             # once 1.5 standoffs clear of one of them (the hysteresis keeps it from flickering)
@@ -115,36 +145,24 @@ class PointingGuidance:
                 if escaping and t_s - self._escape_event_t >= 60.0:
                     self._escape_event_t = t_s
                     self.events("ASSUMPTION_VIOLATED", reason="boresight between two close zones that cannot merge: steering out of the gap")
-            if rebuilt or self._sky_law_key is None or self._aim_moved(t_s, y):
-                zones = [s.law for s in self.slots]
-                geometry = self.sky_geometry
-                merged, groups = geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
-                if groups != self._sky_groups:
-                    self._report_merge(self._sky_groups, groups)
-                    self._checks_dirty = True
-                self._sky_groups = groups
-                self._sky_law_zones = merged
-                if self._plan_due or self._path_blocked(t_s, merged + geometry.pending):
-                    self._plan(t_s, y, merged + geometry.pending)
-                aim = self._aim
-                eps_max = ZoneGeometry.fast_eps_max(aim, merged, geometry.unmerged)
-                eps = self._eps_for(max(eps_max, 1e-5))
-                target, occ = self._substitute_target(t_s, merged, eps, geometry.pending, y, aim)
-                if occ != self._occulted:
-                    if occ >= len(merged) and not self._escaping:
-                        self.events("ASSUMPTION_VIOLATED", reason="target between two zones closing around the boresight: steering out of the gap")
-                    elif 0 <= occ < len(merged):
-                        self.events("ASSUMPTION_VIOLATED", reason=f"target in the eps-layer of zone {occ}: steering to the nearest safe direction")
-                    self._occulted = occ
-                    self._checks_dirty = True
-                if occ >= 0:
-                    eps_max = ZoneGeometry.fast_eps_max(target, merged, geometry.unmerged)
-                    eps = self._eps_for(max(eps_max, 1e-5))
-                self._sky_target = target
-                self._sky_eps, self._sky_eps_max = eps, eps_max
-                self._current_eps = eps
-                self._sky_law = _make_star_law(target, merged, 1.0, self.kappa, eps)
-                self._sky_law_key = True
+            if rebuilt or self._sky_law_key is None or (
+                    self._aim_from(res) if pack is not None and res[R_AIM_DONE] != 0.0 else self._aim_moved(t_s, y)):
+                self._rebuild_sky_law(t_s, y)
+            pack = self._sky_pack_now()
+            if pack is not None and self._law_pack is not None:
+                n = len(self.slots)
+                res = np.empty(R_DRIFT + 2 * n)
+                drift = np.array([s.phys_drift_deg for s in self.slots])
+                fp = self._fill_params(t_s, 0.0)
+                prev = self._governor_prev(fp)
+                law = self._law_pack
+                pointing_law_nb(q, y, fp, self.target_N, self.roll_axis_B, self.roll_ref_N, law[0], law[1],
+                                pack[1], pack[2], drift, prev, res)
+                return self._pointing_output(t_s, res, y, False)
+            out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
+            out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
+            if self._sky_law is None:  # the law as arrays only so far (`_set_sky_law`): the same law as an object
+                self._sky_law = _make_star_law(self._sky_target, self._sky_law_zones, 1.0, self.kappa, self._sky_eps)
             u_law, zone = self._sky_law.control_and_zone(y)
             out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
             out.active_zone = -1 if zone is None else self._sky_groups[zone][0]
@@ -153,6 +171,9 @@ class PointingGuidance:
             out.zone_count = len(self.slots)
             out.zone_bodies = self._slot_body_codes()
             governor_rate = self._governor_rate(out.margins_deg)
+        else:
+            out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
+            out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
         out.assumptions_ok = self.assumptions_ok
         # the law's rate b^x R^T k1 u within the rate limit and the governor's rate; the roll rate is about
         # the boresight, the law's rate normal to it: the roll gets what the rate limit leaves, so the body
@@ -164,6 +185,301 @@ class PointingGuidance:
         self._watch_progress(t_s, y, out.pointing_error_deg, float(c[3]), out.active_zone)
         out.omega_cmd_BN_B = c[:3]
         out.roll_error_deg = math.degrees(c[5])
+        return out
+
+    def _rebuild_sky_law(self, t_s: float, y: np.ndarray) -> None:
+        """The law for the zones as they are now, the boresight ``y`` and the aim: merging, the path check,
+        eps, the substitute target. What only depends on the zones is kept while they stay the same objects
+        (merge without a close pair, the pairwise eps bound, the law's zone arrays)."""
+        zones = [s.law for s in self.slots]
+        geometry = self.sky_geometry
+        merged, groups = self._merge_law_zones(zones, y)
+        if groups != self._sky_groups:
+            self._report_merge(self._sky_groups, groups)
+            self._checks_dirty = True
+        self._sky_groups = groups
+        self._sky_group_first = [g[0] for g in groups]
+        self._sky_zones_merged = any(len(g) > 1 for g in groups)
+        self._sky_law_zones = merged
+        if self._plan_due or self._path_blocked(t_s, merged + geometry.pending):
+            self._plan(t_s, y, merged + geometry.pending)
+        aim = self._aim
+        zpack = self._law_zones_pack(merged)
+        seps = None if zpack is None else zone_separations_nb(aim, *zpack).tolist()
+        eps_max = self._fast_eps_max(aim, merged, geometry.unmerged, seps)
+        eps = self._eps_for(max(eps_max, 1e-5))
+        target, occ = self._substitute_target(t_s, merged, eps, geometry.pending, y, aim, seps)
+        if occ != self._occulted:
+            if occ >= len(merged) and not self._escaping:
+                self.events("ASSUMPTION_VIOLATED", reason="target between two zones closing around the boresight: steering out of the gap")
+            elif 0 <= occ < len(merged):
+                self.events("ASSUMPTION_VIOLATED", reason=f"target in the eps-layer of zone {occ}: steering to the nearest safe direction")
+            self._occulted = occ
+            self._checks_dirty = True
+        if occ >= 0:
+            eps_max = ZoneGeometry.fast_eps_max(target, merged, geometry.unmerged)
+            eps = self._eps_for(max(eps_max, 1e-5))
+        self._sky_target = target
+        self._sky_eps, self._sky_eps_max = eps, eps_max
+        self._current_eps = eps
+        self._set_sky_law(target, merged, eps, zpack)
+        self._sky_law_key = True
+
+    def _zone_facts(self, zone) -> tuple:
+        """What the guidance derives from one zone object (immutable), kept while it is in use: (its
+        bounding cap as `sky_zones.cap_of` gives it, its `pack_zones` row and arcs or None, the law's cap
+        axis and half-angle and kernel as `gnc.laws.StarShapedLaw` computes them)."""
+        facts = self._zone_facts_kept.get(id(zone))
+        if facts is not None and facts[0] is zone:
+            return facts[1]
+        if len(self._zone_facts_kept) > 64:
+            self._zone_facts_kept.clear()
+        cap = sky_zones.cap_of(zone)
+        pack = pack_zones([zone])
+        axis, half_angle = zone.bounding_cap
+        axis = np.asarray(axis, dtype=float)
+        law = (axis / math.sqrt(axis.dot(axis)), float(half_angle), np.asarray(zone.kernel, dtype=float))
+        facts = (cap, pack, law)
+        self._zone_facts_kept[id(zone)] = (zone, facts)
+        return facts
+
+    def _merge_law_zones(self, zones: list, y: np.ndarray) -> tuple[list, list[list[int]]]:
+        """`ZoneGeometry.merge` of the law's zones. When no two of them come within the merge gap (its
+        first test, on the same caps), the merge returns them as they are, whatever the boresight: then
+        without calling it (and at once while they stay the same objects)."""
+        geometry = self.sky_geometry
+        kept = self._merge_kept
+        if not (kept is not None and len(kept) == len(zones) and all(a is b for a, b in zip(kept, zones))):
+            caps = [self._zone_facts(z)[0] for z in zones]
+            gap = geometry.merge_gap_rad
+            for gi in range(len(zones)):
+                for gj in range(gi + 1, len(zones)):
+                    (ai, ri), (aj, rj) = caps[gi], caps[gj]
+                    d = math.acos(max(-1.0, min(1.0, float(ai @ aj))))
+                    if not d - ri - rj >= gap:  # a close pair: the merge decides
+                        self._merge_kept = None
+                        return geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
+            self._merge_kept = tuple(zones)
+        geometry.pending, geometry.unmerged = [], []
+        return list(zones), [[i] for i in range(len(zones))]
+
+    def _law_zones_pack(self, merged: list):
+        """`pack_zones` of the law's zones (from each zone's packed row), kept while they are the same
+        objects."""
+        kept = self._law_zones_kept
+        if kept is not None and len(kept[0]) == len(merged) and all(a is b for a, b in zip(kept[0], merged)):
+            return kept[1]
+        packs = [self._zone_facts(z)[1] for z in merged]
+        if any(p is None for p in packs):
+            pack = None
+        else:
+            tab = np.concatenate([p[0] for p in packs])
+            start = 0
+            for i in range(len(packs)):
+                if tab[i, ZT_KIND] != 0.0:
+                    tab[i, ZT_START] = start
+                    start += int(tab[i, ZT_COUNT])
+            pack = (tab, np.ascontiguousarray(np.concatenate([p[1] for p in packs])))
+        self._law_zones_kept = (tuple(merged), pack, {}, {})
+        return pack
+
+    def _fast_eps_max(self, aim: np.ndarray, merged: list, unmerged: list, seps: list[float] | None) -> float:
+        """`ZoneGeometry.fast_eps_max` with the pairwise bound kept for the same zones (it only depends on
+        them) and the aim's separations ``seps`` already computed."""
+        kept = self._law_zones_kept
+        if seps is None or kept is None or kept[1] is None:
+            return ZoneGeometry.fast_eps_max(aim, merged, unmerged)
+        key = tuple(sorted(tuple(sorted(p)) for p in unmerged))
+        bound = kept[2].get(key)
+        if bound is None:
+            bound = kept[2][key] = ZoneGeometry.pair_bound(merged, unmerged)
+        for d in seps:
+            bound = min(bound, d)
+        return bound
+
+    def _set_sky_law(self, target: np.ndarray, merged: list, eps: float, zpack) -> None:
+        """The star-shaped law on ``merged`` towards ``target`` (`gnc.laws.StarShapedLaw` with k1 = 1: its
+        checks and its arrays, computed as its constructor does): as arrays for `pointing_step_nb`, the
+        zones' part kept for the same zones and kappa; or the law object itself for zones the kernels do
+        not know."""
+        if zpack is None:
+            self._sky_law = _make_star_law(target, merged, 1.0, self.kappa, eps)
+            self._law_pack = None
+            return
+        law_target = _unit_vector(target, "target")
+        eps = _positive(eps, "eps")
+        if eps >= 2.0:
+            raise ValueError(f"eps must be < 2 (the largest separation on the sphere), got {eps}")
+        laws = self._law_zones_kept[3]
+        tab = laws.get((self.kappa, eps))
+        if tab is None:
+            base = laws.get(self.kappa)
+            if base is None:
+                _zone_list(merged, 3)
+                k1, kappa = _positive(1.0, "k1"), _positive(self.kappa, "kappa")
+                tab = zpack[0].copy()
+                halves = []
+                # `gnc.laws._cap_skip_cosines`: the axes here, the cosines (they depend on eps) below
+                for i, zone in enumerate(merged):
+                    axis, half_angle, g = self._zone_facts(zone)[2]
+                    tab[i, ZT_CAP_AXIS:ZT_CAP_AXIS + 3] = axis
+                    halves.append(half_angle)
+                    tab[i, ZT_KERNEL:ZT_KERNEL + 3] = np.ascontiguousarray((k1 / kappa) * g)
+                base = laws[self.kappa] = (tab, halves)
+            tab, halves = base[0].copy(), base[1]
+            theta_eps = float(np.arccos(1.0 - eps))
+            for i, half_angle in enumerate(halves):
+                reach = half_angle + theta_eps + 1e-9
+                tab[i, ZT_CAP_COS] = np.cos(reach) if reach < np.pi else -2.0  # -2: never skip
+            if len(laws) > 32:
+                laws.clear()
+            laws[(self.kappa, eps)] = tab
+        self._sky_law = None
+        self._law_pack = (tab, zpack[1], law_target, eps)
+
+    def _sky_pack_now(self):
+        """(slot bodies, slot centres, packed physical zones) for the compiled cycle, or None: the Python
+        path (no zones, a zone not built yet, an ephemeris replaced by a test, zones the kernels do not know)."""
+        pack = self._sky_pack
+        if pack is not None:
+            return pack if "directions" not in vars(self.ephem) else None
+        if not self.slots or "directions" in vars(self.ephem) or any(s.built_center is None for s in self.slots):
+            return None
+        phys = pack_zones([s.phys for s in self.slots])
+        if phys is None:
+            return None
+        geo = np.zeros((len(self.slots), 4, 3))
+        for i, s in enumerate(self.slots):
+            if s.fixed_center is not None:
+                geo[i, SG_FIXED] = s.fixed_center
+            geo[i, SG_BUILT] = s.built_center
+            geo[i, SG_BUILT_LAW] = s.built_center_law
+            geo[i, SG_BODY, 0] = _BODY_INDEX[s.body]
+        self._sky_pack = pack = (geo, *phys)
+        return pack
+
+    def _fill_params(self, t_s: float, steady: float) -> np.ndarray:
+        """The scalar inputs of `pointing_step_nb` (layout FP_*): the cycle's, and the rest again when one
+        of the values they come from was replaced."""
+        e = self.ephem
+        k = math.floor(t_s / EPHEMERIS_NODE_S)
+        f = t_s / EPHEMERIS_NODE_S - k  # as `SkyEphemeris.directions`
+        if k != self._eph_k:
+            s0, m0 = e._geocentric(k)
+            s1, m1 = e._geocentric(k + 1)
+            self._eph = np.array([e.p_hat, e.q_hat, s0, s1, m0, m1], dtype=float)
+            self._eph_k = k
+        fp = self._fp
+        follower = self._follower
+        key = self._fp_key
+        if (key is None or key[0] is not self.k1 or key[1] is not self.max_rate_rad_s or key[2] is not follower
+                or key[3] is not self.accel_deg_s2 or key[4] is not self.bandwidth_rad_s):
+            self._fp_key = (self.k1, self.max_rate_rad_s, follower, self.accel_deg_s2, self.bandwidth_rad_s)
+            fp[FP_U0:FP_EPS] = (e.u0, e.n_rad_s, e.radius_km, self.k1, self.max_rate_rad_s,
+                                self.cfg.pointing.roll_gain_1_s, self.accel_deg_s2, self.bandwidth_rad_s)
+            fp[FP_COS_AHEAD] = follower.cos_ahead if follower is not None else 0.0
+            fp[FP_FOLLOW] = 1.0 if follower is not None else 0.0
+            fp[FP_B:FP_B + 3] = self.b_B
+        law = self._law_pack
+        if law is not self._fp_law:  # a new law: its eps and target
+            self._fp_law = law
+            if law is not None:
+                fp[FP_EPS] = law[3]
+                fp[FP_LAW_TARGET:FP_LAW_TARGET + 3] = law[2]
+        fp[FP_T] = t_s
+        fp[FP_F] = f
+        fp[FP_STEADY] = steady
+        if follower is not None:
+            fp[FP_START] = follower.index
+            fp[FP_AIM_K] = self._aim_k
+        return fp
+
+    def _governor_prev(self, fp: np.ndarray) -> np.ndarray:
+        """Last cycle's margins for the governor (`_governor_rate`) as an array; sets FP_NPREV."""
+        prev = self._governor_margins
+        if prev is None:
+            fp[FP_NPREV] = -1.0
+            return _NO_MARGINS
+        fp[FP_NPREV] = len(prev)
+        kept = self._governor_kept
+        if kept is not None and kept[0] is prev:
+            return kept[1]
+        return np.array(prev, dtype=float)
+
+    def _pointing_step(self, t_s: float, q: np.ndarray, pack, steady: bool) -> np.ndarray:
+        fp = self._fill_params(t_s, 1.0 if steady else 0.0)
+        prev = self._governor_prev(fp)
+        law = self._law_pack or _NO_LAW
+        f = self._follower
+        return pointing_step_nb(q, fp, self._eph, self.target_N, self.roll_axis_B, self.roll_ref_N, pack[0],
+                                f.path if f is not None else _NO_PATH, law[0], law[1], pack[1], pack[2], prev)
+
+    def _aim_from(self, res: np.ndarray) -> bool:
+        """`_aim_moved` (`advance_aim`) with the path index the kernel found this cycle."""
+        f = self._follower
+        f.index = int(res[R_NEAREST])
+        k = int(res[R_AIM])
+        if k == self._aim_k:
+            return False
+        if k == len(f.path) - 1:  # the path is done: the last leg is the paper's law to the real target
+            self._follower, self._aim, self._aim_k = None, self.target_N, -1
+        else:
+            self._aim, self._aim_k = f.path[k], k
+        return True
+
+    def _apply_sky(self, res: np.ndarray) -> bool:
+        """`_update_sky` from the kernel's sky: the slots' centres and drifts, and the one rebuild it asks
+        for. True if a law zone was rebuilt."""
+        dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
+        self._dirs = dirs
+        for i, s in enumerate(self.slots):
+            s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
+            s.phys_drift_deg = float(res[R_DRIFT + i])
+        w = int(res[R_WORST])
+        if w < 0:
+            return False
+        slot = self.slots[w]
+        c = slot.center_N
+        self._sky_pack = None
+        if res[R_WORST_KIND] == 0.0:
+            slot.law = slot.builder_law.build(c)
+            slot.built_center_law = c.copy()
+            return True
+        slot.phys = slot.builder_phys.build(c)
+        slot.built_center = c.copy()
+        slot.phys_drift_deg = _angle_deg(c, slot.built_center)
+        return False
+
+    def _pointing_output(self, t_s: float, res: np.ndarray, y: np.ndarray, compiled_sky: bool) -> GuidanceOutput:
+        """The cycle's output from `pointing_law_nb`'s results; the governor's and the watchdog's state, and
+        with ``compiled_sky`` (the whole cycle was one call) the sky as `_update_sky` leaves it."""
+        if res[R_LAW_ERROR] != 0.0:
+            raise ValueError(f"state x must be a unit vector on S^2, |x|^2 = {float(y @ y)!r}")
+        n = len(self.slots)
+        if compiled_sky:
+            dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
+            self._dirs = dirs
+            drift = res[R_DRIFT:R_DRIFT + n].tolist()
+            for i, s in enumerate(self.slots):
+                s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
+                s.phys_drift_deg = drift[i]
+            follower = self._follower
+            if follower is not None:
+                follower.index = int(res[R_NEAREST])
+        else:
+            dirs = self._dirs
+        zone = int(res[R_ZONE])
+        active = -1 if zone < 0 else self._sky_group_first[zone]
+        margins_arr = res[R_DRIFT + n:R_DRIFT + 2 * n]
+        margins = margins_arr.tolist()
+        error = float(res[R_ERROR])
+        out = pointing_output(res[R_OMEGA:R_OMEGA + 3], "POINTING", y, self.target_N.copy(),
+                              dirs.get("sun", _NAN3), dirs.get("moon", _NAN3), active, self._sky_eps,
+                              self._sky_eps_max, margins, float(res[R_MARGIN_MIN]), error, math.degrees(res[R_ROLL]),
+                              self._sky_zones_merged, self.assumptions_ok, n, self._slot_body_codes())
+        self._governor_margins = kept = list(margins)
+        self._governor_kept = (kept, margins_arr)
+        self._watch_progress(t_s, y, error, float(res[R_LAW_RATE]), active)
         return out
 
 
@@ -188,7 +504,7 @@ class PointingGuidance:
 
 
     def _substitute_target(self, t_s: float, zones: list, eps: float, pending: list, y: np.ndarray,
-                           aim: np.ndarray) -> tuple[np.ndarray, int]:
+                           aim: np.ndarray, seps: list[float] | None = None) -> tuple[np.ndarray, int]:
         """`ZoneGeometry.retreat_target` for the law's aim (the commanded target, or the point ahead on
         the planned path), reusing the last substitute while it is
         still clear of every zone by the standoff (a search costs milliseconds; zones rebuild every ~1 s
@@ -198,7 +514,8 @@ class PointingGuidance:
         While the boresight is squeezed between two close zones that could not merge (`_squeezed`), or
         inside the would-be merged shape of such a pair, it first gets out: the law target is then the
         nearest direction clear of every zone by the standoff, on the commanded target's side. Such a pair
-        leaves the law no admissible eps between its zones, so that is the one place it must not stay."""
+        leaves the law no admissible eps between its zones, so that is the one place it must not stay.
+        ``seps``: the zones' separations from ``aim`` when already computed."""
         standoff = self.cfg.law.retreat_standoff_deg
         d_free = ZoneGeometry.clear_separation(standoff, eps)
         clear = lambda x: all(float(z.separation(x)) > d_free for z in list(zones) + list(pending))  # noqa: E731
@@ -212,13 +529,17 @@ class PointingGuidance:
         kept = self._substitute
         if kept is not None and kept[0] is aim and t_s - kept[2] < self.SUBSTITUTE_REFRESH_S:
             _, x, _, occ_then = kept
-            occ = ZoneGeometry.occulting(aim, zones, eps, pending)
+            occ = (ZoneGeometry.occulting(aim, zones, eps, pending) if seps is None
+                   else ZoneGeometry.occulting_from(seps, aim, eps, pending))
             if occ >= 0 and occ_then >= 0 and clear(x):
                 return x, occ
             if occ < 0:  # what retreat_target answers for a usable target, without looking again
                 self._substitute = (aim, aim, t_s, -1)
                 return aim, -1
-        x, occ = ZoneGeometry.retreat_target(aim, zones, eps, standoff, avoid=pending, near=y)
+        if seps is not None and ZoneGeometry.occulting_from(seps, aim, eps, pending) < 0:
+            x, occ = aim, -1  # what retreat_target answers for a usable target
+        else:
+            x, occ = ZoneGeometry.retreat_target(aim, zones, eps, standoff, avoid=pending, near=y)
         self._substitute = (aim, x, t_s, occ)
         return x, occ
 

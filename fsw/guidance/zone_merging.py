@@ -99,6 +99,15 @@ class ZoneGeometry:
         they have no admissible eps at all, and letting them drive eps to zero would take the law's
         repulsion away everywhere, not just at their neck, which the substitute target keeps the
         spacecraft out of. The full assumption check still reports them."""
+        bound = ZoneGeometry.pair_bound(zones, ignore)
+        for z in zones:
+            bound = min(bound, float(z.separation(target)))
+        return bound
+
+    @staticmethod
+    def pair_bound(zones: list, ignore: list[tuple[int, int]] = ()) -> float:
+        """The part of `fast_eps_max` that depends on the zones alone: min(1, 1 - cos(delta)) over the
+        pairs not in ``ignore`` (the guidance keeps it while the zones stay the same)."""
         bound = 1.0
         caps = [sky_zones.cap_of(z) for z in zones]
         skip = {tuple(sorted(p)) for p in ignore}
@@ -109,8 +118,6 @@ class ZoneGeometry:
                 gap = math.acos(max(-1.0, min(1.0, float(caps[i][0] @ caps[j][0])))) - caps[i][1] - caps[j][1]
                 delta = max(gap, 0.0) / 2.0
                 bound = min(bound, 1.0 - math.cos(delta))
-        for z in zones:
-            bound = min(bound, float(z.separation(target)))
         return bound
 
     RETREAT_RING_STEP_DEG = 1.0
@@ -126,9 +133,14 @@ class ZoneGeometry:
     def occulting(target: np.ndarray, zones: list, eps: float, avoid: list = ()) -> int:
         """Index of the zone whose eps-layer holds the target, len(zones) + k if the k-th avoid shape
         contains it, -1 if the target is usable."""
-        occ = next((i for i, z in enumerate(zones) if float(z.separation(target)) <= eps), -1)
+        return ZoneGeometry.occulting_from([float(z.separation(target)) for z in zones], target, eps, avoid)
+
+    @staticmethod
+    def occulting_from(separations: list[float], target: np.ndarray, eps: float, avoid: list = ()) -> int:
+        """`occulting` with the zones' separations from the target already computed (in zone order)."""
+        occ = next((i for i, d in enumerate(separations) if d <= eps), -1)
         if occ < 0:
-            occ = next((len(zones) + k for k, z in enumerate(avoid) if z.contains(target)), -1)
+            occ = next((len(separations) + k for k, z in enumerate(avoid) if z.contains(target)), -1)
         return occ
 
     @staticmethod
