@@ -242,7 +242,9 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     req = mission.requirements
     b_B = np.asarray(mission.spacecraft.instrument_boresight_B, dtype=float)
     y_N = summary.boresight_N(truth["q_NB"], b_B)
-    zones = summary.sky_zone_series(mission, truth, y_N) if mission.flight_software.pointing.zones else []
+    # only each zone's minimum margin is judged here (and its last boundary drawn): see minimum_only
+    zones = (summary.sky_zone_series(mission, truth, y_N, minimum_only=True)
+             if mission.flight_software.pointing.zones else [])
     if mission.flight_software.quaternion.zones:
         zones += summary.attitude_zone_series(mission, summary.lifted_quaternions(mission, truth))
     metrics: dict[str, float] = {}
