@@ -153,6 +153,12 @@ def _profile_points(phi: np.ndarray, theta_rad: np.ndarray) -> np.ndarray:
     return np.stack((st * np.cos(phi), st * np.sin(phi), np.cos(theta_rad)), axis=-1)
 
 
+# inflated_radial_profile_deg by (shape, margin, rays, samples): ~12 ms for a star shape, and every run of a
+# campaign worker builds the same flight-software zones. Values are copied out, so reuse changes nothing.
+_INFLATED_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+_INFLATED_CACHE_SIZE = 32
+
+
 def inflated_radial_profile_deg(shape: Any, margin_deg: float, rays: int = _RAYS, boundary_samples: int = 1440) -> tuple[np.ndarray, np.ndarray]:
     """Radial hull of the ``margin_deg`` neighbourhood of a shape (see module docstring) [deg].
 
@@ -160,6 +166,19 @@ def inflated_radial_profile_deg(shape: Any, margin_deg: float, rays: int = _RAYS
     the cap of radius ``margin`` about B up to the along-ray angle ``s_B + acos(cos m / cos d_perp)``;
     the inflated radius is the largest such angle (and never less than the physical radius + 0).
     """
+    if not (isinstance(shape, Mapping) or hasattr(shape, "model_dump")):  # keyed by value: config shapes only
+        return _inflated_radial_profile_deg(shape, margin_deg, rays, boundary_samples)
+    key = (repr(shape), float(margin_deg), int(rays), int(boundary_samples))
+    hit = _INFLATED_CACHE.get(key)
+    if hit is None:
+        hit = _inflated_radial_profile_deg(shape, margin_deg, rays, boundary_samples)
+        if len(_INFLATED_CACHE) >= _INFLATED_CACHE_SIZE:
+            _INFLATED_CACHE.pop(next(iter(_INFLATED_CACHE)))
+        _INFLATED_CACHE[key] = hit
+    return hit[0].copy(), hit[1].copy()
+
+
+def _inflated_radial_profile_deg(shape: Any, margin_deg: float, rays: int, boundary_samples: int) -> tuple[np.ndarray, np.ndarray]:
     phi = np.linspace(0.0, 2 * math.pi, rays, endpoint=False)
     _, base = radial_profile_deg(shape, phi)
     if margin_deg <= 0.0:

@@ -74,8 +74,44 @@ def _signed_margins(zone, X: np.ndarray) -> np.ndarray:
     return out
 
 
-def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> list[ZoneSeries]:
-    """Signed margins of the boresight to each physical sky zone, with the truth ephemeris."""
+# Minimum-only judging (`sky_zone_series(..., minimum_only=True)`): a stretch of the run is left
+# unevaluated only when its lower bound exceeds the best evaluated margin by this much [deg], far above the
+# rounding of either (the margin's arccos near 0 is good to ~1e-6 deg).
+SKIP_SLACK_DEG = 1e-3
+
+# Star zones built for judging, by (shape, extra radius, centre bytes): an exact superellipse's search
+# structure costs ~15 ms to build, and the runs of a campaign worker (or of a bench) see the same truth
+# ephemeris, hence the same centres. A zone is read-only once built, so reusing it changes no value.
+_ZONE_CACHE: dict[tuple, Any] = {}
+_ZONE_CACHE_SIZE = 64
+
+
+def _built_zone(builder, key: tuple, c0: np.ndarray):
+    """``builder.build(c0)``, kept for the next run that judges the same zone about the same centre."""
+    k = key + (c0.tobytes(),)
+    zone = _ZONE_CACHE.pop(k, None)
+    if zone is None:
+        zone = builder.build(c0)
+        while len(_ZONE_CACHE) >= _ZONE_CACHE_SIZE:
+            _ZONE_CACHE.pop(next(iter(_ZONE_CACHE)))  # the least recently used
+    _ZONE_CACHE[k] = zone
+    return zone
+
+
+def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray, *,
+                    minimum_only: bool = False) -> list[ZoneSeries]:
+    """Signed margins of the boresight to each physical sky zone, with the truth ephemeris.
+
+    ``minimum_only`` (fast mode's judge, which reads only each zone's minimum margin and its last
+    boundary): a star zone (whose exact search structure costs ~15 ms to build, its margin ~3 us per
+    sample) is built and evaluated only where the run can hold its minimum. Each sample's margin is
+    bounded below by its angle to the zone's centre minus the zone's largest angular radius; stretches
+    (one zone each) are taken in increasing order of that bound, the sample of lowest bound first, and in
+    each only the samples whose bound does not exceed the best margin found (+ SKIP_SLACK_DEG) are
+    evaluated, until a stretch's lowest bound exceeds it. ``margin_deg`` holds the lower bound on the
+    samples left out, and ``boundary_history`` only its last entry. The minimum is the full series' own
+    (the same zones on the same samples). Once a margin is negative (the boresight inside a zone) every
+    sample is evaluated."""
     from gnc import sky_zones
 
     out = []
@@ -90,16 +126,19 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> l
             r = float(np.linalg.norm(truth["r_sc_N_km"][0]))
             extra = math.degrees(math.asin(min(1.0, EARTH_RADIUS_KM / r)))
         builder = sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra)
+        key = (repr(z.geometry), extra)
         if z.geometry.shape == "cone":  # exact at every sample: angle to the centre minus the half-angle
             c = centers / np.linalg.norm(centers, axis=1, keepdims=True)
             margins = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", y_N, c), -1.0, 1.0))) \
                 - (z.geometry.half_angle_deg + extra)
-            history = [(float(t[k]), np.asarray(builder.build(c[k]).boundary(180)))
-                       for k in range(0, len(t), max(1, int(30.0 / max(t[1] - t[0], 1e-9))) if len(t) > 1 else 1)]
+            ks = range(0, len(t), max(1, int(30.0 / max(t[1] - t[0], 1e-9))) if len(t) > 1 else 1)
+            if minimum_only:
+                ks = ks[-1:]
+            history = [(float(t[k]), np.asarray(builder.build(c[k]).boundary(180))) for k in ks]
             out.append(ZoneSeries(z.name, "sky", margins, history))
             continue
-        margins = np.empty(len(t))
-        history = []
+        # stretches of samples judged against one zone: rebuilt when its centre moved (ZONE_REBUILD_DEG)
+        stretches = []
         start = 0
         cos_tol = math.cos(math.radians(ZONE_REBUILD_DEG))
         while start < len(t):
@@ -107,13 +146,112 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> l
             moved = (centers[start:] @ c0) / np.linalg.norm(centers[start:], axis=1) < cos_tol
             stop = start + (int(np.argmax(moved)) if moved.any() else len(t) - start)
             stop = max(stop, start + 1)
-            zone = builder.build(c0)
-            margins[start:stop] = _signed_margins(zone, y_N[start:stop])
-            if not history or t[start] - history[-1][0] >= 30.0:
-                history.append((float(t[start]), np.asarray(zone.boundary(180))))
+            stretches.append((start, stop, c0))
             start = stop
+        # the stretches whose zone boundary is kept for the plots: one every 30 s or more
+        shown: list[int] = []
+        for i, (start, _, _) in enumerate(stretches):
+            if not shown or t[start] - t[stretches[shown[-1]][0]] >= 30.0:
+                shown.append(i)
+        shown_set = set(shown)
+        margins = np.empty(len(t))
+        if not minimum_only:
+            history = []
+            for i, (start, stop, c0) in enumerate(stretches):
+                zone = _built_zone(builder, key, c0)
+                margins[start:stop] = _signed_margins(zone, y_N[start:stop])
+                if i in shown_set:
+                    history.append((float(t[start]), np.asarray(zone.boundary(180))))
+            out.append(ZoneSeries(z.name, "sky", margins, history))
+            continue
+        radius_deg = _star_radius_bound_deg(builder)
+        bounds = []
+        for start, stop, c0 in stretches:
+            if radius_deg is None:
+                bounds.append(np.full(stop - start, -math.inf))
+                continue
+            y = y_N[start:stop]
+            angle_deg = np.degrees(2.0 * np.arctan2(np.linalg.norm(y - c0, axis=1), np.linalg.norm(y + c0, axis=1)))
+            bounds.append(np.where(np.isnan(angle_deg), -math.inf, angle_deg - radius_deg))
+        lowest = np.array([b.min() if len(b) else math.inf for b in bounds])
+        for (start, stop, _), b in zip(stretches, bounds):
+            margins[start:stop] = b
+        evaluated = np.zeros(len(t), dtype=bool)
+        best = math.inf
+        built = {}
+
+        def evaluate(i: int, sel: np.ndarray) -> None:
+            # the margins of samples sel of stretch i: per sample the full series' own values
+            nonlocal best
+            start, stop, c0 = stretches[i]
+            sel = sel[~evaluated[start:stop][sel]]
+            if not len(sel):
+                return
+            if i not in built:
+                built[i] = _built_zone(builder, key, c0)
+            m = _signed_margins(built[i], np.ascontiguousarray(y_N[start:stop][sel]))
+            margins[start + sel] = m
+            evaluated[start + sel] = True
+            best = min(best, float(m.min()))
+
+        for i in np.argsort(lowest, kind="stable"):
+            if best >= 0.0 and lowest[i] > best + SKIP_SLACK_DEG:
+                break  # this stretch and all after it cannot hold the minimum
+            if best == math.inf:  # the sample of lowest bound first: its margin bounds the minimum
+                evaluate(i, np.array([int(np.argmin(bounds[i]))]))
+            everything = np.arange(len(bounds[i]))
+            evaluate(i, everything if best < 0.0 else np.flatnonzero(~(bounds[i] > best + SKIP_SLACK_DEG)))
+        if best < 0.0:  # inside a zone: every sample judged
+            for i in range(len(stretches)):
+                evaluate(i, np.arange(len(bounds[i])))
+        history = []
+        if shown:
+            i = shown[-1]
+            c0 = stretches[i][2]
+            if i in built:
+                zone = built[i]
+            else:  # the built zone when a run before judged it, else only its boundary
+                zone = _ZONE_CACHE.get(key + (c0.tobytes(),))
+                if zone is None:
+                    zone = _boundary_only_zone(builder, c0)
+            history.append((float(t[stretches[i][0]]), np.asarray(zone.boundary(180))))
         out.append(ZoneSeries(z.name, "sky", margins, history))
     return out
+
+
+def _star_radius_bound_deg(builder) -> float | None:
+    """An upper bound [deg] of the angular radius of the zones ``builder`` builds (about their centre), or
+    None when unknown. The zone is the central projection of a planar set about the centre, so its angular
+    radius is arctan of the set's largest planar radius: a polygon's largest vertex; a superellipse
+    |x/A|^p + |y/B|^p <= 1 within max(A, B) for p <= 2 (|u|_2 <= |u|_p), within its box's corner otherwise."""
+    from gnc import sky_zones
+
+    if not builder.exact:
+        return builder.max_radius_deg  # the polygon on builder.vertices_tan, whose largest radius this is
+    if builder.kind == "superellipse":
+        A = [math.tan(math.radians(a)) for a in sky_zones._shape_get(builder.shape, "semi_axes_deg")]
+        p = float(sky_zones._shape_get(builder.shape, "exponent", 2.0))
+        r = max(A) if p <= 2.0 else math.hypot(*A)
+    elif builder.kind == "polygon":
+        r = float(np.max(np.linalg.norm(sky_zones._polygon_tangent_vertices(
+            sky_zones._shape_get(builder.shape, "vertices_deg")), axis=1)))
+    else:
+        return None
+    return math.degrees(math.atan(r))
+
+
+def _boundary_only_zone(builder, c0: np.ndarray):
+    """The zone ``builder.build(c0)`` for its boundary only: an exact superellipse keeps its geometry but
+    gets the smallest search structure (a build's cost; `boundary` reads only the geometry)."""
+    from gnc import sky_zones, zones
+
+    if not (builder.exact and builder.kind == "superellipse"):
+        return builder.build(c0)
+    c = sky_zones._center(c0)
+    A = [math.tan(math.radians(a)) for a in sky_zones._shape_get(builder.shape, "semi_axes_deg")]
+    return zones.StarZone.superellipsoid(c, sky_zones.sky_frame(c, builder.orientation_deg).T, np.asarray(A),
+                                         float(sky_zones._shape_get(builder.shape, "exponent", 2.0)),
+                                         resolution=(1, 1))
 
 
 def lifted_quaternions(mission, truth: dict[str, np.ndarray]) -> np.ndarray:

@@ -75,14 +75,25 @@ class _TruthRows:
         self.X = np.zeros((n_ticks + 1, self.batch.X.shape[0]))
         self.AUX = np.zeros((n_ticks + 1, self.batch.AUX.shape[1]))
         self._cols = {"r_sc_N_km": AUX_R_SC, "sun_N": AUX_SUN, "moon_N": AUX_MOON, "earth_N": AUX_EARTH}
+        self._bind()
+
+    def _bind(self) -> None:
+        # views of the run's column and row, made once: the world steps its arrays in place (re-made
+        # should it ever replace them)
+        b = self.batch
+        self._X_src, self._AUX_src = b.X, b.AUX
+        self._x0, self._aux0 = b.X[:, 0], b.AUX[0]
 
     def record(self) -> None:
-        if self.n < len(self.t_s):
-            b, i = self.batch, self.n
+        i = self.n
+        if i < len(self.t_s):
+            b = self.batch
+            if b.X is not self._X_src or b.AUX is not self._AUX_src:
+                self._bind()
             self.t_s[i] = b.t
-            self.X[i] = b.X[:, 0]
-            self.AUX[i] = b.AUX[0]
-            self.n += 1
+            self.X[i] = self._x0
+            self.AUX[i] = self._aux0
+            self.n = i + 1
 
     def arrays(self) -> dict[str, np.ndarray]:
         n = self.n
@@ -100,13 +111,26 @@ class _EstimateRows:
     def __init__(self, n_rows: int) -> None:
         self.rows = np.full(n_rows, -1)
         self.q = np.zeros((n_rows, 4))
-        self.P = np.zeros((n_rows, 3, 3))
+        self._cov: np.ndarray | None = None  # the whole covariance per row (no slice per tick), sized at the first
         self.n = 0
 
+    @property
+    def P(self) -> np.ndarray:
+        """The attitude covariance (rows, 3, 3) [rad^2]."""
+        if self._cov is None:
+            return np.zeros((len(self.rows), 3, 3))
+        return np.ascontiguousarray(self._cov[:, :3, :3])
+
     def record(self, truth_row: int, estimator: Any) -> None:
-        if estimator.initialized and self.n < len(self.rows):
-            self.rows[self.n], self.q[self.n], self.P[self.n] = truth_row, estimator.q_NB, estimator.P[:3, :3]
-            self.n += 1
+        n = self.n
+        if estimator.initialized and n < len(self.rows):
+            P = estimator.P
+            if self._cov is None:
+                self._cov = np.zeros((len(self.rows),) + P.shape)
+            self.rows[n] = truth_row
+            self.q[n] = estimator.q_NB
+            self._cov[n] = P
+            self.n = n + 1
 
     def metrics(self, truth: dict[str, np.ndarray]) -> dict[str, float]:
         """``nees_mean`` and ``nees_band_fraction`` (cycles inside the 95 % chi-square band)."""
@@ -242,7 +266,9 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     req = mission.requirements
     b_B = np.asarray(mission.spacecraft.instrument_boresight_B, dtype=float)
     y_N = summary.boresight_N(truth["q_NB"], b_B)
-    zones = summary.sky_zone_series(mission, truth, y_N) if mission.flight_software.pointing.zones else []
+    # only each zone's minimum margin is judged here (and its last boundary drawn): see minimum_only
+    zones = (summary.sky_zone_series(mission, truth, y_N, minimum_only=True)
+             if mission.flight_software.pointing.zones else [])
     if mission.flight_software.quaternion.zones:
         zones += summary.attitude_zone_series(mission, summary.lifted_quaternions(mission, truth))
     metrics: dict[str, float] = {}
