@@ -79,25 +79,6 @@ def _signed_margins(zone, X: np.ndarray) -> np.ndarray:
 # rounding of either (the margin's arccos near 0 is good to ~1e-6 deg).
 SKIP_SLACK_DEG = 1e-3
 
-# Star zones built for judging, by (shape, extra radius, centre bytes): an exact superellipse's search
-# structure costs ~15 ms to build, and the runs of a campaign worker (or of a bench) see the same truth
-# ephemeris, hence the same centres. A zone is read-only once built, so reusing it changes no value.
-_ZONE_CACHE: dict[tuple, Any] = {}
-_ZONE_CACHE_SIZE = 64
-
-
-def _built_zone(builder, key: tuple, c0: np.ndarray):
-    """``builder.build(c0)``, kept for the next run that judges the same zone about the same centre."""
-    k = key + (c0.tobytes(),)
-    zone = _ZONE_CACHE.pop(k, None)
-    if zone is None:
-        zone = builder.build(c0)
-        while len(_ZONE_CACHE) >= _ZONE_CACHE_SIZE:
-            _ZONE_CACHE.pop(next(iter(_ZONE_CACHE)))  # the least recently used
-    _ZONE_CACHE[k] = zone
-    return zone
-
-
 def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray, *,
                     minimum_only: bool = False) -> list[ZoneSeries]:
     """Signed margins of the boresight to each physical sky zone, with the truth ephemeris.
@@ -126,7 +107,6 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray, *,
             r = float(np.linalg.norm(truth["r_sc_N_km"][0]))
             extra = math.degrees(math.asin(min(1.0, EARTH_RADIUS_KM / r)))
         builder = sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra)
-        key = (repr(z.geometry), extra)
         if z.geometry.shape == "cone":  # exact at every sample: angle to the centre minus the half-angle
             c = centers / np.linalg.norm(centers, axis=1, keepdims=True)
             margins = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", y_N, c), -1.0, 1.0))) \
@@ -158,7 +138,7 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray, *,
         if not minimum_only:
             history = []
             for i, (start, stop, c0) in enumerate(stretches):
-                zone = _built_zone(builder, key, c0)
+                zone = builder.build(c0)
                 margins[start:stop] = _signed_margins(zone, y_N[start:stop])
                 if i in shown_set:
                     history.append((float(t[start]), np.asarray(zone.boundary(180))))
@@ -188,7 +168,7 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray, *,
             if not len(sel):
                 return
             if i not in built:
-                built[i] = _built_zone(builder, key, c0)
+                built[i] = builder.build(c0)
             m = _signed_margins(built[i], np.ascontiguousarray(y_N[start:stop][sel]))
             margins[start + sel] = m
             evaluated[start + sel] = True
@@ -210,10 +190,8 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray, *,
             c0 = stretches[i][2]
             if i in built:
                 zone = built[i]
-            else:  # the built zone when a run before judged it, else only its boundary
-                zone = _ZONE_CACHE.get(key + (c0.tobytes(),))
-                if zone is None:
-                    zone = _boundary_only_zone(builder, c0)
+            else:  # only its boundary: the search structure is not needed for a plot
+                zone = _boundary_only_zone(builder, c0)
             history.append((float(t[stretches[i][0]]), np.asarray(zone.boundary(180))))
         out.append(ZoneSeries(z.name, "sky", margins, history))
     return out

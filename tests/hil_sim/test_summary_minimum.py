@@ -89,23 +89,3 @@ def test_boresight_inside_a_zone_evaluates_every_stretch() -> None:
     assert full[0].margin_deg.min() < 0.0
     assert np.array_equal(fast[0].margin_deg, full[0].margin_deg)
     assert math.isfinite(fast[0].margin_deg.min())
-
-
-def test_zones_kept_from_a_run_before_judge_alike() -> None:
-    import hil_sim.summary as summary
-
-    rng = np.random.default_rng(5)
-    mission = _mission(add_earth_radius=True)
-    truth = _truth(rng, n=300)
-    y_N = boresight_N(truth["q_NB"], np.array([0.0, 0.0, 1.0]))
-    summary._ZONE_CACHE.clear()
-    fresh = sky_zone_series(mission, truth, y_N)
-    assert summary._ZONE_CACHE  # star zones kept for the next run
-    for minimum_only in (False, True):
-        again = sky_zone_series(mission, truth, y_N, minimum_only=minimum_only)
-        for a, b in zip(fresh, again):
-            assert a.margin_deg.min() == b.margin_deg.min()
-            assert np.array_equal(a.boundary_history[-1][1], b.boundary_history[-1][1])
-            if not minimum_only:
-                assert np.array_equal(a.margin_deg, b.margin_deg)
-    summary._ZONE_CACHE.clear()
