@@ -21,6 +21,7 @@ from itertools import repeat
 import numpy as np
 
 from fsw.assumption_check import AssumptionChecker
+from fsw.bus.driver import TickInputs
 from fsw.control import RateController
 from fsw.estimation import _NO_SAMPLES, AttitudeEstimator
 from fsw.executive import Executive
@@ -358,7 +359,6 @@ class FlightSoftware:
                 pass
 
         # ---- sensors
-        imu_samples = getattr(inputs, "imu_samples", None) or ()
         imu = inputs.imu
         if realtime:
             age = inputs.imu_age_s
@@ -366,8 +366,14 @@ class FlightSoftware:
                 imu = None
         if imu is not None and not getattr(imu, "valid", True):
             imu = None
-        imu_samples = [s.omega_BN_B for s in imu_samples if getattr(s, "valid", True)] or (
-            [imu.omega_BN_B] if imu is not None else None)
+        # lockstep as the driver delivers it: the tick's decoded gyro rows (every one valid) are the
+        # estimator's (n, 3) samples as they are, without building an ImuSample per row
+        samples = inputs.fresh_imu_omega_BN_B() if type(inputs) is TickInputs else None
+        if samples is None:
+            imu_samples = getattr(inputs, "imu_samples", None) or ()
+            imu_samples = [s.omega_BN_B for s in imu_samples if getattr(s, "valid", True)] or (
+                [imu.omega_BN_B] if imu is not None else None)
+            samples = _NO_SAMPLES if imu_samples is None else np.array(imu_samples, dtype=float).reshape(-1, 3)
         st = inputs.star_tracker
         st_latency = 0.0
         st_fresh = st is not None and st.valid
@@ -381,15 +387,21 @@ class FlightSoftware:
             nq = _norm(np.asarray(st.q_NS, dtype=float).tolist())
             if not (0.9 < nq < 1.1):
                 st_fresh = False
-        wheels = inputs.wheels
-        if realtime:
-            ages = inputs.wheel_ages_s
-            wheels = [w if (w is not None and a is not None and a < 3 * dt) else None for w, a in zip(wheels, ages)]
+        # each wheel's speed (NaN) and fault flags (-1) with no status this tick
+        wheel_arrays = inputs.fresh_wheel_arrays() if type(inputs) is TickInputs else None
+        if wheel_arrays is None:
+            wheels = inputs.wheels
+            if realtime:
+                ages = inputs.wheel_ages_s
+                wheels = [w if (w is not None and a is not None and a < 3 * dt) else None for w, a in zip(wheels, ages)]
+            speeds = np.array([w.speed_rad_s if w is not None else math.nan for w in wheels], dtype=float)
+            faults = np.array([w.fault if w is not None else -1 for w in wheels], dtype=np.int64)
+        else:
+            speeds, faults = wheel_arrays
 
         # ---- estimation (propagate across every IMU sample of the tick)
         est = self.estimator
         q_st = (np.asarray(st.q_NS, dtype=float) / nq) if st_fresh else None
-        samples = _NO_SAMPLES if imu_samples is None else np.array(imu_samples, dtype=float).reshape(-1, 3)
         innovation_deg = est._tick(dt, samples, q_st, st_latency)
         self._st_events(st, st_fresh)
 
@@ -397,11 +409,9 @@ class FlightSoftware:
         q_est = est.q_NB if est.initialized else None
         omega = est.omega_BN_B
         g = self.guidance.step(self.t_s, dt, q_est, omega)
-        speeds = np.array([w.speed_rad_s if w is not None else math.nan for w in wheels], dtype=float)
-        faults = np.array([w.fault if w is not None else -1 for w in wheels], dtype=np.int64)  # -1: no status
         ctrl = self.control.step(dt, g.omega_cmd_BN_B, omega, speeds)
         try:
-            self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm.tolist(), cycle_done=not realtime)
+            self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm, cycle_done=not realtime)
         except Exception as exc:  # noqa: BLE001 - a transmit failure is reported, the loop goes on
             self._bus_tx_errors = getattr(self, "_bus_tx_errors", 0) + 1
             self._event("FATAL_ERROR", reason=f"bus send failed: {type(exc).__name__}: {exc}"[:110])

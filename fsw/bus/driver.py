@@ -169,6 +169,32 @@ class TickInputs:
                                if self._imu_samples else np.zeros((0, 3)))
         return self._imu_omega
 
+    def fresh_imu_omega_BN_B(self) -> np.ndarray | None:
+        """The tick's gyro rates as the driver decoded them, an (n, 3) array with n >= 1 and every sample
+        valid, while ``imu_samples`` has been neither built nor set; else None (read ``imu_samples``)."""
+        if self._imu_samples is None:
+            return self._imu_omega
+        return None
+
+    def fresh_wheel_arrays(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(speed [rad/s], fault flags) per wheel as the driver decoded them, NaN and -1 for a wheel with no
+        status this tick (the ``speed_rad_s`` and ``fault`` of ``wheels``), while ``wheels`` has been neither
+        built nor set; else None (read ``wheels``)."""
+        new = self._wheel_new
+        if self._wheels is not None or new is None:
+            return None
+        rows = self._wheel_rows
+        if rows is None:
+            n = len(new)
+            return np.full(n, np.nan), np.full(n, -1, dtype=np.int64)
+        speeds = rows[:, 0].copy()
+        faults = rows[:, 4].astype(np.int64)  # int(x) of each row's float: truncation, as WheelStatus has it
+        if not all(new):
+            old = np.logical_not(np.array(new, dtype=np.bool_))
+            speeds[old] = np.nan
+            faults[old] = -1
+        return speeds, faults
+
     def _fields(self) -> tuple:
         return (self.tick, self.t, self.period_s, self.imu, self.star_tracker, self.wheels, self.imu_samples,
                 self.frames_expected, self.frames_received)

@@ -318,3 +318,34 @@ def test_tick_inputs_keep_their_constructor_and_build_samples_on_demand() -> Non
            [([0.0, 0.0, 0.1], False, 1.0 - 0.1 / 2), ([0.0, 0.0, 0.2], True, 1.0)]
     assert b.imu_samples is b.imu_samples and b.imu_omega_BN_B is omega
     assert TickInputs(1, 0.1, 0.1, None, None, []).imu_samples == []
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_fresh_arrays_match_the_sample_and_status_objects(seed: int) -> None:
+    """fresh_imu_omega_BN_B / fresh_wheel_arrays give what the GNC cycle builds from ``imu_samples`` and
+    ``wheels`` (speed NaN and fault -1 for a wheel with no status), and None once those lists are set."""
+    rng = np.random.default_rng(seed)
+    nw = int(rng.integers(1, 6))
+    rows = np.column_stack([rng.normal(0, 300, (nw, 4)), rng.integers(0, 8, nw).astype(float)])
+    new = [bool(x) for x in rng.integers(0, 2, nw)]
+    if seed == 0:
+        new = [True] * nw
+    omega = rng.normal(0, 0.1, (int(rng.integers(1, 11)), 3))
+    for wheel_rows in (rows, None):
+        ti = TickInputs(3, 0.3, 0.1, None, None, None, None, imu_omega_BN_B=omega,
+                        imu_saturated=[0.0] * len(omega), wheel_rows=wheel_rows,
+                        wheel_new=new if wheel_rows is not None else [False] * nw)
+        speeds, faults = ti.fresh_wheel_arrays()
+        fresh = ti.fresh_imu_omega_BN_B()
+        ref = ti.wheels  # builds the objects: from now on the arrays are not "fresh"
+        assert ti.fresh_wheel_arrays() is None
+        ref_speeds = np.array([w.speed_rad_s if w is not None else math.nan for w in ref], dtype=float)
+        ref_faults = np.array([w.fault if w is not None else -1 for w in ref], dtype=np.int64)
+        assert speeds.dtype == np.float64 and faults.dtype == np.int64
+        np.testing.assert_array_equal(speeds, ref_speeds)
+        np.testing.assert_array_equal(faults, ref_faults)
+        ref_samples = np.array([s.omega_BN_B for s in ti.imu_samples if s.valid], dtype=float).reshape(-1, 3)
+        assert ti.fresh_imu_omega_BN_B() is None
+        np.testing.assert_array_equal(fresh, ref_samples)
+    ti.imu_samples = [ImuSample(omega[0], False, 0.3, False)]  # a sample set by hand may be invalid
+    assert ti.fresh_imu_omega_BN_B() is None
