@@ -174,9 +174,6 @@ class FlightSoftware:
             # every packet, including the dispatcher's command events, carries onboard time
             self.telemetry.clock = lambda: self.t_s
         self.dispatcher = dispatcher
-        # a sink that only counts packets (fast mode's) declares ``discards_values``: the GNC and HK
-        # packets' values are then not built (every cycle's dict of ~40 channels that nobody reads)
-        self._tm_values_unused = bool(getattr(self.telemetry, "discards_values", False))
         self.clock = clock
         self.n_wheels = len(config.spacecraft.wheels)
         self.period_s = config.gnc_period_s
@@ -513,9 +510,6 @@ class FlightSoftware:
 
     # ---------------------------------------------------------------------------------- telemetry
     def _send_gnc_tm(self, g, ctrl, speeds, imu_valid, st, st_fresh, exec_ms) -> None:
-        if self._tm_values_unused:
-            self.telemetry.send_channels("GNC", None, time_s=self.t_s)
-            return
         est = self.estimator
         nw = self.n_wheels
         margins = list(g.margins_deg)[:6] + [float("nan")] * (6 - min(6, len(g.margins_deg)))
@@ -636,9 +630,6 @@ class FlightSoftware:
         return values
 
     def _send_hk_tm(self) -> None:
-        if self._tm_values_unused:
-            self.telemetry.send_channels("HK", None, time_s=self.t_s)
-            return
         values = self.hk_values()
         rss = _resident_bytes()
         if rss is not None:

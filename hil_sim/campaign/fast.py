@@ -44,8 +44,6 @@ _WHEEL_FIELDS = {"Js_kgm2": "Js_kgm2", "spin_inertia_kgm2": "Js_kgm2", "max_torq
 class _EventRecorder:
     """The flight software's telemetry sink in fast mode: keeps events, counts packets (no sockets)."""
 
-    discards_values = True  # the flight software need not build the packets' values (fsw.app)
-
     def __init__(self) -> None:
         self.events: list[tuple[float, str, dict]] = []
         self.counters = {"packets_sent": 0, "send_errors": 0, "events_sent": 0, "events_throttled": 0}
