@@ -257,16 +257,19 @@ def test_receive_commands_matches_the_per_burst_path(icd: Icd, seed: int) -> Non
         senders.append(fsw_bus)
     fused, reference = sims
     reference._take_burst = lambda burst, t_s, k: setattr(reference, "_rx", reference.receiver.check(burst))
+    reference._rc_watch = (np.zeros(0, dtype=np.int64), np.zeros(0))  # timeouts by E2EReceiver.check_timeouts
     counters: dict = {}
     try:
         for tick in range(120):
-            frames = _random_flight_frames(icd, rng, tick, counters)
+            frames = _random_flight_frames(icd, rng, tick, counters) if tick % 40 < 30 else []  # silences: timeouts
             done = []
             for sim, bus in zip(sims, senders):
                 sim.begin_tick()
                 if frames:
                     send_burst(bus, FrameBurst.from_messages(frames))
                 done.append(sim.end_tick(wait_s=0.0))
+            reference.receiver.check_timeouts(reference.t0_s + (reference.tick - 1) * reference.period_s
+                                              + reference.n_sub * reference.dt_s)  # end_tick's _sub_t(n_sub)
             assert done[0] == done[1]
             assert fused.receiver.counters == reference.receiver.counters
             assert fused.stats == reference.stats
@@ -276,6 +279,7 @@ def test_receive_commands_matches_the_per_burst_path(icd: Icd, seed: int) -> Non
             np.testing.assert_array_equal(fused.world.truth.omega_BN_B, reference.world.truth.omega_BN_B)
         assert fused.stats.stale_cycle_done > 0 and fused.stats.cycle_done_timeouts > 0
         assert sum(c["crc_error"] for c in fused.receiver.counters.values() if "crc_error" in c) > 0
+        assert fused.receiver.counters["CYCLE_DONE"]["timeout"] > 0
     finally:
         for sim, bus in zip(sims, senders):
             sim.bus.shutdown()
