@@ -18,6 +18,8 @@ import math
 import numpy as np
 from numba import njit
 
+from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_UNKNOWN, TIMEOUT_CODE, UNKNOWN_CODE, _tally,
+                             judge_frame)
 from hil_sim.world import _world_period_kernel
 
 _EPS_S = 1e-9
@@ -296,6 +298,94 @@ def apply_received(status, ids, values, first, end, cmd_wheel_of_id, torque_col,
         elif fid == heartbeat_id:
             counts[1] += 1
     return end
+
+
+# receive_commands' integer state (rs) slots; RS_NTALLY is kernels.S_NTALLY (its _tally counts there)
+RS_WHEEL_CMDS, RS_NTALLY, RS_HEARTBEATS, RS_CYCLE_DONE, RS_STALE, RS_DONE = 0, 1, 2, 3, 4, 5
+RS_SIZE = 6
+# its constants (``consts``: these slots, then kind_of_id and cmd_wheel_of_id, n_ids each, then the CRC table)
+(RC_N_CODES, RC_BUS_ROW, RC_TORQUE_COL, RC_TICK_LSB_COL, RC_DONE_ID, RC_DONE_TICK_COL, RC_HEARTBEAT_ID,
+ RC_N_IDS) = range(8)
+RC_SIZE = 8
+
+
+@njit(cache=True)
+def receive_commands(ids, lengths, data, first, status, values, now, awaited, consts, msg_i, sig_i, sig_f, seq,
+                     last_ok_t, wheel_state, tally, rs):
+    """``Simulator``'s receive of frames ``first``.. of a burst in one call: each frame classified as
+    ``fsw.bus.kernels.classify_rows`` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``)
+    and counted in ``tally`` as ``collect_rows`` counts (``rs[RS_NTALLY]`` pairs), then a delivered one
+    applied as :func:`apply_received` applies it (wheel commands into ``wheel_state``; heartbeats, CYCLE_DONEs
+    and stale ones, i.e. for another tick than ``awaited``, counted in ``rs``; ``rs[RS_DONE]`` set by
+    CYCLE_DONE(awaited)). Returns the index after the last frame handled: after CYCLE_DONE(awaited) (later
+    frames stay for later, as classify_until's stop leaves them), the burst's end, or before a frame for
+    the Python path (``status`` FALLBACK_CODE)."""
+    n_codes = consts[RC_N_CODES]
+    bus_key = consts[RC_BUS_ROW] * n_codes
+    torque_col = consts[RC_TORQUE_COL]
+    tick_lsb_col = consts[RC_TICK_LSB_COL]
+    done_id = consts[RC_DONE_ID]
+    done_col = consts[RC_DONE_TICK_COL]
+    heartbeat_id = consts[RC_HEARTBEAT_ID]
+    n_ids = consts[RC_N_IDS]
+    kind_of_id = consts[RC_SIZE:RC_SIZE + n_ids]
+    cmd_wheel_of_id = consts[RC_SIZE + n_ids:RC_SIZE + 2 * n_ids]
+    crc_table = consts[RC_SIZE + 2 * n_ids:]
+    stop = float(awaited)
+    n = ids.shape[0]
+    for i in range(first, n):
+        fid = ids[i]
+        if fid < 0 or fid >= n_ids:
+            status[i] = FALLBACK_CODE
+            return i
+        m = kind_of_id[fid]
+        if m < 0:
+            if m == KIND_UNKNOWN:
+                status[i] = UNKNOWN_CODE
+                _tally(tally, rs, bus_key + UNKNOWN_CODE)
+                continue
+            if m == KIND_ECHO:
+                status[i] = ECHO_CODE
+                _tally(tally, rs, bus_key + ECHO_CODE)
+                continue
+            status[i] = FALLBACK_CODE
+            return i
+        code = judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t)
+        status[i] = code
+        _tally(tally, rs, m * n_codes + code)
+        if code > 1:
+            continue
+        w = cmd_wheel_of_id[fid]
+        if w >= 0:
+            wheel_state[w, WS_CMD] = values[i, torque_col]
+            wheel_state[w, WS_TICK] = values[i, tick_lsb_col]
+            wheel_state[w, WS_LAST_T] = now
+            wheel_state[w, WS_APPLIED] += 1.0
+            rs[RS_WHEEL_CMDS] += 1
+        elif fid == done_id:
+            rs[RS_CYCLE_DONE] += 1
+            if np.int64(values[i, done_col]) == awaited:
+                rs[RS_DONE] = 1
+            else:
+                rs[RS_STALE] += 1
+            if stop <= values[i, done_col] <= stop:
+                return i + 1
+        elif fid == heartbeat_id:
+            rs[RS_HEARTBEATS] += 1
+    return n
+
+
+@njit(cache=True)
+def check_timeouts(now, watch, watch_limit, seq, last_ok_t, tally, rs, n_codes):
+    """``E2EReceiver.check_timeouts(now)`` on the receiver's state arrays (``kernels.finish_tick``'s rule):
+    a timeout counted in ``tally`` (as :func:`receive_commands` counts) when watched message ``watch[j]``
+    goes silent for longer than ``watch_limit[j]``, re-armed by a valid frame."""
+    for j in range(watch.shape[0]):
+        m = watch[j]
+        if now - last_ok_t[m] > watch_limit[j]:
+            if seq[m, 1] == 0:
+                seq[m, 1] = 1
+                _tally(tally, rs, m * n_codes + TIMEOUT_CODE)
 
 
 @njit(cache=True)

@@ -32,10 +32,11 @@ import can
 import numpy as np
 
 from fsw.bus.burst import FrameBurst
-from fsw.bus.e2e import NO_STOP, CheckedBurst, CheckedFrame, E2EReceiver
+from fsw.bus.e2e import NO_STOP, PYTHON_RUN, CheckedBurst, CheckedFrame, E2EReceiver
 from fsw.bus.kernels import ECHO_CODE
 from fsw.bus.icd import Icd
 from fsw.bus.transport import recv_burst, send_batch, send_burst
+from hil_sim import device_kernels as dk
 from hil_sim.device_kernels import apply_received
 from hil_sim.devices import Devices, DeviceTiming, WorldLike
 from hil_sim.faults import FaultInjector
@@ -117,6 +118,26 @@ class Simulator:
         for fid, w in self._cmd_index.items():
             self._cmd_wheel_of_id[fid] = w
         self._rx_counts = np.zeros(4, dtype=np.int64)
+        # receive_commands' arrays (a tick's commands classified, counted and applied in one compiled call):
+        # the constants packed once, the tally of (counter key, count) pairs and its targets, the state
+        n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE (as the flight-side driver)
+        n_messages = len(self.icd.message_names)
+        kind_of_id = self.receiver.kernel_state[0]
+        cfg = np.zeros(dk.RC_SIZE, dtype=np.int64)
+        cfg[[dk.RC_N_CODES, dk.RC_BUS_ROW, dk.RC_TORQUE_COL, dk.RC_TICK_LSB_COL, dk.RC_DONE_ID, dk.RC_DONE_TICK_COL,
+             dk.RC_HEARTBEAT_ID, dk.RC_N_IDS]] = (n_codes, n_messages, self._torque_col, self._tick_lsb_col,
+                                                  self._cycle_done_id, self._done_tick_col, self._heartbeat_id,
+                                                  len(kind_of_id))
+        self._rc_consts = np.ascontiguousarray(np.concatenate(
+            [cfg, kind_of_id, self._cmd_wheel_of_id, self.receiver.kernel_state[4]]).astype(np.int64))
+        self._rc_table = self.receiver.kernel_state[1:4] + self.receiver.kernel_state[5:]
+        self._rc_tally = np.zeros(((n_messages + 1) * n_codes, 2), dtype=np.int64)
+        self._rc_targets = self.receiver.tally_targets(n_codes)
+        self._rc_state = np.zeros(dk.RS_SIZE, dtype=np.int64)
+        self._rc_n_codes = n_codes
+        self._rc_watch = self.receiver.watched_timeouts()  # (message indices, limits) as check_timeouts has them
+        self._rc_status = np.zeros(0, dtype=np.int64)
+        self._rc_values = np.zeros((0, self.icd.table.start.shape[1]))
         # Lockstep waits wake only for CYCLE_DONE where the bus can filter wake-ups (socketcan): the wheel
         # commands before it queue without a context switch each (see _receive_until_done).
         self._wait_for = getattr(bus, "wait_for", None)
@@ -208,7 +229,14 @@ class Simulator:
         if paced is None and hasattr(self.world, "advance_sampled"):
             # not paced: the whole period in one compiled call (same numbers as the loop below)
             # _sub_t(j) for j = 0..n_sub: (t0 + k T) + j dt, the same sums on an array
-            self.devices.step_world(self.world, self.dt_s, (self.t0_s + self.tick * self.period_s) + self._j_dt)
+            times = (self.t0_s + self.tick * self.period_s) + self._j_dt
+            self.devices.step_world(self.world, self.dt_s, times)
+            # the receiver's check_timeouts(_sub_t(n_sub)) compiled (times[-1] is that sum)
+            rs = self._rc_state
+            dk.check_timeouts(times[-1], self._rc_watch[0], self._rc_watch[1], self._rc_table[3], self._rc_table[4],
+                              self._rc_tally, rs, self._rc_n_codes)
+            if rs[dk.RS_NTALLY]:
+                self._settle_tally()
         else:
             for j in range(self.n_sub):
                 if paced is not None:
@@ -216,7 +244,7 @@ class Simulator:
                 t = self._sub_t(j)
                 self.world.step(self.dt_s, self.devices.wheel_torques(t))
                 self.devices.sample_sensors(self.world, self._sub_t(j + 1))
-        self.receiver.check_timeouts(self._sub_t(self.n_sub))
+            self.receiver.check_timeouts(self._sub_t(self.n_sub))
         self.tick += 1
         self.stats.ticks += 1
         self._tick_open = False
@@ -241,6 +269,10 @@ class Simulator:
                 continue
             burst = None if wait_first else recv_burst(self.bus, 0.0)  # clock reads only when it is empty
             wait_first = False
+            if burst is not None:
+                if self._take_burst(burst, t_s, k):
+                    return True
+                continue
             if burst is None:
                 now = time.monotonic()
                 if deadline is None:
@@ -258,7 +290,54 @@ class Simulator:
                     burst = recv_burst(self.bus, 0.0)  # no CYCLE_DONE in time: take what did come
                 if burst is None:
                     return False
+            if self._take_burst(burst, t_s, k):
+                return True
+
+    def _take_burst(self, burst: FrameBurst, t_s: float, k: int) -> bool:
+        """A burst read off the bus while awaiting CYCLE_DONE(k): in one compiled call
+        (device_kernels.receive_commands: E2E, counts, wheel commands, CYCLE_DONE) where that is what
+        ``_handle_next`` would do (no fault active on received frames, no frame observer, more frames than
+        the receiver judges one by one), else into ``_rx`` for ``_handle_next``. Frames the compiled call
+        leaves (after CYCLE_DONE(k), or from one for the receiver's Python path on) wait in ``_rx`` too.
+        Returns whether CYCLE_DONE(k) came (else the caller goes on: ``_rx``, the bus)."""
+        n = len(burst)
+        if (n <= PYTHON_RUN or self.on_frame is not None or self._awaiting != k
+                or (self.injector and not self.injector.passes_through(t_s, "rx"))):
             self._rx = self.receiver.check(burst)
+            return False
+        if self._rc_status.shape[0] < n:
+            self._rc_status = np.zeros(2 * n, dtype=np.int64)
+            self._rc_values = np.zeros((2 * n, self._rc_values.shape[1]))
+        rs = self._rc_state
+        msg_i, sig_i, sig_f, seq, last_ok_t = self._rc_table
+        end = dk.receive_commands(burst.ids, burst.lengths, burst.data, 0, self._rc_status, self._rc_values, t_s, k,
+                                  self._rc_consts, msg_i, sig_i, sig_f, seq, last_ok_t, self.devices.wheel_state,
+                                  self._rc_tally, rs)
+        wheel_cmds, n_tally, heartbeats, cycle_done, stale, done = rs.tolist()
+        if n_tally:
+            self._settle_tally()
+        rs[:] = 0
+        stats = self.stats
+        if wheel_cmds:
+            stats.wheel_commands += wheel_cmds
+        if heartbeats:
+            stats.heartbeats += heartbeats
+        if cycle_done:
+            stats.cycle_done += cycle_done
+            stats.stale_cycle_done += stale
+        if end < n:  # the rest as if still queued (from a frame for the Python path, or after CYCLE_DONE(k))
+            rx = self._rx = self.receiver.check(burst)
+            rx.pos = end
+        return done != 0
+
+    def _settle_tally(self) -> None:
+        """The compiled calls' counts ((key, count) pairs in ``_rc_tally``) into the receiver's counters."""
+        rs = self._rc_state
+        targets = self._rc_targets
+        for key, count in self._rc_tally[:int(rs[dk.RS_NTALLY])].tolist():
+            counts, cls = targets[key]
+            counts[cls] += count
+        rs[dk.RS_NTALLY] = 0
 
     def poll(self, t_s: float) -> int:
         """Handle everything queued now, stamping it with simulation time ``t_s``. Returns the count."""
