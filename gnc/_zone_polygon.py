@@ -145,6 +145,66 @@ def contains_point(x, vertices, c, B, plane_normal, plane_offset):
     return inside
 
 
+# Relative margin of `polygon_box`'s x range: the crossing abscissa xi + (py - yi)(xj - xi)/(yj - yi) of
+# `contains_point` lies between xi and xj up to a few rounding errors of the largest coordinate (~1e-15 of
+# it); 1e-9 of it covers that many times over.
+_BOX_MARGIN_REL = 1e-9
+
+
+def polygon_box(vertices: np.ndarray) -> np.ndarray:
+    """(x_min - margin, x_max + margin, y_min, y_max) of the plane vertices (n, 2): the precheck of
+    `contains_point_boxed`."""
+    v = np.asarray(vertices, dtype=np.float64)
+    margin = _BOX_MARGIN_REL * float(np.abs(v).max()) + 1e-300
+    return np.array([float(v[:, 0].min()) - margin, float(v[:, 0].max()) + margin,
+                     float(v[:, 1].min()), float(v[:, 1].max())])
+
+
+@njit(cache=True)
+def contains_point_boxed(x, vertices, box, c, B, plane_normal, plane_offset):
+    """`contains_point` with the vertex loop skipped when the projected point lies outside ``box``
+    (`polygon_box`), where the loop's answer is False anyway. py >= y_max or py < y_min: no edge has
+    (yi > py) != (yj > py), so nothing toggles (exact comparisons). Otherwise the edges crossing the
+    line y = py are even in number (the cyclic sequence yi > py changes value an even number of times),
+    and every crossing abscissa is within the margin of [x_min, x_max]: px left of the box toggles at
+    all of them, right of it at none; both give False. NaN fails every comparison and takes the loop."""
+    xn = x[0] * plane_normal[0] + x[1] * plane_normal[1] + x[2] * plane_normal[2]
+    if xn <= 0.0:
+        return False
+    scale = plane_offset / xn
+    px = 0.0
+    py = 0.0
+    for i in range(3):
+        v = x[i] * scale - c[i]
+        px += B[i, 0] * v
+        py += B[i, 1] * v
+    if py >= box[3] or py < box[2] or px < box[0] or px > box[1]:
+        return False
+    inside = False
+    m = vertices.shape[0]
+    j = m - 1
+    for i in range(m):
+        xi, yi = vertices[i, 0], vertices[i, 1]
+        xj, yj = vertices[j, 0], vertices[j, 1]
+        if (yi > py) != (yj > py):
+            xcross = xi + (py - yi) * (xj - xi) / (yj - yi)
+            if px < xcross:
+                inside = not inside
+        j = i
+    return inside
+
+
+@njit(cache=True)
+def signed_separation_one_boxed(x, edges, mids, reach, vertices, box, c, B, plane_normal, plane_offset, clamp):
+    """`signed_separation_one` with `contains_point_boxed` (the same number)."""
+    inside = contains_point_boxed(x, vertices, box, c, B, plane_normal, plane_offset)
+    if inside and clamp:
+        return 0.0
+    b = np.empty(3)
+    d = nearest_on_boundary(x, edges, mids, reach, b)
+    return -d if inside else d
+
+
 @njit(cache=True)
 def signed_separation_one(x, edges, mids, reach, vertices, c, B, plane_normal, plane_offset, clamp):
     """Signed separation of one x (negative inside); clamp=True gives 0 inside."""

@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
-from gnc._zone_polygon import signed_separation_one
+from gnc._zone_polygon import polygon_box, signed_separation_one_boxed
 from gnc.attitude import pointing_rate_command_nb, quat_to_dcm_nb
 from gnc.zones import _cone_signed
 
@@ -161,11 +161,12 @@ def aim_index_nb(path, start, y, cos_ahead):
 # ZT_OFFSET the plane; ZT_AXIS / ZT_HALF a cone's axis and half-angle; for the law's zones, ZT_CAP_AXIS /
 # ZT_CAP_COS the bounding-cap screen and ZT_KERNEL (k1 / kappa) g of `gnc.laws.StarShapedLaw`. The kernels
 # call the zones' own compiled separations (`gnc.zones._cone_signed`,
-# `gnc._zone_polygon.signed_separation_one`) on these rows: the same numbers.
+# `gnc._zone_polygon.signed_separation_one_boxed`, its box precheck in ZT_BOX) on these rows: the same numbers.
 ZT_KIND, ZT_START, ZT_COUNT, ZT_REACH, ZT_C, ZT_B = 0, 1, 2, 3, 4, 7
 ZT_NORMAL, ZT_OFFSET, ZT_AXIS, ZT_HALF = 13, 16, 17, 20
 ZT_CAP_AXIS, ZT_CAP_COS, ZT_KERNEL = 21, 24, 25
-ZT_WIDTH = 28
+ZT_BOX = 28  # a polygon's plane-vertex box (`gnc._zone_polygon.polygon_box`, 4)
+ZT_WIDTH = 32
 ARC_WIDTH = 14
 
 
@@ -180,8 +181,9 @@ def zone_signed_nb(x, tab, arcs, z, clamp):
     for i in range(3):
         B[i, 0] = tab[z, ZT_B + 2 * i]
         B[i, 1] = tab[z, ZT_B + 2 * i + 1]
-    return signed_separation_one(x, arcs[s:e, 0:9], arcs[s:e, 9:12], tab[z, ZT_REACH], arcs[s:e, 12:14],
-                                 tab[z, ZT_C:ZT_C + 3], B, tab[z, ZT_NORMAL:ZT_NORMAL + 3], tab[z, ZT_OFFSET], clamp)
+    return signed_separation_one_boxed(x, arcs[s:e, 0:9], arcs[s:e, 9:12], tab[z, ZT_REACH], arcs[s:e, 12:14],
+                                       tab[z, ZT_BOX:ZT_BOX + 4], tab[z, ZT_C:ZT_C + 3], B,
+                                       tab[z, ZT_NORMAL:ZT_NORMAL + 3], tab[z, ZT_OFFSET], clamp)
 
 
 @njit(cache=True)
@@ -217,6 +219,7 @@ def pack_zones(zones: list) -> tuple[np.ndarray, np.ndarray] | None:
         tab[i, ZT_B:ZT_B + 6] = np.asarray(B).reshape(6)
         tab[i, ZT_NORMAL:ZT_NORMAL + 3] = normal
         tab[i, ZT_OFFSET] = offset
+        tab[i, ZT_BOX:ZT_BOX + 4] = polygon_box(v)
         arcs.append(np.hstack([e, m, v]))
         start += n
     return tab, np.ascontiguousarray(np.concatenate(arcs))

@@ -39,7 +39,7 @@ class PathFollowing:
         if not cfg.enabled:
             return
         self._planned_t = t_s
-        vertices = plan_path(y, self.target_N, obstacles, cfg.standoff_deg, cfg.polygon_sides)
+        vertices = plan_path(y, self.target_N, obstacles, cfg.standoff_deg, cfg.polygon_sides, self._planning_polygons())
         if vertices is None:
             return
         if len(vertices) <= 2:
@@ -51,6 +51,14 @@ class PathFollowing:
             length = path_length_deg(vertices)
             self.events("PATH_PLANNED", length_deg=length, detour_deg=length - _angle_deg(y, self.target_N),
                         legs=len(vertices) - 1)
+
+    def _planning_polygons(self) -> dict:
+        """The planner's polygons of the zones planned round so far (`plan_path`'s ``kept``): a replan
+        round the same zone objects does not rebuild them."""
+        kept = getattr(self, "_planning_polygons_kept", None)
+        if kept is None:
+            kept = self._planning_polygons_kept = {}
+        return kept
 
     def _follow(self, vertices: np.ndarray, y: np.ndarray) -> None:
         """Fly the path ``vertices`` (boresight ``y`` at its start): the law's aim moves along it."""

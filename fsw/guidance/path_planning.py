@@ -125,22 +125,42 @@ def _blocked(nodes: np.ndarray, i: np.ndarray, j: np.ndarray, sc: np.ndarray, sd
     return np.any(straddle1 & straddle2 & same_point & ~own, axis=1)
 
 
+def _kept_polygon(zone, standoff_deg: float, rays: int, kept: dict | None):
+    """`planning_polygon`, taken from ``kept`` when the same zone object (zones are immutable) was planned
+    round at the same standoff and rays before; its arrays read-only, as the planner only reads them."""
+    if kept is None:
+        return planning_polygon(zone, standoff_deg, rays)
+    key = (id(zone), standoff_deg, rays)
+    entry = kept.get(key)
+    if entry is not None and entry[0] is zone:
+        return entry[1]
+    poly = planning_polygon(zone, standoff_deg, rays)
+    if poly is not None:
+        poly[0].setflags(write=False)
+        poly[1].setflags(write=False)
+    if len(kept) > 64:
+        kept.clear()
+    kept[key] = (zone, poly)
+    return poly
+
+
 def plan_path(start: np.ndarray, end: np.ndarray, zones: list, standoff_deg: float,
-              rays: int = 48) -> np.ndarray | None:
+              rays: int = 48, kept: dict | None = None) -> np.ndarray | None:
     """Vertices (start, ..., end) of the shortest boresight path keeping ``standoff_deg`` from every
     zone (within the polygon approximation), or None when there is none or the zones are too large to
     plan round. A zone within the standoff of the start or the end is planned round at zero standoff.
 
     Visibility graph on start, end and the polygon vertices. Besides polygon sides, a shortest path only
     uses tangent segments (both neighbours of a polygon vertex on the same side of the segment), so only
-    those and the sides are tested against every polygon side.
+    those and the sides are tested against every polygon side. ``kept``: a dict the caller keeps between
+    plans, for the polygons of zones planned round before (`_kept_polygon`; the same polygons).
     """
     start, end = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
     polys = []
     for z in zones:
-        poly = planning_polygon(z, standoff_deg, rays)
+        poly = _kept_polygon(z, standoff_deg, rays, kept)
         if poly is not None and _inside(np.array([start, end]), poly[1]).any():
-            poly = planning_polygon(z, 0.0, rays)
+            poly = _kept_polygon(z, 0.0, rays, kept)
         if poly is None or _inside(np.array([start, end]), poly[1]).any():
             return None
         polys.append(poly)

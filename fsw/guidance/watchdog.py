@@ -86,7 +86,8 @@ class StallRecovery:
             return
         obstacles = list(self._sky_law_zones) + list(self.sky_geometry.pending)
         standoff = self.cfg.pointing.path.standoff_deg
-        vertices = plan_path(y, self.target_N, obstacles, standoff, self.cfg.pointing.path.polygon_sides)
+        vertices = plan_path(y, self.target_N, obstacles, standoff, self.cfg.pointing.path.polygon_sides,
+                             self._planning_polygons())
         detour = vertices is None or len(vertices) <= 2
         if detour:
             vertices = np.array([y, detour_waypoint(y, self.target_N, obstacles, standoff), self.target_N])
