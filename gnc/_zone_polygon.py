@@ -119,11 +119,11 @@ def nearest_on_boundary_full(x, edges, b_out):
 
 
 @njit(cache=True)
-def contains_point(x, vertices, c, B, plane_normal, plane_offset):
-    """Crossing-number test of the central projection of x onto the plane against the polygon."""
+def _plane_point(x, c, B, plane_normal, plane_offset):
+    """(in front, px, py): whether x projects onto the plane at all (x . n > 0), and its plane point."""
     xn = x[0] * plane_normal[0] + x[1] * plane_normal[1] + x[2] * plane_normal[2]
     if xn <= 0.0:
-        return False
+        return False, 0.0, 0.0
     scale = plane_offset / xn
     px = 0.0
     py = 0.0
@@ -131,6 +131,12 @@ def contains_point(x, vertices, c, B, plane_normal, plane_offset):
         v = x[i] * scale - c[i]
         px += B[i, 0] * v
         py += B[i, 1] * v
+    return True, px, py
+
+
+@njit(cache=True)
+def _crossing_number_odd(vertices, px, py):
+    """Whether the ray from (px, py) towards +x crosses the polygon's edges an odd number of times."""
     inside = False
     m = vertices.shape[0]
     j = m - 1
@@ -143,6 +149,15 @@ def contains_point(x, vertices, c, B, plane_normal, plane_offset):
                 inside = not inside
         j = i
     return inside
+
+
+@njit(cache=True)
+def contains_point(x, vertices, c, B, plane_normal, plane_offset):
+    """Crossing-number test of the central projection of x onto the plane against the polygon."""
+    front, px, py = _plane_point(x, c, B, plane_normal, plane_offset)
+    if not front:
+        return False
+    return _crossing_number_odd(vertices, px, py)
 
 
 # Relative margin of `polygon_box`'s x range: the crossing abscissa xi + (py - yi)(xj - xi)/(yj - yi) of
@@ -168,30 +183,12 @@ def contains_point_boxed(x, vertices, box, c, B, plane_normal, plane_offset):
     line y = py are even in number (the cyclic sequence yi > py changes value an even number of times),
     and every crossing abscissa is within the margin of [x_min, x_max]: px left of the box toggles at
     all of them, right of it at none; both give False. NaN fails every comparison and takes the loop."""
-    xn = x[0] * plane_normal[0] + x[1] * plane_normal[1] + x[2] * plane_normal[2]
-    if xn <= 0.0:
+    front, px, py = _plane_point(x, c, B, plane_normal, plane_offset)
+    if not front:
         return False
-    scale = plane_offset / xn
-    px = 0.0
-    py = 0.0
-    for i in range(3):
-        v = x[i] * scale - c[i]
-        px += B[i, 0] * v
-        py += B[i, 1] * v
     if py >= box[3] or py < box[2] or px < box[0] or px > box[1]:
         return False
-    inside = False
-    m = vertices.shape[0]
-    j = m - 1
-    for i in range(m):
-        xi, yi = vertices[i, 0], vertices[i, 1]
-        xj, yj = vertices[j, 0], vertices[j, 1]
-        if (yi > py) != (yj > py):
-            xcross = xi + (py - yi) * (xj - xi) / (yj - yi)
-            if px < xcross:
-                inside = not inside
-        j = i
-    return inside
+    return _crossing_number_odd(vertices, px, py)
 
 
 @njit(cache=True)
