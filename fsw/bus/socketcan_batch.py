@@ -23,7 +23,6 @@ Frames, their order and content are exactly what python-can delivers.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import errno
 import math
 import socket
@@ -35,6 +34,8 @@ from typing import Iterable, Sequence
 import can
 from can.interfaces.socketcan import constants
 from can.interfaces.socketcan.socketcan import SocketcanBus, build_can_frame, pack_filters
+
+from fsw.bus.mmsg import IoVec as _IoVec, MMsgHdr as _MMsgHdr, PollFd as _PollFd, libc, take_queued
 
 BATCH = 64  # frames per recvmmsg/sendmmsg call (a lockstep tick has ~20)
 _FRAME = struct.Struct("=IB3x8s")  # struct can_frame (classic CAN, CAN_MTU = 16 bytes)
@@ -50,38 +51,7 @@ _Message = can.Message
 _new_message = can.Message.__new__
 
 
-def _load_libc() -> ctypes.CDLL:
-    try:  # find_library("c") would run `ldconfig -p` in a subprocess at every start
-        return ctypes.CDLL("libc.so.6", use_errno=True)
-    except OSError:
-        return ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
-
-
-_libc = _load_libc()
-
-
-class _IoVec(ctypes.Structure):
-    _fields_ = [("iov_base", ctypes.c_void_p), ("iov_len", ctypes.c_size_t)]
-
-
-class _MsgHdr(ctypes.Structure):
-    _fields_ = [("msg_name", ctypes.c_void_p), ("msg_namelen", ctypes.c_uint32),
-                ("msg_iov", ctypes.POINTER(_IoVec)), ("msg_iovlen", ctypes.c_size_t),
-                ("msg_control", ctypes.c_void_p), ("msg_controllen", ctypes.c_size_t),
-                ("msg_flags", ctypes.c_int)]
-
-
-class _MMsgHdr(ctypes.Structure):
-    _fields_ = [("msg_hdr", _MsgHdr), ("msg_len", ctypes.c_uint)]
-
-
-class _PollFd(ctypes.Structure):
-    _fields_ = [("fd", ctypes.c_int), ("events", ctypes.c_short), ("revents", ctypes.c_short)]
-
-
-_libc.recvmmsg.argtypes = [ctypes.c_int, ctypes.POINTER(_MMsgHdr), ctypes.c_uint, ctypes.c_int, ctypes.c_void_p]
-_libc.sendmmsg.argtypes = [ctypes.c_int, ctypes.POINTER(_MMsgHdr), ctypes.c_uint, ctypes.c_int]
-_libc.poll.argtypes = [ctypes.POINTER(_PollFd), ctypes.c_ulong, ctypes.c_int]
+_libc = libc
 
 
 def classic_frame(msg: can.Message) -> bytes:
@@ -178,14 +148,7 @@ class BatchSocketcanBus(SocketcanBus):
         are set (then only ``recv`` reads)."""
         if not self._is_filtered:
             return None
-        rx = self._rx
-        if not rx and not self._fill(timeout):
-            return []
-        if limit is None or len(rx) <= limit:
-            out = list(rx)
-            rx.clear()
-            return out
-        return [rx.popleft() for _ in range(limit)]
+        return take_queued(self._rx, self._fill, timeout, limit)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         if self._rx or self._fill(timeout):

@@ -47,6 +47,8 @@ from can import CanProtocol
 from can.interfaces.udp_multicast.bus import GeneralPurposeUdpMulticastBus, UdpMulticastBus
 from can.interfaces.udp_multicast.utils import is_msgpack_installed, unpack_message
 
+from fsw.bus.mmsg import IoVec as _IoVec, MMsgHdr as _MMsgHdr, libc, take_queued
+
 LOOPBACK = "127.0.0.1"
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 IP_MULTICAST_ALL = getattr(socket, "IP_MULTICAST_ALL", 49)
@@ -87,26 +89,7 @@ def _drop_source_port(sock: socket.socket, port: int) -> None:
 
 BATCH = 64  # datagrams per sendmmsg (a lockstep tick has ~20)
 _MSG_DONTWAIT = int(socket.MSG_DONTWAIT)
-_libc = ctypes.CDLL("libc.so.6", use_errno=True) if sys.platform.startswith("linux") else None
-
-
-class _IoVec(ctypes.Structure):
-    _fields_ = [("iov_base", ctypes.c_void_p), ("iov_len", ctypes.c_size_t)]
-
-
-class _MsgHdr(ctypes.Structure):
-    _fields_ = [("msg_name", ctypes.c_void_p), ("msg_namelen", ctypes.c_uint32),
-                ("msg_iov", ctypes.POINTER(_IoVec)), ("msg_iovlen", ctypes.c_size_t),
-                ("msg_control", ctypes.c_void_p), ("msg_controllen", ctypes.c_size_t),
-                ("msg_flags", ctypes.c_int)]
-
-
-class _MMsgHdr(ctypes.Structure):
-    _fields_ = [("msg_hdr", _MsgHdr), ("msg_len", ctypes.c_uint)]
-
-
-if _libc is not None:
-    _libc.sendmmsg.argtypes = [ctypes.c_int, ctypes.POINTER(_MMsgHdr), ctypes.c_uint, ctypes.c_int]
+_libc = libc
 
 
 class _TxSlots:
@@ -239,14 +222,7 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
         are set (then only ``recv`` reads)."""
         if self._filters is not None:
             return None
-        rx = self._rx
-        if not rx and not self._fill(timeout):
-            return []
-        if limit is None or len(rx) <= limit:
-            out = list(rx)
-            rx.clear()
-            return out
-        return [rx.popleft() for _ in range(limit)]
+        return take_queued(self._rx, self._fill, timeout, limit)
 
     def _fill(self, timeout: float | None) -> bool:
         """Queue every datagram the socket holds; if none, wait up to ``timeout`` (None: for ever) for one."""
