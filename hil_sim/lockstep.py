@@ -118,6 +118,11 @@ class Simulator:
         for fid, w in self._cmd_index.items():
             self._cmd_wheel_of_id[fid] = w
         self._rx_counts = np.zeros(4, dtype=np.int64)
+        # the per-frame apply of the paced (real-time) and fault-window paths: a fast-mode run never reaches
+        # it, so load (or compile) it here, with nothing to apply, not inside a real-time run's first tick
+        apply_received(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 1)), 0, 0,
+                       self._cmd_wheel_of_id, self._torque_col, self._tick_lsb_col, self._cycle_done_id,
+                       self._done_tick_col, self._heartbeat_id, 0.0, self.devices.wheel_state, self._rx_counts)
         # receive_commands' arrays (a tick's commands classified, counted and applied in one compiled call):
         # the constants packed once, the tally of (counter key, count) pairs and its targets, the state
         n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE (as the flight-side driver)
