@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
-from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_UNKNOWN, TIMEOUT_CODE, UNKNOWN_CODE, _tally,
+from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_UNKNOWN, UNKNOWN_CODE, _tally,
                              judge_frame)
 from hil_sim.world import _world_period_kernel
 
@@ -373,19 +373,6 @@ def receive_commands(ids, lengths, data, first, status, values, now, awaited, co
         elif fid == heartbeat_id:
             rs[RS_HEARTBEATS] += 1
     return n
-
-
-@njit(cache=True)
-def check_timeouts(now, watch, watch_limit, seq, last_ok_t, tally, rs, n_codes):
-    """``E2EReceiver.check_timeouts(now)`` on the receiver's state arrays (``kernels.finish_tick``'s rule):
-    a timeout counted in ``tally`` (as :func:`receive_commands` counts) when watched message ``watch[j]``
-    goes silent for longer than ``watch_limit[j]``, re-armed by a valid frame."""
-    for j in range(watch.shape[0]):
-        m = watch[j]
-        if now - last_ok_t[m] > watch_limit[j]:
-            if seq[m, 1] == 0:
-                seq[m, 1] = 1
-                _tally(tally, rs, m * n_codes + TIMEOUT_CODE)
 
 
 @njit(cache=True)

@@ -33,7 +33,7 @@ import numpy as np
 
 from fsw.bus.burst import FrameBurst
 from fsw.bus.e2e import NO_STOP, PYTHON_RUN, CheckedBurst, CheckedFrame, E2EReceiver
-from fsw.bus.kernels import ECHO_CODE
+from fsw.bus.kernels import ECHO_CODE, count_timeouts
 from fsw.bus.icd import Icd
 from fsw.bus.transport import recv_burst, send_batch, send_burst
 from hil_sim import device_kernels as dk
@@ -238,8 +238,8 @@ class Simulator:
             self.devices.step_world(self.world, self.dt_s, times)
             # the receiver's check_timeouts(_sub_t(n_sub)) compiled (times[-1] is that sum)
             rs = self._rc_state
-            dk.check_timeouts(times[-1], self._rc_watch[0], self._rc_watch[1], self._rc_table[3], self._rc_table[4],
-                              self._rc_tally, rs, self._rc_n_codes)
+            count_timeouts(times[-1], self._rc_watch[0], self._rc_watch[1], self._rc_table[3], self._rc_table[4],
+                           self._rc_tally, rs, self._rc_n_codes)
             if rs[dk.RS_NTALLY]:
                 self._settle_tally()
         else:

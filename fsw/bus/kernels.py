@@ -290,6 +290,19 @@ def _start_tick(st, ft, cfg, values, i, seq, last_ok_t):  # pragma: no cover - c
     st[S_PHASE] = PHASE_TICK if following > 0 else PHASE_DONE
 
 
+@njit(cache=True)
+def count_timeouts(now, watch, watch_limit, seq, last_ok_t, tally, st, n_codes):  # pragma: no cover - compiled
+    """E2EReceiver.check_timeouts' rule on the receiver's state arrays, shared by both ends of the bus: one
+    timeout counted in ``tally`` when watched message ``watch[j]`` has been silent for longer than
+    ``watch_limit[j]`` at ``now``, re-armed by a valid frame (``seq[m, 1]``)."""
+    for j in range(watch.shape[0]):
+        m = watch[j]
+        if now - last_ok_t[m] > watch_limit[j]:
+            if seq[m, 1] == 0:
+                seq[m, 1] = 1
+                _tally(tally, st, m * n_codes + TIMEOUT_CODE)
+
+
 @njit("void(int64[::1], float64[::1], int64[::1], float64[::1], int64[:, ::1], float64[::1], int64[:, ::1], int64)",
       cache=True)  # (a signature: compiled at import, also where no tick of the warm-up closes incomplete)
 def finish_tick(st, ft, watch, watch_limit, seq, last_ok_t, tally, n_codes):  # pragma: no cover - compiled
@@ -298,13 +311,7 @@ def finish_tick(st, ft, watch, watch_limit, seq, last_ok_t, tally, n_codes):  # 
     the tick becomes the last one."""
     if st[S_RECEIVED] < st[S_EXPECTED]:
         st[S_INCOMPLETE] += 1
-    now = ft[F_T_TICK]
-    for j in range(watch.shape[0]):
-        m = watch[j]
-        if now - last_ok_t[m] > watch_limit[j]:
-            if seq[m, 1] == 0:
-                seq[m, 1] = 1
-                _tally(tally, st, m * n_codes + TIMEOUT_CODE)
+    count_timeouts(ft[F_T_TICK], watch, watch_limit, seq, last_ok_t, tally, st, n_codes)
     st[S_LAST] = st[S_TICK]
     st[S_HAS_LAST] = 1
     st[S_PHASE] = PHASE_DONE
