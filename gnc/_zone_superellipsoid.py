@@ -850,11 +850,78 @@ def boundary_points(W, geom, dim, n):
 # ----------------------------------------------------------------------------------------------
 # Construction of the search structure (numpy, once per zone)
 
-def _cap_of(points: np.ndarray) -> tuple[np.ndarray, float]:
-    axis = points.mean(axis=0)
-    axis /= np.linalg.norm(axis)
-    rho = float(np.max(2.0 * np.arctan2(np.linalg.norm(points - axis, axis=1), np.linalg.norm(points + axis, axis=1))))
-    return axis, rho
+@njit(cache=True)
+def _row_sums(points):
+    """Per group the sum of its rows, in row order: (G, R, dim) -> (G, dim). np.add.reduce over axis 0
+    of a C-ordered (R, dim) block (``mean(axis=0)``) adds the rows one after the other like this."""
+    G, R, dim = points.shape
+    out = np.empty((G, dim))
+    for g in range(G):
+        for i in range(dim):
+            s = points[g, 0, i]
+            for r in range(1, R):
+                s += points[g, r, i]
+            out[g, i] = s
+    return out
+
+
+@njit(cache=True)
+def _nearest_sq_dist(bd, bs):
+    """Per cell and dense point, the squared distance to the nearest sample of the same cell:
+    bd (C, D, dim), bs (C, S, dim) -> (C, D), dim <= 4. Each squared distance is summed in the order of
+    np.einsum("ijk,ijk->ij", diff, diff) over a row of dim <= 4, which reduces one SIMD register of the
+    products: (d0^2 + d2^2) + (d1^2 + d3^2) (tested against it)."""
+    C, D, dim = bd.shape
+    S = bs.shape[1]
+    out = np.empty((C, D))
+    p = np.zeros(4)
+    for c in range(C):
+        for j in range(D):
+            best = np.inf
+            for s in range(S):
+                for i in range(dim):
+                    d = bd[c, j, i] - bs[c, s, i]
+                    p[i] = d * d
+                v = (p[0] + p[2]) + (p[1] + p[3])
+                if np.isnan(v):  # as np.min: a NaN wins
+                    best = v
+                    break
+                if v < best:
+                    best = v
+            out[c, j] = best
+    return out
+
+
+def _caps(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Caps of G point groups at once: points (G, R, dim) -> unit axes (G, dim), half-angles (G,).
+
+    Each group's value is bit for bit that of the per-group numpy expressions
+        axis = P.mean(axis=0); axis /= np.linalg.norm(axis)
+        rho = max(2 arctan2(|P - axis|, |P + axis|))  (row norms: np.linalg.norm(., axis=1))
+    (tested against them): the mean is the same sequential row sum divided by R, the axis norm the
+    same dot product, and the row norms the same 2-D reduction over stacked rows."""
+    G, R, dim = points.shape
+    axis = _row_sums(points) / R
+    for g in range(G):  # np.linalg.norm of a vector is sqrt(x.dot(x)) (BLAS); keep that exact product
+        axis[g] /= math.sqrt(axis[g].dot(axis[g]))
+    rows = points.reshape(G * R, dim)
+    offset = np.repeat(axis, R, axis=0)
+    ang = 2.0 * np.arctan2(np.linalg.norm(rows - offset, axis=1), np.linalg.norm(rows + offset, axis=1))
+    return axis, np.max(ang.reshape(G, R), axis=1)
+
+
+def _inflate(angle: np.ndarray) -> np.ndarray:
+    """min(pi, 1.1 angle + 1e-9) elementwise, Python's min (pi unless strictly smaller)."""
+    v = 1.1 * angle + 1e-9
+    return np.where(v < np.pi, v, np.pi)
+
+
+def _covering_radius(bd: np.ndarray, bs: np.ndarray) -> np.ndarray:
+    """Per cell: the farthest dense point from its nearest sample of the same cell [rad].
+    bd (C, D, dim), bs (C, S, dim) -> (C,)."""
+    C, D, _ = bd.shape
+    chord = np.sqrt(_nearest_sq_dist(bd, bs).reshape(C * D))
+    return np.max((2.0 * np.arcsin(np.minimum(1.0, chord / 2.0))).reshape(C, D), axis=1)
 
 
 def _face_points(axis: int, sign: float, alpha: np.ndarray, beta: np.ndarray) -> np.ndarray:
@@ -867,19 +934,23 @@ def _face_points(axis: int, sign: float, alpha: np.ndarray, beta: np.ndarray) ->
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
-def _cell_grids(n: int, m: int, k: int, sc: int, sub: int):
-    """Per cell (in kernel numbering): its sample w (grid order inside the cell) and a dense
-    sub-sampling including the cell's edges. n = 2: m arcs of k samples on S^1. n = 3: equi-angular
-    cube-sphere, 6 faces x m x m cells of k x k samples, sample index face G^2 + i G + j (G = m k)."""
+def _cell_grids(n: int, m: int, k: int, sc: int, sub: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every cell's samples w (M, k^(n-1), n) (grid order inside the cell) and a dense sub-sampling
+    including the cell's edges (M, (sub k + 1)^(n-1), n), indexed by kernel cell number.
+    n = 2: m arcs of k samples on S^1. n = 3: equi-angular cube-sphere, 6 faces x m x m cells of
+    k x k samples, sample index face G^2 + i G + j (G = m k)."""
     G = m * k
     if n == 2:
         dt = 2.0 * np.pi / G
-        for P in range(m):
-            ts = (P * k + np.arange(k) + 0.5) * dt
-            td = np.linspace(P * k * dt, (P + 1) * k * dt, sub * k + 1)
-            yield P, np.stack([np.cos(ts), np.sin(ts)], axis=1), np.stack([np.cos(td), np.sin(td)], axis=1)
-        return
+        P = np.arange(m)
+        ts = (P[:, None] * k + np.arange(k) + 0.5) * dt
+        # one linspace per arc, as np.linspace(P k dt, (P + 1) k dt, sub k + 1) (the same expressions)
+        td = np.linspace(P * k * dt, (P + 1) * k * dt, sub * k + 1, axis=1)
+        return np.stack([np.cos(ts), np.sin(ts)], axis=-1), np.stack([np.cos(td), np.sin(td)], axis=-1)
     da = 0.5 * np.pi / G
+    M = 6 * m * m
+    ws = np.empty((M, k * k, 3))
+    wd = np.empty((M, (sub * k + 1) ** 2, 3))
     for face in range(6):
         axis, sign = face // 2, (1.0 if face % 2 == 0 else -1.0)
         for bi in range(m):
@@ -889,7 +960,9 @@ def _cell_grids(n: int, m: int, k: int, sc: int, sub: int):
                 a_d = np.linspace(-0.25 * np.pi + bi * k * da, -0.25 * np.pi + (bi + 1) * k * da, sub * k + 1)
                 b_d = np.linspace(-0.25 * np.pi + bj * k * da, -0.25 * np.pi + (bj + 1) * k * da, sub * k + 1)
                 P = face * m * m + ((bi // sc) * (m // sc) + bj // sc) * sc * sc + (bi % sc) * sc + bj % sc
-                yield (P, _face_points(axis, sign, a_s, b_s), _face_points(axis, sign, a_d, b_d))
+                ws[P] = _face_points(axis, sign, a_s, b_s)
+                wd[P] = _face_points(axis, sign, a_d, b_d)
+    return ws, wd
 
 
 def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] | None = None):
@@ -897,7 +970,7 @@ def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] 
     w in the first n columns; scoring reads only the compact b block), cells (M, dim + 4), super-cells (Ms, dim + 2),
     grid = [G, k, m, sc, first sample of each cell (M), 8 neighbour cells of each cell (8M)] (samples per circle / cube-face edge, samples
     per cell edge, cells per circle / face edge, cells per super-cell edge) and cell_of (N,), the cell
-    of every sample."""
+    of every sample. All cells at once (array expressions per element as the per-cell ones)."""
     sub = 4
     if n == 2:
         m, k = resolution or (128, 16)
@@ -912,47 +985,42 @@ def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] 
     else:
         raise ValueError(f"superellipsoid zones are implemented for S^2 and S^3 (n = 2, 3), got n = {n}")
     G = m * k
+    ws, wd = _cell_grids(n, m, k, sc, sub)
+    S, D = ws.shape[1], wd.shape[1]
+    bs = boundary_points(np.ascontiguousarray(ws.reshape(M * S, n)), geom, dim, n).reshape(M, S, dim)
+    bd = boundary_points(np.ascontiguousarray(wd.reshape(M * D, n)), geom, dim, n).reshape(M, D, dim)
+    axis, rho = _caps(bd)
+    # Safety factors: the dense sub-sampling is 4x finer than the samples, so the missed excess
+    # is second order; 10% plus a small absolute margin covers it.
+    rho = _inflate(rho)
+    h = _inflate(_covering_radius(bd, bs))
+    cells = np.empty((M, dim + 4))
+    cells[:, :dim] = axis
+    cells[:, dim:] = np.stack([np.cos(rho), np.sin(rho), np.cos(h), np.sin(h)], axis=1)
     samples = np.zeros((2 * N, dim))
     cell_of = np.empty(N, dtype=np.int32)
-    cells = np.empty((M, dim + 4))
-    dense_of = [None] * M
-    for P, ws, wd in _cell_grids(n, m, k, sc, sub):
-        bs = boundary_points(np.ascontiguousarray(ws), geom, dim, n)
-        bd = boundary_points(np.ascontiguousarray(wd), geom, dim, n)
-        axis, rho = _cap_of(bd)
-        # covering radius: farthest dense point from its nearest sample of the same cell
-        diff = bd[:, None, :] - bs[None, :, :]
-        chord = np.sqrt(np.min(np.einsum("ijk,ijk->ij", diff, diff), axis=1))
-        h = float(np.max(2.0 * np.arcsin(np.minimum(1.0, chord / 2.0))))
-        # Safety factors: the dense sub-sampling is 4x finer than the samples, so the missed excess
-        # is second order; 10% plus a small absolute margin covers it.
-        rho = min(np.pi, 1.1 * rho + 1e-9)
-        h = min(np.pi, 1.1 * h + 1e-9)
-        cells[P] = np.concatenate([axis, [np.cos(rho), np.sin(rho), np.cos(h), np.sin(h)]])
-        dense_of[P] = bd
-        rows = np.hstack([bs, ws, np.zeros((len(ws), dim - n))])  # [b (dim), w (n), pad]
-        if n == 2:
-            samples[P * k:(P + 1) * k] = rows[:, :dim]
-            samples[N + P * k:N + (P + 1) * k] = rows[:, dim:]
-            cell_of[P * k:(P + 1) * k] = P
-        else:
+    if n == 2:
+        samples[:N] = bs.reshape(N, dim)
+        samples[N:, :n] = ws.reshape(N, n)
+        cell_of[:] = np.repeat(np.arange(M, dtype=np.int32), k)
+    else:
+        for P in range(M):
             face, rem = divmod(P, m * m)
-            S, t = divmod(rem, sc * sc)
-            SI, SJ = divmod(S, m // sc)
+            Sp, t = divmod(rem, sc * sc)
+            SI, SJ = divmod(Sp, m // sc)
             ti, tj = divmod(t, sc)
             bi, bj = SI * sc + ti, SJ * sc + tj
-            blk = rows.reshape(k, k, 2 * dim)
             for a in range(k):
                 base = face * G * G + (bi * k + a) * G + bj * k
-                samples[base:base + k] = blk[a, :, :dim]
-                samples[N + base:N + base + k] = blk[a, :, dim:]
+                samples[base:base + k] = bs[P, a * k:(a + 1) * k]
+                samples[N + base:N + base + k, :n] = ws[P, a * k:(a + 1) * k]
                 cell_of[base:base + k] = P
     per_super = sc if n == 2 else sc * sc
+    s_axis, s_rho = _caps(bd.reshape(M // per_super, per_super * D, dim))
+    s_rho = _inflate(s_rho)
     supers = np.empty((M // per_super, dim + 2))
-    for S in range(M // per_super):
-        axis, rho = _cap_of(np.vstack(dense_of[S * per_super:(S + 1) * per_super]))
-        rho = min(np.pi, 1.1 * rho + 1e-9)
-        supers[S] = np.concatenate([axis, [np.cos(rho), np.sin(rho)]])
+    supers[:, :dim] = s_axis
+    supers[:, dim:] = np.stack([np.cos(s_rho), np.sin(s_rho)], axis=1)
     if n == 2:
         first = np.arange(M, dtype=np.int64) * k
     else:
