@@ -868,21 +868,24 @@ def _row_sums(points):
 @njit(cache=True)
 def _nearest_sq_dist(bd, bs):
     """Per cell and dense point, the squared distance to the nearest sample of the same cell:
-    bd (C, D, dim), bs (C, S, dim) -> (C, D), dim <= 4. Each squared distance is summed in the order of
+    bd (C, D, dim), bs (C, S, dim) -> (C, D), dim 3 or 4. Each squared distance is summed in the order of
     np.einsum("ijk,ijk->ij", diff, diff) over a row of dim <= 4, which reduces one SIMD register of the
     products: (d0^2 + d2^2) + (d1^2 + d3^2) (tested against it)."""
     C, D, dim = bd.shape
     S = bs.shape[1]
     out = np.empty((C, D))
-    p = np.zeros(4)
     for c in range(C):
         for j in range(D):
             best = np.inf
             for s in range(S):
-                for i in range(dim):
-                    d = bd[c, j, i] - bs[c, s, i]
-                    p[i] = d * d
-                v = (p[0] + p[2]) + (p[1] + p[3])
+                d0 = bd[c, j, 0] - bs[c, s, 0]
+                d1 = bd[c, j, 1] - bs[c, s, 1]
+                d2 = bd[c, j, 2] - bs[c, s, 2]
+                p3 = 0.0
+                if dim == 4:
+                    d3 = bd[c, j, 3] - bs[c, s, 3]
+                    p3 = d3 * d3
+                v = (d0 * d0 + d2 * d2) + (d1 * d1 + p3)
                 if np.isnan(v):  # as np.min: a NaN wins
                     best = v
                     break
@@ -892,6 +895,32 @@ def _nearest_sq_dist(bd, bs):
     return out
 
 
+@njit(cache=True)
+def _cap_norms(points, axis):
+    """|p - axis| and |p + axis| for every point p of each group: points (G, R, dim), axis (G, dim) ->
+    two (G, R) arrays, each norm as np.linalg.norm(., axis=1) of a (R, dim) block: the squares summed in
+    order (tested against it)."""
+    G, R, dim = points.shape
+    minus = np.empty((G, R))
+    plus = np.empty((G, R))
+    for g in range(G):
+        for r in range(R):
+            sm = 0.0
+            sp = 0.0
+            for i in range(dim):
+                dm = points[g, r, i] - axis[g, i]
+                dp = points[g, r, i] + axis[g, i]
+                if i == 0:
+                    sm = dm * dm
+                    sp = dp * dp
+                else:
+                    sm += dm * dm
+                    sp += dp * dp
+            minus[g, r] = math.sqrt(sm)
+            plus[g, r] = math.sqrt(sp)
+    return minus, plus
+
+
 def _caps(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Caps of G point groups at once: points (G, R, dim) -> unit axes (G, dim), half-angles (G,).
 
@@ -899,15 +928,13 @@ def _caps(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         axis = P.mean(axis=0); axis /= np.linalg.norm(axis)
         rho = max(2 arctan2(|P - axis|, |P + axis|))  (row norms: np.linalg.norm(., axis=1))
     (tested against them): the mean is the same sequential row sum divided by R, the axis norm the
-    same dot product, and the row norms the same 2-D reduction over stacked rows."""
+    same dot product, the row norms the same sums of squares in order."""
     G, R, dim = points.shape
     axis = _row_sums(points) / R
     for g in range(G):  # np.linalg.norm of a vector is sqrt(x.dot(x)) (BLAS); keep that exact product
         axis[g] /= math.sqrt(axis[g].dot(axis[g]))
-    rows = points.reshape(G * R, dim)
-    offset = np.repeat(axis, R, axis=0)
-    ang = 2.0 * np.arctan2(np.linalg.norm(rows - offset, axis=1), np.linalg.norm(rows + offset, axis=1))
-    return axis, np.max(ang.reshape(G, R), axis=1)
+    minus, plus = _cap_norms(points, axis)
+    return axis, np.max(2.0 * np.arctan2(minus, plus), axis=1)
 
 
 def _inflate(angle: np.ndarray) -> np.ndarray:
