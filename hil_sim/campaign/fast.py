@@ -196,7 +196,10 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         # The flight software's clock is the simulation clock: a cycle's execution time on this (shared)
         # host must not change its behaviour (a slip feeds FDIR), or runs would not reproduce exactly.
         # Execution-time overruns are a real-time property, measured by `keepout sil run --realtime`.
-        fsw = FlightSoftware(cfg, driver, telemetry=telemetry, dispatcher=dispatcher, clock=lambda: sim.t_s)
+        # It reads sim.t_s as set below at each tick's start and at the stop: the simulator advances
+        # its tick only in end_tick, so between those points sim.t_s is that value (read ~5 times a cycle).
+        now_s = [sim.t_s]
+        fsw = FlightSoftware(cfg, driver, telemetry=telemetry, dispatcher=dispatcher, clock=lambda: now_s[0])
         sender = _InProcessSender(dispatcher)
         timeline = Timeline(mission, sender)
         n_ticks = int(round(mission.duration_s / cfg.gnc_period_s))
@@ -207,6 +210,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         next_command_s = _next_command_s(timeline)
         for row in range(n_ticks):  # row: the truth row of this tick (recorded before it)
             t_s = sim.t_s
+            now_s[0] = t_s
             telemetry.now = t_s
             if next_command_s <= t_s + 1e-9:  # Timeline.release's own test, asked only when it can pass
                 timeline.release(t_s)
@@ -230,6 +234,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
                          events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events if n == "FDIR_TRIPPED"][:200])
     finally:
         if fsw is not None:
+            now_s[0] = sim.t_s  # the flight software's clock at its stop
             fsw.shutdown()
         sim_bus.shutdown()
         fsw_bus.shutdown()
