@@ -951,14 +951,32 @@ def _covering_radius(bd: np.ndarray, bs: np.ndarray) -> np.ndarray:
     return np.max((2.0 * np.arcsin(np.minimum(1.0, chord / 2.0))).reshape(C, D), axis=1)
 
 
-def _face_points(axis: int, sign: float, alpha: np.ndarray, beta: np.ndarray) -> np.ndarray:
-    A, Bg = np.meshgrid(alpha, beta, indexing="ij")
-    v = np.empty(A.shape + (3,))
+def _cell_index(m: int, sc: int, bi: np.ndarray, bj: np.ndarray) -> np.ndarray:
+    """Kernel number of cell (bi, bj) within its cube face (cells grouped by sc x sc super-cell)."""
+    return ((bi // sc) * (m // sc) + bj // sc) * sc * sc + (bi % sc) * sc + bj % sc
+
+
+def _cell_coordinates(m: int, sc: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Face, row bi and column bj of every cell in kernel numbering (6 m^2 cells), int64 arrays."""
+    P = np.arange(6 * m * m, dtype=np.int64)
+    face, rem = np.divmod(P, m * m)
+    S, t = np.divmod(rem, sc * sc)
+    SI, SJ = np.divmod(S, m // sc)
+    ti, tj = np.divmod(t, sc)
+    return face, SI * sc + ti, SJ * sc + tj
+
+
+def _face_points(axis: int, sign: float, tan_angles: np.ndarray, bi: np.ndarray, bj: np.ndarray) -> np.ndarray:
+    """Unit directions of the equi-angular grid of cells (bi, bj) of one cube face: point (i, j) of a cell
+    is (sign, tan alpha_i, tan beta_j) in the face's axis order, alpha from row bi and beta from row bj of
+    the per-row angles' tangents (m, K) -> (cells, K K, 3), normalised as np.linalg.norm rows."""
+    K = tan_angles.shape[1]
+    v = np.empty((len(bi), K, K, 3))
     v[..., axis] = sign
-    v[..., (axis + 1) % 3] = np.tan(A)
-    v[..., (axis + 2) % 3] = np.tan(Bg)
+    v[..., (axis + 1) % 3] = tan_angles[bi][:, :, None]
+    v[..., (axis + 2) % 3] = tan_angles[bj][:, None, :]
     v = v.reshape(-1, 3)
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
+    return (v / np.linalg.norm(v, axis=1, keepdims=True)).reshape(len(bi), K * K, 3)
 
 
 def _cell_grids(n: int, m: int, k: int, sc: int, sub: int) -> tuple[np.ndarray, np.ndarray]:
@@ -976,19 +994,18 @@ def _cell_grids(n: int, m: int, k: int, sc: int, sub: int) -> tuple[np.ndarray, 
         return np.stack([np.cos(ts), np.sin(ts)], axis=-1), np.stack([np.cos(td), np.sin(td)], axis=-1)
     da = 0.5 * np.pi / G
     M = 6 * m * m
+    row = np.arange(m)
+    # per row of cells: its sample angles and its dense angles (one linspace per row, as per cell)
+    tan_s = np.tan(-0.25 * np.pi + (row[:, None] * k + np.arange(k) + 0.5) * da)
+    tan_d = np.tan(np.linspace(-0.25 * np.pi + row * k * da, -0.25 * np.pi + (row + 1) * k * da, sub * k + 1, axis=1))
+    bi, bj = np.divmod(np.arange(m * m), m)
+    in_face = _cell_index(m, sc, bi, bj)
     ws = np.empty((M, k * k, 3))
     wd = np.empty((M, (sub * k + 1) ** 2, 3))
     for face in range(6):
         axis, sign = face // 2, (1.0 if face % 2 == 0 else -1.0)
-        for bi in range(m):
-            for bj in range(m):
-                a_s = -0.25 * np.pi + (bi * k + np.arange(k) + 0.5) * da
-                b_s = -0.25 * np.pi + (bj * k + np.arange(k) + 0.5) * da
-                a_d = np.linspace(-0.25 * np.pi + bi * k * da, -0.25 * np.pi + (bi + 1) * k * da, sub * k + 1)
-                b_d = np.linspace(-0.25 * np.pi + bj * k * da, -0.25 * np.pi + (bj + 1) * k * da, sub * k + 1)
-                P = face * m * m + ((bi // sc) * (m // sc) + bj // sc) * sc * sc + (bi % sc) * sc + bj % sc
-                ws[P] = _face_points(axis, sign, a_s, b_s)
-                wd[P] = _face_points(axis, sign, a_d, b_d)
+        ws[face * m * m + in_face] = _face_points(axis, sign, tan_s, bi, bj)
+        wd[face * m * m + in_face] = _face_points(axis, sign, tan_d, bi, bj)
     return ws, wd
 
 
@@ -1031,52 +1048,35 @@ def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] 
         samples[N:, :n] = ws.reshape(N, n)
         cell_of[:] = np.repeat(np.arange(M, dtype=np.int32), k)
     else:
-        for P in range(M):
-            face, rem = divmod(P, m * m)
-            Sp, t = divmod(rem, sc * sc)
-            SI, SJ = divmod(Sp, m // sc)
-            ti, tj = divmod(t, sc)
-            bi, bj = SI * sc + ti, SJ * sc + tj
-            for a in range(k):
-                base = face * G * G + (bi * k + a) * G + bj * k
-                samples[base:base + k] = bs[P, a * k:(a + 1) * k]
-                samples[N + base:N + base + k, :n] = ws[P, a * k:(a + 1) * k]
-                cell_of[base:base + k] = P
+        # each cell's face and (row, column) on it, then its samples' grid indices (P, a, b)
+        face, bi, bj = _cell_coordinates(m, sc)
+        a = np.arange(k)
+        idx = (face[:, None, None] * G * G + (bi[:, None, None] * k + a[None, :, None]) * G
+               + bj[:, None, None] * k + a[None, None, :]).reshape(M * k * k)
+        samples[idx] = bs.reshape(M * k * k, dim)
+        samples[N + idx, :n] = ws.reshape(M * k * k, n)
+        cell_of[idx] = np.repeat(np.arange(M, dtype=np.int32), k * k)
     per_super = sc if n == 2 else sc * sc
     s_axis, s_rho = _caps(bd.reshape(M // per_super, per_super * D, dim))
     s_rho = _inflate(s_rho)
     supers = np.empty((M // per_super, dim + 2))
     supers[:, :dim] = s_axis
     supers[:, dim:] = np.stack([np.cos(s_rho), np.sin(s_rho)], axis=1)
+    # the 8 neighbour cells of every cell on the same cube face (-1 across a face edge; unused on S^1)
+    adj = -np.ones((M, 8), dtype=np.int64)
     if n == 2:
         first = np.arange(M, dtype=np.int64) * k
     else:
-        first = np.empty(M, dtype=np.int64)
-        for P in range(M):
-            face, rem = divmod(P, m * m)
-            S, t = divmod(rem, sc * sc)
-            SI, SJ = divmod(S, m // sc)
-            ti, tj = divmod(t, sc)
-            first[P] = face * G * G + (SI * sc + ti) * k * G + (SJ * sc + tj) * k
-    # the 8 neighbour cells of every cell on the same cube face (-1 across a face edge; unused on S^1)
-    adj = -np.ones((M, 8), dtype=np.int64)
-    if n == 3:
-        for P in range(M):
-            face, rem = divmod(P, m * m)
-            S, t = divmod(rem, sc * sc)
-            SI, SJ = divmod(S, m // sc)
-            ti, tj = divmod(t, sc)
-            bi, bj = SI * sc + ti, SJ * sc + tj
-            q = 0
-            for di in (-1, 0, 1):
-                for dj in (-1, 0, 1):
-                    if di == 0 and dj == 0:
-                        continue
-                    ni, nj = bi + di, bj + dj
-                    if 0 <= ni < m and 0 <= nj < m:
-                        adj[P, q] = (face * m * m + ((ni // sc) * (m // sc) + nj // sc) * sc * sc
-                                     + (ni % sc) * sc + nj % sc)
-                    q += 1
+        first = face * G * G + bi * k * G + bj * k
+        q = 0
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                if di == 0 and dj == 0:
+                    continue
+                ni, nj = bi + di, bj + dj
+                ok = (0 <= ni) & (ni < m) & (0 <= nj) & (nj < m)
+                adj[ok, q] = face[ok] * m * m + _cell_index(m, sc, ni[ok], nj[ok])
+                q += 1
     grid = np.concatenate([np.array([G, k, m, sc], dtype=np.int64), first, adj.ravel()])
     return (np.ascontiguousarray(samples), np.ascontiguousarray(cells), np.ascontiguousarray(supers),
             grid, cell_of)
