@@ -218,3 +218,21 @@ def test_caps_match_per_group_cap_of():
     for g in range(9):
         ref_axis, ref_rho = _ref_cap_of(pts[g])
         assert _bitwise_equal(ref_axis, axis[g]) and ref_rho == rho[g]
+
+
+def test_cells_cached_by_exact_geometry():
+    from gnc import zones
+
+    zones._CELLS_CACHE.clear()
+    c = np.array([0.3, -0.5, 0.8])
+    first = zones.StarZone.superellipsoid(c, None, (0.4, 0.25), 0.7)
+    again = zones.StarZone.superellipsoid(c, None, (0.4, 0.25), 0.7)
+    other = zones.StarZone.superellipsoid(c, None, (0.4, 0.2500000001), 0.7)
+    assert again._samples is first._samples and other._samples is not first._samples
+    fresh = _ref_build_cells(first._geom, 3, 2)
+    assert all(_bitwise_equal(a, b) for a, b in zip(fresh, (again._samples, again._cells, again._supers, again._grid,
+                                                           again._cell_of)))
+    X = np.random.default_rng(1).standard_normal((50, 3))
+    X /= np.linalg.norm(X, axis=1, keepdims=True)
+    assert np.array_equal(first.signed_separation_batch(X), again.signed_separation_batch(X))
+    zones._CELLS_CACHE.clear()
