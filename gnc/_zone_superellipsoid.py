@@ -848,7 +848,7 @@ def boundary_points(W, geom, dim, n):
 
 
 # ----------------------------------------------------------------------------------------------
-# Construction of the search structure (numpy, once per zone)
+# Construction of the search structure (once per zone: array expressions and small kernels)
 
 @njit(cache=True)
 def _row_sums(points):
