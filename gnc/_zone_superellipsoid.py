@@ -848,48 +848,165 @@ def boundary_points(W, geom, dim, n):
 
 
 # ----------------------------------------------------------------------------------------------
-# Construction of the search structure (numpy, once per zone)
+# Construction of the search structure (once per zone: array expressions and small kernels)
 
-def _cap_of(points: np.ndarray) -> tuple[np.ndarray, float]:
-    axis = points.mean(axis=0)
-    axis /= np.linalg.norm(axis)
-    rho = float(np.max(2.0 * np.arctan2(np.linalg.norm(points - axis, axis=1), np.linalg.norm(points + axis, axis=1))))
-    return axis, rho
+@njit(cache=True)
+def _row_sums(points):
+    """Per group the sum of its rows, in row order: (G, R, dim) -> (G, dim). np.add.reduce over axis 0
+    of a C-ordered (R, dim) block (``mean(axis=0)``) adds the rows one after the other like this."""
+    G, R, dim = points.shape
+    out = np.empty((G, dim))
+    for g in range(G):
+        for i in range(dim):
+            s = points[g, 0, i]
+            for r in range(1, R):
+                s += points[g, r, i]
+            out[g, i] = s
+    return out
 
 
-def _face_points(axis: int, sign: float, alpha: np.ndarray, beta: np.ndarray) -> np.ndarray:
-    A, Bg = np.meshgrid(alpha, beta, indexing="ij")
-    v = np.empty(A.shape + (3,))
+@njit(cache=True)
+def _nearest_sq_dist(bd, bs):
+    """Per cell and dense point, the squared distance to the nearest sample of the same cell:
+    bd (C, D, dim), bs (C, S, dim) -> (C, D), dim 3 or 4. Each squared distance is summed in the order of
+    np.einsum("ijk,ijk->ij", diff, diff) over a row of dim <= 4, which reduces one SIMD register of the
+    products: (d0^2 + d2^2) + (d1^2 + d3^2) (tested against it)."""
+    C, D, dim = bd.shape
+    S = bs.shape[1]
+    out = np.empty((C, D))
+    for c in range(C):
+        for j in range(D):
+            best = np.inf
+            for s in range(S):
+                d0 = bd[c, j, 0] - bs[c, s, 0]
+                d1 = bd[c, j, 1] - bs[c, s, 1]
+                d2 = bd[c, j, 2] - bs[c, s, 2]
+                p3 = 0.0
+                if dim == 4:
+                    d3 = bd[c, j, 3] - bs[c, s, 3]
+                    p3 = d3 * d3
+                v = (d0 * d0 + d2 * d2) + (d1 * d1 + p3)
+                if np.isnan(v):  # as np.min: a NaN wins
+                    best = v
+                    break
+                if v < best:
+                    best = v
+            out[c, j] = best
+    return out
+
+
+@njit(cache=True)
+def _cap_norms(points, axis):
+    """|p - axis| and |p + axis| for every point p of each group: points (G, R, dim), axis (G, dim) ->
+    two (G, R) arrays, each norm as np.linalg.norm(., axis=1) of a (R, dim) block: the squares summed in
+    order (tested against it)."""
+    G, R, dim = points.shape
+    minus = np.empty((G, R))
+    plus = np.empty((G, R))
+    for g in range(G):
+        for r in range(R):
+            sm = 0.0
+            sp = 0.0
+            for i in range(dim):
+                dm = points[g, r, i] - axis[g, i]
+                dp = points[g, r, i] + axis[g, i]
+                if i == 0:
+                    sm = dm * dm
+                    sp = dp * dp
+                else:
+                    sm += dm * dm
+                    sp += dp * dp
+            minus[g, r] = math.sqrt(sm)
+            plus[g, r] = math.sqrt(sp)
+    return minus, plus
+
+
+def _caps(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Caps of G point groups at once: points (G, R, dim) -> unit axes (G, dim), half-angles (G,).
+
+    Each group's value is bit for bit that of the per-group numpy expressions
+        axis = P.mean(axis=0); axis /= np.linalg.norm(axis)
+        rho = max(2 arctan2(|P - axis|, |P + axis|))  (row norms: np.linalg.norm(., axis=1))
+    (tested against them): the mean is the same sequential row sum divided by R, the axis norm the
+    same dot product, the row norms the same sums of squares in order."""
+    G, R, dim = points.shape
+    axis = _row_sums(points) / R
+    for g in range(G):  # np.linalg.norm of a vector is sqrt(x.dot(x)) (BLAS); keep that exact product
+        axis[g] /= math.sqrt(axis[g].dot(axis[g]))
+    minus, plus = _cap_norms(points, axis)
+    return axis, np.max(2.0 * np.arctan2(minus, plus), axis=1)
+
+
+def _inflate(angle: np.ndarray) -> np.ndarray:
+    """min(pi, 1.1 angle + 1e-9) elementwise, Python's min (pi unless strictly smaller)."""
+    v = 1.1 * angle + 1e-9
+    return np.where(v < np.pi, v, np.pi)
+
+
+def _covering_radius(bd: np.ndarray, bs: np.ndarray) -> np.ndarray:
+    """Per cell: the farthest dense point from its nearest sample of the same cell [rad].
+    bd (C, D, dim), bs (C, S, dim) -> (C,)."""
+    C, D, _ = bd.shape
+    chord = np.sqrt(_nearest_sq_dist(bd, bs).reshape(C * D))
+    return np.max((2.0 * np.arcsin(np.minimum(1.0, chord / 2.0))).reshape(C, D), axis=1)
+
+
+def _cell_index(m: int, sc: int, bi: np.ndarray, bj: np.ndarray) -> np.ndarray:
+    """Kernel number of cell (bi, bj) within its cube face (cells grouped by sc x sc super-cell)."""
+    return ((bi // sc) * (m // sc) + bj // sc) * sc * sc + (bi % sc) * sc + bj % sc
+
+
+def _cell_coordinates(m: int, sc: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Face, row bi and column bj of every cell in kernel numbering (6 m^2 cells), int64 arrays."""
+    P = np.arange(6 * m * m, dtype=np.int64)
+    face, rem = np.divmod(P, m * m)
+    S, t = np.divmod(rem, sc * sc)
+    SI, SJ = np.divmod(S, m // sc)
+    ti, tj = np.divmod(t, sc)
+    return face, SI * sc + ti, SJ * sc + tj
+
+
+def _face_points(axis: int, sign: float, tan_angles: np.ndarray, bi: np.ndarray, bj: np.ndarray) -> np.ndarray:
+    """Unit directions of the equi-angular grid of cells (bi, bj) of one cube face: point (i, j) of a cell
+    is (sign, tan alpha_i, tan beta_j) in the face's axis order, alpha from row bi and beta from row bj of
+    the per-row angles' tangents (m, K) -> (cells, K K, 3), normalised as np.linalg.norm rows."""
+    K = tan_angles.shape[1]
+    v = np.empty((len(bi), K, K, 3))
     v[..., axis] = sign
-    v[..., (axis + 1) % 3] = np.tan(A)
-    v[..., (axis + 2) % 3] = np.tan(Bg)
+    v[..., (axis + 1) % 3] = tan_angles[bi][:, :, None]
+    v[..., (axis + 2) % 3] = tan_angles[bj][:, None, :]
     v = v.reshape(-1, 3)
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
+    return (v / np.linalg.norm(v, axis=1, keepdims=True)).reshape(len(bi), K * K, 3)
 
 
-def _cell_grids(n: int, m: int, k: int, sc: int, sub: int):
-    """Per cell (in kernel numbering): its sample w (grid order inside the cell) and a dense
-    sub-sampling including the cell's edges. n = 2: m arcs of k samples on S^1. n = 3: equi-angular
-    cube-sphere, 6 faces x m x m cells of k x k samples, sample index face G^2 + i G + j (G = m k)."""
+def _cell_grids(n: int, m: int, k: int, sc: int, sub: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every cell's samples w (M, k^(n-1), n) (grid order inside the cell) and a dense sub-sampling
+    including the cell's edges (M, (sub k + 1)^(n-1), n), indexed by kernel cell number.
+    n = 2: m arcs of k samples on S^1. n = 3: equi-angular cube-sphere, 6 faces x m x m cells of
+    k x k samples, sample index face G^2 + i G + j (G = m k)."""
     G = m * k
     if n == 2:
         dt = 2.0 * np.pi / G
-        for P in range(m):
-            ts = (P * k + np.arange(k) + 0.5) * dt
-            td = np.linspace(P * k * dt, (P + 1) * k * dt, sub * k + 1)
-            yield P, np.stack([np.cos(ts), np.sin(ts)], axis=1), np.stack([np.cos(td), np.sin(td)], axis=1)
-        return
+        P = np.arange(m)
+        ts = (P[:, None] * k + np.arange(k) + 0.5) * dt
+        # one linspace per arc, as np.linspace(P k dt, (P + 1) k dt, sub k + 1) (the same expressions)
+        td = np.linspace(P * k * dt, (P + 1) * k * dt, sub * k + 1, axis=1)
+        return np.stack([np.cos(ts), np.sin(ts)], axis=-1), np.stack([np.cos(td), np.sin(td)], axis=-1)
     da = 0.5 * np.pi / G
+    M = 6 * m * m
+    row = np.arange(m)
+    # per row of cells: its sample angles and its dense angles (one linspace per row, as per cell)
+    tan_s = np.tan(-0.25 * np.pi + (row[:, None] * k + np.arange(k) + 0.5) * da)
+    tan_d = np.tan(np.linspace(-0.25 * np.pi + row * k * da, -0.25 * np.pi + (row + 1) * k * da, sub * k + 1, axis=1))
+    bi, bj = np.divmod(np.arange(m * m), m)
+    in_face = _cell_index(m, sc, bi, bj)
+    ws = np.empty((M, k * k, 3))
+    wd = np.empty((M, (sub * k + 1) ** 2, 3))
     for face in range(6):
         axis, sign = face // 2, (1.0 if face % 2 == 0 else -1.0)
-        for bi in range(m):
-            for bj in range(m):
-                a_s = -0.25 * np.pi + (bi * k + np.arange(k) + 0.5) * da
-                b_s = -0.25 * np.pi + (bj * k + np.arange(k) + 0.5) * da
-                a_d = np.linspace(-0.25 * np.pi + bi * k * da, -0.25 * np.pi + (bi + 1) * k * da, sub * k + 1)
-                b_d = np.linspace(-0.25 * np.pi + bj * k * da, -0.25 * np.pi + (bj + 1) * k * da, sub * k + 1)
-                P = face * m * m + ((bi // sc) * (m // sc) + bj // sc) * sc * sc + (bi % sc) * sc + bj % sc
-                yield (P, _face_points(axis, sign, a_s, b_s), _face_points(axis, sign, a_d, b_d))
+        ws[face * m * m + in_face] = _face_points(axis, sign, tan_s, bi, bj)
+        wd[face * m * m + in_face] = _face_points(axis, sign, tan_d, bi, bj)
+    return ws, wd
 
 
 def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] | None = None):
@@ -897,7 +1014,7 @@ def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] 
     w in the first n columns; scoring reads only the compact b block), cells (M, dim + 4), super-cells (Ms, dim + 2),
     grid = [G, k, m, sc, first sample of each cell (M), 8 neighbour cells of each cell (8M)] (samples per circle / cube-face edge, samples
     per cell edge, cells per circle / face edge, cells per super-cell edge) and cell_of (N,), the cell
-    of every sample."""
+    of every sample. All cells at once (array expressions per element as the per-cell ones)."""
     sub = 4
     if n == 2:
         m, k = resolution or (128, 16)
@@ -912,76 +1029,54 @@ def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] 
     else:
         raise ValueError(f"superellipsoid zones are implemented for S^2 and S^3 (n = 2, 3), got n = {n}")
     G = m * k
+    ws, wd = _cell_grids(n, m, k, sc, sub)
+    S, D = ws.shape[1], wd.shape[1]
+    bs = boundary_points(np.ascontiguousarray(ws.reshape(M * S, n)), geom, dim, n).reshape(M, S, dim)
+    bd = boundary_points(np.ascontiguousarray(wd.reshape(M * D, n)), geom, dim, n).reshape(M, D, dim)
+    axis, rho = _caps(bd)
+    # Safety factors: the dense sub-sampling is 4x finer than the samples, so the missed excess
+    # is second order; 10% plus a small absolute margin covers it.
+    rho = _inflate(rho)
+    h = _inflate(_covering_radius(bd, bs))
+    cells = np.empty((M, dim + 4))
+    cells[:, :dim] = axis
+    cells[:, dim:] = np.stack([np.cos(rho), np.sin(rho), np.cos(h), np.sin(h)], axis=1)
     samples = np.zeros((2 * N, dim))
     cell_of = np.empty(N, dtype=np.int32)
-    cells = np.empty((M, dim + 4))
-    dense_of = [None] * M
-    for P, ws, wd in _cell_grids(n, m, k, sc, sub):
-        bs = boundary_points(np.ascontiguousarray(ws), geom, dim, n)
-        bd = boundary_points(np.ascontiguousarray(wd), geom, dim, n)
-        axis, rho = _cap_of(bd)
-        # covering radius: farthest dense point from its nearest sample of the same cell
-        diff = bd[:, None, :] - bs[None, :, :]
-        chord = np.sqrt(np.min(np.einsum("ijk,ijk->ij", diff, diff), axis=1))
-        h = float(np.max(2.0 * np.arcsin(np.minimum(1.0, chord / 2.0))))
-        # Safety factors: the dense sub-sampling is 4x finer than the samples, so the missed excess
-        # is second order; 10% plus a small absolute margin covers it.
-        rho = min(np.pi, 1.1 * rho + 1e-9)
-        h = min(np.pi, 1.1 * h + 1e-9)
-        cells[P] = np.concatenate([axis, [np.cos(rho), np.sin(rho), np.cos(h), np.sin(h)]])
-        dense_of[P] = bd
-        rows = np.hstack([bs, ws, np.zeros((len(ws), dim - n))])  # [b (dim), w (n), pad]
-        if n == 2:
-            samples[P * k:(P + 1) * k] = rows[:, :dim]
-            samples[N + P * k:N + (P + 1) * k] = rows[:, dim:]
-            cell_of[P * k:(P + 1) * k] = P
-        else:
-            face, rem = divmod(P, m * m)
-            S, t = divmod(rem, sc * sc)
-            SI, SJ = divmod(S, m // sc)
-            ti, tj = divmod(t, sc)
-            bi, bj = SI * sc + ti, SJ * sc + tj
-            blk = rows.reshape(k, k, 2 * dim)
-            for a in range(k):
-                base = face * G * G + (bi * k + a) * G + bj * k
-                samples[base:base + k] = blk[a, :, :dim]
-                samples[N + base:N + base + k] = blk[a, :, dim:]
-                cell_of[base:base + k] = P
+    if n == 2:
+        samples[:N] = bs.reshape(N, dim)
+        samples[N:, :n] = ws.reshape(N, n)
+        cell_of[:] = np.repeat(np.arange(M, dtype=np.int32), k)
+    else:
+        # each cell's face and (row, column) on it, then its samples' grid indices (P, a, b)
+        face, bi, bj = _cell_coordinates(m, sc)
+        a = np.arange(k)
+        idx = (face[:, None, None] * G * G + (bi[:, None, None] * k + a[None, :, None]) * G
+               + bj[:, None, None] * k + a[None, None, :]).reshape(M * k * k)
+        samples[idx] = bs.reshape(M * k * k, dim)
+        samples[N + idx, :n] = ws.reshape(M * k * k, n)
+        cell_of[idx] = np.repeat(np.arange(M, dtype=np.int32), k * k)
     per_super = sc if n == 2 else sc * sc
+    s_axis, s_rho = _caps(bd.reshape(M // per_super, per_super * D, dim))
+    s_rho = _inflate(s_rho)
     supers = np.empty((M // per_super, dim + 2))
-    for S in range(M // per_super):
-        axis, rho = _cap_of(np.vstack(dense_of[S * per_super:(S + 1) * per_super]))
-        rho = min(np.pi, 1.1 * rho + 1e-9)
-        supers[S] = np.concatenate([axis, [np.cos(rho), np.sin(rho)]])
+    supers[:, :dim] = s_axis
+    supers[:, dim:] = np.stack([np.cos(s_rho), np.sin(s_rho)], axis=1)
+    # the 8 neighbour cells of every cell on the same cube face (-1 across a face edge; unused on S^1)
+    adj = -np.ones((M, 8), dtype=np.int64)
     if n == 2:
         first = np.arange(M, dtype=np.int64) * k
     else:
-        first = np.empty(M, dtype=np.int64)
-        for P in range(M):
-            face, rem = divmod(P, m * m)
-            S, t = divmod(rem, sc * sc)
-            SI, SJ = divmod(S, m // sc)
-            ti, tj = divmod(t, sc)
-            first[P] = face * G * G + (SI * sc + ti) * k * G + (SJ * sc + tj) * k
-    # the 8 neighbour cells of every cell on the same cube face (-1 across a face edge; unused on S^1)
-    adj = -np.ones((M, 8), dtype=np.int64)
-    if n == 3:
-        for P in range(M):
-            face, rem = divmod(P, m * m)
-            S, t = divmod(rem, sc * sc)
-            SI, SJ = divmod(S, m // sc)
-            ti, tj = divmod(t, sc)
-            bi, bj = SI * sc + ti, SJ * sc + tj
-            q = 0
-            for di in (-1, 0, 1):
-                for dj in (-1, 0, 1):
-                    if di == 0 and dj == 0:
-                        continue
-                    ni, nj = bi + di, bj + dj
-                    if 0 <= ni < m and 0 <= nj < m:
-                        adj[P, q] = (face * m * m + ((ni // sc) * (m // sc) + nj // sc) * sc * sc
-                                     + (ni % sc) * sc + nj % sc)
-                    q += 1
+        first = face * G * G + bi * k * G + bj * k
+        q = 0
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                if di == 0 and dj == 0:
+                    continue
+                ni, nj = bi + di, bj + dj
+                ok = (0 <= ni) & (ni < m) & (0 <= nj) & (nj < m)
+                adj[ok, q] = face[ok] * m * m + _cell_index(m, sc, ni[ok], nj[ok])
+                q += 1
     grid = np.concatenate([np.array([G, k, m, sc], dtype=np.int64), first, adj.ravel()])
     return (np.ascontiguousarray(samples), np.ascontiguousarray(cells), np.ascontiguousarray(supers),
             grid, cell_of)

@@ -77,6 +77,25 @@ def default_tangent_basis(center: ArrayLike) -> NDArray[np.float64]:
     return np.stack(cols, axis=1)
 
 
+# The superellipsoid search structure by its exact inputs (geometry vector, resolution): ~45 ms to build
+# on S^3, ~1.5 ms on S^2. A campaign worker builds the same zones run after run (the flight software's and
+# the judge's attitude zones of a mission; its sky zones when the epoch is not dispersed). The arrays are
+# only read once built (the kernels never write them), so zones may share them.
+_CELLS_CACHE: dict[tuple, tuple] = {}
+_CELLS_CACHE_SIZE = 16
+
+
+def _superellipsoid_cells(geom: NDArray[np.float64], dim: int, n: int, resolution: tuple[int, int] | None) -> tuple:
+    key = (geom.tobytes(), dim, n, None if resolution is None else tuple(int(r) for r in resolution))
+    hit = _CELLS_CACHE.get(key)
+    if hit is None:
+        hit = _se.build_cells(geom, dim, n, resolution)
+        if len(_CELLS_CACHE) >= _CELLS_CACHE_SIZE:
+            _CELLS_CACHE.pop(next(iter(_CELLS_CACHE)))
+        _CELLS_CACHE[key] = hit
+    return hit
+
+
 class Zone:
     """Common interface; see the module docstring for the meaning of each member."""
 
@@ -302,7 +321,7 @@ class StarZone(Zone):
         zone.exponent = q
         zone._stats = np.zeros(4, dtype=np.int64)  # search effort of the last nearest() call
         zone._geom = _se.make_geom(q, c, B, a)
-        zone._samples, zone._cells, zone._supers, zone._grid, zone._cell_of = _se.build_cells(
+        zone._samples, zone._cells, zone._supers, zone._grid, zone._cell_of = _superellipsoid_cells(
             zone._geom, zone.dim, n, resolution)
         zone._plane = np.ascontiguousarray(np.append(zone.plane_normal, zone.plane_offset))
         zone._se_args = _se.pack(zone._geom, zone._samples, zone._cells, zone._supers, zone._grid, zone._cell_of,

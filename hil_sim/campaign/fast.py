@@ -71,6 +71,7 @@ class _TruthRows:
 
         self.batch = world.batch
         self.n = 0
+        self._rows = n_ticks + 1
         self.t_s = np.zeros(n_ticks + 1)
         self.X = np.zeros((n_ticks + 1, self.batch.X.shape[0]))
         self.AUX = np.zeros((n_ticks + 1, self.batch.AUX.shape[1]))
@@ -86,7 +87,7 @@ class _TruthRows:
 
     def record(self) -> None:
         i = self.n
-        if i < len(self.t_s):
+        if i < self._rows:
             b = self.batch
             if b.X is not self._X_src or b.AUX is not self._AUX_src:
                 self._bind()
@@ -109,6 +110,7 @@ class _EstimateRows:
     (`hil_sim.consistency`): only fast mode can read the flight software's full covariance."""
 
     def __init__(self, n_rows: int) -> None:
+        self._n_rows = n_rows
         self.rows = np.full(n_rows, -1)
         self.q = np.zeros((n_rows, 4))
         self._cov: np.ndarray | None = None  # the whole covariance per row (no slice per tick), sized at the first
@@ -123,7 +125,7 @@ class _EstimateRows:
 
     def record(self, truth_row: int, estimator: Any) -> None:
         n = self.n
-        if estimator.initialized and n < len(self.rows):
+        if estimator.initialized and n < self._n_rows:
             P = estimator.P
             if self._cov is None:
                 self._cov = np.zeros((len(self.rows),) + P.shape)
@@ -194,7 +196,10 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         # The flight software's clock is the simulation clock: a cycle's execution time on this (shared)
         # host must not change its behaviour (a slip feeds FDIR), or runs would not reproduce exactly.
         # Execution-time overruns are a real-time property, measured by `keepout sil run --realtime`.
-        fsw = FlightSoftware(cfg, driver, telemetry=telemetry, dispatcher=dispatcher, clock=lambda: sim.t_s)
+        # It reads sim.t_s as set below at each tick's start and at the stop: the simulator advances
+        # its tick only in end_tick, so between those points sim.t_s is that value (read ~5 times a cycle).
+        now_s = [sim.t_s]
+        fsw = FlightSoftware(cfg, driver, telemetry=telemetry, dispatcher=dispatcher, clock=lambda: now_s[0])
         sender = _InProcessSender(dispatcher)
         timeline = Timeline(mission, sender)
         n_ticks = int(round(mission.duration_s / cfg.gnc_period_s))
@@ -202,15 +207,20 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         truth.record()
         estimates = _EstimateRows(n_ticks + 1)
         torques = np.zeros((n_ticks + 1, world.n_wheels))
-        for _ in range(n_ticks):
-            telemetry.now = sim.t_s
-            timeline.release(sim.t_s)
+        next_command_s = _next_command_s(timeline)
+        for row in range(n_ticks):  # row: the truth row of this tick (recorded before it)
+            t_s = sim.t_s
+            now_s[0] = t_s
+            telemetry.now = t_s
+            if next_command_s <= t_s + 1e-9:  # Timeline.release's own test, asked only when it can pass
+                timeline.release(t_s)
+                next_command_s = _next_command_s(timeline)
             sim.begin_tick()
             inputs = driver.collect_tick(0.0)
             if inputs is not None:
                 fsw.run_cycle(inputs)
-                estimates.record(truth.n - 1, fsw.estimator)  # the estimate of the truth row at this tick
-                torques[truth.n - 1] = fsw.last.wheel_torque_cmd_Nm  # held over the tick that follows
+                estimates.record(row, fsw.estimator)  # the estimate of the truth row at this tick
+                torques[row] = fsw.last.wheel_torque_cmd_Nm  # held over the tick that follows
             sim.end_tick(wait_s=0.0)
             truth.record()
         record = truth.arrays()
@@ -224,9 +234,15 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
                          events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events if n == "FDIR_TRIPPED"][:200])
     finally:
         if fsw is not None:
+            now_s[0] = sim.t_s  # the flight software's clock at its stop
             fsw.shutdown()
         sim_bus.shutdown()
         fsw_bus.shutdown()
+
+
+def _next_command_s(timeline: Any) -> float:
+    """Scheduled time of the timeline's next telecommand [s] (inf when none is left)."""
+    return timeline.entries[0].t_s if timeline.entries else math.inf
 
 
 _ICD = None
