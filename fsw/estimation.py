@@ -355,6 +355,28 @@ def _estimator_cycle(q, bias, P, omega, samples, prev_sample, has_prev, dt_s, si
     return q, bias, P, omega, np.full(3, np.nan), initialized, used, rejected, innov
 
 
+@njit("Tuple((f8[::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[::1], f8[:, ::1], f8[::1],"
+      " f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8, f8, b1, b1, b1)", cache=True)
+def _estimator_tick(q, bias, P, omega, prev_sample, samples, q_NS, q_SB, R_st, P0, consts, dt_s, st_latency, has_prev,
+                    initialized, has_st):
+    """`_estimator_cycle` with fewer arguments and results, for `AttitudeEstimator._tick`: handing five new
+    arrays back to Python cost more than the dispatch of the call (~0.5 us each). ``consts``: (sig_v, sig_u,
+    star tracker max age, innovation gate [deg]). ``bias`` (3,), ``P`` (6, 6) and ``prev_sample`` (3,) are
+    overwritten with the new ones (NaN: this cycle had no gyro sample); they are the estimator's own, which
+    nothing else keeps. The attitude and the rate, which guidance keeps from one cycle to the next, come
+    back as new arrays. Returns (q, omega, initialized, used, rejected, innovation_deg)."""
+    q, bias_n, P_n, omega, new_prev, initialized, used, rejected, innov = _estimator_cycle(
+        q, bias, P, omega, samples, prev_sample, has_prev, dt_s, consts[0], consts[1], initialized, has_st, q_NS, q_SB,
+        st_latency, consts[2], consts[3], R_st, P0)
+    for i in range(3):
+        bias[i] = bias_n[i]
+        prev_sample[i] = new_prev[i]
+    for i in range(6):
+        for j in range(6):
+            P[i, j] = P_n[i, j]
+    return q, omega, initialized, used, rejected, innov
+
+
 def star_tracker_noise_B(cfg, q_BS: np.ndarray) -> np.ndarray:
     """The star tracker's attitude noise covariance in body axes [rad^2] (3, 3).
 
@@ -377,7 +399,6 @@ def star_tracker_noise_B(cfg, q_BS: np.ndarray) -> np.ndarray:
 
 _NO_SAMPLES = np.zeros((0, 3))
 _NO_QUATERNION = np.array([1.0, 0.0, 0.0, 0.0])
-_NO_SAMPLE = np.full(3, np.nan)
 
 
 @dataclass
@@ -399,6 +420,9 @@ class AttitudeEstimator:
         self.sig_v = cfg.gyro_arw_rad_s_sqrt_hz
         self.sig_u = cfg.gyro_bias_rw_rad_s2_sqrt_hz
         self.R_st_B = star_tracker_noise_B(cfg, q_BS)
+        # the compiled cycle's scalar constants in one array (one argument instead of four)
+        self._consts = np.array([self.sig_v, self.sig_u, cfg.star_tracker_max_age_s, cfg.innovation_gate_deg],
+                                dtype=float)
         self.reset()
 
     def reset(self) -> None:
@@ -413,7 +437,19 @@ class AttitudeEstimator:
         self.resets = 0
         self.star_tracker_used = False  # this cycle's star-tracker sample was fused
         self.innovation_rejected = False  # this cycle's star-tracker sample was gated out
-        self._prev_sample: np.ndarray | None = None  # the last gyro sample, start of the next interval
+        # the last gyro sample, start of the next interval (`_prev_sample`): overwritten by the compiled cycle
+        self._prev_buf = np.full(3, np.nan)
+        self._has_prev = False
+
+    @property
+    def _prev_sample(self) -> np.ndarray | None:
+        """The last gyro sample (a copy), start of the next interval; None when the last cycle had none."""
+        return self._prev_buf.copy() if self._has_prev else None
+
+    @_prev_sample.setter
+    def _prev_sample(self, sample: np.ndarray | None) -> None:
+        self._has_prev = sample is not None
+        self._prev_buf = np.full(3, np.nan) if sample is None else np.array(sample, dtype=float).reshape(3)
 
     def _initial_P(self) -> np.ndarray:
         sa = math.radians(self.cfg.initial_attitude_sigma_deg)
@@ -467,15 +503,13 @@ class AttitudeEstimator:
         GNC cycle calls it directly with ``samples`` a C-contiguous float (n, 3) array and ``q_NS`` a
         contiguous float quaternion or None. Returns the innovation [deg] (NaN when none this cycle)."""
         has_st = q_NS is not None
-        P0 = self._initial_P() if has_st and not self.initialized else self.P
-        prev = self._prev_sample
-        (self.q_NB, self.bias_B, self.P, self.omega_BN_B, new_prev, self.initialized, used, self.innovation_rejected,
-         innov_deg) = _estimator_cycle(
-            self.q_NB, self.bias_B, self.P, self.omega_BN_B, samples, prev if prev is not None else _NO_SAMPLE,
-            prev is not None, dt_s, self.sig_v, self.sig_u, self.initialized, has_st,
-            q_NS if has_st else _NO_QUATERNION, np.ascontiguousarray(self.q_SB, dtype=float), st_latency_s, self.cfg.star_tracker_max_age_s,
-            self.cfg.innovation_gate_deg, self.R_st_B, P0)
-        self._prev_sample = new_prev if samples.shape[0] else None
+        P = self.P
+        P0 = self._initial_P() if has_st and not self.initialized else P
+        # bias_B, P and the previous sample are updated in place (`_estimator_tick`)
+        self.q_NB, self.omega_BN_B, self.initialized, used, self.innovation_rejected, innov_deg = _estimator_tick(
+            self.q_NB, self.bias_B, P, self.omega_BN_B, self._prev_buf, samples, q_NS if has_st else _NO_QUATERNION,
+            self.q_SB, self.R_st_B, P0, self._consts, dt_s, st_latency_s, self._has_prev, self.initialized, has_st)
+        self._has_prev = samples.shape[0] > 0
         self.star_tracker_used = used
         self.coasting_s = 0.0 if used else self.coasting_s + dt_s
         self.last_innovation_deg = innov_deg
