@@ -381,6 +381,7 @@ class FlightSoftware:
             samples = _NO_SAMPLES if imu_samples is None else np.array(imu_samples, dtype=float).reshape(-1, 3)
         st = inputs.star_tracker
         st_latency = 0.0
+        nq = 1.0
         st_fresh = st is not None and st.valid
         if st_fresh:
             if realtime:
@@ -389,7 +390,7 @@ class FlightSoftware:
                 st_latency = max(0.0, float(inputs.t) - float(st.t))
             if st_latency > self._st_max_age_s:
                 st_fresh = False
-            q_NS = np.asarray(st.q_NS, dtype=float)
+            q_NS = np.ascontiguousarray(st.q_NS, dtype=float)
             nq = _norm(q_NS.tolist())
             if not (0.9 < nq < 1.1):
                 st_fresh = False
@@ -407,7 +408,7 @@ class FlightSoftware:
 
         # ---- estimation (propagate across every IMU sample of the tick)
         est = self.estimator
-        innovation_deg = est._tick(dt, samples, (q_NS / nq) if st_fresh else None, st_latency)
+        innovation_deg = est._tick(dt, samples, q_NS if st_fresh else None, st_latency, nq)
         if st_fresh != self._st_was_valid:  # the star tracker was lost or is back
             self._st_events(st, st_fresh)
 

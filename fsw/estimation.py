@@ -356,17 +356,22 @@ def _estimator_cycle(q, bias, P, omega, samples, prev_sample, has_prev, dt_s, si
 
 
 @njit("Tuple((f8[::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[::1], f8[:, ::1], f8[::1],"
-      " f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8, f8, b1, b1, b1)", cache=True)
-def _estimator_tick(q, bias, P, omega, prev_sample, samples, q_NS, q_SB, R_st, P0, consts, dt_s, st_latency, has_prev,
-                    initialized, has_st):
+      " f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8, f8, f8, b1, b1, b1)", cache=True)
+def _estimator_tick(q, bias, P, omega, prev_sample, samples, q_NS, q_SB, R_st, P0, consts, dt_s, st_latency, q_norm,
+                    has_prev, initialized, has_st):
     """`_estimator_cycle` with fewer arguments and results, for `AttitudeEstimator._tick`: handing five new
     arrays back to Python cost more than the dispatch of the call (~0.5 us each). ``consts``: (sig_v, sig_u,
     star tracker max age, innovation gate [deg]). ``bias`` (3,), ``P`` (6, 6) and ``prev_sample`` (3,) are
     overwritten with the new ones (NaN: this cycle had no gyro sample); they are the estimator's own, which
     nothing else keeps. The attitude and the rate, which guidance keeps from one cycle to the next, come
-    back as new arrays. Returns (q, omega, initialized, used, rejected, innovation_deg)."""
+    back as new arrays. ``q_NS`` is divided by ``q_norm`` first (numpy's ``q_NS / q_norm``, element by
+    element), so the caller need not build the unit quaternion. Returns (q, omega, initialized, used,
+    rejected, innovation_deg)."""
+    q_unit = np.empty(4)
+    for i in range(4):
+        q_unit[i] = q_NS[i] / q_norm
     q, bias_n, P_n, omega, new_prev, initialized, used, rejected, innov = _estimator_cycle(
-        q, bias, P, omega, samples, prev_sample, has_prev, dt_s, consts[0], consts[1], initialized, has_st, q_NS, q_SB,
+        q, bias, P, omega, samples, prev_sample, has_prev, dt_s, consts[0], consts[1], initialized, has_st, q_unit, q_SB,
         st_latency, consts[2], consts[3], R_st, P0)
     for i in range(3):
         bias[i] = bias_n[i]
@@ -498,17 +503,19 @@ class AttitudeEstimator:
             cov_trace_deg2=self.cov_trace_deg2,
         )
 
-    def _tick(self, dt_s: float, samples: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float) -> float:
-        """`_cycle` without the status: one compiled call (`_estimator_cycle`) and the attribute sets. The
+    def _tick(self, dt_s: float, samples: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float,
+              q_norm: float = 1.0) -> float:
+        """`_cycle` without the status: one compiled call (`_estimator_tick`) and the attribute sets. The
         GNC cycle calls it directly with ``samples`` a C-contiguous float (n, 3) array and ``q_NS`` a
-        contiguous float quaternion or None. Returns the innovation [deg] (NaN when none this cycle)."""
+        contiguous float quaternion (4,) or None, the tracker's sample divided by ``q_norm`` (its norm) in
+        the compiled call. Returns the innovation [deg] (NaN when none this cycle)."""
         has_st = q_NS is not None
         P = self.P
         P0 = self._initial_P() if has_st and not self.initialized else P
         # bias_B, P and the previous sample are updated in place (`_estimator_tick`)
         self.q_NB, self.omega_BN_B, self.initialized, used, self.innovation_rejected, innov_deg = _estimator_tick(
             self.q_NB, self.bias_B, P, self.omega_BN_B, self._prev_buf, samples, q_NS if has_st else _NO_QUATERNION,
-            self.q_SB, self.R_st_B, P0, self._consts, dt_s, st_latency_s, self._has_prev, self.initialized, has_st)
+            self.q_SB, self.R_st_B, P0, self._consts, dt_s, st_latency_s, q_norm, self._has_prev, self.initialized, has_st)
         self._has_prev = samples.shape[0] > 0
         self.star_tracker_used = used
         self.coasting_s = 0.0 if used else self.coasting_s + dt_s
