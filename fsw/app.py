@@ -14,6 +14,7 @@ The flight software learns about the world only through the bus driver and telec
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass
 from itertools import repeat
@@ -30,6 +31,8 @@ from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
 _CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
+# the E2E classes that housekeeping totals over the received messages
+_HK_CLASSES = ("ok", "ok_some_lost", "crc_error", "wrong_sequence", "repeated", "bad_length", "out_of_range", "timeout")
 _NAN6, _ZERO6 = [math.nan] * 6, [0.0] * 6  # fillers of the GNC packet's six zone and wheel slots
 # RWn_STATUS fault bits (config/icd/keepout.dbc): 1 overspeed, 2 command timeout, 4 drive fault.
 WHEEL_OVERSPEED = 0x01
@@ -52,8 +55,6 @@ def _resident_bytes() -> int | None:
     Linux (resident pages of /proc/self/statm), read through one descriptor kept open: psutil costs
     ~0.2 ms a call, once per housekeeping cycle. None where /proc is not available."""
     global _statm
-    import os
-
     try:
         pid = os.getpid()
         if _statm is None or _statm[0] != pid:  # "self" is resolved at open: a forked child opens its own
@@ -593,10 +594,9 @@ class FlightSoftware:
             self._hk_src, self._hk_src_len = counters, len(counters)
             self._hk_dicts = [c for name, c in counters.items() if not name.startswith("_")]
         dicts = self._hk_dicts
-
-        def total(*classes):
-            # each class summed over the messages in C (map over dict.get): the same integers as a loop
-            return sum([sum(map(dict.get, dicts, repeat(k), repeat(0))) for k in classes])
+        # each E2E class summed over the messages in C (map over dict.get): the same integers as a loop
+        n = {k: sum(map(dict.get, dicts, repeat(k), repeat(0))) for k in _HK_CLASSES}
+        bus = counters.get("_bus", {})
         tm = self.telemetry.counters
         values = {
             "uptime_s": time.monotonic() - self._start_wall,
@@ -609,14 +609,14 @@ class FlightSoftware:
             "exec_max_ms_hk": ex.hk.exec_max_ms,
             "exec_mean_ms_hk": ex.hk.exec_mean_ms,
             "jitter_max_ms": 1e3 * ex.jitter.max_s,
-            "bus_rx_ok": total("ok", "ok_some_lost"),
-            "bus_crc_errors": total("crc_error"),
-            "bus_alive_errors": total("wrong_sequence", "ok_some_lost"),
-            "bus_repeated": total("repeated"),
-            "bus_decode_errors": total("bad_length", "out_of_range"),
-            "bus_timeouts": total("timeout"),
+            "bus_rx_ok": n["ok"] + n["ok_some_lost"],
+            "bus_crc_errors": n["crc_error"],
+            "bus_alive_errors": n["wrong_sequence"] + n["ok_some_lost"],
+            "bus_repeated": n["repeated"],
+            "bus_decode_errors": n["bad_length"] + n["out_of_range"],
+            "bus_timeouts": n["timeout"],
             "bus_tx_errors": getattr(self, "_bus_tx_errors", 0),
-            "bus_unknown_ids": sum(self.driver.counters.get("_bus", {}).get(k, 0) for k in ("unknown_id", "error_frame")),
+            "bus_unknown_ids": bus.get("unknown_id", 0) + bus.get("error_frame", 0),
             "bus_stale_syncs": getattr(self.driver, "stale_syncs", 0),
             "bus_unexpected_frames": getattr(self.driver, "unexpected_frames", 0),
             "imu_stale_cycles": self.fdir.stale_counts["IMU"],

@@ -367,6 +367,8 @@ class Fdir:
         self.cycle_slip = LimitMonitor("CYCLE_SLIP", f.cycle_slip, bank=bank, index=k + 2)
         self._all_wheels = np.ones(n_wheels, dtype=np.bool_)  # evaluate_arrays: every wheel is evaluated
         self.stale_counts = {"IMU": 0, "STAR_TRACKER": 0}
+        # (dictionary name, bank index) of every monitor in all_monitors() order, for states()
+        self._monitor_indices = [(m.monitor, m._i) for m in self.all_monitors()]
 
     def all_monitors(self) -> list[LimitMonitor]:
         return [self.imu_stale, self.imu_corrupt, self.st_stale, self.st_corrupt, self.innovation,
@@ -374,7 +376,7 @@ class Fdir:
 
     @property
     def trips(self) -> int:
-        return int(self._bank.trips.sum())
+        return sum(self._bank.trips.tolist())  # Python ints: numpy's reduction costs more on a few values
 
     def reset_counters(self) -> None:
         self._bank.trips[:] = 0
@@ -383,11 +385,11 @@ class Fdir:
         """Worst state per dictionary monitor (HK channels fdir_<monitor>)."""
         out: dict[str, str] = {}
         codes = self._bank.state.tolist()
-        for m in self.all_monitors():
-            cur = out.get(m.monitor)
-            state = _STATES[codes[m._i]]
+        for monitor, i in self._monitor_indices:
+            cur = out.get(monitor)
+            state = _STATES[codes[i]]
             if cur is None or _STATE_RANK[state] > _STATE_RANK[cur]:
-                out[m.monitor] = state
+                out[monitor] = state
         return out
 
     def _trip(self, mon: LimitMonitor, value: float, actions: list[FdirAction], wheel: int | None = None) -> None:
