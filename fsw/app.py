@@ -223,14 +223,15 @@ class FlightSoftware:
     def _warm_up(self) -> None:
         """Load the compiled kernels and start the check worker now, so the first cycle is not late.
 
-        Runs the estimator on a scratch instance and every guidance mode once on the real zones (events
-        muted), then restores the initial mode.
+        Runs the estimator's cycle as the GNC cycle calls it (`AttitudeEstimator._tick`) on a scratch
+        instance (initialisation, a fused fix, a cycle without gyro samples) and every guidance mode once on
+        the real zones (events muted), then restores the initial mode.
         """
         q = np.array([1.0, 0.0, 0.0, 0.0])
         scratch = AttitudeEstimator(self.cfg.estimator, np.asarray(self.cfg.spacecraft.star_tracker_q_BS))
-        scratch.step(self.period_s, np.zeros(3), q)
-        scratch.step_samples(self.period_s, np.zeros((2, 3)), q)
-        scratch.step(self.period_s, np.zeros(3), np.array([0.99, 0.1, 0.0, 0.0]) / np.linalg.norm([0.99, 0.1]))
+        scratch._tick(self.period_s, np.zeros((1, 3)), q, 0.0)
+        scratch._tick(self.period_s, np.zeros((2, 3)), np.array([0.99, 0.1, 0.0, 0.0]), 0.0, math.hypot(0.99, 0.1))
+        scratch._tick(self.period_s, _NO_SAMPLES, None, 0.0)
         g = self.guidance
         events, g.events = g.events, (lambda name, **args: None)
         try:

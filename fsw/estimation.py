@@ -173,14 +173,6 @@ def _propagate_in_place(q, bias, P, omega_meas, dt, sig_v, sig_u, PP):
 
 
 @njit(cache=True)
-def mekf_propagate_many(q, bias, P, omegas, dt, sig_v, sig_u):
-    """Propagate through consecutive gyro samples omegas (n, 3), each held for ``dt`` [s]."""
-    for k in range(omegas.shape[0]):
-        q, P = mekf_propagate(q, bias, P, omegas[k], dt, sig_v, sig_u)
-    return q, P
-
-
-@njit(cache=True)
 def mekf_innovation(q, q_meas):
     """Small-angle innovation dtheta_B [rad] = 2 vec(q_est^* (x) q_meas), sign-fixed (double cover)."""
     qc = q.copy()
@@ -197,12 +189,6 @@ def mekf_innovation(q, q_meas):
         ang = 2.0 * math.atan2(vn, dq[0])
         out[:] = dq[1:] * (ang / vn)
     return out
-
-
-@njit(cache=True)
-def mekf_update(q, bias, P, dtheta, R):
-    """Fuse one attitude measurement given its innovation (H = [I 0], R the 3x3 body-frame noise [rad^2])."""
-    return mekf_update_lagged(q, bias, P, dtheta, R, 0.0)
 
 
 @njit(cache=True)
@@ -235,8 +221,12 @@ def mekf_update_lagged(q, bias, P, dtheta, R, lag):
 @njit(cache=True)
 def _mekf_fuse(q, bias, P, omega_last, omega_bridge, bridge_var, initialized, has_st, q_NS, q_SB, st_latency, max_age,
                gate_deg, R_st, P0):
-    """`_mekf_cycle` after the propagation: the rate estimate and the star tracker's fusion (same
-    arguments, same returns)."""
+    """The estimator cycle after the propagation: the rate estimate (``omega_last`` minus the bias) and the
+    star tracker's fusion. ``omega_bridge``: the mean measured rate over the star tracker's latency, which
+    brings its sample to the filter time, and ``bridge_var`` the variance of that mean's white noise per
+    axis [rad^2/s^2]; ``R_st``: the star tracker's noise covariance in body axes [rad^2]
+    (`star_tracker_noise_B`); ``P0``: the covariance a first star-tracker fix initialises.
+    Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
     used = False
     rejected = False
     innov_deg = np.nan
@@ -271,27 +261,6 @@ def _mekf_fuse(q, bias, P, omega_last, omega_bridge, bridge_var, initialized, ha
     return q, bias, P, omega, initialized, used, rejected, innov_deg
 
 
-@njit("Tuple((f8[::1], f8[::1], f8[:, ::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8,"
-      " f8[::1], f8, f8[::1], f8[::1], f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8[:, ::1], f8[:, ::1])",
-      cache=True)
-def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_bridge, bridge_var, sig_v, sig_u,
-                initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg, R_st, P0):
-    """One estimator cycle in one compiled call: propagate through the gyro rates ``prior`` (k, 3), each
-    held ``prior_dt``, then ``omega_prop`` held ``dt``; fuse the star tracker. ``omega_last``: the newest
-    gyro sample (the rate estimate is it minus the bias); ``omega_bridge``: the mean measured rate over
-    the star tracker's latency, which brings its sample to the filter time, and ``bridge_var`` the
-    variance of that mean's white noise per axis [rad^2/s^2]; ``R_st``: the star tracker's noise
-    covariance in body axes [rad^2] (`star_tracker_noise_B`); ``P0``: the covariance a first star-tracker
-    fix initialises. tests/fsw/test_estimation.py compares it with a Python reference.
-    Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
-    if initialized and prior.shape[0] > 0:
-        q, P = mekf_propagate_many(q, bias, P, prior, prior_dt, sig_v, sig_u)
-    if initialized:
-        q, P = mekf_propagate(q, bias, P, omega_prop, dt, sig_v, sig_u)
-    return _mekf_fuse(q, bias, P, omega_last, omega_bridge, bridge_var, initialized, has_st, q_NS, q_SB, st_latency,
-                      max_age, gate_deg, R_st, P0)
-
-
 @njit(cache=True)
 def _round_half_even(x):
     """Python's ``round(x)`` of a float (ties to even) as an integer."""
@@ -307,8 +276,8 @@ def _round_half_even(x):
 def _estimator_cycle(q, bias, P, omega, samples, prev_sample, has_prev, dt_s, sig_v, sig_u, initialized, has_st, q_NS,
                      q_SB, st_latency, max_age, gate_deg, R_st, P0):
     """`AttitudeEstimator._cycle` in one compiled call: the trapezoid rates of the gyro ``samples`` (n, 3),
-    the bridge over the star tracker's latency, then `_mekf_cycle`; the expressions and summation orders
-    of the numpy version it replaces (tests/fsw/test_estimation.py). ``omega``: the last rate estimate;
+    the bridge over the star tracker's latency, the propagation, then `_mekf_fuse`; the expressions and
+    summation orders of the numpy version it replaces (tests/fsw/test_estimation.py). ``omega``: the last rate estimate;
     ``prev_sample``: the last gyro sample of the previous cycle (``has_prev`` False: none).
     Returns (q, bias, P, omega, the new previous sample, initialized, used, rejected, innovation_deg); the
     new previous sample is NaN when this cycle had no gyro sample."""

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -318,25 +318,8 @@ def _wheel_monitor_values(dt_s, speed, fault_flags, cmd, active, seen, max_speed
     return fault, ratio
 
 
-@dataclass
-class FdirInputs:
-    """What FDIR looks at in one GNC cycle (None = not applicable this cycle)."""
-
-    imu_missing: bool
-    imu_corrupt_frames: int
-    st_missing: bool
-    st_corrupt_frames: int
-    innovation_deg: float | None
-    wheel_fault: list[bool] = field(default_factory=list)
-    wheel_speed_ratio: list[float] = field(default_factory=list)
-    wheel_speed_rad_s: list[float] = field(default_factory=list)
-    margins_deg: list[float] = field(default_factory=list)
-    zone_bodies: list[str] = field(default_factory=list)
-    slipped: bool = False
-
-
 class Fdir:
-    """All monitors; `evaluate` (or `evaluate_arrays`) once per GNC cycle returns the actions to take.
+    """All monitors; `evaluate_cycle` (or `evaluate_arrays`) once per GNC cycle returns the actions to take.
 
     The monitors' states are arrays of one `MonitorBank`, in the order they are evaluated: IMU_STALE,
     ST_STALE, IMU_CORRUPT, ST_CORRUPT, INNOVATION, WHEEL_FAULT per wheel, WHEEL_SPEED per wheel,
@@ -407,27 +390,11 @@ class Fdir:
             self.event("FDIR_CLEARED", monitor=mon.monitor)
         return res
 
-    def evaluate(self, x: FdirInputs) -> list[FdirAction]:
-        """`evaluate_arrays` for the inputs gathered in an `FdirInputs`."""
-        n = self.n_wheels
-        fault = np.zeros(n, dtype=np.bool_)
-        ratio = np.full(n, np.nan)
-        evaluated = np.zeros(n, dtype=np.bool_)  # wheels past the inputs' lists are not evaluated
-        for i, v in enumerate(x.wheel_fault[:n]):
-            fault[i] = bool(v)
-            evaluated[i] = True
-        for i, v in enumerate(x.wheel_speed_ratio[:n]):
-            ratio[i] = v
-        innovation = x.innovation_deg if x.innovation_deg is not None else np.nan
-        return self._evaluate(x.imu_missing, x.imu_corrupt_frames, x.st_missing, x.st_corrupt_frames, innovation,
-                              fault, evaluated, ratio, x.wheel_speed_rad_s, x.margins_deg, x.zone_bodies, x.slipped)
-
     def evaluate_arrays(self, imu_missing: bool, imu_corrupt_frames: int, st_missing: bool, st_corrupt_frames: int,
                         innovation_deg: float, wheel_fault: np.ndarray, wheel_speed_ratio: np.ndarray,
                         wheel_speed_rad_s: np.ndarray, margins_deg, zone_bodies: list[str],
                         slipped: bool) -> list[FdirAction]:
-        """One cycle of every monitor (what `FdirInputs` describes, per-wheel values as arrays of
-        ``n_wheels``: ``wheel_fault`` bool, ``wheel_speed_ratio`` NaN where not evaluated;
+        """One cycle of every monitor (per-wheel values as arrays of ``n_wheels``: ``wheel_fault`` bool, ``wheel_speed_ratio`` NaN where not evaluated;
         ``innovation_deg`` NaN when none this cycle). Returns the actions to take."""
         return self._evaluate(imu_missing, imu_corrupt_frames, st_missing, st_corrupt_frames, innovation_deg,
                               wheel_fault, self._all_wheels, wheel_speed_ratio, wheel_speed_rad_s, margins_deg,

@@ -5,10 +5,11 @@ import math
 
 import numpy as np
 import pytest
+from numba import njit
 from scipy.spatial.transform import Rotation
 
 from fsw.config import EstimatorConfig
-from fsw.estimation import AttitudeEstimator
+from fsw.estimation import AttitudeEstimator, _mekf_fuse, mekf_propagate
 
 
 def _err_deg(q_a, q_b) -> float:
@@ -245,10 +246,34 @@ def test_structured_propagation_matches_the_dense_matrix_form() -> None:
         assert np.array_equal(Pn, Pn.T)
 
 
+@njit
+def _mekf_propagate_many(q, bias, P, omegas, dt, sig_v, sig_u):
+    """Propagate through consecutive gyro samples omegas (n, 3), each held for ``dt`` [s]."""
+    for k in range(omegas.shape[0]):
+        q, P = mekf_propagate(q, bias, P, omegas[k], dt, sig_v, sig_u)
+    return q, P
+
+
+@njit("Tuple((f8[::1], f8[::1], f8[:, ::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8,"
+      " f8[::1], f8, f8[::1], f8[::1], f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8[:, ::1], f8[:, ::1])")
+def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_bridge, bridge_var, sig_v, sig_u,
+                initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg, R_st, P0):
+    """The estimator cycle as one compiled call before `_estimator_cycle` (the flight code until then):
+    propagate through the gyro rates ``prior`` (k, 3), each held ``prior_dt``, then ``omega_prop`` held
+    ``dt`` (`mekf_propagate`, allocating); fuse the star tracker (`_mekf_fuse`).
+    Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
+    if initialized and prior.shape[0] > 0:
+        q, P = _mekf_propagate_many(q, bias, P, prior, prior_dt, sig_v, sig_u)
+    if initialized:
+        q, P = mekf_propagate(q, bias, P, omega_prop, dt, sig_v, sig_u)
+    return _mekf_fuse(q, bias, P, omega_last, omega_bridge, bridge_var, initialized, has_st, q_NS, q_SB, st_latency,
+                      max_age, gate_deg, R_st, P0)
+
+
 def _numpy_cycle(est, dt_s, samples, q_NS, st_latency_s):
     """The estimator cycle as it was written in numpy around `_mekf_cycle` (before `_estimator_cycle`
     fused it into one compiled call): the reference the fused kernel must match bit for bit."""
-    from fsw.estimation import _NO_QUATERNION, _NO_SAMPLES, _mekf_cycle
+    from fsw.estimation import _NO_QUATERNION, _NO_SAMPLES
 
     n = samples.shape[0]
     if n:
