@@ -33,6 +33,7 @@ MODES = ("SAFE", "POINTING", "QUATERNION")
 _CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
 # the E2E classes that housekeeping totals over the received messages
 _HK_CLASSES = ("ok", "ok_some_lost", "crc_error", "wrong_sequence", "repeated", "bad_length", "out_of_range", "timeout")
+_FDIR_HK_KEYS: dict[str, str] = {}  # FDIR monitor name -> its HK channel (fdir_<monitor>), filled as met
 _NAN6, _ZERO6 = [math.nan] * 6, [0.0] * 6  # fillers of the GNC packet's six zone and wheel slots
 # RWn_STATUS fault bits (config/icd/keepout.dbc): 1 overspeed, 2 command timeout, 4 drive fault.
 WHEEL_OVERSPEED = 0x01
@@ -629,8 +630,12 @@ class FlightSoftware:
             "fdir_trips": self.fdir.trips,
             "wheels_isolated": self.control.isolated_mask,
         }
+        keys = _FDIR_HK_KEYS
         for mon, state in self.fdir.states().items():
-            values[f"fdir_{mon.lower()}"] = state
+            key = keys.get(mon)
+            if key is None:
+                key = keys[mon] = f"fdir_{mon.lower()}"
+            values[key] = state
         if self.dispatcher is not None:
             values.update(self.dispatcher.hk_values())
         return values

@@ -493,8 +493,9 @@ class AttitudeEstimator:
 
     def _attitude_trace(self) -> float:
         # = float(np.trace(self.P[0:3, 0:3])) (same summation order), without numpy's call overhead
+        # (item: the element as a Python float, no numpy scalar in between)
         P = self.P
-        return float(P[0, 0]) + float(P[1, 1]) + float(P[2, 2])
+        return P.item(0, 0) + P.item(1, 1) + P.item(2, 2)
 
     @property
     def cov_trace_deg2(self) -> float:

@@ -41,7 +41,7 @@ _ACTION_CODES = {
     "isolate_wheel": "ISOLATE_WHEEL",
     "isolate_wheel_safe": "ISOLATE_WHEEL",
 }
-_STATE_RANK = {"DISABLED": 0, "NOMINAL": 1, "PERSISTING": 2, "TRIPPED": 3}
+_STATE_RANK = {"DISABLED": 0, "NOMINAL": 1, "PERSISTING": 2, "TRIPPED": 3}  # = the code in _STATES
 
 
 @dataclass
@@ -350,8 +350,11 @@ class Fdir:
         self.cycle_slip = LimitMonitor("CYCLE_SLIP", f.cycle_slip, bank=bank, index=k + 2)
         self._all_wheels = np.ones(n_wheels, dtype=np.bool_)  # evaluate_arrays: every wheel is evaluated
         self.stale_counts = {"IMU": 0, "STAR_TRACKER": 0}
-        # (dictionary name, bank index) of every monitor in all_monitors() order, for states()
-        self._monitor_indices = [(m.monitor, m._i) for m in self.all_monitors()]
+        # (dictionary name, bank indices of its monitors) in all_monitors() order of first appearance, for states()
+        groups: dict[str, list[int]] = {}
+        for m in self.all_monitors():
+            groups.setdefault(m.monitor, []).append(m._i)
+        self._monitor_groups = list(groups.items())
 
     def all_monitors(self) -> list[LimitMonitor]:
         return [self.imu_stale, self.imu_corrupt, self.st_stale, self.st_corrupt, self.innovation,
@@ -366,14 +369,9 @@ class Fdir:
 
     def states(self) -> dict[str, str]:
         """Worst state per dictionary monitor (HK channels fdir_<monitor>)."""
-        out: dict[str, str] = {}
         codes = self._bank.state.tolist()
-        for monitor, i in self._monitor_indices:
-            cur = out.get(monitor)
-            state = _STATES[codes[i]]
-            if cur is None or _STATE_RANK[state] > _STATE_RANK[cur]:
-                out[monitor] = state
-        return out
+        # a state's rank is its code (_STATES in _STATE_RANK's order): the worst is the largest code
+        return {monitor: _STATES[max(map(codes.__getitem__, indices))] for monitor, indices in self._monitor_groups}
 
     def _trip(self, mon: LimitMonitor, value: float, actions: list[FdirAction], wheel: int | None = None) -> None:
         rule = mon.rule
