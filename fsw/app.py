@@ -14,6 +14,7 @@ The flight software learns about the world only through the bus driver and telec
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass
 from itertools import repeat
@@ -30,6 +31,10 @@ from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
 _CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
+# the E2E classes that housekeeping totals over the received messages
+_HK_CLASSES = ("ok", "ok_some_lost", "crc_error", "wrong_sequence", "repeated", "bad_length", "out_of_range", "timeout")
+_FDIR_HK_KEYS: dict[str, str] = {}  # FDIR monitor name -> its HK channel (fdir_<monitor>), filled as met
+_NAN6, _ZERO6 = [math.nan] * 6, [0.0] * 6  # fillers of the GNC packet's six zone and wheel slots
 # RWn_STATUS fault bits (config/icd/keepout.dbc): 1 overspeed, 2 command timeout, 4 drive fault.
 WHEEL_OVERSPEED = 0x01
 WHEEL_FAULT_MASK = 0x02 | 0x04
@@ -51,8 +56,6 @@ def _resident_bytes() -> int | None:
     Linux (resident pages of /proc/self/statm), read through one descriptor kept open: psutil costs
     ~0.2 ms a call, once per housekeeping cycle. None where /proc is not available."""
     global _statm
-    import os
-
     try:
         pid = os.getpid()
         if _statm is None or _statm[0] != pid:  # "self" is resolved at open: a forked child opens its own
@@ -191,13 +194,16 @@ class FlightSoftware:
         self.checker = AssumptionChecker(config.law.assumption_check)
         self._last_check_t = -math.inf
         self._check_budget_free_at = -math.inf  # host monotonic time from which a periodic check may start
-        self._corrupt_prev = {"IMU": 0, "STAR_TRACKER": 0}
         self._corrupt_src: dict | None = None
-        self._corrupt_dicts: dict[str, tuple[list[dict], list[str]]] = {}
+        self._corrupt_dicts: tuple[list[dict], list[str], list[dict], list[str]] = ([], [], [], [])
         self._hk_src: dict | None = None  # the driver's counters that _hk_dicts lists
         self._hk_src_len = 0
         self._hk_dicts: list[dict] = []
         self._max_speed = np.ascontiguousarray(self.control.max_speed, dtype=float)  # fixed at start-up
+        # configuration the cycle reads every tick, fixed at start-up (no telecommand changes it)
+        self._st_max_age_s = config.estimator.star_tracker_max_age_s
+        self._gnc_tm_every = config.tmtc.gnc_packet_every_n_cycles
+        self._corrupt_totals: tuple[int, int] = (0, 0)  # (IMU, star tracker) E2E rejections so far
         self._st_was_valid = True
         self._st_outage_start = 0.0
         self._target_reached = False
@@ -218,14 +224,15 @@ class FlightSoftware:
     def _warm_up(self) -> None:
         """Load the compiled kernels and start the check worker now, so the first cycle is not late.
 
-        Runs the estimator on a scratch instance and every guidance mode once on the real zones (events
-        muted), then restores the initial mode.
+        Runs the estimator's cycle as the GNC cycle calls it (`AttitudeEstimator._tick`) on a scratch
+        instance (initialisation, a fused fix, a cycle without gyro samples) and every guidance mode once on
+        the real zones (events muted), then restores the initial mode.
         """
         q = np.array([1.0, 0.0, 0.0, 0.0])
         scratch = AttitudeEstimator(self.cfg.estimator, np.asarray(self.cfg.spacecraft.star_tracker_q_BS))
-        scratch.step(self.period_s, np.zeros(3), q)
-        scratch.step_samples(self.period_s, np.zeros((2, 3)), q)
-        scratch.step(self.period_s, np.zeros(3), np.array([0.99, 0.1, 0.0, 0.0]) / np.linalg.norm([0.99, 0.1]))
+        scratch._tick(self.period_s, np.zeros((1, 3)), q, 0.0)
+        scratch._tick(self.period_s, np.zeros((2, 3)), np.array([0.99, 0.1, 0.0, 0.0]), 0.0, math.hypot(0.99, 0.1))
+        scratch._tick(self.period_s, _NO_SAMPLES, None, 0.0)
         g = self.guidance
         events, g.events = g.events, (lambda name, **args: None)
         try:
@@ -340,7 +347,8 @@ class FlightSoftware:
     def _gnc_task(self, inputs, slipped_before: bool) -> None:
         t_start = self.clock()
         dt = self.period_s
-        if hasattr(inputs, "tick"):
+        lockstep = type(inputs) is TickInputs  # the driver's own inputs: the array fast paths below
+        if lockstep or hasattr(inputs, "tick"):
             tick = int(inputs.tick)
             self.t_s = float(inputs.t)
             realtime = False
@@ -368,7 +376,7 @@ class FlightSoftware:
             imu = None
         # lockstep as the driver delivers it: the tick's decoded gyro rows (every one valid) are the
         # estimator's (n, 3) samples as they are, without building an ImuSample per row
-        samples = inputs.fresh_imu_omega_BN_B() if type(inputs) is TickInputs else None
+        samples = inputs.fresh_imu_omega_BN_B() if lockstep else None
         if samples is None:
             imu_samples = getattr(inputs, "imu_samples", None) or ()
             imu_samples = [s.omega_BN_B for s in imu_samples if getattr(s, "valid", True)] or (
@@ -376,19 +384,21 @@ class FlightSoftware:
             samples = _NO_SAMPLES if imu_samples is None else np.array(imu_samples, dtype=float).reshape(-1, 3)
         st = inputs.star_tracker
         st_latency = 0.0
+        nq = 1.0
         st_fresh = st is not None and st.valid
         if st_fresh:
             if realtime:
                 st_latency = float(inputs.star_tracker_age_s or 0.0)
             else:
                 st_latency = max(0.0, float(inputs.t) - float(st.t))
-            if st_latency > self.cfg.estimator.star_tracker_max_age_s:
+            if st_latency > self._st_max_age_s:
                 st_fresh = False
-            nq = _norm(np.asarray(st.q_NS, dtype=float).tolist())
+            q_NS = np.ascontiguousarray(st.q_NS, dtype=float)
+            nq = _norm(q_NS.tolist())
             if not (0.9 < nq < 1.1):
                 st_fresh = False
         # each wheel's speed (NaN) and fault flags (-1) with no status this tick
-        wheel_arrays = inputs.fresh_wheel_arrays() if type(inputs) is TickInputs else None
+        wheel_arrays = inputs.fresh_wheel_arrays() if lockstep else None
         if wheel_arrays is None:
             wheels = inputs.wheels
             if realtime:
@@ -401,9 +411,9 @@ class FlightSoftware:
 
         # ---- estimation (propagate across every IMU sample of the tick)
         est = self.estimator
-        q_st = (np.asarray(st.q_NS, dtype=float) / nq) if st_fresh else None
-        innovation_deg = est._tick(dt, samples, q_st, st_latency)
-        self._st_events(st, st_fresh)
+        innovation_deg = est._tick(dt, samples, q_NS if st_fresh else None, st_latency, nq)
+        if st_fresh != self._st_was_valid:  # the star tracker was lost or is back
+            self._st_events(st, st_fresh)
 
         # ---- guidance and control
         q_est = est.q_NB if est.initialized else None
@@ -442,7 +452,7 @@ class FlightSoftware:
         exec_ms = 1e3 * (self.clock() - t_start)
         self.last = CycleRecord(self.t_s, g.mode, est.q_NB.copy(), g.omega_cmd_BN_B, ctrl.wheel_torque_cmd_Nm,
                                 g.margins_deg, g.margin_min_deg, g.pointing_error_deg, g.att_error_deg, exec_ms)
-        if self.cycle % self.cfg.tmtc.gnc_packet_every_n_cycles == 0:
+        if self.cycle % self._gnc_tm_every == 0:
             self._send_gnc_tm(g, ctrl, speeds, imu is not None, st, st_fresh, exec_ms)
         self.cycle += 1
 
@@ -460,22 +470,20 @@ class FlightSoftware:
         counters = self.driver.counters
         if counters is not self._corrupt_src:
             # the per-message counter dicts live as long as the receiver: look them up once, as the
-            # (dict, class) pairs each sensor's total sums
+            # (dict, class) pairs each sensor's total sums (IMU dicts, IMU classes, tracker dicts, classes)
             self._corrupt_src = counters
-            self._corrupt_dicts = {
-                sensor: ([counters[m] for m in msgs if m in counters for _ in _CORRUPT_CLASSES],
-                         [k for m in msgs if m in counters for k in _CORRUPT_CLASSES])
-                for sensor, msgs in (("IMU", ("IMU_RATE",)), ("STAR_TRACKER", ("ST_QUAT_A", "ST_QUAT_B")))
-            }
-        prev = self._corrupt_prev
-        imu_dicts, imu_keys = self._corrupt_dicts["IMU"]
-        st_dicts, st_keys = self._corrupt_dicts["STAR_TRACKER"]
+            self._corrupt_dicts = tuple(
+                part
+                for msgs in (("IMU_RATE",), ("ST_QUAT_A", "ST_QUAT_B"))
+                for part in ([counters[m] for m in msgs if m in counters for _ in _CORRUPT_CLASSES],
+                             [k for m in msgs if m in counters for k in _CORRUPT_CLASSES]))
+        imu_dicts, imu_keys, st_dicts, st_keys = self._corrupt_dicts
         # integer sums in C (map over dict.get): the same totals as a loop
         imu_total = sum(map(dict.get, imu_dicts, imu_keys, repeat(0)))
         st_total = sum(map(dict.get, st_dicts, st_keys, repeat(0)))
-        imu, st = max(0, imu_total - prev["IMU"]), max(0, st_total - prev["STAR_TRACKER"])
-        prev["IMU"], prev["STAR_TRACKER"] = imu_total, st_total
-        return imu, st
+        imu_prev, st_prev = self._corrupt_totals
+        self._corrupt_totals = (imu_total, st_total)
+        return max(0, imu_total - imu_prev), max(0, st_total - st_prev)
 
     def _execute(self, action) -> None:
         a = action.action
@@ -511,10 +519,10 @@ class FlightSoftware:
     # ---------------------------------------------------------------------------------- telemetry
     def _send_gnc_tm(self, g, ctrl, speeds, imu_valid, st, st_fresh, exec_ms) -> None:
         est = self.estimator
-        nw = self.n_wheels
-        margins = list(g.margins_deg)[:6] + [float("nan")] * (6 - min(6, len(g.margins_deg)))
-        wheel_speed = speeds.tolist() + [math.nan] * (6 - nw)
-        wheel_tau = ctrl.wheel_torque_cmd_Nm.tolist() + [0.0] * (6 - nw)
+        margins = list(g.margins_deg)[:6]
+        margins += _NAN6[len(margins):]  # the packet's six slots, NaN where there is no zone
+        wheel_speed = speeds.tolist() + _NAN6[self.n_wheels:]
+        wheel_tau = ctrl.wheel_torque_cmd_Nm.tolist() + _ZERO6[self.n_wheels:]
         values = {
             "cycle": self.cycle,
             "mode": g.mode,
@@ -588,10 +596,9 @@ class FlightSoftware:
             self._hk_src, self._hk_src_len = counters, len(counters)
             self._hk_dicts = [c for name, c in counters.items() if not name.startswith("_")]
         dicts = self._hk_dicts
-
-        def total(*classes):
-            # each class summed over the messages in C (map over dict.get): the same integers as a loop
-            return sum([sum(map(dict.get, dicts, repeat(k), repeat(0))) for k in classes])
+        # each E2E class summed over the messages in C (map over dict.get): the same integers as a loop
+        n = {k: sum(map(dict.get, dicts, repeat(k), repeat(0))) for k in _HK_CLASSES}
+        bus = counters.get("_bus", {})
         tm = self.telemetry.counters
         values = {
             "uptime_s": time.monotonic() - self._start_wall,
@@ -604,14 +611,14 @@ class FlightSoftware:
             "exec_max_ms_hk": ex.hk.exec_max_ms,
             "exec_mean_ms_hk": ex.hk.exec_mean_ms,
             "jitter_max_ms": 1e3 * ex.jitter.max_s,
-            "bus_rx_ok": total("ok", "ok_some_lost"),
-            "bus_crc_errors": total("crc_error"),
-            "bus_alive_errors": total("wrong_sequence", "ok_some_lost"),
-            "bus_repeated": total("repeated"),
-            "bus_decode_errors": total("bad_length", "out_of_range"),
-            "bus_timeouts": total("timeout"),
+            "bus_rx_ok": n["ok"] + n["ok_some_lost"],
+            "bus_crc_errors": n["crc_error"],
+            "bus_alive_errors": n["wrong_sequence"] + n["ok_some_lost"],
+            "bus_repeated": n["repeated"],
+            "bus_decode_errors": n["bad_length"] + n["out_of_range"],
+            "bus_timeouts": n["timeout"],
             "bus_tx_errors": getattr(self, "_bus_tx_errors", 0),
-            "bus_unknown_ids": sum(self.driver.counters.get("_bus", {}).get(k, 0) for k in ("unknown_id", "error_frame")),
+            "bus_unknown_ids": bus.get("unknown_id", 0) + bus.get("error_frame", 0),
             "bus_stale_syncs": getattr(self.driver, "stale_syncs", 0),
             "bus_unexpected_frames": getattr(self.driver, "unexpected_frames", 0),
             "imu_stale_cycles": self.fdir.stale_counts["IMU"],
@@ -623,8 +630,12 @@ class FlightSoftware:
             "fdir_trips": self.fdir.trips,
             "wheels_isolated": self.control.isolated_mask,
         }
+        keys = _FDIR_HK_KEYS
         for mon, state in self.fdir.states().items():
-            values[f"fdir_{mon.lower()}"] = state
+            key = keys.get(mon)
+            if key is None:
+                key = keys[mon] = f"fdir_{mon.lower()}"
+            values[key] = state
         if self.dispatcher is not None:
             values.update(self.dispatcher.hk_values())
         return values

@@ -172,7 +172,7 @@ class RateController:
 
     @property
     def isolated_mask(self) -> int:
-        return int(sum(1 << i for i in range(self.n) if not self.active[i]))
+        return sum(1 << i for i, active in enumerate(self.active.tolist()) if not active)
 
     def step(self, dt_s: float, omega_cmd_BN_B: np.ndarray, omega_BN_B: np.ndarray, wheel_speed_rad_s: np.ndarray | None = None) -> ControlOutput:
         """One cycle of the rate loop; ``wheel_speed_rad_s`` (NaN for a wheel without a report, None: no

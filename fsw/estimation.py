@@ -173,14 +173,6 @@ def _propagate_in_place(q, bias, P, omega_meas, dt, sig_v, sig_u, PP):
 
 
 @njit(cache=True)
-def mekf_propagate_many(q, bias, P, omegas, dt, sig_v, sig_u):
-    """Propagate through consecutive gyro samples omegas (n, 3), each held for ``dt`` [s]."""
-    for k in range(omegas.shape[0]):
-        q, P = mekf_propagate(q, bias, P, omegas[k], dt, sig_v, sig_u)
-    return q, P
-
-
-@njit(cache=True)
 def mekf_innovation(q, q_meas):
     """Small-angle innovation dtheta_B [rad] = 2 vec(q_est^* (x) q_meas), sign-fixed (double cover)."""
     qc = q.copy()
@@ -197,12 +189,6 @@ def mekf_innovation(q, q_meas):
         ang = 2.0 * math.atan2(vn, dq[0])
         out[:] = dq[1:] * (ang / vn)
     return out
-
-
-@njit(cache=True)
-def mekf_update(q, bias, P, dtheta, R):
-    """Fuse one attitude measurement given its innovation (H = [I 0], R the 3x3 body-frame noise [rad^2])."""
-    return mekf_update_lagged(q, bias, P, dtheta, R, 0.0)
 
 
 @njit(cache=True)
@@ -235,8 +221,12 @@ def mekf_update_lagged(q, bias, P, dtheta, R, lag):
 @njit(cache=True)
 def _mekf_fuse(q, bias, P, omega_last, omega_bridge, bridge_var, initialized, has_st, q_NS, q_SB, st_latency, max_age,
                gate_deg, R_st, P0):
-    """`_mekf_cycle` after the propagation: the rate estimate and the star tracker's fusion (same
-    arguments, same returns)."""
+    """The estimator cycle after the propagation: the rate estimate (``omega_last`` minus the bias) and the
+    star tracker's fusion. ``omega_bridge``: the mean measured rate over the star tracker's latency, which
+    brings its sample to the filter time, and ``bridge_var`` the variance of that mean's white noise per
+    axis [rad^2/s^2]; ``R_st``: the star tracker's noise covariance in body axes [rad^2]
+    (`star_tracker_noise_B`); ``P0``: the covariance a first star-tracker fix initialises.
+    Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
     used = False
     rejected = False
     innov_deg = np.nan
@@ -271,27 +261,6 @@ def _mekf_fuse(q, bias, P, omega_last, omega_bridge, bridge_var, initialized, ha
     return q, bias, P, omega, initialized, used, rejected, innov_deg
 
 
-@njit("Tuple((f8[::1], f8[::1], f8[:, ::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8,"
-      " f8[::1], f8, f8[::1], f8[::1], f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8[:, ::1], f8[:, ::1])",
-      cache=True)
-def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_bridge, bridge_var, sig_v, sig_u,
-                initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg, R_st, P0):
-    """One estimator cycle in one compiled call: propagate through the gyro rates ``prior`` (k, 3), each
-    held ``prior_dt``, then ``omega_prop`` held ``dt``; fuse the star tracker. ``omega_last``: the newest
-    gyro sample (the rate estimate is it minus the bias); ``omega_bridge``: the mean measured rate over
-    the star tracker's latency, which brings its sample to the filter time, and ``bridge_var`` the
-    variance of that mean's white noise per axis [rad^2/s^2]; ``R_st``: the star tracker's noise
-    covariance in body axes [rad^2] (`star_tracker_noise_B`); ``P0``: the covariance a first star-tracker
-    fix initialises. tests/fsw/test_estimation.py compares it with a Python reference.
-    Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
-    if initialized and prior.shape[0] > 0:
-        q, P = mekf_propagate_many(q, bias, P, prior, prior_dt, sig_v, sig_u)
-    if initialized:
-        q, P = mekf_propagate(q, bias, P, omega_prop, dt, sig_v, sig_u)
-    return _mekf_fuse(q, bias, P, omega_last, omega_bridge, bridge_var, initialized, has_st, q_NS, q_SB, st_latency,
-                      max_age, gate_deg, R_st, P0)
-
-
 @njit(cache=True)
 def _round_half_even(x):
     """Python's ``round(x)`` of a float (ties to even) as an integer."""
@@ -307,8 +276,8 @@ def _round_half_even(x):
 def _estimator_cycle(q, bias, P, omega, samples, prev_sample, has_prev, dt_s, sig_v, sig_u, initialized, has_st, q_NS,
                      q_SB, st_latency, max_age, gate_deg, R_st, P0):
     """`AttitudeEstimator._cycle` in one compiled call: the trapezoid rates of the gyro ``samples`` (n, 3),
-    the bridge over the star tracker's latency, then `_mekf_cycle`; the expressions and summation orders
-    of the numpy version it replaces (tests/fsw/test_estimation.py). ``omega``: the last rate estimate;
+    the bridge over the star tracker's latency, the propagation, then `_mekf_fuse`; the expressions and
+    summation orders of the numpy version it replaces (tests/fsw/test_estimation.py). ``omega``: the last rate estimate;
     ``prev_sample``: the last gyro sample of the previous cycle (``has_prev`` False: none).
     Returns (q, bias, P, omega, the new previous sample, initialized, used, rejected, innovation_deg); the
     new previous sample is NaN when this cycle had no gyro sample."""
@@ -355,6 +324,33 @@ def _estimator_cycle(q, bias, P, omega, samples, prev_sample, has_prev, dt_s, si
     return q, bias, P, omega, np.full(3, np.nan), initialized, used, rejected, innov
 
 
+@njit("Tuple((f8[::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[::1], f8[:, ::1], f8[::1],"
+      " f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8, f8, f8, b1, b1, b1)", cache=True)
+def _estimator_tick(q, bias, P, omega, prev_sample, samples, q_NS, q_SB, R_st, P0, consts, dt_s, st_latency, q_norm,
+                    has_prev, initialized, has_st):
+    """`_estimator_cycle` with fewer arguments and results, for `AttitudeEstimator._tick`: handing five new
+    arrays back to Python cost more than the dispatch of the call (~0.5 us each). ``consts``: (sig_v, sig_u,
+    star tracker max age, innovation gate [deg]). ``bias`` (3,), ``P`` (6, 6) and ``prev_sample`` (3,) are
+    overwritten with the new ones (NaN: this cycle had no gyro sample); they are the estimator's own, which
+    nothing else keeps. The attitude and the rate, which guidance keeps from one cycle to the next, come
+    back as new arrays. ``q_NS`` is divided by ``q_norm`` first (numpy's ``q_NS / q_norm``, element by
+    element), so the caller need not build the unit quaternion. Returns (q, omega, initialized, used,
+    rejected, innovation_deg)."""
+    q_unit = np.empty(4)
+    for i in range(4):
+        q_unit[i] = q_NS[i] / q_norm
+    q, bias_n, P_n, omega, new_prev, initialized, used, rejected, innov = _estimator_cycle(
+        q, bias, P, omega, samples, prev_sample, has_prev, dt_s, consts[0], consts[1], initialized, has_st, q_unit, q_SB,
+        st_latency, consts[2], consts[3], R_st, P0)
+    for i in range(3):
+        bias[i] = bias_n[i]
+        prev_sample[i] = new_prev[i]
+    for i in range(6):
+        for j in range(6):
+            P[i, j] = P_n[i, j]
+    return q, omega, initialized, used, rejected, innov
+
+
 def star_tracker_noise_B(cfg, q_BS: np.ndarray) -> np.ndarray:
     """The star tracker's attitude noise covariance in body axes [rad^2] (3, 3).
 
@@ -377,7 +373,6 @@ def star_tracker_noise_B(cfg, q_BS: np.ndarray) -> np.ndarray:
 
 _NO_SAMPLES = np.zeros((0, 3))
 _NO_QUATERNION = np.array([1.0, 0.0, 0.0, 0.0])
-_NO_SAMPLE = np.full(3, np.nan)
 
 
 @dataclass
@@ -399,6 +394,9 @@ class AttitudeEstimator:
         self.sig_v = cfg.gyro_arw_rad_s_sqrt_hz
         self.sig_u = cfg.gyro_bias_rw_rad_s2_sqrt_hz
         self.R_st_B = star_tracker_noise_B(cfg, q_BS)
+        # the compiled cycle's scalar constants in one array (one argument instead of four)
+        self._consts = np.array([self.sig_v, self.sig_u, cfg.star_tracker_max_age_s, cfg.innovation_gate_deg],
+                                dtype=float)
         self.reset()
 
     def reset(self) -> None:
@@ -413,7 +411,19 @@ class AttitudeEstimator:
         self.resets = 0
         self.star_tracker_used = False  # this cycle's star-tracker sample was fused
         self.innovation_rejected = False  # this cycle's star-tracker sample was gated out
-        self._prev_sample: np.ndarray | None = None  # the last gyro sample, start of the next interval
+        # the last gyro sample, start of the next interval (`_prev_sample`): overwritten by the compiled cycle
+        self._prev_buf = np.full(3, np.nan)
+        self._has_prev = False
+
+    @property
+    def _prev_sample(self) -> np.ndarray | None:
+        """The last gyro sample (a copy), start of the next interval; None when the last cycle had none."""
+        return self._prev_buf.copy() if self._has_prev else None
+
+    @_prev_sample.setter
+    def _prev_sample(self, sample: np.ndarray | None) -> None:
+        self._has_prev = sample is not None
+        self._prev_buf = np.full(3, np.nan) if sample is None else np.array(sample, dtype=float).reshape(3)
 
     def _initial_P(self) -> np.ndarray:
         sa = math.radians(self.cfg.initial_attitude_sigma_deg)
@@ -462,20 +472,20 @@ class AttitudeEstimator:
             cov_trace_deg2=self.cov_trace_deg2,
         )
 
-    def _tick(self, dt_s: float, samples: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float) -> float:
-        """`_cycle` without the status: one compiled call (`_estimator_cycle`) and the attribute sets. The
+    def _tick(self, dt_s: float, samples: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float,
+              q_norm: float = 1.0) -> float:
+        """`_cycle` without the status: one compiled call (`_estimator_tick`) and the attribute sets. The
         GNC cycle calls it directly with ``samples`` a C-contiguous float (n, 3) array and ``q_NS`` a
-        contiguous float quaternion or None. Returns the innovation [deg] (NaN when none this cycle)."""
+        contiguous float quaternion (4,) or None, the tracker's sample divided by ``q_norm`` (its norm) in
+        the compiled call. Returns the innovation [deg] (NaN when none this cycle)."""
         has_st = q_NS is not None
-        P0 = self._initial_P() if has_st and not self.initialized else self.P
-        prev = self._prev_sample
-        (self.q_NB, self.bias_B, self.P, self.omega_BN_B, new_prev, self.initialized, used, self.innovation_rejected,
-         innov_deg) = _estimator_cycle(
-            self.q_NB, self.bias_B, self.P, self.omega_BN_B, samples, prev if prev is not None else _NO_SAMPLE,
-            prev is not None, dt_s, self.sig_v, self.sig_u, self.initialized, has_st,
-            q_NS if has_st else _NO_QUATERNION, np.ascontiguousarray(self.q_SB, dtype=float), st_latency_s, self.cfg.star_tracker_max_age_s,
-            self.cfg.innovation_gate_deg, self.R_st_B, P0)
-        self._prev_sample = new_prev if samples.shape[0] else None
+        P = self.P
+        P0 = self._initial_P() if has_st and not self.initialized else P
+        # bias_B, P and the previous sample are updated in place (`_estimator_tick`)
+        self.q_NB, self.omega_BN_B, self.initialized, used, self.innovation_rejected, innov_deg = _estimator_tick(
+            self.q_NB, self.bias_B, P, self.omega_BN_B, self._prev_buf, samples, q_NS if has_st else _NO_QUATERNION,
+            self.q_SB, self.R_st_B, P0, self._consts, dt_s, st_latency_s, q_norm, self._has_prev, self.initialized, has_st)
+        self._has_prev = samples.shape[0] > 0
         self.star_tracker_used = used
         self.coasting_s = 0.0 if used else self.coasting_s + dt_s
         self.last_innovation_deg = innov_deg
@@ -483,8 +493,9 @@ class AttitudeEstimator:
 
     def _attitude_trace(self) -> float:
         # = float(np.trace(self.P[0:3, 0:3])) (same summation order), without numpy's call overhead
+        # (item: the element as a Python float, no numpy scalar in between)
         P = self.P
-        return float(P[0, 0]) + float(P[1, 1]) + float(P[2, 2])
+        return P.item(0, 0) + P.item(1, 1) + P.item(2, 2)
 
     @property
     def cov_trace_deg2(self) -> float:

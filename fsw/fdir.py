@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -41,7 +41,7 @@ _ACTION_CODES = {
     "isolate_wheel": "ISOLATE_WHEEL",
     "isolate_wheel_safe": "ISOLATE_WHEEL",
 }
-_STATE_RANK = {"DISABLED": 0, "NOMINAL": 1, "PERSISTING": 2, "TRIPPED": 3}
+_STATE_RANK = {"DISABLED": 0, "NOMINAL": 1, "PERSISTING": 2, "TRIPPED": 3}  # = the code in _STATES
 
 
 @dataclass
@@ -318,25 +318,8 @@ def _wheel_monitor_values(dt_s, speed, fault_flags, cmd, active, seen, max_speed
     return fault, ratio
 
 
-@dataclass
-class FdirInputs:
-    """What FDIR looks at in one GNC cycle (None = not applicable this cycle)."""
-
-    imu_missing: bool
-    imu_corrupt_frames: int
-    st_missing: bool
-    st_corrupt_frames: int
-    innovation_deg: float | None
-    wheel_fault: list[bool] = field(default_factory=list)
-    wheel_speed_ratio: list[float] = field(default_factory=list)
-    wheel_speed_rad_s: list[float] = field(default_factory=list)
-    margins_deg: list[float] = field(default_factory=list)
-    zone_bodies: list[str] = field(default_factory=list)
-    slipped: bool = False
-
-
 class Fdir:
-    """All monitors; `evaluate` (or `evaluate_arrays`) once per GNC cycle returns the actions to take.
+    """All monitors; `evaluate_cycle` (or `evaluate_arrays`) once per GNC cycle returns the actions to take.
 
     The monitors' states are arrays of one `MonitorBank`, in the order they are evaluated: IMU_STALE,
     ST_STALE, IMU_CORRUPT, ST_CORRUPT, INNOVATION, WHEEL_FAULT per wheel, WHEEL_SPEED per wheel,
@@ -367,6 +350,11 @@ class Fdir:
         self.cycle_slip = LimitMonitor("CYCLE_SLIP", f.cycle_slip, bank=bank, index=k + 2)
         self._all_wheels = np.ones(n_wheels, dtype=np.bool_)  # evaluate_arrays: every wheel is evaluated
         self.stale_counts = {"IMU": 0, "STAR_TRACKER": 0}
+        # (dictionary name, bank indices of its monitors) in all_monitors() order of first appearance, for states()
+        groups: dict[str, list[int]] = {}
+        for m in self.all_monitors():
+            groups.setdefault(m.monitor, []).append(m._i)
+        self._monitor_groups = list(groups.items())
 
     def all_monitors(self) -> list[LimitMonitor]:
         return [self.imu_stale, self.imu_corrupt, self.st_stale, self.st_corrupt, self.innovation,
@@ -374,21 +362,16 @@ class Fdir:
 
     @property
     def trips(self) -> int:
-        return int(self._bank.trips.sum())
+        return sum(self._bank.trips.tolist())  # Python ints: numpy's reduction costs more on a few values
 
     def reset_counters(self) -> None:
         self._bank.trips[:] = 0
 
     def states(self) -> dict[str, str]:
         """Worst state per dictionary monitor (HK channels fdir_<monitor>)."""
-        out: dict[str, str] = {}
         codes = self._bank.state.tolist()
-        for m in self.all_monitors():
-            cur = out.get(m.monitor)
-            state = _STATES[codes[m._i]]
-            if cur is None or _STATE_RANK[state] > _STATE_RANK[cur]:
-                out[m.monitor] = state
-        return out
+        # a state's rank is its code (_STATES in _STATE_RANK's order): the worst is the largest code
+        return {monitor: _STATES[max(map(codes.__getitem__, indices))] for monitor, indices in self._monitor_groups}
 
     def _trip(self, mon: LimitMonitor, value: float, actions: list[FdirAction], wheel: int | None = None) -> None:
         rule = mon.rule
@@ -405,27 +388,11 @@ class Fdir:
             self.event("FDIR_CLEARED", monitor=mon.monitor)
         return res
 
-    def evaluate(self, x: FdirInputs) -> list[FdirAction]:
-        """`evaluate_arrays` for the inputs gathered in an `FdirInputs`."""
-        n = self.n_wheels
-        fault = np.zeros(n, dtype=np.bool_)
-        ratio = np.full(n, np.nan)
-        evaluated = np.zeros(n, dtype=np.bool_)  # wheels past the inputs' lists are not evaluated
-        for i, v in enumerate(x.wheel_fault[:n]):
-            fault[i] = bool(v)
-            evaluated[i] = True
-        for i, v in enumerate(x.wheel_speed_ratio[:n]):
-            ratio[i] = v
-        innovation = x.innovation_deg if x.innovation_deg is not None else np.nan
-        return self._evaluate(x.imu_missing, x.imu_corrupt_frames, x.st_missing, x.st_corrupt_frames, innovation,
-                              fault, evaluated, ratio, x.wheel_speed_rad_s, x.margins_deg, x.zone_bodies, x.slipped)
-
     def evaluate_arrays(self, imu_missing: bool, imu_corrupt_frames: int, st_missing: bool, st_corrupt_frames: int,
                         innovation_deg: float, wheel_fault: np.ndarray, wheel_speed_ratio: np.ndarray,
                         wheel_speed_rad_s: np.ndarray, margins_deg, zone_bodies: list[str],
                         slipped: bool) -> list[FdirAction]:
-        """One cycle of every monitor (what `FdirInputs` describes, per-wheel values as arrays of
-        ``n_wheels``: ``wheel_fault`` bool, ``wheel_speed_ratio`` NaN where not evaluated;
+        """One cycle of every monitor (per-wheel values as arrays of ``n_wheels``: ``wheel_fault`` bool, ``wheel_speed_ratio`` NaN where not evaluated;
         ``innovation_deg`` NaN when none this cycle). Returns the actions to take."""
         return self._evaluate(imu_missing, imu_corrupt_frames, st_missing, st_corrupt_frames, innovation_deg,
                               wheel_fault, self._all_wheels, wheel_speed_ratio, wheel_speed_rad_s, margins_deg,

@@ -5,10 +5,11 @@ import math
 
 import numpy as np
 import pytest
+from numba import njit
 from scipy.spatial.transform import Rotation
 
 from fsw.config import EstimatorConfig
-from fsw.estimation import AttitudeEstimator
+from fsw.estimation import AttitudeEstimator, _mekf_fuse, mekf_propagate
 
 
 def _err_deg(q_a, q_b) -> float:
@@ -245,10 +246,34 @@ def test_structured_propagation_matches_the_dense_matrix_form() -> None:
         assert np.array_equal(Pn, Pn.T)
 
 
+@njit
+def _mekf_propagate_many(q, bias, P, omegas, dt, sig_v, sig_u):
+    """Propagate through consecutive gyro samples omegas (n, 3), each held for ``dt`` [s]."""
+    for k in range(omegas.shape[0]):
+        q, P = mekf_propagate(q, bias, P, omegas[k], dt, sig_v, sig_u)
+    return q, P
+
+
+@njit("Tuple((f8[::1], f8[::1], f8[:, ::1], f8[::1], b1, b1, b1, f8))(f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8,"
+      " f8[::1], f8, f8[::1], f8[::1], f8, f8, f8, b1, b1, f8[::1], f8[::1], f8, f8, f8, f8[:, ::1], f8[:, ::1])")
+def _mekf_cycle(q, bias, P, prior, prior_dt, omega_prop, dt, omega_last, omega_bridge, bridge_var, sig_v, sig_u,
+                initialized, has_st, q_NS, q_SB, st_latency, max_age, gate_deg, R_st, P0):
+    """The estimator cycle as one compiled call before `_estimator_cycle` (the flight code until then):
+    propagate through the gyro rates ``prior`` (k, 3), each held ``prior_dt``, then ``omega_prop`` held
+    ``dt`` (`mekf_propagate`, allocating); fuse the star tracker (`_mekf_fuse`).
+    Returns (q, bias, P, omega, initialized, used, rejected, innovation_deg)."""
+    if initialized and prior.shape[0] > 0:
+        q, P = _mekf_propagate_many(q, bias, P, prior, prior_dt, sig_v, sig_u)
+    if initialized:
+        q, P = mekf_propagate(q, bias, P, omega_prop, dt, sig_v, sig_u)
+    return _mekf_fuse(q, bias, P, omega_last, omega_bridge, bridge_var, initialized, has_st, q_NS, q_SB, st_latency,
+                      max_age, gate_deg, R_st, P0)
+
+
 def _numpy_cycle(est, dt_s, samples, q_NS, st_latency_s):
     """The estimator cycle as it was written in numpy around `_mekf_cycle` (before `_estimator_cycle`
     fused it into one compiled call): the reference the fused kernel must match bit for bit."""
-    from fsw.estimation import _NO_QUATERNION, _NO_SAMPLES, _mekf_cycle
+    from fsw.estimation import _NO_QUATERNION, _NO_SAMPLES
 
     n = samples.shape[0]
     if n:
@@ -343,3 +368,43 @@ def test_in_place_propagation_is_bit_identical_to_mekf_propagate() -> None:
         q2, P2 = q.copy(), P.copy()
         _propagate_in_place(q2, bias, P2, omega, dt, 1e-4, 1e-6, PP)
         assert np.array_equal(q2, qn) and np.array_equal(P2, Pn), k
+
+
+def test_estimator_tick_is_estimator_cycle_in_place() -> None:
+    """`_estimator_tick` (bias, P and the previous sample overwritten, the tracker sample divided by its
+    norm inside) against `_estimator_cycle` on the numpy-normalised sample: every output equal to the last
+    bit, over random sample counts, tracker gaps, norms off one, outliers and a (re)initialisation."""
+    from fsw.estimation import _NO_QUATERNION, _estimator_cycle, _estimator_tick
+
+    rng = np.random.default_rng(31)
+    cfg = EstimatorConfig(gyro_arw_rad_s_sqrt_hz=1e-4, gyro_bias_rw_rad_s2_sqrt_hz=1e-6)
+    est = AttitudeEstimator(cfg, np.array([1.0, 0.0, 0.0, 0.0]))
+    consts = np.array([est.sig_v, est.sig_u, cfg.star_tracker_max_age_s, cfg.innovation_gate_deg])
+    q, bias, P, omega = est.q_NB, est.bias_B, est.P, est.omega_BN_B
+    prev, has_prev, initialized = np.full(3, np.nan), False, False
+    kinds = set()
+    for k in range(400):
+        n = int(rng.integers(0, 12)) if k % 9 else 0
+        samples = rng.normal(scale=0.02, size=(n, 3))
+        has_st = bool(k % 3)
+        q_raw = rng.normal(size=4) if k % 50 == 0 else np.array([1.0, 0.0, 0.0, 0.0]) + rng.normal(scale=1e-4, size=4)
+        q_raw *= rng.uniform(0.95, 1.05) / np.linalg.norm(q_raw)
+        nq = float(np.linalg.norm(q_raw)) if has_st else 1.0
+        lat = float(rng.uniform(0.0, 0.2))
+        P0 = est._initial_P() if has_st and not initialized else P
+        ref = _estimator_cycle(q, bias, P, omega, samples, prev, has_prev, 0.1, est.sig_v, est.sig_u, initialized,
+                               has_st, q_raw / nq if has_st else _NO_QUATERNION, est.q_SB, lat,
+                               cfg.star_tracker_max_age_s, cfg.innovation_gate_deg, est.R_st_B, P0)
+        bias2, P2, prev2 = bias.copy(), P.copy(), prev.copy()
+        out = _estimator_tick(q, bias2, P2, omega, prev2, samples, q_raw if has_st else _NO_QUATERNION, est.q_SB,
+                              est.R_st_B, P0, consts, 0.1, lat, nq, has_prev, initialized, has_st)
+        q_r, bias_r, P_r, omega_r, prev_r, init_r, used_r, rej_r, innov_r = ref
+        assert np.array_equal(out[0], q_r) and np.array_equal(out[1], omega_r)
+        assert np.array_equal(bias2, bias_r) and np.array_equal(P2, P_r), k
+        assert np.array_equal(prev2, prev_r, equal_nan=True)
+        assert out[2:5] == (init_r, used_r, rej_r) and str(out[5]) == str(innov_r)
+        kinds.add("used" if used_r else "rejected" if rej_r else "coast")
+        q, bias, P, omega, prev, has_prev, initialized = q_r, bias_r, P_r, omega_r, prev_r, n > 0, init_r
+        if k == 200:  # forget the attitude: the next fix initialises again
+            initialized = False
+    assert kinds == {"used", "rejected", "coast"}, kinds
