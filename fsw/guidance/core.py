@@ -11,7 +11,7 @@ import numpy as np
 
 from fsw.assumption_check import CheckResult
 from fsw.guidance._kernels import FP_WIDTH
-from fsw.guidance.common import GuidanceOutput, _saturate, _unit, signed_margin_deg
+from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _saturate, _unit, signed_margin_deg
 from fsw.guidance.ephemeris import SkyEphemeris
 from fsw.guidance.path_following import PathFollowing
 from fsw.guidance.path_planning import PathFollower
@@ -67,6 +67,7 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
                     fixed,
                 )
             )
+        self._body_codes = [_BODY_CODES[s.body] for s in self.slots]  # telemetry codes, fixed with the slots
         self.sky_geometry = ZoneGeometry(3, cfg.law.merge_gap_deg)
         if self.slots:
             _warm_batch_kernels([s.builder_law for s in self.slots])
@@ -83,9 +84,9 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self._sky_zones_merged = False
         self._fp = np.zeros(FP_WIDTH)
         self._eph_k = None
-        self._eph = None
         self._fp_key = None
         self._fp_law = None
+        self._fp_vecs = None
         self._zone_facts_kept: dict[int, tuple] = {}
         self._sky_groups: list[list[int]] = []
         self._sky_law_zones: list = []
