@@ -456,43 +456,43 @@ class PointingGuidance:
     def _pointing_output(self, t_s: float, res: np.ndarray, y: np.ndarray, compiled_sky: bool) -> GuidanceOutput:
         """The cycle's output from `pointing_law_nb`'s results; the governor's and the watchdog's state, and
         with ``compiled_sky`` (the whole cycle was one call) the sky as `_update_sky` leaves it."""
-        if res[R_LAW_ERROR] != 0.0:
+        vals = res.tolist()  # the scalars as Python floats in one call (not an array slice or scalar each)
+        if vals[R_LAW_ERROR] != 0.0:
             raise ValueError(f"state x must be a unit vector on S^2, |x|^2 = {float(y @ y)!r}")
         slots = self.slots
         n = len(slots)
         if compiled_sky:
             sun, moon = res[0:3], res[3:6]
             dirs = self._dirs = {"sun": sun, "moon": moon, "earth": res[6:9]}
-            for s, drift in zip(slots, res[R_DRIFT:R_DRIFT + n].tolist()):
+            for s, drift in zip(slots, vals[R_DRIFT:R_DRIFT + n]):
                 s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
                 s.phys_drift_deg = drift
             follower = self._follower
             if follower is not None:
-                follower.index = int(res[R_NEAREST])
+                follower.index = int(vals[R_NEAREST])
         else:
             dirs = self._dirs
             sun, moon = dirs.get("sun", _NAN3), dirs.get("moon", _NAN3)
-        zone = int(res[R_ZONE])
+        zone = int(vals[R_ZONE])
         active = -1 if zone < 0 else self._sky_group_first[zone]
-        margins_arr = res[R_DRIFT + n:R_DRIFT + 2 * n]
-        margins = margins_arr.tolist()
-        error = float(res[R_ERROR])
+        error = vals[R_ERROR]
         # the record's dict in one step (the dataclass constructor, with its keyword handling and default
         # factories, cost ~3 us a cycle)
         out = object.__new__(GuidanceOutput)
         out.__dict__ = {
             "omega_cmd_BN_B": res[R_OMEGA:R_OMEGA + 3], "mode": "POINTING", "safe_phase": "NONE",
-            "active_zone": active, "eps": self._sky_eps, "eps_max": self._sky_eps_max, "margins_deg": margins,
-            "margin_min_deg": float(res[R_MARGIN_MIN]), "pointing_error_deg": error, "att_error_deg": math.nan,
-            "roll_error_deg": math.degrees(res[R_ROLL]), "boresight_N": y, "target_N": self.target_N.copy(),
-            "q_target_NB": _NAN4, "zones_merged": self._sky_zones_merged, "assumptions_ok": self.assumptions_ok,
-            "sun_N": sun, "moon_N": moon, "zone_count": n, "zone_bodies": self._body_codes,
+            "active_zone": active, "eps": self._sky_eps, "eps_max": self._sky_eps_max,
+            "margins_deg": vals[R_DRIFT + n:R_DRIFT + 2 * n], "margin_min_deg": vals[R_MARGIN_MIN],
+            "pointing_error_deg": error, "att_error_deg": math.nan, "roll_error_deg": math.degrees(vals[R_ROLL]),
+            "boresight_N": y, "target_N": self.target_N.copy(), "q_target_NB": _NAN4,
+            "zones_merged": self._sky_zones_merged, "assumptions_ok": self.assumptions_ok, "sun_N": sun,
+            "moon_N": moon, "zone_count": n, "zone_bodies": self._body_codes,
         }
-        self._governor_margins = kept = margins_arr.tolist()
-        self._governor_kept = (kept, margins_arr)
+        self._governor_margins = kept = vals[R_DRIFT + n:R_DRIFT + 2 * n]
+        self._governor_kept = (kept, res[R_DRIFT + n:R_DRIFT + 2 * n])
         # the progress watchdog (`_watch_progress`): a cycle that is not idle (its test in
         # `ProgressWatchdog.update`) only restarts the watch
-        law_rate = float(res[R_LAW_RATE])
+        law_rate = vals[R_LAW_RATE]
         watchdog = self._watchdog
         if (watchdog.window_s > 0.0 and active < 0 and self._occulted < 0 and not self._escaping
                 and error >= MIN_ERROR_DEG and law_rate < RATE_FRACTION * self.max_rate_rad_s):
