@@ -77,6 +77,8 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         # zones, the law's zones and law, what is kept while the zones stay the same objects
         self._sky_pack = None
         self._law_pack = None
+        self._sky_res = None  # a compiled cycle's sky not applied to the slots yet (`_settle_sky`)
+        self._target_out = (None, None)  # (target_N, its read-only copy the POINTING outputs share)
         self._merge_kept = None
         self._law_zones_kept = None
         self._governor_kept = None

@@ -63,6 +63,9 @@ class _SkySlot:
     phys: object | None = None
     law: object | None = None
     phys_drift_deg: float = 0.0  # angle between center_N and built_center, this cycle
+    # center_N and phys_drift_deg (and the guidance's `_dirs`) as the last cycle left them once
+    # `PointingGuidance._settle_sky` has run: a compiled cycle leaves them to it (nothing in a steady
+    # cycle reads them; every reader settles first)
 
 
 class PointingGuidance:
@@ -78,6 +81,7 @@ class PointingGuidance:
         covers the cycles a pending rebuild may wait.
         """
         dirs = self.ephem.directions(t_s) if self.slots else {}
+        self._sky_res = None  # every slot's state is set below
         self._dirs = dirs
         worst, worst_kind, worst_slot = 0.0, None, None
         first = False
@@ -113,6 +117,7 @@ class PointingGuidance:
     def _sky_margins(self, y_N: np.ndarray) -> tuple[list[float], float]:
         """Signed physical margins [deg], conservative: minus the zone's drift since it was built (as
         `_update_sky` found it this cycle)."""
+        self._settle_sky()
         margins = [signed_margin_deg(s.phys, y_N) - s.phys_drift_deg for s in self.slots]
         return margins, (min(margins) if margins else float("nan"))
 
@@ -433,11 +438,8 @@ class PointingGuidance:
     def _apply_sky(self, res: np.ndarray) -> bool:
         """`_update_sky` from the kernel's sky: the slots' centres and drifts, and the one rebuild it asks
         for. True if a law zone was rebuilt."""
-        dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
-        self._dirs = dirs
-        for i, s in enumerate(self.slots):
-            s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
-            s.phys_drift_deg = float(res[R_DRIFT + i])
+        self._sky_res = res
+        self._settle_sky()
         w = int(res[R_WORST])
         if w < 0:
             return False
@@ -453,20 +455,30 @@ class PointingGuidance:
         slot.phys_drift_deg = _angle_deg(c, slot.built_center)
         return False
 
+    def _settle_sky(self) -> None:
+        """The sky of the last compiled cycle (`pointing_step_nb`'s ``res``), if not applied yet, as
+        `_update_sky` leaves it: the directions (`_dirs`), the slots' centres and drifts."""
+        res = self._sky_res
+        if res is None:
+            return
+        self._sky_res = None
+        dirs = self._dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
+        for s, drift in zip(self.slots, res[R_DRIFT:R_DRIFT + len(self.slots)].tolist()):
+            s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
+            s.phys_drift_deg = drift
+
     def _pointing_output(self, t_s: float, res: np.ndarray, y: np.ndarray, compiled_sky: bool) -> GuidanceOutput:
         """The cycle's output from `pointing_law_nb`'s results; the governor's and the watchdog's state, and
-        with ``compiled_sky`` (the whole cycle was one call) the sky as `_update_sky` leaves it."""
+        with ``compiled_sky`` (the whole cycle was one call) the sky as `_update_sky` leaves it (applied to
+        the slots when read, `_settle_sky`)."""
         vals = res.tolist()  # the scalars as Python floats in one call (not an array slice or scalar each)
         if vals[R_LAW_ERROR] != 0.0:
             raise ValueError(f"state x must be a unit vector on S^2, |x|^2 = {float(y @ y)!r}")
         slots = self.slots
         n = len(slots)
         if compiled_sky:
+            self._sky_res = res  # the slots' sky, applied when read (`_settle_sky`)
             sun, moon = res[0:3], res[3:6]
-            dirs = self._dirs = {"sun": sun, "moon": moon, "earth": res[6:9]}
-            for s, drift in zip(slots, vals[R_DRIFT:R_DRIFT + n]):
-                s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
-                s.phys_drift_deg = drift
             follower = self._follower
             if follower is not None:
                 follower.index = int(vals[R_NEAREST])
@@ -476,6 +488,11 @@ class PointingGuidance:
         zone = int(vals[R_ZONE])
         active = -1 if zone < 0 else self._sky_group_first[zone]
         error = vals[R_ERROR]
+        target = self._target_out
+        if target[0] is not self.target_N:  # a new target: its copy for the outputs, read-only as they share it
+            copy = self.target_N.copy()
+            copy.flags.writeable = False
+            target = self._target_out = (self.target_N, copy)
         # the record's dict in one step (the dataclass constructor, with its keyword handling and default
         # factories, cost ~3 us a cycle)
         out = object.__new__(GuidanceOutput)
@@ -484,7 +501,7 @@ class PointingGuidance:
             "active_zone": active, "eps": self._sky_eps, "eps_max": self._sky_eps_max,
             "margins_deg": vals[R_DRIFT + n:R_DRIFT + 2 * n], "margin_min_deg": vals[R_MARGIN_MIN],
             "pointing_error_deg": error, "att_error_deg": math.nan, "roll_error_deg": math.degrees(vals[R_ROLL]),
-            "boresight_N": y, "target_N": self.target_N.copy(), "q_target_NB": _NAN4,
+            "boresight_N": y, "target_N": target[1], "q_target_NB": _NAN4,
             "zones_merged": self._sky_zones_merged, "assumptions_ok": self.assumptions_ok, "sun_N": sun,
             "moon_N": moon, "zone_count": n, "zone_bodies": self._body_codes,
         }
@@ -561,6 +578,7 @@ class PointingGuidance:
         return x, occ
 
     def _report_merge(self, old: list[list[int]], new: list[list[int]]) -> None:
+        self._settle_sky()
         old_pairs = {(g[0], j) for g in old for j in g[1:]}
         new_pairs = {(g[0], j) for g in new for j in g[1:]}
         for a, b in sorted(new_pairs - old_pairs):
