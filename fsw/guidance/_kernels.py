@@ -232,7 +232,8 @@ def pack_zones(zones: list) -> tuple[np.ndarray, np.ndarray] | None:
  FP_ACCEL, FP_BANDWIDTH, FP_EPS, FP_COS_AHEAD, FP_FOLLOW) = range(17)
 FP_LAW_TARGET, FP_B, FP_TARGET, FP_ROLL_AXIS, FP_ROLL_REF = 17, 20, 23, 26, 29
 FP_EPH = 32  # 6 rows of 3: p_hat, q_hat, Sun and Moon at the two ephemeris nodes (`sky_directions_nb`)
-FP_WIDTH = 50
+FP_PREV = 50  # then last cycle's margins (FP_NPREV of them), for the governor; the law kernel writes its own
+FP_WIDTH = 50  # plus one per slot
 
 # result layout of `pointing_step_nb`
 (R_DIRS, R_Y, R_COMPLETE, R_WORST, R_WORST_KIND, R_NEAREST, R_AIM, R_OMEGA, R_LAW_RATE, R_ERROR, R_ROLL,
@@ -301,10 +302,10 @@ def star_law_nb(y, eps, law_target, tab, arcs, u):
 
 
 @njit(cache=True)
-def pointing_law_nb(q, y, fp, law_tab, law_arcs, phys_tab, phys_arcs, drift, prev, res):
+def pointing_law_nb(q, y, fp, law_tab, law_arcs, phys_tab, phys_arcs, drift, res):
     """The law's ``u`` and zone, the slots' margins (less their ``drift``), the governor's rate and the
     command (`pointing_command_nb`, target and roll axes from ``fp``) into ``res`` (layout R_*; the margins
-    at ``res[R_DRIFT + n:]``)."""
+    at ``res[R_DRIFT + n:]``, and at ``fp[FP_PREV:]`` for the next cycle's governor)."""
     n = phys_tab.shape[0]
     u = np.empty(3)
     zone = star_law_nb(y, fp[FP_EPS], fp[FP_LAW_TARGET:FP_LAW_TARGET + 3], law_tab, law_arcs, u)
@@ -327,12 +328,14 @@ def pointing_law_nb(q, y, fp, law_tab, law_arcs, phys_tab, phys_arcs, drift, pre
         closest = 0.0
         for i in range(n):
             m = res[m0 + i]
-            if m < prev[i] and (not found or m < closest):
+            if m < fp[FP_PREV + i] and (not found or m < closest):
                 closest, found = m, True
         if found:
             room = 1.0 * closest - BRAKING_RESERVE_DEG
             governor = math.radians(rate_for_distance_nb(room, fp[FP_ACCEL], fp[FP_BANDWIDTH]))
     res[R_GOVERNOR] = governor
+    for i in range(n):
+        fp[FP_PREV + i] = res[m0 + i]
     c = pointing_command_nb(q, y, fp[FP_B:FP_B + 3], u, fp[FP_K1], fp[FP_MAX_RATE], governor,
                             fp[FP_TARGET:FP_TARGET + 3], fp[FP_ROLL_AXIS:FP_ROLL_AXIS + 3],
                             fp[FP_ROLL_REF:FP_ROLL_REF + 3], fp[FP_ROLL_GAIN])
@@ -344,7 +347,7 @@ def pointing_law_nb(q, y, fp, law_tab, law_arcs, phys_tab, phys_arcs, drift, pre
 
 
 @njit(cache=True)
-def pointing_step_nb(q, fp, slot_geo, path, law_tab, law_arcs, phys_tab, phys_arcs, prev, res):
+def pointing_step_nb(q, fp, slot_geo, path, law_tab, law_arcs, phys_tab, phys_arcs, res):
     """One POINTING cycle in steady state (`PointingGuidance._pointing`): the sky directions, every slot's
     drift and the rebuild it calls for, the boresight, the path follower's aim; then, when no zone needs a
     rebuild, the law is current (``fp[FP_STEADY]``) and the aim stays, `pointing_law_nb`
@@ -392,6 +395,6 @@ def pointing_step_nb(q, fp, slot_geo, path, law_tab, law_arcs, phys_tab, phys_ar
         res[R_AIM_DONE] = 1.0
         if aim != int(fp[FP_AIM_K]):
             return 0.0
-    pointing_law_nb(q, y, fp, law_tab, law_arcs, phys_tab, phys_arcs, res[R_DRIFT:R_DRIFT + n], prev, res)
+    pointing_law_nb(q, y, fp, law_tab, law_arcs, phys_tab, phys_arcs, res[R_DRIFT:R_DRIFT + n], res)
     res[R_COMPLETE] = 1.0
     return 1.0

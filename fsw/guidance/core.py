@@ -84,7 +84,7 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self._governor_kept = None
         self._sky_group_first: list[int] = []
         self._sky_zones_merged = False
-        self._fp = np.zeros(FP_WIDTH)
+        self._fp = np.zeros(FP_WIDTH + len(self.slots))
         self._eph_k = None
         self._fp_key = None
         self._fp_law = None

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fsw.guidance._kernels import (
-    ARC_WIDTH, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_EPH, FP_EPS, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_ROLL_AXIS,
+    ARC_WIDTH, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_EPH, FP_EPS, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_PREV, FP_ROLL_AXIS,
     FP_ROLL_REF, FP_START, FP_STEADY, FP_T, FP_TARGET, FP_U0, R_AIM, R_AIM_DONE, R_DRIFT, R_ERROR, R_LAW_ERROR,
     R_LAW_RATE, R_MARGIN_MIN,
     R_NEAREST, R_OMEGA, R_ROLL, R_WORST, R_WORST_KIND, R_Y, R_ZONE, SG_BODY, SG_BUILT, SG_BUILT_LAW, SG_FIXED,
@@ -36,7 +36,6 @@ LAW_REBUILD_TRIGGER_DEG = 0.08
 PHYS_REBUILD_TOL_DEG = 0.5
 _BODY_INDEX = {"sun": 0, "moon": 1, "earth": 2, "inertial": 3}  # rows of `sky_directions_nb`; 3: a fixed centre
 _NO_PATH = np.zeros((1, 3))
-_NO_MARGINS = np.zeros(0)
 _NO_LAW = (np.zeros((0, ZT_WIDTH)), np.zeros((0, ARC_WIDTH)))
 
 
@@ -138,11 +137,11 @@ class PointingGuidance:
                       and not self.sky_geometry.unmerged
                       and not (follower is not None
                                and t_s - self._planned_t >= self.cfg.pointing.path.replan_period_s))
-            fp, prev = self._cycle_inputs(t_s, 1.0 if steady else 0.0)
+            fp = self._cycle_inputs(t_s, 1.0 if steady else 0.0)
             law = self._law_pack or _NO_LAW
             res = np.empty(R_DRIFT + 2 * len(pack[0]))
             if pointing_step_nb(q, fp, pack[0], follower.path if follower is not None else _NO_PATH, law[0], law[1],
-                                pack[1], pack[2], prev, res) != 0.0:
+                                pack[1], pack[2], res) != 0.0:
                 return self._pointing_output(t_s, res, res[R_Y:R_Y + 3], True)
             rebuilt = self._apply_sky(res)
             y = res[R_Y:R_Y + 3]
@@ -166,9 +165,9 @@ class PointingGuidance:
                 n = len(self.slots)
                 res = np.empty(R_DRIFT + 2 * n)
                 drift = np.array([s.phys_drift_deg for s in self.slots])
-                fp, prev = self._cycle_inputs(t_s, 0.0)
+                fp = self._cycle_inputs(t_s, 0.0)
                 law = self._law_pack
-                pointing_law_nb(q, y, fp, law[0], law[1], pack[1], pack[2], drift, prev, res)
+                pointing_law_nb(q, y, fp, law[0], law[1], pack[1], pack[2], drift, res)
                 return self._pointing_output(t_s, res, y, False)
             out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
             out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
@@ -369,11 +368,11 @@ class PointingGuidance:
         self._sky_pack = pack = (geo, *phys)
         return pack
 
-    def _cycle_inputs(self, t_s: float, steady: float) -> tuple[np.ndarray, np.ndarray]:
-        """The inputs of `pointing_step_nb` / `pointing_law_nb` (layout FP_*) and last cycle's margins for
-        the governor (`_governor_rate`) as an array: the cycle's values, and the rest again when one of the
-        values they come from was replaced (the target and the roll axes are replaced, never written into:
-        SAFE swaps them for its own every cycle)."""
+    def _cycle_inputs(self, t_s: float, steady: float) -> np.ndarray:
+        """The inputs of `pointing_step_nb` / `pointing_law_nb` (layout FP_*), with last cycle's margins for
+        the governor (`_governor_rate`): the cycle's values, and the rest again when one of the values they
+        come from was replaced (the target and the roll axes are replaced, never written into: SAFE swaps
+        them for its own every cycle)."""
         fp = self._fp
         e = self.ephem
         k = math.floor(t_s / EPHEMERIS_NODE_S)
@@ -415,12 +414,12 @@ class PointingGuidance:
         prev = self._governor_margins
         if prev is None:
             fp[FP_NPREV] = -1.0
-            return fp, _NO_MARGINS
+            return fp
         fp[FP_NPREV] = len(prev)
-        kept = self._governor_kept
-        if kept is not None and kept[0] is prev:
-            return fp, kept[1]
-        return fp, np.array(prev, dtype=float)
+        # the margins the law kernel left in fp last cycle (`_pointing_output` keeps their list), or others
+        if prev is not self._governor_kept and len(prev) == len(self.slots):  # the only count the kernels use
+            fp[FP_PREV:FP_PREV + len(prev)] = prev
+        return fp
 
     def _aim_from(self, res: np.ndarray) -> bool:
         """`_aim_moved` (`advance_aim`) with the path index the kernel found this cycle."""
@@ -505,8 +504,8 @@ class PointingGuidance:
             "zones_merged": self._sky_zones_merged, "assumptions_ok": self.assumptions_ok, "sun_N": sun,
             "moon_N": moon, "zone_count": n, "zone_bodies": self._body_codes,
         }
-        self._governor_margins = kept = vals[R_DRIFT + n:R_DRIFT + 2 * n]
-        self._governor_kept = (kept, res[R_DRIFT + n:R_DRIFT + 2 * n])
+        # the margins as the law kernel left them in fp[FP_PREV:] for the next cycle's governor
+        self._governor_margins = self._governor_kept = vals[R_DRIFT + n:R_DRIFT + 2 * n]
         # the progress watchdog (`_watch_progress`): a cycle that is not idle (its test in
         # `ProgressWatchdog.update`) only restarts the watch
         law_rate = vals[R_LAW_RATE]

@@ -205,8 +205,8 @@ def test_cycle_inputs_follow_what_the_guidance_replaces() -> None:
         (s0, m0), (s1, m1) = g.ephem._geocentric(k), g.ephem._geocentric(k + 1)
         return np.concatenate([g.ephem.p_hat, g.ephem.q_hat, s0, s1, m0, m1])
 
-    fp, prev = g._cycle_inputs(0.0, 1.0)
-    assert prev.size == 0 and fp[K.FP_NPREV] == -1.0
+    fp = g._cycle_inputs(0.0, 1.0)
+    assert fp[K.FP_NPREV] == -1.0
     assert np.array_equal(rows(fp, K.FP_TARGET), g.target_N)
     assert np.array_equal(rows(fp, K.FP_ROLL_AXIS), g.roll_axis_B)
     assert np.array_equal(rows(fp, K.FP_ROLL_REF), g.roll_ref_N)
@@ -214,10 +214,10 @@ def test_cycle_inputs_follow_what_the_guidance_replaces() -> None:
     g.target_N = _ra_dec(95.0, 30.0)
     g.roll_axis_B, g.roll_ref_N = np.array([0.0, 1.0, 0.0]), _ra_dec(10.0, -20.0)
     g._governor_margins = [4.0, 5.5, 7.25]
-    fp, prev = g._cycle_inputs(12.3, 0.0)
+    fp = g._cycle_inputs(12.3, 0.0)
     assert np.array_equal(rows(fp, K.FP_TARGET), g.target_N)
     assert np.array_equal(rows(fp, K.FP_ROLL_AXIS), g.roll_axis_B)
     assert np.array_equal(rows(fp, K.FP_ROLL_REF), g.roll_ref_N)
     assert np.array_equal(rows(fp, K.FP_EPH, 18), ephemeris_rows(12.3))
     assert fp[K.FP_T] == 12.3 and fp[K.FP_F] == 12.3 / 10.0 - 1 and fp[K.FP_STEADY] == 0.0
-    assert prev.tolist() == [4.0, 5.5, 7.25] and fp[K.FP_NPREV] == 3
+    assert fp[K.FP_PREV:].tolist() == [4.0, 5.5, 7.25] and fp[K.FP_NPREV] == 3
