@@ -225,11 +225,15 @@ def pack_zones(zones: list) -> tuple[np.ndarray, np.ndarray] | None:
     return tab, np.ascontiguousarray(np.concatenate(arcs))
 
 
-# scalar inputs of `pointing_step_nb` (one float vector): per cycle first, then what changes seldom
+# inputs of `pointing_step_nb` (one float vector, so that the compiled call unboxes few arguments): per
+# cycle first, then what changes seldom: the commanded target and the roll law's axes (rewritten when the
+# guidance replaces them), the ephemeris rows (every EPHEMERIS_NODE_S)
 (FP_T, FP_F, FP_STEADY, FP_START, FP_AIM_K, FP_NPREV, FP_U0, FP_N, FP_RADIUS, FP_K1, FP_MAX_RATE, FP_ROLL_GAIN,
  FP_ACCEL, FP_BANDWIDTH, FP_EPS, FP_COS_AHEAD, FP_FOLLOW) = range(17)
-FP_LAW_TARGET, FP_B = 17, 20
-FP_WIDTH = 23
+FP_LAW_TARGET, FP_B, FP_TARGET, FP_ROLL_AXIS, FP_ROLL_REF = 17, 20, 23, 26, 29
+FP_EPH = 32  # 6 rows of 3: p_hat, q_hat, Sun and Moon at the two ephemeris nodes (`sky_directions_nb`)
+FP_PREV = 50  # then last cycle's margins (FP_NPREV of them), for the governor; the law kernel writes its own
+FP_WIDTH = 50  # plus one per slot
 
 # result layout of `pointing_step_nb`
 (R_DIRS, R_Y, R_COMPLETE, R_WORST, R_WORST_KIND, R_NEAREST, R_AIM, R_OMEGA, R_LAW_RATE, R_ERROR, R_ROLL,
@@ -298,10 +302,10 @@ def star_law_nb(y, eps, law_target, tab, arcs, u):
 
 
 @njit(cache=True)
-def pointing_law_nb(q, y, fp, target, roll_axis, roll_ref, law_tab, law_arcs, phys_tab, phys_arcs, drift, prev,
-                    res):
+def pointing_law_nb(q, y, fp, law_tab, law_arcs, phys_tab, phys_arcs, drift, res):
     """The law's ``u`` and zone, the slots' margins (less their ``drift``), the governor's rate and the
-    command (`pointing_command_nb`) into ``res`` (layout R_*; the margins at ``res[R_DRIFT + n:]``)."""
+    command (`pointing_command_nb`, target and roll axes from ``fp``) into ``res`` (layout R_*; the margins
+    at ``res[R_DRIFT + n:]``, and at ``fp[FP_PREV:]`` for the next cycle's governor)."""
     n = phys_tab.shape[0]
     u = np.empty(3)
     zone = star_law_nb(y, fp[FP_EPS], fp[FP_LAW_TARGET:FP_LAW_TARGET + 3], law_tab, law_arcs, u)
@@ -324,14 +328,17 @@ def pointing_law_nb(q, y, fp, target, roll_axis, roll_ref, law_tab, law_arcs, ph
         closest = 0.0
         for i in range(n):
             m = res[m0 + i]
-            if m < prev[i] and (not found or m < closest):
+            if m < fp[FP_PREV + i] and (not found or m < closest):
                 closest, found = m, True
         if found:
             room = 1.0 * closest - BRAKING_RESERVE_DEG
             governor = math.radians(rate_for_distance_nb(room, fp[FP_ACCEL], fp[FP_BANDWIDTH]))
     res[R_GOVERNOR] = governor
-    c = pointing_command_nb(q, y, fp[FP_B:FP_B + 3], u, fp[FP_K1], fp[FP_MAX_RATE], governor, target, roll_axis,
-                            roll_ref, fp[FP_ROLL_GAIN])
+    for i in range(n):
+        fp[FP_PREV + i] = res[m0 + i]
+    c = pointing_command_nb(q, y, fp[FP_B:FP_B + 3], u, fp[FP_K1], fp[FP_MAX_RATE], governor,
+                            fp[FP_TARGET:FP_TARGET + 3], fp[FP_ROLL_AXIS:FP_ROLL_AXIS + 3],
+                            fp[FP_ROLL_REF:FP_ROLL_REF + 3], fp[FP_ROLL_GAIN])
     for k in range(3):
         res[R_OMEGA + k] = c[k]
     res[R_LAW_RATE] = c[3]
@@ -340,20 +347,20 @@ def pointing_law_nb(q, y, fp, target, roll_axis, roll_ref, law_tab, law_arcs, ph
 
 
 @njit(cache=True)
-def pointing_step_nb(q, fp, eph, target, roll_axis, roll_ref, slot_geo, path, law_tab, law_arcs, phys_tab,
-                     phys_arcs, prev):
+def pointing_step_nb(q, fp, slot_geo, path, law_tab, law_arcs, phys_tab, phys_arcs, res):
     """One POINTING cycle in steady state (`PointingGuidance._pointing`): the sky directions, every slot's
     drift and the rebuild it calls for, the boresight, the path follower's aim; then, when no zone needs a
     rebuild, the law is current (``fp[FP_STEADY]``) and the aim stays, `pointing_law_nb`
     (``res[R_COMPLETE]`` = 1). Otherwise the guidance finishes the cycle in Python (``res[R_COMPLETE]`` = 0).
+    Fills ``res`` (R_DRIFT + 2 n, the caller's: no array to box on the way back) and returns
+    ``res[R_COMPLETE]``.
 
-    ``eph``: rows p_hat, q_hat, Sun and Moon at the two ephemeris nodes (`sky_directions_nb`);
     ``slot_geo`` (n, 4, 3): per slot the fixed centre, the centres its physical and law zones were built
     at, and its body (row 3, column 0: 0 Sun, 1 Moon, 2 Earth, 3 fixed)."""
     n = slot_geo.shape[0]
-    res = np.empty(R_DRIFT + 2 * n)
-    d = sky_directions_nb(fp[FP_T], fp[FP_U0], fp[FP_N], fp[FP_RADIUS], eph[0], eph[1], fp[FP_F], eph[2], eph[3],
-                          eph[4], eph[5])
+    e = FP_EPH
+    d = sky_directions_nb(fp[FP_T], fp[FP_U0], fp[FP_N], fp[FP_RADIUS], fp[e:e + 3], fp[e + 3:e + 6], fp[FP_F],
+                          fp[e + 6:e + 9], fp[e + 9:e + 12], fp[e + 12:e + 15], fp[e + 15:e + 18])
     for i in range(3):
         for k in range(3):
             res[R_DIRS + 3 * i + k] = d[i, k]
@@ -380,15 +387,14 @@ def pointing_step_nb(q, fp, eph, target, roll_axis, roll_ref, slot_geo, path, la
     res[R_AIM] = fp[FP_AIM_K]
     res[R_AIM_DONE] = 0.0
     if worst_slot >= 0 or fp[FP_STEADY] == 0.0:
-        return res
+        return 0.0
     if fp[FP_FOLLOW] != 0.0:
         nearest, aim = aim_index_nb(path, int(fp[FP_START]), y, fp[FP_COS_AHEAD])
         res[R_NEAREST] = nearest
         res[R_AIM] = aim
         res[R_AIM_DONE] = 1.0
         if aim != int(fp[FP_AIM_K]):
-            return res
-    pointing_law_nb(q, y, fp, target, roll_axis, roll_ref, law_tab, law_arcs, phys_tab, phys_arcs,
-                    res[R_DRIFT:R_DRIFT + n], prev, res)
+            return 0.0
+    pointing_law_nb(q, y, fp, law_tab, law_arcs, phys_tab, phys_arcs, res[R_DRIFT:R_DRIFT + n], res)
     res[R_COMPLETE] = 1.0
-    return res
+    return 1.0

@@ -73,25 +73,6 @@ class GuidanceOutput:
     zone_bodies: list[str] = field(default_factory=list)
 
 
-def pointing_output(omega_cmd_BN_B: np.ndarray, mode: str, boresight_N: np.ndarray, target_N: np.ndarray,
-                    sun_N: np.ndarray, moon_N: np.ndarray, active_zone: int, eps: float, eps_max: float,
-                    margins_deg: list[float], margin_min_deg: float, pointing_error_deg: float,
-                    roll_error_deg: float, zones_merged: bool, assumptions_ok: bool, zone_count: int,
-                    zone_bodies: list[str]) -> GuidanceOutput:
-    """A POINTING cycle's `GuidanceOutput` with every field given: the record's dict in one step (the
-    dataclass constructor, with its keyword handling and default factories, cost ~3 us a cycle)."""
-    out = object.__new__(GuidanceOutput)
-    out.__dict__ = {
-        "omega_cmd_BN_B": omega_cmd_BN_B, "mode": mode, "safe_phase": "NONE", "active_zone": active_zone,
-        "eps": eps, "eps_max": eps_max, "margins_deg": margins_deg, "margin_min_deg": margin_min_deg,
-        "pointing_error_deg": pointing_error_deg, "att_error_deg": math.nan, "roll_error_deg": roll_error_deg,
-        "boresight_N": boresight_N, "target_N": target_N, "q_target_NB": _NAN4, "zones_merged": zones_merged,
-        "assumptions_ok": assumptions_ok, "sun_N": sun_N, "moon_N": moon_N, "zone_count": zone_count,
-        "zone_bodies": zone_bodies,
-    }
-    return out
-
-
 def _saturate(omega: np.ndarray, max_rate_rad_s: float) -> np.ndarray:
     n = _norm(np.asarray(omega, dtype=float))
     return omega * (max_rate_rad_s / n) if n > max_rate_rad_s else omega

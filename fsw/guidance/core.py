@@ -11,7 +11,7 @@ import numpy as np
 
 from fsw.assumption_check import CheckResult
 from fsw.guidance._kernels import FP_WIDTH
-from fsw.guidance.common import GuidanceOutput, _saturate, _unit, signed_margin_deg
+from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _saturate, _unit, signed_margin_deg
 from fsw.guidance.ephemeris import SkyEphemeris
 from fsw.guidance.path_following import PathFollowing
 from fsw.guidance.path_planning import PathFollower
@@ -67,6 +67,7 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
                     fixed,
                 )
             )
+        self._body_codes = [_BODY_CODES[s.body] for s in self.slots]  # telemetry codes, fixed with the slots
         self.sky_geometry = ZoneGeometry(3, cfg.law.merge_gap_deg)
         if self.slots:
             _warm_batch_kernels([s.builder_law for s in self.slots])
@@ -76,16 +77,18 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         # zones, the law's zones and law, what is kept while the zones stay the same objects
         self._sky_pack = None
         self._law_pack = None
+        self._sky_res = None  # a compiled cycle's sky not applied to the slots yet (`_settle_sky`)
+        self._target_out = (None, None)  # (target_N, its read-only copy the POINTING outputs share)
         self._merge_kept = None
         self._law_zones_kept = None
         self._governor_kept = None
         self._sky_group_first: list[int] = []
         self._sky_zones_merged = False
-        self._fp = np.zeros(FP_WIDTH)
+        self._fp = np.zeros(FP_WIDTH + len(self.slots))
         self._eph_k = None
-        self._eph = None
         self._fp_key = None
         self._fp_law = None
+        self._fp_vecs = None
         self._zone_facts_kept: dict[int, tuple] = {}
         self._sky_groups: list[list[int]] = []
         self._sky_law_zones: list = []

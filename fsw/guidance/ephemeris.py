@@ -10,6 +10,7 @@ from fsw.guidance._kernels import sky_directions_nb
 from gnc.ephemeris import EARTH_RADIUS_KM, julian_date_tdb, moon_position_N_km, sun_position_N_km
 
 EPHEMERIS_NODE_S = 10.0
+EPHEMERIS_BLOCK_NODES = 32  # nodes evaluated in one batched call of the series (320 s of flight)
 _MU_EARTH_KM3_S2 = 398600.4418
 
 
@@ -28,19 +29,31 @@ class SkyEphemeris:
         self.p_hat = node
         self.q_hat = np.array([-math.sin(raan) * math.cos(i), math.cos(raan) * math.cos(i), math.sin(i)])
         self.earth_angular_radius_deg = math.degrees(math.asin(EARTH_RADIUS_KM / o.radius_km))
-        self._nodes: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._block_first = 0  # node of the block's first row
+        self._block: tuple[np.ndarray, np.ndarray] | None = None  # Sun and Moon positions [km], a row per node
 
     def position_N_km(self, t_s: float) -> np.ndarray:
         u = self.u0 + self.n_rad_s * t_s
         return self.radius_km * (math.cos(u) * self.p_hat + math.sin(u) * self.q_hat)
 
     def _geocentric(self, node: int) -> tuple[np.ndarray, np.ndarray]:
-        if node not in self._nodes:
-            if len(self._nodes) > 4:
-                self._nodes.clear()
-            jd = self.jd0 + node * EPHEMERIS_NODE_S / 86400.0
-            self._nodes[node] = (np.asarray(sun_position_N_km(jd), dtype=float), np.asarray(moon_position_N_km(jd), dtype=float))
-        return self._nodes[node]
+        """Geocentric Sun and Moon positions [km] at ephemeris node ``node``.
+
+        The series are numpy expressions of the time, element by element: evaluated for a block of
+        EPHEMERIS_BLOCK_NODES nodes at once they give each node's numbers exactly as one evaluation per
+        node did (tests/fsw/test_guidance.py), in the time of three or four single nodes (one node is ~100
+        numpy calls on scalars). A block starts one node before the missing one, so that the pair of
+        nodes a cycle interpolates between is always in one block."""
+        i = node - self._block_first
+        block = self._block
+        if block is None or not 0 <= i < EPHEMERIS_BLOCK_NODES:
+            self._block_first = first = node - 1
+            nodes = np.arange(first, first + EPHEMERIS_BLOCK_NODES)
+            jd = self.jd0 + nodes * EPHEMERIS_NODE_S / 86400.0
+            self._block = block = (np.asarray(sun_position_N_km(jd), dtype=float),
+                                   np.asarray(moon_position_N_km(jd), dtype=float))
+            i = 1
+        return block[0][i], block[1][i]
 
     def directions(self, t_s: float) -> dict[str, np.ndarray]:
         """Unit vectors from the spacecraft to the Sun, Moon and Earth centre in N.

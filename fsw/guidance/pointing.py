@@ -15,16 +15,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from fsw.guidance._kernels import (
-    ARC_WIDTH, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_EPS, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_START, FP_STEADY,
-    FP_T, FP_U0, R_AIM, R_AIM_DONE, R_COMPLETE, R_DRIFT, R_ERROR, R_LAW_ERROR, R_LAW_RATE, R_MARGIN_MIN,
+    ARC_WIDTH, FP_AIM_K, FP_B, FP_COS_AHEAD, FP_EPH, FP_EPS, FP_F, FP_FOLLOW, FP_LAW_TARGET, FP_NPREV, FP_PREV, FP_ROLL_AXIS,
+    FP_ROLL_REF, FP_START, FP_STEADY, FP_T, FP_TARGET, FP_U0, R_AIM, R_AIM_DONE, R_DRIFT, R_ERROR, R_LAW_ERROR,
+    R_LAW_RATE, R_MARGIN_MIN,
     R_NEAREST, R_OMEGA, R_ROLL, R_WORST, R_WORST_KIND, R_Y, R_ZONE, SG_BODY, SG_BUILT, SG_BUILT_LAW, SG_FIXED,
     ZT_CAP_AXIS, ZT_CAP_COS, ZT_COUNT, ZT_KERNEL, ZT_KIND, ZT_START, ZT_WIDTH, boresight_nb, pack_zones,
     pointing_command_nb, pointing_law_nb, pointing_step_nb, zone_separations_nb,
 )
 from fsw.guidance.common import (
-    _BODY_CODES, _NAN3, GuidanceOutput, _angle_deg, _make_star_law, pointing_output, signed_margin_deg,
+    _NAN3, _NAN4, GuidanceOutput, _angle_deg, _make_star_law, signed_margin_deg,
 )
 from fsw.guidance.ephemeris import EPHEMERIS_NODE_S
+from fsw.guidance.watchdog import MIN_ERROR_DEG, RATE_FRACTION
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
 from gnc.laws import _positive, _unit_vector, _zone_list
@@ -34,7 +36,6 @@ LAW_REBUILD_TRIGGER_DEG = 0.08
 PHYS_REBUILD_TOL_DEG = 0.5
 _BODY_INDEX = {"sun": 0, "moon": 1, "earth": 2, "inertial": 3}  # rows of `sky_directions_nb`; 3: a fixed centre
 _NO_PATH = np.zeros((1, 3))
-_NO_MARGINS = np.zeros(0)
 _NO_LAW = (np.zeros((0, ZT_WIDTH)), np.zeros((0, ARC_WIDTH)))
 
 
@@ -61,6 +62,9 @@ class _SkySlot:
     phys: object | None = None
     law: object | None = None
     phys_drift_deg: float = 0.0  # angle between center_N and built_center, this cycle
+    # center_N and phys_drift_deg (and the guidance's `_dirs`) as the last cycle left them once
+    # `PointingGuidance._settle_sky` has run: a compiled cycle leaves them to it (nothing in a steady
+    # cycle reads them; every reader settles first)
 
 
 class PointingGuidance:
@@ -76,6 +80,7 @@ class PointingGuidance:
         covers the cycles a pending rebuild may wait.
         """
         dirs = self.ephem.directions(t_s) if self.slots else {}
+        self._sky_res = None  # every slot's state is set below
         self._dirs = dirs
         worst, worst_kind, worst_slot = 0.0, None, None
         first = False
@@ -111,12 +116,15 @@ class PointingGuidance:
     def _sky_margins(self, y_N: np.ndarray) -> tuple[list[float], float]:
         """Signed physical margins [deg], conservative: minus the zone's drift since it was built (as
         `_update_sky` found it this cycle)."""
+        self._settle_sky()
         margins = [signed_margin_deg(s.phys, y_N) - s.phys_drift_deg for s in self.slots]
         return margins, (min(margins) if margins else float("nan"))
 
 
     def _pointing(self, t_s: float, q: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
-        pack = self._sky_pack_now()
+        pack = self._sky_pack
+        if pack is None or "directions" in vars(self.ephem):
+            pack = self._sky_pack_now()
         if pack is None:
             rebuilt = self._update_sky(t_s)
             y = boresight_nb(q, self.b_B)
@@ -124,12 +132,16 @@ class PointingGuidance:
             # steady state in one compiled call (design note 15); when a zone must be rebuilt, the law is
             # stale or the aim moves on, the kernel stops after the sky and the boresight and the cycle
             # goes on below, in the order of the Python it replaces
+            follower = self._follower
             steady = (self._sky_law_key is not None and self._law_pack is not None and not self._escaping
                       and not self.sky_geometry.unmerged
-                      and not (self._follower is not None
+                      and not (follower is not None
                                and t_s - self._planned_t >= self.cfg.pointing.path.replan_period_s))
-            res = self._pointing_step(t_s, q, pack, steady)
-            if res[R_COMPLETE] != 0.0:
+            fp = self._cycle_inputs(t_s, 1.0 if steady else 0.0)
+            law = self._law_pack or _NO_LAW
+            res = np.empty(R_DRIFT + 2 * len(pack[0]))
+            if pointing_step_nb(q, fp, pack[0], follower.path if follower is not None else _NO_PATH, law[0], law[1],
+                                pack[1], pack[2], res) != 0.0:
                 return self._pointing_output(t_s, res, res[R_Y:R_Y + 3], True)
             rebuilt = self._apply_sky(res)
             y = res[R_Y:R_Y + 3]
@@ -153,11 +165,9 @@ class PointingGuidance:
                 n = len(self.slots)
                 res = np.empty(R_DRIFT + 2 * n)
                 drift = np.array([s.phys_drift_deg for s in self.slots])
-                fp = self._fill_params(t_s, 0.0)
-                prev = self._governor_prev(fp)
+                fp = self._cycle_inputs(t_s, 0.0)
                 law = self._law_pack
-                pointing_law_nb(q, y, fp, self.target_N, self.roll_axis_B, self.roll_ref_N, law[0], law[1],
-                                pack[1], pack[2], drift, prev, res)
+                pointing_law_nb(q, y, fp, law[0], law[1], pack[1], pack[2], drift, res)
                 return self._pointing_output(t_s, res, y, False)
             out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
             out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
@@ -358,18 +368,20 @@ class PointingGuidance:
         self._sky_pack = pack = (geo, *phys)
         return pack
 
-    def _fill_params(self, t_s: float, steady: float) -> np.ndarray:
-        """The scalar inputs of `pointing_step_nb` (layout FP_*): the cycle's, and the rest again when one
-        of the values they come from was replaced."""
+    def _cycle_inputs(self, t_s: float, steady: float) -> np.ndarray:
+        """The inputs of `pointing_step_nb` / `pointing_law_nb` (layout FP_*), with last cycle's margins for
+        the governor (`_governor_rate`): the cycle's values, and the rest again when one of the values they
+        come from was replaced (the target and the roll axes are replaced, never written into: SAFE swaps
+        them for its own every cycle)."""
+        fp = self._fp
         e = self.ephem
         k = math.floor(t_s / EPHEMERIS_NODE_S)
         f = t_s / EPHEMERIS_NODE_S - k  # as `SkyEphemeris.directions`
         if k != self._eph_k:
             s0, m0 = e._geocentric(k)
             s1, m1 = e._geocentric(k + 1)
-            self._eph = np.array([e.p_hat, e.q_hat, s0, s1, m0, m1], dtype=float)
+            fp[FP_EPH:FP_EPH + 18].reshape(6, 3)[:] = (e.p_hat, e.q_hat, s0, s1, m0, m1)
             self._eph_k = k
-        fp = self._fp
         follower = self._follower
         key = self._fp_key
         if (key is None or key[0] is not self.k1 or key[1] is not self.max_rate_rad_s or key[2] is not follower
@@ -380,6 +392,13 @@ class PointingGuidance:
             fp[FP_COS_AHEAD] = follower.cos_ahead if follower is not None else 0.0
             fp[FP_FOLLOW] = 1.0 if follower is not None else 0.0
             fp[FP_B:FP_B + 3] = self.b_B
+        vecs = self._fp_vecs
+        if (vecs is None or vecs[0] is not self.target_N or vecs[1] is not self.roll_axis_B
+                or vecs[2] is not self.roll_ref_N):
+            self._fp_vecs = (self.target_N, self.roll_axis_B, self.roll_ref_N)
+            fp[FP_TARGET:FP_TARGET + 3] = self.target_N
+            fp[FP_ROLL_AXIS:FP_ROLL_AXIS + 3] = self.roll_axis_B
+            fp[FP_ROLL_REF:FP_ROLL_REF + 3] = self.roll_ref_N
         law = self._law_pack
         if law is not self._fp_law:  # a new law: its eps and target
             self._fp_law = law
@@ -392,27 +411,15 @@ class PointingGuidance:
         if follower is not None:
             fp[FP_START] = follower.index
             fp[FP_AIM_K] = self._aim_k
-        return fp
-
-    def _governor_prev(self, fp: np.ndarray) -> np.ndarray:
-        """Last cycle's margins for the governor (`_governor_rate`) as an array; sets FP_NPREV."""
         prev = self._governor_margins
         if prev is None:
             fp[FP_NPREV] = -1.0
-            return _NO_MARGINS
+            return fp
         fp[FP_NPREV] = len(prev)
-        kept = self._governor_kept
-        if kept is not None and kept[0] is prev:
-            return kept[1]
-        return np.array(prev, dtype=float)
-
-    def _pointing_step(self, t_s: float, q: np.ndarray, pack, steady: bool) -> np.ndarray:
-        fp = self._fill_params(t_s, 1.0 if steady else 0.0)
-        prev = self._governor_prev(fp)
-        law = self._law_pack or _NO_LAW
-        f = self._follower
-        return pointing_step_nb(q, fp, self._eph, self.target_N, self.roll_axis_B, self.roll_ref_N, pack[0],
-                                f.path if f is not None else _NO_PATH, law[0], law[1], pack[1], pack[2], prev)
+        # the margins the law kernel left in fp last cycle (`_pointing_output` keeps their list), or others
+        if prev is not self._governor_kept and len(prev) == len(self.slots):  # the only count the kernels use
+            fp[FP_PREV:FP_PREV + len(prev)] = prev
+        return fp
 
     def _aim_from(self, res: np.ndarray) -> bool:
         """`_aim_moved` (`advance_aim`) with the path index the kernel found this cycle."""
@@ -430,11 +437,8 @@ class PointingGuidance:
     def _apply_sky(self, res: np.ndarray) -> bool:
         """`_update_sky` from the kernel's sky: the slots' centres and drifts, and the one rebuild it asks
         for. True if a law zone was rebuilt."""
-        dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
-        self._dirs = dirs
-        for i, s in enumerate(self.slots):
-            s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
-            s.phys_drift_deg = float(res[R_DRIFT + i])
+        self._sky_res = res
+        self._settle_sky()
         w = int(res[R_WORST])
         if w < 0:
             return False
@@ -450,45 +454,74 @@ class PointingGuidance:
         slot.phys_drift_deg = _angle_deg(c, slot.built_center)
         return False
 
+    def _settle_sky(self) -> None:
+        """The sky of the last compiled cycle (`pointing_step_nb`'s ``res``), if not applied yet, as
+        `_update_sky` leaves it: the directions (`_dirs`), the slots' centres and drifts."""
+        res = self._sky_res
+        if res is None:
+            return
+        self._sky_res = None
+        dirs = self._dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
+        for s, drift in zip(self.slots, res[R_DRIFT:R_DRIFT + len(self.slots)].tolist()):
+            s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
+            s.phys_drift_deg = drift
+
     def _pointing_output(self, t_s: float, res: np.ndarray, y: np.ndarray, compiled_sky: bool) -> GuidanceOutput:
         """The cycle's output from `pointing_law_nb`'s results; the governor's and the watchdog's state, and
-        with ``compiled_sky`` (the whole cycle was one call) the sky as `_update_sky` leaves it."""
-        if res[R_LAW_ERROR] != 0.0:
+        with ``compiled_sky`` (the whole cycle was one call) the sky as `_update_sky` leaves it (applied to
+        the slots when read, `_settle_sky`)."""
+        vals = res.tolist()  # the scalars as Python floats in one call (not an array slice or scalar each)
+        if vals[R_LAW_ERROR] != 0.0:
             raise ValueError(f"state x must be a unit vector on S^2, |x|^2 = {float(y @ y)!r}")
-        n = len(self.slots)
+        slots = self.slots
+        n = len(slots)
         if compiled_sky:
-            dirs = {"sun": res[0:3], "moon": res[3:6], "earth": res[6:9]}
-            self._dirs = dirs
-            drift = res[R_DRIFT:R_DRIFT + n].tolist()
-            for i, s in enumerate(self.slots):
-                s.center_N = s.fixed_center if s.fixed_center is not None else dirs[s.body]
-                s.phys_drift_deg = drift[i]
+            self._sky_res = res  # the slots' sky, applied when read (`_settle_sky`)
+            sun, moon = res[0:3], res[3:6]
             follower = self._follower
             if follower is not None:
-                follower.index = int(res[R_NEAREST])
+                follower.index = int(vals[R_NEAREST])
         else:
             dirs = self._dirs
-        zone = int(res[R_ZONE])
+            sun, moon = dirs.get("sun", _NAN3), dirs.get("moon", _NAN3)
+        zone = int(vals[R_ZONE])
         active = -1 if zone < 0 else self._sky_group_first[zone]
-        margins_arr = res[R_DRIFT + n:R_DRIFT + 2 * n]
-        margins = margins_arr.tolist()
-        error = float(res[R_ERROR])
-        out = pointing_output(res[R_OMEGA:R_OMEGA + 3], "POINTING", y, self.target_N.copy(),
-                              dirs.get("sun", _NAN3), dirs.get("moon", _NAN3), active, self._sky_eps,
-                              self._sky_eps_max, margins, float(res[R_MARGIN_MIN]), error, math.degrees(res[R_ROLL]),
-                              self._sky_zones_merged, self.assumptions_ok, n, self._slot_body_codes())
-        self._governor_margins = kept = list(margins)
-        self._governor_kept = (kept, margins_arr)
-        self._watch_progress(t_s, y, error, float(res[R_LAW_RATE]), active)
+        error = vals[R_ERROR]
+        target = self._target_out
+        if target[0] is not self.target_N:  # a new target: its copy for the outputs, read-only as they share it
+            copy = self.target_N.copy()
+            copy.flags.writeable = False
+            target = self._target_out = (self.target_N, copy)
+        # the record's dict in one step (the dataclass constructor, with its keyword handling and default
+        # factories, cost ~3 us a cycle)
+        out = object.__new__(GuidanceOutput)
+        out.__dict__ = {
+            "omega_cmd_BN_B": res[R_OMEGA:R_OMEGA + 3], "mode": "POINTING", "safe_phase": "NONE",
+            "active_zone": active, "eps": self._sky_eps, "eps_max": self._sky_eps_max,
+            "margins_deg": vals[R_DRIFT + n:R_DRIFT + 2 * n], "margin_min_deg": vals[R_MARGIN_MIN],
+            "pointing_error_deg": error, "att_error_deg": math.nan, "roll_error_deg": math.degrees(vals[R_ROLL]),
+            "boresight_N": y, "target_N": target[1], "q_target_NB": _NAN4,
+            "zones_merged": self._sky_zones_merged, "assumptions_ok": self.assumptions_ok, "sun_N": sun,
+            "moon_N": moon, "zone_count": n, "zone_bodies": self._body_codes,
+        }
+        # the margins as the law kernel left them in fp[FP_PREV:] for the next cycle's governor
+        self._governor_margins = self._governor_kept = vals[R_DRIFT + n:R_DRIFT + 2 * n]
+        # the progress watchdog (`_watch_progress`): a cycle that is not idle (its test in
+        # `ProgressWatchdog.update`) only restarts the watch
+        law_rate = vals[R_LAW_RATE]
+        watchdog = self._watchdog
+        if (watchdog.window_s > 0.0 and active < 0 and self._occulted < 0 and not self._escaping
+                and error >= MIN_ERROR_DEG and law_rate < RATE_FRACTION * self.max_rate_rad_s):
+            self._watch_progress(t_s, y, error, law_rate, active)
+        else:
+            watchdog.reset()
         return out
 
 
     def _slot_body_codes(self) -> list[str]:
-        """Telemetry code of each slot's body (the slots are fixed at start-up): one list, read-only by use."""
-        codes = getattr(self, "_body_codes", None)
-        if codes is None:
-            codes = self._body_codes = [_BODY_CODES[s.body] for s in self.slots]
-        return codes
+        """Telemetry code of each slot's body (the slots are fixed at start-up, `Guidance.__init__`): one
+        list, read-only by use."""
+        return self._body_codes
 
     def _squeezed(self, y: np.ndarray, factor: float) -> bool:
         """True if the boresight is within factor x the standoff of both zones of a close pair that could
@@ -544,6 +577,7 @@ class PointingGuidance:
         return x, occ
 
     def _report_merge(self, old: list[list[int]], new: list[list[int]]) -> None:
+        self._settle_sky()
         old_pairs = {(g[0], j) for g in old for j in g[1:]}
         new_pairs = {(g[0], j) for g in new for j in g[1:]}
         for a, b in sorted(new_pairs - old_pairs):

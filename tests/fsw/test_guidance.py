@@ -581,3 +581,22 @@ def test_safe_aims_back_at_the_commanded_target_when_pointing_resumes() -> None:
     g.set_target_direction(np.array([0.0, 1.0, 0.0]))  # commanded during SAFE: held for POINTING
     g.set_mode("POINTING")
     np.testing.assert_allclose(g.target_N, [0.0, 1.0, 0.0])
+
+
+def test_ephemeris_nodes_evaluated_in_blocks_are_each_node_s_own_numbers() -> None:
+    """`SkyEphemeris._geocentric` evaluates the series for a block of nodes at once: every node, in any
+    order of access (forwards as a run goes, backwards, jumps), is bit for bit the single evaluation."""
+    from fsw.guidance.ephemeris import EPHEMERIS_BLOCK_NODES, EPHEMERIS_NODE_S, SkyEphemeris
+    from gnc.ephemeris import moon_position_N_km, sun_position_N_km
+
+    rng = np.random.default_rng(17)
+    for epoch in ("2026-04-25T12:00:00+00:00", "2030-03-29T12:00:00+00:00", "2035-11-02T03:17:00+00:00"):
+        e = SkyEphemeris(_epoch_cfg(epoch, [MOON_CONE], [1.0, 0.0, 0.0]))
+        nodes = list(range(-2, 3 * EPHEMERIS_BLOCK_NODES)) + list(range(40, 0, -1))
+        nodes += [int(k) for k in rng.integers(-1000, 10**6, 40)]
+        for k in nodes:
+            for node in (k, k + 1):
+                sun, moon = e._geocentric(node)
+                jd = e.jd0 + node * EPHEMERIS_NODE_S / 86400.0
+                assert np.array_equal(sun, np.asarray(sun_position_N_km(jd), dtype=float))
+                assert np.array_equal(moon, np.asarray(moon_position_N_km(jd), dtype=float))

@@ -171,6 +171,10 @@ def _fly(compiled: bool, path: bool) -> tuple[list[dict], list, int]:
                 g.set_target_direction(_ra_dec(200.0, 0.0))
             out = g.step(t, 0.1, q, np.zeros(3))
             outs.append(_record(out))
+            if k % 7 == 0:  # the sky a compiled cycle leaves to `_settle_sky`: the Python cycle's, when read
+                g._settle_sky()
+                outs.append({"dirs": {b: v.tobytes() for b, v in g._dirs.items()},
+                             "slots": [(s.center_N.tobytes(), repr(s.phys_drift_deg)) for s in g.slots]})
             r = Rotation.from_quat(np.roll(q, -1)) * Rotation.from_rotvec(out.omega_cmd_BN_B * 0.1)
             q = np.roll(r.as_quat(), 1)
     finally:
@@ -182,7 +186,38 @@ def _fly(compiled: bool, path: bool) -> tuple[list[dict], list, int]:
 def test_compiled_pointing_cycle_is_the_python_cycle(path: bool) -> None:
     compiled, events_c, calls_c = _fly(True, path)
     python, events_p, calls_p = _fly(False, path)
-    assert calls_p == 0 and calls_c == len(compiled) - 1  # each cycle its own way (the first builds the zones)
+    assert calls_p == 0 and calls_c == 1500 - 1  # each cycle its own way (the first builds the zones)
     assert events_c == events_p
     for k, (a, b) in enumerate(zip(compiled, python)):
         assert a == b, (k, [f for f in a if a[f] != b[f]])
+
+
+def test_cycle_inputs_follow_what_the_guidance_replaces() -> None:
+    """`_cycle_inputs` rewrites the target, the roll axes (SAFE swaps in its own every cycle) and the
+    ephemeris rows in the kernels' input vector when they are replaced, and only then."""
+    g = Guidance(_demo_cfg(False))
+
+    def rows(fp, at, n=3):
+        return fp[at:at + n]
+
+    def ephemeris_rows(t):
+        k = math.floor(t / 10.0)
+        (s0, m0), (s1, m1) = g.ephem._geocentric(k), g.ephem._geocentric(k + 1)
+        return np.concatenate([g.ephem.p_hat, g.ephem.q_hat, s0, s1, m0, m1])
+
+    fp = g._cycle_inputs(0.0, 1.0)
+    assert fp[K.FP_NPREV] == -1.0
+    assert np.array_equal(rows(fp, K.FP_TARGET), g.target_N)
+    assert np.array_equal(rows(fp, K.FP_ROLL_AXIS), g.roll_axis_B)
+    assert np.array_equal(rows(fp, K.FP_ROLL_REF), g.roll_ref_N)
+    assert np.array_equal(rows(fp, K.FP_EPH, 18), ephemeris_rows(0.0))
+    g.target_N = _ra_dec(95.0, 30.0)
+    g.roll_axis_B, g.roll_ref_N = np.array([0.0, 1.0, 0.0]), _ra_dec(10.0, -20.0)
+    g._governor_margins = [4.0, 5.5, 7.25]
+    fp = g._cycle_inputs(12.3, 0.0)
+    assert np.array_equal(rows(fp, K.FP_TARGET), g.target_N)
+    assert np.array_equal(rows(fp, K.FP_ROLL_AXIS), g.roll_axis_B)
+    assert np.array_equal(rows(fp, K.FP_ROLL_REF), g.roll_ref_N)
+    assert np.array_equal(rows(fp, K.FP_EPH, 18), ephemeris_rows(12.3))
+    assert fp[K.FP_T] == 12.3 and fp[K.FP_F] == 12.3 / 10.0 - 1 and fp[K.FP_STEADY] == 0.0
+    assert fp[K.FP_PREV:].tolist() == [4.0, 5.5, 7.25] and fp[K.FP_NPREV] == 3
