@@ -20,7 +20,8 @@ from numba import njit
 
 from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_UNKNOWN, UNKNOWN_CODE, _tally,
                              judge_frame)
-from hil_sim.world import _world_period_kernel
+from hil_sim import world as wd
+from hil_sim.world import _world_period_kernel, view1, view2, view3
 
 _EPS_S = 1e-9
 # RWn_STATUS.fault bits and hil_sim.world.WheelStatus.fault bits (as in hil_sim.devices)
@@ -375,38 +376,92 @@ def receive_commands(ids, lengths, data, first, status, values, now, awaited, co
     return n
 
 
+# Devices' packed state for period_packed (Devices._bind_period; hil_sim.world.pack_arrays): its slots,
+# then the places of its float / int scalars
+(DP_IMU_CLOCK, DP_ST_CLOCK, DP_WHEEL_STATE, DP_TIMEOUT, DP_U_SEQ, DP_NO_NORMALS, DP_J_DT, DP_TIMES, DP_T_END,
+ DP_GYRO_SEQ, DP_ST_Q_SEQ, DP_SCALARS,
+ DP_ST_MS, DP_ST_COLS, DP_ST_SEQ, DP_Q_N, DP_OUT, DP_ISCALARS, DP_ST_BLIND_SEQ,
+ DP_IMU_DUE, DP_ST_DUE, DP_SAT_SEQ, DP_ST_VALID_SEQ) = range(23)
+DPS_IMU_LAT, DPS_IMU_LO, DPS_IMU_HI, DPS_ST_LAT = range(4)  # float scalars
+DPS_IMU_M, DPS_DIST_N, DPS_DIST_POS, DPS_IMU_POS, DPS_ST_POS, DPS_N_RUNS = range(6)  # int scalars
+
+
 @njit(cache=True)
-def period_fused(times_s, imu_clock, st_clock, imu_due, st_due, wheel_state, timeout_s, u_seq,
-                 dist_buf, dist_pos, dist_n, no_normals, imu_buf, imu_pos, st_buf, st_pos, n_runs,
-                 X, D, TEMP, G, W, B, dt_sub, n_sub, U_APPLIED, FLAGS, DECAY, GM, HAS_COULOMB, WORK, T_END, ORB, sun_c,
-                 moon_c, eph_t0, eph_h, AUX, CLOCK, BIAS, GYRO_P, GYRO_SEQ, SAT_SEQ, ST_P, ST_BASIS, ST_Q, ST_VALID,
-                 ST_BLIND, ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ,
-                 imu_lat, imu_lo, imu_hi, imu_m, st_lat, st_ms, st_cols, st_seq, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N, out):
-    """One GNC period of ``Devices.step_world`` in one call: ``plan_period``, then the world's
-    ``_world_period_kernel`` with its normals read from the streams' buffers where they stand (what
-    ``NormalStream.take_rows`` would slice: dist_n numbers per step when dist_n > 0, else the zero rows
-    ``no_normals``; 6 * n_runs per gyro sample; 3 * n_runs per star-tracker sample; the caller checked that
-    the buffers hold them), then ``queue_samples``. out: [steps done, gyro samples, star-tracker samples]
-    (the caller advances the streams); nothing is queued when a step was refused (steps done < J)."""
-    J = times_s.shape[0] - 1
-    counts = plan_period(times_s, imu_clock, st_clock, imu_due, st_due, wheel_state, timeout_s, u_seq)
+def period_packed(t_base, DF, DI, DB, WF, WI, WB, sun_c, moon_c, dist_buf, imu_buf, st_buf, Q_DUE, Q_M, Q_ROWS,
+                  Q_TS):
+    """One GNC period of ``Devices.step_world`` in one call, on the devices' (DF, DI, DB) and the world's
+    (WF, WI, WB) packed state: the step times (times[j] = t_base + j_dt[j]; when t_base is NaN the times slot
+    is already filled), ``plan_period``, the world's ``_world_period_kernel`` with its normals read from the
+    streams' buffers where they stand (what ``NormalStream.take_rows`` would slice: dist_n numbers per step
+    when dist_n > 0, else the zero rows; 6 * n_runs per gyro sample; 3 * n_runs per star-tracker sample),
+    the world's last gyro sample (``WorldBatch.finish_period``), then ``queue_samples``.
+    out: [steps done, gyro samples, star-tracker samples] (the caller advances the streams and the world's
+    time); nothing is queued when a step was refused (steps done < J). out[0] = -1, and nothing done at
+    all, when a buffer may not hold the period's normals (the caller takes the three-call path, whose draws
+    refill it)."""
+    DL = DI
+    WL = WI
+    times = view1(DF, DL, DP_TIMES)
+    J = times.shape[0] - 1
+    isc = view1(DI, DL, DP_ISCALARS)
+    out = view1(DI, DL, DP_OUT)
+    dist_n, dist_pos, imu_pos, st_pos, n_runs = (isc[DPS_DIST_N], isc[DPS_DIST_POS], isc[DPS_IMU_POS],
+                                                 isc[DPS_ST_POS], isc[DPS_N_RUNS])
+    k_imu = 6 * n_runs
+    k_st = 3 * n_runs
+    if (dist_pos + dist_n * J > dist_buf.shape[0] or imu_pos + k_imu * J > imu_buf.shape[0]
+            or st_pos + k_st * J > st_buf.shape[0]):
+        out[0] = -1
+        return
+    if not math.isnan(t_base):
+        j_dt = view1(DF, DL, DP_J_DT)
+        for j in range(J + 1):
+            times[j] = t_base + j_dt[j]
+    imu_due = view1(DB, DL, DP_IMU_DUE)
+    st_due = view1(DB, DL, DP_ST_DUE)
+    u_seq = view3(DF, DL, DP_U_SEQ)
+    counts = plan_period(times, view1(DF, DL, DP_IMU_CLOCK), view1(DF, DL, DP_ST_CLOCK), imu_due, st_due,
+                         view2(DF, DL, DP_WHEEL_STATE), view1(DF, DL, DP_TIMEOUT), u_seq)
     n_imu = counts // 1000
     n_st = counts % 1000
     if dist_n > 0:
         normals = dist_buf[dist_pos:dist_pos + dist_n * J].reshape((J, dist_n))
     else:
-        normals = no_normals
-    k_imu = 6 * n_runs
+        normals = view2(DF, DL, DP_NO_NORMALS)
     imu_normals = imu_buf[imu_pos:imu_pos + k_imu * n_imu].reshape((n_imu, k_imu))
-    k_st = 3 * n_runs
     st_normals = st_buf[st_pos:st_pos + k_st * n_st].reshape((n_st, k_st))
-    done = _world_period_kernel(X, D, TEMP, G, W, B, u_seq, normals, dt_sub, n_sub, U_APPLIED, FLAGS, DECAY, GM,
-                                HAS_COULOMB, WORK, T_END, ORB, sun_c, moon_c, eph_t0, eph_h, AUX, imu_due, CLOCK,
-                                imu_normals, BIAS, GYRO_P, GYRO_SEQ, SAT_SEQ, st_due, ST_P, ST_BASIS, st_normals, ST_Q,
-                                ST_VALID, ST_BLIND, ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ)
+    wsc = view1(WF, WL, wd.WP_SCALARS)
+    T_END = view1(DF, DL, DP_T_END)
+    GYRO_SEQ = view3(DF, DL, DP_GYRO_SEQ)
+    SAT_SEQ = view2(DB, DL, DP_SAT_SEQ)
+    ST_Q_SEQ = view3(DF, DL, DP_ST_Q_SEQ)
+    ST_VALID_SEQ = view2(DB, DL, DP_ST_VALID_SEQ)
+    ST_BLIND_SEQ = view2(DI, DL, DP_ST_BLIND_SEQ)
+    done = _world_period_kernel(
+        view2(WF, WL, wd.WP_X), view2(WF, WL, wd.WP_D), view2(WF, WL, wd.WP_TEMP), view3(WF, WL, wd.WP_G),
+        view3(WF, WL, wd.WP_W), view2(WF, WL, wd.WP_B), u_seq, normals, wsc[wd.WPS_DT_SUB],
+        view1(WI, WL, wd.WP_ISCALARS)[wd.WPS_N_SUB], view2(WF, WL, wd.WP_U_APPLIED), view2(WI, WL, wd.WP_FLAGS),
+        view2(WF, WL, wd.WP_DECAY), view2(WF, WL, wd.WP_GM), view1(WB, WL, wd.WP_HAS_COULOMB),
+        view2(WF, WL, wd.WP_WORK), T_END, view2(WF, WL, wd.WP_ORB), sun_c, moon_c, wsc[wd.WPS_EPH_T0],
+        wsc[wd.WPS_EPH_H], view2(WF, WL, wd.WP_AUX), imu_due, view1(WF, WL, wd.WP_CLOCK), imu_normals,
+        view2(WF, WL, wd.WP_BIAS), view2(WF, WL, wd.WP_GYRO_P), GYRO_SEQ, SAT_SEQ, st_due, view2(WF, WL, wd.WP_ST_P),
+        view3(WF, WL, wd.WP_ST_BASIS), st_normals, view2(WF, WL, wd.WP_ST_Q), view1(WB, WL, wd.WP_ST_VALID),
+        view1(WI, WL, wd.WP_ST_BLIND), ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ)
     out[0] = done
     out[1] = n_imu
     out[2] = n_st
+    if done:
+        wsc[wd.WPS_T_END] = T_END[done - 1]
+        if imu_due[done - 1]:
+            gyro_out = view2(WF, WL, wd.WP_GYRO_OUT)
+            gyro_sat = view1(WB, WL, wd.WP_GYRO_SAT)
+            for m in range(gyro_out.shape[0]):
+                for c in range(3):
+                    gyro_out[m, c] = GYRO_SEQ[done - 1, m, c]
+                gyro_sat[m] = SAT_SEQ[done - 1, m]
     if done == J:
-        queue_samples(times_s, imu_due, GYRO_SEQ, SAT_SEQ, imu_lat, imu_lo, imu_hi, imu_m, st_due, ST_Q_SEQ,
-                      ST_VALID_SEQ, ST_BLIND_SEQ, st_lat, st_ms, st_cols, st_seq, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N)
+        dsc = view1(DF, DL, DP_SCALARS)
+        queue_samples(times, imu_due, GYRO_SEQ, SAT_SEQ, dsc[DPS_IMU_LAT], dsc[DPS_IMU_LO], dsc[DPS_IMU_HI],
+                      isc[DPS_IMU_M], st_due, ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ, dsc[DPS_ST_LAT],
+                      view1(DI, DL, DP_ST_MS), view1(DI, DL, DP_ST_COLS), view1(DI, DL, DP_ST_SEQ), Q_DUE, Q_M,
+                      Q_ROWS, Q_TS, view1(DI, DL, DP_Q_N))

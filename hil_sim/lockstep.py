@@ -92,6 +92,8 @@ class Simulator:
         self.n_sub = n_sub
         self.dt_s = gnc_period_s / n_sub
         self._j_dt = np.arange(n_sub + 1) * self.dt_s  # j * dt_s, j = 0..n_sub
+        self._j_dt_end = float(self._j_dt[-1])
+        self._world_samples = hasattr(world, "advance_sampled")
         self.devices = Devices.for_world(world, self.icd, timing)
         self.n_wheels = len(self.devices.wheels)
         self.injector = FaultInjector(self.icd, faults, seed=fault_seed)
@@ -231,15 +233,15 @@ class Simulator:
 
     def _advance_period(self, paced: Callable[[int], None] | None) -> None:
         """Step the world over [t_k, t_k + T] in dynamics steps; ``paced(j)`` runs before step j (real time)."""
-        if paced is None and hasattr(self.world, "advance_sampled"):
+        if paced is None and self._world_samples:
             # not paced: the whole period in one compiled call (same numbers as the loop below)
-            # _sub_t(j) for j = 0..n_sub: (t0 + k T) + j dt, the same sums on an array
-            times = (self.t0_s + self.tick * self.period_s) + self._j_dt
-            self.devices.step_world(self.world, self.dt_s, times)
-            # the receiver's check_timeouts(_sub_t(n_sub)) compiled (times[-1] is that sum)
+            # _sub_t(j) for j = 0..n_sub: (t0 + k T) + j dt, the same sums (made in the compiled call)
+            t_k = self.t0_s + self.tick * self.period_s
+            self.devices.step_period(self.world, self.dt_s, self.n_sub, t_k)
+            # the receiver's check_timeouts(_sub_t(n_sub)) compiled
             rs = self._rc_state
-            count_timeouts(times[-1], self._rc_watch[0], self._rc_watch[1], self._rc_table[3], self._rc_table[4],
-                           self._rc_tally, rs, self._rc_n_codes)
+            count_timeouts(t_k + self._j_dt_end, self._rc_watch[0], self._rc_watch[1], self._rc_table[3],
+                           self._rc_table[4], self._rc_tally, rs, self._rc_n_codes)
             if rs[dk.RS_NTALLY]:
                 self._settle_tally()
         else:
