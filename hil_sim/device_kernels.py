@@ -21,6 +21,7 @@ from numba import njit
 from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_UNKNOWN, UNKNOWN_CODE, _tally,
                              judge_frame)
 from hil_sim import world as wd
+from hil_sim.dynamics import W_KT
 from hil_sim.world import _world_period_kernel, view1, view2, view3
 
 _EPS_S = 1e-9
@@ -376,20 +377,37 @@ def receive_commands(ids, lengths, data, first, status, values, now, awaited, co
     return n
 
 
-# Devices' packed state for period_packed (Devices._bind_period; hil_sim.world.pack_arrays): its slots,
-# then the places of its float / int scalars
-(DP_IMU_CLOCK, DP_ST_CLOCK, DP_WHEEL_STATE, DP_TIMEOUT, DP_U_SEQ, DP_NO_NORMALS, DP_J_DT, DP_TIMES, DP_T_END,
- DP_GYRO_SEQ, DP_ST_Q_SEQ, DP_SCALARS,
- DP_ST_MS, DP_ST_COLS, DP_ST_SEQ, DP_Q_N, DP_OUT, DP_ISCALARS, DP_ST_BLIND_SEQ,
- DP_IMU_DUE, DP_ST_DUE, DP_SAT_SEQ, DP_ST_VALID_SEQ) = range(23)
-DPS_IMU_LAT, DPS_IMU_LO, DPS_IMU_HI, DPS_ST_LAT = range(4)  # float scalars
-DPS_IMU_M, DPS_DIST_N, DPS_DIST_POS, DPS_IMU_POS, DPS_ST_POS, DPS_N_RUNS = range(6)  # int scalars
+# Devices' packed state (Devices._pack_state; hil_sim.world.pack_arrays): its slots, then the places of its
+# float / int scalars
+(DS_IMU_CLOCK, DS_ST_CLOCK, DS_WHEEL_STATE, DS_TIMEOUT, DS_STATUS_RANGES, DS_SCALARS,
+ DS_ST_MS, DS_ST_COLS, DS_ST_SEQ, DS_Q_N, DS_STATUS_MS, DS_STATUS_COLS, DS_ISCALARS) = range(13)
+DSS_IMU_LAT, DSS_IMU_LO, DSS_IMU_HI, DSS_ST_LAT = range(4)  # float scalars
+DSS_IMU_M, DSS_AGE_COL, DSS_SYNC_M, DSS_SYNC_COLS = range(4)  # int scalars (SYNC's 3 slots from DSS_SYNC_COLS)
+# a period's plan and scratch (Devices._bind_period): slots, int scalars
+(DP_U_SEQ, DP_NO_NORMALS, DP_J_DT, DP_TIMES, DP_T_END, DP_GYRO_SEQ, DP_ST_Q_SEQ,
+ DP_OUT, DP_ISCALARS, DP_ST_BLIND_SEQ,
+ DP_IMU_DUE, DP_ST_DUE, DP_SAT_SEQ, DP_ST_VALID_SEQ) = range(14)
+DPS_DIST_N, DPS_DIST_POS, DPS_IMU_POS, DPS_ST_POS, DPS_N_RUNS = range(5)
 
 
 @njit(cache=True)
-def period_packed(t_base, DF, DI, DB, WF, WI, WB, sun_c, moon_c, dist_buf, imu_buf, st_buf, Q_DUE, Q_M, Q_ROWS,
-                  Q_TS):
-    """One GNC period of ``Devices.step_world`` in one call, on the devices' (DF, DI, DB) and the world's
+def tick_rows_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS):
+    """``tick_rows`` on the devices' (SF, SI) and the world's (WF, WI) packed state; sync = (tick,
+    period_ms). Returns the number of rows (SYNC included)."""
+    isc = view1(SI, SI, DS_ISCALARS)
+    return tick_rows(t_s, (tick, period_ms), isc[DSS_SYNC_M], isc[DSS_SYNC_COLS:DSS_SYNC_COLS + 3], Q_DUE, Q_M,
+                     Q_ROWS, Q_TS, view1(SI, SI, DS_Q_N), isc[DSS_AGE_COL], view2(WF, WI, wd.WP_X),
+                     view2(WF, WI, wd.WP_U_APPLIED), view3(WF, WI, wd.WP_W)[W_KT], view2(WF, WI, wd.WP_TEMP),
+                     view2(WI, WI, wd.WP_FLAGS), view2(SF, SI, DS_WHEEL_STATE), view1(SF, SI, DS_TIMEOUT),
+                     view1(SI, SI, DS_STATUS_MS), view1(SI, SI, DS_STATUS_COLS), view2(SF, SI, DS_STATUS_RANGES),
+                     OUT_IDX, OUT_ROWS)
+
+
+@njit(cache=True)
+def period_packed(t_base, SF, SI, DF, DI, DB, WF, WI, WB, sun_c, moon_c, dist_buf, imu_buf, st_buf, Q_DUE, Q_M,
+                  Q_ROWS, Q_TS):
+    """One GNC period of ``Devices.step_world`` in one call, on the devices' (SF, SI), the period's (DF, DI,
+    DB) and the world's
     (WF, WI, WB) packed state: the step times (times[j] = t_base + j_dt[j]; when t_base is NaN the times slot
     is already filled), ``plan_period``, the world's ``_world_period_kernel`` with its normals read from the
     streams' buffers where they stand (what ``NormalStream.take_rows`` would slice: dist_n numbers per step
@@ -420,8 +438,8 @@ def period_packed(t_base, DF, DI, DB, WF, WI, WB, sun_c, moon_c, dist_buf, imu_b
     imu_due = view1(DB, DL, DP_IMU_DUE)
     st_due = view1(DB, DL, DP_ST_DUE)
     u_seq = view3(DF, DL, DP_U_SEQ)
-    counts = plan_period(times, view1(DF, DL, DP_IMU_CLOCK), view1(DF, DL, DP_ST_CLOCK), imu_due, st_due,
-                         view2(DF, DL, DP_WHEEL_STATE), view1(DF, DL, DP_TIMEOUT), u_seq)
+    counts = plan_period(times, view1(SF, SI, DS_IMU_CLOCK), view1(SF, SI, DS_ST_CLOCK), imu_due, st_due,
+                         view2(SF, SI, DS_WHEEL_STATE), view1(SF, SI, DS_TIMEOUT), u_seq)
     n_imu = counts // 1000
     n_st = counts % 1000
     if dist_n > 0:
@@ -460,8 +478,8 @@ def period_packed(t_base, DF, DI, DB, WF, WI, WB, sun_c, moon_c, dist_buf, imu_b
                     gyro_out[m, c] = GYRO_SEQ[done - 1, m, c]
                 gyro_sat[m] = SAT_SEQ[done - 1, m]
     if done == J:
-        dsc = view1(DF, DL, DP_SCALARS)
-        queue_samples(times, imu_due, GYRO_SEQ, SAT_SEQ, dsc[DPS_IMU_LAT], dsc[DPS_IMU_LO], dsc[DPS_IMU_HI],
-                      isc[DPS_IMU_M], st_due, ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ, dsc[DPS_ST_LAT],
-                      view1(DI, DL, DP_ST_MS), view1(DI, DL, DP_ST_COLS), view1(DI, DL, DP_ST_SEQ), Q_DUE, Q_M,
-                      Q_ROWS, Q_TS, view1(DI, DL, DP_Q_N))
+        ssc = view1(SF, SI, DS_SCALARS)
+        queue_samples(times, imu_due, GYRO_SEQ, SAT_SEQ, ssc[DSS_IMU_LAT], ssc[DSS_IMU_LO], ssc[DSS_IMU_HI],
+                      view1(SI, SI, DS_ISCALARS)[DSS_IMU_M], st_due, ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ,
+                      ssc[DSS_ST_LAT], view1(SI, SI, DS_ST_MS), view1(SI, SI, DS_ST_COLS), view1(SI, SI, DS_ST_SEQ),
+                      Q_DUE, Q_M, Q_ROWS, Q_TS, view1(SI, SI, DS_Q_N))

@@ -378,7 +378,25 @@ class Devices:
         self._st_cols = np.array(st.a_cols + st.b_cols, dtype=np.int64)
         lo, hi = imu._range
         self._imu_range = (float(lo), float(hi))
+        self._pack_state()
         self._warm_kernels()
+
+    def _pack_state(self) -> None:
+        """The state the per-tick kernels (``device_kernels.period_packed``, ``tick_rows_packed``) read and
+        write, as views of a few buffers (``hil_sim.world.pack_arrays``, slots DS_*): the sensors' clocks,
+        the wheels' command state, the queue's count, and the constants of the frames they make."""
+        imu, st = self.imu, self.star_tracker
+        lo, hi = self._imu_range
+        sync = [self.icd.column("SYNC", s) for s in ("tick", "frames_following", "period_ms")]
+        floats = [imu.clock, st.clock, self.wheel_state, self.wheel_timeout_s, self._status_ranges(),
+                  np.array([float(imu.latency_s), lo, hi, float(st.latency_s)])]
+        ints = [self._st_ms, self._st_cols, st.seq_state, self.q_n, self._status_ms, self._status_cols(),
+                np.array([imu._m, st.age_col, self.icd.message_index["SYNC"]] + sync, dtype=np.int64)]
+        self.packed_f, self.packed_i, _, views = pack_arrays(floats, ints, [])
+        (imu.clock, st.clock, self.wheel_state, self.wheel_timeout_s, _, _,
+         self._st_ms, self._st_cols, st.seq_state, self.q_n, _, _, self._packed_iscalars) = views
+        for i, w in enumerate(self.wheels):
+            w.state = self.wheel_state[i]
 
     def _warm_kernels(self) -> None:
         """Call the kernels a run may reach only later (the three-call period path when a normal stream
@@ -521,30 +539,19 @@ class Devices:
         st.samples += counts % 1000
 
     def _bind_period(self, b: Any, dt_s: float, n_sub: int, steps: int) -> None:
-        """The state ``device_kernels.period_packed`` reads and writes as views of three buffers
-        (``hil_sim.world.pack_arrays``, slots DP_*): the clocks, the wheels' command state, the queue's count
-        and the period's plan and scratch; their current values carried over. Bound again when the period's
-        length, the sub-steps or the world's batch change."""
+        """The period's plan and scratch of ``device_kernels.period_packed`` as views of three buffers (slots
+        DP_*). Bound again when the period's length, the sub-steps or the world's batch change."""
         M = b.n_runs
-        imu, st = self.imu, self.star_tracker
         dist_n = n_sub * M * 3 if b._has_random_disturbance and n_sub > 0 else 0
-        lo, hi = self._imu_range
-        floats = [imu.clock, st.clock, self.wheel_state, self.wheel_timeout_s, np.zeros((steps, 1, len(self.wheels))),
-                  np.zeros((steps, M * 3)), np.arange(steps + 1) * dt_s, np.zeros(steps + 1), np.zeros(steps),
-                  np.zeros((steps, M, 3)), np.zeros((steps, M, 4)),
-                  np.array([float(imu.latency_s), lo, hi, float(st.latency_s)])]
-        ints = [self._st_ms, self._st_cols, st.seq_state, self.q_n, np.zeros(3, dtype=np.int64),
-                np.array([imu._m, dist_n, 0, 0, 0, M], dtype=np.int64), np.zeros((steps, M), dtype=np.int64)]
+        floats = [np.zeros((steps, 1, len(self.wheels))), np.zeros((steps, M * 3)), np.arange(steps + 1) * dt_s,
+                  np.zeros(steps + 1), np.zeros(steps), np.zeros((steps, M, 3)), np.zeros((steps, M, 4))]
+        ints = [np.zeros(3, dtype=np.int64), np.array([dist_n, 0, 0, 0, M], dtype=np.int64),
+                np.zeros((steps, M), dtype=np.int64)]
         bools = [np.zeros(steps, dtype=np.bool_), np.zeros(steps, dtype=np.bool_), np.zeros((steps, M), dtype=np.bool_),
                  np.zeros((steps, M), dtype=np.bool_)]
-        self.packed_f, self.packed_i, self.packed_b, views = pack_arrays(floats, ints, bools)
-        (imu.clock, st.clock, self.wheel_state, self.wheel_timeout_s, u_seq, _, _, self._times, _, _, _, _,
-         self._st_ms, self._st_cols, st.seq_state, self.q_n, self._period_counts, self._period_iscalars, _,
-         imu_due, st_due, _, _) = views
-        for i, w in enumerate(self.wheels):
-            w.state = self.wheel_state[i]
+        self.period_f, self.period_i, self.period_b, views = pack_arrays(floats, ints, bools)
+        (u_seq, _, _, self._times, _, _, _, self._period_counts, self._period_iscalars, _, imu_due, st_due, _, _) = views
         self._plan = (u_seq, imu_due, st_due)
-        self._tick_args = None  # it holds the wheel state and the queue's count
         self._period_steps = (dist_n * steps, 6 * M, 3 * M)  # the draws of a period, of a sample
         self._bound = (b, dt_s, n_sub, steps)
 
@@ -567,8 +574,9 @@ class Devices:
             self._times[:] = times
         table = b.prepare_packed(dt_s, n_sub, steps)
         self._reserve(3 * steps)
-        dk.period_packed(t_s, self.packed_f, self.packed_i, self.packed_b, b.packed_f, b.packed_i, b.packed_b,
-                         table[1], table[2], nd._buf, ni._buf, ns._buf, self.q_due, self.q_m, self.q_rows, self.q_ts)
+        dk.period_packed(t_s, self.packed_f, self.packed_i, self.period_f, self.period_i, self.period_b, b.packed_f,
+                         b.packed_i, b.packed_b, table[1], table[2], nd._buf, ni._buf, ns._buf, self.q_due, self.q_m,
+                         self.q_rows, self.q_ts)
         done, n_imu, n_st = self._period_counts.tolist()
         if done < 0:
             return False
@@ -609,19 +617,22 @@ class Devices:
                   sync_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
         """A tick's frames as rows (one compiled call): SYNC(tick) in row 0, then ``rows_due(t_s)`` and
         ``wheel_status_rows(world, t_s)``; returns (message indices, rows, count) or None when ``world``
-        is not a ``hil_sim.world.World`` (then the caller takes the Python path)."""
+        is not a ``hil_sim.world.World`` (then the caller takes the Python path). ``sync_m``/``sync_cols``:
+        SYNC's message index and its (tick, frames_following, period_ms) slots (the ICD's)."""
         args = self._tick_args
-        if args is None or args[0] is not world or args[-2].shape[0] < 1 + int(self.q_n[0]) + len(self.wheels):
+        if args is None or args[0] is not world or args[1] is not self.q_due or args[2] < 1 + self.q_n.item(0) + len(
+                self.wheels):
             fast = self._fast_world(world)
             if fast is None:
                 return None
-            _, X, U_APPLIED, W_KT, TEMP, FLAGS = fast
+            if sync_m != self._packed_iscalars[dk.DSS_SYNC_M] or list(sync_cols) != self._packed_iscalars[
+                    dk.DSS_SYNC_COLS:dk.DSS_SYNC_COLS + 3].tolist():  # pragma: no cover - the ICD's SYNC
+                raise ValueError("tick_rows: SYNC's index or slots differ from the ICD's")
+            b = fast[0]
             idx, rows = self._out(1 + int(self.q_n[0]) + len(self.wheels) + 16)
-            args = self._tick_args = (world, sync_m, sync_cols, self.q_due, self.q_m, self.q_rows, self.q_ts, self.q_n,
-                                      self.star_tracker.age_col, X, U_APPLIED, W_KT, TEMP, FLAGS, self.wheel_state,
-                                      self.wheel_timeout_s, self._status_ms, self._status_cols(), self._status_ranges(),
-                                      idx, rows)
-        n = dk.tick_rows(t_s, (float(tick), float(period_ms)), *args[1:])
+            args = self._tick_args = (world, self.q_due, idx.shape[0], self.packed_f, self.packed_i, b.packed_f,
+                                      b.packed_i, self.q_due, self.q_m, self.q_rows, self.q_ts, idx, rows)
+        n = dk.tick_rows_packed(t_s, float(tick), float(period_ms), *args[3:])
         return args[-2], args[-1], n
 
     def _status_cols(self) -> np.ndarray:
