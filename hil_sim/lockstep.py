@@ -97,6 +97,7 @@ class Simulator:
         self.devices = Devices.for_world(world, self.icd, timing)
         self.n_wheels = len(self.devices.wheels)
         self.injector = FaultInjector(self.icd, faults, seed=fault_seed)
+        self._faults = self.injector.faults  # (empty: the injector never acts, ``bool(injector)`` is False)
         self.cycle_done_timeout_s = cycle_done_timeout_s
         self.clock = clock
         self.on_frame = on_frame
@@ -144,6 +145,9 @@ class Simulator:
         self._rc_n_codes = n_codes
         self._rc_watch = self.receiver.watched_timeouts()  # (message indices, limits) as check_timeouts has them
         self._rc_status = np.zeros(0, dtype=np.int64)
+        # count_timeouts' arguments after the time (bound once: the same arrays every tick)
+        self._ct_args = (self._rc_watch[0], self._rc_watch[1], self._rc_table[3], self._rc_table[4], self._rc_tally,
+                         self._rc_state, n_codes)
         self._rc_values = np.zeros((0, self.icd.table.start.shape[1]))
         # Lockstep waits wake only for CYCLE_DONE where the bus can filter wake-ups (socketcan): the wheel
         # commands before it queue without a context switch each (see _receive_until_done).
@@ -173,13 +177,21 @@ class Simulator:
         """Publish SYNC(k) and the device frames of tick k. Returns the number of frames sent."""
         if self._tick_open:
             raise RuntimeError("begin_tick() called twice without end_tick()")
-        t = self.t_s
-        sync = self._sync_row
-        sync[self._sync_cols[0]] = self.tick & 0xFFFFFFFF
-        sync[self._sync_cols[2]] = self.period_ms
+        t = self.t0_s + self.tick * self.period_s  # t_s
+        tick = self.tick & 0xFFFFFFFF
         # the tick's rows in one compiled call where the world allows (SYNC in row 0, then the device rows)
-        out = self.devices.tick_rows(self.world, t, sync[self._sync_cols[0]], self.period_ms, self._sync_m,
-                                     self._sync_cols_arr)
+        out = self.devices.tick_rows(self.world, t, tick, self.period_ms, self._sync_m, self._sync_cols_arr)
+        if out is not None and not self._faults:
+            # no fault to inject: SYNC first, then the device frames: one compiled encode, one burst (alive
+            # counters are per message, so encoding SYNC with the others gives the bytes it always had)
+            out_idx, out_rows, n = out
+            self._send_burst(self._sync_sender.burst(out_idx[:n], out_rows[:n]), t)
+            self._tick_open = True
+            self._awaiting = self.tick
+            return n
+        sync = self._sync_row
+        sync[self._sync_cols[0]] = tick
+        sync[self._sync_cols[2]] = self.period_ms
         if out is None:
             idx, rows = self.devices.rows_due(t)
             status_idx, status_rows = self.devices.wheel_status_rows(self.world, t)
@@ -240,10 +252,10 @@ class Simulator:
             self.devices.step_period(self.world, self.dt_s, self.n_sub, t_k)
             # the receiver's check_timeouts(_sub_t(n_sub)) compiled
             rs = self._rc_state
-            count_timeouts(t_k + self._j_dt_end, self._rc_watch[0], self._rc_watch[1], self._rc_table[3],
-                           self._rc_table[4], self._rc_tally, rs, self._rc_n_codes)
-            if rs[dk.RS_NTALLY]:
-                self._settle_tally()
+            count_timeouts(t_k + self._j_dt_end, *self._ct_args)
+            n_tally = rs.item(dk.RS_NTALLY)
+            if n_tally:
+                self._settle_tally(n_tally)
         else:
             for j in range(self.n_sub):
                 if paced is not None:
@@ -258,8 +270,8 @@ class Simulator:
 
     # ---------------------------------------------------------------------------------- receiving
     def _receive_until_done(self, k: int, wait_s: float) -> bool:
-        t_s = self.t_s
-        if self.injector:  # (without faults nothing is ever held)
+        t_s = self.t0_s + self.tick * self.period_s  # t_s
+        if self._faults:  # (without faults nothing is ever held)
             for msg in self.injector.release(t_s, "rx"):  # flight-software frames delayed by a fault
                 self._classify(msg, t_s)
         # With a doorbell (socketcan) a waiting tick starts with the wait: this tick's answer comes after this
@@ -309,7 +321,7 @@ class Simulator:
         Returns whether CYCLE_DONE(k) came (else the caller goes on: ``_rx``, the bus)."""
         n = len(burst)
         if (n <= PYTHON_RUN or self.on_frame is not None or self._awaiting != k
-                or (self.injector and not self.injector.passes_through(t_s, "rx"))):
+                or (self._faults and not self.injector.passes_through(t_s, "rx"))):
             self._rx = self.receiver.check(burst)
             return False
         if self._rc_status.shape[0] < n:
@@ -321,9 +333,9 @@ class Simulator:
                                   self._rc_consts, msg_i, sig_i, sig_f, seq, last_ok_t, self.devices.wheel_state,
                                   self._rc_tally, rs)
         wheel_cmds, n_tally, heartbeats, cycle_done, stale, done = rs.tolist()
+        rs.fill(0)
         if n_tally:
-            self._settle_tally()
-        rs[:] = 0
+            self._settle_tally(n_tally)
         stats = self.stats
         if wheel_cmds:
             stats.wheel_commands += wheel_cmds
@@ -337,14 +349,14 @@ class Simulator:
             rx.pos = end
         return done != 0
 
-    def _settle_tally(self) -> None:
-        """The compiled calls' counts ((key, count) pairs in ``_rc_tally``) into the receiver's counters."""
-        rs = self._rc_state
+    def _settle_tally(self, n_tally: int) -> None:
+        """The compiled calls' counts (the first ``n_tally`` (key, count) pairs in ``_rc_tally``) into the
+        receiver's counters; the tally emptied (``_rc_state[RS_NTALLY]``)."""
         targets = self._rc_targets
-        for key, count in self._rc_tally[:int(rs[dk.RS_NTALLY])].tolist():
+        for key, count in self._rc_tally[:n_tally].tolist():
             counts, cls = targets[key]
             counts[cls] += count
-        rs[dk.RS_NTALLY] = 0
+        self._rc_state[dk.RS_NTALLY] = 0
 
     def poll(self, t_s: float) -> int:
         """Handle everything queued now, stamping it with simulation time ``t_s``. Returns the count."""
