@@ -18,7 +18,8 @@ import math
 import numpy as np
 from numba import njit
 
-from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_UNKNOWN, UNKNOWN_CODE, _tally,
+from fsw.bus.burst import MAX_DLC
+from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_UNKNOWN, UNKNOWN_CODE, _tally, encode_range,
                              judge_frame)
 from hil_sim import world as wd
 from hil_sim.dynamics import W_KT
@@ -379,8 +380,9 @@ def receive_commands(ids, lengths, data, first, status, values, now, awaited, co
 
 # Devices' packed state (Devices._pack_state; hil_sim.world.pack_arrays): its slots, then the places of its
 # float / int scalars
-(DS_IMU_CLOCK, DS_ST_CLOCK, DS_WHEEL_STATE, DS_TIMEOUT, DS_STATUS_RANGES, DS_SCALARS,
- DS_ST_MS, DS_ST_COLS, DS_ST_SEQ, DS_Q_N, DS_STATUS_MS, DS_STATUS_COLS, DS_ISCALARS) = range(13)
+(DS_IMU_CLOCK, DS_ST_CLOCK, DS_WHEEL_STATE, DS_TIMEOUT, DS_STATUS_RANGES, DS_SCALARS, DS_SIG_F,
+ DS_ST_MS, DS_ST_COLS, DS_ST_SEQ, DS_Q_N, DS_STATUS_MS, DS_STATUS_COLS, DS_ISCALARS, DS_MSG_I, DS_SIG_I, DS_CRC,
+ DS_FRAME_IDS, DS_DLC) = range(19)  # (DS_SIG_F..: the ICD codec table's arrays, DS_FRAME_IDS/DLC by message)
 DSS_IMU_LAT, DSS_IMU_LO, DSS_IMU_HI, DSS_ST_LAT = range(4)  # float scalars
 DSS_IMU_M, DSS_AGE_COL, DSS_SYNC_M, DSS_SYNC_COLS = range(4)  # int scalars (SYNC's 3 slots from DSS_SYNC_COLS)
 # a period's plan and scratch (Devices._bind_period): slots, int scalars
@@ -401,6 +403,26 @@ def tick_rows_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q
                      view2(WI, WI, wd.WP_FLAGS), view2(SF, SI, DS_WHEEL_STATE), view1(SF, SI, DS_TIMEOUT),
                      view1(SI, SI, DS_STATUS_MS), view1(SI, SI, DS_STATUS_COLS), view2(SF, SI, DS_STATUS_RANGES),
                      OUT_IDX, OUT_ROWS)
+
+
+@njit(cache=True)
+def tick_burst_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS, counters,
+                      sent):
+    """``tick_rows_packed``, then its n rows encoded as ``E2ESender.burst`` encodes them (``encode_range``
+    with the sender's alive ``counters`` and ``sent`` counts) into new arrays. Returns (n, rows encoded,
+    frame ids, data (n, 8), lengths): a FrameBurst's arrays when all n are encoded."""
+    n = tick_rows_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS)
+    data = np.zeros((n, MAX_DLC), dtype=np.uint8)
+    done = encode_range(OUT_IDX, OUT_ROWS, counters, sent, data, view2(SI, SI, DS_MSG_I), view3(SI, SI, DS_SIG_I),
+                        view3(SF, SI, DS_SIG_F), view1(SI, SI, DS_CRC), n)
+    frame_ids = view1(SI, SI, DS_FRAME_IDS)
+    dlc = view1(SI, SI, DS_DLC)
+    ids = np.empty(n, dtype=np.int64)
+    lengths = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        ids[i] = frame_ids[OUT_IDX[i]]
+        lengths[i] = dlc[OUT_IDX[i]]
+    return n, done, ids, data, lengths
 
 
 @njit(cache=True)

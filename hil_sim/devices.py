@@ -23,6 +23,7 @@ from typing import Any, NamedTuple, Protocol, Sequence
 import can
 import numpy as np
 
+from fsw.bus.burst import FrameBurst
 from fsw.bus.icd import E2ESender, Icd
 from hil_sim import device_kernels as dk
 from hil_sim.device_kernels import WS_APPLIED, WS_CMD, WS_LAST_T, WS_TICK
@@ -388,13 +389,16 @@ class Devices:
         imu, st = self.imu, self.star_tracker
         lo, hi = self._imu_range
         sync = [self.icd.column("SYNC", s) for s in ("tick", "frames_following", "period_ms")]
+        table = self.icd.table  # the codec's constants (tick_burst_packed encodes), copied
         floats = [imu.clock, st.clock, self.wheel_state, self.wheel_timeout_s, self._status_ranges(),
-                  np.array([float(imu.latency_s), lo, hi, float(st.latency_s)])]
+                  np.array([float(imu.latency_s), lo, hi, float(st.latency_s)]), table.sig_f]
         ints = [self._st_ms, self._st_cols, st.seq_state, self.q_n, self._status_ms, self._status_cols(),
-                np.array([imu._m, st.age_col, self.icd.message_index["SYNC"]] + sync, dtype=np.int64)]
+                np.array([imu._m, st.age_col, self.icd.message_index["SYNC"]] + sync, dtype=np.int64),
+                table.msg_i, table.sig_i, table.crc_table,
+                np.array([self.icd.messages[n].frame_id for n in self.icd.message_names], dtype=np.int64), table.dlc]
         self.packed_f, self.packed_i, _, views = pack_arrays(floats, ints, [])
-        (imu.clock, st.clock, self.wheel_state, self.wheel_timeout_s, _, _,
-         self._st_ms, self._st_cols, st.seq_state, self.q_n, _, _, self._packed_iscalars) = views
+        (imu.clock, st.clock, self.wheel_state, self.wheel_timeout_s, _, _, _,
+         self._st_ms, self._st_cols, st.seq_state, self.q_n, _, _, self._packed_iscalars, _, _, _, _, _) = views
         for i, w in enumerate(self.wheels):
             w.state = self.wheel_state[i]
 
@@ -613,15 +617,11 @@ class Devices:
                 self._push(self.star_tracker.frames_for(q[j], valid[j], blind[j], times_s[j + 1]))
 
     # ------------------------------------------------------------------------------- frames out
-    def tick_rows(self, world: Any, t_s: float, tick: int, period_ms: int, sync_m: int,
-                  sync_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
-        """A tick's frames as rows (one compiled call): SYNC(tick) in row 0, then ``rows_due(t_s)`` and
-        ``wheel_status_rows(world, t_s)``; returns (message indices, rows, count) or None when ``world``
-        is not a ``hil_sim.world.World`` (then the caller takes the Python path). ``sync_m``/``sync_cols``:
-        SYNC's message index and its (tick, frames_following, period_ms) slots (the ICD's)."""
+    def _tick_kernel_args(self, world: Any, sync_m: int, sync_cols: np.ndarray) -> tuple | None:
+        """``tick_rows_packed``'s arguments after (t_s, tick, period_ms), for ``world`` (None when it is not a
+        ``hil_sim.world.World``); kept while the world, the queue's arrays and the output rows' room hold."""
         args = self._tick_args
-        if args is None or args[0] is not world or args[1] is not self.q_due or args[2] < 1 + self.q_n.item(0) + len(
-                self.wheels):
+        if args is None or args[0] is not world or args[1] < 1 + self.q_n.item(0) + len(self.wheels):
             fast = self._fast_world(world)
             if fast is None:
                 return None
@@ -630,10 +630,35 @@ class Devices:
                 raise ValueError("tick_rows: SYNC's index or slots differ from the ICD's")
             b = fast[0]
             idx, rows = self._out(1 + int(self.q_n[0]) + len(self.wheels) + 16)
-            args = self._tick_args = (world, self.q_due, idx.shape[0], self.packed_f, self.packed_i, b.packed_f,
-                                      b.packed_i, self.q_due, self.q_m, self.q_rows, self.q_ts, idx, rows)
-        n = dk.tick_rows_packed(t_s, float(tick), float(period_ms), *args[3:])
+            args = self._tick_args = (world, idx.shape[0], (self.packed_f, self.packed_i, b.packed_f, b.packed_i,
+                                                            self.q_due, self.q_m, self.q_rows, self.q_ts, idx, rows))
+        return args[2]
+
+    def tick_rows(self, world: Any, t_s: float, tick: int, period_ms: int, sync_m: int,
+                  sync_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
+        """A tick's frames as rows (one compiled call): SYNC(tick) in row 0, then ``rows_due(t_s)`` and
+        ``wheel_status_rows(world, t_s)``; returns (message indices, rows, count) or None when ``world``
+        is not a ``hil_sim.world.World`` (then the caller takes the Python path). ``sync_m``/``sync_cols``:
+        SYNC's message index and its (tick, frames_following, period_ms) slots (the ICD's)."""
+        args = self._tick_kernel_args(world, sync_m, sync_cols)
+        if args is None:
+            return None
+        n = dk.tick_rows_packed(t_s, float(tick), float(period_ms), *args)
         return args[-2], args[-1], n
+
+    def tick_burst(self, world: Any, t_s: float, tick: int, period_ms: int, sync_m: int,
+                   sync_cols: np.ndarray) -> FrameBurst | None:
+        """``tick_rows`` encoded by the nodes' sender (``self.sender.burst`` of its rows: the same bytes and
+        alive counters), in the same compiled call; None when ``world`` is not a ``hil_sim.world.World``."""
+        args = self._tick_kernel_args(world, sync_m, sync_cols)
+        if args is None:
+            return None
+        sender = self.sender
+        n, done, ids, data, lengths = dk.tick_burst_packed(t_s, float(tick), float(period_ms), *args, sender._counter,
+                                                           sender._sent)
+        if done < n:  # a row the compiled codec refused: the checked path names the error
+            return sender.burst(args[-2][:n], args[-1][:n], data, done)
+        return FrameBurst(ids, data, lengths)
 
     def _status_cols(self) -> np.ndarray:
         cols = getattr(self, "_status_cols_arr", None)

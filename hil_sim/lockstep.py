@@ -179,16 +179,18 @@ class Simulator:
             raise RuntimeError("begin_tick() called twice without end_tick()")
         t = self.t0_s + self.tick * self.period_s  # t_s
         tick = self.tick & 0xFFFFFFFF
+        if not self._faults:
+            # no fault to inject: SYNC first, then the device frames, made and encoded in one compiled call
+            # where the world allows (alive counters are per message, so encoding SYNC with the others gives
+            # the bytes it always had), one burst
+            burst = self.devices.tick_burst(self.world, t, tick, self.period_ms, self._sync_m, self._sync_cols_arr)
+            if burst is not None:
+                self._send_burst(burst, t)
+                self._tick_open = True
+                self._awaiting = self.tick
+                return len(burst)
         # the tick's rows in one compiled call where the world allows (SYNC in row 0, then the device rows)
         out = self.devices.tick_rows(self.world, t, tick, self.period_ms, self._sync_m, self._sync_cols_arr)
-        if out is not None and not self._faults:
-            # no fault to inject: SYNC first, then the device frames: one compiled encode, one burst (alive
-            # counters are per message, so encoding SYNC with the others gives the bytes it always had)
-            out_idx, out_rows, n = out
-            self._send_burst(self._sync_sender.burst(out_idx[:n], out_rows[:n]), t)
-            self._tick_open = True
-            self._awaiting = self.tick
-            return n
         sync = self._sync_row
         sync[self._sync_cols[0]] = tick
         sync[self._sync_cols[2]] = self.period_ms
