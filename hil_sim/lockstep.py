@@ -156,6 +156,7 @@ class Simulator:
             bus.watch([self._cycle_done_id])
         self.tick = 0
         self.t0_s = float(world.t)
+        self.t_s = self.t0_s + self.tick * self.period_s
         self.stats = SimStats()
         self._done_ticks: set[int] = set()
         self._tick_open = False
@@ -164,10 +165,8 @@ class Simulator:
         self.devices.sample_sensors(world, self.t0_s)
 
     # ------------------------------------------------------------------------------------ time
-    @property
-    def t_s(self) -> float:
-        """Simulation time of the current tick, t0 + k T (exact, not accumulated)."""
-        return self.t0_s + self.tick * self.period_s
+    # ``t_s``: simulation time of the current tick, t0 + k T (exact, not accumulated), an attribute set with
+    # ``tick`` (read several times a tick: by the flight software's clock, the timeline, the recorders)
 
     def _sub_t(self, j: int) -> float:
         return self.t0_s + self.tick * self.period_s + j * self.dt_s
@@ -177,7 +176,7 @@ class Simulator:
         """Publish SYNC(k) and the device frames of tick k. Returns the number of frames sent."""
         if self._tick_open:
             raise RuntimeError("begin_tick() called twice without end_tick()")
-        t = self.t0_s + self.tick * self.period_s  # t_s
+        t = self.t_s
         tick = self.tick & 0xFFFFFFFF
         if not self._faults:
             # no fault to inject: SYNC first, then the device frames, made and encoded in one compiled call
@@ -250,7 +249,7 @@ class Simulator:
         if paced is None and self._world_samples:
             # not paced: the whole period in one compiled call (same numbers as the loop below)
             # _sub_t(j) for j = 0..n_sub: (t0 + k T) + j dt, the same sums (made in the compiled call)
-            t_k = self.t0_s + self.tick * self.period_s
+            t_k = self.t_s
             self.devices.step_period(self.world, self.dt_s, self.n_sub, t_k)
             # the receiver's check_timeouts(_sub_t(n_sub)) compiled
             rs = self._rc_state
@@ -267,12 +266,13 @@ class Simulator:
                 self.devices.sample_sensors(self.world, self._sub_t(j + 1))
             self.receiver.check_timeouts(self._sub_t(self.n_sub))
         self.tick += 1
+        self.t_s = self.t0_s + self.tick * self.period_s
         self.stats.ticks += 1
         self._tick_open = False
 
     # ---------------------------------------------------------------------------------- receiving
     def _receive_until_done(self, k: int, wait_s: float) -> bool:
-        t_s = self.t0_s + self.tick * self.period_s  # t_s
+        t_s = self.t_s
         if self._faults:  # (without faults nothing is ever held)
             for msg in self.injector.release(t_s, "rx"):  # flight-software frames delayed by a fault
                 self._classify(msg, t_s)
