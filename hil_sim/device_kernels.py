@@ -426,6 +426,16 @@ def tick_burst_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, 
 
 
 @njit(cache=True)
+def receive_commands_packed(ids, lengths, data, now, awaited, status, values, consts, SF, SI, seq, last_ok_t, tally,
+                            rs):
+    """``receive_commands`` of a whole burst (from frame 0) with the ICD codec table and the wheels' command
+    state read from the devices' packed state (SF, SI: ``Devices._pack_state``)."""
+    return receive_commands(ids, lengths, data, 0, status, values, now, awaited, consts, view2(SI, SI, DS_MSG_I),
+                            view3(SI, SI, DS_SIG_I), view3(SF, SI, DS_SIG_F), seq, last_ok_t,
+                            view2(SF, SI, DS_WHEEL_STATE), tally, rs)
+
+
+@njit(cache=True)
 def period_packed(t_base, SF, SI, DF, DI, DB, WF, WI, WB, sun_c, moon_c, dist_buf, imu_buf, st_buf, Q_DUE, Q_M,
                   Q_ROWS, Q_TS):
     """One GNC period of ``Devices.step_world`` in one call, on the devices' (SF, SI), the period's (DF, DI,

@@ -517,7 +517,7 @@ class Devices:
     def step_period(self, world: Any, dt_s: float, steps: int, t_s: float) -> None:
         """``step_world(world, dt_s, times)`` with times[j] = t_s + j_dt[j], j_dt = arange(steps + 1) * dt_s
         (the simulator's sub-step times of a period, the same sums), made inside the compiled call."""
-        fast = self._fast_world(world)
+        fast = self._world_fast if world is self._world_key else self._fast_world(world)
         if fast is not None and steps and self._step_fused(world, fast[0], dt_s, None, steps, t_s):
             return
         self.step_world(world, dt_s, t_s + np.arange(steps + 1) * dt_s)

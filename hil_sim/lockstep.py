@@ -145,6 +145,12 @@ class Simulator:
         self._rc_n_codes = n_codes
         self._rc_watch = self.receiver.watched_timeouts()  # (message indices, limits) as check_timeouts has them
         self._rc_status = np.zeros(0, dtype=np.int64)
+        self._rc_args: tuple | None = None  # (see _take_burst)
+        # receive_commands_packed reads the codec table from the devices' packed copy of it
+        if not all(np.array_equal(a, b) for a, b in zip(self._rc_table[:3], (self.icd.table.msg_i,
+                                                                              self.icd.table.sig_i,
+                                                                              self.icd.table.sig_f))):
+            raise ValueError("Simulator: the receiver's codec table is not the ICD's")  # pragma: no cover
         # count_timeouts' arguments after the time (bound once: the same arrays every tick)
         self._ct_args = (self._rc_watch[0], self._rc_watch[1], self._rc_table[3], self._rc_table[4], self._rc_tally,
                          self._rc_state, n_codes)
@@ -329,11 +335,15 @@ class Simulator:
         if self._rc_status.shape[0] < n:
             self._rc_status = np.zeros(2 * n, dtype=np.int64)
             self._rc_values = np.zeros((2 * n, self._rc_values.shape[1]))
+            self._rc_args = None
+        args = self._rc_args
+        if args is None:
+            # receive_commands_packed's arguments after the time and tick, bound while the scratch holds
+            d = self.devices
+            args = self._rc_args = (self._rc_status, self._rc_values, self._rc_consts, d.packed_f, d.packed_i,
+                                    self._rc_table[3], self._rc_table[4], self._rc_tally, self._rc_state)
         rs = self._rc_state
-        msg_i, sig_i, sig_f, seq, last_ok_t = self._rc_table
-        end = dk.receive_commands(burst.ids, burst.lengths, burst.data, 0, self._rc_status, self._rc_values, t_s, k,
-                                  self._rc_consts, msg_i, sig_i, sig_f, seq, last_ok_t, self.devices.wheel_state,
-                                  self._rc_tally, rs)
+        end = dk.receive_commands_packed(burst.ids, burst.lengths, burst.data, t_s, k, *args)
         wheel_cmds, n_tally, heartbeats, cycle_done, stale, done = rs.tolist()
         rs.fill(0)
         if n_tally:

@@ -351,7 +351,7 @@ class WorldBatch:
          self.FLAGS, self.ST_BLIND, self._iscalars, has_coulomb, self.ST_VALID, self.GYRO_SAT) = views
         self._coef = (decay, gm, has_coulomb)  # filled in place (_set_coef): the views stay the kernels' arrays
         self._coef_dt = -1.0
-        self._packed_key: tuple = ()
+        self._packed_dt, self._packed_n_sub = math.nan, -1  # what dt_sub / n_sub were set for (prepare_packed)
         self._packed_table: tuple | None = None
 
     def _set_coef(self, dt_sub: float) -> None:
@@ -478,12 +478,11 @@ class WorldBatch:
         t_last = t + J * dt_s  # the ephemeris table's reach: a bound, the kernel accumulates exactly
         if t_last + dt_s >= eph.t_end_s or t < eph.t_start_s:
             eph.ensure(t, t_last + dt_s)
-        key = (dt_s, n_sub)
-        if key != self._packed_key:
+        if dt_s != self._packed_dt or n_sub != self._packed_n_sub:
             self._dt_sub = dt_s / n_sub if n_sub else 0.0
             self._scalars[WPS_DT_SUB] = self._dt_sub
             self._iscalars[WPS_N_SUB] = n_sub
-            self._packed_key = key
+            self._packed_dt, self._packed_n_sub = dt_s, n_sub
         if self._dt_sub != self._coef_dt:
             self._set_coef(self._dt_sub)
         table = eph.table  # one read: consistent even if another thread extends the table
