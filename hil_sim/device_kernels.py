@@ -18,9 +18,12 @@ import math
 import numpy as np
 from numba import njit
 
-from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_UNKNOWN, UNKNOWN_CODE, _tally,
+from fsw.bus.burst import MAX_DLC
+from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_UNKNOWN, UNKNOWN_CODE, _tally, encode_range,
                              judge_frame)
-from hil_sim.world import _world_period_kernel
+from hil_sim import world as wd
+from hil_sim.dynamics import W_KT
+from hil_sim.world import _world_period_kernel, view1, view2, view3
 
 _EPS_S = 1e-9
 # RWn_STATUS.fault bits and hil_sim.world.WheelStatus.fault bits (as in hil_sim.devices)
@@ -375,38 +378,140 @@ def receive_commands(ids, lengths, data, first, status, values, now, awaited, co
     return n
 
 
+# Devices' packed state (Devices._pack_state; hil_sim.world.pack_arrays): its slots, then the places of its
+# float / int scalars
+(DS_IMU_CLOCK, DS_ST_CLOCK, DS_WHEEL_STATE, DS_TIMEOUT, DS_STATUS_RANGES, DS_SCALARS, DS_SIG_F,
+ DS_ST_MS, DS_ST_COLS, DS_ST_SEQ, DS_Q_N, DS_STATUS_MS, DS_STATUS_COLS, DS_ISCALARS, DS_MSG_I, DS_SIG_I, DS_CRC,
+ DS_FRAME_IDS, DS_DLC) = range(19)  # (DS_SIG_F..: the ICD codec table's arrays, DS_FRAME_IDS/DLC by message)
+DSS_IMU_LAT, DSS_IMU_LO, DSS_IMU_HI, DSS_ST_LAT = range(4)  # float scalars
+DSS_IMU_M, DSS_AGE_COL, DSS_SYNC_M, DSS_SYNC_COLS = range(4)  # int scalars (SYNC's 3 slots from DSS_SYNC_COLS)
+# a period's plan and scratch (Devices._bind_period): slots, int scalars
+(DP_U_SEQ, DP_NO_NORMALS, DP_J_DT, DP_TIMES, DP_T_END, DP_GYRO_SEQ, DP_ST_Q_SEQ,
+ DP_OUT, DP_ISCALARS, DP_ST_BLIND_SEQ,
+ DP_IMU_DUE, DP_ST_DUE, DP_SAT_SEQ, DP_ST_VALID_SEQ) = range(14)
+DPS_DIST_N, DPS_DIST_POS, DPS_IMU_POS, DPS_ST_POS, DPS_N_RUNS = range(5)
+
+
 @njit(cache=True)
-def period_fused(times_s, imu_clock, st_clock, imu_due, st_due, wheel_state, timeout_s, u_seq,
-                 dist_buf, dist_pos, dist_n, no_normals, imu_buf, imu_pos, st_buf, st_pos, n_runs,
-                 X, D, TEMP, G, W, B, dt_sub, n_sub, U_APPLIED, FLAGS, DECAY, GM, HAS_COULOMB, WORK, T_END, ORB, sun_c,
-                 moon_c, eph_t0, eph_h, AUX, CLOCK, BIAS, GYRO_P, GYRO_SEQ, SAT_SEQ, ST_P, ST_BASIS, ST_Q, ST_VALID,
-                 ST_BLIND, ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ,
-                 imu_lat, imu_lo, imu_hi, imu_m, st_lat, st_ms, st_cols, st_seq, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N, out):
-    """One GNC period of ``Devices.step_world`` in one call: ``plan_period``, then the world's
-    ``_world_period_kernel`` with its normals read from the streams' buffers where they stand (what
-    ``NormalStream.take_rows`` would slice: dist_n numbers per step when dist_n > 0, else the zero rows
-    ``no_normals``; 6 * n_runs per gyro sample; 3 * n_runs per star-tracker sample; the caller checked that
-    the buffers hold them), then ``queue_samples``. out: [steps done, gyro samples, star-tracker samples]
-    (the caller advances the streams); nothing is queued when a step was refused (steps done < J)."""
-    J = times_s.shape[0] - 1
-    counts = plan_period(times_s, imu_clock, st_clock, imu_due, st_due, wheel_state, timeout_s, u_seq)
+def tick_rows_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS):
+    """``tick_rows`` on the devices' (SF, SI) and the world's (WF, WI) packed state; sync = (tick,
+    period_ms). Returns the number of rows (SYNC included)."""
+    isc = view1(SI, SI, DS_ISCALARS)
+    return tick_rows(t_s, (tick, period_ms), isc[DSS_SYNC_M], isc[DSS_SYNC_COLS:DSS_SYNC_COLS + 3], Q_DUE, Q_M,
+                     Q_ROWS, Q_TS, view1(SI, SI, DS_Q_N), isc[DSS_AGE_COL], view2(WF, WI, wd.WP_X),
+                     view2(WF, WI, wd.WP_U_APPLIED), view3(WF, WI, wd.WP_W)[W_KT], view2(WF, WI, wd.WP_TEMP),
+                     view2(WI, WI, wd.WP_FLAGS), view2(SF, SI, DS_WHEEL_STATE), view1(SF, SI, DS_TIMEOUT),
+                     view1(SI, SI, DS_STATUS_MS), view1(SI, SI, DS_STATUS_COLS), view2(SF, SI, DS_STATUS_RANGES),
+                     OUT_IDX, OUT_ROWS)
+
+
+@njit(cache=True)
+def tick_burst_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS, counters,
+                      sent):
+    """``tick_rows_packed``, then its n rows encoded as ``E2ESender.burst`` encodes them (``encode_range``
+    with the sender's alive ``counters`` and ``sent`` counts) into new arrays. Returns (n, rows encoded,
+    frame ids, data (n, 8), lengths): a FrameBurst's arrays when all n are encoded."""
+    n = tick_rows_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS)
+    data = np.zeros((n, MAX_DLC), dtype=np.uint8)
+    done = encode_range(OUT_IDX, OUT_ROWS, counters, sent, data, view2(SI, SI, DS_MSG_I), view3(SI, SI, DS_SIG_I),
+                        view3(SF, SI, DS_SIG_F), view1(SI, SI, DS_CRC), n)
+    frame_ids = view1(SI, SI, DS_FRAME_IDS)
+    dlc = view1(SI, SI, DS_DLC)
+    ids = np.empty(n, dtype=np.int64)
+    lengths = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        ids[i] = frame_ids[OUT_IDX[i]]
+        lengths[i] = dlc[OUT_IDX[i]]
+    return n, done, ids, data, lengths
+
+
+@njit(cache=True)
+def receive_commands_packed(ids, lengths, data, now, awaited, status, values, consts, SF, SI, seq, last_ok_t, tally,
+                            rs):
+    """``receive_commands`` of a whole burst (from frame 0) with the ICD codec table and the wheels' command
+    state read from the devices' packed state (SF, SI: ``Devices._pack_state``)."""
+    return receive_commands(ids, lengths, data, 0, status, values, now, awaited, consts, view2(SI, SI, DS_MSG_I),
+                            view3(SI, SI, DS_SIG_I), view3(SF, SI, DS_SIG_F), seq, last_ok_t,
+                            view2(SF, SI, DS_WHEEL_STATE), tally, rs)
+
+
+@njit(cache=True)
+def period_packed(t_base, SF, SI, DF, DI, DB, WF, WI, WB, sun_c, moon_c, dist_buf, imu_buf, st_buf, Q_DUE, Q_M,
+                  Q_ROWS, Q_TS):
+    """One GNC period of ``Devices.step_world`` in one call, on the devices' (SF, SI), the period's (DF, DI,
+    DB) and the world's
+    (WF, WI, WB) packed state: the step times (times[j] = t_base + j_dt[j]; when t_base is NaN the times slot
+    is already filled), ``plan_period``, the world's ``_world_period_kernel`` with its normals read from the
+    streams' buffers where they stand (what ``NormalStream.take_rows`` would slice: dist_n numbers per step
+    when dist_n > 0, else the zero rows; 6 * n_runs per gyro sample; 3 * n_runs per star-tracker sample),
+    the world's last gyro sample (``WorldBatch.finish_period``), then ``queue_samples``.
+    out: [steps done, gyro samples, star-tracker samples] (the caller advances the streams and the world's
+    time); nothing is queued when a step was refused (steps done < J). out[0] = -1, and nothing done at
+    all, when a buffer may not hold the period's normals (the caller takes the three-call path, whose draws
+    refill it)."""
+    DL = DI
+    WL = WI
+    times = view1(DF, DL, DP_TIMES)
+    J = times.shape[0] - 1
+    isc = view1(DI, DL, DP_ISCALARS)
+    out = view1(DI, DL, DP_OUT)
+    dist_n, dist_pos, imu_pos, st_pos, n_runs = (isc[DPS_DIST_N], isc[DPS_DIST_POS], isc[DPS_IMU_POS],
+                                                 isc[DPS_ST_POS], isc[DPS_N_RUNS])
+    k_imu = 6 * n_runs
+    k_st = 3 * n_runs
+    if (dist_pos + dist_n * J > dist_buf.shape[0] or imu_pos + k_imu * J > imu_buf.shape[0]
+            or st_pos + k_st * J > st_buf.shape[0]):
+        out[0] = -1
+        return
+    if not math.isnan(t_base):
+        j_dt = view1(DF, DL, DP_J_DT)
+        for j in range(J + 1):
+            times[j] = t_base + j_dt[j]
+    imu_due = view1(DB, DL, DP_IMU_DUE)
+    st_due = view1(DB, DL, DP_ST_DUE)
+    u_seq = view3(DF, DL, DP_U_SEQ)
+    counts = plan_period(times, view1(SF, SI, DS_IMU_CLOCK), view1(SF, SI, DS_ST_CLOCK), imu_due, st_due,
+                         view2(SF, SI, DS_WHEEL_STATE), view1(SF, SI, DS_TIMEOUT), u_seq)
     n_imu = counts // 1000
     n_st = counts % 1000
     if dist_n > 0:
         normals = dist_buf[dist_pos:dist_pos + dist_n * J].reshape((J, dist_n))
     else:
-        normals = no_normals
-    k_imu = 6 * n_runs
+        normals = view2(DF, DL, DP_NO_NORMALS)
     imu_normals = imu_buf[imu_pos:imu_pos + k_imu * n_imu].reshape((n_imu, k_imu))
-    k_st = 3 * n_runs
     st_normals = st_buf[st_pos:st_pos + k_st * n_st].reshape((n_st, k_st))
-    done = _world_period_kernel(X, D, TEMP, G, W, B, u_seq, normals, dt_sub, n_sub, U_APPLIED, FLAGS, DECAY, GM,
-                                HAS_COULOMB, WORK, T_END, ORB, sun_c, moon_c, eph_t0, eph_h, AUX, imu_due, CLOCK,
-                                imu_normals, BIAS, GYRO_P, GYRO_SEQ, SAT_SEQ, st_due, ST_P, ST_BASIS, st_normals, ST_Q,
-                                ST_VALID, ST_BLIND, ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ)
+    wsc = view1(WF, WL, wd.WP_SCALARS)
+    T_END = view1(DF, DL, DP_T_END)
+    GYRO_SEQ = view3(DF, DL, DP_GYRO_SEQ)
+    SAT_SEQ = view2(DB, DL, DP_SAT_SEQ)
+    ST_Q_SEQ = view3(DF, DL, DP_ST_Q_SEQ)
+    ST_VALID_SEQ = view2(DB, DL, DP_ST_VALID_SEQ)
+    ST_BLIND_SEQ = view2(DI, DL, DP_ST_BLIND_SEQ)
+    done = _world_period_kernel(
+        view2(WF, WL, wd.WP_X), view2(WF, WL, wd.WP_D), view2(WF, WL, wd.WP_TEMP), view3(WF, WL, wd.WP_G),
+        view3(WF, WL, wd.WP_W), view2(WF, WL, wd.WP_B), u_seq, normals, wsc[wd.WPS_DT_SUB],
+        view1(WI, WL, wd.WP_ISCALARS)[wd.WPS_N_SUB], view2(WF, WL, wd.WP_U_APPLIED), view2(WI, WL, wd.WP_FLAGS),
+        view2(WF, WL, wd.WP_DECAY), view2(WF, WL, wd.WP_GM), view1(WB, WL, wd.WP_HAS_COULOMB),
+        view2(WF, WL, wd.WP_WORK), T_END, view2(WF, WL, wd.WP_ORB), sun_c, moon_c, wsc[wd.WPS_EPH_T0],
+        wsc[wd.WPS_EPH_H], view2(WF, WL, wd.WP_AUX), imu_due, view1(WF, WL, wd.WP_CLOCK), imu_normals,
+        view2(WF, WL, wd.WP_BIAS), view2(WF, WL, wd.WP_GYRO_P), GYRO_SEQ, SAT_SEQ, st_due, view2(WF, WL, wd.WP_ST_P),
+        view3(WF, WL, wd.WP_ST_BASIS), st_normals, view2(WF, WL, wd.WP_ST_Q), view1(WB, WL, wd.WP_ST_VALID),
+        view1(WI, WL, wd.WP_ST_BLIND), ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ)
     out[0] = done
     out[1] = n_imu
     out[2] = n_st
+    if done:
+        wsc[wd.WPS_T_END] = T_END[done - 1]
+        if imu_due[done - 1]:
+            gyro_out = view2(WF, WL, wd.WP_GYRO_OUT)
+            gyro_sat = view1(WB, WL, wd.WP_GYRO_SAT)
+            for m in range(gyro_out.shape[0]):
+                for c in range(3):
+                    gyro_out[m, c] = GYRO_SEQ[done - 1, m, c]
+                gyro_sat[m] = SAT_SEQ[done - 1, m]
     if done == J:
-        queue_samples(times_s, imu_due, GYRO_SEQ, SAT_SEQ, imu_lat, imu_lo, imu_hi, imu_m, st_due, ST_Q_SEQ,
-                      ST_VALID_SEQ, ST_BLIND_SEQ, st_lat, st_ms, st_cols, st_seq, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N)
+        ssc = view1(SF, SI, DS_SCALARS)
+        queue_samples(times, imu_due, GYRO_SEQ, SAT_SEQ, ssc[DSS_IMU_LAT], ssc[DSS_IMU_LO], ssc[DSS_IMU_HI],
+                      view1(SI, SI, DS_ISCALARS)[DSS_IMU_M], st_due, ST_Q_SEQ, ST_VALID_SEQ, ST_BLIND_SEQ,
+                      ssc[DSS_ST_LAT], view1(SI, SI, DS_ST_MS), view1(SI, SI, DS_ST_COLS), view1(SI, SI, DS_ST_SEQ),
+                      Q_DUE, Q_M, Q_ROWS, Q_TS, view1(SI, SI, DS_Q_N))

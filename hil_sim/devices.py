@@ -23,9 +23,11 @@ from typing import Any, NamedTuple, Protocol, Sequence
 import can
 import numpy as np
 
+from fsw.bus.burst import FrameBurst
 from fsw.bus.icd import E2ESender, Icd
 from hil_sim import device_kernels as dk
 from hil_sim.device_kernels import WS_APPLIED, WS_CMD, WS_LAST_T, WS_TICK
+from hil_sim.world import pack_arrays
 
 # Fault bits of RWn_STATUS.fault (see the DBC comment).
 FAULT_OVERSPEED, FAULT_CMD_TIMEOUT, FAULT_DRIVE = 1, 2, 4
@@ -371,13 +373,34 @@ class Devices:
         self._world_fast: tuple | None = None
         self._plan: tuple | None = None
         self._tick_args: tuple | None = None  # tick_rows' kernel arguments (see there)
-        self._fused_args: list | None = None  # _step_fused's kernel arguments (see there)
+        self._bound: tuple = ()  # what the packed state was bound for (_bind_period)
         st = star_tracker
         self._st_ms = np.array([st._a_m, st._b_m], dtype=np.int64)
         self._st_cols = np.array(st.a_cols + st.b_cols, dtype=np.int64)
         lo, hi = imu._range
         self._imu_range = (float(lo), float(hi))
+        self._pack_state()
         self._warm_kernels()
+
+    def _pack_state(self) -> None:
+        """The state the per-tick kernels (``device_kernels.period_packed``, ``tick_rows_packed``) read and
+        write, as views of a few buffers (``hil_sim.world.pack_arrays``, slots DS_*): the sensors' clocks,
+        the wheels' command state, the queue's count, and the constants of the frames they make."""
+        imu, st = self.imu, self.star_tracker
+        lo, hi = self._imu_range
+        sync = [self.icd.column("SYNC", s) for s in ("tick", "frames_following", "period_ms")]
+        table = self.icd.table  # the codec's constants (tick_burst_packed encodes), copied
+        floats = [imu.clock, st.clock, self.wheel_state, self.wheel_timeout_s, self._status_ranges(),
+                  np.array([float(imu.latency_s), lo, hi, float(st.latency_s)]), table.sig_f]
+        ints = [self._st_ms, self._st_cols, st.seq_state, self.q_n, self._status_ms, self._status_cols(),
+                np.array([imu._m, st.age_col, self.icd.message_index["SYNC"]] + sync, dtype=np.int64),
+                table.msg_i, table.sig_i, table.crc_table,
+                np.array([self.icd.messages[n].frame_id for n in self.icd.message_names], dtype=np.int64), table.dlc]
+        self.packed_f, self.packed_i, _, views = pack_arrays(floats, ints, [])
+        (imu.clock, st.clock, self.wheel_state, self.wheel_timeout_s, _, _, _,
+         self._st_ms, self._st_cols, st.seq_state, self.q_n, _, _, self._packed_iscalars, _, _, _, _, _) = views
+        for i, w in enumerate(self.wheels):
+            w.state = self.wheel_state[i]
 
     def _warm_kernels(self) -> None:
         """Call the kernels a run may reach only later (the three-call period path when a normal stream
@@ -479,21 +502,34 @@ class Devices:
     def step_world(self, world: Any, dt_s: float, times_s: Sequence[float]) -> None:
         """``world.step(dt_s, wheel_torques(times_s[j]))`` then ``sample_sensors(world, times_s[j + 1])``
         for each step j, through the world's one-call ``advance_sampled`` (the same numbers and frames).
-        With a ``hil_sim.world.World``: three compiled calls (commands and due flags, world, frame rows)."""
+        With a ``hil_sim.world.World``: one compiled call (``_step_fused``), else three (commands and due
+        flags, world, frame rows)."""
         fast = self._fast_world(world)
         if fast is None:
             self._step_world_python(world, dt_s, times_s)
             return
         times = np.asarray(times_s, dtype=float)
         steps = times.shape[0] - 1
+        if steps and self._step_fused(world, fast[0], dt_s, times, steps):
+            return
+        self._step_planned(world, dt_s, times, steps)
+
+    def step_period(self, world: Any, dt_s: float, steps: int, t_s: float) -> None:
+        """``step_world(world, dt_s, times)`` with times[j] = t_s + j_dt[j], j_dt = arange(steps + 1) * dt_s
+        (the simulator's sub-step times of a period, the same sums), made inside the compiled call."""
+        fast = self._world_fast if world is self._world_key else self._fast_world(world)
+        if fast is not None and steps and self._step_fused(world, fast[0], dt_s, None, steps, t_s):
+            return
+        self.step_world(world, dt_s, t_s + np.arange(steps + 1) * dt_s)
+
+    def _step_planned(self, world: Any, dt_s: float, times: np.ndarray, steps: int) -> None:
+        """``step_world`` in three compiled calls (commands and due flags, world, frame rows)."""
         plan = self._plan
         if plan is None or plan[0].shape[0] != steps:
             plan = self._plan = (np.zeros((steps, 1, len(self.wheels))), np.zeros(steps, dtype=np.bool_),
                                  np.zeros(steps, dtype=np.bool_))
         u_seq, imu_due, st_due = plan
         imu, st = self.imu, self.star_tracker
-        if steps and self._step_fused(world, fast[0], dt_s, times, steps):
-            return
         counts = dk.plan_period(times, imu.clock, st.clock, imu_due, st_due, self.wheel_state, self.wheel_timeout_s,
                                 u_seq)
         gyro, sat, q, valid, blind = world.advance_planned(dt_s, u_seq, imu_due, st_due, counts // 1000,
@@ -506,47 +542,54 @@ class Devices:
         imu.samples += counts // 1000
         st.samples += counts % 1000
 
-    def _step_fused(self, world: Any, b: Any, dt_s: float, times: np.ndarray, steps: int) -> bool:
-        """``step_world`` in one compiled call (``device_kernels.period_fused``) when the world's normal
-        streams hold the period's numbers in their buffers (else False, nothing done: the caller takes
-        the three-call path, whose draws refill them)."""
+    def _bind_period(self, b: Any, dt_s: float, n_sub: int, steps: int) -> None:
+        """The period's plan and scratch of ``device_kernels.period_packed`` as views of three buffers (slots
+        DP_*). Bound again when the period's length, the sub-steps or the world's batch change."""
         M = b.n_runs
-        n_sub = world.sub_steps(dt_s)
-        nd, ni, ns = b.normals_disturbance, b.normals_imu, b.normals_star_tracker
         dist_n = n_sub * M * 3 if b._has_random_disturbance and n_sub > 0 else 0
-        if (nd._pos + dist_n * steps > nd._buf.size or ni._pos + 6 * M * steps > ni._buf.size
-                or ns._pos + 3 * M * steps > ns._buf.size):
-            return False
-        wargs = b.prepare_period(dt_s, n_sub, steps)
+        floats = [np.zeros((steps, 1, len(self.wheels))), np.zeros((steps, M * 3)), np.arange(steps + 1) * dt_s,
+                  np.zeros(steps + 1), np.zeros(steps), np.zeros((steps, M, 3)), np.zeros((steps, M, 4))]
+        ints = [np.zeros(3, dtype=np.int64), np.array([dist_n, 0, 0, 0, M], dtype=np.int64),
+                np.zeros((steps, M), dtype=np.int64)]
+        bools = [np.zeros(steps, dtype=np.bool_), np.zeros(steps, dtype=np.bool_), np.zeros((steps, M), dtype=np.bool_),
+                 np.zeros((steps, M), dtype=np.bool_)]
+        self.period_f, self.period_i, self.period_b, views = pack_arrays(floats, ints, bools)
+        (u_seq, _, _, self._times, _, _, _, self._period_counts, self._period_iscalars, _, imu_due, st_due, _, _) = views
+        self._plan = (u_seq, imu_due, st_due)
+        self._period_steps = (dist_n * steps, 6 * M, 3 * M)  # the draws of a period, of a sample
+        self._bound = (b, dt_s, n_sub, steps)
+
+    def _step_fused(self, world: Any, b: Any, dt_s: float, times: np.ndarray | None, steps: int,
+                    t_s: float = math.nan) -> bool:
+        """``step_world`` in one compiled call (``device_kernels.period_packed``) when the world's normal
+        streams hold the period's numbers in their buffers (else False, nothing done: the caller takes the
+        three-call path, whose draws refill them). ``times``: the step times, or None to make them from
+        ``t_s`` (``step_period``)."""
+        n_sub = world.sub_steps(dt_s)
+        bound = self._bound
+        if not bound or bound[0] is not b or bound[1] != dt_s or bound[2] != n_sub or bound[3] != steps:
+            self._bind_period(b, dt_s, n_sub, steps)
+        nd, ni, ns = b.normals_disturbance, b.normals_imu, b.normals_star_tracker
+        isc = self._period_iscalars
+        isc[dk.DPS_DIST_POS] = nd._pos
+        isc[dk.DPS_IMU_POS] = ni._pos
+        isc[dk.DPS_ST_POS] = ns._pos
+        if times is not None:
+            self._times[:] = times
+        table = b.prepare_packed(dt_s, n_sub, steps)
         self._reserve(3 * steps)
-        args = self._fused_args
-        if args is None or args[-1] is not wargs or args[-2] is not self.q_due or args[-3] != (dt_s, n_sub):
-            no_normals = b._no_normals_rows
-            if no_normals.shape[0] != steps:
-                no_normals = b._no_normals_rows = np.zeros((steps, b._no_normals.size))
-            u_seq, imu_due, st_due = self._plan
-            imu, st = self.imu, self.star_tracker
-            lo, hi = self._imu_range
-            w = wargs
-            args = self._fused_args = [
-                None, imu.clock, st.clock, imu_due, st_due, self.wheel_state, self.wheel_timeout_s, u_seq,
-                None, 0, dist_n, no_normals, None, 0, None, 0, M,
-                w[0], w[1], w[2], w[3], w[4], w[5], w[8], w[9], w[10], w[11], w[12], w[13], w[14], w[15], w[16], w[17],
-                w[18], w[19], w[20], w[21], w[22], w[24], w[26], w[27], w[28], w[29], w[31], w[32], w[34], w[35],
-                w[36], w[37], w[38], w[39],
-                float(imu.latency_s), lo, hi, imu._m, float(st.latency_s), self._st_ms, self._st_cols, st.seq_state,
-                self.q_due, self.q_m, self.q_rows, self.q_ts, self.q_n, np.zeros(3, dtype=np.int64),
-                (dt_s, n_sub), self.q_due, wargs]
-        args[0] = times
-        args[8], args[9], args[12], args[13], args[14], args[15] = nd._buf, nd._pos, ni._buf, ni._pos, ns._buf, ns._pos
-        out = args[-4]
-        dk.period_fused(*args[:-3])
-        done, n_imu, n_st = out.tolist()
+        dk.period_packed(t_s, self.packed_f, self.packed_i, self.period_f, self.period_i, self.period_b, b.packed_f,
+                         b.packed_i, b.packed_b, table[1], table[2], nd._buf, ni._buf, ns._buf, self.q_due, self.q_m,
+                         self.q_rows, self.q_ts)
+        done, n_imu, n_st = self._period_counts.tolist()
+        if done < 0:
+            return False
         # the draws take_rows would have made (made before the kernel: also when a step is refused)
-        nd._pos += dist_n * steps
-        ni._pos += 6 * M * n_imu
-        ns._pos += 3 * M * n_st
-        b.finish_period(done, args[7], args[3])
+        dist, per_imu, per_st = self._period_steps
+        nd._pos += dist
+        ni._pos += per_imu * n_imu
+        ns._pos += per_st * n_st
+        b.finish_packed(done, steps, self._plan[0])
         self.imu.samples += n_imu
         self.star_tracker.samples += n_st
         return True
@@ -574,24 +617,48 @@ class Devices:
                 self._push(self.star_tracker.frames_for(q[j], valid[j], blind[j], times_s[j + 1]))
 
     # ------------------------------------------------------------------------------- frames out
+    def _tick_kernel_args(self, world: Any, sync_m: int, sync_cols: np.ndarray) -> tuple | None:
+        """``tick_rows_packed``'s arguments after (t_s, tick, period_ms), for ``world`` (None when it is not a
+        ``hil_sim.world.World``); kept while the world, the queue's arrays and the output rows' room hold."""
+        args = self._tick_args
+        if args is None or args[0] is not world or args[1] < 1 + self.q_n.item(0) + len(self.wheels):
+            fast = self._fast_world(world)
+            if fast is None:
+                return None
+            if sync_m != self._packed_iscalars[dk.DSS_SYNC_M] or list(sync_cols) != self._packed_iscalars[
+                    dk.DSS_SYNC_COLS:dk.DSS_SYNC_COLS + 3].tolist():  # pragma: no cover - the ICD's SYNC
+                raise ValueError("tick_rows: SYNC's index or slots differ from the ICD's")
+            b = fast[0]
+            idx, rows = self._out(1 + int(self.q_n[0]) + len(self.wheels) + 16)
+            args = self._tick_args = (world, idx.shape[0], (self.packed_f, self.packed_i, b.packed_f, b.packed_i,
+                                                            self.q_due, self.q_m, self.q_rows, self.q_ts, idx, rows))
+        return args[2]
+
     def tick_rows(self, world: Any, t_s: float, tick: int, period_ms: int, sync_m: int,
                   sync_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
         """A tick's frames as rows (one compiled call): SYNC(tick) in row 0, then ``rows_due(t_s)`` and
         ``wheel_status_rows(world, t_s)``; returns (message indices, rows, count) or None when ``world``
-        is not a ``hil_sim.world.World`` (then the caller takes the Python path)."""
-        args = self._tick_args
-        if args is None or args[0] is not world or args[-2].shape[0] < 1 + int(self.q_n[0]) + len(self.wheels):
-            fast = self._fast_world(world)
-            if fast is None:
-                return None
-            _, X, U_APPLIED, W_KT, TEMP, FLAGS = fast
-            idx, rows = self._out(1 + int(self.q_n[0]) + len(self.wheels) + 16)
-            args = self._tick_args = (world, sync_m, sync_cols, self.q_due, self.q_m, self.q_rows, self.q_ts, self.q_n,
-                                      self.star_tracker.age_col, X, U_APPLIED, W_KT, TEMP, FLAGS, self.wheel_state,
-                                      self.wheel_timeout_s, self._status_ms, self._status_cols(), self._status_ranges(),
-                                      idx, rows)
-        n = dk.tick_rows(t_s, (float(tick), float(period_ms)), *args[1:])
+        is not a ``hil_sim.world.World`` (then the caller takes the Python path). ``sync_m``/``sync_cols``:
+        SYNC's message index and its (tick, frames_following, period_ms) slots (the ICD's)."""
+        args = self._tick_kernel_args(world, sync_m, sync_cols)
+        if args is None:
+            return None
+        n = dk.tick_rows_packed(t_s, float(tick), float(period_ms), *args)
         return args[-2], args[-1], n
+
+    def tick_burst(self, world: Any, t_s: float, tick: int, period_ms: int, sync_m: int,
+                   sync_cols: np.ndarray) -> FrameBurst | None:
+        """``tick_rows`` encoded by the nodes' sender (``self.sender.burst`` of its rows: the same bytes and
+        alive counters), in the same compiled call; None when ``world`` is not a ``hil_sim.world.World``."""
+        args = self._tick_kernel_args(world, sync_m, sync_cols)
+        if args is None:
+            return None
+        sender = self.sender
+        n, done, ids, data, lengths = dk.tick_burst_packed(t_s, float(tick), float(period_ms), *args, sender._counter,
+                                                           sender._sent)
+        if done < n:  # a row the compiled codec refused: the checked path names the error
+            return sender.burst(args[-2][:n], args[-1][:n], data, done)
+        return FrameBurst(ids, data, lengths)
 
     def _status_cols(self) -> np.ndarray:
         cols = getattr(self, "_status_cols_arr", None)

@@ -92,9 +92,12 @@ class Simulator:
         self.n_sub = n_sub
         self.dt_s = gnc_period_s / n_sub
         self._j_dt = np.arange(n_sub + 1) * self.dt_s  # j * dt_s, j = 0..n_sub
+        self._j_dt_end = float(self._j_dt[-1])
+        self._world_samples = hasattr(world, "advance_sampled")
         self.devices = Devices.for_world(world, self.icd, timing)
         self.n_wheels = len(self.devices.wheels)
         self.injector = FaultInjector(self.icd, faults, seed=fault_seed)
+        self._faults = self.injector.faults  # (empty: the injector never acts, ``bool(injector)`` is False)
         self.cycle_done_timeout_s = cycle_done_timeout_s
         self.clock = clock
         self.on_frame = on_frame
@@ -142,6 +145,15 @@ class Simulator:
         self._rc_n_codes = n_codes
         self._rc_watch = self.receiver.watched_timeouts()  # (message indices, limits) as check_timeouts has them
         self._rc_status = np.zeros(0, dtype=np.int64)
+        self._rc_args: tuple | None = None  # (see _take_burst)
+        # receive_commands_packed reads the codec table from the devices' packed copy of it
+        if not all(np.array_equal(a, b) for a, b in zip(self._rc_table[:3], (self.icd.table.msg_i,
+                                                                              self.icd.table.sig_i,
+                                                                              self.icd.table.sig_f))):
+            raise ValueError("Simulator: the receiver's codec table is not the ICD's")  # pragma: no cover
+        # count_timeouts' arguments after the time (bound once: the same arrays every tick)
+        self._ct_args = (self._rc_watch[0], self._rc_watch[1], self._rc_table[3], self._rc_table[4], self._rc_tally,
+                         self._rc_state, n_codes)
         self._rc_values = np.zeros((0, self.icd.table.start.shape[1]))
         # Lockstep waits wake only for CYCLE_DONE where the bus can filter wake-ups (socketcan): the wheel
         # commands before it queue without a context switch each (see _receive_until_done).
@@ -150,6 +162,7 @@ class Simulator:
             bus.watch([self._cycle_done_id])
         self.tick = 0
         self.t0_s = float(world.t)
+        self.t_s = self.t0_s + self.tick * self.period_s
         self.stats = SimStats()
         self._done_ticks: set[int] = set()
         self._tick_open = False
@@ -158,10 +171,8 @@ class Simulator:
         self.devices.sample_sensors(world, self.t0_s)
 
     # ------------------------------------------------------------------------------------ time
-    @property
-    def t_s(self) -> float:
-        """Simulation time of the current tick, t0 + k T (exact, not accumulated)."""
-        return self.t0_s + self.tick * self.period_s
+    # ``t_s``: simulation time of the current tick, t0 + k T (exact, not accumulated), an attribute set with
+    # ``tick`` (read several times a tick: by the flight software's clock, the timeline, the recorders)
 
     def _sub_t(self, j: int) -> float:
         return self.t0_s + self.tick * self.period_s + j * self.dt_s
@@ -172,12 +183,22 @@ class Simulator:
         if self._tick_open:
             raise RuntimeError("begin_tick() called twice without end_tick()")
         t = self.t_s
-        sync = self._sync_row
-        sync[self._sync_cols[0]] = self.tick & 0xFFFFFFFF
-        sync[self._sync_cols[2]] = self.period_ms
+        tick = self.tick & 0xFFFFFFFF
+        if not self._faults:
+            # no fault to inject: SYNC first, then the device frames, made and encoded in one compiled call
+            # where the world allows (alive counters are per message, so encoding SYNC with the others gives
+            # the bytes it always had), one burst
+            burst = self.devices.tick_burst(self.world, t, tick, self.period_ms, self._sync_m, self._sync_cols_arr)
+            if burst is not None:
+                self._send_burst(burst, t)
+                self._tick_open = True
+                self._awaiting = self.tick
+                return len(burst)
         # the tick's rows in one compiled call where the world allows (SYNC in row 0, then the device rows)
-        out = self.devices.tick_rows(self.world, t, sync[self._sync_cols[0]], self.period_ms, self._sync_m,
-                                     self._sync_cols_arr)
+        out = self.devices.tick_rows(self.world, t, tick, self.period_ms, self._sync_m, self._sync_cols_arr)
+        sync = self._sync_row
+        sync[self._sync_cols[0]] = tick
+        sync[self._sync_cols[2]] = self.period_ms
         if out is None:
             idx, rows = self.devices.rows_due(t)
             status_idx, status_rows = self.devices.wheel_status_rows(self.world, t)
@@ -231,17 +252,17 @@ class Simulator:
 
     def _advance_period(self, paced: Callable[[int], None] | None) -> None:
         """Step the world over [t_k, t_k + T] in dynamics steps; ``paced(j)`` runs before step j (real time)."""
-        if paced is None and hasattr(self.world, "advance_sampled"):
+        if paced is None and self._world_samples:
             # not paced: the whole period in one compiled call (same numbers as the loop below)
-            # _sub_t(j) for j = 0..n_sub: (t0 + k T) + j dt, the same sums on an array
-            times = (self.t0_s + self.tick * self.period_s) + self._j_dt
-            self.devices.step_world(self.world, self.dt_s, times)
-            # the receiver's check_timeouts(_sub_t(n_sub)) compiled (times[-1] is that sum)
+            # _sub_t(j) for j = 0..n_sub: (t0 + k T) + j dt, the same sums (made in the compiled call)
+            t_k = self.t_s
+            self.devices.step_period(self.world, self.dt_s, self.n_sub, t_k)
+            # the receiver's check_timeouts(_sub_t(n_sub)) compiled
             rs = self._rc_state
-            count_timeouts(times[-1], self._rc_watch[0], self._rc_watch[1], self._rc_table[3], self._rc_table[4],
-                           self._rc_tally, rs, self._rc_n_codes)
-            if rs[dk.RS_NTALLY]:
-                self._settle_tally()
+            count_timeouts(t_k + self._j_dt_end, *self._ct_args)
+            n_tally = rs.item(dk.RS_NTALLY)
+            if n_tally:
+                self._settle_tally(n_tally)
         else:
             for j in range(self.n_sub):
                 if paced is not None:
@@ -251,13 +272,14 @@ class Simulator:
                 self.devices.sample_sensors(self.world, self._sub_t(j + 1))
             self.receiver.check_timeouts(self._sub_t(self.n_sub))
         self.tick += 1
+        self.t_s = self.t0_s + self.tick * self.period_s
         self.stats.ticks += 1
         self._tick_open = False
 
     # ---------------------------------------------------------------------------------- receiving
     def _receive_until_done(self, k: int, wait_s: float) -> bool:
         t_s = self.t_s
-        if self.injector:  # (without faults nothing is ever held)
+        if self._faults:  # (without faults nothing is ever held)
             for msg in self.injector.release(t_s, "rx"):  # flight-software frames delayed by a fault
                 self._classify(msg, t_s)
         # With a doorbell (socketcan) a waiting tick starts with the wait: this tick's answer comes after this
@@ -307,21 +329,25 @@ class Simulator:
         Returns whether CYCLE_DONE(k) came (else the caller goes on: ``_rx``, the bus)."""
         n = len(burst)
         if (n <= PYTHON_RUN or self.on_frame is not None or self._awaiting != k
-                or (self.injector and not self.injector.passes_through(t_s, "rx"))):
+                or (self._faults and not self.injector.passes_through(t_s, "rx"))):
             self._rx = self.receiver.check(burst)
             return False
         if self._rc_status.shape[0] < n:
             self._rc_status = np.zeros(2 * n, dtype=np.int64)
             self._rc_values = np.zeros((2 * n, self._rc_values.shape[1]))
+            self._rc_args = None
+        args = self._rc_args
+        if args is None:
+            # receive_commands_packed's arguments after the time and tick, bound while the scratch holds
+            d = self.devices
+            args = self._rc_args = (self._rc_status, self._rc_values, self._rc_consts, d.packed_f, d.packed_i,
+                                    self._rc_table[3], self._rc_table[4], self._rc_tally, self._rc_state)
         rs = self._rc_state
-        msg_i, sig_i, sig_f, seq, last_ok_t = self._rc_table
-        end = dk.receive_commands(burst.ids, burst.lengths, burst.data, 0, self._rc_status, self._rc_values, t_s, k,
-                                  self._rc_consts, msg_i, sig_i, sig_f, seq, last_ok_t, self.devices.wheel_state,
-                                  self._rc_tally, rs)
+        end = dk.receive_commands_packed(burst.ids, burst.lengths, burst.data, t_s, k, *args)
         wheel_cmds, n_tally, heartbeats, cycle_done, stale, done = rs.tolist()
+        rs.fill(0)
         if n_tally:
-            self._settle_tally()
-        rs[:] = 0
+            self._settle_tally(n_tally)
         stats = self.stats
         if wheel_cmds:
             stats.wheel_commands += wheel_cmds
@@ -335,14 +361,14 @@ class Simulator:
             rx.pos = end
         return done != 0
 
-    def _settle_tally(self) -> None:
-        """The compiled calls' counts ((key, count) pairs in ``_rc_tally``) into the receiver's counters."""
-        rs = self._rc_state
+    def _settle_tally(self, n_tally: int) -> None:
+        """The compiled calls' counts (the first ``n_tally`` (key, count) pairs in ``_rc_tally``) into the
+        receiver's counters; the tally emptied (``_rc_state[RS_NTALLY]``)."""
         targets = self._rc_targets
-        for key, count in self._rc_tally[:int(rs[dk.RS_NTALLY])].tolist():
+        for key, count in self._rc_tally[:n_tally].tolist():
             counts, cls = targets[key]
             counts[cls] += count
-        rs[dk.RS_NTALLY] = 0
+        self._rc_state[dk.RS_NTALLY] = 0
 
     def poll(self, t_s: float) -> int:
         """Handle everything queued now, stamping it with simulation time ``t_s``. Returns the count."""

@@ -189,6 +189,77 @@ def _world_period_kernel(X, D, TEMP, G, W, B, U_SEQ, NORMALS_SEQ, dt_sub, n_sub,
 _A_TABLE = 40  # slot of the ephemeris table in WorldBatch._period_kernel_args (after the kernel's 40 arguments)
 
 
+# ------------------------------------------------------------------------------------------ packed state
+# A compiled call pays numba's argument dispatch per argument (~0.1 us each): state a per-tick kernel reads
+# lives in a few buffers (one per dtype), the named arrays being views of them, so such a call passes the
+# buffers. The int buffer starts with the layout: one row (offset in its dtype's buffer, d0, d1, d2) per slot.
+PACK_LAYOUT_COLS = 4
+
+
+def pack_arrays(floats: Sequence[np.ndarray], ints: Sequence[np.ndarray],
+                bools: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[np.ndarray]]:
+    """(float64 buffer, int64 buffer with the layout first, bool buffer, views): copies of the arrays (up to
+    3-d) in buffers, and the views that take their place, in the order given (floats, ints, bools = the
+    slots 0..). The views are C-contiguous, as the arrays the kernels were typed with."""
+    n_slots = len(floats) + len(ints) + len(bools)
+    head = n_slots * PACK_LAYOUT_COLS
+    bufs = []
+    layout = np.zeros((n_slots, PACK_LAYOUT_COLS), dtype=np.int64)
+    slot = 0
+    for group, dtype, start in ((floats, np.float64, 0), (ints, np.int64, head), (bools, np.bool_, 0)):
+        o = start
+        for a in group:
+            if a.ndim > 3:
+                raise ValueError(f"pack_arrays: up to 3 dimensions, got shape {a.shape}")
+            layout[slot, 0] = o
+            layout[slot, 1:1 + a.ndim] = a.shape
+            o += a.size
+            slot += 1
+        bufs.append(np.zeros(max(o, 1), dtype=dtype))
+    fbuf, ibuf, bbuf = bufs
+    ibuf[:head] = layout.reshape(-1)
+    views = []
+    for group, buf in ((floats, fbuf), (ints, ibuf), (bools, bbuf)):
+        for a in group:
+            o = int(layout[len(views), 0])
+            v = buf[o:o + a.size].reshape(a.shape)
+            v[...] = a
+            views.append(v)
+    return fbuf, ibuf, bbuf, views
+
+
+@njit(cache=True, inline="always")
+def view1(buf, layout, k):
+    """Slot k of a packed buffer (1-d)."""
+    o = layout[k * PACK_LAYOUT_COLS]
+    return buf[o:o + layout[k * PACK_LAYOUT_COLS + 1]]
+
+
+@njit(cache=True, inline="always")
+def view2(buf, layout, k):
+    """Slot k of a packed buffer (2-d)."""
+    r = k * PACK_LAYOUT_COLS
+    o, d0, d1 = layout[r], layout[r + 1], layout[r + 2]
+    return buf[o:o + d0 * d1].reshape((d0, d1))
+
+
+@njit(cache=True, inline="always")
+def view3(buf, layout, k):
+    """Slot k of a packed buffer (3-d)."""
+    r = k * PACK_LAYOUT_COLS
+    o, d0, d1, d2 = layout[r], layout[r + 1], layout[r + 2], layout[r + 3]
+    return buf[o:o + d0 * d1 * d2].reshape((d0, d1, d2))
+
+
+# WorldBatch's packed state (_pack_state): its slots, and the float / int scalars' places
+(WP_X, WP_D, WP_TEMP, WP_G, WP_W, WP_B, WP_U_APPLIED, WP_DECAY, WP_GM, WP_WORK, WP_ORB, WP_AUX, WP_CLOCK, WP_BIAS,
+ WP_GYRO_P, WP_ST_P, WP_ST_BASIS, WP_ST_Q, WP_GYRO_OUT, WP_SCALARS,
+ WP_FLAGS, WP_ST_BLIND, WP_ISCALARS,
+ WP_HAS_COULOMB, WP_ST_VALID, WP_GYRO_SAT) = range(26)
+WPS_T_END, WPS_DT_SUB, WPS_EPH_T0, WPS_EPH_H = range(4)  # float scalars (WPS_T_END: out, the period's end)
+WPS_N_SUB = 0  # int scalars
+
+
 class WorldBatch:
     """M runs stepped together. All runs share the epoch and the number of wheels; any other parameter may
     differ per run (dispersions). Outputs and properties have a leading run axis (M, ...); the dynamics
@@ -259,9 +330,37 @@ class WorldBatch:
         self._t_end = np.zeros(0)
         self._clock = np.array([0.0, 0.0, self.imu_period_s[0], math.nan])  # see _world_period_kernel
         self._no_normals_rows = np.zeros((0, M * 3))
+        self._pack_state()
         self._t = 0.0
         self._advance(0.0, np.zeros((M, N)), 0)
         self._warm_period_kernel()
+
+    def _pack_state(self) -> None:
+        """The arrays of the per-period kernel (``period_packed`` in hil_sim.device_kernels) as views of three
+        buffers (``pack_arrays``): the same arrays, in place, for every other reader. The step coefficients
+        get slots too (``_set_coef`` writes them in place)."""
+        N, M = self.n_wheels, self.n_runs
+        floats = [self.X, self.D, self.TEMP, self.G, self.W, self.B, self.U_APPLIED, np.zeros((N, M)),
+                  np.zeros((2, M)), self._work, self.ORB, self.AUX, self._clock, self.BIAS, self.GYRO_P, self.ST_P,
+                  self.ST_BASIS, self.ST_Q, self.GYRO_OUT, np.zeros(4)]
+        ints = [self.FLAGS, self.ST_BLIND, np.zeros(1, dtype=np.int64)]
+        bools = [np.zeros(N, dtype=np.bool_), self.ST_VALID, self.GYRO_SAT]
+        self.packed_f, self.packed_i, self.packed_b, views = pack_arrays(floats, ints, bools)
+        (self.X, self.D, self.TEMP, self.G, self.W, self.B, self.U_APPLIED, decay, gm, self._work, self.ORB, self.AUX,
+         self._clock, self.BIAS, self.GYRO_P, self.ST_P, self.ST_BASIS, self.ST_Q, self.GYRO_OUT, self._scalars,
+         self.FLAGS, self.ST_BLIND, self._iscalars, has_coulomb, self.ST_VALID, self.GYRO_SAT) = views
+        self._coef = (decay, gm, has_coulomb)  # filled in place (_set_coef): the views stay the kernels' arrays
+        self._coef_dt = -1.0
+        self._packed_dt, self._packed_n_sub = math.nan, -1  # what dt_sub / n_sub were set for (prepare_packed)
+        self._packed_table: tuple | None = None
+
+    def _set_coef(self, dt_sub: float) -> None:
+        """The step coefficients for sub-steps of dt_sub, into their slots."""
+        decay, gm, has_coulomb = dyn.step_coefficients(self.W, self.B, dt_sub)
+        self._coef[0][...] = decay
+        self._coef[1][...] = gm
+        self._coef[2][...] = has_coulomb
+        self._coef_dt = dt_sub
 
     def _warm_period_kernel(self) -> None:
         """Call the period kernel once with no step (J = 0), with the types ``advance_sampled`` passes: on a
@@ -305,8 +404,7 @@ class WorldBatch:
             normals = self._no_normals
         dt_sub = dt_s / n_sub if n_sub else 0.0
         if dt_sub != self._coef_dt:
-            self._coef = dyn.step_coefficients(self.W, self.B, dt_sub)
-            self._coef_dt = dt_sub
+            self._set_coef(dt_sub)
         decay, gm, has_coulomb = self._coef
         eph_t0, sun_c, moon_c = eph.table  # one read: consistent even if another thread extends the table
         if not _world_step_kernel(self.X, self.D, self.TEMP, self.G, self.W, self.B, u_cmd, normals, dt_sub, n_sub,
@@ -355,8 +453,7 @@ class WorldBatch:
         M = self.n_runs
         dt_sub = dt_s / n_sub if n_sub else 0.0
         if dt_sub != self._coef_dt:
-            self._coef = dyn.step_coefficients(self.W, self.B, dt_sub)
-            self._coef_dt = dt_sub
+            self._set_coef(dt_sub)
         if self._period_out is None or self._period_out[0].shape[0] != J:
             # outputs reused from period to period (callers copy what they keep, as with GYRO_OUT)
             self._period_out = (np.zeros((J, M, 3)), np.zeros((J, M), dtype=np.bool_), np.zeros((J, M, 4)),
@@ -372,6 +469,42 @@ class WorldBatch:
         clock[0], clock[1] = self._t, dt_s
         clock[3] = math.nan if self._t_last_imu is None else self._t_last_imu
         return args
+
+    def prepare_packed(self, dt_s: float, n_sub: int, J: int) -> tuple:
+        """``prepare_period`` for ``period_packed`` (the state in its slots, not an argument list): the
+        ephemeris table's reach, the step coefficients, dt_sub / n_sub and the clock. Returns the table."""
+        eph = self.ephemeris
+        t = self._t
+        t_last = t + J * dt_s  # the ephemeris table's reach: a bound, the kernel accumulates exactly
+        if t_last + dt_s >= eph.t_end_s or t < eph.t_start_s:
+            eph.ensure(t, t_last + dt_s)
+        if dt_s != self._packed_dt or n_sub != self._packed_n_sub:
+            self._dt_sub = dt_s / n_sub if n_sub else 0.0
+            self._scalars[WPS_DT_SUB] = self._dt_sub
+            self._iscalars[WPS_N_SUB] = n_sub
+            self._packed_dt, self._packed_n_sub = dt_s, n_sub
+        if self._dt_sub != self._coef_dt:
+            self._set_coef(self._dt_sub)
+        table = eph.table  # one read: consistent even if another thread extends the table
+        if table is not self._packed_table:
+            self._scalars[WPS_EPH_T0] = table[0]
+            self._scalars[WPS_EPH_H] = eph.node_spacing_s
+            self._packed_table = table
+        clock = self._clock
+        clock[0] = t
+        clock[1] = dt_s
+        clock[3] = math.nan if self._t_last_imu is None else self._t_last_imu
+        return table
+
+    def finish_packed(self, done: int, J: int, u_seq: np.ndarray) -> None:
+        """``finish_period`` after ``period_packed`` (which copied the last gyro sample already)."""
+        if done:
+            self._t = self._scalars.item(WPS_T_END)
+            t_imu = self._clock.item(3)
+            if t_imu == t_imu:  # not NaN
+                self._t_last_imu = t_imu
+        if done < J:
+            raise ValueError(f"step: wheel_torque_cmd_Nm must be finite, got {u_seq[done].tolist()!r}")
 
     def finish_period(self, done: int, u_seq: np.ndarray, imu_due: np.ndarray) -> None:
         """After the period kernel did ``done`` of len(u_seq) steps: the clock and the last gyro sample;
@@ -485,7 +618,7 @@ class WorldBatch:
         else:
             self.W[dyn.W_MODE, wheel, run] = dyn._MODE_CODES[mode]
             dyn.update_free_inertia(self.G, self.W, self.B, run)
-        self._coef_dt = -1.0  # W changed: recompute the per-step coefficients
+        self._coef_dt = -1.0  # W changed: recompute the per-step coefficients (their slots, in place)
 
 
 class World:

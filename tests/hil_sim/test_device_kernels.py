@@ -284,3 +284,95 @@ def test_receive_commands_matches_the_per_burst_path(icd: Icd, seed: int) -> Non
         for sim, bus in zip(sims, senders):
             sim.bus.shutdown()
             bus.shutdown()
+
+
+def test_pack_arrays_views_are_the_arrays_and_the_kernels_read_them() -> None:
+    """pack_arrays: each view holds its array's values (shape, dtype, C order) in a shared buffer, and
+    view1/2/3 inside a compiled call see the same memory (a write through either shows in the other)."""
+    from numba import njit
+
+    from hil_sim.world import pack_arrays, view1, view2, view3
+
+    rng = np.random.default_rng(5)
+    floats = [rng.normal(size=3), rng.normal(size=(2, 5)), rng.normal(size=(3, 1, 4)), np.zeros((0, 2))]
+    ints = [rng.integers(-9, 9, size=(4, 3)), np.arange(7)]
+    bools = [rng.random(6) < 0.5, rng.random((2, 3)) < 0.5]
+    fbuf, ibuf, bbuf, views = pack_arrays(floats, ints, bools)
+    for a, v, buf in zip(floats + ints + bools, views, [fbuf] * 4 + [ibuf] * 2 + [bbuf] * 2):
+        assert v.shape == a.shape and v.dtype == a.dtype and v.flags.c_contiguous
+        assert v.size == 0 or np.shares_memory(v, buf)
+        np.testing.assert_array_equal(v, a)
+
+    @njit
+    def read(fbuf, ibuf, bbuf):
+        return (view1(fbuf, ibuf, 0).copy(), view2(fbuf, ibuf, 1).copy(), view3(fbuf, ibuf, 2).copy(),
+                view2(ibuf, ibuf, 4).copy(), view1(ibuf, ibuf, 5).copy(), view1(bbuf, ibuf, 6).copy(),
+                view2(bbuf, ibuf, 7).copy())
+
+    @njit
+    def bump(fbuf, ibuf):
+        view3(fbuf, ibuf, 2)[2, 0, 3] += 1.0
+
+    for k, got in zip([0, 1, 2, 4, 5, 6, 7], read(fbuf, ibuf, bbuf)):
+        np.testing.assert_array_equal(got, views[k])
+    before = float(views[2][2, 0, 3])
+    bump(fbuf, ibuf)
+    assert views[2][2, 0, 3] == before + 1.0
+    with pytest.raises(ValueError):
+        pack_arrays([np.zeros((1, 1, 1, 1))], [], [])
+
+
+def test_step_period_matches_step_world_with_the_simulators_times(icd: Icd) -> None:
+    """Devices.step_period (the step times made inside the compiled call from t_s) and step_world with
+    times t_s + arange(J + 1) * dt_s made in numpy, as the simulator made them: the same world and frames."""
+    worlds = [World(WorldParams(), seed=6), World(WorldParams(), seed=6)]
+    devs = [Devices.for_world(w, icd) for w in worlds]
+    rng = np.random.default_rng(8)
+    j_dt = np.arange(11) * 0.01
+    t0 = 0.0
+    for k in range(150):  # long enough for a normal stream to refill (the three-call path on both sides)
+        t_k = t0 + k * 0.1
+        cmd = rng.normal(0.0, 0.01, worlds[0].n_wheels)
+        for d in devs:
+            for i, w in enumerate(d.wheels):
+                if k % 5 != i:
+                    w.on_command({"torque_cmd": float(cmd[i]), "tick_lsb": k & 0xFF}, t_k)
+        devs[0].step_period(worlds[0], 0.01, 10, t_k)
+        devs[1].step_world(worlds[1], 0.01, t_k + j_dt)
+        a, b = worlds[0].batch, worlds[1].batch
+        assert a._t == b._t and a._t_last_imu == b._t_last_imu
+        for name in ("X", "TEMP", "U_APPLIED", "FLAGS", "AUX", "GYRO_OUT", "GYRO_SAT", "ST_Q"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        ia, ra = devs[0].rows_due(t_k + 0.1)
+        ib, rb = devs[1].rows_due(t_k + 0.1)
+        assert ia == ib and ra == rb
+    assert devs[0].imu.samples == devs[1].imu.samples > 1000
+
+
+def test_tick_burst_matches_tick_rows_encoded_by_the_sender(icd: Icd) -> None:
+    """Devices.tick_burst (rows and encoding in one compiled call) and tick_rows then E2ESender.burst: the
+    same frames (ids, bytes, lengths) and the same alive counters, tick after tick; a row out of its DBC
+    range goes to the sender's checked path, which names it."""
+    worlds = [World(WorldParams(), seed=2), World(WorldParams(), seed=2)]
+    devs = [Devices.for_world(w, icd) for w in worlds]
+    sync_m = icd.message_index["SYNC"]
+    sync_cols = np.array([icd.column("SYNC", s) for s in ("tick", "frames_following", "period_ms")], dtype=np.int64)
+    j_dt = np.arange(11) * 0.01
+    for k in range(40):
+        t_k = k * 0.1
+        burst = devs[0].tick_burst(worlds[0], t_k, k, 100, sync_m, sync_cols)
+        idx, rows, n = devs[1].tick_rows(worlds[1], t_k, k, 100, sync_m, sync_cols)
+        ref = devs[1].sender.burst(idx[:n], rows[:n])
+        assert len(burst) == n
+        np.testing.assert_array_equal(burst.ids, ref.ids)
+        np.testing.assert_array_equal(burst.data, ref.data)
+        np.testing.assert_array_equal(burst.lengths, ref.lengths)
+        assert burst.data.dtype == ref.data.dtype and burst.lengths.dtype == ref.lengths.dtype
+        assert devs[0].sender.counters == devs[1].sender.counters and devs[0].sender.sent == devs[1].sender.sent
+        for d, w in zip(devs, worlds):
+            d.step_world(w, 0.01, t_k + j_dt)
+    devs[0].wheel_state[0, dk.WS_LAST_T] = 3.95
+    worlds[0].batch.X[7, 0] = 1e9  # a wheel speed far outside RW1_STATUS.speed: clamped, so still encodable
+    worlds[0].batch.TEMP[0, 0] = math.nan  # NaN is not clamped: the codec refuses it, the checked path raises
+    with pytest.raises(Exception, match="RW1_STATUS"):
+        devs[0].tick_burst(worlds[0], 4.0, 40, 100, sync_m, sync_cols)
