@@ -338,7 +338,7 @@ class FlightSoftware:
         return self.last
 
     def _gnc_task(self, inputs, slipped_before: bool) -> None:
-        t_start = self.clock()
+        t_start = self.executive.tick_start  # the executive's clock read just before this call
         dt = self.period_s
         if hasattr(inputs, "tick"):
             tick = int(inputs.tick)
