@@ -345,7 +345,7 @@ class FlightSoftware:
         return self.last
 
     def _gnc_task(self, inputs, slipped_before: bool) -> None:
-        t_start = self.clock()
+        t_start = self.executive.tick_start  # the executive's clock read just before this call
         dt = self.period_s
         lockstep = type(inputs) is TickInputs  # the driver's own inputs: the array fast paths below
         if lockstep or hasattr(inputs, "tick"):

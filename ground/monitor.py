@@ -17,6 +17,7 @@ in ``tm_raw.bin`` or the event log, so it cannot change what the run is judged o
 from __future__ import annotations
 
 import collections
+import ctypes
 import json
 import math
 import select
@@ -47,6 +48,71 @@ if TYPE_CHECKING:
 
 # A backwards jump larger than this is read as a flight-software restart, not as 16000 lost packets.
 MAX_PLAUSIBLE_GAP = SEQ_MODULO // 2
+# Archives reach the disk in pieces of this size (and at every flush): a lockstep SIL archives a packet
+# every ~1 ms, and each write, like each lock a buffered file takes, is a system call in the vcan-vm guest
+# (CPython 3.11 reads the monotonic clock at every lock acquire, even a non-blocking one).
+ARCHIVE_CHUNK_BYTES = 1 << 16
+DATAGRAM_BYTES = 65536  # what a receive reads: more than any UDP datagram, so none is cut
+RECV_BATCH = 32  # datagrams per recvmmsg() (a SIL ground takes ~20 a wake-up)
+_MSG_DONTWAIT = int(socket.MSG_DONTWAIT)
+
+
+class _ChunkedWriter:
+    """An append-only binary file written from a bytearray in ``ARCHIVE_CHUNK_BYTES`` pieces: what a
+    ``BufferedWriter`` does (bytes reach the file on ``flush``/``close`` or when a piece is full), without
+    its lock (see ``ARCHIVE_CHUNK_BYTES``)."""
+
+    def __init__(self, path: Path) -> None:
+        self._file = open(path, "ab", buffering=0)
+        self._pending = bytearray()
+
+    def write(self, data: bytes) -> int:
+        self._pending += data
+        if len(self._pending) >= ARCHIVE_CHUNK_BYTES:
+            self.flush()
+        return len(data)
+
+    def flush(self) -> None:
+        pending = self._pending
+        while pending:  # FileIO writes at most what it can (a full disk raises, the rest stays pending)
+            written = self._file.write(pending)
+            del pending[:written]
+
+    def close(self) -> None:
+        try:
+            self.flush()
+        finally:
+            self._file.close()
+
+
+class _DatagramBatch:
+    """recvmmsg() of up to ``RECV_BATCH`` datagrams into fixed buffers: one system call for what would
+    be a ``recv`` each (Linux; ``libc`` None elsewhere, and then the monitor reads datagram by datagram)."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        from fsw.bus.mmsg import IoVec, MMsgHdr, libc
+
+        self.libc = libc
+        self.fd = sock.fileno()
+        self.data = ctypes.create_string_buffer(DATAGRAM_BYTES * RECV_BATCH)
+        self.view = memoryview(self.data).cast("B")
+        self.iov = (IoVec * RECV_BATCH)()
+        self.hdr = (MMsgHdr * RECV_BATCH)()
+        base = ctypes.addressof(self.data)
+        for i in range(RECV_BATCH):
+            self.iov[i].iov_base = base + DATAGRAM_BYTES * i
+            self.iov[i].iov_len = DATAGRAM_BYTES
+            self.hdr[i].msg_hdr.msg_iov = ctypes.pointer(self.iov[i])
+            self.hdr[i].msg_hdr.msg_iovlen = 1
+
+    def read(self, limit: int) -> list[bytes]:
+        """The datagrams queued now, in order, at most ``limit`` (<= RECV_BATCH); [] when none (or on a
+        socket error: ``recv`` stopped there too)."""
+        n = self.libc.recvmmsg(self.fd, self.hdr, limit, _MSG_DONTWAIT, None)
+        if n <= 0:
+            return []
+        view, hdr = self.view, self.hdr
+        return [bytes(view[DATAGRAM_BYTES * i:DATAGRAM_BYTES * i + hdr[i].msg_len]) for i in range(n)]
 
 
 @dataclass
@@ -158,9 +224,11 @@ class GroundMonitor:
         self._limited: dict[str, list[tuple[str, Any, float, float]]] = {}
         if self.archive_dir is not None:
             self.archive_dir.mkdir(parents=True, exist_ok=True)
-            self._raw = open(self.archive_dir / RAW_ARCHIVE, "ab")
+            self._raw = _ChunkedWriter(self.archive_dir / RAW_ARCHIVE)
             if write_decoded:  # long soaks may keep raw + events only and decode later (`ground decode`)
-                self._decoded = open(self.archive_dir / DECODED_ARCHIVE, "a", encoding="utf-8")
+                self._decoded = open(self.archive_dir / DECODED_ARCHIVE, "a", encoding="utf-8",
+                                     buffering=ARCHIVE_CHUNK_BYTES)
+                self._decoded._CHUNK_SIZE = ARCHIVE_CHUNK_BYTES  # text goes to the buffer in pieces this big
             self._events = open(self.archive_dir / EVENTS_ARCHIVE, "a", encoding="utf-8")
             self._limits = open(self.archive_dir / LIMITS_ARCHIVE, "a", encoding="utf-8")
             if security is not None:
@@ -175,6 +243,12 @@ class GroundMonitor:
                 pass
             self._sock.bind((host, port))
             self._sock.setblocking(False)
+        self._batch: _DatagramBatch | None = None
+        if self._sock is not None:
+            from fsw.bus.mmsg import libc
+
+            if libc is not None:
+                self._batch = _DatagramBatch(self._sock)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -203,9 +277,19 @@ class GroundMonitor:
         # One receive time for the batch: everything read here was queued when the read began (a clock
         # read is a system call in the vcan-vm guest, ~10 us, and the ground takes ~10 packets a wake-up).
         rx_time_s = time.time()
+        batch = self._batch
         while count < self.max_packets_per_poll:  # bounded, so a flood cannot starve stop/display
+            if batch is not None:  # everything queued (up to RECV_BATCH) in one system call
+                wanted = min(RECV_BATCH, self.max_packets_per_poll - count)
+                datagrams = batch.read(wanted)
+                for data in datagrams:
+                    self.process(data, rx_time_s)
+                count += len(datagrams)
+                if len(datagrams) < wanted:  # the queue was empty: as a recv would have found next
+                    break
+                continue
             try:
-                data = self._sock.recv(65536)
+                data = self._sock.recv(DATAGRAM_BYTES)
             except OSError:  # includes BlockingIOError: nothing left
                 break
             self.process(data, rx_time_s)
@@ -376,6 +460,7 @@ class GroundMonitor:
 
     def close(self) -> None:
         if self._sock is not None:
+            self._batch = None
             self._sock.close()
             self._sock = None
         for name in ("_raw", "_decoded", "_events", "_limits", "_rejected"):

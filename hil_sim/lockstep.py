@@ -285,7 +285,9 @@ class Simulator:
         # With a doorbell (socketcan) a waiting tick starts with the wait: this tick's answer comes after this
         # tick's SYNC, which has just been sent (earlier frames still queued are read after the wake-up).
         wait_first = self._wait_for is not None and wait_s > 0.0
-        deadline = None  # the clock is read once the queue is empty (in the vcan-vm guest a read costs ~15 us)
+        # The first wait takes the whole timeout without a clock read (in the vcan-vm guest a read costs
+        # ~15 us, and one wait per tick is the rule); a further wait counts the timeout from its start.
+        deadline, waited = None, False
         while True:
             if k in self._done_ticks:
                 self._done_ticks.discard(k)
@@ -301,12 +303,15 @@ class Simulator:
                     return True
                 continue
             if burst is None:
-                now = time.monotonic()
-                if deadline is None:
-                    deadline = now + wait_s
-                remaining = deadline - now
-                if remaining <= 0.0:
-                    return False
+                if not waited:
+                    waited, remaining = True, wait_s
+                else:
+                    now = time.monotonic()
+                    if deadline is None:
+                        deadline = now + wait_s
+                    remaining = deadline - now
+                    if remaining <= 0.0:
+                        return False
                 if self._wait_for is None:
                     burst = recv_burst(self.bus, remaining)
                 elif self._wait_for(remaining):

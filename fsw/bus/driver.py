@@ -270,6 +270,10 @@ class FswBusDriver:
         self._st_rx: float | None = None
         self._timeout_s = 0.0  # collect_tick's timeout, and its deadline once a wait has begun
         self._deadline: float | None = None
+        self._waited = False  # collect_tick's first wait has begun (it takes the whole timeout)
+        # keepout's own buses (batched socketcan/UDP, light virtual) return from a waiting read with frames or
+        # at the timeout, never before: their first wait of a call needs no deadline (see _wait_burst)
+        self._whole_waits = callable(getattr(bus, "recv_queued", None)) or callable(getattr(bus, "recv_burst", None))
         self._realtime = False  # set by collect_latest: frames answer the newest SYNC seen (module docstring)
         self._rt_sync_tick: int | None = None  # newest SYNC tick received in real time
         self._rt_done_tick: int | None = None  # SYNC tick last answered with CYCLE_DONE
@@ -398,6 +402,7 @@ class FswBusDriver:
         """
         self._timeout_s = max(0.0, timeout_s)
         self._deadline = None  # set when the queue first runs empty (see _next_burst)
+        self._waited = False  # the call's first wait has begun
         self._realtime = False
         st = self._st_i
         st[K.S_PHASE] = K.PHASE_SYNC
@@ -555,11 +560,16 @@ class FswBusDriver:
         # Frames come in bursts after SYNC: try without waiting first, and read the clock only when the
         # queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest): the first
         # wait of a call starts the deadline and waits the whole timeout, without a clock read.
+        if self._timeout_s > 0.0 and not self._waited and self._whole_waits:
+            # the call's first wait: the whole timeout, without a clock read or an empty read first (the
+            # bus returns what is queued at once, and nothing only when the timeout has passed)
+            self._waited = True
+            return recv_burst(self.bus, self._timeout_s if grace_s is None else min(self._timeout_s, grace_s), limit)
         burst = recv_burst(self.bus, 0.0, limit)
         if burst is None:
             if self._timeout_s <= 0.0:
                 return None
-            if self._deadline is None:
+            if self._deadline is None:  # a further wait: the timeout counts from here
                 remaining = self._timeout_s
                 self._deadline = time.monotonic() + remaining
             else:

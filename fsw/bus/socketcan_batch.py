@@ -16,7 +16,12 @@ filters, nanosecond timestamps) and changes only how frames cross the socket:
   waiting is one poll(). Timestamps are the kernel's (SO_TIMESTAMPNS), as with python-can;
 * ``watch(ids)`` + ``wait_for(timeout)``: block until a frame whose id is in ``ids`` has arrived; other
   frames queue without waking the process (a second socket with a kernel filter on ``ids`` is the
-  doorbell; it consumes nothing from the bus's own queue).
+  doorbell; it consumes nothing from the bus's own queue). The doorbell is waited on edge-triggered
+  (epoll): a wait is one system call, and its queue is emptied only every ``DRAIN_EVERY`` rings;
+* a waiting read reads first (the frames are usually there: the simulator's read after the doorbell rang,
+  the flight software's wait for the next SYNC when the simulator ran in between); after a waiting read
+  found the socket empty, the next ``POLL_FIRST_WAITS`` waiting reads poll first (the wait that finds
+  nothing queued, tick after tick, costs two system calls instead of three).
 
 Frames, their order and content are exactly what python-can delivers.
 """
@@ -25,6 +30,7 @@ from __future__ import annotations
 import ctypes
 import errno
 import math
+import select
 import socket
 import struct
 import time
@@ -38,6 +44,12 @@ from can.interfaces.socketcan.socketcan import SocketcanBus, build_can_frame, pa
 from fsw.bus.mmsg import IoVec as _IoVec, MMsgHdr as _MMsgHdr, PollFd as _PollFd, libc, take_queued
 
 BATCH = 64  # frames per recvmmsg/sendmmsg call (a lockstep tick has ~20)
+# The doorbell's queue is emptied every this many rings (a ring is one frame queued there): edge-triggered
+# waiting needs no read per ring, but a full queue would drop frames without a wake-up. DOORBELL_RCVBUF
+# holds far more (a classic CAN frame takes well under 2 KiB of it).
+DRAIN_EVERY = 32
+POLL_FIRST_WAITS = 16
+DOORBELL_RCVBUF = 1 << 20
 _FRAME = struct.Struct("=IB3x8s")  # struct can_frame (classic CAN, CAN_MTU = 16 bytes)
 _CMSG_SPACE = 32  # CMSG_SPACE(sizeof(struct timespec)) on 64-bit Linux
 _TIMESPEC = struct.Struct("=qq")
@@ -102,16 +114,23 @@ def _poll(fd: int, timeout: float | None) -> bool:
     """poll() one fd for input; True when readable. EINTR is retried with the time left (PEP 475 style:
     Python signal handlers run between the attempts)."""
     pfd = _PollFd(fd, _POLLIN, 0)
+    return _wait(lambda ms: _libc.poll(ctypes.byref(pfd), 1, ms), timeout, "poll")
+
+
+def _wait(call, timeout: float | None, name: str) -> bool:
+    """``call(ms)`` (poll/epoll_wait: a count, or -1 with errno) until it is not interrupted; True when it
+    reported something. EINTR is retried with the time left (PEP 475 style: Python signal handlers run
+    between the attempts)."""
     deadline = None  # the clock is read only after an interruption (a clock read is a system call too)
     remaining = timeout
     while True:
         ms = -1 if remaining is None else min(max(0, math.ceil(remaining * 1000.0)), 2**31 - 1)
-        n = _libc.poll(ctypes.byref(pfd), 1, ms)
+        n = call(ms)
         if n >= 0:
             return n > 0
         err = ctypes.get_errno()
         if err != errno.EINTR:
-            raise can.CanOperationError(f"poll failed: {errno.errorcode.get(err, err)}", err)
+            raise can.CanOperationError(f"{name} failed: {errno.errorcode.get(err, err)}", err)
         if remaining is not None:
             if deadline is None:
                 deadline = time.monotonic() + remaining  # first interruption: start the clock here
@@ -129,9 +148,13 @@ class BatchSocketcanBus(SocketcanBus):
         self._fd = self.socket.fileno()
         self._rx: deque[can.Message] = deque()
         self._was_empty = False  # the last read found the socket empty
+        self._poll_first = 0  # waiting reads left that poll before reading (see the module docstring)
         self._rx_slots = _Slots(with_control=True)
         self._tx_slots = _Slots(with_control=False)
         self._doorbell: socket.socket | None = None
+        self._bell_epoll: select.epoll | None = None
+        self._bell_events = ctypes.create_string_buffer(64)  # epoll_wait's output (only its count is used)
+        self._rings = 0  # rings since the doorbell's queue was last emptied
         self._scratch = _Slots(with_control=False)
 
     # ------------------------------------------------------------------------------------- receive
@@ -159,11 +182,16 @@ class BatchSocketcanBus(SocketcanBus):
         """Queue what the socket holds; if nothing, wait up to ``timeout`` (None: for ever) and read."""
         waiting = timeout is None or timeout > 0.0
         # After an empty read (a recv(0) just before, typically) a waiting call polls first: poll() reports
-        # what arrived since, and the read that would fail again is saved.
-        if not (waiting and self._was_empty) and self._read_batch():
-            return True
+        # what arrived since, and the read that would fail again is saved. So do the waiting calls after
+        # one that found the socket empty, for a while (see the module docstring).
         if not waiting:
-            return False
+            return self._read_batch() > 0
+        if self._poll_first:
+            self._poll_first -= 1
+        elif not self._was_empty:
+            if self._read_batch():
+                return True
+            self._poll_first = POLL_FIRST_WAITS
         remaining, deadline = timeout, None
         while _poll(self._fd, remaining):
             if self._read_batch():
@@ -262,22 +290,39 @@ class BatchSocketcanBus(SocketcanBus):
         bell = socket.socket(constants.PF_CAN, socket.SOCK_RAW, constants.CAN_RAW)
         bell.setsockopt(constants.SOL_CAN_RAW, constants.CAN_RAW_FILTER,
                         pack_filters([{"can_id": i, "can_mask": _SFF_MASK, "extended": False} for i in frame_ids]))
+        try:
+            bell.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, DOORBELL_RCVBUF)
+        except OSError:
+            pass
         bell.bind((self.channel,))
         bell.setblocking(False)
         self._doorbell = bell
+        if self._bell_epoll is not None:
+            self._bell_epoll.close()
+        # edge-triggered: a wait returns once for every burst of rings since the last one, without a read
+        self._bell_epoll = select.epoll()
+        self._bell_epoll.register(bell.fileno(), select.EPOLLIN | select.EPOLLET)
+        self._rings = 0
 
     def wait_for(self, timeout: float | None) -> bool:
         """Block until a watched frame has arrived since the last call (True) or ``timeout`` (False; 0
         only looks). The frame itself is read with ``recv``; without ``watch`` this returns True at once."""
-        bell = self._doorbell
-        if bell is None:
+        if self._doorbell is None:
             return True
-        if _poll(bell.fileno(), timeout):  # a ring from before this call is still queued: at once
-            self._drain_doorbell()
+        epfd, events = self._bell_epoll.fileno(), self._bell_events
+        # (select.epoll.poll would read the clock for its timeout: a system call in the vcan-vm guest)
+        if _wait(lambda ms: _libc.epoll_wait(epfd, events, 1, ms), timeout, "epoll_wait"):
+            # a ring from before this call counts: its edge is kept until a wait takes it
+            self._rings += 1
+            self._poll_first = 0  # the frames before the ring are queued: read them first
+            if self._rings >= DRAIN_EVERY:
+                self._drain_doorbell()
             return True
+        self._drain_doorbell()  # nothing came: start again from an empty queue (a lost edge costs one wait)
         return False
 
     def _drain_doorbell(self) -> int:
+        self._rings = 0
         total = 0
         while True:
             n = _libc.recvmmsg(self._doorbell.fileno(), self._scratch.hdr, BATCH, _MSG_DONTWAIT, None)
@@ -289,6 +334,8 @@ class BatchSocketcanBus(SocketcanBus):
 
     def shutdown(self) -> None:
         if self._doorbell is not None:
+            self._bell_epoll.close()
+            self._bell_epoll = None
             self._doorbell.close()
             self._doorbell = None
         super().shutdown()
