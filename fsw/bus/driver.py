@@ -773,7 +773,7 @@ class FswBusDriver:
             tick = self._rt_sync_tick  # the application's cycle count means nothing to the simulator
         with_done = cycle_done and not self._realtime
         tau = torques_Nm
-        if type(tau) is not np.ndarray or tau.dtype is not _F8 or tau.ndim != 1 or not tau.flags.c_contiguous:
+        if type(tau) is not np.ndarray or tau.dtype != _F8 or tau.ndim != 1 or not tau.flags.c_contiguous:
             tau = np.array(list(map(float, torques_Nm)), dtype=np.float64)
         ids, dlc = self._cmd_frames[with_done]
         out = np.zeros(self._cmd_shape[with_done], dtype=np.uint8)
