@@ -370,6 +370,7 @@ class FswBusDriver:
         self._st_half = self._rows
         self._wheel_buf = self._ft[K.F_WHEEL_ROWS:K.F_WHEEL_ROWS + 5 * n_wheels].reshape(n_wheels, 5)
         self._tally = np.zeros(((len(icd.message_names) + 1) * self._n_codes, 2), dtype=np.int64)
+        self._tally_flat = self._tally.reshape(-1)
         self._tally_targets = self.receiver.tally_targets(self._n_codes)
         self._status_buf = np.zeros(64, dtype=np.int64)  # a lockstep burst's class codes and value rows
         self._values_buf = np.zeros((64, width))
@@ -382,13 +383,13 @@ class FswBusDriver:
         self._cmd_frames = {True: (ids, dlc), False: (ids[:n_wheels], dlc[:n_wheels])}
         self._cmd_limits = np.array([[lo, hi] for _, lo, hi in self._cmd_ranges], dtype=np.float64)
         self._cmd_cols = np.array([self._cmd_torque_col, self._cmd_tick_col, self._done_tick_col], dtype=np.int64)
-        self._cmd_values = np.zeros((n_wheels + 1, width))
         self._cmd_shape = {True: (n_wheels + 1, MAX_DLC), False: (n_wheels, MAX_DLC)}
         table = icd.table
         # kernels.command_rows with the driver's arrays bound (the cycle passes only the torques and tick)
-        self._command_rows = partial(K.command_rows, self._cmd_limits, self._cmd_idx, self._cmd_cols,
-                                     self._cmd_values, self._sender._counter, self._sender._sent, table.msg_i,
-                                     table.sig_i, table.sig_f, table.crc_table)
+        ic, fc = K.pack_commands(self._cmd_limits, self._cmd_idx, self._cmd_cols, width, table.msg_i, table.sig_i,
+                                 table.sig_f, table.crc_table)
+        self._cmd_values = fc[ic[K.CMD_OFF_VALUES]:].reshape(n_wheels + 1, width)  # the rows each call writes
+        self._command_rows = partial(K.command_rows, ic, fc, self._sender._cs)
         # the heartbeat as a one-frame burst (the in-process bus carries it as arrays, not a can.Message)
         self._hb_idx = np.array([icd.message_index["FSW_HEARTBEAT"]], dtype=np.int64)
         self._hb_cols = (self._col["FSW_HEARTBEAT", "mode"], self._col["FSW_HEARTBEAT", "cycle"])
@@ -550,7 +551,8 @@ class FswBusDriver:
         if k:
             self._st_i[K.S_NTALLY] = 0
             targets = self._tally_targets
-            for key, count in self._tally[:k].tolist():
+            pairs = iter(self._tally_flat[:2 * k].tolist())  # key, count, key, count...: one flat list
+            for key, count in zip(pairs, pairs):
                 counts, cls = targets[key]
                 counts[cls] += count
         if vals[K.S_PHASE] != K.PHASE_DONE:
@@ -778,7 +780,7 @@ class FswBusDriver:
         ids, dlc = self._cmd_frames[with_done]
         out = np.zeros(self._cmd_shape[with_done], dtype=np.uint8)
         # the limits, NaN -> 0, the rows and their encoding in one compiled call (kernels.command_rows)
-        done = self._command_rows(tau, tick & 0xFFFF, tick & 0xFFFFFFFF, with_done, out)
+        done = self._command_rows(tau, tick & 0xFFFF, tick & 0xFFFFFFFF, 1 if with_done else 0, out)
         if done < len(ids):  # a row the compiled codec refused: the checked path names the error
             burst = self._sender.burst(self._cmd_idx[:len(ids)], self._cmd_values[:len(ids)].copy(), out, done)
         else:

@@ -367,8 +367,9 @@ class E2ESender:
 
     def __init__(self, icd: Icd) -> None:
         self.icd = icd
-        self._counter = np.zeros(len(icd.message_names), dtype=np.int64)  # by message index (the kernels')
-        self._sent = np.zeros(len(icd.message_names), dtype=np.int64)
+        # alive counters and sent counts by message index (the kernels'), rows of one array (one argument)
+        self._cs = np.zeros((2, len(icd.message_names)), dtype=np.int64)
+        self._counter, self._sent = self._cs[0], self._cs[1]
         self._fast = {name: (spec.codec, spec.frame_id, icd.message_index[name])
                       for name, spec in icd.messages.items() if spec.codec}
         self._ids = np.array([icd.messages[n].frame_id for n in icd.message_names], dtype=np.int64)

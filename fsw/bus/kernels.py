@@ -474,17 +474,53 @@ def collect_rows(status, values, st, ft, consts, msg_i, sig_i, sig_f, seq, last_
     return i
 
 
-@njit("int64(float64[:, ::1], int64[::1], int64[::1], float64[:, ::1], int64[::1], int64[::1], int64[:, ::1], "
-      "int64[:, :, ::1], float64[:, :, ::1], int64[::1], float64[::1], int64, int64, boolean, uint8[:, ::1])",
-      cache=True)
-def command_rows(limits, idx, cols, values, counters, sent, msg_i, sig_i, sig_f, crc_table, torques, tick_lsb,
-                 done_tick, with_done, out):  # pragma: no cover - compiled
-    """FswBusDriver.send_wheel_torques' frames in one call (the driver's arrays first, bound once:
-    functools.partial): wheel i's command row (``torques[i]`` limited to
-    ``limits[i]`` = (low, high), NaN or infinite sent as 0, and ``tick_lsb``) and, ``with_done``, the
+# command_rows' packed arrays (a compiled call's cost grows with its arguments, ~0.15 us per array here):
+# ``ic`` ints: this header, then the messages (n_w + 1), the value slots (torque, tick_lsb, CYCLE_DONE's tick),
+# the table's msg_i, sig_i and CRC table at the offsets the header gives; ``fc`` floats: the limits (n_w x 2),
+# the table's sig_f, then the value rows ((n_w + 1) x width, written by each call) at the header's offsets
+(CMD_NW, CMD_M, CMD_S, CMD_WIDTH, CMD_OFF_IDX, CMD_OFF_COLS, CMD_OFF_MSG, CMD_OFF_SIG, CMD_OFF_CRC, CMD_OFF_SIGF,
+ CMD_OFF_VALUES) = range(11)
+CMD_HEAD = CMD_OFF_VALUES + 1
+
+
+def pack_commands(limits: np.ndarray, idx: np.ndarray, cols: np.ndarray, width: int, msg_i: np.ndarray,
+                  sig_i: np.ndarray, sig_f: np.ndarray, crc_table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(ic, fc) for :func:`command_rows` (layout above); the value rows are ``fc[ic[CMD_OFF_VALUES]:]``."""
+    nw = len(limits)
+    m, s = sig_i.shape[0], sig_i.shape[1]
+    head = np.zeros(CMD_HEAD, dtype=np.int64)
+    parts = [np.asarray(idx, dtype=np.int64), np.asarray(cols, dtype=np.int64), msg_i.ravel(), sig_i.ravel(),
+             crc_table.astype(np.int64)]
+    offsets = np.cumsum([CMD_HEAD] + [len(p) for p in parts])
+    head[:CMD_OFF_IDX] = nw, m, s, width
+    head[CMD_OFF_IDX:CMD_OFF_CRC + 1] = offsets[:5]
+    head[CMD_OFF_SIGF] = 2 * nw
+    head[CMD_OFF_VALUES] = 2 * nw + sig_f.size
+    ic = np.ascontiguousarray(np.concatenate([head] + parts))
+    fc = np.concatenate([np.asarray(limits, dtype=np.float64).ravel(), sig_f.ravel(), np.zeros((nw + 1) * width)])
+    return ic, fc
+
+
+@njit("int64(int64[::1], float64[::1], int64[:, ::1], float64[::1], int64, int64, int64, uint8[:, ::1])", cache=True)
+def command_rows(ic, fc, cs, torques, tick_lsb, done_tick, with_done, out):  # pragma: no cover - compiled
+    """FswBusDriver.send_wheel_torques' frames in one call (the driver's packed arrays ``ic``, ``fc``
+    (:func:`pack_commands`) and its sender's alive counters and sent counts ``cs`` = (counters, sent) first,
+    bound once: functools.partial): wheel i's command row (``torques[i]`` limited to
+    ``limits[i]`` = (low, high), NaN or infinite sent as 0, and ``tick_lsb``) and, ``with_done`` (0 / 1), the
     CYCLE_DONE row (``done_tick``) into ``values`` (slots ``cols`` = torque, tick_lsb, CYCLE_DONE's tick),
     then encoded as :func:`encode_rows` does (messages ``idx``). Returns the rows encoded (as
     encode_rows: fewer when one cannot be)."""
+    nw, m, s, width = ic[CMD_NW], ic[CMD_M], ic[CMD_S], ic[CMD_WIDTH]
+    idx = ic[ic[CMD_OFF_IDX]:ic[CMD_OFF_IDX] + nw + 1]
+    cols = ic[ic[CMD_OFF_COLS]:ic[CMD_OFF_COLS] + 3]
+    msg_i = ic[ic[CMD_OFF_MSG]:ic[CMD_OFF_MSG] + 4 * m].reshape((m, 4))
+    sig_i = ic[ic[CMD_OFF_SIG]:ic[CMD_OFF_SIG] + 3 * m * s].reshape((m, s, 3))
+    crc_table = ic[ic[CMD_OFF_CRC]:ic[CMD_OFF_CRC] + 256]
+    limits = fc[:2 * nw].reshape((nw, 2))
+    sig_f = fc[ic[CMD_OFF_SIGF]:ic[CMD_OFF_SIGF] + 6 * m * s].reshape((m, s, 6))
+    values = fc[ic[CMD_OFF_VALUES]:ic[CMD_OFF_VALUES] + (nw + 1) * width].reshape((nw + 1, width))
+    counters = cs[0]
+    sent = cs[1]
     n = torques.shape[0]
     values[:, :] = 0.0
     for i in range(n):
@@ -499,4 +535,5 @@ def command_rows(limits, idx, cols, values, counters, sent, msg_i, sig_i, sig_f,
         values[i, cols[0]] = tau
         values[i, cols[1]] = tick_lsb
     values[n, cols[2]] = done_tick
-    return encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table, n + 1 if with_done else n)
+    return encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table,
+                        n + 1 if with_done != 0 else n)

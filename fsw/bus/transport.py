@@ -353,7 +353,7 @@ class LightVirtualBus(VirtualBus):
                         raise can.CanOperationError("Could not send message to one or more recipients")
                 continue
             bus_queue.put(burst)
-        return len(burst)
+        return len(burst.ids)
 
     def recv_burst(self, timeout: float | None = 0.0) -> FrameBurst | None:
         if self._filters is not None or not self._open:
