@@ -318,7 +318,11 @@ class FswBusDriver:
     def _init_lockstep(self, icd: Icd, n_wheels: int) -> None:
         """The arrays of the compiled lockstep tick (kernels.collect_rows): its state, what it does with each
         frame id, the signals' slots, and the tick's decoded samples."""
-        self._st_i = np.zeros(K.S_SIZE, dtype=np.int64)  # kernels.S_*: phase, counts, pending SYNC, samples
+        # kernels.S_*: phase, counts, pending SYNC, samples; then the tally (key, count pairs)
+        self._n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE
+        n_tally = (len(icd.message_names) + 1) * self._n_codes
+        self._st_all = np.zeros(K.S_SIZE + 2 * n_tally, dtype=np.int64)
+        self._st_i = self._st_all[:K.S_SIZE]
         col = self._col
         cfg = np.zeros(K.C_SIZE, dtype=np.int64)
         for slot, key in ((K.C_TICK, ("SYNC", "tick")), (K.C_FOLLOWING, ("SYNC", "frames_following")),
@@ -333,7 +337,6 @@ class FswBusDriver:
                           (K.C_CURRENT, ("RW1_STATUS", "current")), (K.C_TEMP, ("RW1_STATUS", "temp")),
                           (K.C_FAULT, ("RW1_STATUS", "fault"))):
             cfg[slot] = col[key]
-        self._n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE
         cfg[K.C_N_CODES] = self._n_codes
         cfg[K.C_BUS_ROW] = len(icd.message_names)
         role = np.full(2048, K.ROLE_NONE, dtype=np.int64)
@@ -351,26 +354,33 @@ class FswBusDriver:
         cfg[K.C_OFF_CRC] = cfg[K.C_OFF_ROLE] + len(role)
         cfg[K.C_OFF_WATCH] = cfg[K.C_OFF_CRC] + len(crc_table)
         cfg[K.C_N_WATCH] = len(self._watch)
-        self._consts = np.concatenate([cfg, kind_of_id, role, crc_table, self._watch])  # (kernels: C_OFF_*)
+        width = icd.table.start.shape[1]
+        cfg[K.C_N_MSG], cfg[K.C_N_SIG], cfg[K.C_WIDTH] = sig_i.shape[0], sig_i.shape[1], width
+        cfg[K.C_OFF_MSG] = cfg[K.C_OFF_WATCH] + len(self._watch)
+        cfg[K.C_OFF_SIG] = cfg[K.C_OFF_MSG] + msg_i.size
+        cfg[K.C_OFF_HALVES] = K.F_SIZE + len(watch_limit)
+        cfg[K.C_OFF_SIGF] = cfg[K.C_OFF_HALVES] + 2 * width
+        cfg[K.C_N_TALLY] = n_tally
+        self._consts = np.concatenate([cfg, kind_of_id, role, crc_table, self._watch, msg_i.ravel(), sig_i.ravel()])
         self._cfg = self._consts[:K.C_SIZE]
-        self._ft = np.zeros(K.F_SIZE + len(watch_limit))  # kernels.F_*, then the watched messages' limits
-        self._ft[K.F_SIZE:] = watch_limit
+        # kernels.F_*, the watched messages' limits, the star tracker halves, the table's sig_f (C_OFF_*)
+        self._ft = np.zeros(cfg[K.C_OFF_SIGF] + sig_f.size)
+        self._ft[K.F_SIZE:K.F_SIZE + len(watch_limit)] = watch_limit
+        self._ft[cfg[K.C_OFF_SIGF]:] = sig_f.ravel()
         self._ft[K.F_WHEEL_T:K.F_WHEEL_T + MAX_WHEELS] = np.nan  # no status from that wheel yet
         self._ft[K.F_WHEEL_SPEED:K.F_WHEEL_SPEED + MAX_WHEELS] = np.nan
         self._st_i[K.S_WHEEL_FAULT:K.S_WHEEL_FAULT + MAX_WHEELS] = -1
         self._ft_out = self._ft[:K.F_SIZE]  # a closed tick's float outputs (copied once per tick)
-        self._watch_limit = self._ft[K.F_SIZE:]
+        self._watch_limit = self._ft[K.F_SIZE:K.F_SIZE + len(watch_limit)]
         self._table = (msg_i, sig_i, sig_f, seq, last_ok_t)
         self._st_ab = {icd.spec("ST_QUAT_A").frame_id: 0, icd.spec("ST_QUAT_B").frame_id: 1}
-        width = icd.table.start.shape[1]
         self._width = width
         self._imu_buf = np.zeros((64, 4))  # the tick's gyro rows (x, y, z, saturated); grows when full
         # the star tracker's halves (A, B) waiting for their pair; each wheel's newest status row (in ft)
-        self._rows = np.zeros((2, width))
-        self._st_half = self._rows
+        self._st_half = self._ft[cfg[K.C_OFF_HALVES]:cfg[K.C_OFF_HALVES] + 2 * width].reshape(2, width)
         self._wheel_buf = self._ft[K.F_WHEEL_ROWS:K.F_WHEEL_ROWS + 5 * n_wheels].reshape(n_wheels, 5)
-        self._tally = np.zeros(((len(icd.message_names) + 1) * self._n_codes, 2), dtype=np.int64)
-        self._tally_flat = self._tally.reshape(-1)
+        self._tally_flat = self._st_all[K.S_SIZE:]
+        self._tally = self._tally_flat.reshape(n_tally, 2)
         self._tally_targets = self.receiver.tally_targets(self._n_codes)
         self._status_buf = np.zeros(64, dtype=np.int64)  # a lockstep burst's class codes and value rows
         self._values_buf = np.zeros((64, width))
@@ -397,10 +407,9 @@ class FswBusDriver:
 
     def _bind_collect(self) -> None:
         """kernels.collect_rows with the driver's arrays bound (again whenever a buffer is replaced)."""
-        msg_i, sig_i, sig_f, seq, last_ok_t = self._table
-        self._collect_rows = partial(K.collect_rows, self._status_buf, self._values_buf, self._st_i, self._ft,
-                                     self._consts, msg_i, sig_i, sig_f, seq, last_ok_t, self._imu_buf, self._rows,
-                                     self._tally)
+        seq, last_ok_t = self._table[3], self._table[4]
+        self._collect_rows = partial(K.collect_rows, self._status_buf, self._values_buf, self._st_all, self._ft,
+                                     self._consts, seq, last_ok_t, self._imu_buf)
 
     @property
     def bus(self) -> can.BusABC:

@@ -239,13 +239,15 @@ S_SIZE = S_WHEEL_FAULT + 6
 # ... and its configuration slots (cfg): value-row columns of the signals the driver reads
 (C_TICK, C_FOLLOWING, C_PERIOD, C_IMU_X, C_IMU_Y, C_IMU_Z, C_IMU_SAT, C_QW, C_QX, C_VALID, C_BLIND, C_SEQ_A,
  C_QY, C_QZ, C_SEQ_B, C_AGE, C_SPEED, C_TORQUE, C_CURRENT, C_TEMP, C_FAULT, C_N_CODES, C_BUS_ROW,
- C_OFF_KIND, C_OFF_ROLE, C_OFF_CRC, C_OFF_WATCH, C_N_WATCH) = range(28)
-C_SIZE = C_N_WATCH + 1
-# The constant integer arrays travel as one (``consts``: cfg, then kind_of_id, role_of_id, the CRC table and
-# the watched messages at the C_OFF_* offsets; a compiled call's cost grows with its arguments), the
-# watched messages' timeout limits at the end of ``ft`` (F_SIZE on), and the wheels' status rows in ``ft``
-# too (F_WHEEL_ROWS: one copy of ``ft[:F_SIZE]`` is a closed tick's float outputs); ``rows``: the star
-# tracker halves A, B.
+ C_OFF_KIND, C_OFF_ROLE, C_OFF_CRC, C_OFF_WATCH, C_N_WATCH, C_N_MSG, C_N_SIG, C_WIDTH, C_OFF_MSG, C_OFF_SIG,
+ C_OFF_HALVES, C_OFF_SIGF, C_N_TALLY) = range(36)
+C_SIZE = C_N_TALLY + 1
+# The constant integer arrays travel as one (``consts``: cfg, then kind_of_id, role_of_id, the CRC table,
+# the watched messages and the table's msg_i and sig_i at the C_OFF_* offsets; a compiled call's cost grows
+# with its arguments, ~0.15 us per array), the tally after the integer state (``st``: S_SIZE on), the
+# watched messages' timeout limits, the star tracker halves A, B (C_OFF_HALVES) and the table's sig_f
+# (C_OFF_SIGF) after the float state (``ft``: F_SIZE on), and the wheels' status rows in ``ft`` too
+# (F_WHEEL_ROWS: one copy of ``ft[:F_SIZE]`` is a closed tick's float outputs).
 # ... and its float state (ft) slots
 F_T_TICK, F_PERIOD, F_P_PERIOD_MS, F_ST_T, F_ST_Q = 0, 1, 2, 3, 4  # F_ST_Q..F_ST_Q+3: q_NS
 F_WHEEL_T = 8  # + wheel index: the time of each wheel's newest status
@@ -345,11 +347,10 @@ def star_tracker_pair(st, ft, cfg, st_half, now):  # pragma: no cover - compiled
     st[S_ST_HAVE_B] = 0
 
 
-@njit("int64(int64[::1], float64[:, ::1], int64[::1], float64[::1], int64[::1], int64[:, ::1], int64[:, :, ::1], "
-      "float64[:, :, ::1], int64[:, ::1], float64[::1], float64[:, ::1], float64[:, ::1], int64[:, ::1], int64[::1], "
-      "int64[::1], uint8[:, ::1], int64, int64)", cache=True)
-def collect_rows(status, values, st, ft, consts, msg_i, sig_i, sig_f, seq, last_ok_t, imu, rows, tally, ids, lengths,
-                 data, first, first_fid):  # pragma: no cover - compiled
+@njit("int64(int64[::1], float64[:, ::1], int64[::1], float64[::1], int64[::1], int64[:, ::1], float64[::1], "
+      "float64[:, ::1], int64[::1], int64[::1], uint8[:, ::1], int64, int64)", cache=True)
+def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, lengths, data, first,
+                 first_fid):  # pragma: no cover - compiled
     """FswBusDriver.collect_tick's work on frames ``first``.. of a burst (``ids``, ``lengths``, ``data``), in one
     call (the driver's arrays come first, bound once: functools.partial), each frame classified as
     :func:`classify_rows` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``) and counted
@@ -369,12 +370,18 @@ def collect_rows(status, values, st, ft, consts, msg_i, sig_i, sig_f, seq, last_
     Returns the index after the last frame handled: where the tick closed or the burst ended, or before a
     frame for the Python path (``status`` FALLBACK_CODE) or a gyro frame with ``imu`` full (``st[S_GROW]``)."""
     cfg = consts[:C_SIZE]
+    m_n, s_n, width = cfg[C_N_MSG], cfg[C_N_SIG], cfg[C_WIDTH]
+    msg_i = consts[cfg[C_OFF_MSG]:cfg[C_OFF_MSG] + 4 * m_n].reshape((m_n, 4))
+    sig_i = consts[cfg[C_OFF_SIG]:cfg[C_OFF_SIG] + 3 * m_n * s_n].reshape((m_n, s_n, 3))
+    sig_f = ft[cfg[C_OFF_SIGF]:cfg[C_OFF_SIGF] + 6 * m_n * s_n].reshape((m_n, s_n, 6))
+    st = st_all[:S_SIZE]
+    tally = st_all[S_SIZE:S_SIZE + 2 * cfg[C_N_TALLY]].reshape((cfg[C_N_TALLY], 2))
     kind_of_id = consts[cfg[C_OFF_KIND]:cfg[C_OFF_ROLE]]
     role_of_id = consts[cfg[C_OFF_ROLE]:cfg[C_OFF_CRC]]
     crc_table = consts[cfg[C_OFF_CRC]:cfg[C_OFF_WATCH]]
     watch = consts[cfg[C_OFF_WATCH]:cfg[C_OFF_WATCH] + cfg[C_N_WATCH]]
     watch_limit = ft[F_SIZE:F_SIZE + cfg[C_N_WATCH]]
-    st_half = rows
+    st_half = ft[cfg[C_OFF_HALVES]:cfg[C_OFF_HALVES] + 2 * width].reshape((2, width))
     n = ids.shape[0]
     n_codes = cfg[C_N_CODES]
     bus_row = cfg[C_BUS_ROW]
