@@ -28,7 +28,7 @@ from fsw.bus.e2e import _TABLE as _CRC_TABLE
 from fsw.bus.e2e import crc8_sae_j1850, e2e_crc
 from fsw.bus.burst import FrameBurst
 from fsw.bus.burst import data_frame as _data_frame
-from fsw.bus.kernels import MAX_DLC, CodecTable, encode_rows
+from fsw.bus.kernels import MAX_DLC, CodecTable, encode_burst
 
 DEFAULT_DBC_PATH = config_path("icd", "keepout.dbc")
 
@@ -376,7 +376,7 @@ class E2ESender:
         self._dlc = icd.table.dlc
         t = icd.table
         # kernels.encode_rows with this sender's counters and the table bound (a burst passes its rows only)
-        self._encode = partial(encode_rows, self._counter, self._sent, t.msg_i, t.sig_i, t.sig_f, t.crc_table)
+        self._encode = partial(encode_burst, self._cs, t.packed_i, t.sig_f)
 
     @property
     def counters(self) -> dict[str, int]:
