@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable, NamedTuple, Sequence
 
 import can
@@ -39,9 +40,10 @@ from fsw.bus.burst import FrameBurst
 from fsw.bus.e2e import CODE_CLASS, CheckedBurst, CheckedFrame, E2EReceiver
 from fsw.bus.icd import E2ESender, Icd
 from fsw.bus.kernels import MAX_DLC
-from fsw.bus.transport import recv_burst, send_burst
+from fsw.bus.transport import recv_burst, send_batch
 
 FSW_NODE = "FSW"
+_F8 = np.dtype(np.float64)
 MAX_WHEELS = 6
 TX_TIMEOUT_S = 0.05  # how long a send may wait for room in the transmit queue
 # Once every announced frame of a tick has arrived but some failed E2E, the tick waits this much longer
@@ -98,7 +100,8 @@ class TickInputs:
     """
 
     __slots__ = ("tick", "t", "period_s", "imu", "star_tracker", "_wheels", "_imu_samples", "frames_expected",
-                 "frames_received", "_imu_omega", "_imu_saturated", "_wheel_rows", "_wheel_new")
+                 "frames_received", "_imu_omega", "_imu_saturated", "_wheel_rows", "_wheel_new", "_wheel_src",
+                 "_wheel_arrays")
 
     def __init__(self, tick: int, t: float, period_s: float, imu: ImuSample | None,
                  star_tracker: StarTrackerSample | None, wheels: list[WheelStatus | None],
@@ -108,12 +111,31 @@ class TickInputs:
         self.tick, self.t, self.period_s = tick, t, period_s
         self.imu, self.star_tracker, self._wheels = imu, star_tracker, wheels
         self._wheel_rows, self._wheel_new = wheel_rows, wheel_new
+        self._wheel_src = self._wheel_arrays = None
         self.frames_expected, self.frames_received = frames_expected, frames_received
         if imu_samples is None and imu_omega_BN_B is None:
             imu_samples = []
         self._imu_samples = imu_samples
         self._imu_omega = imu_omega_BN_B
         self._imu_saturated = imu_saturated
+
+    @classmethod
+    def _of_tick(cls, tick: int, t: float, period_s: float, imu: ImuSample | None,
+                 star_tracker: StarTrackerSample | None, frames_expected: int, frames_received: int,
+                 omega: np.ndarray | None, saturated: list | None, wheel_new: list, src: np.ndarray,
+                 speeds: np.ndarray, faults: np.ndarray) -> "TickInputs":
+        """A lockstep tick as FswBusDriver._settle closes it, slot by slot (no keyword parsing): gyro rows
+        ``omega`` (None: no sample) with their saturated flags (None: none saturated), the wheels' status
+        rows at ``src[F_WHEEL_ROWS:]`` (a closed tick's copy of the driver's float state), the tick's wheel
+        speeds and fault flags as ``fresh_wheel_arrays`` gives them."""
+        self = object.__new__(cls)
+        self.tick, self.t, self.period_s, self.imu, self.star_tracker = tick, t, period_s, imu, star_tracker
+        self.frames_expected, self.frames_received = frames_expected, frames_received
+        self._wheels = self._wheel_rows = None
+        self._wheel_new, self._wheel_src, self._wheel_arrays = wheel_new, src, (speeds, faults)
+        self._imu_samples = None if omega is not None else []
+        self._imu_omega, self._imu_saturated = omega, saturated
+        return self
 
     @property
     def complete(self) -> bool:
@@ -125,6 +147,8 @@ class TickInputs:
         if samples is None:
             # The IMU frames of tick k were sampled over (t_{k-1}, t_k]; spread their times evenly.
             omega, flags, t, period_s = self._imu_omega, self._imu_saturated, self.t, self.period_s
+            if flags is None:  # (the driver passes no flags when no sample of the tick was saturated)
+                flags = [0.0] * len(omega)
             n = len(flags)
             samples = [ImuSample(omega[i], bool(flags[i]), t - (n - 1 - i) * period_s / n) for i in range(n)]
             self._imu_samples = samples
@@ -134,11 +158,19 @@ class TickInputs:
     def imu_samples(self, samples: list[ImuSample]) -> None:
         self._imu_samples, self._imu_omega = samples, None
 
+    def _status_rows(self) -> np.ndarray | None:
+        """The wheels' status rows (speed, torque, current, temp, fault) the tick closed with."""
+        rows = self._wheel_rows
+        if rows is None and self._wheel_src is not None:
+            n = len(self._wheel_new)
+            rows = self._wheel_rows = self._wheel_src[K.F_WHEEL_ROWS:K.F_WHEEL_ROWS + 5 * n].reshape(n, 5)
+        return rows
+
     @property
     def wheels(self) -> list[WheelStatus | None]:
         wheels = self._wheels
         if wheels is None and self._wheel_new is not None:
-            new, rows = self._wheel_new, self._wheel_rows
+            new, rows = self._wheel_new, self._status_rows()
             wheels = [None] * len(new)
             if rows is not None:
                 t = self.t
@@ -150,12 +182,14 @@ class TickInputs:
 
     @wheels.setter
     def wheels(self, wheels: list[WheelStatus | None]) -> None:
-        self._wheels, self._wheel_rows = wheels, None
+        self._wheels, self._wheel_rows, self._wheel_src, self._wheel_arrays = wheels, None, None, None
 
     @property
     def wheel_speed_rad_s(self) -> np.ndarray:
         """Each wheel's speed reported this tick [rad/s], NaN for a wheel that reported nothing (the
         ``speed_rad_s`` of ``wheels`` as one array)."""
+        if self._wheel_arrays is not None and self._wheels is None:
+            return self._wheel_arrays[0].copy()
         if self._wheel_rows is not None and self._wheels is None:
             speeds = self._wheel_rows[:, 0].copy()
             speeds[[not x for x in self._wheel_new]] = np.nan
@@ -183,6 +217,8 @@ class TickInputs:
         new = self._wheel_new
         if self._wheels is not None or new is None:
             return None
+        if self._wheel_arrays is not None:  # as the driver's tick closed them (kernels.F_WHEEL_SPEED...)
+            return self._wheel_arrays
         rows = self._wheel_rows
         if rows is None:
             n = len(new)
@@ -237,7 +273,7 @@ class FswBusDriver:
                  clock: Callable[[], float] = time.monotonic) -> None:
         if not 1 <= n_wheels <= MAX_WHEELS:
             raise ValueError(f"n_wheels must be 1..{MAX_WHEELS} (the ICD has RW1..RW{MAX_WHEELS}), got {n_wheels}")
-        self.bus = bus
+        self.bus = bus  # (the property: binds the bus's burst methods)
         self.icd = icd
         self.n_wheels = n_wheels
         self.clock = clock
@@ -271,9 +307,6 @@ class FswBusDriver:
         self._timeout_s = 0.0  # collect_tick's timeout, and its deadline once a wait has begun
         self._deadline: float | None = None
         self._waited = False  # collect_tick's first wait has begun (it takes the whole timeout)
-        # keepout's own buses (batched socketcan/UDP, light virtual) return from a waiting read with frames or
-        # at the timeout, never before: their first wait of a call needs no deadline (see _wait_burst)
-        self._whole_waits = callable(getattr(bus, "recv_queued", None)) or callable(getattr(bus, "recv_burst", None))
         self._realtime = False  # set by collect_latest: frames answer the newest SYNC seen (module docstring)
         self._rt_sync_tick: int | None = None  # newest SYNC tick received in real time
         self._rt_done_tick: int | None = None  # SYNC tick last answered with CYCLE_DONE
@@ -286,7 +319,11 @@ class FswBusDriver:
     def _init_lockstep(self, icd: Icd, n_wheels: int) -> None:
         """The arrays of the compiled lockstep tick (kernels.collect_rows): its state, what it does with each
         frame id, the signals' slots, and the tick's decoded samples."""
-        self._st_i = np.zeros(K.S_SIZE, dtype=np.int64)  # kernels.S_*: phase, counts, pending SYNC, samples
+        # kernels.S_*: phase, counts, pending SYNC, samples; then the tally (key, count pairs)
+        self._n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE
+        n_tally = (len(icd.message_names) + 1) * self._n_codes
+        self._st_all = np.zeros(K.S_SIZE + 2 * n_tally, dtype=np.int64)
+        self._st_i = self._st_all[:K.S_SIZE]
         col = self._col
         cfg = np.zeros(K.C_SIZE, dtype=np.int64)
         for slot, key in ((K.C_TICK, ("SYNC", "tick")), (K.C_FOLLOWING, ("SYNC", "frames_following")),
@@ -301,7 +338,6 @@ class FswBusDriver:
                           (K.C_CURRENT, ("RW1_STATUS", "current")), (K.C_TEMP, ("RW1_STATUS", "temp")),
                           (K.C_FAULT, ("RW1_STATUS", "fault"))):
             cfg[slot] = col[key]
-        self._n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE
         cfg[K.C_N_CODES] = self._n_codes
         cfg[K.C_BUS_ROW] = len(icd.message_names)
         role = np.full(2048, K.ROLE_NONE, dtype=np.int64)
@@ -319,24 +355,38 @@ class FswBusDriver:
         cfg[K.C_OFF_CRC] = cfg[K.C_OFF_ROLE] + len(role)
         cfg[K.C_OFF_WATCH] = cfg[K.C_OFF_CRC] + len(crc_table)
         cfg[K.C_N_WATCH] = len(self._watch)
-        self._consts = np.concatenate([cfg, kind_of_id, role, crc_table, self._watch])  # (kernels: C_OFF_*)
+        width = icd.table.start.shape[1]
+        cfg[K.C_N_MSG], cfg[K.C_N_SIG], cfg[K.C_WIDTH] = sig_i.shape[0], sig_i.shape[1], width
+        cfg[K.C_OFF_MSG] = cfg[K.C_OFF_WATCH] + len(self._watch)
+        cfg[K.C_OFF_SIG] = cfg[K.C_OFF_MSG] + msg_i.size
+        cfg[K.C_OFF_HALVES] = K.F_SIZE + len(watch_limit)
+        cfg[K.C_OFF_SIGF] = cfg[K.C_OFF_HALVES] + 2 * width
+        cfg[K.C_N_TALLY] = n_tally
+        self._consts = np.concatenate([cfg, kind_of_id, role, crc_table, self._watch, msg_i.ravel(), sig_i.ravel()])
         self._cfg = self._consts[:K.C_SIZE]
-        self._ft = np.zeros(K.F_SIZE + len(watch_limit))  # kernels.F_*, then the watched messages' limits
-        self._ft[K.F_SIZE:] = watch_limit
+        # kernels.F_*, the watched messages' limits, the star tracker halves, the table's sig_f (C_OFF_*)
+        self._ft = np.zeros(cfg[K.C_OFF_SIGF] + sig_f.size)
+        self._ft[K.F_SIZE:K.F_SIZE + len(watch_limit)] = watch_limit
+        self._ft[cfg[K.C_OFF_SIGF]:] = sig_f.ravel()
         self._ft[K.F_WHEEL_T:K.F_WHEEL_T + MAX_WHEELS] = np.nan  # no status from that wheel yet
-        self._watch_limit = self._ft[K.F_SIZE:]
+        self._ft[K.F_WHEEL_SPEED:K.F_WHEEL_SPEED + MAX_WHEELS] = np.nan
+        self._st_i[K.S_WHEEL_FAULT:K.S_WHEEL_FAULT + MAX_WHEELS] = -1
+        self._ft_out = self._ft[:K.F_SIZE]  # a closed tick's float outputs (copied once per tick)
+        self._watch_limit = self._ft[K.F_SIZE:K.F_SIZE + len(watch_limit)]
         self._table = (msg_i, sig_i, sig_f, seq, last_ok_t)
         self._st_ab = {icd.spec("ST_QUAT_A").frame_id: 0, icd.spec("ST_QUAT_B").frame_id: 1}
-        width = icd.table.start.shape[1]
         self._width = width
         self._imu_buf = np.zeros((64, 4))  # the tick's gyro rows (x, y, z, saturated); grows when full
-        # the star tracker's halves (A, B) waiting for their pair, then each wheel's newest status row
-        self._rows = np.zeros((2 + n_wheels, max(width, 5)))
-        self._st_half, self._wheel_buf = self._rows[:2], self._rows[2:]
-        self._tally = np.zeros(((len(icd.message_names) + 1) * self._n_codes, 2), dtype=np.int64)
+        # the star tracker's halves (A, B) waiting for their pair; each wheel's newest status row (in ft)
+        self._st_half = self._ft[cfg[K.C_OFF_HALVES]:cfg[K.C_OFF_HALVES] + 2 * width].reshape(2, width)
+        self._wheel_buf = self._ft[K.F_WHEEL_ROWS:K.F_WHEEL_ROWS + 5 * n_wheels].reshape(n_wheels, 5)
+        self._tally_flat = self._st_all[K.S_SIZE:]
+        self._tally = self._tally_flat.reshape(n_tally, 2)
         self._tally_targets = self.receiver.tally_targets(self._n_codes)
         self._status_buf = np.zeros(64, dtype=np.int64)  # a lockstep burst's class codes and value rows
         self._values_buf = np.zeros((64, width))
+        self._bind_collect()
+        self._rx_reuse = _LockstepRx(None, 0)  # the lockstep burst being read (one object, reused)
         self._no_frames = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 8), dtype=np.uint8))
         # the commands' frame ids / lengths (with and without CYCLE_DONE; never edited: bursts share them)
         ids = np.array([icd.spec(icd.message_names[m]).frame_id for m in self._cmd_idx], dtype=np.int64)
@@ -344,7 +394,38 @@ class FswBusDriver:
         self._cmd_frames = {True: (ids, dlc), False: (ids[:n_wheels], dlc[:n_wheels])}
         self._cmd_limits = np.array([[lo, hi] for _, lo, hi in self._cmd_ranges], dtype=np.float64)
         self._cmd_cols = np.array([self._cmd_torque_col, self._cmd_tick_col, self._done_tick_col], dtype=np.int64)
-        self._cmd_values = np.zeros((n_wheels + 1, width))
+        self._cmd_shape = {True: (n_wheels + 1, MAX_DLC), False: (n_wheels, MAX_DLC)}
+        table = icd.table
+        # kernels.command_rows with the driver's arrays bound (the cycle passes only the torques and tick)
+        ic, fc = K.pack_commands(self._cmd_limits, self._cmd_idx, self._cmd_cols, width, table.msg_i, table.sig_i,
+                                 table.sig_f, table.crc_table)
+        self._cmd_values = fc[ic[K.CMD_OFF_VALUES]:].reshape(n_wheels + 1, width)  # the rows each call writes
+        self._command_rows = partial(K.command_rows, ic, fc, self._sender._cs)
+        # the heartbeat as a one-frame burst (the in-process bus carries it as arrays, not a can.Message)
+        self._hb_idx = np.array([icd.message_index["FSW_HEARTBEAT"]], dtype=np.int64)
+        self._hb_cols = (self._col["FSW_HEARTBEAT", "mode"], self._col["FSW_HEARTBEAT", "cycle"])
+        self._hb_values = np.zeros((1, width))
+
+    def _bind_collect(self) -> None:
+        """kernels.collect_rows with the driver's arrays bound (again whenever a buffer is replaced)."""
+        seq, last_ok_t = self._table[3], self._table[4]
+        self._collect_rows = partial(K.collect_rows, self._status_buf, self._values_buf, self._st_all, self._ft,
+                                     self._consts, seq, last_ok_t, self._imu_buf)
+
+    @property
+    def bus(self) -> can.BusABC:
+        return self._bus
+
+    @bus.setter
+    def bus(self, bus: can.BusABC) -> None:
+        # a bus that carries bursts (LightVirtualBus) is read and written through its own methods, looked
+        # up once here rather than per call (transport.recv_burst / send_burst do that lookup)
+        self._bus = bus
+        self._recv_carry = getattr(bus, "recv_burst", None)
+        self._send_carry = getattr(bus, "send_burst", None)
+        # keepout's own buses (batched socketcan/UDP, light virtual) return from a waiting read with frames or
+        # at the timeout, never before: their first wait of a call needs no deadline (see _wait_burst)
+        self._whole_waits = callable(getattr(bus, "recv_queued", None)) or callable(self._recv_carry)
 
     @property
     def _supervision_started(self) -> bool:
@@ -409,10 +490,11 @@ class FswBusDriver:
         rx = self._rx
         if rx is not None and type(rx) is not _LockstepRx:
             rx = self._lockstep_rx(rx.burst.tail(rx.pos)) if rx.pos < rx.n else None
+        phase = K.PHASE_SYNC
         if st[K.S_PENDING]:  # SYNC(k) came while finishing the last tick: start k with no frame read
             ids, lengths, data = self._no_frames
             self._collect(ids, lengths, data, 0, K.NO_FID)
-        phase = int(st[K.S_PHASE])
+            phase = st.item(K.S_PHASE)
         while phase != K.PHASE_DONE:
             if phase == K.PHASE_SYNC:
                 if rx is None or rx.pos >= rx.n:  # SYNC(k) comes first
@@ -430,25 +512,30 @@ class FswBusDriver:
                                   self._tally, self._n_codes)
                     break
             burst = rx.burst
-            end = rx.pos = self._collect(burst.ids, burst.lengths, burst.data, rx.pos, K.NO_FID)
-            while end < rx.n and self._status_buf[end] == K.FALLBACK_CODE:
-                end = rx.pos = self._collect_fallback(rx, end)
-            phase = int(st[K.S_PHASE])
+            end = rx.pos = self._collect_rows(burst.ids, burst.lengths, burst.data, rx.pos, K.NO_FID)
+            if end < rx.n:  # the tick closed, or the gyro rows are full, or a frame for the Python path
+                if st[K.S_GROW]:
+                    end = rx.pos = self._collect(burst.ids, burst.lengths, burst.data, end, K.NO_FID)
+                while end < rx.n and self._status_buf[end] == K.FALLBACK_CODE:
+                    end = rx.pos = self._collect_fallback(rx, end)
+            phase = st.item(K.S_PHASE)
         return self._settle()
 
     def _collect(self, ids: np.ndarray, lengths: np.ndarray, data: np.ndarray, first: int, first_fid: int) -> int:
         """kernels.collect_rows on frames ``first``.. (growing the gyro rows when the kernel asks)."""
-        msg_i, sig_i, sig_f, seq, last_ok_t = self._table
         st = self._st_i
         while True:
-            end = K.collect_rows(ids, lengths, data, self._status_buf, self._values_buf, first, first_fid, st,
-                                 self._ft, self._consts, msg_i, sig_i, sig_f, seq, last_ok_t, self._imu_buf,
-                                 self._rows, self._tally)
+            if st[K.S_GROW]:
+                st[K.S_GROW] = 0
+                self._grow_imu()
+            end = self._collect_rows(ids, lengths, data, first, first_fid)
             if end >= len(ids) or not st[K.S_GROW]:
                 return end
-            st[K.S_GROW] = 0
-            self._imu_buf = np.concatenate([self._imu_buf, np.zeros_like(self._imu_buf)])
             first, first_fid = end, K.NO_FID
+
+    def _grow_imu(self) -> None:
+        self._imu_buf = np.concatenate([self._imu_buf, np.zeros_like(self._imu_buf)])
+        self._bind_collect()
 
     def _collect_fallback(self, rx: "_LockstepRx", i: int) -> int:
         """Frame ``i`` of ``rx`` by the receiver's Python path (a frame the compiled table cannot judge), then
@@ -466,7 +553,7 @@ class FswBusDriver:
                 self._values_buf[i, :len(row)] = row
         st = self._st_i
         if st[K.S_IMU_N] >= len(self._imu_buf):
-            self._imu_buf = np.concatenate([self._imu_buf, np.zeros_like(self._imu_buf)])
+            self._grow_imu()
         burst = rx.burst
         return self._collect(burst.ids, burst.lengths, burst.data, i, fid)
 
@@ -478,38 +565,39 @@ class FswBusDriver:
         if k:
             self._st_i[K.S_NTALLY] = 0
             targets = self._tally_targets
-            for key, count in self._tally[:k].tolist():
+            pairs = iter(self._tally_flat[:2 * k].tolist())  # key, count, key, count...: one flat list
+            for key, count in zip(pairs, pairs):
                 counts, cls = targets[key]
                 counts[cls] += count
         if vals[K.S_PHASE] != K.PHASE_DONE:
             return None
         tick = vals[K.S_TICK]
         self.last_tick = tick
-        fl = self._ft.tolist()
-        t = self.t_tick = fl[K.F_T_TICK]
-        period_s = self.period_s = fl[K.F_PERIOD]
+        # one copy of the float state holds the tick's outputs: its time, the star tracker's q_NS, the
+        # wheels' speeds this tick and their status rows (the arrays below are views of this copy)
+        out = self._ft_out.copy()
+        t = self.t_tick = out.item(K.F_T_TICK)
+        period_s = self.period_s = out.item(K.F_PERIOD)
         n = vals[K.S_IMU_N]
-        imu = None
-        omega = flags = None
+        imu = omega = flags = None
         if n:
             # the tick's gyro samples straight from the decoded rows (ImuSample objects only when asked for)
             buf = self._imu_buf
             omega = buf[:n, :3].copy()
-            flags = buf[:n, 3].tolist()
-            imu = self._imu = ImuSample(omega[n - 1], bool(flags[n - 1]), t)
+            if vals[K.S_IMU_SAT]:
+                flags = buf[:n, 3].tolist()
+            imu = self._imu = ImuSample(omega[n - 1], bool(buf.item(n - 1, 3)), t)
             self._imu_rx = t
         st_sample = None
         if vals[K.S_ST_NEW]:
-            q = self._ft[K.F_ST_Q:K.F_ST_Q + 4].copy()
-            st_sample = self._st = StarTrackerSample(q, bool(vals[K.S_ST_VALID]), vals[K.S_ST_BLIND], fl[K.F_ST_T])
+            st_sample = self._st = StarTrackerSample(out[K.F_ST_Q:K.F_ST_Q + 4], bool(vals[K.S_ST_VALID]),
+                                                     vals[K.S_ST_BLIND], out.item(K.F_ST_T))
             self._st_rx = t
         nw = self.n_wheels
-        new = vals[K.S_WHEEL_NEW:K.S_WHEEL_NEW + nw]
-        # the wheels' rows as they are now (WheelStatus objects only when ``wheels`` is read)
-        rows = self._wheel_buf[:, :5].copy() if any(new) else None
-        return TickInputs(tick, t, period_s, imu, st_sample, None, None if n else [], vals[K.S_EXPECTED],
-                          vals[K.S_RECEIVED], imu_omega_BN_B=omega, imu_saturated=flags, wheel_rows=rows,
-                          wheel_new=new)
+        return TickInputs._of_tick(tick, t, period_s, imu, st_sample, vals[K.S_EXPECTED], vals[K.S_RECEIVED], omega,
+                                   flags, vals[K.S_WHEEL_NEW:K.S_WHEEL_NEW + nw], out,
+                                   out[K.F_WHEEL_SPEED:K.F_WHEEL_SPEED + nw],
+                                   self._st_i[K.S_WHEEL_FAULT:K.S_WHEEL_FAULT + nw].copy())
 
     def _lockstep_rx(self, burst: FrameBurst) -> "_LockstepRx":
         n = len(burst.ids)
@@ -517,7 +605,9 @@ class FswBusDriver:
             size = max(n, 2 * len(self._status_buf))
             self._status_buf = np.zeros(size, dtype=np.int64)
             self._values_buf = np.zeros((size, self._width))
-        self._rx = rx = _LockstepRx(burst, n)
+            self._bind_collect()
+        rx = self._rx = self._rx_reuse  # (the burst before it is read to its end: nothing else holds it)
+        rx.burst, rx.n, rx.pos = burst, n, 0
         return rx
 
     def _next_lockstep_burst(self, grace_s: float | None, limit: int) -> "_LockstepRx | None":
@@ -560,12 +650,14 @@ class FswBusDriver:
         # Frames come in bursts after SYNC: try without waiting first, and read the clock only when the
         # queue is empty (clock reads are system calls on some hosts, e.g. the vcan-vm guest): the first
         # wait of a call starts the deadline and waits the whole timeout, without a clock read.
+        carry = self._recv_carry
         if self._timeout_s > 0.0 and not self._waited and self._whole_waits:
             # the call's first wait: the whole timeout, without a clock read or an empty read first (the
             # bus returns what is queued at once, and nothing only when the timeout has passed)
             self._waited = True
-            return recv_burst(self.bus, self._timeout_s if grace_s is None else min(self._timeout_s, grace_s), limit)
-        burst = recv_burst(self.bus, 0.0, limit)
+            first_s = self._timeout_s if grace_s is None else min(self._timeout_s, grace_s)
+            return carry(first_s) if carry is not None else recv_burst(self._bus, first_s, limit)
+        burst = carry(0.0) if carry is not None else recv_burst(self._bus, 0.0, limit)
         if burst is None:
             if self._timeout_s <= 0.0:
                 return None
@@ -578,7 +670,7 @@ class FswBusDriver:
                     return None
             if grace_s is not None:
                 remaining = min(remaining, grace_s)
-            burst = recv_burst(self.bus, remaining, limit)
+            burst = carry(remaining) if carry is not None else recv_burst(self._bus, remaining, limit)
         return burst
 
     def _start_supervision(self, now: float) -> None:
@@ -679,15 +771,19 @@ class FswBusDriver:
         """Send in order as one burst (one system call over socketcan: in the emulated guest a call costs
         15-30 us; one queue entry in process). A refused frame is counted and the rest are still tried,
         exactly as with one send per frame."""
-        while len(burst):
+        carry = self._send_carry  # (transport.send_burst's two ways, the bus's looked up once)
+        n = len(burst.ids)
+        while n:
             try:
-                sent = send_burst(self.bus, burst, TX_TIMEOUT_S)
+                sent = int(carry(burst, TX_TIMEOUT_S)) if carry is not None else \
+                    send_batch(self._bus, burst.messages(), TX_TIMEOUT_S)
             except can.CanError:
                 sent = 0
-            if sent >= len(burst):
+            if sent >= n:
                 return
             self.tx_errors += 1
             burst = burst.tail(sent + 1)
+            n = len(burst.ids)
 
     def send_wheel_torques(self, tick: int, torques_Nm: Sequence[float], cycle_done: bool = False) -> None:
         """Send RW1_CMD..RWn_CMD for ``tick``, and with ``cycle_done`` the lockstep CYCLE_DONE(tick) in
@@ -699,18 +795,14 @@ class FswBusDriver:
             tick = self._rt_sync_tick  # the application's cycle count means nothing to the simulator
         with_done = cycle_done and not self._realtime
         tau = torques_Nm
-        if type(tau) is not np.ndarray or tau.dtype != np.float64 or tau.ndim != 1 or not tau.flags.c_contiguous:
+        if type(tau) is not np.ndarray or tau.dtype != _F8 or tau.ndim != 1 or not tau.flags.c_contiguous:
             tau = np.array(list(map(float, torques_Nm)), dtype=np.float64)
         ids, dlc = self._cmd_frames[with_done]
-        out = np.zeros((len(ids), MAX_DLC), dtype=np.uint8)
-        sender = self._sender
-        table = self.icd.table
+        out = np.zeros(self._cmd_shape[with_done], dtype=np.uint8)
         # the limits, NaN -> 0, the rows and their encoding in one compiled call (kernels.command_rows)
-        done = K.command_rows(tau, tick & 0xFFFF, tick & 0xFFFFFFFF, with_done, self._cmd_limits, self._cmd_idx,
-                              self._cmd_cols, self._cmd_values, sender._counter, sender._sent, out, table.msg_i,
-                              table.sig_i, table.sig_f, table.crc_table)
+        done = self._command_rows(tau, tick & 0xFFFF, tick & 0xFFFFFFFF, 1 if with_done else 0, out)
         if done < len(ids):  # a row the compiled codec refused: the checked path names the error
-            burst = sender.burst(self._cmd_idx[:len(ids)], self._cmd_values[:len(ids)].copy(), out, done)
+            burst = self._sender.burst(self._cmd_idx[:len(ids)], self._cmd_values[:len(ids)].copy(), out, done)
         else:
             burst = FrameBurst(ids, out, dlc)
         self._send_burst(burst)
@@ -733,7 +825,12 @@ class FswBusDriver:
         self._send(self._sender.frame("CYCLE_DONE", {"tick": k & 0xFFFFFFFF}))
 
     def send_heartbeat(self, mode: int, cycle: int) -> None:
-        self._send(self._sender.frame("FSW_HEARTBEAT", {"mode": int(mode) & 0x0F, "cycle": cycle & 0xFFFFFFFF}))
+        # the frame E2ESender.frame builds, encoded in one compiled call and sent as a burst (a refused frame
+        # counted as _send counts it)
+        row = self._hb_values
+        row[0, self._hb_cols[0]] = int(mode) & 0x0F
+        row[0, self._hb_cols[1]] = cycle & 0xFFFFFFFF
+        self._send_burst(self._sender.burst(self._hb_idx, row))
 
 
 class _LockstepRx:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -27,7 +28,7 @@ from fsw.bus.e2e import _TABLE as _CRC_TABLE
 from fsw.bus.e2e import crc8_sae_j1850, e2e_crc
 from fsw.bus.burst import FrameBurst
 from fsw.bus.burst import data_frame as _data_frame
-from fsw.bus.kernels import MAX_DLC, CodecTable
+from fsw.bus.kernels import MAX_DLC, CodecTable, encode_burst
 
 DEFAULT_DBC_PATH = config_path("icd", "keepout.dbc")
 
@@ -366,12 +367,16 @@ class E2ESender:
 
     def __init__(self, icd: Icd) -> None:
         self.icd = icd
-        self._counter = np.zeros(len(icd.message_names), dtype=np.int64)  # by message index (the kernels')
-        self._sent = np.zeros(len(icd.message_names), dtype=np.int64)
+        # alive counters and sent counts by message index (the kernels'), rows of one array (one argument)
+        self._cs = np.zeros((2, len(icd.message_names)), dtype=np.int64)
+        self._counter, self._sent = self._cs[0], self._cs[1]
         self._fast = {name: (spec.codec, spec.frame_id, icd.message_index[name])
                       for name, spec in icd.messages.items() if spec.codec}
         self._ids = np.array([icd.messages[n].frame_id for n in icd.message_names], dtype=np.int64)
         self._dlc = icd.table.dlc
+        t = icd.table
+        # kernels.encode_rows with this sender's counters and the table bound (a burst passes its rows only)
+        self._encode = partial(encode_burst, self._cs, t.packed_i, t.sig_f)
 
     @property
     def counters(self) -> dict[str, int]:
@@ -404,6 +409,8 @@ class E2ESender:
         n = len(idx)
         if out is None:
             out = np.zeros((n, MAX_DLC), dtype=np.uint8)
+        if done == 0 and n:  # the whole burst, without slicing (the usual call: every row encodes)
+            done = self._encode(idx, values, out)
         while done < n:
             done += self.icd.table.encode(idx[done:], values[done:], self._counter, self._sent, out[done:])
             if done < n:

@@ -68,14 +68,21 @@ class CodecTable:
             [self.start, self.length, self.signed.astype(np.int64)], axis=2)))
         object.__setattr__(self, "sig_f", np.ascontiguousarray(np.stack(
             [self.scale, self.offset, self.vmin, self.vmax, self.alo, self.ahi], axis=2)))
+        # ... and msg_i, sig_i and the CRC table in one for encode_burst (T_* header)
+        m, s = self.sig_i.shape[0], self.sig_i.shape[1]
+        head = np.array([m, s, T_HEAD, T_HEAD + 4 * m, T_HEAD + 4 * m + 3 * m * s], dtype=np.int64)
+        object.__setattr__(self, "packed_i", np.ascontiguousarray(np.concatenate(
+            [head, self.msg_i.ravel(), self.sig_i.ravel(), self.crc_table.astype(np.int64)])))
 
     def encode(self, idx: np.ndarray, values: np.ndarray, counters: np.ndarray, sent: np.ndarray,
                out: np.ndarray) -> int:
         """:func:`encode_rows` over this table."""
-        return encode_rows(idx, values, counters, sent, out, self.msg_i, self.sig_i, self.sig_f, self.crc_table)
+        return encode_rows(counters, sent, self.msg_i, self.sig_i, self.sig_f, self.crc_table, idx, values, out)
 
 
 _I = "int64[::1]"
+(T_M, T_S, T_OFF_MSG, T_OFF_SIG, T_OFF_CRC) = range(5)  # CodecTable.packed_i's header
+T_HEAD = T_OFF_CRC + 1
 _I2 = "int64[:, ::1]"
 _F2 = "float64[:, ::1]"
 
@@ -114,17 +121,30 @@ def encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_tabl
     return n
 
 
-@njit(f"int64({_I}, {_F2}, {_I}, {_I}, uint8[:, ::1], {_I2}, int64[:, :, ::1], float64[:, :, ::1], {_I})",
+@njit(f"int64({_I}, {_I}, {_I2}, int64[:, :, ::1], float64[:, :, ::1], {_I}, {_I}, {_F2}, uint8[:, ::1])",
       cache=True)
-def encode_rows(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table):  # pragma: no cover - compiled
+def encode_rows(counters, sent, msg_i, sig_i, sig_f, crc_table, idx, values, out):  # pragma: no cover - compiled
     """Encode row i of ``values`` (slots 2.. of message ``idx[i]``) into ``out[i, :dlc]`` with the message's
     alive counter ``counters[m]`` (then advanced mod 16, and ``sent[m]`` counted) and its E2E CRC. Stops at
     the first row it cannot encode (a value outside its DBC range or NaN, a raw value not fitting its
     bits, an unsupported message): returns how many rows were encoded; the caller takes the checked
     per-frame path for that row. Table: ``msg_i[m] = (dlc, crc seed, signals, max delta)``,
     ``sig_i[m, k] = (start bit, bits, signed)``, ``sig_f[m, k] = (scale, offset, min, max, accept low,
-    accept high)``."""
+    accept high)``. (The sender's and the table's arrays come first: a sender binds them once,
+    functools.partial.)"""
     return encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table, idx.shape[0])
+
+
+@njit(f"int64({_I2}, {_I}, float64[:, :, ::1], {_I}, {_F2}, uint8[:, ::1])", cache=True)
+def encode_burst(cs, ti, sig_f, idx, values, out):  # pragma: no cover - compiled
+    """:func:`encode_rows` with fewer arguments (a compiled call's cost grows with them, ~0.15 us per array):
+    the sender's alive counters and sent counts as the rows of ``cs``, the table's msg_i, sig_i and CRC table
+    packed in ``ti`` (``CodecTable.packed_i``)."""
+    m, s = ti[T_M], ti[T_S]
+    msg_i = ti[ti[T_OFF_MSG]:ti[T_OFF_MSG] + 4 * m].reshape((m, 4))
+    sig_i = ti[ti[T_OFF_SIG]:ti[T_OFF_SIG] + 3 * m * s].reshape((m, s, 3))
+    crc_table = ti[ti[T_OFF_CRC]:ti[T_OFF_CRC] + 256]
+    return encode_range(idx, values, cs[0], cs[1], out, msg_i, sig_i, sig_f, crc_table, idx.shape[0])
 
 
 @njit(cache=True)
@@ -231,21 +251,28 @@ ROLE_WHEEL = 10  # + wheel index (0-based)
 (S_PHASE, S_NTALLY, S_UNEXPECTED, S_STALE, S_INCOMPLETE, S_GROW, S_HAS_LAST, S_LAST, S_TICK, S_EXPECTED,
  S_RECEIVED, S_FAILED, S_PENDING, S_P_TICK, S_P_FOLLOWING, S_SUPERVISED, S_IMU_N, S_ST_HAVE_A, S_ST_HAVE_B,
  S_ST_SEQ_A, S_ST_SEQ_B, S_ST_NEW, S_ST_VALID, S_ST_BLIND, S_WHEEL_NEW) = range(25)
+S_IMU_SAT = S_WHEEL_NEW + 6  # the tick's gyro samples flagged saturated
+S_WHEEL_FAULT = S_IMU_SAT + 1  # + wheel index: the fault flags of its status this tick, -1 when none came
 NO_FID = -(1 << 40)  # collect_rows' first_fid when frame ``first`` is not judged yet
-S_SIZE = S_WHEEL_NEW + 6
+S_SIZE = S_WHEEL_FAULT + 6
 # ... and its configuration slots (cfg): value-row columns of the signals the driver reads
 (C_TICK, C_FOLLOWING, C_PERIOD, C_IMU_X, C_IMU_Y, C_IMU_Z, C_IMU_SAT, C_QW, C_QX, C_VALID, C_BLIND, C_SEQ_A,
  C_QY, C_QZ, C_SEQ_B, C_AGE, C_SPEED, C_TORQUE, C_CURRENT, C_TEMP, C_FAULT, C_N_CODES, C_BUS_ROW,
- C_OFF_KIND, C_OFF_ROLE, C_OFF_CRC, C_OFF_WATCH, C_N_WATCH) = range(28)
-C_SIZE = C_N_WATCH + 1
-# The constant integer arrays travel as one (``consts``: cfg, then kind_of_id, role_of_id, the CRC table and
-# the watched messages at the C_OFF_* offsets; a compiled call's cost grows with its arguments), the
-# watched messages' timeout limits at the end of ``ft`` (F_SIZE on) and the star tracker halves and wheel
-# rows in one array (``rows``: halves A, B, then one row per wheel).
+ C_OFF_KIND, C_OFF_ROLE, C_OFF_CRC, C_OFF_WATCH, C_N_WATCH, C_N_MSG, C_N_SIG, C_WIDTH, C_OFF_MSG, C_OFF_SIG,
+ C_OFF_HALVES, C_OFF_SIGF, C_N_TALLY) = range(36)
+C_SIZE = C_N_TALLY + 1
+# The constant integer arrays travel as one (``consts``: cfg, then kind_of_id, role_of_id, the CRC table,
+# the watched messages and the table's msg_i and sig_i at the C_OFF_* offsets; a compiled call's cost grows
+# with its arguments, ~0.15 us per array), the tally after the integer state (``st``: S_SIZE on), the
+# watched messages' timeout limits, the star tracker halves A, B (C_OFF_HALVES) and the table's sig_f
+# (C_OFF_SIGF) after the float state (``ft``: F_SIZE on), and the wheels' status rows in ``ft`` too
+# (F_WHEEL_ROWS: one copy of ``ft[:F_SIZE]`` is a closed tick's float outputs).
 # ... and its float state (ft) slots
 F_T_TICK, F_PERIOD, F_P_PERIOD_MS, F_ST_T, F_ST_Q = 0, 1, 2, 3, 4  # F_ST_Q..F_ST_Q+3: q_NS
 F_WHEEL_T = 8  # + wheel index: the time of each wheel's newest status
-F_SIZE = F_WHEEL_T + 6
+F_WHEEL_SPEED = F_WHEEL_T + 6  # + wheel index: the speed of its status this tick, NaN when none came
+F_WHEEL_ROWS = F_WHEEL_SPEED + 6  # + 5 * wheel index: its newest status (speed, torque, current, temp, fault)
+F_SIZE = F_WHEEL_ROWS + 5 * 6
 PHASE_SYNC, PHASE_TICK, PHASE_DONE = 0, 1, 2  # waiting for SYNC(k) / for tick k's frames / tick closed
 TIMEOUT_CODE = 10  # tally code of a timeout (the tally's other codes are the class codes above)
 
@@ -284,9 +311,12 @@ def _start_tick(st, ft, cfg, values, i, seq, last_ok_t):  # pragma: no cover - c
     st[S_RECEIVED] = 0
     st[S_FAILED] = 0
     st[S_IMU_N] = 0
+    st[S_IMU_SAT] = 0
     st[S_ST_NEW] = 0
     for w in range(6):
         st[S_WHEEL_NEW + w] = 0
+        st[S_WHEEL_FAULT + w] = -1
+        ft[F_WHEEL_SPEED + w] = np.nan
     st[S_PHASE] = PHASE_TICK if following > 0 else PHASE_DONE
 
 
@@ -336,12 +366,12 @@ def star_tracker_pair(st, ft, cfg, st_half, now):  # pragma: no cover - compiled
     st[S_ST_HAVE_B] = 0
 
 
-@njit("int64(int64[::1], int64[::1], uint8[:, ::1], int64[::1], float64[:, ::1], int64, int64, int64[::1], "
-      "float64[::1], int64[::1], int64[:, ::1], int64[:, :, ::1], float64[:, :, ::1], int64[:, ::1], float64[::1], "
-      "float64[:, ::1], float64[:, ::1], int64[:, ::1])", cache=True)
-def collect_rows(ids, lengths, data, status, values, first, first_fid, st, ft, consts, msg_i, sig_i, sig_f, seq,
-                 last_ok_t, imu, rows, tally):  # pragma: no cover - compiled
-    """FswBusDriver.collect_tick's work on frames ``first``.. of a burst, in one call: each frame classified as
+@njit("int64(int64[::1], float64[:, ::1], int64[::1], float64[::1], int64[::1], int64[:, ::1], float64[::1], "
+      "float64[:, ::1], int64[::1], int64[::1], uint8[:, ::1], int64, int64)", cache=True)
+def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, lengths, data, first,
+                 first_fid):  # pragma: no cover - compiled
+    """FswBusDriver.collect_tick's work on frames ``first``.. of a burst (``ids``, ``lengths``, ``data``), in one
+    call (the driver's arrays come first, bound once: functools.partial), each frame classified as
     :func:`classify_rows` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``) and counted
     in ``tally`` ((message row * n_codes + code, count) pairs, ``st[S_NTALLY]`` of them), then what the
     driver does with it, by phase (``st[S_PHASE]``):
@@ -351,20 +381,26 @@ def collect_rows(ids, lengths, data, status, values, first, first_fid, st, ft, c
         frame belongs to no announced tick (counted unexpected);
       * tick k: a delivered device frame is received (the gyro's into ``imu`` rows (x, y, z, saturated),
         the star tracker's halves into ``st_half`` (a sample when both halves of one ``sample_seq`` are
-        in), a wheel's status into ``wheels`` (speed, torque, current, temp, fault)), one that fails E2E
+        in), a wheel's status into ``ft``'s rows (F_WHEEL_ROWS) and the tick's speeds and fault flags
+        (F_WHEEL_SPEED, S_WHEEL_FAULT), the saturated gyro samples counted), one that fails E2E
         counts as failed; a SYNC of a later tick is kept pending and closes the tick, an older one is
         stale; the announced count of received frames closes it. A closed tick runs :func:`finish_tick`.
 
     Returns the index after the last frame handled: where the tick closed or the burst ended, or before a
     frame for the Python path (``status`` FALLBACK_CODE) or a gyro frame with ``imu`` full (``st[S_GROW]``)."""
     cfg = consts[:C_SIZE]
+    m_n, s_n, width = cfg[C_N_MSG], cfg[C_N_SIG], cfg[C_WIDTH]
+    msg_i = consts[cfg[C_OFF_MSG]:cfg[C_OFF_MSG] + 4 * m_n].reshape((m_n, 4))
+    sig_i = consts[cfg[C_OFF_SIG]:cfg[C_OFF_SIG] + 3 * m_n * s_n].reshape((m_n, s_n, 3))
+    sig_f = ft[cfg[C_OFF_SIGF]:cfg[C_OFF_SIGF] + 6 * m_n * s_n].reshape((m_n, s_n, 6))
+    st = st_all[:S_SIZE]
+    tally = st_all[S_SIZE:S_SIZE + 2 * cfg[C_N_TALLY]].reshape((cfg[C_N_TALLY], 2))
     kind_of_id = consts[cfg[C_OFF_KIND]:cfg[C_OFF_ROLE]]
     role_of_id = consts[cfg[C_OFF_ROLE]:cfg[C_OFF_CRC]]
     crc_table = consts[cfg[C_OFF_CRC]:cfg[C_OFF_WATCH]]
     watch = consts[cfg[C_OFF_WATCH]:cfg[C_OFF_WATCH] + cfg[C_N_WATCH]]
     watch_limit = ft[F_SIZE:F_SIZE + cfg[C_N_WATCH]]
-    st_half = rows[:2]
-    wheels = rows[2:]
+    st_half = ft[cfg[C_OFF_HALVES]:cfg[C_OFF_HALVES] + 2 * width].reshape((2, width))
     n = ids.shape[0]
     n_codes = cfg[C_N_CODES]
     bus_row = cfg[C_BUS_ROW]
@@ -435,6 +471,8 @@ def collect_rows(ids, lengths, data, status, values, first, first_fid, st, ft, c
             imu[k, 1] = values[j, cfg[C_IMU_Y]]
             imu[k, 2] = values[j, cfg[C_IMU_Z]]
             imu[k, 3] = values[j, cfg[C_IMU_SAT]]
+            if imu[k, 3] != 0.0:
+                st[S_IMU_SAT] += 1
             st[S_IMU_N] = k + 1
         elif role == ROLE_ST_A or role == ROLE_ST_B:
             h = role - ROLE_ST_A
@@ -445,13 +483,16 @@ def collect_rows(ids, lengths, data, status, values, first, first_fid, st, ft, c
             star_tracker_pair(st, ft, cfg, st_half, now)
         elif role >= ROLE_WHEEL:
             w = role - ROLE_WHEEL
-            wheels[w, 0] = values[j, cfg[C_SPEED]]
-            wheels[w, 1] = values[j, cfg[C_TORQUE]]
-            wheels[w, 2] = values[j, cfg[C_CURRENT]]
-            wheels[w, 3] = values[j, cfg[C_TEMP]]
-            wheels[w, 4] = values[j, cfg[C_FAULT]]
+            r = F_WHEEL_ROWS + 5 * w
+            ft[r] = values[j, cfg[C_SPEED]]
+            ft[r + 1] = values[j, cfg[C_TORQUE]]
+            ft[r + 2] = values[j, cfg[C_CURRENT]]
+            ft[r + 3] = values[j, cfg[C_TEMP]]
+            ft[r + 4] = values[j, cfg[C_FAULT]]
             ft[F_WHEEL_T + w] = now
             st[S_WHEEL_NEW + w] = 1
+            ft[F_WHEEL_SPEED + w] = ft[r]
+            st[S_WHEEL_FAULT + w] = np.int64(ft[r + 4])  # truncation, as WheelStatus' int()
         if st[S_RECEIVED] >= st[S_EXPECTED]:
             st[S_PHASE] = PHASE_DONE
     if st[S_PHASE] == PHASE_DONE:  # (never called once the tick is closed)
@@ -459,16 +500,53 @@ def collect_rows(ids, lengths, data, status, values, first, first_fid, st, ft, c
     return i
 
 
-@njit("int64(float64[::1], int64, int64, boolean, float64[:, ::1], int64[::1], int64[::1], float64[:, ::1], "
-      "int64[::1], int64[::1], uint8[:, ::1], int64[:, ::1], int64[:, :, ::1], float64[:, :, ::1], int64[::1])",
-      cache=True)
-def command_rows(torques, tick_lsb, done_tick, with_done, limits, idx, cols, values, counters, sent, out, msg_i,
-                 sig_i, sig_f, crc_table):  # pragma: no cover - compiled
-    """FswBusDriver.send_wheel_torques' frames in one call: wheel i's command row (``torques[i]`` limited to
-    ``limits[i]`` = (low, high), NaN or infinite sent as 0, and ``tick_lsb``) and, ``with_done``, the
+# command_rows' packed arrays (a compiled call's cost grows with its arguments, ~0.15 us per array here):
+# ``ic`` ints: this header, then the messages (n_w + 1), the value slots (torque, tick_lsb, CYCLE_DONE's tick),
+# the table's msg_i, sig_i and CRC table at the offsets the header gives; ``fc`` floats: the limits (n_w x 2),
+# the table's sig_f, then the value rows ((n_w + 1) x width, written by each call) at the header's offsets
+(CMD_NW, CMD_M, CMD_S, CMD_WIDTH, CMD_OFF_IDX, CMD_OFF_COLS, CMD_OFF_MSG, CMD_OFF_SIG, CMD_OFF_CRC, CMD_OFF_SIGF,
+ CMD_OFF_VALUES) = range(11)
+CMD_HEAD = CMD_OFF_VALUES + 1
+
+
+def pack_commands(limits: np.ndarray, idx: np.ndarray, cols: np.ndarray, width: int, msg_i: np.ndarray,
+                  sig_i: np.ndarray, sig_f: np.ndarray, crc_table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(ic, fc) for :func:`command_rows` (layout above); the value rows are ``fc[ic[CMD_OFF_VALUES]:]``."""
+    nw = len(limits)
+    m, s = sig_i.shape[0], sig_i.shape[1]
+    head = np.zeros(CMD_HEAD, dtype=np.int64)
+    parts = [np.asarray(idx, dtype=np.int64), np.asarray(cols, dtype=np.int64), msg_i.ravel(), sig_i.ravel(),
+             crc_table.astype(np.int64)]
+    offsets = np.cumsum([CMD_HEAD] + [len(p) for p in parts])
+    head[:CMD_OFF_IDX] = nw, m, s, width
+    head[CMD_OFF_IDX:CMD_OFF_CRC + 1] = offsets[:5]
+    head[CMD_OFF_SIGF] = 2 * nw
+    head[CMD_OFF_VALUES] = 2 * nw + sig_f.size
+    ic = np.ascontiguousarray(np.concatenate([head] + parts))
+    fc = np.concatenate([np.asarray(limits, dtype=np.float64).ravel(), sig_f.ravel(), np.zeros((nw + 1) * width)])
+    return ic, fc
+
+
+@njit("int64(int64[::1], float64[::1], int64[:, ::1], float64[::1], int64, int64, int64, uint8[:, ::1])", cache=True)
+def command_rows(ic, fc, cs, torques, tick_lsb, done_tick, with_done, out):  # pragma: no cover - compiled
+    """FswBusDriver.send_wheel_torques' frames in one call (the driver's packed arrays ``ic``, ``fc``
+    (:func:`pack_commands`) and its sender's alive counters and sent counts ``cs`` = (counters, sent) first,
+    bound once: functools.partial): wheel i's command row (``torques[i]`` limited to
+    ``limits[i]`` = (low, high), NaN or infinite sent as 0, and ``tick_lsb``) and, ``with_done`` (0 / 1), the
     CYCLE_DONE row (``done_tick``) into ``values`` (slots ``cols`` = torque, tick_lsb, CYCLE_DONE's tick),
     then encoded as :func:`encode_rows` does (messages ``idx``). Returns the rows encoded (as
     encode_rows: fewer when one cannot be)."""
+    nw, m, s, width = ic[CMD_NW], ic[CMD_M], ic[CMD_S], ic[CMD_WIDTH]
+    idx = ic[ic[CMD_OFF_IDX]:ic[CMD_OFF_IDX] + nw + 1]
+    cols = ic[ic[CMD_OFF_COLS]:ic[CMD_OFF_COLS] + 3]
+    msg_i = ic[ic[CMD_OFF_MSG]:ic[CMD_OFF_MSG] + 4 * m].reshape((m, 4))
+    sig_i = ic[ic[CMD_OFF_SIG]:ic[CMD_OFF_SIG] + 3 * m * s].reshape((m, s, 3))
+    crc_table = ic[ic[CMD_OFF_CRC]:ic[CMD_OFF_CRC] + 256]
+    limits = fc[:2 * nw].reshape((nw, 2))
+    sig_f = fc[ic[CMD_OFF_SIGF]:ic[CMD_OFF_SIGF] + 6 * m * s].reshape((m, s, 6))
+    values = fc[ic[CMD_OFF_VALUES]:ic[CMD_OFF_VALUES] + (nw + 1) * width].reshape((nw + 1, width))
+    counters = cs[0]
+    sent = cs[1]
     n = torques.shape[0]
     values[:, :] = 0.0
     for i in range(n):
@@ -483,4 +561,5 @@ def command_rows(torques, tick_lsb, done_tick, with_done, limits, idx, cols, val
         values[i, cols[0]] = tau
         values[i, cols[1]] = tick_lsb
     values[n, cols[2]] = done_tick
-    return encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table, n + 1 if with_done else n)
+    return encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table,
+                        n + 1 if with_done != 0 else n)

@@ -338,9 +338,11 @@ class LightVirtualBus(VirtualBus):
         self._spill: list[can.Message] = []  # frames of a burst ``recv`` has begun handing out, reversed
 
     def send_burst(self, burst: FrameBurst, timeout: float | None = None) -> int:
-        self._check_if_open()
+        if not self._open:
+            self._check_if_open()  # raises
+        own, skip_own = self.queue, not self.receive_own_messages
         for bus_queue in self.channel:
-            if bus_queue is self.queue and not self.receive_own_messages:
+            if bus_queue is own and skip_own:
                 continue
             if not isinstance(bus_queue, queue.SimpleQueue):  # a plain VirtualBus: frame by frame
                 for msg in burst.messages():
@@ -351,26 +353,36 @@ class LightVirtualBus(VirtualBus):
                         raise can.CanOperationError("Could not send message to one or more recipients")
                 continue
             bus_queue.put(burst)
-        return len(burst)
+        return len(burst.ids)
 
     def recv_burst(self, timeout: float | None = 0.0) -> FrameBurst | None:
         if self._filters is not None or not self._open:
             return recv_burst(_PlainReader(self), timeout)
+        q = self.queue
         parts: list[FrameBurst] = []
         if self._spill:
             parts.append(FrameBurst.from_messages(self._spill[::-1]))
             self._spill = []
-        get = self.queue.get_nowait
-        try:
-            if not parts:
-                item = get() if timeout is not None and timeout <= 0.0 else self.queue.get(True, timeout)
-                parts.append(item if type(item) is FrameBurst else FrameBurst.from_messages([item]))
-            while True:
-                item = get()
-                parts.append(item if type(item) is FrameBurst else FrameBurst.from_messages([item]))
-        except queue.Empty:
-            pass
-        return FrameBurst.join(parts) if parts else None
+        elif q.empty():  # (an empty queue asked first: no queue.Empty raised and caught)
+            if timeout is not None and timeout <= 0.0:
+                return None
+            try:
+                item = q.get(True, timeout)
+            except queue.Empty:
+                return None
+            if q.empty() and type(item) is FrameBurst:
+                return item
+            parts.append(item if type(item) is FrameBurst else FrameBurst.from_messages([item]))
+        else:
+            item = q.get_nowait()  # (this bus is the queue's one reader: not empty means an item is there)
+            if q.empty() and type(item) is FrameBurst:
+                return item  # the usual lockstep read: one burst queued
+            parts.append(item if type(item) is FrameBurst else FrameBurst.from_messages([item]))
+        get = q.get_nowait
+        while not q.empty():
+            item = get()
+            parts.append(item if type(item) is FrameBurst else FrameBurst.from_messages([item]))
+        return FrameBurst.join(parts)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         self._check_if_open()

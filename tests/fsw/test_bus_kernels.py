@@ -194,3 +194,26 @@ def test_light_virtual_bus_carries_bursts_and_plain_readers_see_the_same_frames(
     finally:
         for bus in (tx, rx_burst, rx_plain):
             bus.shutdown()
+
+
+def test_encode_burst_matches_encode_rows_on_the_packed_table(icd: Icd) -> None:
+    """kernels.encode_burst (E2ESender's: counters/sent as one array, the table packed) gives encode_rows'
+    bytes, counters and stopping row, also where a row is refused."""
+    from fsw.bus.kernels import encode_burst
+
+    rng = np.random.default_rng(7)
+    table, m = icd.table, len(icd.message_names)
+    cs = np.zeros((2, m), dtype=np.int64)
+    counters, sent = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
+    for trial in range(200):
+        names, _, values = _random_rows(icd, rng, 5)
+        idx = np.array([icd.message_index[n] for n in names], dtype=np.int64)
+        if trial % 5 == 0:  # a refused row: out of range or NaN
+            values[int(rng.integers(5)), 2 + int(rng.integers(max(1, table.nsig[idx].min() - 2)))] = \
+                [np.nan, 1e12, -1e12][trial % 3]
+        a, b = np.zeros((5, 8), dtype=np.uint8), np.zeros((5, 8), dtype=np.uint8)
+        got = encode_burst(cs, table.packed_i, table.sig_f, idx, values, a)
+        want = table.encode(idx, values, counters, sent, b)
+        assert got == want
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(cs, np.stack([counters, sent]))
