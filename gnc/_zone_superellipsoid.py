@@ -1009,6 +1009,20 @@ def _cell_grids(n: int, m: int, k: int, sc: int, sub: int) -> tuple[np.ndarray, 
     return ws, wd
 
 
+def grid_sizes(n: int, resolution: tuple[int, int] | None = None) -> tuple[int, int, int, int, int]:
+    """(m, k, sc, M, N) of the grid on S^(n-1): cells per circle / cube-face edge, samples per cell edge,
+    cells per super-cell edge, cells, samples."""
+    if n == 2:
+        m, k = resolution or (128, 16)
+        sc = next(s for s in (8, 4, 2, 1) if m % s == 0)
+        return m, k, sc, m, m * k
+    if n == 3:
+        m, k = resolution or (12, 4)
+        sc = next(s for s in (3, 4, 2, 1) if m % s == 0)
+        return m, k, sc, 6 * m * m, 6 * (m * k) ** 2
+    raise ValueError(f"superellipsoid zones are implemented for S^2 and S^3 (n = 2, 3), got n = {n}")
+
+
 def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] | None = None):
     """Precompute samples (2N, dim) in grid order (rows [0, N): boundary points b; rows [N, 2N): their
     w in the first n columns; scoring reads only the compact b block), cells (M, dim + 4), super-cells (Ms, dim + 2),
@@ -1016,18 +1030,7 @@ def build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, int] 
     per cell edge, cells per circle / face edge, cells per super-cell edge) and cell_of (N,), the cell
     of every sample. All cells at once (array expressions per element as the per-cell ones)."""
     sub = 4
-    if n == 2:
-        m, k = resolution or (128, 16)
-        sc = next(s for s in (8, 4, 2, 1) if m % s == 0)
-        M = m
-        N = m * k
-    elif n == 3:
-        m, k = resolution or (12, 4)
-        sc = next(s for s in (3, 4, 2, 1) if m % s == 0)
-        M = 6 * m * m
-        N = 6 * (m * k) ** 2
-    else:
-        raise ValueError(f"superellipsoid zones are implemented for S^2 and S^3 (n = 2, 3), got n = {n}")
+    m, k, sc, M, N = grid_sizes(n, resolution)
     G = m * k
     ws, wd = _cell_grids(n, m, k, sc, sub)
     S, D = ws.shape[1], wd.shape[1]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from gnc import _zone_superellipsoid as se
-from gnc._zone_superellipsoid import boundary_points
+from gnc._zone_superellipsoid import boundary_points, grid_sizes
 from gnc.zones import default_tangent_basis, paper_s3_star_zone
 
 
@@ -64,18 +64,7 @@ def _ref_build_cells(geom: np.ndarray, dim: int, n: int, resolution: tuple[int, 
     per cell edge, cells per circle / face edge, cells per super-cell edge) and cell_of (N,), the cell
     of every sample."""
     sub = 4
-    if n == 2:
-        m, k = resolution or (128, 16)
-        sc = next(s for s in (8, 4, 2, 1) if m % s == 0)
-        M = m
-        N = m * k
-    elif n == 3:
-        m, k = resolution or (12, 4)
-        sc = next(s for s in (3, 4, 2, 1) if m % s == 0)
-        M = 6 * m * m
-        N = 6 * (m * k) ** 2
-    else:
-        raise ValueError(f"superellipsoid zones are implemented for S^2 and S^3 (n = 2, 3), got n = {n}")
+    m, k, sc, M, N = grid_sizes(n, resolution)
     G = m * k
     samples = np.zeros((2 * N, dim))
     cell_of = np.empty(N, dtype=np.int32)
