@@ -131,7 +131,7 @@ def _tick_breakdown(duration: float) -> dict:
     timed(fdir.Fdir, "evaluate_cycle", "fsw_cycle.fdir")  # residual, wheel values and every monitor
     timed(FswBusDriver, "send_wheel_torques", "fsw_cycle.wheel_commands_out")
     timed(FlightSoftware, "_send_gnc_tm", "fsw_cycle.telemetry")
-    timed(devices.Devices, "step_world", "world_step_and_commands_in.world_and_sensors")
+    timed(devices.Devices, "step_period", "world_step_and_commands_in.world_and_sensors")  # what end_tick calls
     try:
         plan, _ = _plan(2, duration)
         # a first run loads the worker's caches (numba, ICD, ephemeris), as a campaign worker's first run does
