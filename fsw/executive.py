@@ -177,7 +177,9 @@ class Executive:
         OS sleep granularity.
         """
         P = self.period_s
-        t0 = self.clock() + P
+        # the first cycle at once: a simulator already sending SYNC (the SIL starts it when the flight
+        # software has started) has its tick 0 answered, not left to look late
+        t0 = self.clock()
         k = 0
         n = 0
         self.stop_requested = False

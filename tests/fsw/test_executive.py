@@ -81,6 +81,23 @@ def test_realtime_schedule_jitter_and_missed_starts() -> None:
     assert slips and slips[0][0] == "GNC"
 
 
+def test_realtime_first_cycle_starts_at_once_then_every_period() -> None:
+    """A simulator started with the flight software is already sending SYNC: the first cycle must not wait
+    a period (it would leave tick 0 unanswered, a late cycle in every real-time run)."""
+    clock = FakeClock()
+    starts: list[float] = []
+
+    def collect():
+        starts.append(clock.t)
+        return SimpleNamespace()
+
+    ex = _executive(clock, [0.001] * 10, [], [])
+    n = ex.run_realtime(collect, duration_s=0.5, sleep=clock.sleep, spin_s=0.0)
+    assert n == 5
+    assert starts[0] == pytest.approx(100.0, abs=1e-12)
+    assert starts == pytest.approx([100.0 + 0.1 * k for k in range(5)], abs=1e-9)
+
+
 def test_reset_counters() -> None:
     clock = FakeClock()
     ex = _executive(clock, [0.2], [], [])
