@@ -124,7 +124,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if outcome.interrupted:
         console.print(f"[yellow]interrupted: {len(outcome.records)} finished runs kept in {out}; "
                       f"`keepout campaign run {args.campaign} --out {out}` resumes[/yellow]")
-    results = finalize(plan, out, outcome.records, report=not args.no_report)
+    try:
+        results = finalize(plan, out, outcome.records, report=not args.no_report)
+    except KeyboardInterrupt:
+        # Ctrl-C after the last run, while tabulating: the runs' records are on disk, nothing is lost
+        console.print(f"[yellow]interrupted while tabulating: {len(outcome.records)} finished runs kept in "
+                      f"{out}; `keepout campaign report {out}` tabulates them[/yellow]")
+        return 130
     code = _print_results(console, results)
     return 130 if outcome.interrupted else code
 

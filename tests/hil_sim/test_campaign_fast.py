@@ -71,8 +71,10 @@ def test_ctrl_c_stops_the_campaign_and_keeps_finished_runs(tmp_path):
     import time
 
     out = tmp_path / "interrupted"
+    # 600 s runs (about a second each here): Ctrl-C must land while runs remain (5 s runs all finished
+    # before the signal once the loop got fast)
     proc = subprocess.Popen([sys.executable, "-m", "hil_sim", "campaign", "run", str(REGRESSION), "--runs", "8",
-                             "--workers", "1", "--duration", "5", "--out", str(out), "--no-report"],
+                             "--workers", "1", "--duration", "600", "--out", str(out), "--no-report"],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 240
@@ -89,6 +91,22 @@ def test_ctrl_c_stops_the_campaign_and_keeps_finished_runs(tmp_path):
     assert 1 <= len(kept) < 8 and "interrupted" in output
     # the finished runs were tabulated, and the folder resumes
     assert len(pd.read_parquet(out / "results.parquet")) == len(kept)
+
+
+def test_ctrl_c_while_tabulating_exits_130_and_keeps_the_runs(tmp_path, monkeypatch, capsys):
+    from hil_sim.campaign import runner
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "finalize", interrupted)
+    out = tmp_path / "tabulating"
+    code = main(["campaign", "run", str(REGRESSION), "--runs", "2", "--workers", "1", "--duration", "5",
+                 "--out", str(out), "--no-report"])
+    assert code == 130
+    assert len(list((out / "runs").glob("run-*.json"))) == 2
+    said = capsys.readouterr()
+    assert "interrupted while tabulating" in said.out + said.err and "campaign report" in said.out + said.err
 
 
 @pytest.mark.slow
