@@ -19,8 +19,7 @@ import numpy as np
 from numba import njit
 
 from fsw.bus.burst import MAX_DLC
-from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_UNKNOWN, UNKNOWN_CODE, _tally, encode_range,
-                             judge_frame)
+from fsw.bus.kernels import FALLBACK_CODE, _tally, encode_range, judge_frame, unjudged_code
 from hil_sim import world as wd
 from hil_sim.dynamics import W_KT
 from hil_sim.world import _world_period_kernel, view1, view2, view3
@@ -338,21 +337,14 @@ def receive_commands(ids, lengths, data, first, status, values, now, awaited, co
     n = ids.shape[0]
     for i in range(first, n):
         fid = ids[i]
-        if fid < 0 or fid >= n_ids:
-            status[i] = FALLBACK_CODE
-            return i
+        code = unjudged_code(fid, kind_of_id)
+        if code >= 0:
+            status[i] = code
+            if code == FALLBACK_CODE:
+                return i
+            _tally(tally, rs, bus_key + code)  # unknown ids and own echoes are counted on the bus row
+            continue
         m = kind_of_id[fid]
-        if m < 0:
-            if m == KIND_UNKNOWN:
-                status[i] = UNKNOWN_CODE
-                _tally(tally, rs, bus_key + UNKNOWN_CODE)
-                continue
-            if m == KIND_ECHO:
-                status[i] = ECHO_CODE
-                _tally(tally, rs, bus_key + ECHO_CODE)
-                continue
-            status[i] = FALLBACK_CODE
-            return i
         code = judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t)
         status[i] = code
         _tally(tally, rs, m * n_codes + code)

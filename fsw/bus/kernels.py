@@ -198,6 +198,23 @@ def judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table
     return code
 
 
+@njit(cache=True)
+def unjudged_code(fid, kind_of_id):  # pragma: no cover - compiled
+    """The class code of a frame id that is not judged as a table message: UNKNOWN_CODE, ECHO_CODE, or
+    FALLBACK_CODE (an id outside the table, or a message for the Python path); -1 for a message to judge
+    (``kind_of_id[fid]`` its index)."""
+    if fid < 0 or fid >= kind_of_id.shape[0]:
+        return FALLBACK_CODE
+    m = kind_of_id[fid]
+    if m >= 0:
+        return -1
+    if m == KIND_UNKNOWN:
+        return UNKNOWN_CODE
+    if m == KIND_ECHO:
+        return ECHO_CODE
+    return FALLBACK_CODE
+
+
 @njit("int64(int64[::1], int64[::1], uint8[:, ::1], int64[::1], float64[:, ::1], int64, float64, int64, int64, "
       "float64, float64, boolean[::1], int64, int64[::1], int64[:, ::1], int64[:, :, ::1], float64[:, :, ::1], "
       "int64[::1], int64[:, ::1], float64[::1])", cache=True)
@@ -216,19 +233,13 @@ def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_
     n = ids.shape[0]
     for i in range(first, n):
         fid = ids[i]
-        if fid < 0 or fid >= kind_of_id.shape[0]:
-            status[i] = FALLBACK_CODE
-            return i
+        code = unjudged_code(fid, kind_of_id)
+        if code >= 0:
+            status[i] = code
+            if code == FALLBACK_CODE:
+                return i
+            continue
         m = kind_of_id[fid]
-        if m < 0:
-            if m == KIND_UNKNOWN:
-                status[i] = UNKNOWN_CODE
-                continue
-            if m == KIND_ECHO:
-                status[i] = ECHO_CODE
-                continue
-            status[i] = FALLBACK_CODE
-            return i
         code = judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t)
         status[i] = code
         if code <= OK_SOME_LOST_CODE:
