@@ -322,6 +322,27 @@ def test_idle_polls_read_nothing_and_every_arrival_is_handled_at_the_next_poll()
     assert signal.getsignal(signal.SIGIO) == before
 
 
+def test_a_replaced_arrival_handler_makes_every_poll_read() -> None:
+    """Another SIGIO handler installed after arming: the arrival flag no longer hears arrivals, so a poll
+    must read the socket rather than trust it (a command sent then is handled at the next poll)."""
+    import signal
+
+    dispatcher, recorder, _ = make_dispatcher(port=0)
+    dispatcher.poll()  # the first poll always reads
+    assert dispatcher._nothing_arrived()
+    previous = signal.signal(signal.SIGIO, lambda signum, frame: None)
+    try:
+        assert not dispatcher._nothing_arrived()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as uplink:
+            uplink.sendto(encode_command(DICTIONARY, "NOOP", seq_count=1), dispatcher.address)
+            time.sleep(0.05)
+        results = dispatcher.poll()
+        assert len(results) == 1 and results[0].accepted and len(recorder.calls) == 1
+    finally:
+        signal.signal(signal.SIGIO, previous)
+        dispatcher.close()
+
+
 def test_dispatcher_made_outside_the_main_thread_reads_at_every_poll() -> None:
     import threading
 
