@@ -244,8 +244,8 @@ class FlightSoftware:
             g.set_mode(self.cfg.initial_mode)
             g.events = events
             g.forget_law_state()
-        # freeze before the fork: a collection after it would write every object's header and copy each
-        # page the worker shares (0.8 s of a lockstep run's first cycle in the one-CPU vcan-vm guest)
+        # the collection over the start-up heap now, before FSW_STARTED starts the simulator's SIL loop
+        # (the cycle loops freeze again: then there is nothing left to walk)
         prepare_cycle_thread()
         self.checker.start()
 

@@ -7,6 +7,12 @@ the host preempts it there the real-time cycle thread waits for the GIL. The 24 
 cycle slips of 0.1-0.2 s. Here the cycle thread pickles the snapshot itself (0.2 ms for three zones)
 and writes it to a pipe enlarged so that the write never blocks; the result is read with a
 non-blocking poll.
+
+The worker is a new interpreter (``python -c``, started with the pipes' ends), not a fork of the flight
+process: after a fork every page the flight process writes first (an object's reference count is enough)
+is copied on a page fault. That was ~1,000 faults in a lockstep run, most in its first cycles and in the
+first slew's, and in the one-CPU vcan-vm guest, where a fault is a round trip through the host, the first
+two cycles took 110-140 ms each (4-12 ms without the fork).
 """
 from __future__ import annotations
 
@@ -53,11 +59,10 @@ def _background_priority(parent_pid: int) -> None:
 
     die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # a forked worker inherits the flight software's SIGTERM handler (stop the executive): `close` must
-    # be able to end it
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # `close` ends the worker with it
     try:
-        # a worker forked from a SCHED_FIFO cycle thread would inherit its policy and preempt it
+        # a worker started from a SCHED_FIFO cycle thread inherits its policy (through exec too) and would
+        # preempt it
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except (OSError, AttributeError):
         pass
@@ -67,10 +72,16 @@ def _background_priority(parent_pid: int) -> None:
         pass
 
 
-def _worker(requests, results, parent_pid: int, parent_ends=()) -> None:
+def serve(requests_fd: int, results_fd: int, parent_pid: int) -> None:
+    """The worker process's loop: a snapshot in, a ``CheckResult`` out, until the flight software closes
+    its end. The check's modules are loaded at once, at background priority, so the first check does not
+    load them while the flight software is cycling."""
+    from multiprocessing.connection import Connection
+
     _background_priority(parent_pid)
-    for conn in parent_ends:  # forked copies of the parent's ends: without closing them, no EOF ever comes
-        conn.close()
+    import gnc.checks  # noqa: F401
+
+    requests, results = Connection(requests_fd, writable=False), Connection(results_fd, readable=False)
     while True:
         try:
             snapshot = pickle.loads(requests.recv_bytes())
@@ -86,7 +97,7 @@ def _worker(requests, results, parent_pid: int, parent_ends=()) -> None:
 class AssumptionChecker:
     """Runs the full assumption check away from the GNC cycle.
 
-    mode 'process': one worker process (fork); `submit` hands it a snapshot, `poll` returns the result
+    mode 'process': one worker process (a new interpreter); `submit` hands it a snapshot, `poll` returns the result
     once finished (never blocks). mode 'inline': `submit` runs it at once (deterministic, tests).
     mode 'off': never checks. At most one check is in flight.
     """
@@ -109,25 +120,30 @@ class AssumptionChecker:
         return self._in_flight
 
     def start(self) -> None:
-        """Start the worker process now (forking later, mid-mission, would delay a cycle)."""
+        """Start the worker process now (starting it later, mid-mission, would delay a cycle)."""
         if self.mode != "process" or self.worker is not None:
             return
         import fcntl
-        import multiprocessing
         import os
+        import subprocess
+        import sys
+        from multiprocessing.connection import Connection
 
-        ctx = multiprocessing.get_context("fork")
-        req_r, req_w = ctx.Pipe(duplex=False)
-        res_r, res_w = ctx.Pipe(duplex=False)
+        req_r, req_w = os.pipe()
+        res_r, res_w = os.pipe()
         try:
-            self._capacity = fcntl.fcntl(req_w.fileno(), fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
+            self._capacity = fcntl.fcntl(req_w, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
         except OSError:
-            self._capacity = fcntl.fcntl(req_w.fileno(), fcntl.F_GETPIPE_SZ)
-        self.worker = ctx.Process(target=_worker, args=(req_r, res_w, os.getpid(), (req_w, res_r)), name="keepout-assumption-check", daemon=True)
-        self.worker.start()
-        req_r.close()
-        res_w.close()
-        self._requests, self._results = req_w, res_r
+            self._capacity = fcntl.fcntl(req_w, fcntl.F_GETPIPE_SZ)
+        code = f"from fsw.assumption_check import serve; serve({req_r}, {res_w}, {os.getpid()})"
+        try:
+            self.worker = subprocess.Popen([sys.executable, "-c", code], pass_fds=(req_r, res_w),
+                                           stdin=subprocess.DEVNULL)
+        finally:
+            os.close(req_r)
+            os.close(res_w)
+        self._requests = Connection(req_w, readable=False)
+        self._results = Connection(res_r, writable=False)
 
     def submit(self, snapshot) -> bool:
         if self.mode == "off" or snapshot is None or self.busy:
@@ -169,11 +185,14 @@ class AssumptionChecker:
         """Stop the worker at once: a check in progress can take seconds, and the flight software must
         neither wait for it nor leave it running after it exits."""
         if self.worker is not None:
+            import subprocess
+
             self.worker.terminate()
-            self.worker.join(timeout=2.0)
-            if self.worker.is_alive():
+            try:
+                self.worker.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
                 self.worker.kill()
-                self.worker.join(timeout=2.0)
+                self.worker.wait(timeout=2.0)
             for conn in (self._requests, self._results):
                 conn.close()
             self.worker = self._requests = self._results = None

@@ -273,14 +273,14 @@ def test_cycle_loops_freeze_the_start_up_heap_before_the_first_cycle(loop, monke
     assert calls == ["freeze", "cycles"]
 
 
-def test_the_check_worker_is_forked_after_the_heap_is_frozen(loop, monkeypatch) -> None:
-    """A collection after the fork writes every object's header and copies each page the worker shares: in
-    the one-CPU vcan-vm guest that was 0.8 s inside a lockstep run's first cycle."""
+def test_the_warm_up_freezes_the_start_up_heap_before_fsw_started(loop, monkeypatch) -> None:
+    """The SIL's simulator starts ticking when FSW_STARTED reaches the ground: a full collection after it
+    (0.1-0.2 s, more in the vcan-vm guest) landed inside the lockstep loop's first cycle."""
     calls = []
     monkeypatch.setattr("fsw.app.freeze_heap", lambda: calls.append("freeze"))
-    monkeypatch.setattr(loop.fsw.checker, "start", lambda: calls.append("fork"))
+    monkeypatch.setattr(loop.fsw.checker, "start", lambda: calls.append("worker"))
     loop.fsw._warm_up()
-    assert calls == ["freeze", "fork"]
+    assert calls == ["freeze", "worker"]
 
 
 def test_process_entry_refuses_to_run_without_a_private_link_key(tmp_path) -> None:

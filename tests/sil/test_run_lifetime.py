@@ -61,7 +61,7 @@ def _assert_all_end(procs: list[psutil.Process]) -> None:
 
 
 def _fsw(parent: psutil.Process) -> psutil.Process:
-    """The flight software: a direct child (its assumption-check worker, forked from it, has its command line)."""
+    """The flight software: a direct child (its assumption-check worker is its own child)."""
     found = [p for p in parent.children() if p.cmdline()[1:3] == ["-m", "fsw"]]
     assert len(found) == 1, [p.cmdline() for p in parent.children()]
     return found[0]
@@ -243,7 +243,7 @@ def test_read_only_out_is_a_clear_error(tmp_path):
 
 
 def test_assumption_check_worker_dies_with_a_killed_flight_software():
-    """The worker forked by the checker ends when its parent is SIGKILLed (no `close` runs then)."""
+    """The worker started by the checker ends when its parent is SIGKILLed (no `close` runs then)."""
     code = ("import time\nfrom fsw.assumption_check import AssumptionChecker\n"
             "c = AssumptionChecker('process'); c.start(); print(c.worker.pid, flush=True); time.sleep(600)")
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
