@@ -183,7 +183,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         # The full assumption check (gnc.checks) only feeds events and telemetry, never the control (the
         # per-cycle eps bound does not depend on it). In 'process' mode it answers after a wall-clock
         # delay, so its events would land on different ticks from run to run (no exact rerun), and it
-        # forks a process per run; 'inline' is deterministic but costs ~1.5 s of CPU per check. The
+        # starts a process per run; 'inline' is deterministic but costs ~1.5 s of CPU per check. The
         # campaign judges keep-out on truth instead, so fast mode switches it off: the GNC is unchanged.
         cfg = cfg.model_copy(update={"law": cfg.law.model_copy(update={"assumption_check": "off"})})
     fsw = None
