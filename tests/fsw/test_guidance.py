@@ -254,6 +254,7 @@ def test_the_assumption_check_worker_is_a_new_interpreter_not_a_fork() -> None:
     run, 110-140 ms for each of the first two cycles in the vcan-vm guest): the worker is exec'd instead,
     this interpreter with the checker's entry point, and it ends with `close`."""
     import sys
+    import time
 
     import psutil
 
@@ -264,7 +265,9 @@ def test_the_assumption_check_worker_is_a_new_interpreter_not_a_fork() -> None:
     try:
         worker = psutil.Process(checker.worker.pid)
         assert worker.ppid() == os.getpid()
-        cmdline = worker.cmdline()
+        deadline = time.monotonic() + 30.0
+        while len(cmdline := worker.cmdline()) < 3 and time.monotonic() < deadline:
+            time.sleep(0.01)  # Popen returns once the child is started; its exec may still be under way
         assert os.path.realpath(cmdline[0]) == os.path.realpath(sys.executable) and cmdline[1] == "-c"
         assert "fsw.assumption_check import serve" in cmdline[2]
     finally:
