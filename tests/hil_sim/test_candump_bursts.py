@@ -107,16 +107,18 @@ def _params() -> WorldParams:
     return WorldParams(spacecraft=SpacecraftParams(omega_BN_B0_rad_s=(0.02, -0.01, 0.015)))
 
 
-def _odd_frames(icd: Icd, k: int) -> list[can.Message]:
+def _odd_frames(icd: Icd, k: int, fd: bool = True) -> list[can.Message]:
     """Frames a third node puts on the bus: the kinds the compiled classifier leaves to the Python path
     (extended, remote, FD), an unknown id, and one with the simulator's own SYNC id (an own echo to it,
     never logged)."""
     sync_id = icd.spec("SYNC").frame_id
-    return [can.Message(arbitration_id=0x1ABCDE0 + k, data=bytes([k & 0xFF, 1, 2]), is_extended_id=True),
-            can.Message(arbitration_id=0x7F0, data=bytes([k & 0xFF]), is_extended_id=False),
-            can.Message(arbitration_id=0x7F1, is_remote_frame=True, dlc=2, is_extended_id=False),
-            can.Message(arbitration_id=sync_id, data=bytes(8), is_extended_id=False),
-            can.Message(arbitration_id=0x7F2, data=bytes(range(12)), is_fd=True, is_extended_id=False)]
+    frames = [can.Message(arbitration_id=0x1ABCDE0 + k, data=bytes([k & 0xFF, 1, 2]), is_extended_id=True),
+              can.Message(arbitration_id=0x7F0, data=bytes([k & 0xFF]), is_extended_id=False),
+              can.Message(arbitration_id=0x7F1, is_remote_frame=True, dlc=2, is_extended_id=False),
+              can.Message(arbitration_id=sync_id, data=bytes(8), is_extended_id=False)]
+    if fd:
+        frames.append(can.Message(arbitration_id=0x7F2, data=bytes(range(12)), is_fd=True, is_extended_id=False))
+    return frames
 
 
 class _Refusing:
@@ -145,17 +147,18 @@ SCENARIOS = {
                                                                                        delay_s=0.15),
                                     FaultSpec("duplicate", "CYCLE_DONE", 1.3, 1.5)), 0, False),
     "realtime": (False, False, True, (), 0, True),
+    "socketcan": ("socketcan", False, True, (), 0, False),  # (the real bus: classic frames only)
 }
 
 
 def _fly(icd: Icd, tmp_path: Path, name: str, bursts: bool, n_ticks: int = 24):
     light, echoes, odd, faults, refuse, realtime = SCENARIOS[name]
-    channel = f"virtual:cb{next(_channels)}"
+    channel = "socketcan:vcan0" if light == "socketcan" else f"virtual:cb{next(_channels)}"
     if echoes:
         sim_bus = can.Bus(interface="virtual", channel=channel.split(":")[1], receive_own_messages=True)
     else:
-        sim_bus = open_bus(channel, light=light)
-    fsw_bus, odd_bus = open_bus(channel, light=light), open_bus(channel, light=light)
+        sim_bus = open_bus(channel, light=light is True)
+    fsw_bus, odd_bus = open_bus(channel, light=light is True), open_bus(channel, light=light is True)
     if refuse:
         sim_bus.send = _Refusing(sim_bus.send, refuse)
     path = tmp_path / f"{name}-{'bursts' if bursts else 'frames'}.log"
@@ -180,14 +183,15 @@ def _fly(icd: Icd, tmp_path: Path, name: str, bursts: bool, n_ticks: int = 24):
             else:
                 sim.begin_tick()
             if odd and k % 3 == 0:
-                for msg in _odd_frames(icd, k):  # ahead of the answer: read with it, before CYCLE_DONE
+                for msg in _odd_frames(icd, k, fd=light != "socketcan"):  # ahead of the answer: before CYCLE_DONE
                     odd_bus.send(msg)
-            responder.cycle(0.0)
+            # (socketcan: the frames are on their way through the kernel; lockstep waits for CYCLE_DONE)
+            responder.cycle(1.0 if light == "socketcan" else 0.0)
             if odd and k % 3 == 1:
-                for msg in _odd_frames(icd, k):  # after CYCLE_DONE in the same read: handled a tick later
+                for msg in _odd_frames(icd, k, fd=light != "socketcan"):  # after CYCLE_DONE: handled a tick later
                     odd_bus.send(msg)
             if not realtime:
-                sim.end_tick(wait_s=0.0)
+                sim.end_tick(wait_s=2.0 if light == "socketcan" else 0.0)
         log.close()
         return (path.read_bytes(), log.frames, per_frame_calls[0], vars(sim.stats),
                 {m: dict(c) for m, c in sim.receiver.counters.items()}, sim.world.truth.q_NB.copy())
@@ -196,7 +200,8 @@ def _fly(icd: Icd, tmp_path: Path, name: str, bursts: bool, n_ticks: int = 24):
             bus.shutdown()
 
 
-@pytest.mark.parametrize("name", list(SCENARIOS))
+@pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.socketcan) if name == "socketcan" else name
+                                  for name in SCENARIOS])
 def test_the_simulator_logs_per_burst_what_it_logged_per_frame(icd: Icd, tmp_path: Path, name: str) -> None:
     log_a, n_a, calls_a, stats_a, counters_a, q_a = _fly(icd, tmp_path, name, bursts=False)
     log_b, n_b, calls_b, stats_b, counters_b, q_b = _fly(icd, tmp_path, name, bursts=True)
