@@ -33,7 +33,7 @@ import numpy as np
 
 from fsw.bus.burst import FrameBurst
 from fsw.bus.e2e import NO_STOP, PYTHON_RUN, CheckedBurst, CheckedFrame, E2EReceiver
-from fsw.bus.kernels import ECHO_CODE, count_timeouts
+from fsw.bus.kernels import ECHO_CODE, MAX_DLC, count_timeouts
 from fsw.bus.icd import Icd
 from fsw.bus.transport import recv_burst, send_batch, send_burst
 from hil_sim import device_kernels as dk
@@ -164,6 +164,14 @@ class Simulator:
         self._ct_args = (self._rc_watch[0], self._rc_watch[1], self._rc_table[3], self._rc_table[4], self._rc_tally,
                          self._rc_state, n_codes)
         self._rc_values = np.zeros((0, self.icd.table.start.shape[1]))
+        # the lockstep receive of a whole burst is first reached in tick 0, which a SIL flies while the flight
+        # software runs its first cycle (on the vcan-vm guest's one CPU): load (or compile) it here, with no
+        # frame, as apply_received above
+        d = self.devices
+        dk.receive_commands_packed(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
+                                   np.zeros((0, MAX_DLC), dtype=np.uint8), 0.0, 0, self._rc_status, self._rc_values,
+                                   self._rc_consts, d.packed_f, d.packed_i, self._rc_table[3], self._rc_table[4],
+                                   self._rc_tally, self._rc_state)
         # Lockstep waits wake only for CYCLE_DONE where the bus can filter wake-ups (socketcan): the wheel
         # commands before it queue without a context switch each (see _receive_until_done).
         self._wait_for = getattr(bus, "wait_for", None)
