@@ -33,7 +33,7 @@ import numpy as np
 
 from fsw.bus.burst import FrameBurst
 from fsw.bus.e2e import NO_STOP, PYTHON_RUN, CheckedBurst, CheckedFrame, E2EReceiver
-from fsw.bus.kernels import ECHO_CODE, count_timeouts
+from fsw.bus.kernels import ECHO_CODE, MAX_DLC, count_timeouts
 from fsw.bus.icd import Icd
 from fsw.bus.transport import recv_burst, send_batch, send_burst
 from hil_sim import device_kernels as dk
@@ -67,13 +67,19 @@ class Simulator:
     ``world``: hil_sim.world.World (or anything with its methods); ``bus``: an open python-can bus;
     ``icd``: the loaded ICD; ``gnc_period_s``: T (a multiple of ``dynamics_dt_s``, itself by default the
     world's max integration step); ``faults``: FaultSpec / mission BusFault entries.
+    ``on_frame(direction, t_s, msg)``: sees every frame sent ("tx") or received ("rx", own echoes left out),
+    at simulation time ``t_s``; alone it takes the simulator off its burst paths (every frame made a
+    ``can.Message``). ``on_burst(direction, t_s, burst, rows)``: with ``on_frame``, the same observer for
+    whole bursts (frames ``rows`` of a FrameBurst, in order; None: all): the burst paths stay, ``on_frame``
+    sees only the frames of the paths that handle messages (the fault injector's, the real-time sends).
     """
 
     def __init__(self, world: WorldLike, bus: can.BusABC, icd: Icd | None = None, *,
                  gnc_period_s: float = 0.1, dynamics_dt_s: float | None = None,
                  timing: DeviceTiming | None = None, faults: Iterable[Any] = (), fault_seed: int = 0,
                  cycle_done_timeout_s: float = 2.0, clock: Callable[[], float] = time.monotonic,
-                 on_frame: Callable[[str, float, can.Message], None] | None = None) -> None:
+                 on_frame: Callable[[str, float, can.Message], None] | None = None,
+                 on_burst: Callable[[str, float, FrameBurst, Iterable[int] | None], None] | None = None) -> None:
         self.world = world
         self.bus = bus
         self.icd = icd or Icd()
@@ -100,7 +106,10 @@ class Simulator:
         self._faults = self.injector.faults  # (empty: the injector never acts, ``bool(injector)`` is False)
         self.cycle_done_timeout_s = cycle_done_timeout_s
         self.clock = clock
+        if on_burst is not None and on_frame is None:
+            raise ValueError("on_burst needs on_frame (the frames of the fault injector's paths are messages)")
         self.on_frame = on_frame
+        self.on_burst = on_burst
         self._sync_sender = self.devices.sender  # one sender (alive counters per message) for all SIM nodes
         self._sync_m = self.icd.message_index["SYNC"]
         self._sync_row = [0.0] * self.icd.table.start.shape[1]
@@ -155,6 +164,14 @@ class Simulator:
         self._ct_args = (self._rc_watch[0], self._rc_watch[1], self._rc_table[3], self._rc_table[4], self._rc_tally,
                          self._rc_state, n_codes)
         self._rc_values = np.zeros((0, self.icd.table.start.shape[1]))
+        # the lockstep receive of a whole burst is first reached in tick 0, which a SIL flies while the flight
+        # software runs its first cycle (on the vcan-vm guest's one CPU): load (or compile) it here, with no
+        # frame, as apply_received above
+        d = self.devices
+        dk.receive_commands_packed(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
+                                   np.zeros((0, MAX_DLC), dtype=np.uint8), 0.0, 0, self._rc_status, self._rc_values,
+                                   self._rc_consts, d.packed_f, d.packed_i, self._rc_table[3], self._rc_table[4],
+                                   self._rc_tally, self._rc_state)
         # Lockstep waits wake only for CYCLE_DONE where the bus can filter wake-ups (socketcan): the wheel
         # commands before it queue without a context switch each (see _receive_until_done).
         self._wait_for = getattr(bus, "wait_for", None)
@@ -169,6 +186,12 @@ class Simulator:
         self._awaiting: int | None = None
         # Sensors sample the initial state (t = t0) before the first tick.
         self.devices.sample_sensors(world, self.t0_s)
+
+    @property
+    def _per_frame(self) -> bool:
+        """Frames observed one by one, as messages (``on_frame`` without ``on_burst``; either may be set
+        after construction): the simulator leaves its burst paths."""
+        return self.on_frame is not None and self.on_burst is None
 
     # ------------------------------------------------------------------------------------ time
     # ``t_s``: simulation time of the current tick, t0 + k T (exact, not accumulated), an attribute set with
@@ -328,12 +351,12 @@ class Simulator:
     def _take_burst(self, burst: FrameBurst, t_s: float, k: int) -> bool:
         """A burst read off the bus while awaiting CYCLE_DONE(k): in one compiled call
         (device_kernels.receive_commands: E2E, counts, wheel commands, CYCLE_DONE) where that is what
-        ``_handle_next`` would do (no fault active on received frames, no frame observer, more frames than
-        the receiver judges one by one), else into ``_rx`` for ``_handle_next``. Frames the compiled call
+        ``_handle_next`` would do (no fault active on received frames, no per-frame observer, more frames
+        than the receiver judges one by one), else into ``_rx`` for ``_handle_next``. Frames the compiled call
         leaves (after CYCLE_DONE(k), or from one for the receiver's Python path on) wait in ``_rx`` too.
         Returns whether CYCLE_DONE(k) came (else the caller goes on: ``_rx``, the bus)."""
         n = len(burst)
-        if (n <= PYTHON_RUN or self.on_frame is not None or self._awaiting != k
+        if (n <= PYTHON_RUN or self._per_frame or self._awaiting != k
                 or (self._faults and not self.injector.passes_through(t_s, "rx"))):
             self._rx = self.receiver.check(burst)
             return False
@@ -349,6 +372,8 @@ class Simulator:
                                     self._rc_table[3], self._rc_table[4], self._rc_tally, self._rc_state)
         rs = self._rc_state
         end = dk.receive_commands_packed(burst.ids, burst.lengths, burst.data, t_s, k, *args)
+        if self.on_burst is not None and end:
+            self._log_rx(burst, self._rc_status[:end].tolist(), 0, end, t_s)
         wheel_cmds, n_tally, heartbeats, cycle_done, stale, done = rs.tolist()
         rs.fill(0)
         if n_tally:
@@ -402,7 +427,9 @@ class Simulator:
         stop = NO_STOP if awaited is None else (self._cycle_done_id, self._done_tick_col, awaited, awaited,
                                                  NO_STOP[4], 0)
         end = self.receiver.classify_until(rx, t_s, stop)
-        if self.on_frame is None and not rx.fallback:
+        if self.on_burst is not None and end > first:
+            self._log_rx(rx.burst, rx.codes, first, end, t_s)
+        if not self._per_frame and not rx.fallback:
             # every frame judged by the compiled classifier: the delivered ones applied in one compiled call
             # (a CYCLE_DONE returns to here, in order, for its tick)
             counts = self._rx_counts
@@ -419,16 +446,25 @@ class Simulator:
                 self.stats.heartbeats += int(counts[1])
                 counts[0] = counts[1] = 0
             return end - first
+        per_frame = self._per_frame
         for i in range(first, end):
             code = rx.codes[i]
             if code == ECHO_CODE:
                 continue
-            if self.on_frame is not None:
+            if per_frame:
                 self.on_frame("rx", t_s, rx.burst.message(i))
             if code <= 1:  # delivered
                 fid = rx.ids[i] if i not in rx.fallback else rx.fallback[i].frame_id
                 self._on_delivered(fid, rx.row(i), t_s)
         return end - first
+
+    def _log_rx(self, burst: FrameBurst, codes: list, first: int, end: int, t_s: float) -> None:
+        """``on_burst`` of received frames ``first``..``end``-1 classified with class codes ``codes`` (indexed
+        as the burst): own echoes left out, as the per-frame observer never sees them."""
+        if ECHO_CODE in codes[first:end]:
+            self.on_burst("rx", t_s, burst, [i for i in range(first, end) if codes[i] != ECHO_CODE])
+        else:
+            self.on_burst("rx", t_s, burst, range(first, end))
 
     def _handle_rx(self, msg: can.Message, t_s: float) -> None:
         for m in (self.injector.process([msg], t_s, extras=False, direction="rx") if self.injector else [msg]):
@@ -473,12 +509,14 @@ class Simulator:
 
     def _send_burst(self, burst: FrameBurst, t_s: float) -> None:
         """``_send_all`` of a burst: as the burst where the bus carries bursts (in process)."""
-        if self.on_frame is not None:
+        if self._per_frame:
             self._send_all(burst.messages(), t_s)
             return
         while len(burst):
             n = send_burst(self.bus, burst, timeout=0.05)
             self.stats.frames_sent += n
+            if self.on_burst is not None and n:
+                self.on_burst("tx", t_s, burst, None if n >= len(burst) else range(n))
             if n >= len(burst):
                 return
             self.stats.tx_errors += 1

@@ -44,7 +44,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 
 import numpy as np
 import yaml
@@ -313,7 +313,11 @@ class TruthRecorder:
 
 class CandumpLog:
     """Every frame the simulator sends or receives, in candump's log format (``candump -l``), which
-    ``cantools decode`` and ``canplayer`` read. Timestamps are simulated seconds."""
+    ``cantools decode`` and ``canplayer`` read. Timestamps are simulated seconds.
+
+    Called per frame (``log(direction, t_s, msg)``: the simulator's ``on_frame``) or per burst
+    (:meth:`log_burst`: its ``on_burst``, which keeps the simulator on its compiled send and receive
+    paths); both write the same line for the same frame."""
 
     def __init__(self, path: Path, channel: str):
         self._file = open(path, "w", encoding="ascii", buffering=1 << 16)
@@ -323,10 +327,16 @@ class CandumpLog:
         self._t_s: float | None = None
         self._stamp = ""
         self._prefix: dict[tuple[int, bool], str] = {}
+        self._std_prefix: dict[int, str] = {}  # (id, False) of ``_prefix``, keyed by the id alone (bursts)
 
     def __call__(self, direction: str, t_s: float, msg) -> None:
         if t_s != self._t_s:
             self._t_s, self._stamp = t_s, f"({t_s:.6f}) {self.channel} "
+        self._file.write(self._line(msg))
+        self.frames += 1
+
+    def _line(self, msg) -> str:
+        """The line of ``msg`` (time stamp ``_stamp``)."""
         key = (msg.arbitration_id, msg.is_extended_id)
         ident = self._prefix.get(key)
         if ident is None:
@@ -334,9 +344,34 @@ class CandumpLog:
                                          else f"{msg.arbitration_id:03X}#")
         data = msg.data
         # bytearray (every received and encoded frame) has hex() itself: no copy into bytes first
-        self._file.write(self._stamp + ident + (data if type(data) is bytearray else bytes(data)).hex().upper()
-                         + "\n")
-        self.frames += 1
+        return self._stamp + ident + (data if type(data) is bytearray else bytes(data)).hex().upper() + "\n"
+
+    def log_burst(self, direction: str, t_s: float, burst, rows: Iterable[int] | None = None) -> None:
+        """Frames ``rows`` (indices, in order; None: all) of a ``fsw.bus.burst.FrameBurst`` sent or received
+        at ``t_s``: the lines the per-frame call writes for ``burst.message(i)``, formatted from the burst's
+        arrays (one hex string of the whole data block) and written at once. A frame with id -1 (not a plain
+        classic data frame: extended, remote, error, FD) is formatted from its message."""
+        if t_s != self._t_s:
+            self._t_s, self._stamp = t_s, f"({t_s:.6f}) {self.channel} "
+        ids = burst.ids.tolist()
+        lengths = burst.lengths.tolist()
+        data = burst.data
+        width = 2 * data.shape[1]  # hex digits per frame row
+        hexed = data.tobytes().hex().upper()
+        stamp, prefixes = self._stamp, self._std_prefix
+        lines = []
+        for i in range(len(ids)) if rows is None else rows:
+            fid = ids[i]
+            if fid < 0:
+                lines.append(self._line(burst.message(i)))
+                continue
+            ident = prefixes.get(fid)
+            if ident is None:
+                ident = prefixes[fid] = f"{fid:03X}#"
+            at = width * i
+            lines.append(stamp + ident + hexed[at:at + 2 * lengths[i]] + "\n")
+        self._file.write("".join(lines))
+        self.frames += len(lines)
 
     def close(self) -> None:
         self._file.close()
@@ -581,7 +616,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         sim = Simulator(world, bus, Icd(), gnc_period_s=gnc_period,
                         dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz, faults=mission.faults,
                         fault_seed=mission.seed, cycle_done_timeout_s=options.cycle_done_timeout_s,
-                        on_frame=candump)
+                        on_frame=candump, on_burst=candump.log_burst)
         n_ticks = int(round(mission.duration_s / gnc_period))
         recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels))
         recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)

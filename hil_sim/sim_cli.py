@@ -117,7 +117,8 @@ def _run(args: argparse.Namespace) -> int:
     gnc_period = 1.0 / mission.flight_software.rates.gnc_rate_hz
     candump = CandumpLog(out / CANDUMP_FILE, info.channel if info.interface == "socketcan" else "can0")
     sim = Simulator(world, bus, Icd(), gnc_period_s=gnc_period, dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz,
-                    faults=mission.faults, fault_seed=mission.seed, on_frame=candump)
+                    faults=mission.faults, fault_seed=mission.seed, on_frame=candump,
+                    on_burst=candump.log_burst)
     n_ticks = int(round(mission.duration_s / gnc_period))
     recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels))
     recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)
