@@ -16,9 +16,14 @@ two cycles took 110-140 ms each (4-12 ms without the fork).
 """
 from __future__ import annotations
 
+import fcntl
 import math
+import os
 import pickle
+import subprocess
+import sys
 from dataclasses import dataclass
+from multiprocessing.connection import Connection
 
 _PIPE_BYTES = 1 << 20  # Linux's default pipe-max-size; a snapshot of six zones is ~0.2 MB
 
@@ -52,7 +57,6 @@ def _background_priority(parent_pid: int) -> None:
     """In the worker: lowest CPU priority, so the check never preempts the GNC cycle; Ctrl-C on the
     terminal's process group is for the flight software to handle (it stops the worker in `close`);
     killed with the flight software (even by SIGKILL, which runs no `close`)."""
-    import os
     import signal
 
     from fsw.lifetime import die_with_parent
@@ -76,8 +80,6 @@ def serve(requests_fd: int, results_fd: int, parent_pid: int) -> None:
     """The worker process's loop: a snapshot in, a ``CheckResult`` out, until the flight software closes
     its end. The check's modules are loaded at once, at background priority, so the first check does not
     load them while the flight software is cycling."""
-    from multiprocessing.connection import Connection
-
     _background_priority(parent_pid)
     import gnc.checks  # noqa: F401
 
@@ -97,8 +99,8 @@ def serve(requests_fd: int, results_fd: int, parent_pid: int) -> None:
 class AssumptionChecker:
     """Runs the full assumption check away from the GNC cycle.
 
-    mode 'process': one worker process (a new interpreter); `submit` hands it a snapshot, `poll` returns the result
-    once finished (never blocks). mode 'inline': `submit` runs it at once (deterministic, tests).
+    mode 'process': one worker process (a new interpreter); `submit` hands it a snapshot, `poll` returns
+    the result once finished (never blocks). mode 'inline': `submit` runs it at once (deterministic, tests).
     mode 'off': never checks. At most one check is in flight.
     """
 
@@ -123,12 +125,6 @@ class AssumptionChecker:
         """Start the worker process now (starting it later, mid-mission, would delay a cycle)."""
         if self.mode != "process" or self.worker is not None:
             return
-        import fcntl
-        import os
-        import subprocess
-        import sys
-        from multiprocessing.connection import Connection
-
         req_r, req_w = os.pipe()
         res_r, res_w = os.pipe()
         try:
@@ -185,8 +181,6 @@ class AssumptionChecker:
         """Stop the worker at once: a check in progress can take seconds, and the flight software must
         neither wait for it nor leave it running after it exits."""
         if self.worker is not None:
-            import subprocess
-
             self.worker.terminate()
             try:
                 self.worker.wait(timeout=2.0)
