@@ -370,7 +370,7 @@ class Devices:
         self._out_idx, self._out_rows = np.zeros(0, dtype=np.int64), np.zeros((0, width))
         self._status_ms = np.array([w.status_m for w in wheels], dtype=np.int64)
         self._world_key: Any = None
-        self._world_fast: tuple | None = None
+        self._world_batch: Any = None  # _world_key's one-run batch (None: not a World)
         self._plan: tuple | None = None
         self._tick_args: tuple | None = None  # tick_rows' kernel arguments (see there)
         self._bound: tuple = ()  # what the packed state was bound for (_bind_period)
@@ -485,40 +485,35 @@ class Devices:
         self._push(self.imu.poll(world, t_s))
         self._push(self.star_tracker.poll(world, t_s))
 
-    def _fast_world(self, world: Any) -> tuple | None:
-        """The arrays the tick kernels read of a ``hil_sim.world.World`` (None for any other world)."""
+    def _fast_world(self, world: Any) -> Any:
+        """The one-run batch the tick kernels read of a ``hil_sim.world.World`` (None for any other world)."""
         if world is self._world_key:
-            return self._world_fast
-        from hil_sim import dynamics as dyn
+            return self._world_batch
         from hil_sim.world import World
         self._world_key = world
-        if type(world) is World and world.batch.n_runs == 1:
-            b = world.batch
-            self._world_fast = (b, b.X, b.U_APPLIED, b.W[dyn.W_KT], b.TEMP, b.FLAGS)
-        else:
-            self._world_fast = None
-        return self._world_fast
+        self._world_batch = world.batch if type(world) is World and world.batch.n_runs == 1 else None
+        return self._world_batch
 
     def step_world(self, world: Any, dt_s: float, times_s: Sequence[float]) -> None:
         """``world.step(dt_s, wheel_torques(times_s[j]))`` then ``sample_sensors(world, times_s[j + 1])``
         for each step j, through the world's one-call ``advance_sampled`` (the same numbers and frames).
         With a ``hil_sim.world.World``: one compiled call (``_step_fused``), else three (commands and due
         flags, world, frame rows)."""
-        fast = self._fast_world(world)
-        if fast is None:
+        batch = self._fast_world(world)
+        if batch is None:
             self._step_world_python(world, dt_s, times_s)
             return
         times = np.asarray(times_s, dtype=float)
         steps = times.shape[0] - 1
-        if steps and self._step_fused(world, fast[0], dt_s, times, steps):
+        if steps and self._step_fused(world, batch, dt_s, times, steps):
             return
         self._step_planned(world, dt_s, times, steps)
 
     def step_period(self, world: Any, dt_s: float, steps: int, t_s: float) -> None:
         """``step_world(world, dt_s, times)`` with times[j] = t_s + j_dt[j], j_dt = arange(steps + 1) * dt_s
         (the simulator's sub-step times of a period, the same sums), made inside the compiled call."""
-        fast = self._world_fast if world is self._world_key else self._fast_world(world)
-        if fast is not None and steps and self._step_fused(world, fast[0], dt_s, None, steps, t_s):
+        batch = self._world_batch if world is self._world_key else self._fast_world(world)
+        if batch is not None and steps and self._step_fused(world, batch, dt_s, None, steps, t_s):
             return
         self.step_world(world, dt_s, t_s + np.arange(steps + 1) * dt_s)
 
@@ -622,13 +617,12 @@ class Devices:
         ``hil_sim.world.World``); kept while the world, the queue's arrays and the output rows' room hold."""
         args = self._tick_args
         if args is None or args[0] is not world or args[1] < 1 + self.q_n.item(0) + len(self.wheels):
-            fast = self._fast_world(world)
-            if fast is None:
+            b = self._fast_world(world)
+            if b is None:
                 return None
             if sync_m != self._packed_iscalars[dk.DSS_SYNC_M] or list(sync_cols) != self._packed_iscalars[
                     dk.DSS_SYNC_COLS:dk.DSS_SYNC_COLS + 3].tolist():  # pragma: no cover - the ICD's SYNC
                 raise ValueError("tick_rows: SYNC's index or slots differ from the ICD's")
-            b = fast[0]
             idx, rows = self._out(1 + int(self.q_n[0]) + len(self.wheels) + 16)
             args = self._tick_args = (world, idx.shape[0], (self.packed_f, self.packed_i, b.packed_f, b.packed_i,
                                                             self.q_due, self.q_m, self.q_rows, self.q_ts, idx, rows))
