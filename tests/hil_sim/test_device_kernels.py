@@ -330,6 +330,12 @@ def test_step_period_matches_step_world_with_the_simulators_times(icd: Icd) -> N
     rng = np.random.default_rng(8)
     j_dt = np.arange(11) * 0.01
     t0 = 0.0
+    planned = [0, 0]  # the three-call path taken, per side
+    for side, d in enumerate(devs):
+        def spy(*args, _inner=d._step_planned, _side=side):
+            planned[_side] += 1
+            return _inner(*args)
+        d._step_planned = spy
     for k in range(150):  # long enough for a normal stream to refill (the three-call path on both sides)
         t_k = t0 + k * 0.1
         cmd = rng.normal(0.0, 0.01, worlds[0].n_wheels)
@@ -347,6 +353,7 @@ def test_step_period_matches_step_world_with_the_simulators_times(icd: Icd) -> N
         ib, rb = devs[1].rows_due(t_k + 0.1)
         assert ia == ib and ra == rb
     assert devs[0].imu.samples == devs[1].imu.samples > 1000
+    assert planned[0] >= 1 and planned[1] >= 1, planned
 
 
 def test_tick_burst_matches_tick_rows_encoded_by_the_sender(icd: Icd) -> None:
