@@ -41,7 +41,6 @@ _ACTION_CODES = {
     "isolate_wheel": "ISOLATE_WHEEL",
     "isolate_wheel_safe": "ISOLATE_WHEEL",
 }
-_STATE_RANK = {"DISABLED": 0, "NOMINAL": 1, "PERSISTING": 2, "TRIPPED": 3}  # = the code in _STATES
 
 
 @dataclass
@@ -370,7 +369,7 @@ class Fdir:
     def states(self) -> dict[str, str]:
         """Worst state per dictionary monitor (HK channels fdir_<monitor>)."""
         codes = self._bank.state.tolist()
-        # a state's rank is its code (_STATES in _STATE_RANK's order): the worst is the largest code
+        # a state's code is its rank (_STATES runs from DISABLED to TRIPPED): the worst is the largest code
         return {monitor: _STATES[max(map(codes.__getitem__, indices))] for monitor, indices in self._monitor_groups}
 
     def _trip(self, mon: LimitMonitor, value: float, actions: list[FdirAction], wheel: int | None = None) -> None:
