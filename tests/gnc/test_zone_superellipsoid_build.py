@@ -157,10 +157,10 @@ def _plane_rotated(B, angle):
 
 
 def test_demo_sun_zone_cells_identical():
-    # demo-pointing's Sun zone (semi-axes 40 x 30 deg, exponent 1.5, orientation 20 deg) at its epoch
+    # shaped as demo-pointing's Sun zone (semi-axes 40 x 30 deg, exponent 1.5, axes turned 20 deg), centred on
+    # the Sun's direction at its epoch; the axes orthonormal, as StarZone.superellipsoid requires
     c = np.array([0.8198773706005024, 0.5252811349002053, 0.22777362993805708])
-    B = np.array([[-0.3060432890544618, -0.2548034832084681], [0.14476122201242433, 0.48108096346354773],
-                  [0.767769421680783, -0.1922748680175074]])
+    B = _plane_rotated(default_tangent_basis(c), np.radians(20.0))
     a = np.tan(np.radians([40.0, 30.0]))
     _assert_same_cells(se.make_geom(1.5, c, B, a), 3, 2)
 
