@@ -30,10 +30,11 @@ demo: setup
 test: setup
 	$(BIN)/python -m pytest -q
 
-# SocketCAN tests inside the User-Mode-Linux guest that has vcan0 (see ../shared/tools/README-vcan-vm.md)
+# SocketCAN tests where vcan0 exists; on a host without CAN, VCAN_RUN names a command that runs its
+# arguments in a guest that has vcan0 (CI passes its own).
+VCAN_RUN ?=
 test-vcan: setup
-	../shared/tools/vcan-vm --setup -- true
-	KEEPOUT_REQUIRE_VCAN=1 ../shared/tools/vcan-vm -- $(BIN)/python -m pytest -q -m socketcan
+	KEEPOUT_REQUIRE_VCAN=1 $(VCAN_RUN) $(BIN)/python -m pytest -q -m socketcan
 
 paper: setup
 	$(BIN)/keepout paper --out docs/paper
