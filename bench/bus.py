@@ -1,7 +1,7 @@
 """Bus benchmark: load of one GNC cycle on 1 Mbit/s classic CAN, transport latency and throughput, lockstep
 loop rate, and the receiver's classification rate on random frames.
 
-    .venv/bin/python bench/bus.py            # everything; the SocketCAN part runs inside ../shared/tools/vcan-vm
+    .venv/bin/python bench/bus.py            # everything; the SocketCAN part runs inside $KEEPOUT_VCAN_RUN (default `vcan-vm`)
                                              # automatically when this host has no vcan0
     .venv/bin/python bench/bus.py --quick    # fewer samples (development)
 
@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -21,7 +22,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 RESULTS = ROOT / "bench" / "results" / "bus.json"
-VCAN_VM = ROOT.parent / "shared" / "tools" / "vcan-vm"
+# a command that runs its arguments in a guest that has vcan0 (the host kernel has no CAN)
+VCAN_VM = os.environ.get("KEEPOUT_VCAN_RUN", "vcan-vm")
 BITRATE = 1_000_000
 
 
@@ -279,7 +281,7 @@ def receiver_fuzz(n: int) -> dict:
 
 # ---------------------------------------------------------------------------------------------- main
 def _vm_part(quick: bool) -> dict | None:
-    if not VCAN_VM.exists():
+    if shutil.which(VCAN_VM) is None:
         return None
     out = ROOT / f".bench-bus-vm-{os.getpid()}.json"
     cmd = [str(VCAN_VM), "--", sys.executable, __file__, "--socketcan-only", str(out)] + (["--quick"] if quick else [])

@@ -7,7 +7,7 @@ Reports, for the regression campaign (config/campaigns/regression.yaml) in ``fas
   * a Dask ``distributed.LocalCluster`` with 1 and 2 worker processes (same code path): the scaling;
   * where one run's time goes per GNC tick (simulator frames out, flight software cycle, world step),
     from one in-process run with timers around the phases.
-Goal (issue 7): >= 3,000 simulated seconds per wall second in total. Prints a table and writes
+Goal: >= 3,000 simulated seconds per wall second in total. Prints a table and writes
 bench/results/campaign.json. Wall times include process start-up and each run's set-up.
 
 What a fast-mode tick costs, and why (see docs/campaign/README.md, "Speed of fast mode"): every GNC tick

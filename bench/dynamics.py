@@ -8,7 +8,7 @@ Cases
 - ``single 10Hz-GNC``: one World; step(0.1) = 10 RK4 sub-steps at 100 Hz, IMU + star tracker every 100 ms.
 - ``batch 100Hz`` / ``batch 10Hz-GNC``: WorldBatch of --runs runs (dispersed inertia, wheel speeds, rates),
   same patterns; the figure is the total over all runs.
-Goals (issue 3): single >= 1,000 sim-s/s, batch of 1,000 >= 50,000 sim-s/s in total.
+Goals: single >= 1,000 sim-s/s, batch of 1,000 >= 50,000 sim-s/s in total.
 
 Each case is repeated; the table quotes the median of the wall-clock rate and, because the machine is shared,
 also the rate per CPU-second of this process (what one idle core would give) and the load average. Everything

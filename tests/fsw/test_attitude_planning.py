@@ -1,4 +1,4 @@
-"""QUATERNION-mode slew planning on S^3 (issue 16.6): the geometry of the planner (exact geodesic-to-ball
+"""QUATERNION-mode slew planning on S^3: the geometry of the planner (exact geodesic-to-ball
 distances, checked by dense sampling) and a blocked slew flown by the flight guidance, planned round the
 forbidden-attitude zone with every margin kept and faster than the paper's law alone.
 

@@ -1,4 +1,4 @@
-"""No stall (issue 16.3): a planned slew resumed after a mode change reaches its target, and the guidance
+"""No stall: a planned slew resumed after a mode change reaches its target, and the guidance
 watchdog reports and replans a slew that stands still (here: a target at the boresight's antipode).
 
 Kinematic loop of the flight guidance: perfect rate tracking at 10 Hz (scipy's Rotation integrates the

@@ -188,7 +188,7 @@ def test_config_validate_cli_prints_every_problem(tmp_path, capsys):
     assert main(["config", "validate", str(DEMO)]) == 0
 
 
-# -- YAML syntax errors in plain words, with the fix (issue 14 point 11) -------------------------------
+# -- YAML syntax errors in plain words, with the fix -------------------------------
 
 def _syntax_error(tmp_path: Path, old: str, new: str) -> tuple[str, Path, str]:
     text, path, err = _load_edited(tmp_path, (old, new))

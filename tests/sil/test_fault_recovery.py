@@ -1,6 +1,6 @@
 """fault-imu-dropout flown in the campaign's fast mode (the real flight software and truth models over a
 virtual CAN bus, judged on truth): after FDIR's SAFE trip and the ground's POINTING at 80 s the slew
-resumes at once and settles within the mission's own settling requirement (issue 16.3). On the old
+resumes at once and settles within the mission's own settling requirement. On the old
 guidance it stood 77 deg from the target from ~100 s to ~275 s and settled at 351 s."""
 from __future__ import annotations
 

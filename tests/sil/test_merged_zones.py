@@ -1,4 +1,4 @@
-"""Sun and Moon cones that touch, overlap or leave a gap narrower than the merge gap (issue 14 point 9).
+"""Sun and Moon cones that touch, overlap or leave a gap narrower than the merge gap.
 
 The flight software merges (inflated) zones closer than ``law.merge_gap_deg`` into one zone and flies round
 it; the load-time physics check must judge that merged geometry, not the zones one by one. Zones here are

@@ -1,4 +1,4 @@
-"""A mission in one place (issue 14 point 12): each fact written once, the initial attitude as RA/Dec + roll.
+"""A mission in one place: each fact written once, the initial attitude as RA/Dec + roll.
 
 The flight software's knowledge defaults to the truth the file gives (epoch, inertia, wheels, star-tracker
 mounting, boresight, orbit), with one set of key names; knowledge is fixed from the values written in the

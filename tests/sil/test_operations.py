@@ -1,4 +1,4 @@
-"""Operating a live run (issue 15, "Done when"): a real-time SIL run, two ground monitors attached with
+"""Operating a live run: a real-time SIL run, two ground monitors attached with
 `keepout ground --run`, Open MCT (`keepout ground web --run`) in Debian's headless Chromium driven by
 Playwright, telecommands sent with `keepout ground send`, and their acknowledgements seen in the page and
 in every archive; then the finished run replayed in a new page. The screenshot goes to the test's folder, or

@@ -97,7 +97,7 @@ def test_target_near_a_sun_cone(offset_deg, inside):
     assert shown, msg
     assert float(shown[1]) == pytest.approx(ra, abs=0.1) and float(shown[2]) == pytest.approx(dec, abs=0.1)
     if inside:
-        # plain words, the Sun's place and how far to move (issue 14 point 10)
+        # plain words, the Sun's place and how far to move
         assert msg.startswith(f"the target from timeline[0] at RA/Dec ({ra:.1f}, {dec + offset_deg:.1f}) is 2.0 deg "
                               "inside zone 'sun' at t = 10 s: the Sun is at RA/Dec ("), msg
         assert msg.endswith("move it at least 5.1 deg further from the Sun (the 2.0 deg into the zone plus the "
@@ -114,7 +114,7 @@ def test_sun_and_moon_zones_merge_later_in_the_run_as_the_moon_approaches_the_su
     """Sun-Moon separation shrinks ~12 deg/day before new moon; zones apart at t=0 overlap within a day.
 
     The flight software then flies them as one merged zone (fsw.guidance.ZoneGeometry.merge), so the check
-    reports the merge, not an Assumption 1 violation between the zones as written (issue 14 point 9)."""
+    reports the merge, not an Assumption 1 violation between the zones as written."""
     from astropy.coordinates import get_body, solar_system_ephemeris
     from astropy.time import Time
 
@@ -227,7 +227,7 @@ def test_config_check_cli(capsys):
 
 
 def test_validate_and_check_agree_on_a_target_inside_a_zone(tmp_path, capsys):
-    """One root cause, one error, at file:line:col of the key to change, from both commands (issue 14.10)."""
+    """One root cause, one error, at file:line:col of the key to change, from both commands."""
     from hil_sim.cli import main
 
     text = (MISSIONS / "demo-pointing.yaml").read_text()

@@ -110,7 +110,7 @@ def test_schema_cli_check_detects_drift(tmp_path, capsys):
 
 
 def test_mission_reference_is_current_and_lists_every_key(tmp_path, capsys):
-    """docs/missions.md is generated from the schema (issue 14 point 12): it is up to date, and every key of
+    """docs/missions.md is generated from the schema: it is up to date, and every key of
     every mapping in the schema appears in it with its unit, default and range."""
     from hil_sim.cli import main
     from hil_sim.mission_docs import DOCS_PATH, mission_docs
