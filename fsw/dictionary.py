@@ -610,7 +610,7 @@ _HK_CHANNELS: list[Channel] = [
     Channel("bus_alive_errors", "U32", "", "bus frames with an unexpected alive counter (lost)",
             Limits(yellow=(None, 0))),
     Channel("bus_repeated", "U32", "", "bus frames repeated (same alive counter)", Limits(yellow=(None, 0))),
-    Channel("bus_decode_errors", "U32", "", "bus frames that failed to decode", Limits(yellow=(None, 0))),
+    Channel("bus_decode_errors", "U32", "", "bus frames that failed to decode, and datagrams on the bus that are not frames (dropped)", Limits(yellow=(None, 0))),
     Channel("bus_timeouts", "U32", "", "ticks with missing sensor frames", Limits(yellow=(None, 0))),
     Channel("bus_tx_errors", "U32", "", "bus transmit failures", Limits(yellow=(None, 0))),
     Channel("bus_unknown_ids", "U32", "", "bus frames with an identifier not in the ICD (or error/extended/remote frames)",

@@ -694,6 +694,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
             stats = {**sim.stats.__dict__, "aborted": abort_reason, "clock": "realtime" if options.realtime else "lockstep", "bus": info.spec, "bus_note": info.note, "wall_s": wall_s,
                      "loop_cpu_s": loop_cpu_s, "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
                      "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
+                     "bus_decode_errors": int(getattr(bus, "decode_errors", 0)),
                      "faults_injected": [list(map(_plain, e)) if isinstance(e, tuple) else _plain(e)
                                          for e in getattr(sim.injector, "log", [])],
                      "telecommands": timeline.sent if timeline else [],
