@@ -21,7 +21,7 @@ from itertools import repeat
 
 import numpy as np
 
-from fsw.assumption_check import AssumptionChecker
+from fsw.assumption_check import MAX_RESTARTS, AssumptionChecker
 from fsw.bus.driver import TickInputs
 from fsw.control import RateController
 from fsw.estimation import _NO_SAMPLES, AttitudeEstimator
@@ -191,7 +191,7 @@ class FlightSoftware:
             config.rates.gnc_rate_hz, config.rates.housekeeping_rate_hz, config.rates.slip_event_throttle_s,
             gnc_task=self._gnc_task, hk_task=self.housekeeping, on_slip=self._on_slip, clock=clock,
         )
-        self.checker = AssumptionChecker(config.law.assumption_check)
+        self.checker = AssumptionChecker(config.law.assumption_check, on_worker_lost=self._check_worker_lost)
         self._last_check_t = -math.inf
         self._check_budget_free_at = -math.inf  # host monotonic time from which a periodic check may start
         self._corrupt_src: dict | None = None
@@ -569,6 +569,12 @@ class FlightSoftware:
             self.telemetry.send_channels("GNC", values, time_s=self.t_s)
         except TypeError:
             self.telemetry.send_channels("GNC", values)
+
+    def _check_worker_lost(self, reason: str, restarts: int, dropped: bool) -> None:
+        if dropped:
+            self._event("CHECK_WORKER_DROPPED", restarts=min(restarts - 1, 255))
+        else:
+            self._event("CHECK_WORKER_LOST", reason=reason, restarts=restarts, max_restarts=MAX_RESTARTS)
 
     def housekeeping(self) -> None:
         """Housekeeping rate group: assumption checks (throttled), heartbeat, HK telemetry."""

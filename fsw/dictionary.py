@@ -690,6 +690,12 @@ EVENTS: tuple[EventDef, ...] = (
              (Arg("cycles", "U32"),)),
     EventDef("FATAL_ERROR", 3, Severity.FATAL, "fatal: {reason}", (_REASON,)),
     EventDef("RT_SCHEDULING", 4, Severity.ACTIVITY_LO, "real-time scheduling: {reason}", (_REASON,)),
+    EventDef("CHECK_WORKER_LOST", 6, Severity.WARNING_LO,
+             "assumption-check worker ended ({reason}): restart {restarts} of {max_restarts}",
+             (_REASON, Arg("restarts", "U8"), Arg("max_restarts", "U8"))),
+    EventDef("CHECK_WORKER_DROPPED", 7, Severity.WARNING_HI,
+             "assumption-check worker lost {restarts} times: background check dropped, the per-cycle eps bound "
+             "still guards the zones", (Arg("restarts", "U8"),)),
     EventDef("RT_SCHEDULING_UNAVAILABLE", 5, Severity.WARNING_LO,
              "real-time scheduling not granted, running best effort: {reason}", (_REASON,)),
     EventDef("MODE_CHANGED", 10, Severity.ACTIVITY_HI, "mode {from_mode} -> {to_mode} ({cause})",
