@@ -643,6 +643,8 @@ _HK_CHANNELS: list[Channel] = [
     Channel("tc_sec_last_sn", "U32", "", "last accepted uplink security SN (the ground sends above it)"),
     Channel("tc_uplink_dropped", "U32", "", "uplink datagrams the kernel discarded, socket buffer full (SO_RXQ_OVFL)",
             Limits(yellow=(None, 0))),
+    Channel("tc_uplink_junk", "U32", "", "uplink datagrams refused unanswered (not authenticated, or malformed "
+            "without link security): counted per reason in tc_sec_* and tc_format_errors", Limits(yellow=(None, 0))),
     Channel("tc_uplink_deferred", "U32", "", "cycles whose uplink read stopped at its time budget, datagrams left queued",
             Limits(yellow=(None, 0))),
     Channel("tm_packets_sent", "U32", "", "telemetry packets sent"),
@@ -780,6 +782,9 @@ EVENTS: tuple[EventDef, ...] = (
              (_OPCODE, Arg("command", "STRING"))),
     EventDef("CMD_REJECTED", 62, Severity.WARNING_HI, "command opcode {opcode} rejected: {error}: {reason}",
              (_OPCODE, Arg("error", "ENUM", enum=TC_ERRORS), _REASON), throttle=20, throttle_window_s=10.0),
+    EventDef("UPLINK_JUNK", 64, Severity.WARNING_LO,
+             "uplink junk: {count} datagrams refused unanswered in {window_s:.0f} s ({reasons})",
+             (Arg("count", "U32"), Arg("window_s", "F32", "s"), Arg("reasons", "STRING", description="count per reason code"))),
     EventDef("SEC_RESYNCED", 63, Severity.WARNING_LO, "uplink anti-replay window moved to security SN {sn}",
              (Arg("sn", "U32"),)),
     EventDef("EVENTS_THROTTLED", 70, Severity.DIAGNOSTIC, "{count} {event} events throttled",
