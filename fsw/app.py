@@ -30,6 +30,11 @@ from fsw.fdir import Fdir, WheelSpeedResidual
 from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
+# TARGET_REACHED: the error below REACHED_ERROR_DEG and the estimated body rate below REACHED_RATE_DEG_S for
+# REACHED_DWELL_S in a row (a slew passing through its target at speed is not "reached")
+REACHED_ERROR_DEG = 0.05
+REACHED_RATE_DEG_S = 0.01
+REACHED_DWELL_S = 5.0
 _CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
 # the E2E classes that housekeeping totals over the received messages
 _HK_CLASSES = ("ok", "ok_some_lost", "crc_error", "wrong_sequence", "repeated", "bad_length", "out_of_range", "timeout")
@@ -207,6 +212,7 @@ class FlightSoftware:
         self._st_was_valid = True
         self._st_outage_start = 0.0
         self._target_reached = False
+        self._held_cycles = 0
         self._rt_t0: float | None = None
         # sensors heard from at least once (their FDIR monitors are armed from then on)
         self._imu_seen = False
@@ -268,6 +274,7 @@ class FlightSoftware:
         self.guidance.set_mode(mode)
         self.mode_reason = cause
         self._target_reached = False
+        self._held_cycles = 0
         if old != mode or mode == "SAFE":
             self._event("MODE_CHANGED", from_mode=old, to_mode=mode, cause=cause)
 
@@ -324,6 +331,7 @@ class FlightSoftware:
         else:
             self.guidance.set_target_quaternion(v)
         self._target_reached = False
+        self._held_cycles = 0
         c = list(v) + [0.0] * (4 - len(v))
         self._event("TARGET_SET", kind=kind, c0=c[0], c1=c[1], c2=c[2], c3=c[3])
 
@@ -447,11 +455,15 @@ class FlightSoftware:
         for action in actions:
             self._execute(action)
 
-        # ---- target reached (event once per target)
+        # ---- target reached (event once per target): held, not passed through. The error and the body rate
+        # must stay within tolerance for a dwell; a slew that arrives fast and overshoots resets the count.
         err = g.pointing_error_deg if g.mode == "POINTING" else g.att_error_deg
-        if g.mode != "SAFE" and not self._target_reached and err == err and err < 0.05:
-            self._target_reached = True
-            self._event("TARGET_REACHED", error_deg=err)
+        if g.mode != "SAFE" and not self._target_reached and err == err:
+            held = err < REACHED_ERROR_DEG and math.degrees(_norm(omega.tolist())) < REACHED_RATE_DEG_S
+            self._held_cycles = self._held_cycles + 1 if held else 0
+            if self._held_cycles * dt >= REACHED_DWELL_S:
+                self._target_reached = True
+                self._event("TARGET_REACHED", error_deg=err)
 
         exec_ms = 1e3 * (self.clock() - t_start)
         self.last = CycleRecord(self.t_s, g.mode, est.q_NB.copy(), g.omega_cmd_BN_B, ctrl.wheel_torque_cmd_Nm,
