@@ -21,7 +21,7 @@ from itertools import repeat
 
 import numpy as np
 
-from fsw.assumption_check import AssumptionChecker
+from fsw.assumption_check import MAX_RESTARTS, AssumptionChecker
 from fsw.bus.driver import TickInputs
 from fsw.control import RateController
 from fsw.estimation import _NO_SAMPLES, AttitudeEstimator
@@ -30,6 +30,11 @@ from fsw.fdir import Fdir, WheelSpeedResidual
 from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
+# TARGET_REACHED: the error below REACHED_ERROR_DEG and the estimated body rate below REACHED_RATE_DEG_S for
+# REACHED_DWELL_S in a row (a slew passing through its target at speed is not "reached")
+REACHED_ERROR_DEG = 0.05
+REACHED_RATE_DEG_S = 0.01
+REACHED_DWELL_S = 5.0
 _CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
 # the E2E classes that housekeeping totals over the received messages
 _HK_CLASSES = ("ok", "ok_some_lost", "crc_error", "wrong_sequence", "repeated", "bad_length", "out_of_range", "timeout")
@@ -191,7 +196,7 @@ class FlightSoftware:
             config.rates.gnc_rate_hz, config.rates.housekeeping_rate_hz, config.rates.slip_event_throttle_s,
             gnc_task=self._gnc_task, hk_task=self.housekeeping, on_slip=self._on_slip, clock=clock,
         )
-        self.checker = AssumptionChecker(config.law.assumption_check)
+        self.checker = AssumptionChecker(config.law.assumption_check, on_worker_lost=self._check_worker_lost)
         self._last_check_t = -math.inf
         self._check_budget_free_at = -math.inf  # host monotonic time from which a periodic check may start
         self._corrupt_src: dict | None = None
@@ -207,6 +212,7 @@ class FlightSoftware:
         self._st_was_valid = True
         self._st_outage_start = 0.0
         self._target_reached = False
+        self._held_cycles = 0
         self._rt_t0: float | None = None
         # sensors heard from at least once (their FDIR monitors are armed from then on)
         self._imu_seen = False
@@ -268,6 +274,7 @@ class FlightSoftware:
         self.guidance.set_mode(mode)
         self.mode_reason = cause
         self._target_reached = False
+        self._held_cycles = 0
         if old != mode or mode == "SAFE":
             self._event("MODE_CHANGED", from_mode=old, to_mode=mode, cause=cause)
 
@@ -324,6 +331,7 @@ class FlightSoftware:
         else:
             self.guidance.set_target_quaternion(v)
         self._target_reached = False
+        self._held_cycles = 0
         c = list(v) + [0.0] * (4 - len(v))
         self._event("TARGET_SET", kind=kind, c0=c[0], c1=c[1], c2=c[2], c3=c[3])
 
@@ -447,11 +455,15 @@ class FlightSoftware:
         for action in actions:
             self._execute(action)
 
-        # ---- target reached (event once per target)
+        # ---- target reached (event once per target): held, not passed through. The error and the body rate
+        # must stay within tolerance for a dwell; a slew that arrives fast and overshoots resets the count.
         err = g.pointing_error_deg if g.mode == "POINTING" else g.att_error_deg
-        if g.mode != "SAFE" and not self._target_reached and err == err and err < 0.05:
-            self._target_reached = True
-            self._event("TARGET_REACHED", error_deg=err)
+        if g.mode != "SAFE" and not self._target_reached and err == err:
+            held = err < REACHED_ERROR_DEG and math.degrees(_norm(omega.tolist())) < REACHED_RATE_DEG_S
+            self._held_cycles = self._held_cycles + 1 if held else 0
+            if self._held_cycles * dt >= REACHED_DWELL_S:
+                self._target_reached = True
+                self._event("TARGET_REACHED", error_deg=err)
 
         exec_ms = 1e3 * (self.clock() - t_start)
         self.last = CycleRecord(self.t_s, g.mode, est.q_NB.copy(), g.omega_cmd_BN_B, ctrl.wheel_torque_cmd_Nm,
@@ -570,6 +582,12 @@ class FlightSoftware:
         except TypeError:
             self.telemetry.send_channels("GNC", values)
 
+    def _check_worker_lost(self, reason: str, restarts: int, dropped: bool) -> None:
+        if dropped:
+            self._event("CHECK_WORKER_DROPPED", restarts=min(restarts - 1, 255))
+        else:
+            self._event("CHECK_WORKER_LOST", reason=reason, restarts=restarts, max_restarts=MAX_RESTARTS)
+
     def housekeeping(self) -> None:
         """Housekeeping rate group: assumption checks (throttled), heartbeat, HK telemetry."""
         gd = self.guidance
@@ -619,7 +637,7 @@ class FlightSoftware:
             "bus_crc_errors": n["crc_error"],
             "bus_alive_errors": n["wrong_sequence"] + n["ok_some_lost"],
             "bus_repeated": n["repeated"],
-            "bus_decode_errors": n["bad_length"] + n["out_of_range"],
+            "bus_decode_errors": n["bad_length"] + n["out_of_range"] + getattr(self.driver.bus, "decode_errors", 0),
             "bus_timeouts": n["timeout"],
             "bus_tx_errors": getattr(self, "_bus_tx_errors", 0),
             "bus_unknown_ids": bus.get("unknown_id", 0) + bus.get("error_frame", 0),

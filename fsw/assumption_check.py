@@ -22,10 +22,15 @@ import os
 import pickle
 import subprocess
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 
 _PIPE_BYTES = 1 << 20  # Linux's default pipe-max-size; a snapshot of six zones is ~0.2 MB
+# The worker is no single point of failure: when it dies (killed, out of memory) the flight software says so
+# and starts a new one, at most this many times; then it drops the background check and says that too. The
+# GNC cycle never waits for the worker: the per-cycle eps bound guards the zones without it.
+MAX_RESTARTS = 3
 
 
 @dataclass
@@ -104,8 +109,12 @@ class AssumptionChecker:
     mode 'off': never checks. At most one check is in flight.
     """
 
-    def __init__(self, mode: str = "process"):
+    def __init__(self, mode: str = "process", on_worker_lost: Callable[[str, int, bool], object] | None = None):
+        """``on_worker_lost(reason, restarts, dropped)`` is called when the worker is found dead: ``restarts``
+        the deaths so far, ``dropped`` when the check is given up (after MAX_RESTARTS)."""
         self.mode = mode
+        self.on_worker_lost = on_worker_lost or (lambda reason, restarts, dropped: None)
+        self.restarts = 0
         self.worker = None
         self._requests = None
         self._results = None
@@ -148,14 +157,31 @@ class AssumptionChecker:
         if self.mode == "inline":
             self._ready = run_full_check(*snapshot)
             return True
+        if self.worker is not None and self.worker.poll() is not None:
+            self._lost(f"exit code {self.worker.returncode}")
+            if self.mode == "off":
+                return False
         self.start()
         payload = pickle.dumps(snapshot, protocol=pickle.HIGHEST_PROTOCOL)
         if len(payload) + 8 > self._capacity:  # the write would wait for the worker: never in a cycle
             self._ready = _failed(f"snapshot of {len(payload)} bytes exceeds the {self._capacity}-byte pipe")
             return True
-        self._requests.send_bytes(payload)
+        try:
+            self._requests.send_bytes(payload)
+        except OSError as exc:  # BrokenPipeError: it died between the check above and the write
+            self._lost(type(exc).__name__)
+            return False
         self._in_flight = True
         return True
+
+    def _lost(self, reason: str) -> None:
+        """The worker is dead: close its ends, count it, and drop the check after MAX_RESTARTS."""
+        self.close()
+        self.restarts += 1
+        dropped = self.restarts > MAX_RESTARTS
+        if dropped:
+            self.mode = "off"
+        self.on_worker_lost(reason, self.restarts, dropped)
 
     def poll(self) -> CheckResult | None:
         res = None
@@ -166,7 +192,7 @@ class AssumptionChecker:
             try:
                 res = self._results.recv()
             except (EOFError, OSError) as exc:  # the worker died: report it, start a new one next time
-                self.close()
+                self._lost(type(exc).__name__)
                 res = _failed(f"worker ended: {type(exc).__name__}")
         if res is None:
             return None
@@ -188,6 +214,9 @@ class AssumptionChecker:
                 self.worker.kill()
                 self.worker.wait(timeout=2.0)
             for conn in (self._requests, self._results):
-                conn.close()
+                try:
+                    conn.close()
+                except OSError:
+                    pass
             self.worker = self._requests = self._results = None
         self._in_flight = False

@@ -43,6 +43,9 @@ _ACTION_CODES = {
 }
 
 
+SATURATED_FRACTION = 0.98  # |speed| / max_speed from which a wheel counts as at its limit (not a failure)
+
+
 @dataclass
 class FdirAction:
     action: str  # safe | reset_estimator | isolate_wheel | isolate_wheel_safe
@@ -299,8 +302,13 @@ def _wheel_monitor_values(dt_s, speed, fault_flags, cmd, active, seen, max_speed
     fault = np.zeros(n, dtype=np.bool_)
     ratio = np.empty(n)
     for i in range(n):
-        residual_off = off[i] and active[i]
         s = speed[i]
+        # A wheel at its speed limit cannot follow a torque that pushes it further: its speed is held there,
+        # as the model says it is. That is saturation (WHEEL_SPEED), not a failure to isolate. A torque back
+        # from the limit must still be followed.
+        at_limit = fault_flags[i] >= 0 and ((fault_flags[i] & overspeed_bit) != 0
+                                            or (math.isfinite(s) and abs(s) >= SATURATED_FRACTION * max_speed[i]))
+        residual_off = off[i] and active[i] and not (at_limit and cmd[i] * s > 0.0)
         if fault_flags[i] < 0:  # no status this cycle (speed NaN): its silence is a fault once heard from
             fault[i] = seen[i] or residual_off
             ratio[i] = np.nan
@@ -315,6 +323,21 @@ def _wheel_monitor_values(dt_s, speed, fault_flags, cmd, active, seen, max_speed
         else:
             ratio[i] = np.nan
     return fault, ratio
+
+
+# the wheel status's fault bits (config/icd/keepout.dbc, RWn_STATUS.fault)
+_WHEEL_BITS = ((0x04, "drive fault reported by the wheel"),
+               (0x02, "command timeout: the wheel's torque commands stopped arriving"))
+
+
+def wheel_fault_cause(flags: int) -> str:
+    """A WHEEL_FAULT's cause in words, from the wheel's status flags this cycle (-1: no status came)."""
+    if flags < 0:
+        return "status lost: no speed report from the wheel"
+    for bit, words in _WHEEL_BITS:
+        if flags & bit:
+            return words
+    return "speed does not follow the commanded torque"
 
 
 class Fdir:
@@ -416,7 +439,7 @@ class Fdir:
         if not changed and not imu_corrupt_frames and not st_corrupt_frames:
             return []  # the usual cycle: no monitor changed state, nothing to report
         return self._report(imu_corrupt_frames, st_corrupt_frames, innovation_deg, wheel_speed_rad_s, margins_deg,
-                            zone_bodies, worst_k)
+                            zone_bodies, worst_k, wheel_fault_flags)
 
     def _count_stale(self, imu_missing: bool, st_missing: bool) -> None:
         stale = self.stale_counts
@@ -437,7 +460,7 @@ class Fdir:
                             zone_bodies, worst_k)
 
     def _report(self, imu_corrupt_frames, st_corrupt_frames, innovation_deg, wheel_speed_rad_s, margins_deg,
-                zone_bodies, worst_k) -> list[FdirAction]:
+                zone_bodies, worst_k, wheel_fault_flags=None) -> list[FdirAction]:
         """The events and actions of the monitors that changed state this cycle, in evaluation order."""
         actions: list[FdirAction] = []
         res = self._bank.result.tolist()
@@ -458,7 +481,11 @@ class Fdir:
         n = self.n_wheels
         for i, mon in enumerate(self.wheel_fault):
             if self._changed(mon, values[5 + i], actions, i, res[5 + i]) == _TRIPPED_NOW:
-                self.event("WHEEL_FAULT", wheel=i + 1, fault=1)
+                if wheel_fault_flags is not None and i < len(wheel_fault_flags):
+                    flags = int(wheel_fault_flags[i])
+                    self.event("WHEEL_FAULT", wheel=i + 1, fault=flags & 0xFF, cause=wheel_fault_cause(flags))
+                else:  # evaluated from fault values alone (evaluate_arrays): the flags are not known here
+                    self.event("WHEEL_FAULT", wheel=i + 1, fault=0, cause="wheel monitor tripped")
         for i, mon in enumerate(self.wheel_speed):
             r = res[5 + n + i]
             if r == _NO_CHANGE:

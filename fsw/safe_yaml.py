@@ -3,8 +3,10 @@
 Shared by the flight software (``keepout fsw MISSION`` reads its mission file itself) and by
 `hil_sim.yaml_loader` (``config validate``, ``sil run``, campaigns), which adds the positions of every key.
 A file is refused when it is not a regular file (a FIFO would block the open forever), when it is larger
-than MAX_FILE_BYTES, nested deeper than MAX_DEPTH, uses more than MAX_ALIASES aliases, or expands
-(aliases repeating aliases, a "billion laughs") to more than MAX_NODES values.
+than MAX_FILE_BYTES or has more than MAX_LINES lines (both before parsing), holds more than
+MAX_COMPOSED_NODES values, is nested deeper than MAX_DEPTH or uses more than MAX_ALIASES aliases (these three
+counted while composing, so the refusal comes as soon as a limit is passed), or expands (aliases repeating
+aliases, a "billion laughs") to more than MAX_NODES values.
 """
 from __future__ import annotations
 
@@ -15,10 +17,15 @@ from typing import Any
 
 import yaml
 
-MAX_FILE_BYTES = 4 * 1024 * 1024  # a mission is a few kB; anything this big is a mistake or an attack
+MAX_FILE_BYTES = 1024 * 1024  # a mission is a few kB; anything this big is a mistake or an attack
 MAX_ALIASES = 100  # YAML aliases (*name) allowed in one file: a mission needs none
 MAX_DEPTH = 32  # nesting of mappings and lists: a mission nests 6 deep
 MAX_NODES = 200_000  # values after alias expansion: stops a "billion laughs" before it costs memory
+# Checked before parsing and while composing, so a file is refused as soon as it goes over, whatever its
+# shape: PyYAML composes ~25 k values a second, so a 4 MB flat list of 2 M values took 88 s and 1.5 GB
+# before the expansion check refused it. The largest shipped config has 410 values and 120 lines.
+MAX_LINES = 50_000
+MAX_COMPOSED_NODES = 20_000  # values as written (each alias counts once here; expansion: MAX_NODES)
 
 
 class UnreadableFile(Exception):
@@ -62,6 +69,9 @@ def read_config_text(path: str | Path) -> str:
             os.close(fd)
     if len(raw) > MAX_FILE_BYTES:
         raise UnreadableFile(f"is larger than {MAX_FILE_BYTES // 2**20} MB, the limit for a config file")
+    lines = raw.count(b"\n")
+    if lines > MAX_LINES:
+        raise UnreadableFile(f"has {lines} lines; a config file may have at most {MAX_LINES} (a mission has ~150)")
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -84,8 +94,13 @@ class BoundedLoader(yaml.SafeLoader):
         super().__init__(stream)
         self._depth = 0
         self._aliases = 0
+        self._nodes = 0
 
     def compose_node(self, parent: Any, index: Any) -> Any:
+        self._nodes += 1
+        if self._nodes > MAX_COMPOSED_NODES:
+            raise LimitExceeded(f"more than {MAX_COMPOSED_NODES} values (keys, items and scalars); a mission "
+                                f"has a few hundred", self.peek_event().start_mark)
         if self.check_event(yaml.AliasEvent):
             self._aliases += 1
             if self._aliases > MAX_ALIASES:

@@ -27,6 +27,7 @@ from the code. With link security only packets that authenticate are answered (s
 from __future__ import annotations
 
 import fcntl
+import math
 import os
 import select
 import signal
@@ -80,6 +81,7 @@ INVALID_OPCODE = "INVALID_OPCODE"
 VALIDATION = "VALIDATION"
 FORMAT = "FORMAT"
 EXECUTION = "EXECUTION"
+JUNK_EVENT_PERIOD_S = 60.0  # UPLINK_JUNK events: at most one a minute of onboard time
 SECURITY = "SECURITY"
 
 # SO_RXQ_OVFL (Linux socket option 40, not exported by every Python): each datagram then carries the
@@ -294,6 +296,12 @@ class CommandDispatcher:
         self.security = security
         self.budget_s = budget_s
         self.kernel_drops = 0  # datagrams the kernel discarded (socket buffer full), never reset
+        # Junk: datagrams refused without an answer (they do not authenticate; without link security, the
+        # malformed ones). Anyone on the host can send them, so they are housekeeping counters, not warning
+        # events: one UPLINK_JUNK event at most every JUNK_EVENT_PERIOD_S says how many came and why.
+        self.junk_total = 0  # never reset
+        self._junk_window: dict[str, int] = {}
+        self._junk_event_t = -math.inf
         self.budget_exhausted = 0  # polls that stopped at the budget with datagrams still queued
         self._handlers: dict[int, Handler] = {}
         self.counters: dict[str, int] = dict.fromkeys(self.COUNTER_NAMES, 0)
@@ -398,6 +406,8 @@ class CommandDispatcher:
                 self.budget_exhausted += 1
                 self._maybe_readable = True
                 break
+        if self._junk_window:
+            self._report_junk()
         return results
 
     def handle_datagram(self, data: bytes) -> CommandResult:
@@ -478,13 +488,31 @@ class CommandDispatcher:
             self._acknowledge("ACCEPTANCE_SUCCESS", request_id, ack_seq, opcode)
         else:
             self.counters["rejected"] += 1
-        self._event("CMD_REJECTED", opcode=opcode or 0, error=kind, reason=reason)
+        if request_id < 0 or (self.security is None and kind == FORMAT):  # junk: counted, summarised
+            self.junk_total += 1
+            self._junk_window[code] = self._junk_window.get(code, 0) + 1
+            self._report_junk()
+        else:
+            self._event("CMD_REJECTED", opcode=opcode or 0, error=kind, reason=reason)
         if request_id >= 0:
             self._acknowledge("COMPLETION_FAILURE" if accepted else "ACCEPTANCE_FAILURE", request_id, ack_seq,
                               opcode, code)
         result = CommandResult(accepted, kind, opcode, name, seq, reason, None, code, request_id)
         self.last_result = result
         return result
+
+    def _report_junk(self) -> None:
+        """One UPLINK_JUNK event for the junk since the last one, at most every JUNK_EVENT_PERIOD_S of
+        onboard time (the first at once: the ground learns that junk started)."""
+        now = self.telemetry.clock() if self.telemetry is not None else time.monotonic()
+        if now - self._junk_event_t < JUNK_EVENT_PERIOD_S:
+            return
+        window = self._junk_window
+        reasons = ", ".join(f"{n} {code}" for code, n in sorted(window.items(), key=lambda kv: -kv[1]))
+        self._event("UPLINK_JUNK", count=sum(window.values()), reasons=reasons[:120],
+                    window_s=min(now - self._junk_event_t, 1e9))
+        self._junk_window = {}
+        self._junk_event_t = now
 
     def _acknowledge(self, report: str, request_id: int, seq: int, opcode: int | None, code: str = "NONE") -> None:
         """Send one verification report (a TC_ACK packet: never throttled, unlike events)."""
@@ -528,7 +556,8 @@ class CommandDispatcher:
         values = {f"tc_sec_{reason}": (sa.counters[reason] if sa is not None else 0) for reason in SECURITY_REASONS}
         values.update(tc_sec_resyncs=sa.resyncs if sa is not None else 0,
                       tc_sec_last_sn=sa.last_sn if sa is not None else 0,
-                      tc_uplink_dropped=self._read_kernel_drops(), tc_uplink_deferred=self.budget_exhausted)
+                      tc_uplink_dropped=self._read_kernel_drops(), tc_uplink_deferred=self.budget_exhausted,
+                      tc_uplink_junk=self.junk_total)
         return values
 
     def reset_counters(self) -> None:

@@ -20,7 +20,7 @@ import json
 import os
 import random
 import socket
-from dataclasses import MISSING, asdict, dataclass, field
+from dataclasses import MISSING, asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +55,8 @@ class Endpoints:
     pids: dict[str, int] = field(default_factory=dict)
     started_unix_s: float = 0.0
     state: str = "running"
+    # the orchestrator's process start time (psutil's create_time): a reused pid is not taken for it
+    orchestrator_started_s: float = 0.0
     version: int = ENDPOINTS_VERSION
 
     @property
@@ -154,6 +156,84 @@ def open_telemetry(endpoints: Endpoints, *, port: int | None = None,
     return sock
 
 
+ORCHESTRATOR_KILLED = "crashed: orchestrator killed"
+
+
+def orchestrator_alive(endpoints: Endpoints) -> bool:
+    """Whether the process that wrote ``endpoints`` (``pids['sil']``) still runs: the same pid with the same
+    start time (an old folder without the start time: the pid alone)."""
+    import psutil
+
+    pid = endpoints.pids.get("sil")
+    if not pid:
+        return True  # not written by an orchestrator we can check: leave it alone
+    try:
+        proc = psutil.Process(int(pid))
+        if proc.status() == psutil.STATUS_ZOMBIE:
+            return False
+        started = proc.create_time()
+    except (psutil.NoSuchProcess, psutil.AccessDenied, ValueError):
+        return False
+    return not endpoints.orchestrator_started_s or abs(started - endpoints.orchestrator_started_s) < 0.05
+
+
+def settle_orphaned_run(run_dir: str | Path) -> bool:
+    """Give a run whose orchestrator is gone (SIGKILL, a host crash) its final status: ``endpoints.json``
+    ``state`` and ``summary.json`` ``status`` said "running" for ever; they now say it crashed. Returns
+    whether the folder was changed. Any `keepout` command that reads run folders calls this."""
+    run_dir = Path(run_dir)
+    summary_path = run_dir / "summary.json"
+    try:
+        summary = json.loads(summary_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        summary = {"run_dir": str(run_dir)}
+    try:
+        endpoints = Endpoints.load(run_dir)
+    except LinkError:  # killed before the endpoints were written: the reserved summary names the orchestrator
+        who = summary.get("orchestrator") if isinstance(summary.get("orchestrator"), dict) else None
+        if summary.get("status") != "running" or not who:
+            return False
+        endpoints = Endpoints(run_id="", tm_transport="udp", tm_host=LOOPBACK, tm_port=0, tc_host=LOOPBACK,
+                              tc_port=0, bus="", pids={"sil": who.get("pid", 0)},
+                              orchestrator_started_s=float(who.get("started_s") or 0.0), state="(none)")
+        if orchestrator_alive(endpoints):
+            return False
+    else:
+        if endpoints.state != "running" or orchestrator_alive(endpoints):
+            return False
+    if summary.get("status", "running") == "running":
+        summary.update(status=ORCHESTRATOR_KILLED, **{"pass": False})
+        tmp = summary_path.with_suffix(".json.tmp")
+        try:
+            tmp.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+            os.replace(tmp, summary_path)
+        except OSError:
+            return False
+    if endpoints.state == "running":
+        try:
+            replace(endpoints, state="crashed").write(run_dir)
+        except OSError:
+            return False
+    return True
+
+
+def settle_orphaned_runs(runs_root: str | Path = RUNS_ROOT) -> list[Path]:
+    """`settle_orphaned_run` on every run folder under ``runs_root``; the folders it changed."""
+    root = Path(runs_root)
+    return [p.parent for p in (root.glob("*/summary.json") if root.is_dir() else ())
+            if _says_running(p) and settle_orphaned_run(p.parent)]
+
+
+def _says_running(summary_path: Path) -> bool:
+    """A cheap look at a summary's head (a finished one is never read whole here)."""
+    try:
+        with open(summary_path, "rb") as f:
+            head = f.read(512)
+    except OSError:
+        return False
+    return b'"status": "running"' in head or b'"status":"running"' in head
+
+
 def find_run(spec: str | Path, runs_root: str | Path = RUNS_ROOT) -> Path:
     """The run folder ``spec`` names: a folder holding ``endpoints.json``, or ``latest`` (the run under
     ``runs_root`` that started last). Raises ``LinkError`` saying what was looked for."""
@@ -162,8 +242,10 @@ def find_run(spec: str | Path, runs_root: str | Path = RUNS_ROOT) -> Path:
         if not (path / ENDPOINTS_FILE).is_file():
             raise LinkError(f"--run {spec}: no {ENDPOINTS_FILE} there; give a run folder written by "
                             f"`keepout sil run` or `latest`")
+        settle_orphaned_run(path)
         return path
     root = Path(runs_root)
+    settle_orphaned_runs(root)
     candidates = []
     for path in root.glob(f"*/{ENDPOINTS_FILE}") if root.is_dir() else ():
         try:

@@ -719,6 +719,53 @@ def _check_braking(mission, report) -> float:
     return first
 
 
+def momentum_exceeded_at_s(J_B: np.ndarray, omega0_B: np.ndarray, torque_B: np.ndarray, axes: np.ndarray,
+                           headroom_Nms: np.ndarray, duration_s: float, samples: int = 2001) -> tuple[float, float, float]:
+    """When the momentum the wheels must hold first exceeds what they can take up, holding attitude.
+
+    The wheels must absorb the body's initial momentum J omega0 and the constant disturbance torque's
+    integral (constant in body axes while the attitude is held: the budget of a mission without momentum
+    management). Returns (the first time it exceeds the capacity along its direction [s] (inf: never within
+    ``duration_s``), the momentum needed then or at the end [N m s], the capacity along it [N m s])."""
+    t = np.linspace(0.0, duration_s, samples)
+    H = (J_B @ omega0_B)[None, :] + t[:, None] * torque_B[None, :]
+    size = np.linalg.norm(H, axis=1)
+    dirs = np.where(size[:, None] > 0.0, H / np.where(size > 0.0, size, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
+    capacity = wheel_authority(axes, headroom_Nms, dirs)
+    over = np.nonzero(size > capacity)[0]
+    k = int(over[0]) if over.size else samples - 1
+    return (float(t[k]) if over.size else math.inf), float(size[k]), float(capacity[k])
+
+
+def _check_momentum_budget(mission, report, axes: np.ndarray, headroom: np.ndarray) -> None:
+    """Refuse a mission whose wheels cannot hold the momentum it will accumulate: a saturated wheel can
+    no longer steer the boresight away from a zone, and keepout has no momentum management on the missions
+    this checks (magnetorquers are not modelled)."""
+    sc = mission.spacecraft
+    J = np.asarray(sc.inertia_B_kgm2, dtype=float)
+    omega0 = np.asarray(mission.initial_state.omega_BN_B_rad_s, dtype=float)
+    torque = np.asarray(sc.disturbance.constant_B_Nm, dtype=float)
+    t_over, need, cap = momentum_exceeded_at_s(J, omega0, torque, axes, headroom, float(mission.duration_s))
+    if t_over == 0.0:
+        report.add("error", "momentum", f"the initial body rate holds {need:.4g} N m s, more than the wheels can "
+                   f"take up along it ({cap:.4g} N m s up to {mission.requirements.max_wheel_speed_fraction:g} of "
+                   "their speed limit): the flight software could never stop the rotation; lower "
+                   "initial_state.omega_BN_B_rad_s", ("initial_state", "omega_BN_B_rad_s"),
+                   momentum_Nms=need, capacity_Nms=cap)
+    elif math.isfinite(t_over):
+        report.add("error", "momentum", f"the constant disturbance torque ({np.linalg.norm(torque):.3g} N m) fills "
+                   f"the wheels' momentum capacity at t = {t_over:.0f} s of the {mission.duration_s:g} s mission "
+                   f"({need:.4g} N m s against {cap:.4g} N m s up to {mission.requirements.max_wheel_speed_fraction:g} "
+                   "of their speed limit); a saturated wheel cannot steer the boresight away from a zone and this "
+                   "mission has no momentum management: shorten duration_s, lower "
+                   "spacecraft.disturbance.constant_B_Nm, or fit larger wheels",
+                   ("spacecraft", "disturbance", "constant_B_Nm"), exceeded_at_s=t_over, momentum_Nms=need,
+                   capacity_Nms=cap)
+    else:
+        report.add("info", "momentum", f"momentum budget: {need:.4g} N m s at the end of the mission against "
+                   f"{cap:.4g} N m s of wheel capacity along it", momentum_Nms=need, capacity_Nms=cap)
+
+
 def _check_wheels(mission, report) -> None:
     sc = mission.spacecraft
     fsw = mission.flight_software
@@ -756,6 +803,7 @@ def _check_wheels(mission, report) -> None:
                    f"{np.round(d[worst_m], 3).tolist()}, below the rate limit spacecraft.max_rate_deg_s = {rate_limit:g}; "
                    f"lower it to {rate_avail_deg_s:.3g}", ("flight_software", "spacecraft", "max_rate_deg_s"),
                    rate_avail_deg_s=rate_avail_deg_s, rate_limit_deg_s=rate_limit)
+    _check_momentum_budget(mission, report, axes, headroom)
     braking_deg = _check_braking(mission, report)
     report.add("info", "wheels", f"worst-axis authority: {accel_avail_deg_s2:.4g} deg/s^2 (commanded "
                f"{accel_cmd:g}), {rate_avail_deg_s:.4g} deg/s momentum-limited rate (limit {rate_limit:g}), braking "

@@ -29,6 +29,7 @@ import dataclasses
 import datetime as dt
 import hashlib
 import ipaddress
+import errno
 import json
 import math
 import multiprocessing as mp
@@ -51,7 +52,7 @@ import yaml
 
 from fsw.lifetime import PARENT_PID_ENV, die_with_parent
 from fsw.link_security import LINK_KEY_FILE, write_key_file
-from ground.link import ENDPOINTS_FILE
+from ground.link import ENDPOINTS_FILE, settle_orphaned_runs
 from keepout_config import config_path
 
 DEFAULT_MISSION = config_path("missions", "demo-pointing.yaml")
@@ -231,8 +232,9 @@ def ground_process(archive_dir: str, endpoints: dict, port: int, port_queue, rea
         except OSError as exc:
             failure = failure or exc
     if failure is not None:
-        print(f"keepout ground: {archive_dir}: cannot write the telemetry archive: {failure.strerror or failure}",
-              file=sys.stderr)
+        if getattr(failure, "errno", None) != errno.ENOSPC:  # a full disk is said once, in the run's status
+            print(f"keepout ground: {archive_dir}: cannot write the telemetry archive: {failure.strerror or failure}",
+                  file=sys.stderr)
         sys.exit(GROUND_EXIT_CANNOT_WRITE)
 
 
@@ -514,6 +516,8 @@ def run_sil(options: RunOptions) -> RunResult:
     SIGTERM, a crash of any of the three processes, a full disk) ends it here with a judged
     ``summary.json`` whose ``status`` says which, and the matching exit code."""
     mission, report = prepare(options)
+    _shutdown_errors.clear()
+    settle_orphaned_runs(options.out_root)  # earlier runs here whose orchestrator was killed get their end
     run_dir = _run_dir(Path(options.out_root), mission.name)
     _reserve_summary(run_dir)
     if report is not None:
@@ -529,7 +533,14 @@ def run_sil(options: RunOptions) -> RunResult:
             raise
         if main_thread:  # the run is over: a SIGTERM now must not cut its judgement short
             signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        return _judge(run_dir, mission, status, code, options.planned_duration_s)
+        try:
+            return _judge(run_dir, mission, status, code, options.planned_duration_s)
+        except (OSError, EOFError, ValueError, KeyError) as exc:  # what was recorded is unreadable
+            reason = _disk_full(exc) or f"{type(exc).__name__}: {exc}"
+            crashed = {"mission": mission.name, "run_dir": str(run_dir), "pass": False,
+                       "status": f"crashed: the run's records could not be written or read: {reason}"}
+            _quietly(lambda: _write_reserved_summary(run_dir, crashed))
+            return RunResult(run_dir, EXIT_CRASHED, crashed)
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous_sigterm)
@@ -694,6 +705,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
             stats = {**sim.stats.__dict__, "aborted": abort_reason, "clock": "realtime" if options.realtime else "lockstep", "bus": info.spec, "bus_note": info.note, "wall_s": wall_s,
                      "loop_cpu_s": loop_cpu_s, "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
                      "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
+                     "bus_decode_errors": int(getattr(bus, "decode_errors", 0)),
                      "faults_injected": [list(map(_plain, e)) if isinstance(e, tuple) else _plain(e)
                                          for e in getattr(sim.injector, "log", [])],
                      "telecommands": timeline.sent if timeline else [],
@@ -759,6 +771,10 @@ def _stop_children(fsw_proc: subprocess.Popen | None, ground, stop_event) -> Non
             ground.join(timeout=5.0)
 
 
+# what the shutdown steps of this process's run could not do (a full disk): said once, in the final status
+_shutdown_errors: list[Exception] = []
+
+
 def _quietly(step) -> None:
     """One shutdown step; a failure (a full disk) must not keep the next ones or the summary from running."""
     if step is None:
@@ -766,7 +782,14 @@ def _quietly(step) -> None:
     try:
         step()
     except (OSError, ValueError) as exc:
-        print(f"keepout: shutdown step failed: {exc}", file=sys.stderr)
+        _shutdown_errors.append(exc)
+
+
+def _disk_full(exc: BaseException | None = None) -> str | None:
+    """'No space left on device' (or the first write error) when the run folder's disk failed the run."""
+    errors = [e for e in (*_shutdown_errors, exc) if isinstance(e, OSError)]
+    full = [e for e in errors if e.errno == errno.ENOSPC] or errors
+    return (full[0].strerror or str(full[0])) if full else None
 
 
 SUMMARY_FILE = "summary.json"
@@ -776,7 +799,8 @@ SUMMARY_RESERVE_BYTES = 256 * 1024
 def _reserve_summary(run_dir: Path) -> None:
     """Write summary.json at the start, status 'running', padded: the final summary overwrites these
     blocks, so it can be written even when the disk has filled up during the run."""
-    head = json.dumps({"status": "running", "pass": False, "run_dir": str(run_dir)})
+    head = json.dumps({"status": "running", "pass": False, "run_dir": str(run_dir),
+                       "orchestrator": {"pid": os.getpid(), "started_s": _own_start_time()}})
     (run_dir / SUMMARY_FILE).write_text(head + " " * (SUMMARY_RESERVE_BYTES - len(head)) + "\n")
 
 
@@ -839,7 +863,16 @@ def _endpoints(mission, run_id: str, bus_spec: str, realtime: bool):
         tm_host = tmtc.telemetry_host if fixed_group else random_group()
     return Endpoints(run_id=run_id, tm_transport=transport, tm_host=tm_host, tm_port=0, tm_interface=interface,
                      tc_host=tc_host, tc_port=0, bus=bus_spec, clock="realtime" if realtime else "lockstep",
-                     pids={"sil": os.getpid()}, started_unix_s=time.time())
+                     pids={"sil": os.getpid()}, started_unix_s=time.time(),
+                     orchestrator_started_s=_own_start_time())
+
+
+def _own_start_time() -> float:
+    """This process's start time as psutil reports it: with the pid, tells a later reader of the run folder
+    whether the orchestrator still runs (ground.link.settle_orphaned_run)."""
+    import psutil
+
+    return psutil.Process().create_time()
 
 
 def _truth_error_function(mission, boresight_B: np.ndarray):

@@ -57,6 +57,9 @@ def _run(args: argparse.Namespace) -> int:
     except RunNotStarted as exc:
         print(f"run could not start: {exc}", file=sys.stderr)
         return EXIT_NOT_STARTED
+    if "requirements" not in result.summary:  # nothing could be judged (the run folder's disk filled up)
+        print(f"{result.summary['status']} -> {result.run_dir}", file=sys.stderr)
+        return result.exit_code
     print(format_summary(result.summary, total_wall_s=_since_process_start()))
     return result.exit_code
 

@@ -145,6 +145,7 @@ def _run(args: argparse.Namespace) -> int:
         stats = {**sim.stats.__dict__, "aborted": aborted, "clock": "realtime" if args.realtime else "lockstep",
                  "bus": info.spec, "bus_note": info.note, "bitrate_bps": mission.bus_bitrate_bps, "wall_s": wall_s,
                  "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames,
+                 "bus_decode_errors": int(getattr(bus, "decode_errors", 0)),
                  "telecommands": timeline.sent, "telecommand_errors": timeline.errors}
         (out / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n")
     if code == EXIT_NOT_STARTED:

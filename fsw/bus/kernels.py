@@ -265,7 +265,17 @@ ROLE_WHEEL = 10  # + wheel index (0-based)
 S_IMU_SAT = S_WHEEL_NEW + 6  # the tick's gyro samples flagged saturated
 S_WHEEL_FAULT = S_IMU_SAT + 1  # + wheel index: the fault flags of its status this tick, -1 when none came
 NO_FID = -(1 << 40)  # collect_rows' first_fid when frame ``first`` is not judged yet
-S_SIZE = S_WHEEL_FAULT + 6
+# a run of SYNCs too far ahead of the last tick: the newest one's tick and how many came one tick apart
+S_CHAIN_TICK = S_WHEEL_FAULT + 6
+S_CHAIN_N = S_CHAIN_TICK + 1
+S_SIZE = S_CHAIN_N + 1
+# A SYNC is plausible when its tick follows the reference tick by 1..MAX_SYNC_STEP and it keeps the period.
+# Anything else is counted (S_STALE) and ignored: a replayed log or a forged frame that passed the CRC by
+# chance (1 in 256) can no longer move onboard time. A simulator that really moved on (the flight software
+# stalled past MAX_SYNC_STEP ticks) is followed again after RESYNC_RUN SYNCs in a row one tick apart, a run
+# that random or replayed frames do not make.
+MAX_SYNC_STEP = 100
+RESYNC_RUN = 3
 # ... and its configuration slots (cfg): value-row columns of the signals the driver reads
 (C_TICK, C_FOLLOWING, C_PERIOD, C_IMU_X, C_IMU_Y, C_IMU_Z, C_IMU_SAT, C_QW, C_QX, C_VALID, C_BLIND, C_SEQ_A,
  C_QY, C_QZ, C_SEQ_B, C_AGE, C_SPEED, C_TORQUE, C_CURRENT, C_TEMP, C_FAULT, C_N_CODES, C_BUS_ROW,
@@ -299,6 +309,30 @@ def _tally(tally, st, key):  # pragma: no cover - compiled
     tally[k, 0] = key
     tally[k, 1] = 1
     st[S_NTALLY] = k + 1
+
+
+@njit(cache=True)
+def _sync_plausible(st, ft, cfg, values, j, has_ref, ref):  # pragma: no cover - compiled
+    # SYNC in row j against the reference tick ``ref`` (the last closed or the current one); counts the rest
+    tk = np.int64(values[j, cfg[C_TICK]])
+    if has_ref == 0:
+        return tk >= 0
+    if tk <= ref:
+        st[S_STALE] += 1
+        return False
+    if tk - ref <= MAX_SYNC_STEP and abs(values[j, cfg[C_PERIOD]] - 1000.0 * ft[F_PERIOD]) < 1e-6:
+        st[S_CHAIN_N] = 0
+        return True
+    if st[S_CHAIN_N] > 0 and tk == st[S_CHAIN_TICK] + 1:
+        st[S_CHAIN_N] += 1
+    else:
+        st[S_CHAIN_N] = 1
+    st[S_CHAIN_TICK] = tk
+    if st[S_CHAIN_N] >= RESYNC_RUN:
+        st[S_CHAIN_N] = 0
+        return True
+    st[S_STALE] += 1
+    return False
 
 
 @njit(cache=True)
@@ -454,9 +488,7 @@ def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, l
             continue
         if st[S_PHASE] == PHASE_SYNC:
             if role == ROLE_SYNC:
-                if st[S_HAS_LAST] != 0 and np.int64(values[j, cfg[C_TICK]]) <= st[S_LAST]:
-                    st[S_STALE] += 1
-                else:
+                if _sync_plausible(st, ft, cfg, values, j, st[S_HAS_LAST], st[S_LAST]):
                     _start_tick(st, ft, cfg, values, j, seq, last_ok_t)
             elif role >= ROLE_DEVICE:
                 st[S_UNEXPECTED] += 1
@@ -464,9 +496,8 @@ def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, l
         # PHASE_TICK
         if role == ROLE_SYNC:
             tk = np.int64(values[j, cfg[C_TICK]])
-            if tk <= st[S_TICK]:
-                st[S_STALE] += 1
-            else:  # the next tick already started: keep its SYNC, close this one
+            if _sync_plausible(st, ft, cfg, values, j, 1, st[S_TICK]):
+                # the next tick already started: keep its SYNC, close this one
                 st[S_PENDING] = 1
                 st[S_P_TICK] = tk
                 st[S_P_FOLLOWING] = np.int64(values[j, cfg[C_FOLLOWING]])

@@ -148,6 +148,7 @@ class BatchSocketcanBus(SocketcanBus):
         self._fd = self.socket.fileno()
         self._rx: deque[can.Message] = deque()
         self._was_empty = False  # the last read found the socket empty
+        self.decode_errors = 0  # received buffers that are not a classic can_frame, dropped
         self._poll_first = 0  # waiting reads left that poll before reading (see the module docstring)
         self._rx_slots = _Slots(with_control=True)
         self._tx_slots = _Slots(with_control=False)
@@ -221,6 +222,9 @@ class BatchSocketcanBus(SocketcanBus):
         for i in range(n):
             h = slots.hdr[i].msg_hdr
             can_id, dlc, payload = _FRAME.unpack_from(view, 16 * i)
+            if slots.hdr[i].msg_len != 16 or dlc > 8:  # not a classic can_frame: dropped and counted
+                self.decode_errors += 1
+                continue
             if h.msg_controllen >= _CMSG_SPACE:
                 sec, nsec = _TIMESPEC.unpack_from(control, _CMSG_SPACE * i + 16)
                 stamp = sec + nsec * 1e-9

@@ -356,9 +356,10 @@ def _used_value(loc, mission, world, initial, fsw, sent_commands, sim) -> Any:
             return [math.degrees(math.atan2(v[1], v[0])) % 360.0,
                     math.degrees(math.asin(max(-1.0, min(1.0, v[2] / np.linalg.norm(v)))))]
     if loc[:1] == ("faults",):
-        # a fault's optional fields (a delay's delay_s, a corruption's bit) only when it has them
+        # every field a mission's fault may have, so a dispersion that adds faults to a base mission's own
+        # (drawn with their delay_s, bit, probability) compares field by field with what was injected
         used = [{"kind": f.kind, "message": f.message, "start_s": f.start_s, "end_s": f.end_s,
-                 **{k: getattr(f, k) for k in ("delay_s", "bit") if getattr(f, k) is not None}}
+                 "delay_s": f.delay_s, "bit": f.bit, "probability": f.probability}
                 for f in sim.injector.faults] if sim.injector is not None else []
         return dsp.read_path({"faults": used}, loc)
     if loc[:2] == ("spacecraft", "wheels") and len(loc) >= 4 and loc[3] in _WHEEL_FIELDS:

@@ -167,15 +167,21 @@ def _sha256(path: Path) -> str:
 # Backends (same two calls for both)
 # ---------------------------------------------------------------------------------------------
 
-def _ignore_sigint() -> None:
-    # Ctrl-C is the driver's to handle: it cancels what is pending and stops the workers itself.
+def _init_worker() -> None:
+    """A pool worker: Ctrl-C is the driver's to handle (it cancels what is pending and stops the workers
+    itself), and the worker dies with its parent, the forkserver, which ends when the driver does (its pipe
+    from the driver closes): a SIGKILLed `keepout campaign run` leaves no worker flying a run."""
     import signal
+
+    from fsw.lifetime import die_with_parent
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent()
 
 
 # What a fast-mode run imports, loaded once by the forkserver so each worker starts with it instead of
 # importing it on its own (~1.5 s per worker, which is wall time whenever workers share a core).
-_FORKSERVER_PRELOAD = ("hil_sim.campaign.fast", "hil_sim.world", "hil_sim.lockstep", "hil_sim.sil",
+_FORKSERVER_PRELOAD = ("hil_sim.campaign._forkserver_lifetime", "hil_sim.campaign.fast", "hil_sim.world", "hil_sim.lockstep", "hil_sim.sil",
                        "hil_sim.summary", "hil_sim.mission", "fsw.app", "fsw.bus", "fsw.telecommand")
 
 
@@ -184,9 +190,12 @@ class _LocalBackend:
         import multiprocessing
         # forkserver: workers start clean (no threads or open sockets inherited from the driver); it
         # imports the modules above itself (none starts a thread or opens anything at import)
+        from hil_sim.campaign._forkserver_lifetime import DRIVER_PID_ENV
+
+        os.environ[DRIVER_PID_ENV] = str(os.getpid())  # the forkserver, started with this environment, dies with us
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(list(_FORKSERVER_PRELOAD))
-        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_ignore_sigint)
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker)
 
     def submit(self, fn: Callable, *args: Any) -> Any:
         return self.pool.submit(fn, *args)

@@ -105,3 +105,76 @@ def test_unknown_identifiers_reach_housekeeping() -> None:
         assert hk["bus_unknown_ids"] == 7 and hk["bus_stale_syncs"] == 0
     finally:
         loop.close()
+
+
+def test_a_sync_far_ahead_or_with_another_period_cannot_move_onboard_time(icd: Icd, buses) -> None:
+    """A forged SYNC that passes E2E by chance (a random payload's CRC matches 1 time in 256) used to start
+    its tick: one with tick 47,500,000,000 put onboard time at 4.75e9 s and every later real SYNC was stale.
+    Now a SYNC more than MAX_SYNC_STEP ticks ahead, or with another period, is counted and ignored."""
+    from fsw.bus import kernels as K
+
+    sim, fsw = buses
+    tx = E2ESender(icd)
+    drv = FswBusDriver(fsw, icd, n_wheels=1)
+    sim.send(tx.frame("SYNC", dict(tick=5, frames_following=0, period_ms=100)))
+    assert drv.collect_tick(timeout_s=0.5).tick == 5
+    sim.send(tx.frame("SYNC", dict(tick=5 + K.MAX_SYNC_STEP + 1, frames_following=0, period_ms=100)))
+    sim.send(tx.frame("SYNC", dict(tick=6, frames_following=0, period_ms=250)))  # the period changed
+    sim.send(tx.frame("SYNC", dict(tick=6, frames_following=0, period_ms=100)))
+    inputs = drv.collect_tick(timeout_s=0.5)
+    assert inputs.tick == 6 and inputs.t == pytest.approx(0.6)
+    assert drv.stale_syncs == 2
+
+
+def test_a_run_of_consecutive_syncs_far_ahead_is_followed_again(icd: Icd, buses) -> None:
+    """A simulator that really moved on while the flight software was stalled is not locked out: a run of
+    RESYNC_RUN SYNCs one tick apart is followed (a replayed log or random frames make no such run)."""
+    from fsw.bus import kernels as K
+
+    sim, fsw = buses
+    tx = E2ESender(icd)
+    drv = FswBusDriver(fsw, icd, n_wheels=1)
+    sim.send(tx.frame("SYNC", dict(tick=1, frames_following=0, period_ms=100)))
+    assert drv.collect_tick(timeout_s=0.5).tick == 1
+    far = 1 + 10 * K.MAX_SYNC_STEP
+    for k in range(K.RESYNC_RUN):
+        sim.send(tx.frame("SYNC", dict(tick=far + k, frames_following=0, period_ms=100)))
+    assert drv.collect_tick(timeout_s=0.5).tick == far + K.RESYNC_RUN - 1
+    assert drv.stale_syncs == K.RESYNC_RUN - 1
+
+
+def test_datagrams_that_are_not_frames_are_dropped_and_counted() -> None:
+    """Any local process can send to the udp_multicast bus's group and port. A 10-byte datagram that is not
+    msgpack, and msgpack that is not a frame, used to raise CanOperationError into the cycle (the flight
+    software and the simulator exited 'fatal'); now they are dropped and counted, and frames still pass."""
+    import socket
+    import time
+
+    import msgpack
+
+    from fsw.bus.transport import open_bus
+
+    where: list = []
+    bus = open_bus("udp_multicast", info_out=where)
+    try:
+        _, group, port = where[0].spec.split(":")
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+        tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+        for junk in (b"0123456789", msgpack.packb({"arbitration_id": "x"}), msgpack.packb([1, 2, 3]),
+                     msgpack.packb({"data": b"1" * 70, "arbitration_id": 5, "dlc": 70})):
+            tx.sendto(junk, (group, int(port)))
+        other = open_bus(f"udp_multicast:{group}:{port}")
+        try:
+            other.send(can.Message(arbitration_id=0x123, data=b"\x01\x02", is_extended_id=False))
+        finally:
+            other.shutdown()
+        got, deadline = [], time.monotonic() + 5.0
+        while not got and time.monotonic() < deadline:
+            msg = bus.recv(0.2)
+            if msg is not None:
+                got.append(msg)
+        assert [m.arbitration_id for m in got] == [0x123]
+        assert bus.decode_errors == 4
+    finally:
+        bus.shutdown()

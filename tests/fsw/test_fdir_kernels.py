@@ -32,6 +32,7 @@ class FdirInputs:
     margins_deg: list[float] = field(default_factory=list)
     zone_bodies: list[str] = field(default_factory=list)
     slipped: bool = False
+    wheel_flags: list[int] = field(default_factory=list)  # status fault bits this cycle, -1: no status
 
 
 def _evaluate(fdir: Fdir, x: FdirInputs) -> list[FdirAction]:
@@ -139,7 +140,11 @@ class _RefFdir:
                 self.event("INNOVATION_HIGH", innovation_deg=x.innovation_deg)
         for i, faulty in enumerate(x.wheel_fault):
             if self._run(self.wheel_fault[i], 1.0 if faulty else 0.0, actions, i) == "tripped":
-                self.event("WHEEL_FAULT", wheel=i + 1, fault=1)
+                if i < len(x.wheel_flags):
+                    flags = x.wheel_flags[i]
+                    self.event("WHEEL_FAULT", wheel=i + 1, fault=flags & 0xFF, cause=_REF_CAUSE(flags))
+                else:
+                    self.event("WHEEL_FAULT", wheel=i + 1, fault=0, cause="wheel monitor tripped")
         for i, ratio in enumerate(x.wheel_speed_ratio):
             if ratio != ratio:
                 continue
@@ -158,8 +163,20 @@ class _RefFdir:
         return actions
 
 
-def _ref_wheel_values(wheels, speed_list, residual_off, max_speed, seen):
-    """The application's per-wheel loop before `WheelSpeedResidual.monitor_values`."""
+def _REF_CAUSE(flags: int) -> str:
+    """The words the DBC's fault-bit comment gives each flag (drive fault first)."""
+    if flags < 0:
+        return "status lost: no speed report from the wheel"
+    if flags & 4:
+        return "drive fault reported by the wheel"
+    if flags & 2:
+        return "command timeout: the wheel's torque commands stopped arriving"
+    return "speed does not follow the commanded torque"
+
+
+def _ref_wheel_values(wheels, speed_list, residual_off, max_speed, seen, cmd):
+    """The application's per-wheel loop before `WheelSpeedResidual.monitor_values`, with saturation: a
+    wheel at 98 % of its limit (or flagged overspeed) pushed further is not failing to follow."""
     wheel_fault, wheel_ratio = [], []
     for i, (w, s, m) in enumerate(zip(wheels, speed_list, max_speed)):
         if w is None:
@@ -168,7 +185,8 @@ def _ref_wheel_values(wheels, speed_list, residual_off, max_speed, seen):
             continue
         seen[i] = True
         fault = int(w[1])
-        wheel_fault.append(bool(fault & WHEEL_FAULT_MASK) or residual_off[i])
+        saturated = (bool(fault & WHEEL_OVERSPEED) or abs(s) >= 0.98 * m) and cmd[i] * s > 0.0
+        wheel_fault.append(bool(fault & WHEEL_FAULT_MASK) or (residual_off[i] and not saturated))
         wheel_ratio.append(max(abs(s) / m, 1.0 if fault & WHEEL_OVERSPEED else 0.0) if math.isfinite(s) else math.nan)
     return wheel_fault, wheel_ratio
 
@@ -238,12 +256,13 @@ def test_compiled_fdir_matches_the_python_monitors(seed: int) -> None:
                                       WHEEL_OVERSPEED, imu_missing, imu_corrupt, st_missing, st_corrupt, innovation,
                                       margins, zone_bodies, slipped)
         off = (ref_res.update(0.1, speeds, cmd) & active).tolist()
-        wheel_fault, wheel_ratio = _ref_wheel_values(wheels, speed_list, off, max_speed.tolist(), ref_seen)
+        wheel_fault, wheel_ratio = _ref_wheel_values(wheels, speed_list, off, max_speed.tolist(), ref_seen,
+                                                     cmd.tolist())
         ref_actions = ref.evaluate(FdirInputs(
             imu_missing=imu_missing, imu_corrupt_frames=imu_corrupt, st_missing=st_missing,
             st_corrupt_frames=st_corrupt, innovation_deg=innovation, wheel_fault=wheel_fault,
             wheel_speed_ratio=wheel_ratio, wheel_speed_rad_s=speed_list, margins_deg=margins,
-            zone_bodies=zone_bodies, slipped=slipped))
+            zone_bodies=zone_bodies, slipped=slipped, wheel_flags=faults.tolist()))
         assert actions == ref_actions, k
         assert events == ref_events, k
         assert [type(v) for _, a in events for v in a.values()] == [type(v) for _, a in ref_events for v in a.values()]
@@ -277,3 +296,34 @@ def test_evaluate_of_fdir_inputs_matches_the_python_monitors() -> None:
                        zone_bodies=["SUN"], slipped=bool(rng.random() < 0.5))
         assert _evaluate(fdir, x) == ref.evaluate(x), k
         assert events == ref_events and fdir.states() == ref.states()
+
+
+@pytest.mark.parametrize("speed_fraction, expect_isolation", [(0.99, False), (0.5, True)])
+def test_a_wheel_held_at_its_speed_limit_is_saturated_not_failed(speed_fraction: float,
+                                                                  expect_isolation: bool) -> None:
+    """A wheel pushed further at its speed limit does not speed up: that is what the wheel model does at the
+    limit, so it is saturation (WHEEL_SPEED), never an isolation for a speed that does not follow its torque.
+    The same wheel ignoring its torque at half speed is failing, and is isolated."""
+    cfg = _config()
+    n = 4
+    events: list = []
+    fdir = Fdir(cfg, n, event=lambda name, **a: events.append((name, a)))
+    Js = np.full(n, 1e-3)
+    res = WheelSpeedResidual(Js)
+    max_speed = np.full(n, 600.0)
+    seen, active = np.zeros(n, dtype=bool), np.ones(n, dtype=bool)
+    speeds = np.array([speed_fraction * 600.0, 10.0, -20.0, 30.0])
+    cmd = np.array([0.05, 0.0, 0.0, 0.0])  # wheel 1 pushed further up: 50 rad/s^2 it does not follow
+    flags = np.zeros(n, dtype=np.int64)
+    actions = []
+    for _ in range(100):
+        actions += fdir.evaluate_cycle(res, 0.1, speeds.copy(), flags, cmd, active, seen, max_speed,
+                                       WHEEL_FAULT_MASK, WHEEL_OVERSPEED, False, 0, False, 0, float("nan"),
+                                       [5.0], ["SUN"], False)
+    isolated = [a for a in actions if a.action == "isolate_wheel"]
+    assert bool(isolated) == expect_isolation, (actions, events)
+    faults = [a for name, a in events if name == "WHEEL_FAULT"]
+    if expect_isolation:
+        assert faults and faults[0]["cause"] == "speed does not follow the commanded torque"
+    else:
+        assert not faults and any(name == "WHEEL_SPEED_LIMIT" for name, _ in events)

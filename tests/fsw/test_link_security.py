@@ -236,3 +236,46 @@ def test_config_validate_refuses_a_non_loopback_uplink_and_warns_when_it_is_allo
     assert main(["config", "validate", str(path)]) == 0
     captured = capsys.readouterr()
     assert "warning" in captured.err and "0.0.0.0" in captured.err and "valid" in captured.out
+
+
+def test_uplink_junk_is_housekeeping_not_a_flood_of_warning_events() -> None:
+    """Junk on the uplink used to raise a WARNING_HI CMD_REJECTED event each (7,321 throttled in one run): an
+    attacker controlled the warnings. Now junk is counted per reason in housekeeping and summarised by one
+    UPLINK_JUNK event a minute at most; a command that authenticates and is refused still raises CMD_REJECTED."""
+    import random
+
+    from fsw.telemetry import TelemetrySender
+
+    now = [0.0]
+    telemetry = TelemetrySender(DICTIONARY, port=None, clock=lambda: now[0])
+    dispatcher = CommandDispatcher(DICTIONARY, telemetry, port=None, security=uplink_receiver(KEY, 16))
+    dispatcher.register("NOOP", lambda: None)
+    dispatcher.register("SET_MODE", lambda mode: None)
+    rnd = random.Random(3)
+    forged = SecurityAssociation(bytes(32), SPI_TC)
+    n = 0
+    for step in range(3000):  # 300 s of onboard time, junk every 0.1 s: random bytes and forged MACs
+        now[0] = 0.1 * step
+        junk = (bytes(rnd.getrandbits(8) for _ in range(rnd.randint(1, 80))) if step % 2
+                else forged.protect(encode_command(DICTIONARY, "NOOP", seq_count=step % 16000), sn=step + 1))
+        dispatcher.handle_datagram(junk)
+        n += 1
+    hk = dispatcher.hk_values()
+    assert hk["tc_uplink_junk"] == n
+    assert hk["tc_sec_bad_mac"] + hk["tc_sec_unauthenticated"] + hk["tc_format_errors"] == n  # per reason
+    assert hk["tc_sec_bad_mac"] == n // 2
+    events = [e for e in telemetry.recent_events]
+    assert not [e for e in events if e.name == "CMD_REJECTED"]
+    summaries = [e for e in events if e.name == "UPLINK_JUNK"]
+    assert 5 <= len(summaries) <= 6  # the first at once, then one a minute over 300 s
+    assert sum(e.args["count"] for e in summaries) <= n
+    # an authenticated command that is refused (an unknown mode) is the ground's business: an event each
+    ground = _ground()
+    bad = bytearray(encode_command(DICTIONARY, "SET_MODE", ["POINTING"], seq_count=1))
+    bad[8] = 200  # mode index out of range
+    from fsw.telemetry import crc16_ccitt
+
+    bad = bytes(bad[:-2]) + crc16_ccitt(bytes(bad[:-2])).to_bytes(2, "big")
+    result = dispatcher.handle_datagram(ground.protect(bad, sn=10_000))
+    assert not result.accepted
+    assert [e.name for e in telemetry.recent_events][-1] == "CMD_REJECTED"

@@ -132,8 +132,12 @@ def test_format_errors(setup) -> None:
     segmented[2] &= 0x3F  # sequence flags 00: continuation segment
     _expect(dispatcher, bytes(segmented) + struct.pack("!H", crc16_ccitt(bytes(segmented))), "FORMAT", "unsegmented")
     assert recorder.calls == []
-    rejected = [e for e in telemetry.recent_events if e.name == "CMD_REJECTED"]
-    assert len(rejected) == 10 and all(e.args["error"] == "FORMAT" for e in rejected)
+    # malformed datagrams are junk anyone can send: counted in housekeeping, summarised in one UPLINK_JUNK
+    # event a minute at most (the first at once), never a CMD_REJECTED warning each
+    assert not [e for e in telemetry.recent_events if e.name == "CMD_REJECTED"]
+    junk = [e for e in telemetry.recent_events if e.name == "UPLINK_JUNK"]
+    assert len(junk) == 1 and junk[0].args["count"] == 1
+    assert dispatcher.hk_values()["tc_format_errors"] == 10 and dispatcher.hk_values()["tc_uplink_junk"] == 10
 
 
 def test_invalid_opcode_errors(setup) -> None:

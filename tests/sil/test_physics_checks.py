@@ -258,3 +258,32 @@ def test_every_error_names_the_key_to_change():
     locs = {f.loc for f in report.errors}
     assert ("flight_software", "pointing", "zones", 0, "geometry") in locs
     assert ("flight_software", "control", "max_command_accel_deg_s2") in locs
+
+
+def test_a_disturbance_that_saturates_the_wheels_within_the_mission_is_refused_with_the_time():
+    """A mission whose constant disturbance fills the wheels before its end used to pass `config check`; in
+    flight the wheel saturated, was isolated as failed, and the boresight ended inside the Sun zone. The
+    budget is checked against a hand count: the smallsat's four pyramid wheels (axes (+-1, +-1, 1)/sqrt 3,
+    each 4.8e-5 kg m^2 up to 0.9 x 628 rad/s) hold 4 h / sqrt 3 along body x, all four spinning at their
+    headroom with the y and z parts cancelling."""
+    data = _data("smallsat-example.yaml")
+    data["duration_s"] = 10_000.0
+    data["spacecraft"]["disturbance"] = {"constant_B_Nm": [1.0e-5, 0.0, 0.0]}
+    data["initial_state"]["wheel_speeds_rad_s"] = [0.0, 0.0, 0.0, 0.0]
+    report = check_mission(_mission(data), quick=True)
+    found = _checks(report, "momentum")
+    assert len(found) == 1, report.format()
+    h = 4.8e-5 * 0.9 * 628.0
+    expected_s = (4.0 * h / math.sqrt(3.0)) / 1.0e-5
+    assert found[0].numbers["exceeded_at_s"] == pytest.approx(expected_s, abs=10.0)
+    assert "t = " in found[0].message and found[0].loc == ("spacecraft", "disturbance", "constant_B_Nm")
+    data["duration_s"] = 0.9 * expected_s  # ends before the wheels fill: accepted
+    assert not _checks(check_mission(_mission(data), quick=True), "momentum")
+
+
+def test_an_initial_body_rate_beyond_the_wheels_momentum_is_refused():
+    data = _data("smallsat-example.yaml")
+    data["initial_state"]["omega_BN_B_rad_s"] = [0.5, 0.0, 0.0]
+    found = _checks(check_mission(_mission(data), quick=True), "momentum")
+    assert len(found) == 1 and found[0].loc == ("initial_state", "omega_BN_B_rad_s")
+    assert found[0].numbers["momentum_Nms"] > found[0].numbers["capacity_Nms"]
