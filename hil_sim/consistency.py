@@ -49,3 +49,34 @@ def band_fraction(nees: np.ndarray, probability: float = 0.95, dof: int = ATTITU
         return float("nan")
     lo, hi = nees_band(probability, dof)
     return float(np.mean((nees > lo) & (nees < hi)))
+
+
+# Samples of one run are correlated: the star tracker's roll error over ~20 s, the gyro bias over hundreds of
+# seconds. The chi-square and binomial intervals below are for independent samples, so they are applied to
+# samples INDEPENDENT_SPACING_S apart. That removes the fast correlation, not the slow one: a pass says the
+# filter's errors are consistent at that spacing, a necessary condition of consistency, not a proof of it.
+INDEPENDENT_SPACING_S = 20.0
+
+
+def thinned(nees: np.ndarray, period_s: float, spacing_s: float = INDEPENDENT_SPACING_S) -> np.ndarray:
+    """Every sample ``spacing_s`` apart (``period_s``: the sampling period) of one run's NEES series."""
+    step = max(1, int(round(spacing_s / period_s)))
+    return np.asarray(nees, dtype=float)[::step]
+
+
+def time_average_interval(n_samples: int, probability: float = 0.95, dof: int = ATTITUDE_DOF) -> tuple[float, float]:
+    """Two-sided ``probability`` interval of the average of ``n_samples`` independent NEES samples
+    (n times the average is chi-square with n dof degrees of freedom): the time-averaged NEES of one run,
+    or the ensemble average over runs and samples."""
+    return nees_band(probability, dof, runs=n_samples)
+
+
+def band_fraction_interval(n_samples: int, probability: float = 0.95,
+                           confidence: float = 0.95) -> tuple[float, float]:
+    """Where the fraction of ``n_samples`` independent samples inside the ``probability`` band lies with
+    ``confidence`` for a consistent filter: the binomial(n, probability) interval, as fractions. A fraction
+    of 95 % is the expected value, not a bound: with 30 samples anything from 27/30 up passes."""
+    from scipy.stats import binom
+
+    lo, hi = binom.interval(confidence, n_samples, probability)
+    return float(lo) / n_samples, float(hi) / n_samples
