@@ -345,8 +345,8 @@ class FlightSoftware:
 
         try:
             self.guidance.set_gains(k1, kappa, "auto" if eps == 0 else eps, rate_limit_deg_s)
-        except ValueError as exc:
-            raise CommandValidationError(f"SET_GAINS: {exc}", "GAINS_INADMISSIBLE") from None
+        except ValueError as exc:  # GainsRefused says why in its code; anything else is inadmissible gains
+            raise CommandValidationError(f"SET_GAINS: {exc}", getattr(exc, "code", "GAINS_INADMISSIBLE")) from None
         self._event("GAINS_SET", k1=k1, kappa=kappa, eps=eps, rate_limit_deg_s=rate_limit_deg_s)
 
     # ------------------------------------------------------------------------------------ cycles

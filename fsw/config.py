@@ -89,6 +89,8 @@ class SpacecraftConfig(_Strict):
     wheels: list[WheelConfig] = Field(default_factory=_pyramid_wheels, min_length=3, max_length=6, description="Reaction wheels (3..6), in bus order RW1..RWn.")
     star_tracker_q_BS: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Star-tracker mounting quaternion q_BS (rotates star-tracker vectors into body), scalar first.")
     max_rate_deg_s: float = Field(1.0, gt=0.0, le=20.0, description="Body rate limit: the angular-velocity command is scaled so |omega_cmd| never exceeds it [deg/s].")
+    star_tracker_max_rate_deg_s: float = Field(2.0, gt=0.0, le=90.0, description="Body rate above which the star tracker gives no attitude [deg/s]; SET_GAINS may not raise the rate limit past it (default: the truth's spacecraft.star_tracker.max_rate_deg_s).")
+    imu_range_rad_s: float = Field(0.35, gt=0.0, le=20.0, description="Gyro measurement range per axis [rad/s]; SET_GAINS may not raise the rate limit past it (default: the truth's spacecraft.imu.saturation_rad_s).")
 
     @field_validator("inertia_B_kgm2")
     @classmethod
@@ -520,6 +522,9 @@ def knowledge_from_truth(mission: dict) -> dict:
             fill(known, "wheels", [{k: w[k] for k in WHEEL_KNOWLEDGE_KEYS if w.get(k) is not None} for w in renamed])
         if isinstance(sc.get("star_tracker"), dict):
             fill(known, "star_tracker_q_BS", sc["star_tracker"].get("q_BS"))
+            fill(known, "star_tracker_max_rate_deg_s", sc["star_tracker"].get("max_rate_deg_s"))
+        if isinstance(sc.get("imu"), dict):
+            fill(known, "imu_range_rad_s", sc["imu"].get("saturation_rad_s"))
         fill(child("pointing"), "boresight_B", sc.get("instrument_boresight_B"))
     if isinstance(state, dict) and "q_NB" not in state and _is_ra_dec(state.get("ra_dec_deg")):
         ra, dec = (math.radians(float(a)) for a in state["ra_dec_deg"])

@@ -505,6 +505,10 @@ TC_REASONS: tuple[tuple[str, str, str], ...] = (
     ("BAD_MAC", "SECURITY", "the MAC does not verify: forged or signed with another key (not answered)"),
     ("REPLAY", "SECURITY", "security sequence number not above the last accepted one: a replay"),
     ("OUTSIDE_WINDOW", "SECURITY", "security sequence number beyond the anti-replay window: send SEC_RESYNC"),
+    # appended: the wire code is the position in this table
+    ("BRAKING_DISTANCE", "VALIDATION", "stopping from the rate limit takes more than the margin and eps-layer allow"),
+    ("RATE_ABOVE_SENSOR_LIMIT", "VALIDATION", "rate limit above the star tracker's tracking rate or the gyro's range"),
+    ("WHEEL_AUTHORITY", "VALIDATION", "rate limit above what the wheels left can give"),
 )
 TC_REASON_CODES = tuple(name for name, _, _ in TC_REASONS)
 TC_REASON_CLASS = {name: error_class for name, error_class, _ in TC_REASONS}
@@ -814,7 +818,7 @@ COMMANDS: tuple[CommandDef, ...] = (
          Arg("kappa", "F64", "", "star-shaped law gain kappa", min=1e-6, max=100.0),
          Arg("eps", "F64", "", "eps-layer width in d_s units (0: auto)", min=0.0, max=1.0),
          Arg("rate_limit_deg_s", "F64", "deg/s", "body rate command limit", min=1e-3, max=20.0)),
-        failure_codes=("GAINS_INADMISSIBLE",),
+        failure_codes=("GAINS_INADMISSIBLE", "BRAKING_DISTANCE", "RATE_ABOVE_SENSOR_LIMIT", "WHEEL_AUTHORITY"),
     ),
     CommandDef("SEC_RESYNC", 0x10, "move the uplink anti-replay window forward to this command's security "
                "SN (the only command accepted beyond the window; never backwards)"),

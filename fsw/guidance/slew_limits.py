@@ -76,5 +76,29 @@ def braking_problem(rate_limit_deg_s: float, accel_deg_s2: float, bandwidth_rad_
 
 
 def rule_eps(eps_setting: float | str, eps_max_used: float) -> float:
-    """The eps the command rule assumes: the fixed eps, or the cap of the automatic one."""
-    return eps_max_used if eps_setting == "auto" else float(eps_setting)
+    """The eps-layer the braking rule may credit: the cap of the automatic eps, and never more for a fixed
+    one (eps 0.99 would credit an 89 deg layer: SET_GAINS with 4 deg/s was accepted and the true body rate
+    reached 3.33 deg/s, 333 % of the configured limit)."""
+    return eps_max_used if eps_setting == "auto" else min(float(eps_setting), eps_max_used)
+
+
+SENSOR_REASON = "RATE_ABOVE_SENSOR_LIMIT"
+
+
+def sensor_rate_problem(rate_limit_deg_s: float, star_tracker_max_rate_deg_s: float,
+                        imu_range_rad_s: float) -> str | None:
+    """None when the sensors follow ``rate_limit_deg_s`` (the star tracker still gives an attitude, the
+    gyro stays in range), else the rejection reason, starting with ``RATE_ABOVE_SENSOR_LIMIT``."""
+    gyro_deg_s = math.degrees(imu_range_rad_s)
+    if rate_limit_deg_s <= min(star_tracker_max_rate_deg_s, gyro_deg_s):
+        return None
+    return (f"{SENSOR_REASON}: {rate_limit_deg_s:g} deg/s is above what the sensors follow (star tracker "
+            f"{star_tracker_max_rate_deg_s:g} deg/s, gyro range {gyro_deg_s:.3g} deg/s)")
+
+
+class GainsRefused(ValueError):
+    """SET_GAINS refused: ``code`` is the acknowledgement's reason code (fsw.dictionary.TC_REASONS)."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message if message.startswith(code) else f"{code}: {message}")
+        self.code = code

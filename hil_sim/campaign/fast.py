@@ -227,7 +227,9 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         record["wheel_torque_Nm"] = torques[:len(record["t_s"])]
         trips = [str(a.get("monitor", "?")) for _, name, a in telemetry.events if name == "FDIR_TRIPPED"]
         rejected = sum(1 for _, name, _ in telemetry.events if name in ("CMD_REJECTED", "TARGET_REJECTED"))
-        metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected)
+        from hil_sim.summary import acknowledged_rate_limits
+        acked = acknowledged_rate_limits(telemetry.events)
+        metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected, acked)
         metrics.update(estimates.metrics(record))
         used = _read_back(paths, mission, world, initial, fsw, timeline.sent, sim)
         return RunResult(metrics=metrics, used=used, trajectory=trajectory, sim_time_s=float(record["t_s"][-1]),
@@ -272,10 +274,12 @@ def metric_better(name: str) -> str | None:
 
 
 def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycle_slips: float,
-          rejected_commands: int = 0) -> tuple[dict[str, float], dict[str, np.ndarray]]:
+          rejected_commands: int = 0, gains_set: Sequence[tuple[float, float]] | None = None,
+          ) -> tuple[dict[str, float], dict[str, np.ndarray]]:
     """A run's metrics, judged on truth with the SIL's own functions (``hil_sim.summary``), so the fast and
     sil modes agree. ``truth``: the arrays of ``hil_sim.sil.TruthRecorder``; ``fdir_trips``: the monitor of
-    every FDIR_TRIPPED event; ``cycle_slips``: lockstep ticks the flight software never answered."""
+    every FDIR_TRIPPED event; ``cycle_slips``: lockstep ticks the flight software never answered;
+    ``gains_set``: the rate limits the flight software acknowledged (GAINS_SET), for the rate judge."""
     from hil_sim import summary
     t = truth["t_s"]
     n = len(t)
@@ -304,7 +308,7 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     metrics["final_error_deg"] = float(err[-1])
     limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
     metrics["peak_wheel_speed_fraction"] = float(np.max(np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]))
-    metrics["peak_body_rate_fraction"] = summary.peak_body_rate_fraction(mission, truth)[0]
+    metrics["peak_body_rate_fraction"] = summary.peak_body_rate_fraction(mission, truth, gains_set)[0]
     # lockstep: a slip is a tick the flight software never answered with CYCLE_DONE (as the SIL counts)
     metrics["cycle_slips"] = float(cycle_slips)
     expected = list(req.expected_fdir_events)

@@ -15,6 +15,7 @@ from fsw.config import FswConfig
 from fsw.dictionary import DICTIONARY
 from fsw.guidance import Guidance
 from fsw.guidance.slew_limits import (
+    allowed_braking_deg,
     BRAKING_RESERVE_DEG, braking_distance_deg, braking_problem, layer_angle_deg, rate_for_distance_deg_s,
 )
 from fsw.telecommand import CommandDispatcher, encode_command
@@ -126,3 +127,35 @@ def test_true_body_rate_stays_within_the_limit_on_a_slew_with_a_large_roll_error
     limit = math.radians(loop.fsw.cfg.spacecraft.max_rate_deg_s)
     assert max(rates) > 0.9 * limit  # the slew ran at the limit
     assert max(rates) <= 1.05 * limit
+
+
+def test_set_gains_says_the_real_reason_and_credits_no_layer_wider_than_the_cap() -> None:
+    """eps 0.99 credited an 89 deg eps-layer to the braking rule: SET_GAINS with 4 deg/s was accepted and the
+    true body rate reached 3.33 deg/s, 333 % of the configured limit. The rule now credits at most the
+    eps cap's layer; a rate the star tracker cannot track or the gyro cannot measure is refused as such,
+    and the acknowledgement carries the reason's own code."""
+    loop, tm, tc = _bus({"spacecraft": {"star_tracker_max_rate_deg_s": 30.0, "imu_range_rad_s": 0.35}})
+    try:
+        loop.run(3)
+        cfg = loop.fsw.cfg
+        accel, bw, margin, cap = (cfg.control.max_command_accel_deg_s2, cfg.control.rate_bandwidth_rad_s,
+                                  cfg.law.margin_deg, cfg.law.eps_max_used)
+        capped = rate_for_distance_deg_s(allowed_braking_deg(margin, cap), accel, bw)
+        wide_layer = rate_for_distance_deg_s(allowed_braking_deg(margin, 0.99), accel, bw)
+        rate = 1.5 * capped  # brakes in time only if the 0.99 layer were credited
+        assert capped < rate < wide_layer and rate < 20.0
+        send = lambda seq, **a: tc.handle_datagram(encode_command(  # noqa: E731
+            DICTIONARY, "SET_GAINS", {"k1": 1.0, "kappa": 1.0, "eps": 0.0, "rate_limit_deg_s": 0.5, **a}, seq_count=seq))
+        wide = send(1, eps=0.99, rate_limit_deg_s=rate)
+        assert not wide.accepted and wide.code == "BRAKING_DISTANCE", wide
+        assert send(2, rate_limit_deg_s=0.5).accepted
+    finally:
+        loop.close()
+    # a rate that brakes in time but that the star tracker cannot follow
+    g = Guidance(FswConfig.model_validate({"spacecraft": {"star_tracker_max_rate_deg_s": 0.4}}))
+    assert braking_problem(0.45, g.accel_deg_s2, g.bandwidth_rad_s, g.cfg.law.margin_deg, g.cfg.law.eps_max_used) is None
+    with pytest.raises(ValueError) as refused:
+        g.set_gains(1.0, 1.0, "auto", 0.45)
+    assert refused.value.code == "RATE_ABOVE_SENSOR_LIMIT" and "star tracker 0.4 deg/s" in str(refused.value)
+    g.set_gains(1.0, 1.0, "auto", 0.35)
+    assert g.max_rate_rad_s == pytest.approx(math.radians(0.35))
