@@ -105,9 +105,9 @@ def attack(bus: str, count: int, rate_per_s: float, seed: int) -> dict:
                     sock.bind((bus.split(":", 1)[1],))
                     make, send = _can_junk, sock.send
                 while sent < count and proc.poll() is None:
-                    due = started + sent / rate_per_s
-                    if due > time.monotonic():
-                        time.sleep(due - time.monotonic())
+                    ahead = started + sent / rate_per_s - time.monotonic()
+                    if ahead > 0.0:
+                        time.sleep(ahead)
                     try:
                         send(make(rnd))
                     except OSError:

@@ -495,6 +495,7 @@ class FswBusDriver:
             ids, lengths, data = self._no_frames
             self._collect(ids, lengths, data, 0, K.NO_FID)
             phase = st.item(K.S_PHASE)
+        grace_end = None  # when the announced count is covered by good and failed frames: the grace's end
         while phase != K.PHASE_DONE:
             if phase == K.PHASE_SYNC:
                 if rx is None or rx.pos >= rx.n:  # SYNC(k) comes first
@@ -505,8 +506,17 @@ class FswBusDriver:
                     return None
             else:
                 received, failed, expected = st[K.S_RECEIVED:K.S_FAILED + 1].tolist() + [int(st[K.S_EXPECTED])]
-                rx = self._next_lockstep_burst(FRAME_GRACE_S if received + failed >= expected else None,
-                                               max(1, expected - received))
+                grace = None
+                if received + failed >= expected:
+                    # One grace for the tick, not one per burst: a stream of junk frames (a flood, frames
+                    # that fail E2E) would otherwise renew it and hold the tick open until the timeout.
+                    now = self.clock()
+                    grace_end = now + FRAME_GRACE_S if grace_end is None else grace_end
+                    grace = max(0.0, grace_end - now)
+                if grace == 0.0:  # the grace is over: what this burst still holds, and no further read
+                    rx = self._rx if self._rx is not None and self._rx.pos < self._rx.n else None
+                else:
+                    rx = self._next_lockstep_burst(grace, max(1, expected - received))
                 if rx is None:  # the tick closes incomplete
                     K.finish_tick(st, self._ft, self._watch, self._watch_limit, self._table[3], self._table[4],
                                   self._tally, self._n_codes)
