@@ -54,6 +54,7 @@ SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 IP_MULTICAST_ALL = getattr(socket, "IP_MULTICAST_ALL", 49)
 SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
 MAX_DATAGRAM = 4096  # python-can's max_buffer
+READS_PER_FILL = 1024  # datagrams read in one go at most (see _read_all)
 _TIMESPEC = struct.Struct("@ll")  # python-can's received_timestamp_struct
 _ANCILLARY = socket.CMSG_SPACE(_TIMESPEC.size)
 # the keys of python-can's pack_message, in its order
@@ -63,6 +64,16 @@ _KEY_SET = frozenset(_KEYS)
 _unpackb = msgpack.unpackb
 _new_message = can.Message.__new__
 _Message = can.Message
+
+
+def _well_typed(msg: can.Message) -> bool:
+    """The fields of a message python-can unpacked have the types a frame's have (its ``check`` only
+    compares values, and NaN compares false: a NaN identifier passed it and crashed the simulator)."""
+    return (type(msg.arbitration_id) is int and type(msg.dlc) is int and isinstance(msg.data, bytearray)
+            and (msg.dlc == len(msg.data) or msg.is_remote_frame is True and not msg.data)
+            and all(type(f) is bool for f in (msg.is_extended_id, msg.is_remote_frame, msg.is_error_frame,
+                                              msg.is_fd, msg.bitrate_switch, msg.error_state_indicator))
+            and (msg.channel is None or type(msg.channel) in (str, int)))
 
 
 def _stamp_of(ancillary: list) -> float | None:
@@ -267,7 +278,9 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
     def _read_all(self) -> int:
         sock, rx, stamped = self._rx_sock, self._rx, self._stamped
         n = 0
-        while True:
+        # at most READS_PER_FILL datagrams a call (more than the socket's buffer holds): a stream of junk
+        # arriving as fast as it is read cannot keep the reader here for ever; the caller's timeout holds
+        for _ in range(READS_PER_FILL):
             try:
                 if stamped:
                     data, ancillary, _flags, _addr = sock.recvmsg(MAX_DATAGRAM, _ANCILLARY)
@@ -290,6 +303,8 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
             if msg is not None:
                 rx.append(msg)
                 n += 1
+        self._was_empty = False
+        return n
 
     def _decode(self, data: bytes, stamp: float) -> can.Message | None:
         """``unpack_message(data, replace={"timestamp": stamp}, check=True)`` and python-can's CAN FD
@@ -311,6 +326,9 @@ class LoopbackUdpMulticastBus(UdpMulticastBus):
             try:
                 msg = unpack_message(data, replace={"timestamp": stamp}, check=True)
             except Exception:  # noqa: BLE001 - whatever a stranger's datagram makes msgpack or Message raise
+                self.decode_errors += 1
+                return None
+            if not _well_typed(msg):
                 self.decode_errors += 1
                 return None
             if not self._fd_frames and msg.is_fd:  # a CAN FD frame on a classic bus: not one of ours

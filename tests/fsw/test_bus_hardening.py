@@ -211,3 +211,23 @@ def test_a_stream_of_corrupt_frames_cannot_hold_a_tick_open(icd: Icd, buses) -> 
         flood.join(timeout=2.0)
     assert inputs is not None and inputs.frames_received == 1 and not inputs.complete
     assert took < 1.0, f"the tick stayed open {took:.2f} s under the stream"
+
+
+def test_a_message_python_can_accepts_but_with_ill_typed_fields_is_dropped() -> None:
+    """python-can's check compares values, and NaN compares false: a msgpack frame with a NaN identifier
+    passed it and crashed the simulator ("cannot convert float NaN to integer"). Found by the live fuzz."""
+    import time
+
+    import msgpack
+
+    from fsw.bus.udp_loopback import LoopbackUdpMulticastBus
+
+    bus = LoopbackUdpMulticastBus.__new__(LoopbackUdpMulticastBus)  # the decoder alone, no socket
+    bus.decode_errors, bus._fd_frames = 0, False
+    fields = {"timestamp": time.time(), "arbitration_id": float("nan"), "is_extended_id": False,
+              "is_remote_frame": False, "is_error_frame": False, "channel": None, "dlc": 2, "data": b"\x01\x02",
+              "is_fd": False, "bitrate_switch": False, "error_state_indicator": False}
+    assert bus._decode(msgpack.packb(fields, use_bin_type=True), 1.0) is None and bus.decode_errors == 1
+    fields["arbitration_id"] = 0x40
+    msg = bus._decode(msgpack.packb(fields, use_bin_type=True), 1.0)
+    assert msg is not None and msg.arbitration_id == 0x40 and bus.decode_errors == 1
