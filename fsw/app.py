@@ -522,7 +522,14 @@ class FlightSoftware:
             return True
         second = not ctl.active.all()
         if not ctl.isolate(wheel):
-            return False
+            if self.fdir.wheel_fault_reasons[wheel] == "status lost":
+                # only its status is lost and the rest cannot control three axes: keep flying it, open loop
+                self._event("WHEEL_RESTORED", wheel=wheel + 1, reason="status lost; the other wheels cannot "
+                            "control three axes")
+                return True
+            if not self._restore_silent_wheel(wheel):
+                return False
+            second = False  # three usable wheels again: fly on
         self.wheel_residual.forget()
         self._event("WHEEL_ISOLATED", wheel=wheel + 1)
         accel_deg_s2, rate_deg_s = ctl.slew_authority()
@@ -531,6 +538,24 @@ class FlightSoftware:
         self._event("SLEW_LIMITS_REDUCED", rate_limit_deg_s=rate, accel_deg_s2=accel,
                     wheels=int(ctl.active.sum()))
         return not second
+
+    def _restore_silent_wheel(self, failing: int) -> bool:
+        """Graceful degradation: when isolating ``failing`` would leave fewer wheels than three-axis control
+        needs, bring back a wheel that was isolated only because its status is lost (its drive still obeys
+        the commands; FDIR saw no drive fault, no command timeout, no speed residual before the silence) and
+        isolate ``failing`` instead. True when that leaves wheels spanning three axes."""
+        ctl = self.control
+        reasons = self.fdir.wheel_fault_reasons
+        for spare in range(ctl.n):
+            if ctl.active[spare] or spare == failing or reasons[spare] != "status lost":
+                continue
+            ctl.restore(spare)
+            if ctl.isolate(failing):
+                self._event("WHEEL_RESTORED", wheel=spare + 1, reason=f"status lost; wheel {failing + 1} "
+                            f"{reasons[failing] or 'failed'}")
+                return True
+            ctl.restore(spare, active=False)  # no better: keep the allocation as it was
+        return False
 
     # ---------------------------------------------------------------------------------- telemetry
     def _send_gnc_tm(self, g, ctrl, speeds, imu_valid, st, st_fresh, exec_ms) -> None:

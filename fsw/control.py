@@ -153,6 +153,13 @@ class RateController:
         self._any_active = bool(self.active.any())
         return True
 
+    def restore(self, wheel: int, active: bool = True) -> None:
+        """Put an isolated wheel back into allocation (flown open loop when its status is lost), or with
+        ``active`` False take it out whatever the rest can span (undoing a restore)."""
+        self.active[wheel] = active
+        self.M = allocation_matrix(self.G, self.active)
+        self._any_active = bool(self.active.any())
+
     # share of the worst-axis torque the slew may use: the rest is for feedback, gyroscopic terms and
     # disturbances (the default spacecraft's 0.15 deg/s^2 is 0.79 of its four wheels' 0.19)
     AUTHORITY_FRACTION = 0.8

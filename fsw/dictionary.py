@@ -771,6 +771,8 @@ EVENTS: tuple[EventDef, ...] = (
              (Arg("wheel", "U8"), Arg("speed_rad_s", "F32", "rad/s")), throttle=5, throttle_window_s=10.0),
     EventDef("WHEEL_ISOLATED", 42, Severity.WARNING_HI, "wheel {wheel} removed from allocation",
              (Arg("wheel", "U8"),)),
+    EventDef("WHEEL_RESTORED", 49, Severity.WARNING_HI, "wheel {wheel} back in allocation, open loop: {reason}",
+             (Arg("wheel", "U8"), _REASON)),
     EventDef("SLEW_LIMITS_REDUCED", 44, Severity.WARNING_LO,
              "slew limits reduced to {rate_limit_deg_s:.3f} deg/s, {accel_deg_s2:.4f} deg/s^2 on {wheels} wheels",
              (Arg("rate_limit_deg_s", "F32", "deg/s"), Arg("accel_deg_s2", "F32", "deg/s^2"), Arg("wheels", "U8"))),

@@ -330,6 +330,9 @@ _WHEEL_BITS = ((0x04, "drive fault reported by the wheel"),
                (0x02, "command timeout: the wheel's torque commands stopped arriving"))
 
 
+STATUS_LOST = "status lost"  # a wheel isolated for this alone may still obey its commands
+
+
 def wheel_fault_cause(flags: int) -> str:
     """A WHEEL_FAULT's cause in words, from the wheel's status flags this cycle (-1: no status came)."""
     if flags < 0:
@@ -372,6 +375,9 @@ class Fdir:
         self.cycle_slip = LimitMonitor("CYCLE_SLIP", f.cycle_slip, bank=bank, index=k + 2)
         self._all_wheels = np.ones(n_wheels, dtype=np.bool_)  # evaluate_arrays: every wheel is evaluated
         self.stale_counts = {"IMU": 0, "STAR_TRACKER": 0}
+        # the symptom of each wheel's last WHEEL_FAULT trip (`wheel_fault_reason`), "" before any: a wheel
+        # isolated only because its status is lost still obeys its commands and can be used again
+        self.wheel_fault_reasons = [""] * n_wheels
         # (dictionary name, bank indices of its monitors) in all_monitors() order of first appearance, for states()
         groups: dict[str, list[int]] = {}
         for m in self.all_monitors():
@@ -483,9 +489,13 @@ class Fdir:
             if self._changed(mon, values[5 + i], actions, i, res[5 + i]) == _TRIPPED_NOW:
                 if wheel_fault_flags is not None and i < len(wheel_fault_flags):
                     flags = int(wheel_fault_flags[i])
-                    self.event("WHEEL_FAULT", wheel=i + 1, fault=flags & 0xFF, cause=wheel_fault_cause(flags))
+                    cause = wheel_fault_cause(flags)
+                    self.event("WHEEL_FAULT", wheel=i + 1, fault=flags & 0xFF, cause=cause)
                 else:  # evaluated from fault values alone (evaluate_arrays): the flags are not known here
-                    self.event("WHEEL_FAULT", wheel=i + 1, fault=0, cause="wheel monitor tripped")
+                    flags, cause = 0, "wheel monitor tripped"
+                    self.event("WHEEL_FAULT", wheel=i + 1, fault=0, cause=cause)
+                # what the application asks when a later fault would leave fewer than three wheels
+                self.wheel_fault_reasons[i] = STATUS_LOST if flags < 0 else cause
         for i, mon in enumerate(self.wheel_speed):
             r = res[5 + n + i]
             if r == _NO_CHANGE:
