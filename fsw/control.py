@@ -14,7 +14,7 @@ Rate loop (computed torque on the body):
 command's acceleration is the feed-forward ``omega_cmd_dot``. Without the jerk limit the law's command,
 which can swing by ten degrees of direction from one cycle to the next inside an eps-layer, made the
 acceleration reverse every cycle and the feed-forward J omega_cmd_dot threw the wheels from one torque
-limit to the other (issue 16.4, design note 13); with it the torque command changes by at most
+limit to the other (design note 13); with it the torque command changes by at most
 J max_jerk dt plus the feedback's share a cycle. Allocation: ``tau_w = -G^+ tau_B`` with the
 minimum-norm pseudo-inverse of the active (non-isolated) wheels; if any wheel exceeds its torque limit the
 whole vector is scaled down by the worst ratio, which keeps the torque direction (the loop slows down

@@ -322,7 +322,7 @@ def add_torque_variation(spans: list[dict[str, Any]], t: np.ndarray, wheel_torqu
     """Each settling span gets ``torque_variation_Nm``: the total variation of the wheel torque commands
     over the span, sum over samples and wheels of |tau_k - tau_(k-1)| [N m]. A smooth slew needs about
     4 x the torque limit per wheel (up, down, and the same to brake); a chattering one many times that
-    (issue 16.4)."""
+    (design note 13)."""
     tau = np.asarray(wheel_torque_Nm, dtype=float)
     if tau.ndim != 2 or len(tau) != len(t) or len(t) < 2:
         return

@@ -38,7 +38,7 @@ def test_braking_distance_is_kinematics_and_the_governor_rate_is_its_inverse() -
 
 
 def test_rule_refuses_the_demo_commands_that_entered_the_moon_zone() -> None:
-    """Issue 16: SET_GAINS k1 = 1 with 20 deg/s, or 4 deg/s alone, took the demo's boresight 12.5-13.7 deg into
+    """SET_GAINS k1 = 1 with 20 deg/s, or 4 deg/s alone, took the demo's boresight 12.5-13.7 deg into
     the Moon zone. With the demo's 3 deg margin, 0.035 eps cap, 0.15 deg/s^2 and 1 rad/s both are refused;
     the configured 1 deg/s passes."""
     args = dict(accel_deg_s2=0.15, bandwidth_rad_s=1.0, margin_deg=3.0, eps=0.035)
@@ -114,7 +114,7 @@ def test_governor_slows_towards_a_zone_being_approached_and_not_away_from_one() 
 
 
 def test_true_body_rate_stays_within_the_limit_on_a_slew_with_a_large_roll_error() -> None:
-    """Issue 16 point 2: the roll rate about the boresight came on top of the law's full rate (+12 % on a
+    """The roll rate about the boresight came on top of the law's full rate (+12 % on a
     150 deg slew). A 60 deg slew that also has to roll 90 deg: true |omega| within the limit + 5 %."""
     y0 = np.array([math.sin(math.radians(60.0)), 0.0, math.cos(math.radians(60.0))])
     loop, _, _ = _bus({"pointing": {"target_N": [0.0, 0.0, 1.0], "zones": [], "roll_axis_B": [0.0, 1.0, 0.0],
