@@ -15,6 +15,7 @@ filter (the one before the latency-aware update: mean NEES 7.2) fails every one 
 """
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,29 @@ from hil_sim.consistency import (attitude_nees, band_fraction, band_fraction_int
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "config" / "missions" / "demo-pointing.yaml"
 CAMPAIGN = ROOT / "config" / "campaigns" / "nees.yaml"
+
+
+@contextlib.contextmanager
+def _nees_series():
+    """The per-cycle NEES of every fast-mode run flown inside the block, read where fast mode computes its
+    metrics (one array per run, in order)."""
+    from hil_sim.campaign.fast import _EstimateRows
+
+    series: list[np.ndarray] = []
+    original = _EstimateRows.metrics
+
+    def keep(self, truth):
+        keep = self.rows[:self.n] < len(truth["q_NB"])
+        rows = self.rows[:self.n][keep]
+        series.append(attitude_nees(truth["q_NB"][rows], self.q[:self.n][keep], self.P[:self.n][keep]))
+        return original(self, truth)
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(_EstimateRows, "metrics", keep)
+    try:
+        yield series
+    finally:
+        mp.undo()
 
 
 def test_nees_of_errors_drawn_from_the_covariance_is_chi_square_3():
@@ -88,24 +112,9 @@ def test_mekf_is_consistent_over_the_demo():
     from hil_sim.campaign.fast import run_fast
     from hil_sim.mission import load_mission
 
-    from hil_sim.campaign.fast import _EstimateRows
-
     mission = load_mission(DEMO)
-    series: list[np.ndarray] = []
-    original = _EstimateRows.metrics
-
-    def keep(self, truth):
-        keep = self.rows[:self.n] < len(truth["q_NB"])
-        rows = self.rows[:self.n][keep]
-        series.append(attitude_nees(truth["q_NB"][rows], self.q[:self.n][keep], self.P[:self.n][keep]))
-        return original(self, truth)
-
-    mp = pytest.MonkeyPatch()
-    mp.setattr(_EstimateRows, "metrics", keep)
-    try:
+    with _nees_series() as series:
         run_fast(mission, mission.seed)
-    finally:
-        mp.undo()
     samples = thinned(series[0], mission.flight_software.gnc_period_s)
     lo, hi = time_average_interval(samples.size)
     f_lo, f_hi = band_fraction_interval(samples.size)
@@ -119,27 +128,12 @@ def test_mekf_is_consistent_over_the_demo():
 @pytest.mark.slow
 def test_mekf_is_consistent_over_a_campaign():
     from hil_sim.campaign.execute import execute_run
-    from hil_sim.campaign.fast import _EstimateRows
     from hil_sim.campaign.runner import build_plan
 
     plan, _ = build_plan(CAMPAIGN)
     runs = plan.campaign.runs
-    # each run's per-cycle NEES, read where fast mode computes its metrics
-    series: list[np.ndarray] = []
-    original = _EstimateRows.metrics
-
-    def keep(self, truth):
-        keep = self.rows[:self.n] < len(truth["q_NB"])
-        rows = self.rows[:self.n][keep]
-        series.append(attitude_nees(truth["q_NB"][rows], self.q[:self.n][keep], self.P[:self.n][keep]))
-        return original(self, truth)
-
-    mp = pytest.MonkeyPatch()
-    mp.setattr(_EstimateRows, "metrics", keep)
-    try:
+    with _nees_series() as series:  # each run's per-cycle NEES
         records = [execute_run(plan, i) for i in range(runs)]
-    finally:
-        mp.undo()
     assert all(r.status == "pass" for r in records), [(r.run, r.status, r.error) for r in records]
     rates = plan.base_raw["flight_software"].get("rates", {})
     period = 1.0 / float(rates.get("gnc_rate_hz", 10.0))
