@@ -30,6 +30,11 @@ from fsw.fdir import Fdir, WheelSpeedResidual
 from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
+# A housekeeping period in which at least BUS_BURST_FRAMES frames fail their CRC or do not decode is a burst:
+# a bus fault (BUS_CORRUPT, one a minute at most, and the bus_corrupt_bursts counter), not a sensor's or a
+# wheel's (those monitors judge their own frames' absence, with their own persistence).
+BUS_BURST_FRAMES = 5
+BUS_EVENT_PERIOD_S = 60.0
 # TARGET_REACHED: the error below REACHED_ERROR_DEG and the estimated body rate below REACHED_RATE_DEG_S for
 # REACHED_DWELL_S in a row (a slew passing through its target at speed is not "reached")
 REACHED_ERROR_DEG = 0.05
@@ -209,6 +214,10 @@ class FlightSoftware:
         self._st_max_age_s = config.estimator.star_tracker_max_age_s
         self._gnc_tm_every = config.tmtc.gnc_packet_every_n_cycles
         self._corrupt_totals: tuple[int, int] = (0, 0)  # (IMU, star tracker) E2E rejections so far
+        # bus-fault bursts (see _bus_fault_check): frames failing E2E or decoding seen so far, bursts counted,
+        # the frames of the bursts not yet reported and when BUS_CORRUPT was last raised
+        self._bus_failed_seen, self._bus_bursts, self._bus_burst_frames = 0, 0, 0
+        self._bus_event_t = -math.inf
         self._st_was_valid = True
         self._st_outage_start = 0.0
         self._target_reached = False
@@ -687,8 +696,23 @@ class FlightSoftware:
             values.update(self.dispatcher.hk_values())
         return values
 
+    def _bus_fault_check(self, values: dict) -> None:
+        """Count a burst of corrupt frames as a bus fault: `bus_corrupt_bursts`, and BUS_CORRUPT at most every
+        BUS_EVENT_PERIOD_S of onboard time with the frames of the bursts since the last one."""
+        failed = int(values["bus_crc_errors"]) + int(values["bus_decode_errors"])
+        new = failed - self._bus_failed_seen if failed >= self._bus_failed_seen else failed  # (RESET_COUNTERS)
+        self._bus_failed_seen = failed
+        if new >= BUS_BURST_FRAMES:
+            self._bus_bursts += 1
+            self._bus_burst_frames += new
+        if self._bus_burst_frames and self.t_s - self._bus_event_t >= BUS_EVENT_PERIOD_S:
+            self._event("BUS_CORRUPT", count=self._bus_burst_frames, bursts=self._bus_bursts)
+            self._bus_burst_frames, self._bus_event_t = 0, self.t_s
+        values["bus_corrupt_bursts"] = self._bus_bursts
+
     def _send_hk_tm(self) -> None:
         values = self.hk_values()
+        self._bus_fault_check(values)
         rss = _resident_bytes()
         if rss is not None:
             values["rss_mb"] = rss / 1e6

@@ -615,6 +615,8 @@ _HK_CHANNELS: list[Channel] = [
             Limits(yellow=(None, 0))),
     Channel("bus_repeated", "U32", "", "bus frames repeated (same alive counter)", Limits(yellow=(None, 0))),
     Channel("bus_decode_errors", "U32", "", "bus frames that failed to decode, and datagrams on the bus that are not frames (dropped)", Limits(yellow=(None, 0))),
+    Channel("bus_corrupt_bursts", "U32", "", "housekeeping periods with 5 or more frames failing their CRC or "
+            "decoding: bus faults (BUS_CORRUPT)", Limits(yellow=(None, 0))),
     Channel("bus_timeouts", "U32", "", "ticks with missing sensor frames", Limits(yellow=(None, 0))),
     Channel("bus_tx_errors", "U32", "", "bus transmit failures", Limits(yellow=(None, 0))),
     Channel("bus_unknown_ids", "U32", "", "bus frames with an identifier not in the ICD (or error/extended/remote frames)",
@@ -765,6 +767,9 @@ EVENTS: tuple[EventDef, ...] = (
              "star-tracker innovation {innovation_deg:.3f} deg above gate", (Arg("innovation_deg", "F32", "deg"),),
              throttle=5, throttle_window_s=10.0),
     EventDef("ESTIMATOR_RESET", 37, Severity.WARNING_LO, "estimator reset: {reason}", (_REASON,)),
+    EventDef("BUS_CORRUPT", 38, Severity.WARNING_LO,
+             "bus fault: {count} frames failed their CRC or did not decode in bursts ({bursts} bursts so far)",
+             (Arg("count", "U32"), Arg("bursts", "U32"))),
     EventDef("WHEEL_FAULT", 40, Severity.WARNING_HI, "wheel {wheel} fault: {cause} (status flags 0x{fault:02x})",
              (Arg("wheel", "U8"), Arg("fault", "U8"), Arg("cause", "STRING", description="the fault in words")), throttle=5, throttle_window_s=10.0),
     EventDef("WHEEL_SPEED_LIMIT", 41, Severity.WARNING_LO, "wheel {wheel} speed {speed_rad_s:.1f} rad/s at limit",

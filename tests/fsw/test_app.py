@@ -299,3 +299,22 @@ def test_process_entry_refuses_to_run_without_a_private_link_key(tmp_path) -> No
                            "--key-file", str(tmp_path / "open.key")], cwd=ROOT, capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 2 and "open.key" in proc.stderr and "chmod 600" in proc.stderr
+
+
+def test_a_burst_of_corrupt_frames_is_a_bus_fault_counted_and_reported_once_a_minute(loop) -> None:
+    """Frames that fail their CRC or do not decode in bursts are a bus fault: the bus_corrupt_bursts counter
+    and one BUS_CORRUPT event a minute at most (with the frames since the last one). A few stray ones are not."""
+    fsw = loop.fsw
+    values = lambda crc, dec: {"bus_crc_errors": crc, "bus_decode_errors": dec}  # noqa: E731
+    seen = []
+    for second, (crc, dec) in enumerate([(2, 0), (3, 0), (40, 5), (80, 5), (81, 5), (200, 9), (0, 0), (30, 0)]):
+        fsw.t_s = 30.0 * second  # housekeeping periods 30 s apart: events may come every other one
+        v = values(crc, dec)
+        fsw._bus_fault_check(v)
+        seen.append(v["bus_corrupt_bursts"])
+    # bursts: +42 (t 60), +40 (t 90), +123 (t 150), +30 after a counter reset (t 210); +2, +1, +1 are not.
+    # Events: at once (t 60), then at t 120 and t 180 with what came since; the last burst waits its minute.
+    assert seen == [0, 0, 1, 2, 2, 3, 3, 4]
+    events = [e for e in loop.tm.recent_events if e.name == "BUS_CORRUPT"]
+    assert [e.args["count"] for e in events] == [42, 40, 123]
+    assert not [e for e in loop.tm.recent_events if e.name in ("WHEEL_FAULT", "WHEEL_ISOLATED")]
