@@ -658,19 +658,20 @@ class _ErrorsAsWritten:
         out = []
         for err, loc in zip(errors, written):
             err = dict(err)
+            text = range_message(loc, err)
+            if text is not None:
+                err["msg"] = text
+                err.pop("input", None)  # the message already shows it, beside the unit
             source = self._source(loc)
             if source is not None:
                 if any(other[:len(source)] == source or source[:len(other)] == other
                        for other in written if other and other[0] != "flight_software"):
                     continue  # the truth key's own error says it
-                err["msg"] = (f"{err.get('msg', 'invalid')} (in {format_path(loc)}, the flight software's copy of "
-                              f"this value: flight_software does not give it)")
+                if "input" in err:  # shown before the note, where problems_from_validation would append it
+                    err["msg"] = f"{err.get('msg', 'invalid')} (got {err.pop('input')!r})"
+                err["msg"] = (f"{err.get('msg', 'invalid')}, in {format_path(loc)}, the flight software's copy of "
+                              "this value (flight_software does not give it)")
                 err["loc"] = source
-                loc = source
-            text = range_message(loc, err)
-            if text is not None:
-                err["msg"] = text
-                err.pop("input", None)  # the message already shows it, with its unit
             out.append(err)
         return out
 
