@@ -184,3 +184,14 @@ def test_the_regression_campaign_does_not_state_a_run_count_its_report_may_contr
 
     description = load_campaign(ROOT / "config" / "campaigns" / "regression.yaml").description
     assert not re.search(r"\d+\s+dispersed runs", description), description
+
+
+def test_the_campaign_copy_records_the_file_baseline_save_looks_beside(tmp_path):
+    """`campaign run` records the campaign file's absolute path where `baseline save` reads it."""
+    from hil_sim.campaign.runner import build_plan, prepare_out_dir
+    from hil_sim.campaign_cli import campaign_source
+
+    campaign = ROOT / "config" / "campaigns" / "regression.yaml"
+    plan, base = build_plan(campaign, runs=1)
+    prepare_out_dir(tmp_path / "out", plan, campaign.resolve(), base)
+    assert campaign_source(tmp_path / "out") == campaign.resolve()
