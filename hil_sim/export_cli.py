@@ -9,7 +9,7 @@ scalar (a vector ``q_NB`` becomes ``q_NB_0 .. q_NB_3``; every name carries its u
 - ``margins``: the signed angle [deg] from the boresight to each physical keep-out zone on the truth
   ephemeris, one column per zone (``margin_<zone>_deg``): the numbers the run's judge uses;
 - ``estimates``: the flight software's estimate as telemetered (quaternion, rate, gyro bias, covariance
-  trace, sensor validity, pointing error, its own keep-out margin on its inflated zones);
+  trace, sensor validity, pointing error, its margin to the nearest physical zone as it estimates it);
 - ``commands``: what it commanded (mode, target, rate command, body and wheel torques);
 - ``events``: its events (time, name, severity, message, arguments as JSON).
 

@@ -36,8 +36,7 @@ MAX_SAMPLES = 100_000
 def add_cli(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "sky", help="where the Sun, Moon, Earth limb and keep-out zones are, and when each target is free of them",
-        description=__doc__.replace("``", "").split("\n\n", 1)[0].replace("\n", " ") + "\n\n"
-        + __doc__.replace("``", "").replace("`", "").split("\n\n", 1)[1],
+        description=__doc__.replace("``", "").replace("`", ""),
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("mission", type=Path, help="mission YAML")
     p.add_argument("--at", default=None, metavar="T",
