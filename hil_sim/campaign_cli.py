@@ -12,7 +12,9 @@ import json
 import sys
 from pathlib import Path
 
-DEFAULT_BASELINES = Path("config") / "campaigns" / "baselines"
+BASELINES = "baselines"  # a campaign's baselines: <folder of its YAML>/baselines/<campaign name>
+DEFAULT_BASELINES = f"<folder of the campaign YAML>/{BASELINES}"  # for the help texts
+CAMPAIGN_COPY_HEADER = "# campaign as run, from "  # first line of <out>/campaign.yaml (runner.prepare_out_dir)
 EXIT_CODES = ("exit codes of run and report: 0 PASS, 1 FAIL, 2 not started, 4 INCONCLUSIVE (no failure, but "
               "too few runs to show the required success probability), 130 interrupted")
 
@@ -116,7 +118,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         console.print(f"[red]campaign not started:[/red]\n{exc}")
         return 2
     out = args.out or (latest_out_dir(plan.campaign) if args.resume else None) or default_out_dir(plan.campaign)
-    prepare_out_dir(out, plan, Path(args.campaign), base_path)
+    if args.scheduler:
+        # before the output folder exists: a refused campaign leaves nothing behind (the ModuleNotFoundError
+        # becomes one line with the pip command, hil_sim/cli.py)
+        import distributed  # noqa: F401
+    # the campaign file's absolute path, so `baseline save` finds its folder from anywhere
+    prepare_out_dir(out, plan, Path(args.campaign).resolve(), base_path)
     where = f"Dask {args.scheduler}" if args.scheduler else f"{args.workers or 'all'} local workers"
     console.print(f"campaign [bold]{plan.campaign.name}[/bold]: {plan.campaign.runs} runs, mode {plan.mode}, "
                   f"{where} -> {out}")
@@ -222,13 +229,32 @@ def _folder_and_plan(arg: str, run: int | None = None):
 
 
 def _baseline_dir(results: Path, given: Path | None) -> Path:
+    """``given``, else ``baselines/<campaign name>`` beside the campaign YAML the folder was run from (not
+    the current folder: a baseline belongs with its campaign, wherever the command is typed)."""
     if given:
         return given
     plan = results / "plan.json"
     if not plan.is_file():
         raise FileNotFoundError(f"{results} is not a campaign output folder (no plan.json)")
     name = json.loads(plan.read_text())["campaign"]
-    return DEFAULT_BASELINES / name
+    source = campaign_source(results)
+    if source is None or not source.parent.is_dir():
+        raise FileNotFoundError(f"{results}: the campaign file it was run from ({source or 'not recorded'}) is not "
+                                "here; give the baseline folder with --to (save) or --baseline (compare)")
+    return source.parent / BASELINES / name
+
+
+def campaign_source(results: Path) -> Path | None:
+    """The campaign YAML a campaign output folder was run from (recorded on the first line of its copy);
+    a relative path, as older folders recorded it, is taken from the current folder."""
+    try:
+        with open(results / "campaign.yaml", encoding="utf-8") as f:
+            first = f.readline().rstrip("\n")
+    except OSError:
+        return None
+    if not first.startswith(CAMPAIGN_COPY_HEADER):
+        return None
+    return Path(first[len(CAMPAIGN_COPY_HEADER):]).absolute()
 
 
 def _cmd_baseline_save(args: argparse.Namespace) -> int:

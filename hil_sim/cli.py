@@ -20,6 +20,8 @@ _COMMAND_MODULES = (
     "ground.cli",         # keepout ground [send ...]
     "hil_sim.campaign_cli",  # keepout campaign run|rerun|baseline|compare|shrink
     "hil_sim.init_cli",   # keepout init DIR
+    "hil_sim.export_cli",  # keepout export RUN --format csv|mat|parquet
+    "hil_sim.sky_cli",    # keepout sky MISSION --at T | --from T0 --to T1 --step S
 )
 
 EXIT_CANNOT_START = 3  # as `keepout sil run`: a part this command needs is missing (docs/running.md)

@@ -7,7 +7,8 @@ of the copied files point at the schema files written beside them:
     DIR/campaigns/my-campaign.yaml    its dispersed campaign (the release regression, renamed)
     DIR/schema/mission.schema.json    editor schemas (yaml-language-server), from the models
     DIR/schema/campaign.schema.json
-    DIR/README.md                     the commands to check, run and disperse it
+    DIR/docs/missions.md              the mission-file reference: every key, its unit, range and default
+    DIR/README.md                     the commands to check, run and disperse it, and where the keys are
 """
 from __future__ import annotations
 
@@ -19,12 +20,15 @@ from pathlib import Path
 MISSION_NAME = "my-mission"
 CAMPAIGN_NAME = "my-campaign"
 EXIT_BAD_DIR = 2  # as a rejected mission: the user's input (DIR) is not usable
+REFERENCE = "missions.md"  # docs/missions.md, shipped in the wheel as keepout_docs/missions.md
 
 README = f"""# A keepout mission project
 
 - `missions/{MISSION_NAME}.yaml`: the mission (truth, flight software, timeline, requirements). An editor with
   the YAML language server completes and checks it against `schema/mission.schema.json`.
 - `campaigns/{CAMPAIGN_NAME}.yaml`: dispersed runs of that mission.
+- `docs/missions.md`: the mission-file reference (every key with its unit, range and default, and a worked
+  example), the copy shipped with this keepout; `keepout config docs --out -` prints it again.
 
     keepout config check missions/{MISSION_NAME}.yaml        # validation and the physics checks
     keepout sil run missions/{MISSION_NAME}.yaml             # one SIL run, judged (runs/<id>/summary.json)
@@ -68,7 +72,8 @@ def write_project(target: Path) -> list[Path]:
     campaign = re.sub(r"(?m)^base_mission: .*$", f"base_mission: ../missions/{MISSION_NAME}.yaml", campaign)
     files = {target / "missions" / f"{MISSION_NAME}.yaml": mission,
              target / "campaigns" / f"{CAMPAIGN_NAME}.yaml": campaign,
-             target / "README.md": README}
+             target / "README.md": README,
+             target / "docs" / REFERENCE: docs_path(REFERENCE).read_text(encoding="utf-8")}
     written = []
     for path, text in files.items():
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -82,3 +87,17 @@ def write_project(target: Path) -> list[Path]:
 def _renamed(text: str, name: str) -> str:
     """The file with its top-level ``name:`` replaced (the modeline and comments kept)."""
     return re.sub(r"(?m)^name: .*$", f"name: {name}", text, count=1)
+
+
+def docs_path(name: str) -> Path:
+    """A file of the user documentation: the wheel's copy (package ``keepout_docs``, pyproject.toml), or
+    ``docs/`` of a checkout that was never installed with it."""
+    from importlib.resources import files
+
+    try:
+        installed = Path(str(files("keepout_docs").joinpath(name)))
+    except ModuleNotFoundError:
+        installed = None
+    if installed is not None and installed.is_file():
+        return installed
+    return Path(__file__).resolve().parent.parent / "docs" / name

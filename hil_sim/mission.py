@@ -546,11 +546,179 @@ def load_mission_marked(path: str | Path, *, text: str | None = None) -> tuple[M
     try:
         mission = Mission.model_validate(doc.data)
     except ValidationError as exc:
-        raise ConfigError(problems_from_validation(doc, exc, Mission)) from None
+        raise ConfigError(problems_from_validation(doc, _ErrorsAsWritten(doc.data, exc), Mission)) from None
     problems = [Problem(doc.file, *doc.mark_for(loc), _path(loc), msg) for loc, msg in mission.semantic_problems()]
     if problems:
         raise ConfigError(problems)
     return mission, doc
+
+
+# ---------------------------------------------------------------------------------------------
+# Validation messages about the keys as written: units named, copies of the truth not reported twice
+# ---------------------------------------------------------------------------------------------
+
+Loc = tuple[str | int, ...]
+# Where the flight software's knowledge comes from when the file does not give it (fsw.config.KNOWLEDGE_DEFAULTS,
+# filled in by knowledge_from_truth): an error in such a copy is an error in the truth key the user wrote.
+KNOWLEDGE_SOURCES: dict[Loc, Loc] = {
+    ("flight_software", "epoch_utc"): ("epoch_utc",),
+    ("flight_software", "spacecraft", "inertia_B_kgm2"): ("spacecraft", "inertia_B_kgm2"),
+    ("flight_software", "spacecraft", "wheels"): ("spacecraft", "wheels"),
+    ("flight_software", "spacecraft", "star_tracker_q_BS"): ("spacecraft", "star_tracker", "q_BS"),
+    ("flight_software", "pointing", "boresight_B"): ("spacecraft", "instrument_boresight_B"),
+    ("flight_software", "pointing", "target_N"): ("initial_state", "ra_dec_deg"),
+    ("flight_software", "orbit", "radius_km"): ("orbit", "semi_major_axis_km"),
+    ("flight_software", "orbit", "inclination_deg"): ("orbit", "inclination_deg"),
+    ("flight_software", "orbit", "raan_deg"): ("orbit", "raan_deg"),
+    ("flight_software", "orbit", "arg_latitude_at_epoch_deg"): ("orbit", "arg_perigee_deg"),
+}
+# The unit a key's name ends with (the project's convention), longest suffix first.
+UNIT_SUFFIXES: tuple[tuple[str, str], ...] = tuple(sorted((
+    ("_rad_s", "rad/s"), ("_deg_s", "deg/s"), ("_deg_s2", "deg/s^2"), ("_deg_s3", "deg/s^3"), ("_deg", "deg"),
+    ("_rad", "rad"), ("_s", "s"), ("_hz", "Hz"), ("_Hz", "Hz"), ("_Nm", "N m"), ("_km", "km"), ("_kgm2", "kg m^2"),
+    ("_arcsec", "arcsec"), ("_ppm", "ppm"), ("_bps", "bit/s"), ("_rad_per_sqrt_s", "rad/sqrt(s)"),
+    ("_rad_s_per_sqrt_s", "rad/s/sqrt(s)"), ("_Nm_per_rad_s", "N m s/rad"), ("_rad_s_sqrt_hz", "rad/s/sqrt(Hz)"),
+), key=lambda item: -len(item[0])))
+# Units a value may have been typed in by mistake, per unit of the key: (name, factor to the key's unit).
+_MISTAKEN_UNITS: dict[str, tuple[tuple[str, float], ...]] = {
+    "rad/s": (("rpm", math.pi / 30.0), ("deg/s", math.pi / 180.0)),
+    "deg/s": (("rad/s", 180.0 / math.pi),),
+    "rad": (("deg", math.pi / 180.0),),
+    "deg": (("rad", 180.0 / math.pi),),
+}
+_BOUND_WORDS = {"gt": "greater than", "ge": "greater than or equal to", "lt": "less than",
+                "le": "less than or equal to"}
+
+
+def key_unit(loc: Loc) -> str:
+    """The unit named by the last key of ``loc`` ('' when its name carries none)."""
+    name = next((part for part in reversed(loc) if isinstance(part, str) and not _internal(part)), "")
+    return next((unit for suffix, unit in UNIT_SUFFIXES if name.endswith(suffix)), "")
+
+
+def _internal(part: Any) -> bool:
+    return isinstance(part, str) and ("[" in part or part.startswith("function-"))
+
+
+def _written(loc: Loc) -> Loc:
+    return tuple(p for p in loc if not _internal(p))
+
+
+def _in_data(data: Any, loc: Loc) -> bool:
+    node = data
+    for part in _written(loc):
+        if isinstance(node, dict) and part in node:
+            node = node[part]
+        elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
+            node = node[part]
+        else:
+            return False
+    return True
+
+
+def _bounded(value: float, ctx: dict[str, Any]) -> bool:
+    checks = {"gt": lambda b: value > b, "ge": lambda b: value >= b, "lt": lambda b: value < b,
+              "le": lambda b: value <= b}
+    return all(checks[k](float(b)) for k, b in ctx.items() if k in checks)
+
+
+def range_message(loc: Loc, err: dict[str, Any]) -> str | None:
+    """A range error with the key's unit on the bound and the value, and the conversion when the value fits
+    the range in a unit it was likely typed in (6000 in a rad/s key: 6000 rpm = 628.3 rad/s)."""
+    ctx, value, unit = err.get("ctx") or {}, err.get("input"), key_unit(loc)
+    bound = next(((k, ctx[k]) for k in _BOUND_WORDS if k in ctx), None)
+    if not unit or bound is None or not _is_number(value) or not err.get("type", "").endswith(
+            ("greater_than", "greater_than_equal", "less_than", "less_than_equal")):
+        return None
+    msg = f"Input should be {_BOUND_WORDS[bound[0]]} {bound[1]:g} {unit} (got {value!r})"
+    hints = [f"{value:g} {other} = {value * factor:.4g} {unit}" for other, factor in _MISTAKEN_UNITS.get(unit, ())
+             if _bounded(value * factor, ctx)]
+    if hints:
+        msg += f"; if you meant another unit, write it in {unit}: " + ", ".join(hints)
+    return msg
+
+
+class _ErrorsAsWritten:
+    """A pydantic ValidationError's errors as the user wrote the file (for `problems_from_validation`):
+
+    * an error in the flight software's copy of a truth key the file does not give under flight_software
+      (`KNOWLEDGE_SOURCES`) is dropped when the truth key has its own error (one mistake, one message), and
+      otherwise reported at the truth key, saying which copy refused it;
+    * a range error names the key's unit and the value converted from a unit it was likely typed in.
+    """
+
+    def __init__(self, data: Any, exc: Any):
+        self.data, self.exc = data, exc
+
+    def errors(self, include_url: bool = False) -> list[dict[str, Any]]:
+        from hil_sim.yaml_loader import format_path
+
+        errors = self.exc.errors(include_url=include_url)
+        written = [_written(tuple(e.get("loc", ()))) for e in errors]
+        out = []
+        for err, loc in zip(errors, written):
+            err = dict(err)
+            text = range_message(loc, err)
+            if text is not None:
+                err["msg"] = text
+                err.pop("input", None)  # the message already shows it, beside the unit
+            source = self._source(loc)
+            if source is not None:
+                if any(other[:len(source)] == source or source[:len(other)] == other
+                       for other in written if other and other[0] != "flight_software"):
+                    continue  # the truth key's own error says it
+                if "input" in err:  # shown before the note, where problems_from_validation would append it
+                    err["msg"] = f"{err.get('msg', 'invalid')} (got {err.pop('input')!r})"
+                err["msg"] = (f"{err.get('msg', 'invalid')}, in {format_path(loc)}, the flight software's copy of "
+                              "this value (flight_software does not give it)")
+                err["loc"] = source
+            out.append(err)
+        return out
+
+    def _source(self, loc: Loc) -> Loc | None:
+        """The truth key a flight-software key not written in the file was copied from (else None)."""
+        for copied, source in KNOWLEDGE_SOURCES.items():
+            if loc[:len(copied)] == copied and not _in_data(self.data, copied):
+                return source + loc[len(copied):]
+        return None
+
+
+# Values that pass the range but whose size suggests another unit: (key name, test, what it suggests).
+_SUSPECT_VALUES: tuple[tuple[str, Any, str], ...] = (
+    ("omega_BN_B_rad_s", lambda v: abs(v) > 0.1,
+     lambda v: f"{v:g} rad/s is {math.degrees(v):.3g} deg/s, a fast tumble for a spacecraft; if you meant "
+               f"{v:g} deg/s, write {math.radians(v):.4g}"),
+    ("bias_B_rad_s", lambda v: abs(v) > 1e-3,
+     lambda v: f"a gyro bias of {v:g} rad/s is {math.degrees(v) * 3600:.3g} deg/h; if you meant {v:g} deg/s, write "
+               f"{math.radians(v):.4g}, or {v:g} deg/h, {math.radians(v) / 3600:.4g}"),
+    ("max_speed_rad_s", lambda v: v < 30.0,
+     lambda v: f"{v:g} rad/s is {v * 30 / math.pi:.3g} rpm, slow for a reaction wheel; if you meant {v:g} krpm, "
+               f"write {v * 1000 * math.pi / 30:.4g}"),
+    ("half_angle_deg", lambda v: v < math.pi / 2,
+     lambda v: f"{v:g} deg is a small cone; if you meant {v:g} rad, write {math.degrees(v):.4g}"),
+)
+
+
+def unit_warnings(doc: "Marked") -> list[tuple[Loc, str]]:
+    """Values as written whose size suggests the wrong unit (e.g. 0.5 deg/s typed into a rad/s key): each
+    with its key path and what to write instead. Warnings, not errors: such a value may be meant."""
+    out: list[tuple[Loc, str]] = []
+
+    def walk(node: Any, loc: Loc) -> None:
+        if isinstance(node, dict):
+            for key, value in node.items():
+                walk(value, loc + (key,))
+        elif isinstance(node, list):
+            for i, value in enumerate(node):
+                walk(value, loc + (i,))
+        elif _is_number(node):
+            name = next((p for p in reversed(loc) if isinstance(p, str)), "")
+            for key, suspect, why in _SUSPECT_VALUES:
+                if name == key and suspect(float(node)):
+                    out.append((loc, why(float(node))))
+
+    walk(doc.data, ())
+    return out
 
 
 def _path(loc: tuple[str | int, ...]) -> str:

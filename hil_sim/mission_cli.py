@@ -83,9 +83,9 @@ def _generated(args: argparse.Namespace, default: Path, text: Callable[[], str],
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from hil_sim.mission import load_mission_marked
+    from hil_sim.mission import load_mission_marked, unit_warnings
     from hil_sim.physics_checks import check_mission
-    from hil_sim.yaml_loader import ConfigError, ConfigFileError
+    from hil_sim.yaml_loader import ConfigError, ConfigFileError, format_path
 
     status = 0
     for path in args.files:
@@ -107,6 +107,9 @@ def _validate(args: argparse.Namespace) -> int:
         else:
             for warning in mission.flight_software.tmtc.warnings():
                 print(f"{path}: warning: {warning}", file=sys.stderr)
+            for loc, warning in unit_warnings(doc):  # sizes that suggest another unit
+                line, col = doc.mark_for(loc)
+                print(f"{doc.file}:{line}:{col} {format_path(loc)}: warning: {warning}", file=sys.stderr)
             print(f"{path}: valid")
     return status
 

@@ -23,7 +23,10 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
                      help="mission YAML (default: the packaged demo-pointing mission)")
     run.add_argument("--realtime", action="store_true", help="pace the simulator to the clock (default: lockstep)")
     run.add_argument("--bus", default=None,
-                     help="override the mission's bus: auto | socketcan[:IFACE] | udp_multicast[:GROUP:PORT]")
+                     help="override the mission's bus: auto | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | "
+                          "INTERFACE:CHANNEL[,KEY=VALUE...] for any python-can interface (pcan, kvaser, vector, "
+                          "slcan, socketcand, gs_usb, ...); the flight software runs in a process of its own, so "
+                          "python-can's in-process virtual bus does not reach it (docs/bus.md)")
     run.add_argument("--duration", type=float, default=None, metavar="SECONDS",
                      help="override the simulated duration [s]")
     run.add_argument("--out", type=Path, default=Path("runs"), help="parent folder of run folders (default: runs)")

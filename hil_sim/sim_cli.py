@@ -38,7 +38,7 @@ TRUTH_REQUIREMENTS = ("truth recorded", "run completed", "keep-out margin", "set
 def add_cli(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "sim", help="run the simulator alone on a bus (HIL bench; pair with `keepout fsw`)",
-        description=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+        description=_plain_text(__doc__.split("\n\n", 1)[1]), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("mission", type=Path, help="mission YAML")
     p.add_argument("--bus", default=None, help="bus spec (default: the mission's bus): socketcan:can0 | "
                    "udp_multicast:GROUP:PORT | INTERFACE:CHANNEL[,KEY=VALUE...] for any python-can interface")
@@ -55,6 +55,19 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="output folder (default: runs/<mission>-sim-<timestamp>)")
     p.set_defaults(func=_run)
+
+
+def _plain_text(doc: str) -> str:
+    """The module docstring for ``--help``: reST literals (double backticks) shown as plain text."""
+    return doc.replace("``", "")
+
+
+def result_lines(results: list[dict[str, Any]]) -> list[str]:
+    """One line per truth requirement: verdict, name, value and limit with the unit (as `keepout sil run`)."""
+    from hil_sim.summary import _cell
+
+    return [f"  {'PASS' if r['pass'] else 'FAIL'}  {r['name']}: {_cell(r['value'], r.get('unit', ''))} "
+            f"(limit {_cell(r['limit'], r.get('unit', ''))})" for r in results]
 
 
 def _tc_address(text: str | None, mission) -> tuple[str, int]:
@@ -151,8 +164,8 @@ def _run(args: argparse.Namespace) -> int:
     if code == EXIT_NOT_STARTED:
         return code
     passed, results = _truth_check(out, mission)
-    for r in results:
-        print(f"  {'PASS' if r['pass'] else 'FAIL'}  {r['name']}: {r['value']} ({r['limit']})")
+    for line in result_lines(results):
+        print(line)
     print(f"keepout sim: {sim.tick} ticks in {wall_s:.1f} s wall, {sim.stats.cycle_done_timeouts} unanswered; "
           f"{'truth requirements pass' if passed else 'a truth requirement FAILED'}; {out}")
     return code if code != EXIT_PASS else (EXIT_PASS if passed else EXIT_FAIL)

@@ -132,6 +132,9 @@ def _copy_source(dest: Path) -> Path:
 
     for name in (*CODE_PACKAGES, "config"):
         shutil.copytree(ROOT / name, dest / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "node_modules"))
+    (dest / "docs").mkdir()
+    for doc in (ROOT / "docs").glob("*.md"):  # the wheel's keepout_docs
+        shutil.copy(doc, dest / "docs" / doc.name)
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(ROOT / name, dest / name)
     return dest
@@ -148,8 +151,9 @@ def test_the_built_wheel_runs_from_an_empty_folder(tmp_path):
     import venv
 
     source = _copy_source(tmp_path / "src")
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp_path / "dist"),
-                    str(source)], check=True, timeout=600)
+    build = subprocess.run([sys.executable, "-m", "pip", "wheel", "-v", "--no-deps", "-w", str(tmp_path / "dist"),
+                            str(source)], check=True, timeout=600, capture_output=True, text=True)
+    assert "Package would be ignored" not in build.stdout + build.stderr  # setuptools' data-folder warnings
     wheel = next((tmp_path / "dist").glob("keepout-*.whl"))
     env_dir = tmp_path / "venv"
     venv.create(env_dir, with_pip=False)
@@ -178,5 +182,7 @@ def test_the_built_wheel_runs_from_an_empty_folder(tmp_path):
     assert not missing, f"config files not in the wheel: {missing}"
     init = run(keepout, "init", "proj")
     assert init.returncode == 0, init
+    # the mission-file reference, from the wheel's keepout_docs
+    assert (empty / "proj" / "docs" / "missions.md").read_text() == (ROOT / "docs" / "missions.md").read_text()
     check = run(keepout, "config", "validate", "proj/missions/my-mission.yaml")
     assert check.returncode == 0 and "valid" in check.stdout, check
