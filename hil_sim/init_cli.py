@@ -95,8 +95,10 @@ def docs_path(name: str) -> Path:
     from importlib.resources import files
 
     try:
-        installed = Path(str(files("keepout_docs").joinpath(name)))
-    except ModuleNotFoundError:
+        # (iterdir, not joinpath: an editable install makes keepout_docs a namespace package, whose
+        # MultiplexedPath refuses joinpath to a file on Python 3.11)
+        installed = next((Path(str(p)) for p in files("keepout_docs").iterdir() if p.name == name), None)
+    except (ModuleNotFoundError, OSError, ValueError):
         installed = None
     if installed is not None and installed.is_file():
         return installed
