@@ -344,7 +344,7 @@ class DoorConfig(_Strict):
     open_time_s: float = Field(gt=0.0, le=600.0, description="Full stroke closed -> open [s] (default: spacecraft.door.open_time_s).")
     guard_deg: float = Field(0.5, ge=0.0, le=30.0, description="Close when the boresight is predicted to come within this of a physical zone [deg].")
     reopen_margin_deg: float = Field(2.0, ge=0.0, le=90.0, description="Reopen only when every physical margin is at least this [deg] (hysteresis above guard_deg).")
-    reopen_dwell_s: float = Field(10.0, ge=0.0, le=3600.0, description="... and has stayed so, with no closing prediction, for this long [s].")
+    reopen_dwell_s: float = Field(10.0, ge=0.0, le=3600.0, description="Reopen only after every physical margin has been at least reopen_margin_deg, with no closing prediction, for this long [s] (the dwell).")
     coast_horizon_s: float = Field(60.0, gt=0.0, le=3600.0, description="With fewer than three usable wheels (no braking): how far ahead a coasting approach to a zone closes the door [s].")
     stroke_margin: float = Field(1.5, ge=1.0, le=10.0, description="DOOR_FAULT when a commanded stroke takes longer than this times its known time (plus one second) [-].")
     status_timeout_s: float = Field(1.0, gt=0.0, le=60.0, description="DOOR_FAULT (NO_STATUS) after this long without a valid DOOR_STATUS [s].")

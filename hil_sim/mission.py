@@ -275,7 +275,8 @@ TimelineEntry = Annotated[Union[SetModeCommand, SetTargetCommand, SetGainsComman
 # ---------------------------------------------------------------------------------------------
 
 class BusFault(_Model):
-    """A fault injected on the frames of one DBC message during [start_s, end_s)."""
+    """A fault injected on the frames of one DBC message during [start_s, end_s), or a failure of the aperture
+    door's mechanism during that window (the door kinds)."""
 
     kind: Literal["drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent", "door_stuck_open",
                   "door_stuck_closed", "door_slow"] = Field(
