@@ -237,6 +237,8 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         rejected = sum(1 for _, name, _ in telemetry.events if name in ("CMD_REJECTED", "TARGET_REJECTED"))
         metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected)
         metrics.update(estimates.metrics(record))
+        if door is not None:  # how often the flight software shut the aperture door (DOOR_CLOSING events)
+            metrics["door_closes"] = float(sum(1 for _, name, _ in telemetry.events if name == "DOOR_CLOSING"))
         used = _read_back(paths, mission, world, initial, fsw, timeline.sent, sim)
         return RunResult(metrics=metrics, used=used, trajectory=trajectory, sim_time_s=float(record["t_s"][-1]),
                          events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events if n == "FDIR_TRIPPED"][:200])
