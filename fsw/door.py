@@ -135,7 +135,9 @@ class DoorController:
                            dwell_s=t_s - self._clear_since)
                 self.opens += 1
                 self._command(True, t_s, "NONE")
-        self.driver.send_frame("DOOR_CMD", {"open": 1 if self.command_open else 0, "tick_lsb": tick & 0xFFFF})
+        # in the wheel commands' burst, ahead of them (before CYCLE_DONE in lockstep)
+        self.driver.send_frame("DOOR_CMD", {"open": 1 if self.command_open else 0, "tick_lsb": tick & 0xFFFF},
+                               with_commands=True)
         self._check_faults(t_s)
         return bool(self.command_open)
 

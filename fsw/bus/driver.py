@@ -316,6 +316,8 @@ class FswBusDriver:
         self.tx_errors = 0
         self._kept: dict[int, tuple[list, float] | None] = {}  # keep_latest: frame id -> (value row, time)
         self._kept_ids = np.zeros(0, dtype=np.int64)
+        self._one_frame: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # send_frame's message index and row
+        self._ahead: list[FrameBurst] = []  # frames to send ahead of the next wheel commands (send_frame)
         self._init_lockstep(icd, n_wheels)
 
     def _init_lockstep(self, icd: Icd, n_wheels: int) -> None:
@@ -541,15 +543,32 @@ class FswBusDriver:
 
     def _keep_rows(self, ids: np.ndarray, first: int, end: int) -> None:
         """The delivered frames of kept messages among frames first..end-1 of the lockstep burst."""
-        t = float(self._ft[K.F_T_TICK])
-        for i in np.flatnonzero(np.isin(ids[first:end], self._kept_ids)).tolist():
-            j = first + i
-            if 0 <= self._status_buf[j] <= 1:  # delivered (ok, ok_some_lost)
-                self._kept[int(ids[j])] = (self._values_buf[j].tolist(), t)
+        window = ids[first:end]
+        for fid in self._kept_ids.tolist():  # (one or two kept messages: a comparison each, no set search)
+            for i in np.flatnonzero(window == fid).tolist():
+                j = first + i
+                if 0 <= self._status_buf[j] <= 1:  # delivered (ok, ok_some_lost)
+                    self._kept[fid] = (self._values_buf[j].tolist(), float(self._ft[K.F_T_TICK]))
 
-    def send_frame(self, name: str, signals: dict[str, float]) -> None:
-        """Send one frame of message ``name`` (E2E protected; a refused frame counted in ``tx_errors``)."""
-        self._send(self._sender.frame(name, signals))
+    def send_frame(self, name: str, signals: dict[str, float], with_commands: bool = False) -> None:
+        """One frame of message ``name`` (E2E protected, encoded now), sent at once as a one-frame burst, or
+        with ``with_commands`` ahead of the next ``send_wheel_torques`` frames in their burst (one send; in
+        lockstep before CYCLE_DONE). A refused frame is counted in ``tx_errors``; a signal the message does
+        not have raises KeyError."""
+        one = self._one_frame.get(name)
+        if one is None:
+            one = self._one_frame[name] = (np.array([self.icd.message_index[name]], dtype=np.int64),
+                                           np.zeros((1, self._width)))
+        idx, row = one
+        row[0, :] = 0.0
+        col = self._col
+        for sig, value in signals.items():
+            row[0, col[name, sig]] = value
+        burst = self._sender.burst(idx, row)
+        if with_commands:
+            self._ahead.append(burst)
+        else:
+            self._send_burst(burst)
 
     def _collect(self, ids: np.ndarray, lengths: np.ndarray, data: np.ndarray, first: int, first_fid: int) -> int:
         """kernels.collect_rows on frames ``first``.. (growing the gyro rows when the kernel asks)."""
@@ -837,6 +856,9 @@ class FswBusDriver:
             burst = self._sender.burst(self._cmd_idx[:len(ids)], self._cmd_values[:len(ids)].copy(), out, done)
         else:
             burst = FrameBurst(ids, out, dlc)
+        if self._ahead:
+            burst = FrameBurst.join(self._ahead + [burst])
+            self._ahead = []
         self._send_burst(burst)
         if self._realtime:
             self._answer_latest_sync()

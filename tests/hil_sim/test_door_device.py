@@ -140,11 +140,11 @@ def _pair(icd: Icd, door: DoorParams | None, light: bool, faults=()):
     return sim, driver, frames, (sim_bus, fsw_bus)
 
 
-def _cycle(driver: FswBusDriver, open_door: bool | None):
+def _cycle(driver: FswBusDriver, open_door: bool | None, with_commands: bool = True):
     inputs = driver.collect_tick(0.0)
     assert inputs is not None and inputs.complete
-    if open_door is not None:
-        driver.send_frame("DOOR_CMD", {"open": int(open_door), "tick_lsb": inputs.tick & 0xFFFF})
+    if open_door is not None:  # in the wheel commands' burst, or a burst of its own before it
+        driver.send_frame("DOOR_CMD", {"open": int(open_door), "tick_lsb": inputs.tick & 0xFFFF}, with_commands)
     driver.send_wheel_torques(inputs.tick, np.zeros(driver.n_wheels), cycle_done=True)
     return inputs
 
@@ -157,7 +157,7 @@ def test_tick_carries_door_status_and_the_door_obeys_its_command(icd: Icd, light
         status_id = icd.spec("DOOR_STATUS").frame_id
         for k in range(25):
             sim.begin_tick()
-            inputs = _cycle(driver, open_door=k >= 2)
+            inputs = _cycle(driver, open_door=k >= 2, with_commands=light)
             sim.end_tick(wait_s=0.0)
             # SYNC counts the door's status among the frames that follow it, and the tick waits for it
             assert inputs.frames_received == inputs.frames_expected
