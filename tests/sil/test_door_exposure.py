@@ -140,3 +140,31 @@ def test_every_wheel_lost_mid_slew_the_door_keeps_the_exposure_at_zero() -> None
     assert doored["min_margin_deg"] == bare["min_margin_deg"]  # the same flight: the door moves no body
     assert doored["instrument_exposure_s"] == 0.0 and doored["instrument_exposure_depth_deg"] == 0.0
     assert doored["door_closes"] >= 1
+
+
+def test_a_door_stuck_open_is_reported_and_its_exposure_judged() -> None:
+    from hil_sim.campaign import fast
+
+    mission = _wheels_lost("demo-pointing-door")
+    # the door jams open at 30 s, before the wheels are lost: the flight software commands it shut and
+    # reports the stall; the exposure is what it is without a door
+    stuck = mission.faults[0].model_copy(update={"kind": "door_stuck_open", "message": "DOOR_STATUS",
+                                                 "start_s": 30.0, "end_s": 600.0})
+    mission = mission.model_copy(update={"faults": [stuck, *mission.faults]})
+    events: list = []
+    recorder = fast._EventRecorder.event
+
+    def keep(self, name, /, time_s=None, **args):
+        events.append((name, args))
+        return recorder(self, name, time_s=time_s, **args)
+
+    fast._EventRecorder.event = keep
+    try:
+        metrics = fast.run_fast(mission, 20260425).metrics
+    finally:
+        fast._EventRecorder.event = recorder
+    bare = fast.run_fast(_wheels_lost("demo-pointing"), 20260425).metrics
+    assert metrics["door_closes"] >= 1
+    assert {"fault": "STALLED"} in [{"fault": a["fault"]} for n, a in events if n == "DOOR_FAULT"]
+    assert bare["instrument_exposure_s"] > 10.0
+    assert metrics["instrument_exposure_s"] == pytest.approx(bare["instrument_exposure_s"])
