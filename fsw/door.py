@@ -70,7 +70,9 @@ class DoorController:
         self._state = -1
         self._faults_seen: set[str] = set()
         self.position_pct = math.nan
-        self.status_t = -math.inf
+        self.status_t: float | None = None  # onboard time at which the newest DOOR_STATUS was first seen
+        self._first_t: float | None = None  # the first cycle's time (no status yet: counted from it)
+        self._status_rx = -math.inf  # its reception time as the driver stamped it (its own clock in real time)
 
     # ------------------------------------------------------------------------------------- decision
     def predicted_entry(self, margins_deg: Sequence[float], brake_deg_s2: float) -> tuple[int, float, float]:
@@ -102,6 +104,8 @@ class DoorController:
         physical margins to the sky zones [deg] (NaN: unknown); ``brake_deg_s2``: the braking acceleration
         the control can give (0 with fewer than three usable wheels); ``violation``: KEEP_OUT_VIOLATION is
         raised. Returns the command sent (True: open)."""
+        if self._first_t is None:
+            self._first_t = t_s
         self._read_status(t_s)
         if self.command_open is None:  # no status yet: the door is taken as closed
             self._command(False, t_s, "NONE")
@@ -153,9 +157,10 @@ class DoorController:
         if latest is None:
             return
         row, t_rx = latest
-        if t_rx <= self.status_t:
+        if t_rx <= self._status_rx:
             return
-        self.status_t = t_rx
+        self._status_rx = t_rx
+        self.status_t = t_s
         c_pos, c_state, c_cmd, c_fault = self._cols
         self.position_pct = float(row[c_pos])
         state = int(row[c_state])
@@ -173,7 +178,8 @@ class DoorController:
 
     def _check_faults(self, t_s: float) -> None:
         cfg = self.cfg
-        self._fault("NO_STATUS", t_s - self.status_t > cfg.status_timeout_s + 1e-9)
+        last = self.status_t if self.status_t is not None else self._first_t
+        self._fault("NO_STATUS", t_s - last > cfg.status_timeout_s + 1e-9)
         if self._stroke_start is None or self.command_open is None:
             return
         stroke = cfg.open_time_s if self.command_open else cfg.close_time_s

@@ -175,3 +175,20 @@ def test_config_refuses_a_reopen_margin_below_the_guard() -> None:
     with pytest.raises(ValueError, match="reopen_margin_deg"):
         DoorConfig(close_time_s=1.0, open_time_s=1.0, guard_deg=3.0, reopen_margin_deg=2.0)
     assert math.isfinite(DoorConfig(close_time_s=1.0, open_time_s=1.0).coast_horizon_s)
+
+
+def test_status_on_the_drivers_own_clock_and_a_late_first_status() -> None:
+    # real time: the driver stamps frames on its monotonic clock, far from onboard time, and the first
+    # status may come a few cycles after the first cycle (the devices start later): no fault from either
+    door, driver, events = _door()
+    for k in range(40):
+        t = k * T
+        if k >= 5:
+            driver.report(5000.0 + 1.3 * t, 0.0, 0, 0)
+        door.cycle(t, k, [30.0], ["SUN"], True, 0.15, False)
+    assert "DOOR_FAULT" not in _names(events)
+    # then it falls silent: NO_STATUS after status_timeout_s of onboard time
+    for k in range(40, 60):
+        door.cycle(k * T, k, [30.0], ["SUN"], True, 0.15, False)
+    faults = [a["fault"] for n, a in events if n == "DOOR_FAULT"]
+    assert faults == ["NO_STATUS"]
