@@ -168,3 +168,27 @@ def test_a_door_stuck_open_is_reported_and_its_exposure_judged() -> None:
     assert {"fault": "STALLED"} in [{"fault": a["fault"]} for n, a in events if n == "DOOR_FAULT"]
     assert bare["instrument_exposure_s"] > 10.0
     assert metrics["instrument_exposure_s"] == pytest.approx(bare["instrument_exposure_s"])
+
+
+@pytest.mark.slow
+def test_sil_run_shuts_the_door_over_the_bus(tmp_path: Path) -> None:
+    """`keepout sil run` (simulator, flight software and ground as three processes on one bus) of every wheel
+    lost: DOOR_CMD and DOOR_STATUS on the bus every tick, the door shut before the Moon cone, exposure 0."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "door-wheels-lost.yaml"
+    path.write_text(yaml.safe_dump(_wheels_lost("demo-pointing-door").model_dump(mode="json")))
+    proc = subprocess.run([sys.executable, "-m", "hil_sim", "sil", "run", str(path), "--bus", "udp_multicast",
+                           "--out", str(tmp_path / "runs"), "--no-progress"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=600)
+    run_dir = next((tmp_path / "runs").glob("demo-pointing-door-*"))
+    summary = json.loads((run_dir / "summary.json").read_text())
+    rows = {r["name"]: r for r in summary["requirements"]}
+    assert rows["instrument exposure"]["pass"] and rows["instrument exposure"]["value"] == 0.0, proc.stdout
+    assert not rows["keep-out margin moon"]["pass"]  # the boresight went in: the door kept the instrument out
+    assert summary["exposure"]["inside_s"] > 10.0
+    assert summary["events"]["by_name"].get("DOOR_CLOSING", 0) >= 1
+    ids = [line.split()[2].split("#")[0] for line in (run_dir / "bus.candump.log").read_text().splitlines()]
+    assert ids.count("010") == 2400  # SYNC: 240 s of 0.1 s ticks
+    assert ids.count("030") == 2400 and ids.count("068") == 2400  # DOOR_CMD and DOOR_STATUS every tick
