@@ -192,3 +192,30 @@ def test_sil_run_shuts_the_door_over_the_bus(tmp_path: Path) -> None:
     ids = [line.split()[2].split("#")[0] for line in (run_dir / "bus.candump.log").read_text().splitlines()]
     assert ids.count("010") == 2400  # SYNC: 240 s of 0.1 s ticks
     assert ids.count("030") == 2400 and ids.count("068") == 2400  # DOOR_CMD and DOOR_STATUS every tick
+
+
+def test_in_quaternion_mode_the_door_watches_the_sky_zones() -> None:
+    from hil_sim.campaign import fast
+
+    data = _mission_data("demo-quaternion")
+    data["duration_s"] = 30.0
+    data["timeline"] = [e for e in data["timeline"] if e["t_s"] <= 30.0]
+    data["spacecraft"]["door"] = {"close_time_s": 1.0, "open_time_s": 2.0}
+    data["flight_software"].setdefault("pointing", {})["zones"] = [
+        {"name": "sun", "body": "sun", "geometry": {"shape": "cone", "half_angle_deg": 30.0}}]
+    mission = load_mission("m.yaml", text=yaml.safe_dump(data))
+    events: list = []
+    recorder = fast._EventRecorder.event
+
+    def keep(self, name, /, time_s=None, **args):
+        events.append((name, args))
+        return recorder(self, name, time_s=time_s, **args)
+
+    fast._EventRecorder.event = keep
+    try:
+        metrics = fast.run_fast(mission, 1).metrics
+    finally:
+        fast._EventRecorder.event = recorder
+    # the attitude zones are the guidance's margins there; the door opened on the boresight's sky margin
+    opening = [a for n, a in events if n == "DOOR_OPENING"]
+    assert len(opening) == 1 and opening[0]["margin_deg"] == pytest.approx(metrics["margin_sun_deg"], abs=3.0)
