@@ -333,19 +333,21 @@ def add_torque_variation(spans: list[dict[str, Any]], t: np.ndarray, wheel_torqu
         span["torque_variation_Nm"] = float(steps[sel].sum())
 
 
-def rate_limit_series(mission, t: np.ndarray, gains_set: Sequence[tuple[float, float]] | None = None) -> np.ndarray:
+def rate_limit_series(mission, t: np.ndarray, gains_set: Sequence[tuple[float, float]] = ()) -> np.ndarray:
     """The body-rate limit [rad/s] in force at each time: the flight software's configured one, then each
     rate limit the flight software acknowledged (``gains_set``: (onboard time [s], rate limit [deg/s]) of its
-    GAINS_SET events), from its time on. A SET_GAINS the flight software refused changes nothing, so the
-    judge must not take the timeline's word for it; ``gains_set`` None (no events at hand) falls back to the
-    timeline's SET_GAINS."""
+    GAINS_SET events, `acknowledged_rate_limits`), from its time on. A SET_GAINS the flight software refused
+    changes nothing, so the judge never takes the timeline's word for it."""
     limit = np.full(len(t), math.radians(mission.flight_software.spacecraft.max_rate_deg_s))
-    if gains_set is None:
-        gains_set = [(e.t_s, e.rate_limit_deg_s) for e in mission.timeline
-                     if e.command == "SET_GAINS" and e.rate_limit_deg_s is not None]
     for t_s, rate_deg_s in sorted(gains_set):
         limit[t >= t_s] = math.radians(rate_deg_s)
     return limit
+
+
+def acknowledged_rate_limits_of_run(run_dir: Path) -> list[tuple[float, float]]:
+    """`acknowledged_rate_limits` of a run folder's ground event archive."""
+    return acknowledged_rate_limits([(e.get("time_s", 0.0), e.get("event"), e.get("args", {}))
+                                     for e in _ground_events(run_dir)])
 
 
 def acknowledged_rate_limits(events: Sequence[tuple[float, str, dict]]) -> list[tuple[float, float]]:
@@ -355,7 +357,7 @@ def acknowledged_rate_limits(events: Sequence[tuple[float, str, dict]]) -> list[
 
 
 def peak_body_rate_fraction(mission, truth: dict[str, np.ndarray],
-                            gains_set: Sequence[tuple[float, float]] | None = None) -> tuple[float, float]:
+                            gains_set: Sequence[tuple[float, float]] = ()) -> tuple[float, float]:
     """(peak of true |omega_BN_B| / the rate limit in force (`rate_limit_series`), its time [s]). Samples
     before the body rate first comes within the limit (a tumbling start being damped) are not judged."""
     t = truth["t_s"]
@@ -523,9 +525,7 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
                     peak <= req.max_wheel_speed_fraction,
                     f"wheel {w + 1}: {float(np.abs(truth['wheel_speed_rad_s'][:, w]).max()):.1f} rad/s of "
                     f"{limits[w]:.0f} rad/s", "% of max")
-        acked = acknowledged_rate_limits([(e.get("time_s", 0.0), e.get("event"), e.get("args", {}))
-                                          for e in _ground_events(run_dir)])
-        rate_frac, rate_t = peak_body_rate_fraction(mission, truth, acked)
+        rate_frac, rate_t = peak_body_rate_fraction(mission, truth, acknowledged_rate_limits_of_run(run_dir))
         requirement("peak body rate", round(100.0 * rate_frac, 2), f"<= {_num(100.0 * req.max_body_rate_fraction)}",
                     rate_frac <= req.max_body_rate_fraction,
                     f"true |omega| / the configured rate limit, at t = {rate_t:.1f} s", "% of max")

@@ -274,7 +274,7 @@ def metric_better(name: str) -> str | None:
 
 
 def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycle_slips: float,
-          rejected_commands: int = 0, gains_set: Sequence[tuple[float, float]] | None = None,
+          rejected_commands: int = 0, gains_set: Sequence[tuple[float, float]] = (),
           ) -> tuple[dict[str, float], dict[str, np.ndarray]]:
     """A run's metrics, judged on truth with the SIL's own functions (``hil_sim.summary``), so the fast and
     sil modes agree. ``truth``: the arrays of ``hil_sim.sil.TruthRecorder``; ``fdir_trips``: the monitor of

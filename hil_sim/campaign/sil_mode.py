@@ -60,10 +60,8 @@ def run_sil(mission: Any, seed: int, mode: str = "sil", paths: Sequence[str] = (
         used_mission = load_mission(run_dir / "mission.yaml")
         trips = [str(m) for m in report.get("fdir_trips", [])]
         slips = _requirement(report, "cycle slips")
-        acked = summary_mod.acknowledged_rate_limits([(e.get("time_s", 0.0), e.get("event"), e.get("args", {}))
-                                                      for e in summary_mod._ground_events(run_dir)])
         metrics, trajectory = judge(used_mission, truth, trips, float("nan") if slips is None else float(slips),
-                                    gains_set=acked)
+                                    gains_set=summary_mod.acknowledged_rate_limits_of_run(run_dir))
         used = {p: dsp.read_path(used_mission, dsp.parse_path(p)) for p in paths}
         sim_time = float(truth["t_s"][-1]) if len(truth["t_s"]) else 0.0
         return RunResult(metrics=metrics, used=used, trajectory=trajectory, sim_time_s=sim_time,

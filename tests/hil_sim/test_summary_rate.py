@@ -1,5 +1,6 @@
-"""peak_body_rate_fraction (hil_sim.summary): true |omega| over the configured rate limit, which a timeline
-SET_GAINS changes from its time on; a tumbling start is not judged until the rate is within the limit."""
+"""peak_body_rate_fraction (hil_sim.summary): true |omega| over the configured rate limit, which a SET_GAINS the
+flight software acknowledged changes from its time on (the timeline's word alone changes nothing); a tumbling
+start is not judged until the rate is within the limit."""
 from __future__ import annotations
 
 import math
@@ -31,8 +32,10 @@ def _truth(rates_deg_s):
 def test_fraction_follows_the_limit_in_force() -> None:
     # demo limit 1 deg/s; from t = 2 s a SET_GAINS raises it to 2 deg/s
     m = _mission([{"t_s": 2.0, "command": "SET_GAINS", "rate_limit_deg_s": 2.0}])
-    frac, t = peak_body_rate_fraction(m, _truth([0.5, 1.02, 1.9, 1.0]))
+    frac, t = peak_body_rate_fraction(m, _truth([0.5, 1.02, 1.9, 1.0]), gains_set=[(2.0, 2.0)])
     assert frac == pytest.approx(1.02) and t == 1.0
+    frac, t = peak_body_rate_fraction(m, _truth([0.5, 1.02, 1.9, 1.0]))  # not acknowledged: 1 deg/s holds
+    assert frac == pytest.approx(1.9) and t == 2.0
     frac, t = peak_body_rate_fraction(_mission([]), _truth([0.5, 1.02, 1.9, 1.0]))
     assert frac == pytest.approx(1.9) and t == 2.0
 
