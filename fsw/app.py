@@ -26,7 +26,7 @@ from fsw.bus.driver import TickInputs
 from fsw.control import RateController
 from fsw.estimation import _NO_SAMPLES, AttitudeEstimator
 from fsw.executive import Executive
-from fsw.fdir import Fdir, WheelSpeedResidual
+from fsw.fdir import STATUS_LOST, Fdir, WheelSpeedResidual
 from fsw.guidance import Guidance
 
 MODES = ("SAFE", "POINTING", "QUATERNION")
@@ -531,9 +531,9 @@ class FlightSoftware:
             return True
         second = not ctl.active.all()
         if not ctl.isolate(wheel):
-            if self.fdir.wheel_fault_reasons[wheel] == "status lost":
+            if self.fdir.wheel_fault_reasons[wheel] == STATUS_LOST:
                 # only its status is lost and the rest cannot control three axes: keep flying it, open loop
-                self._event("WHEEL_RESTORED", wheel=wheel + 1, reason="status lost; the other wheels cannot "
+                self._event("WHEEL_RESTORED", wheel=wheel + 1, reason=f"{STATUS_LOST}; the other wheels cannot "
                             "control three axes")
                 return True
             if not self._restore_silent_wheel(wheel):
@@ -556,11 +556,11 @@ class FlightSoftware:
         ctl = self.control
         reasons = self.fdir.wheel_fault_reasons
         for spare in range(ctl.n):
-            if ctl.active[spare] or spare == failing or reasons[spare] != "status lost":
+            if ctl.active[spare] or spare == failing or reasons[spare] != STATUS_LOST:
                 continue
             ctl.restore(spare)
             if ctl.isolate(failing):
-                self._event("WHEEL_RESTORED", wheel=spare + 1, reason=f"status lost; wheel {failing + 1} "
+                self._event("WHEEL_RESTORED", wheel=spare + 1, reason=f"{STATUS_LOST}; wheel {failing + 1} "
                             f"{reasons[failing] or 'failed'}")
                 return True
             ctl.restore(spare, active=False)  # no better: keep the allocation as it was

@@ -328,15 +328,13 @@ def _wheel_monitor_values(dt_s, speed, fault_flags, cmd, active, seen, max_speed
 # the wheel status's fault bits (config/icd/keepout.dbc, RWn_STATUS.fault)
 _WHEEL_BITS = ((0x04, "drive fault reported by the wheel"),
                (0x02, "command timeout: the wheel's torque commands stopped arriving"))
-
-
 STATUS_LOST = "status lost"  # a wheel isolated for this alone may still obey its commands
 
 
 def wheel_fault_cause(flags: int) -> str:
     """A WHEEL_FAULT's cause in words, from the wheel's status flags this cycle (-1: no status came)."""
     if flags < 0:
-        return "status lost: no speed report from the wheel"
+        return f"{STATUS_LOST}: no speed report from the wheel"
     for bit, words in _WHEEL_BITS:
         if flags & bit:
             return words
@@ -375,8 +373,8 @@ class Fdir:
         self.cycle_slip = LimitMonitor("CYCLE_SLIP", f.cycle_slip, bank=bank, index=k + 2)
         self._all_wheels = np.ones(n_wheels, dtype=np.bool_)  # evaluate_arrays: every wheel is evaluated
         self.stale_counts = {"IMU": 0, "STAR_TRACKER": 0}
-        # the symptom of each wheel's last WHEEL_FAULT trip (`wheel_fault_reason`), "" before any: a wheel
-        # isolated only because its status is lost still obeys its commands and can be used again
+        # the symptom of each wheel's last WHEEL_FAULT trip (STATUS_LOST or `wheel_fault_cause`), "" before
+        # any: a wheel isolated only because its status is lost still obeys its commands and can be used again
         self.wheel_fault_reasons = [""] * n_wheels
         # (dictionary name, bank indices of its monitors) in all_monitors() order of first appearance, for states()
         groups: dict[str, list[int]] = {}
