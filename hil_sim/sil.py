@@ -27,9 +27,9 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+import errno
 import hashlib
 import ipaddress
-import errno
 import json
 import math
 import multiprocessing as mp

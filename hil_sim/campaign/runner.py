@@ -181,8 +181,10 @@ def _init_worker() -> None:
 
 # What a fast-mode run imports, loaded once by the forkserver so each worker starts with it instead of
 # importing it on its own (~1.5 s per worker, which is wall time whenever workers share a core).
-_FORKSERVER_PRELOAD = ("hil_sim.campaign._forkserver_lifetime", "hil_sim.campaign.fast", "hil_sim.world", "hil_sim.lockstep", "hil_sim.sil",
-                       "hil_sim.summary", "hil_sim.mission", "fsw.app", "fsw.bus", "fsw.telecommand")
+# (first: the forkserver's own lifetime, see hil_sim.campaign._forkserver_lifetime)
+_FORKSERVER_PRELOAD = ("hil_sim.campaign._forkserver_lifetime", "hil_sim.campaign.fast", "hil_sim.world",
+                       "hil_sim.lockstep", "hil_sim.sil", "hil_sim.summary", "hil_sim.mission", "fsw.app", "fsw.bus",
+                       "fsw.telecommand")
 
 
 class _LocalBackend:
