@@ -23,6 +23,7 @@ from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field,
 
 from fsw.config import FswConfig
 from fsw.dictionary import FDIR_MONITORS
+from hil_sim.mission_docs import SUFFIX_UNITS
 from keepout_config import config_path
 
 if TYPE_CHECKING:
@@ -572,13 +573,8 @@ KNOWLEDGE_SOURCES: dict[Loc, Loc] = {
     ("flight_software", "orbit", "raan_deg"): ("orbit", "raan_deg"),
     ("flight_software", "orbit", "arg_latitude_at_epoch_deg"): ("orbit", "arg_perigee_deg"),
 }
-# The unit a key's name ends with (the project's convention), longest suffix first.
-UNIT_SUFFIXES: tuple[tuple[str, str], ...] = tuple(sorted((
-    ("_rad_s", "rad/s"), ("_deg_s", "deg/s"), ("_deg_s2", "deg/s^2"), ("_deg_s3", "deg/s^3"), ("_deg", "deg"),
-    ("_rad", "rad"), ("_s", "s"), ("_hz", "Hz"), ("_Hz", "Hz"), ("_Nm", "N m"), ("_km", "km"), ("_kgm2", "kg m^2"),
-    ("_arcsec", "arcsec"), ("_ppm", "ppm"), ("_bps", "bit/s"), ("_rad_per_sqrt_s", "rad/sqrt(s)"),
-    ("_rad_s_per_sqrt_s", "rad/s/sqrt(s)"), ("_Nm_per_rad_s", "N m s/rad"), ("_rad_s_sqrt_hz", "rad/s/sqrt(Hz)"),
-), key=lambda item: -len(item[0])))
+# The unit a key's name ends with (the project's convention): mission_docs' table, longest suffix first.
+UNIT_SUFFIXES: tuple[tuple[str, str], ...] = tuple(sorted(SUFFIX_UNITS, key=lambda item: -len(item[0])))
 # Units a value may have been typed in by mistake, per unit of the key: (name, factor to the key's unit).
 _MISTAKEN_UNITS: dict[str, tuple[tuple[str, float], ...]] = {
     "rad/s": (("rpm", math.pi / 30.0), ("deg/s", math.pi / 180.0)),
