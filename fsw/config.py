@@ -89,8 +89,8 @@ class SpacecraftConfig(_Strict):
     wheels: list[WheelConfig] = Field(default_factory=_pyramid_wheels, min_length=3, max_length=6, description="Reaction wheels (3..6), in bus order RW1..RWn.")
     star_tracker_q_BS: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Star-tracker mounting quaternion q_BS (rotates star-tracker vectors into body), scalar first.")
     max_rate_deg_s: float = Field(1.0, gt=0.0, le=20.0, description="Body rate limit: the angular-velocity command is scaled so |omega_cmd| never exceeds it [deg/s].")
-    star_tracker_max_rate_deg_s: float = Field(2.0, gt=0.0, le=90.0, description="Body rate above which the star tracker gives no attitude [deg/s]; SET_GAINS may not raise the rate limit past it (default: the truth's spacecraft.star_tracker.max_rate_deg_s).")
-    imu_range_rad_s: float = Field(0.35, gt=0.0, le=20.0, description="Gyro measurement range per axis [rad/s]; SET_GAINS may not raise the rate limit past it (default: the truth's spacecraft.imu.saturation_rad_s).")
+    star_tracker_max_rate_deg_s: float = Field(2.0, gt=0.0, le=90.0, description="Body rate above which the star tracker gives no attitude [deg/s]; SET_GAINS may not raise the rate limit past it.")
+    imu_range_rad_s: float = Field(0.35, gt=0.0, le=20.0, description="Gyro measurement range per axis [rad/s]; SET_GAINS may not raise the rate limit past it.")
 
     @field_validator("inertia_B_kgm2")
     @classmethod
@@ -473,21 +473,32 @@ class ConfigError(ValueError):
 
 
 # ---------------------------------------------------------------------------------- mission files
-# Where each piece of knowledge comes from when a mission file does not give it under flight_software
-# (``knowledge_from_truth`` does it; docs/missions.md lists it as the key's default).
-KNOWLEDGE_DEFAULTS = {
-    "flight_software.epoch_utc": "epoch_utc",
-    "flight_software.spacecraft.inertia_B_kgm2": "spacecraft.inertia_B_kgm2",
-    "flight_software.spacecraft.wheels": "spacecraft.wheels (axis_B, max_torque_Nm, max_speed_rad_s, "
-                                         "spin_inertia_kgm2)",
-    "flight_software.spacecraft.star_tracker_q_BS": "spacecraft.star_tracker.q_BS",
-    "flight_software.pointing.boresight_B": "spacecraft.instrument_boresight_B",
-    "flight_software.pointing.target_N": "initial_state.ra_dec_deg, when the initial attitude is given so",
-    "flight_software.orbit.radius_km": "orbit.semi_major_axis_km",
-    "flight_software.orbit.inclination_deg": "orbit.inclination_deg",
-    "flight_software.orbit.raan_deg": "orbit.raan_deg",
-    "flight_software.orbit.arg_latitude_at_epoch_deg": "orbit.arg_perigee_deg + orbit.mean_anomaly_deg",
+# Where each piece of the flight software's knowledge comes from when the mission file does not give it under
+# flight_software (`knowledge_from_truth` fills it in): knowledge key -> the truth key written once. The
+# validator reports an error in such a copy at its truth key (hil_sim.mission); docs/missions.md lists the
+# source as the key's default.
+KNOWLEDGE_SOURCES: dict[tuple[str, ...], tuple[str, ...]] = {
+    ("flight_software", "epoch_utc"): ("epoch_utc",),
+    ("flight_software", "spacecraft", "inertia_B_kgm2"): ("spacecraft", "inertia_B_kgm2"),
+    ("flight_software", "spacecraft", "wheels"): ("spacecraft", "wheels"),
+    ("flight_software", "spacecraft", "star_tracker_q_BS"): ("spacecraft", "star_tracker", "q_BS"),
+    ("flight_software", "spacecraft", "star_tracker_max_rate_deg_s"): ("spacecraft", "star_tracker", "max_rate_deg_s"),
+    ("flight_software", "spacecraft", "imu_range_rad_s"): ("spacecraft", "imu", "saturation_rad_s"),
+    ("flight_software", "pointing", "boresight_B"): ("spacecraft", "instrument_boresight_B"),
+    ("flight_software", "pointing", "target_N"): ("initial_state", "ra_dec_deg"),
+    ("flight_software", "orbit", "radius_km"): ("orbit", "semi_major_axis_km"),
+    ("flight_software", "orbit", "inclination_deg"): ("orbit", "inclination_deg"),
+    ("flight_software", "orbit", "raan_deg"): ("orbit", "raan_deg"),
+    ("flight_software", "orbit", "arg_latitude_at_epoch_deg"): ("orbit", "arg_perigee_deg"),
 }
+# the sources that are not a plain copy of their truth key, as the docs say them
+_KNOWLEDGE_NOTES = {
+    ("flight_software", "spacecraft", "wheels"): "spacecraft.wheels (axis_B, max_torque_Nm, max_speed_rad_s, "
+                                                 "spin_inertia_kgm2)",
+    ("flight_software", "pointing", "target_N"): "initial_state.ra_dec_deg, when the initial attitude is given so",
+    ("flight_software", "orbit", "arg_latitude_at_epoch_deg"): "orbit.arg_perigee_deg + orbit.mean_anomaly_deg",
+}
+KNOWLEDGE_DEFAULTS = {".".join(k): _KNOWLEDGE_NOTES.get(k, ".".join(v)) for k, v in KNOWLEDGE_SOURCES.items()}
 WHEEL_KNOWLEDGE_KEYS = ("axis_B", "max_torque_Nm", "max_speed_rad_s", "spin_inertia_kgm2")
 
 

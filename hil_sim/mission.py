@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 import numpy as np
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from fsw.config import FswConfig
+from fsw.config import KNOWLEDGE_SOURCES, FswConfig
 from fsw.dictionary import FDIR_MONITORS
 from hil_sim.mission_docs import SUFFIX_UNITS
 from keepout_config import config_path
@@ -559,20 +559,6 @@ def load_mission_marked(path: str | Path, *, text: str | None = None) -> tuple[M
 # ---------------------------------------------------------------------------------------------
 
 Loc = tuple[str | int, ...]
-# Where the flight software's knowledge comes from when the file does not give it (fsw.config.KNOWLEDGE_DEFAULTS,
-# filled in by knowledge_from_truth): an error in such a copy is an error in the truth key the user wrote.
-KNOWLEDGE_SOURCES: dict[Loc, Loc] = {
-    ("flight_software", "epoch_utc"): ("epoch_utc",),
-    ("flight_software", "spacecraft", "inertia_B_kgm2"): ("spacecraft", "inertia_B_kgm2"),
-    ("flight_software", "spacecraft", "wheels"): ("spacecraft", "wheels"),
-    ("flight_software", "spacecraft", "star_tracker_q_BS"): ("spacecraft", "star_tracker", "q_BS"),
-    ("flight_software", "pointing", "boresight_B"): ("spacecraft", "instrument_boresight_B"),
-    ("flight_software", "pointing", "target_N"): ("initial_state", "ra_dec_deg"),
-    ("flight_software", "orbit", "radius_km"): ("orbit", "semi_major_axis_km"),
-    ("flight_software", "orbit", "inclination_deg"): ("orbit", "inclination_deg"),
-    ("flight_software", "orbit", "raan_deg"): ("orbit", "raan_deg"),
-    ("flight_software", "orbit", "arg_latitude_at_epoch_deg"): ("orbit", "arg_perigee_deg"),
-}
 # The unit a key's name ends with (the project's convention): mission_docs' table, longest suffix first.
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = tuple(sorted(SUFFIX_UNITS, key=lambda item: -len(item[0])))
 # Units a value may have been typed in by mistake, per unit of the key: (name, factor to the key's unit).

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -95,3 +96,40 @@ def test_zone_shapes_round_trip() -> None:
     again = FswConfig.model_validate(json.loads(cfg.model_dump_json()))
     assert again == cfg
     assert math.isclose(again.pointing.zones[0].geometry.exponent, 0.7)
+
+
+def test_every_knowledge_source_is_what_knowledge_from_truth_copies() -> None:
+    """KNOWLEDGE_SOURCES (the validator's and the docs' table) and knowledge_from_truth (what fills the
+    knowledge in) name the same keys: each plain copy in the table is filled from its truth key, and nothing
+    the function fills is missing from the table."""
+    import copy
+
+    import yaml
+
+    from fsw.config import KNOWLEDGE_SOURCES, knowledge_from_truth
+
+    data = yaml.safe_load((Path(__file__).resolve().parents[2] / "config" / "missions" / "demo-pointing.yaml").read_text())
+    data["flight_software"] = {}
+    data["initial_state"] = {"ra_dec_deg": [10.0, 20.0]}
+    data["spacecraft"].setdefault("imu", {})["saturation_rad_s"] = 0.3
+    data["spacecraft"].setdefault("star_tracker", {})["max_rate_deg_s"] = 1.7
+    filled = knowledge_from_truth(copy.deepcopy(data))
+
+    def get(node, path):
+        for part in path:
+            node = node[part]
+        return node
+
+    def leaves(node, path=()):
+        if isinstance(node, dict) and node:
+            for key, value in node.items():
+                yield from leaves(value, path + (key,))
+        else:
+            yield path
+
+    for known, truth in KNOWLEDGE_SOURCES.items():
+        value = get(filled, known)  # filled in (a KeyError names a table entry the function does not fill)
+        if known[-1] not in ("wheels", "target_N", "arg_latitude_at_epoch_deg"):  # the three derived ones
+            assert value == get(data, truth), known
+    for path in leaves(filled["flight_software"], ("flight_software",)):
+        assert any(path[:len(k)] == k for k in KNOWLEDGE_SOURCES), f"{path} is filled but not in KNOWLEDGE_SOURCES"
