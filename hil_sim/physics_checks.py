@@ -693,30 +693,29 @@ def _check_quaternion(mission, segments, report, quick: bool = False) -> None:
 
 
 def _check_braking(mission, report) -> float:
-    """The flight software's braking-distance rule (`fsw.guidance.slew_limits.braking_problem`, the one
-    SET_GAINS is judged by onboard) on the configured limits and on every SET_GAINS of the timeline, with
-    the gains in force when it is sent. Returns the braking distance at the configured rate limit [deg]."""
-    from fsw.guidance.slew_limits import braking_distance_deg, braking_problem, rule_eps, sensor_rate_problem
+    """The flight software's rules for a rate limit (`fsw.guidance.slew_limits.rate_limit_problem`: the
+    braking distance and the sensors' range, the ones SET_GAINS is judged by onboard) on the configured limit
+    and on every SET_GAINS of the timeline, with the gains in force when it is sent. Returns the braking
+    distance at the configured rate limit [deg]."""
+    from fsw.guidance.slew_limits import braking_distance_deg, rate_limit_problem
 
     fsw = mission.flight_software
-    accel, bandwidth = fsw.control.max_command_accel_deg_s2, fsw.control.rate_bandwidth_rad_s
-    margin, cap = fsw.law.margin_deg, fsw.law.eps_max_used
+    accel = fsw.control.max_command_accel_deg_s2
     rate, eps = fsw.spacecraft.max_rate_deg_s, fsw.law.eps
-    problem = braking_problem(rate, accel, bandwidth, margin, rule_eps(eps, cap))
-    if problem is not None:
-        report.add("error", "braking", f"flight_software.spacecraft.max_rate_deg_s: {problem}",
+    refused = rate_limit_problem(rate, eps, fsw, accel)
+    if refused is not None:
+        report.add("error", "braking", f"flight_software.spacecraft.max_rate_deg_s: {refused[1]}",
                    ("flight_software", "spacecraft", "max_rate_deg_s"))
-    first = braking_distance_deg(rate, accel, bandwidth)
+    first = braking_distance_deg(rate, accel, fsw.control.rate_bandwidth_rad_s)
     for i, entry in enumerate(mission.timeline):
         if entry.command != "SET_GAINS":
             continue
         rate = entry.rate_limit_deg_s if entry.rate_limit_deg_s is not None else rate
         eps = entry.eps if entry.eps is not None else eps
-        problem = (braking_problem(rate, accel, bandwidth, margin, rule_eps(eps, cap))
-                   or sensor_rate_problem(rate, fsw.spacecraft.star_tracker_max_rate_deg_s, fsw.spacecraft.imu_range_rad_s))
-        if problem is not None:
+        refused = rate_limit_problem(rate, eps, fsw, accel)
+        if refused is not None:
             report.add("error", "braking", f"timeline[{i}] SET_GAINS at {entry.t_s:g} s would be rejected onboard: "
-                       f"{problem}", ("timeline", i, "rate_limit_deg_s"))
+                       f"{refused[1]}", ("timeline", i, "rate_limit_deg_s"))
     return first
 
 

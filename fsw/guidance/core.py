@@ -18,8 +18,7 @@ from fsw.guidance.path_planning import PathFollower
 from fsw.guidance.pointing import ZONE_REBUILD_TOL_DEG, PointingGuidance, _SkySlot, _warm_batch_kernels
 from fsw.guidance.quaternion import QuaternionGuidance
 from fsw.guidance.slew_limits import (
-    BRAKING_REASON, BRAKING_RESERVE_DEG, SENSOR_REASON, GainsRefused, allowed_braking_deg, braking_problem,
-    rate_for_distance_deg_s, rule_eps, sensor_rate_problem,
+    BRAKING_RESERVE_DEG, GainsRefused, allowed_braking_deg, rate_for_distance_deg_s, rate_limit_problem, rule_eps,
 )
 from fsw.guidance.safe import SafeGuidance, _acquisition_rate_B
 from fsw.guidance.watchdog import ProgressWatchdog, StallRecovery
@@ -147,14 +146,9 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
             raise GainsRefused("GAINS_INADMISSIBLE", "k1, kappa and rate limit must be positive")
         if eps != "auto" and not (0.0 < float(eps) < 1.0):
             raise GainsRefused("GAINS_INADMISSIBLE", "eps must be in (0, 1) or 'auto'")
-        problem = braking_problem(rate_limit_deg_s, self.accel_deg_s2, self.bandwidth_rad_s, self.cfg.law.margin_deg,
-                                  rule_eps(eps, self.cfg.law.eps_max_used))
-        if problem is not None:
-            raise GainsRefused(BRAKING_REASON, problem)
-        sc = self.cfg.spacecraft
-        problem = sensor_rate_problem(rate_limit_deg_s, sc.star_tracker_max_rate_deg_s, sc.imu_range_rad_s)
-        if problem is not None:
-            raise GainsRefused(SENSOR_REASON, problem)
+        refused = rate_limit_problem(rate_limit_deg_s, eps, self.cfg, self.accel_deg_s2)
+        if refused is not None:
+            raise GainsRefused(*refused)
         if rate_limit_deg_s > self.rate_cap_deg_s:
             raise GainsRefused("WHEEL_AUTHORITY", f"the wheels left allow at most {self.rate_cap_deg_s:.3g} deg/s")
         self.k1, self.kappa, self.eps_cfg = float(k1), float(kappa), eps

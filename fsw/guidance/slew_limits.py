@@ -96,6 +96,20 @@ def sensor_rate_problem(rate_limit_deg_s: float, star_tracker_max_rate_deg_s: fl
             f"{star_tracker_max_rate_deg_s:g} deg/s, gyro range {gyro_deg_s:.3g} deg/s)")
 
 
+def rate_limit_problem(rate_limit_deg_s: float, eps: float | str, cfg, accel_deg_s2: float) -> tuple[str, str] | None:
+    """The onboard rules for a rate limit, with the flight software's configuration ``cfg`` (FswConfig) and
+    the command acceleration in force (``cfg.control.max_command_accel_deg_s2`` until a wheel is lost):
+    None when it may be flown, else (reason code, reason). One function for SET_GAINS onboard and for
+    `keepout config check`, which applies it to the configured limit and to every SET_GAINS of the timeline."""
+    problem = braking_problem(rate_limit_deg_s, accel_deg_s2, cfg.control.rate_bandwidth_rad_s, cfg.law.margin_deg,
+                              rule_eps(eps, cfg.law.eps_max_used))
+    if problem is not None:
+        return BRAKING_REASON, problem
+    sc = cfg.spacecraft
+    problem = sensor_rate_problem(rate_limit_deg_s, sc.star_tracker_max_rate_deg_s, sc.imu_range_rad_s)
+    return None if problem is None else (SENSOR_REASON, problem)
+
+
 class GainsRefused(ValueError):
     """SET_GAINS refused: ``code`` is the acknowledgement's reason code (fsw.dictionary.TC_REASONS)."""
 

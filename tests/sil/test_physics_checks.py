@@ -287,3 +287,18 @@ def test_an_initial_body_rate_beyond_the_wheels_momentum_is_refused():
     found = _checks(check_mission(_mission(data), quick=True), "momentum")
     assert len(found) == 1 and found[0].loc == ("initial_state", "omega_BN_B_rad_s")
     assert found[0].numbers["momentum_Nms"] > found[0].numbers["capacity_Nms"]
+
+
+def test_a_configured_rate_limit_the_star_tracker_cannot_follow_is_refused_as_onboard():
+    """The configured rate limit is judged by the rules SET_GAINS meets onboard, the sensors' range included:
+    a star tracker that loses its attitude above 0.5 deg/s cannot fly the demo's 1 deg/s."""
+    from fsw.guidance import Guidance
+
+    data = _data("demo-pointing.yaml")
+    data["spacecraft"]["star_tracker"]["max_rate_deg_s"] = 0.5
+    mission = _mission(data)
+    found = [f for f in check_mission(mission, quick=True).errors if f.check == "braking"]
+    assert len(found) == 1 and found[0].loc == ("flight_software", "spacecraft", "max_rate_deg_s")
+    with pytest.raises(ValueError) as onboard:
+        Guidance(mission.flight_software).set_gains(1.0, 1.0, "auto", mission.flight_software.spacecraft.max_rate_deg_s)
+    assert onboard.value.code == "RATE_ABOVE_SENSOR_LIMIT" and str(onboard.value) in found[0].message
