@@ -40,53 +40,49 @@ def _kill_worker(checker: AssumptionChecker) -> None:
         time.sleep(0.01)
 
 
-def test_a_killed_idle_worker_is_reported_and_replaced() -> None:
+@pytest.fixture
+def supervised():
+    """A process-mode checker and the list its worker-lost callback fills: (reason, restarts, dropped)."""
     lost: list = []
     checker = AssumptionChecker("process", on_worker_lost=lambda *a: lost.append(a))
-    try:
-        checker.start()
-        first = checker.worker.pid
+    yield checker, lost
+    checker.close()
+
+
+def test_a_killed_idle_worker_is_reported_and_replaced(supervised) -> None:
+    checker, lost = supervised
+    checker.start()
+    first = checker.worker.pid
+    _kill_worker(checker)
+    assert checker.submit(SNAPSHOT)  # used to raise BrokenPipeError; now sent to a new worker
+    assert lost == [("exit code -9", 1, False)]
+    assert checker.worker.pid != first
+    assert _result(checker).ok
+
+
+def test_a_worker_killed_during_a_check_gives_a_failed_check_and_a_new_worker(supervised) -> None:
+    checker, lost = supervised
+    assert checker.submit(SNAPSHOT)
+    _kill_worker(checker)
+    res = _result(checker)
+    assert res.errors and res.errors[0].startswith("check failed: worker ended")
+    assert [a[1:] for a in lost] == [(1, False)]
+    assert checker.submit(SNAPSHOT)
+    assert _result(checker).ok
+
+
+def test_after_max_restarts_the_check_is_dropped_not_the_flight_software(supervised) -> None:
+    checker, lost = supervised
+    assert checker.submit(SNAPSHOT)
+    for death in range(1, MAX_RESTARTS + 2):
         _kill_worker(checker)
-        checker.submit(SNAPSHOT)  # used to raise BrokenPipeError
-        assert lost == [("exit code -9", 1, False)]
-        assert checker.submit(SNAPSHOT) or checker.busy
-        assert checker.worker.pid != first
-        assert _result(checker).ok
-    finally:
-        checker.close()
-
-
-def test_a_worker_killed_during_a_check_gives_a_failed_check_and_a_new_worker() -> None:
-    lost: list = []
-    checker = AssumptionChecker("process", on_worker_lost=lambda *a: lost.append(a))
-    try:
-        assert checker.submit(SNAPSHOT)
-        _kill_worker(checker)
-        res = _result(checker)
-        assert res.errors and res.errors[0].startswith("check failed: worker ended")
-        assert [a[1:] for a in lost] == [(1, False)]
-        assert checker.submit(SNAPSHOT)
-        assert _result(checker).ok
-    finally:
-        checker.close()
-
-
-def test_after_max_restarts_the_check_is_dropped_not_the_flight_software() -> None:
-    lost: list = []
-    checker = AssumptionChecker("process", on_worker_lost=lambda *a: lost.append(a))
-    try:
-        assert checker.submit(SNAPSHOT)
-        for death in range(1, MAX_RESTARTS + 2):
-            _kill_worker(checker)
-            assert _result(checker).errors[0].startswith("check failed: worker ended")
-            assert lost[-1][1] == death
-            if death <= MAX_RESTARTS:
-                assert checker.submit(SNAPSHOT)  # on a new worker
-        assert lost[-1][1:] == (MAX_RESTARTS + 1, True)
-        assert checker.mode == "off" and checker.worker is None
-        assert not checker.submit(SNAPSHOT)  # no more workers: the per-cycle eps bound still guards
-    finally:
-        checker.close()
+        assert _result(checker).errors[0].startswith("check failed: worker ended")
+        assert lost[-1][1] == death
+        if death <= MAX_RESTARTS:
+            assert checker.submit(SNAPSHOT)  # on a new worker
+    assert lost[-1][1:] == (MAX_RESTARTS + 1, True)
+    assert checker.mode == "off" and checker.worker is None
+    assert not checker.submit(SNAPSHOT)  # no more workers: the per-cycle eps bound still guards
 
 
 @pytest.mark.slow

@@ -115,11 +115,16 @@ def test_mekf_is_consistent_over_the_demo():
     mission = load_mission(DEMO)
     with _nees_series() as series:
         run_fast(mission, mission.seed)
-    samples = thinned(series[0], mission.flight_software.gnc_period_s)
+    _assert_consistent(thinned(series[0], mission.flight_software.gnc_period_s), "\ndemo 600 s")
+
+
+def _assert_consistent(samples: np.ndarray, label: str) -> None:
+    """Independent NEES samples: their average in its chi-square interval, their in-band fraction in its
+    binomial interval."""
     lo, hi = time_average_interval(samples.size)
     f_lo, f_hi = band_fraction_interval(samples.size)
     inside = band_fraction(samples)
-    print(f"\ndemo 600 s: {samples.size} samples 20 s apart, NEES mean {samples.mean():.2f} in [{lo:.2f}, {hi:.2f}], "
+    print(f"{label}: {samples.size} samples 20 s apart, NEES mean {samples.mean():.2f} in [{lo:.2f}, {hi:.2f}], "
           f"inside the band {inside:.3f} in [{f_lo:.3f}, {f_hi:.3f}]")
     assert lo <= samples.mean() <= hi
     assert f_lo <= inside <= f_hi
@@ -135,8 +140,10 @@ def test_mekf_is_consistent_over_a_campaign():
     with _nees_series() as series:  # each run's per-cycle NEES
         records = [execute_run(plan, i) for i in range(runs)]
     assert all(r.status == "pass" for r in records), [(r.run, r.status, r.error) for r in records]
-    rates = plan.base_raw["flight_software"].get("rates", {})
-    period = 1.0 / float(rates.get("gnc_rate_hz", 10.0))
+    from hil_sim.campaign.spec import resolve_base_mission
+    from hil_sim.mission import load_mission
+
+    period = load_mission(resolve_base_mission(CAMPAIGN, plan.campaign)).flight_software.gnc_period_s
     thin = [thinned(s, period) for s in series]
     print()
     outside = 0
@@ -148,14 +155,7 @@ def test_mekf_is_consistent_over_a_campaign():
     # of runs outside must lie within the binomial(runs, 0.05) 95 % interval (for 8 runs: at most 2)
     assert outside <= binom.interval(0.95, runs, 0.05)[1], outside
     # the ensemble: every run's samples together, averaged, in the interval for all of them
-    pooled = np.concatenate(thin)
-    lo, hi = time_average_interval(pooled.size)
-    f_lo, f_hi = band_fraction_interval(pooled.size)
-    inside = band_fraction(pooled)
-    print(f"ensemble of {runs} runs: {pooled.size} samples, NEES mean {pooled.mean():.2f} in [{lo:.2f}, {hi:.2f}], "
-          f"inside the band {inside:.3f} in [{f_lo:.3f}, {f_hi:.3f}]")
-    assert lo <= pooled.mean() <= hi
-    assert f_lo <= inside <= f_hi
+    _assert_consistent(np.concatenate(thin), f"ensemble of {runs} runs")
 
 
 def test_the_intervals_are_the_chi_square_and_binomial_ones():
