@@ -24,6 +24,12 @@ _COMMAND_MODULES = (
     "hil_sim.sky_cli",    # keepout sky MISSION --at T | --from T0 --to T1 --step S
 )
 
+def description_of(doc: str) -> str:
+    """A subcommand module's docstring after its first paragraph, for ``--help``: reST literals (double
+    backticks) shown as plain text."""
+    return doc.split("\n\n", 1)[1].replace("``", "")
+
+
 EXIT_CANNOT_START = 3  # as `keepout sil run`: a part this command needs is missing (docs/running.md)
 # optional parts and the extra that installs them
 _EXTRAS = {"dask": "dask", "distributed": "dask"}

@@ -26,6 +26,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from hil_sim.cli import description_of
+
 FORMATS = ("csv", "mat", "parquet")
 TABLES = ("truth", "margins", "estimates", "commands", "events")
 MAT_FILE = "run.mat"
@@ -41,15 +43,11 @@ COMMAND_CHANNELS = ("mode", "safe_phase", "target_N_", "q_target_NB_", "omega_cm
 def add_cli(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "export", help="write a run's truth, estimates, commands, margins and events as CSV, MATLAB or Parquet",
-        description=_plain(__doc__.split("\n\n", 1)[1]), formatter_class=argparse.RawDescriptionHelpFormatter)
+        description=description_of(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("run", type=Path, metavar="RUN", help="a run folder (runs/<mission>-<stamp>)")
     p.add_argument("--format", choices=FORMATS, default="csv", help="csv (default), mat or parquet")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/export)")
     p.set_defaults(func=_export)
-
-
-def _plain(doc: str) -> str:
-    return doc.replace("``", "")
 
 
 def _export(args: argparse.Namespace) -> int:

@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from hil_sim.cli import description_of
+
 EXIT_PASS, EXIT_FAIL, EXIT_REJECTED, EXIT_NOT_STARTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 TRUTH_CHECK_FILE = "truth_check.json"
 # requirements judged on truth alone (the rest need the flight software's telemetry, which a bench ground
@@ -38,7 +40,7 @@ TRUTH_REQUIREMENTS = ("truth recorded", "run completed", "keep-out margin", "set
 def add_cli(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "sim", help="run the simulator alone on a bus (HIL bench; pair with `keepout fsw`)",
-        description=_plain_text(__doc__.split("\n\n", 1)[1]), formatter_class=argparse.RawDescriptionHelpFormatter)
+        description=description_of(__doc__), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("mission", type=Path, help="mission YAML")
     p.add_argument("--bus", default=None, help="bus spec (default: the mission's bus): socketcan:can0 | "
                    "udp_multicast:GROUP:PORT | INTERFACE:CHANNEL[,KEY=VALUE...] for any python-can interface")
@@ -55,11 +57,6 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="output folder (default: runs/<mission>-sim-<timestamp>)")
     p.set_defaults(func=_run)
-
-
-def _plain_text(doc: str) -> str:
-    """The module docstring for ``--help``: reST literals (double backticks) shown as plain text."""
-    return doc.replace("``", "")
 
 
 def result_lines(results: list[dict[str, Any]]) -> list[str]:
