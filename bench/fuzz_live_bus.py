@@ -37,7 +37,10 @@ from pathlib import Path
 import msgpack
 
 ROOT = Path(__file__).resolve().parents[1]
-ICD_IDS = (16, 32, 33, 34, 35, 64, 80, 81, 96, 97, 98, 99, 112, 256)  # config/icd/keepout.dbc frames
+sys.path.insert(0, str(ROOT))
+from fsw.bus import Icd  # noqa: E402
+
+ICD_IDS = tuple(sorted(m.frame_id for m in Icd().messages.values()))  # every frame of the ICD (the DBC)
 
 
 def _udp_junk(rnd: random.Random) -> bytes:

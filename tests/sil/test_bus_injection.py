@@ -102,7 +102,9 @@ def test_datagrams_that_are_not_frames_never_stop_a_run(tmp_path: Path) -> None:
 def test_random_frames_with_valid_identifiers_cannot_move_onboard_time(tmp_path: Path) -> None:
     """Frames with the ICD's identifiers and random payloads: about 1 in 256 passes the CRC by chance, and a
     SYNC among those used to start its random tick."""
-    ids = [16, 64, 80, 81, 96, 97, 98, 99]  # SYNC, IMU, star tracker, wheel statuses (config/icd/keepout.dbc)
+    from fsw.bus import Icd
+
+    ids = sorted(Icd().ids_sent_by("SIM", "IMU", "STR", "RW1", "RW2", "RW3", "RW4"))  # what the flight side reads
 
     def attack(group: str, port: int, stop: threading.Event) -> None:
         rnd = random.Random(7)
