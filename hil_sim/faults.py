@@ -15,6 +15,10 @@ hit either direction. Kinds (``FaultSpec.kind``):
                  each tick (receiver: ``unknown_id``; real frames still get through)
   silent         the message's sending node stops transmitting all its frames (receiver: ``timeout``)
 
+Two kinds act on the wheel itself, not on frames (`WheelFailures`): ``wheel_stuck`` (its bearing seizes)
+and ``wheel_no_torque`` (its motor or driver dies), for the wheel of message ``RWn_CMD`` / ``RWn_STATUS``
+from ``start_s`` on, for good (a failed mechanism does not heal at ``end_s``).
+
 Every injected fault is appended to ``FaultInjector.log`` (simulation time, kind, message, frame id,
 detail) and to the ``hil_sim.faults`` logger. Random choices (``probability``, babble payloads) come from
 a seeded generator, so runs stay deterministic.
@@ -22,6 +26,7 @@ a seeded generator, so runs stay deterministic.
 from __future__ import annotations
 
 import logging
+import re
 from dataclasses import dataclass
 from typing import Any, Iterable, Sequence
 
@@ -33,6 +38,9 @@ from fsw.bus.icd import Icd
 log = logging.getLogger("hil_sim.faults")
 
 FAULT_KINDS = ("drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent")
+# physical wheel faults -> the world's wheel failure mode (hil_sim.params.WHEEL_FAILURE_MODES)
+WHEEL_FAULT_MODES = {"wheel_stuck": "stuck", "wheel_no_torque": "no_torque"}
+_WHEEL_MESSAGE = re.compile(r"RW([1-6])_(CMD|STATUS)")
 
 
 @dataclass(frozen=True)
@@ -78,6 +86,37 @@ class FaultEvent:
     detail: str
 
 
+class WheelFailures:
+    """The physical wheel faults of a fault list, applied to the world at their time (`due`)."""
+
+    def __init__(self, faults: Iterable[Any] = ()) -> None:
+        pending = []
+        for f in (FaultSpec.from_any(f) for f in faults):
+            if f.kind not in WHEEL_FAULT_MODES:
+                continue
+            match = _WHEEL_MESSAGE.fullmatch(f.message)
+            if match is None:
+                raise ValueError(f"fault {f.kind} on {f.message!r}: name the wheel by its RWn_CMD or RWn_STATUS message")
+            pending.append((f.start_s, int(match.group(1)) - 1, WHEEL_FAULT_MODES[f.kind], f))
+        self.pending = sorted(pending, key=lambda p: p[:2])
+
+    def __bool__(self) -> bool:
+        return bool(self.pending)
+
+    def due(self, t_s: float) -> list[tuple[int, str, FaultSpec]]:
+        """(wheel index, failure mode, fault) of every failure starting by ``t_s``, each once."""
+        out = []
+        while self.pending and self.pending[0][0] <= t_s + 1e-9:
+            _, wheel, mode, f = self.pending.pop(0)
+            out.append((wheel, mode, f))
+        return out
+
+
+def bus_faults(faults: Iterable[Any]) -> list[FaultSpec]:
+    """The faults that act on frames (the physical wheel faults left out: `WheelFailures` applies those)."""
+    return [f for f in (FaultSpec.from_any(f) for f in faults) if f.kind not in WHEEL_FAULT_MODES]
+
+
 class FaultInjector:
     """Applies a list of faults to frames (see module docstring)."""
 
@@ -111,7 +150,7 @@ class FaultInjector:
         return bool(self.faults)
 
     # ---------------------------------------------------------------------------------------- helpers
-    def _record(self, t_s: float, kind: str, message: str, frame_id: int, detail: str) -> None:
+    def record(self, t_s: float, kind: str, message: str, frame_id: int, detail: str) -> None:
         event = FaultEvent(t_s, kind, message, frame_id, detail)
         self.log.append(event)
         log.info("t=%.3f s injected %s on %s (0x%03X): %s", t_s, kind, message, frame_id, detail)
@@ -161,7 +200,7 @@ class FaultInjector:
                 for _ in range(f.babble_per_tick):
                     data = bytes(self.rng.integers(0, 256, size=8, dtype=np.uint8))
                     out.append(can.Message(arbitration_id=f.babble_id, data=data, is_extended_id=False))
-                self._record(t_s, "babble", f.message, f.babble_id, f"{f.babble_per_tick} frames")
+                self.record(t_s, "babble", f.message, f.babble_id, f"{f.babble_per_tick} frames")
         return out
 
     def _one(self, msg: can.Message, t_s: float, active: list[tuple[int, FaultSpec]],
@@ -173,27 +212,27 @@ class FaultInjector:
         for i, f in active:
             if f.kind == "silent":
                 if self._node_of(f.message) & set(spec.senders) and self._hits(f):
-                    self._record(t_s, "silent", spec.name, msg.arbitration_id, f"node {'/'.join(spec.senders)}")
+                    self.record(t_s, "silent", spec.name, msg.arbitration_id, f"node {'/'.join(spec.senders)}")
                     return []
                 continue
             if f.message != spec.name or f.kind == "babble" or not self._hits(f):
                 continue
             if f.kind == "drop":
-                self._record(t_s, "drop", spec.name, msg.arbitration_id, "")
+                self.record(t_s, "drop", spec.name, msg.arbitration_id, "")
                 return []
             if f.kind == "delay":
                 self._held[direction].append((t_s + float(f.delay_s), msg))
-                self._record(t_s, "delay", spec.name, msg.arbitration_id, f"{f.delay_s} s")
+                self.record(t_s, "delay", spec.name, msg.arbitration_id, f"{f.delay_s} s")
                 return []
             if f.kind == "duplicate":
                 frames = frames + [frames[-1]]
-                self._record(t_s, "duplicate", spec.name, msg.arbitration_id, "")
+                self.record(t_s, "duplicate", spec.name, msg.arbitration_id, "")
             elif f.kind == "corrupt":
                 frames = [self._flip(m, int(f.bit)) for m in frames]
-                self._record(t_s, "corrupt", spec.name, msg.arbitration_id, f"bit {f.bit}")
+                self.record(t_s, "corrupt", spec.name, msg.arbitration_id, f"bit {f.bit}")
             elif f.kind == "stick_counter":
                 frames = [self._stick(i, m, spec.name) for m in frames]
-                self._record(t_s, "stick_counter", spec.name, msg.arbitration_id,
+                self.record(t_s, "stick_counter", spec.name, msg.arbitration_id,
                              f"counter {self._stuck_counter[i]}")
         return frames
 

@@ -39,7 +39,7 @@ from fsw.bus.transport import recv_burst, send_batch, send_burst
 from hil_sim import device_kernels as dk
 from hil_sim.device_kernels import apply_received
 from hil_sim.devices import Devices, DeviceTiming, WorldLike
-from hil_sim.faults import FaultInjector
+from hil_sim.faults import FaultInjector, FaultSpec, WheelFailures, bus_faults
 
 SIM_NODES = ("SIM", "IMU", "STR", "RW1", "RW2", "RW3", "RW4", "RW5", "RW6")
 
@@ -102,7 +102,9 @@ class Simulator:
         self._world_samples = hasattr(world, "advance_sampled")
         self.devices = Devices.for_world(world, self.icd, timing)
         self.n_wheels = len(self.devices.wheels)
-        self.injector = FaultInjector(self.icd, faults, seed=fault_seed)
+        self.fault_specs = [FaultSpec.from_any(f) for f in faults or ()]  # as given (campaigns read them back)
+        self.wheel_failures = WheelFailures(self.fault_specs)  # on the mechanism, at their time
+        self.injector = FaultInjector(self.icd, bus_faults(self.fault_specs), seed=fault_seed)
         self._faults = self.injector.faults  # (empty: the injector never acts, ``bool(injector)`` is False)
         self.cycle_done_timeout_s = cycle_done_timeout_s
         self.clock = clock
@@ -197,6 +199,13 @@ class Simulator:
     # ``t_s``: simulation time of the current tick, t0 + k T (exact, not accumulated), an attribute set with
     # ``tick`` (read several times a tick: by the flight software's clock, the timeline, the recorders)
 
+    def _fail_wheels(self, t_s: float) -> None:
+        """Physical wheel faults due by ``t_s``: the world's wheel fails, and the injector's log says so."""
+        for wheel, mode, f in self.wheel_failures.due(t_s):
+            self.world.set_wheel_failure(wheel, mode)
+            self.injector.record(t_s, f.kind, f.message, self.icd.spec(f.message).frame_id,
+                                  f"wheel {wheel + 1} {mode}")
+
     def _sub_t(self, j: int) -> float:
         return self.t0_s + self.tick * self.period_s + j * self.dt_s
 
@@ -207,6 +216,8 @@ class Simulator:
             raise RuntimeError("begin_tick() called twice without end_tick()")
         t = self.t_s
         tick = self.tick & 0xFFFFFFFF
+        if self.wheel_failures:
+            self._fail_wheels(t)
         if not self._faults:
             # no fault to inject: SYNC first, then the device frames, made and encoded in one compiled call
             # where the world allows (alive counters are per message, so encoding SYNC with the others gives

@@ -262,10 +262,13 @@ TimelineEntry = Annotated[Union[SetModeCommand, SetTargetCommand, SetGainsComman
 # ---------------------------------------------------------------------------------------------
 
 class BusFault(_Model):
-    """A fault injected on the frames of one DBC message during [start_s, end_s)."""
+    """A fault injected on the frames of one DBC message during [start_s, end_s), or (wheel_stuck,
+    wheel_no_torque) the physical failure of the wheel of message RWn_CMD / RWn_STATUS from start_s on."""
 
-    kind: Literal["drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent"]
-    message: str = Field(description="DBC message name, e.g. IMU_RATE, ST_QUAT_A, RW2_STATUS")
+    kind: Literal["drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent", "wheel_stuck",
+                  "wheel_no_torque"]
+    message: str = Field(description="DBC message name, e.g. IMU_RATE, ST_QUAT_A, RW2_STATUS (a wheel fault: "
+                         "its wheel's RWn_CMD or RWn_STATUS)")
     start_s: float = Field(ge=0, le=10 * 86400, description="start of the fault window, simulated time [s]")
     end_s: float = Field(gt=0, le=10 * 86400, description="end of the fault window, simulated time [s]")
     delay_s: float | None = Field(None, gt=0, le=10, description="for kind=delay: extra latency [s]")
@@ -326,7 +329,8 @@ class Mission(_Model):
     orbit: Orbit
     initial_state: InitialState
     timeline: list[TimelineEntry] = Field([], description="telecommands the ground sends, by simulated time")
-    faults: list[BusFault] = Field([], description="bus faults to inject")
+    faults: list[BusFault] = Field([], description="faults to inject: on a message's frames, or a wheel's physical "
+                                   "failure (wheel_stuck, wheel_no_torque)")
     requirements: Requirements = Field(default_factory=Requirements)
     flight_software: FswConfig = Field(description="the flight software's own configuration: what it knows of "
                                        "the spacecraft (epoch, inertia, wheels, star-tracker mounting, boresight "
@@ -404,6 +408,9 @@ class Mission(_Model):
                 if wheel > n_wheels:
                     out.append((("faults", i, "message"), f"{fault.message}: the spacecraft has only "
                                 f"{n_wheels} wheels"))
+            elif fault.kind.startswith("wheel_"):
+                out.append((("faults", i, "message"), f"kind {fault.kind!r} fails a wheel: name it by its RWn_CMD "
+                            "or RWn_STATUS message"))
         return out
 
 

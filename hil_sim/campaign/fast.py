@@ -364,7 +364,7 @@ def _used_value(loc, mission, world, initial, fsw, sent_commands, sim) -> Any:
         # (drawn with their delay_s, bit, probability) compares field by field with what was injected
         used = [{"kind": f.kind, "message": f.message, "start_s": f.start_s, "end_s": f.end_s,
                  "delay_s": f.delay_s, "bit": f.bit, "probability": f.probability}
-                for f in sim.injector.faults] if sim.injector is not None else []
+                for f in sim.fault_specs]
         return dsp.read_path({"faults": used}, loc)
     if loc[:2] == ("spacecraft", "wheels") and len(loc) >= 4 and loc[3] in _WHEEL_FIELDS:
         return dsp.to_plain(getattr(p.spacecraft.wheels[loc[2]], _WHEEL_FIELDS[loc[3]]))

@@ -175,9 +175,10 @@ class ChoiceDispersion(_Dispersion):
 class WheelFailureDispersion(_Dispersion):
     """Fail each wheel independently with a probability (at most ``max_failed``), from a random time.
 
-    The failure is injected as bus faults appended to the list at ``path`` (normally ``faults``): the
-    wheel's command frames stop reaching it (``message_template`` with {n} = 1-based wheel number), so
-    the wheel device's command timeout zeroes its torque, as a dead drive electronics would.
+    The failure is appended as faults to the list at ``path`` (normally ``faults``), composed with the base
+    mission's own. By default the wheel's command frames stop reaching it (``message_template`` with {n} =
+    1-based wheel number), so the wheel device's command timeout zeroes its torque, as a dead drive
+    electronics would; ``fault_kind`` wheel_stuck / wheel_no_torque fail the mechanism itself instead.
     """
 
     kind: Literal["wheel_failure"]
@@ -185,7 +186,9 @@ class WheelFailureDispersion(_Dispersion):
     probability: float = Field(gt=0, le=1, description="per wheel, independent")
     max_failed: int = Field(1, ge=1, le=6)
     start_s: ScalarDistribution = Field(description="failure onset, simulated time [s]")
-    fault_kind: Literal["drop", "silent"] = "drop"
+    fault_kind: Literal["drop", "silent", "wheel_stuck", "wheel_no_torque"] = Field(
+        "drop", description="drop / silent: the wheel's frames (message_template); wheel_stuck / wheel_no_torque: the "
+        "wheel itself fails (seized bearing, dead motor) at the drawn time")
     message_template: str = Field("RW{n}_CMD", description="DBC message of wheel n (1-based)")
     expected_fdir_event: Literal[FDIR_MONITORS] | None = Field(  # type: ignore[valid-type]
         "WHEEL_FAULT", description="FDIR monitor that must trip in a run where a failure was drawn (added to the "

@@ -28,6 +28,7 @@ dispersions:
     n_wheels: 4
     probability: 1.0
     max_failed: 1
+    fault_kind: {kind}
     start_s: {{dist: uniform, low: 20.0, high: 150.0}}
 criteria:
   - {{name: keep_out, metric: min_margin_deg, op: ">", limit: 0.0}}
@@ -38,9 +39,10 @@ verdict:
 
 
 @pytest.mark.slow
-def test_a_wheel_failure_drawn_on_a_mission_with_faults_flies_and_is_judged(tmp_path: Path) -> None:
+@pytest.mark.parametrize("kind", ["drop", "wheel_no_torque"])  # frames lost, or the wheel's motor dead
+def test_a_wheel_failure_drawn_on_a_mission_with_faults_flies_and_is_judged(tmp_path: Path, kind: str) -> None:
     spec = tmp_path / "compose.yaml"
-    spec.write_text(CAMPAIGN.format(base=ROOT / "config" / "missions" / "fault-imu-dropout.yaml"))
+    spec.write_text(CAMPAIGN.format(base=ROOT / "config" / "missions" / "fault-imu-dropout.yaml", kind=kind))
     out = tmp_path / "out"
     result = subprocess.run([sys.executable, "-m", "hil_sim", "campaign", "run", str(spec), "--workers", "1",
                              "--duration", "200", "--no-report", "--out", str(out)], cwd=ROOT,
@@ -52,3 +54,4 @@ def test_a_wheel_failure_drawn_on_a_mission_with_faults_flies_and_is_judged(tmp_
     for record in sorted((out / "runs").glob("run-*.json")):
         used = json.loads(record.read_text())["used"]["faults"]
         assert [f["message"] for f in used][0] == "IMU_RATE" and used[1]["message"].endswith("_CMD"), used
+        assert used[1]["kind"] == kind

@@ -207,3 +207,24 @@ def test_lost_sync_costs_one_cycle(icd, params) -> None:
     assert sim.stats.cycle_done_timeouts == 1 and sim.stats.cycle_done == 11
     assert only(driver.counters, "SYNC") == {"ok_some_lost": 1}
     assert [i.tick for i in inputs] == [0, 1, 2, 3, 4, 4, 6, 7, 8, 9, 10, 11]  # tick 5 never started
+
+
+def test_a_wheel_fault_fails_the_mechanism_at_its_time_and_leaves_the_frames_alone(icd, params) -> None:
+    """wheel_stuck / wheel_no_torque act on the wheel, not on frames: the wheel of RWn_CMD seizes at start_s
+    (its speed relative to the body drops to zero, as hil_sim.dynamics.seize_wheel does), every frame still
+    goes out, the injector's log says when, and a mission may draw it in a campaign like any fault."""
+    import dataclasses
+
+    sc = params.spacecraft
+    wheels = tuple(dataclasses.replace(w, initial_speed_rad_s=s) for w, s in zip(sc.wheels, (50.0, -40.0, 30.0, -20.0)))
+    spinning = dataclasses.replace(params, spacecraft=dataclasses.replace(sc, wheels=wheels))
+    faults = [FaultSpec("wheel_stuck", "RW2_CMD", 1.0, 1e5)]
+    sim, _, inputs = run_with_faults(icd, spinning, faults, ticks=30)
+    assert not sim.injector.faults  # nothing acts on frames
+    assert [(e.kind, e.message, e.detail) for e in sim.injector.log] == [("wheel_stuck", "RW2_CMD", "wheel 2 stuck")]
+    assert sim.injector.log[0].t_s == pytest.approx(1.0)
+    speeds = sim.world.truth.wheel_speeds_rad_s
+    assert speeds[1] == 0.0 and abs(speeds[0]) > 10.0 and all(inp.complete for inp in inputs)
+    with pytest.raises(ValueError, match="RWn_CMD or RWn_STATUS"):
+        Simulator(World(params, seed=1), open_bus(f"virtual:flt{next(_channels)}"), icd, gnc_period_s=T,
+                  faults=[FaultSpec("wheel_stuck", "IMU_RATE", 1.0, 2.0)])
