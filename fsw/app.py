@@ -24,6 +24,7 @@ import numpy as np
 from fsw.assumption_check import MAX_RESTARTS, AssumptionChecker
 from fsw.bus.driver import TickInputs
 from fsw.control import RateController
+from fsw.door import DoorController
 from fsw.estimation import _NO_SAMPLES, AttitudeEstimator
 from fsw.executive import Executive
 from fsw.fdir import STATUS_LOST, Fdir, WheelSpeedResidual
@@ -197,6 +198,8 @@ class FlightSoftware:
         self.control = RateController(config)
         self.fdir = Fdir(config, self.n_wheels, event=self._event)
         self.wheel_residual = WheelSpeedResidual(self.control.Js)
+        # the protective aperture door (fsw.door), when the spacecraft has one
+        self.door = DoorController(config.door, self.period_s, driver, self._event) if config.door is not None else None
         self.executive = Executive(
             config.rates.gnc_rate_hz, config.rates.housekeeping_rate_hz, config.rates.slip_event_throttle_s,
             gnc_task=self._gnc_task, hk_task=self.housekeeping, on_slip=self._on_slip, clock=clock,
@@ -441,6 +444,8 @@ class FlightSoftware:
         omega = est.omega_BN_B
         g = self.guidance.step(self.t_s, dt, q_est, omega)
         ctrl = self.control.step(dt, g.omega_cmd_BN_B, omega, speeds)
+        if self.door is not None:  # DOOR_CMD before the wheel commands' CYCLE_DONE
+            self._door_cycle(tick, g)
         try:
             self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm, cycle_done=not realtime)
         except Exception as exc:  # noqa: BLE001 - a transmit failure is reported, the loop goes on
@@ -480,6 +485,28 @@ class FlightSoftware:
         if self.cycle % self._gnc_tm_every == 0:
             self._send_gnc_tm(g, ctrl, speeds, imu is not None, st, st_fresh, exec_ms)
         self.cycle += 1
+
+    def _door_cycle(self, tick: int, g) -> None:
+        """The aperture door's cycle (`fsw.door`) on the boresight's physical sky margins (the guidance's in
+        POINTING and SAFE; in QUATERNION, whose margins are the attitude zones', taken from its sky zones
+        here), the braking the wheels can give (none with fewer than three usable: active and not in
+        WHEEL_FAULT) and KEEP_OUT_VIOLATION (last cycle's FDIR: this cycle's runs after the commands)."""
+        gd = self.guidance
+        known = self.estimator.initialized
+        if g.zone_bodies and g.zone_bodies[0] != "ATTITUDE":
+            margins, bodies = g.margins_deg, g.zone_bodies
+        elif gd.slots and known:
+            gd._update_sky(self.t_s)
+            margins, _ = gd._sky_margins(g.boresight_N)
+            bodies = gd._slot_body_codes()
+        else:
+            margins, bodies = [], []
+        ctl = self.control
+        faulty = [m.state == "TRIPPED" for m in self.fdir.wheel_fault]
+        usable = sum(1 for i, active in enumerate(ctl.active.tolist()) if active and not faulty[i])
+        brake_deg_s2 = math.degrees(ctl.max_accel) if usable >= 3 else 0.0
+        violation = self.fdir.keepout_red.state == "TRIPPED"
+        self.door.cycle(self.t_s, tick, margins, bodies, known, brake_deg_s2, violation)
 
     def _st_events(self, st, st_fresh: bool) -> None:
         if not st_fresh and self._st_was_valid:

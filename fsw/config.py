@@ -333,6 +333,32 @@ class ControlConfig(_Strict):
         return v
 
 
+# --------------------------------------------------------------------------------------------- door
+class DoorConfig(_Strict):
+    """The protective aperture door as the flight software knows and drives it (`fsw.door`): DOOR_CMD every
+    GNC cycle, DOOR_STATUS read back. It closes the door when its own prediction says the boresight will come
+    within `guard_deg` of a physical zone before the control can stop it, counting the door's closing time
+    as reaction time, or when KEEP_OUT_VIOLATION is raised, or while it has no attitude; it opens it again
+    only when every physical margin has stayed at least `reopen_margin_deg` for `reopen_dwell_s` with no
+    such prediction. Without this section there is no door (nothing of it on the bus)."""
+
+    close_time_s: float = Field(gt=0.0, le=600.0, description="Full stroke open -> closed as the flight software knows it [s] (default: spacecraft.door.close_time_s).")
+    open_time_s: float = Field(gt=0.0, le=600.0, description="Full stroke closed -> open [s] (default: spacecraft.door.open_time_s).")
+    guard_deg: float = Field(0.5, ge=0.0, le=30.0, description="Close when the boresight is predicted to come within this of a physical zone [deg].")
+    reopen_margin_deg: float = Field(2.0, ge=0.0, le=90.0, description="Reopen only when every physical margin is at least this [deg] (hysteresis above guard_deg).")
+    reopen_dwell_s: float = Field(10.0, ge=0.0, le=3600.0, description="Reopen only after every physical margin has been at least reopen_margin_deg, with no closing prediction, for this long [s] (the dwell).")
+    coast_horizon_s: float = Field(60.0, gt=0.0, le=3600.0, description="With fewer than three usable wheels (no braking): how far ahead a coasting approach to a zone closes the door [s].")
+    stroke_margin: float = Field(1.5, ge=1.0, le=10.0, description="DOOR_FAULT when a commanded stroke takes longer than this times its known time (plus one second) [-].")
+    status_timeout_s: float = Field(1.0, gt=0.0, le=60.0, description="DOOR_FAULT (NO_STATUS) after this long without a valid DOOR_STATUS [s].")
+
+    @model_validator(mode="after")
+    def _hysteresis(self) -> "DoorConfig":
+        if self.reopen_margin_deg < self.guard_deg:
+            raise ValueError(f"door.reopen_margin_deg ({self.reopen_margin_deg}) must be at least door.guard_deg "
+                             f"({self.guard_deg}): the door would open where it closes")
+        return self
+
+
 # --------------------------------------------------------------------------------------------- FDIR
 FdirAction = Literal["none", "safe", "reset_estimator", "isolate_wheel", "isolate_wheel_safe"]
 
@@ -457,6 +483,7 @@ class FswConfig(_Strict):
     safe: SafeConfig = Field(default_factory=SafeConfig)
     fdir: FdirConfig = Field(default_factory=FdirConfig)
     tmtc: TmTcConfig = Field(default_factory=TmTcConfig)
+    door: DoorConfig | None = Field(None, description="The protective aperture door the flight software drives (default: present, with the spacecraft's stroke times, when spacecraft.door is given; absent otherwise).")
 
     @field_validator("epoch_utc")
     @classmethod
@@ -490,6 +517,8 @@ KNOWLEDGE_SOURCES: dict[tuple[str, ...], tuple[str, ...]] = {
     ("flight_software", "orbit", "inclination_deg"): ("orbit", "inclination_deg"),
     ("flight_software", "orbit", "raan_deg"): ("orbit", "raan_deg"),
     ("flight_software", "orbit", "arg_latitude_at_epoch_deg"): ("orbit", "arg_perigee_deg"),
+    ("flight_software", "door", "close_time_s"): ("spacecraft", "door", "close_time_s"),
+    ("flight_software", "door", "open_time_s"): ("spacecraft", "door", "open_time_s"),
 }
 # the sources that are not a plain copy of their truth key, as the docs say them
 _KNOWLEDGE_NOTES = {
@@ -537,6 +566,11 @@ def knowledge_from_truth(mission: dict) -> dict:
         if isinstance(sc.get("imu"), dict):
             fill(known, "imu_range_rad_s", sc["imu"].get("saturation_rad_s"))
         fill(child("pointing"), "boresight_B", sc.get("instrument_boresight_B"))
+        door = sc.get("door")
+        if isinstance(door, dict) and fsw.get("door", {}) is not None:
+            known_door = child("door")
+            fill(known_door, "close_time_s", door.get("close_time_s"))
+            fill(known_door, "open_time_s", door.get("open_time_s"))
     if isinstance(state, dict) and "q_NB" not in state and _is_ra_dec(state.get("ra_dec_deg")):
         ra, dec = (math.radians(float(a)) for a in state["ra_dec_deg"])
         # hold the initial pointing until the first SET_TARGET

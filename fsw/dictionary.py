@@ -466,6 +466,10 @@ ZONE_BODIES = ("SUN", "MOON", "EARTH", "INERTIAL", "ATTITUDE", "MERGED")
 RATE_GROUPS = ("GNC", "HK")
 SENSORS = ("IMU", "STAR_TRACKER", "WHEEL")
 TC_ERRORS = ("INVALID_OPCODE", "VALIDATION", "FORMAT", "EXECUTION", "SECURITY")
+# the aperture door (fsw.door): why it closes, what its drive or the flight software found wrong, its ends
+DOOR_REASONS = ("NONE", "PREDICTED_ENTRY", "KEEP_OUT_VIOLATION", "NO_ATTITUDE")
+DOOR_FAULTS = ("STALLED", "COMMAND_TIMEOUT", "NO_STATUS", "NOT_CLOSED", "NOT_OPEN")
+DOOR_STATES = ("CLOSED", "OPEN", "CLOSING", "OPENING", "STOPPED")
 
 # Telecommand verification, after PUS service 1 (ECSS-E-ST-70-41C ch. 6.1): every telecommand gets an
 # acceptance report (success or failure with a reason code) and, once accepted, a completion report. They
@@ -783,6 +787,19 @@ EVENTS: tuple[EventDef, ...] = (
              (Arg("rate_limit_deg_s", "F32", "deg/s"), Arg("accel_deg_s2", "F32", "deg/s^2"), Arg("wheels", "U8"))),
     EventDef("TORQUE_SATURATED", 43, Severity.DIAGNOSTIC, "wheel torque scaled by {scale:.3f}",
              (Arg("scale", "F32"),), throttle=1, throttle_window_s=10.0),
+    EventDef("DOOR_CLOSING", 80, Severity.WARNING_HI,
+             "aperture door commanded closed: {reason}, zone {zone} ({body}) margin {margin_deg:.2f} deg, "
+             "predicted reach {reach_deg:.2f} deg",
+             (Arg("reason", "ENUM", enum=DOOR_REASONS), Arg("zone", "I8"), Arg("body", "ENUM", enum=ZONE_BODIES),
+              Arg("margin_deg", "F32", "deg"), Arg("reach_deg", "F32", "deg"))),
+    EventDef("DOOR_OPENING", 81, Severity.ACTIVITY_HI,
+             "aperture door commanded open: every margin >= {margin_deg:.2f} deg for {dwell_s:.1f} s",
+             (Arg("margin_deg", "F32", "deg"), Arg("dwell_s", "F32", "s"))),
+    EventDef("DOOR_STATE", 82, Severity.ACTIVITY_LO, "aperture door {state} ({position_pct:.1f} %)",
+             (Arg("state", "ENUM", enum=DOOR_STATES), Arg("position_pct", "F32", "%"))),
+    EventDef("DOOR_FAULT", 83, Severity.WARNING_HI, "aperture door fault: {fault} (door {position_pct:.1f} % open)",
+             (Arg("fault", "ENUM", enum=DOOR_FAULTS), Arg("position_pct", "F32", "%")),
+             throttle=5, throttle_window_s=10.0),
     EventDef("CYCLE_SLIP", 50, Severity.WARNING_LO,
              "{rate_group} cycle slip: exec {exec_time_ms:.2f} ms ({count} total)",
              (Arg("rate_group", "ENUM", enum=RATE_GROUPS), Arg("exec_time_ms", "F32", "ms"), Arg("count", "U32")),

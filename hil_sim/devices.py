@@ -7,6 +7,8 @@ Each node behaves like its hardware on the bus:
     ``latency_s`` later.
   * :class:`StarTrackerNode`: samples at its own rate; ST_QUAT_A/B go out ``latency_s`` later with the
     sample's age at transmission in ``age_ms``.
+  * :class:`DoorNode` (missions with a door only): drives the aperture door toward the latest valid
+    DOOR_CMD, reports DOOR_STATUS every GNC tick after the wheel statuses.
 
 Nodes never touch the bus themselves: they hand frames (with the simulation time at which they are due)
 to the simulator, which owns the bus, the SYNC protocol and fault injection. A node hands each frame as
@@ -321,6 +323,121 @@ class _AgeRow:
         return row
 
 
+# DOOR_STATUS.state and .fault codes (see the DBC comments)
+DOOR_CLOSED, DOOR_OPEN, DOOR_CLOSING, DOOR_OPENING, DOOR_STOPPED = range(5)
+DOOR_FAULT_STALLED, DOOR_FAULT_CMD_TIMEOUT = 1, 2
+
+
+@dataclass(frozen=True)
+class DoorParams:
+    """A protective aperture door as built: full-stroke times [s], where it starts, and the silence after which
+    its drive closes it by itself [s] (0: it holds its position when the commands stop)."""
+
+    close_time_s: float
+    open_time_s: float
+    initially_open: bool = False
+    close_on_silence_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("close_time_s", "open_time_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"DoorParams.{name}: must be a finite number > 0 [s], got {value!r}")
+        if not (math.isfinite(self.close_on_silence_s) and self.close_on_silence_s >= 0):
+            raise ValueError(f"DoorParams.close_on_silence_s: must be a finite number >= 0 [s], "
+                             f"got {self.close_on_silence_s!r}")
+
+
+class DoorNode:
+    """Aperture door drive, node DOOR: its truth (``position``, 0 closed .. 1 fully open) and its frames.
+
+    It moves the door toward the end the latest valid DOOR_CMD asks for, linearly in time at its stroke's
+    rate, and reports DOOR_STATUS every GNC tick. After ``close_on_silence_s`` without a valid command (once
+    it has had one) it closes the door by itself: a flight software that stopped talking cannot leave the
+    instrument open. Door failures (``hil_sim.faults`` kinds door_stuck_open, door_stuck_closed, door_slow)
+    act on the motion while their window is open: a door stuck open cannot close, one stuck closed cannot
+    open (the drive reports the stall), a slow one takes ``delay_s`` longer for a full stroke. The motion is
+    advanced once per GNC period (``advance``), the failures looked up at the period's start."""
+
+    def __init__(self, icd: Icd, params: DoorParams, sender: E2ESender | None = None, faults: Sequence[Any] = (),
+                 record: Any = None) -> None:
+        self.icd = icd
+        self.params = params
+        self.sender = sender or E2ESender(icd)
+        self.position = 1.0 if params.initially_open else 0.0
+        self.commanded_open = bool(params.initially_open)
+        self.last_cmd_t: float | None = None
+        self.commands_applied = 0
+        self.silenced = False  # closed by itself after a command silence (until the next valid command)
+        self.motion = 0  # -1 closing, +1 opening, 0 still, over the last period
+        self.stalled = False
+        self.faults = [f for f in faults if str(getattr(f, "kind", "")).startswith("door_")]
+        self._record = record  # (t_s, spec, detail): logs a failure when its window opens
+        self._logged: set[int] = set()
+        self.status_m, self._status_row = _row_maker(icd, "DOOR_STATUS")
+
+    @property
+    def target_open(self) -> bool:
+        """The end the drive is driving to (closed after a command silence)."""
+        return self.commanded_open and not self.silenced
+
+    def on_command(self, open_door: bool, t_s: float) -> None:
+        """A valid DOOR_CMD (already E2E-checked) arrived at simulation time ``t_s``."""
+        self.commanded_open = bool(open_door)
+        self.last_cmd_t = t_s
+        self.silenced = False
+        self.commands_applied += 1
+
+    def _failure(self, t_s: float) -> Any:
+        for i, f in enumerate(self.faults):
+            if f.start_s <= t_s < f.end_s:
+                if i not in self._logged and self._record is not None:
+                    self._logged.add(i)
+                    self._record(t_s, f, f"door at {100.0 * self.position:.1f} % open")
+                return f
+        return None
+
+    def advance(self, t0_s: float, t1_s: float) -> None:
+        """Move the door over [t0_s, t1_s] (one GNC period)."""
+        p = self.params
+        last = self.last_cmd_t
+        if last is not None and p.close_on_silence_s > 0 and t1_s - last > p.close_on_silence_s + _EPS_S:
+            self.silenced = True
+        target = 1.0 if self.target_open else 0.0
+        fault = self._failure(t0_s)
+        kind = fault.kind if fault is not None else ""
+        if target == self.position:
+            self.motion, self.stalled = 0, False
+            return
+        opening = target > self.position
+        if (kind == "door_stuck_open" and not opening) or (kind == "door_stuck_closed" and opening):
+            self.motion, self.stalled = 0, True
+            return
+        stroke_s = p.open_time_s if opening else p.close_time_s
+        if kind == "door_slow":
+            stroke_s += float(fault.delay_s or 0.0)
+        step = (t1_s - t0_s) / stroke_s
+        self.position = min(target, self.position + step) if opening else max(target, self.position - step)
+        self.motion, self.stalled = (1 if opening else -1), False
+
+    def status_row(self, t_s: float) -> list:  # noqa: ARG002 - the state is the last period's end
+        """DOOR_STATUS's value row: position [%], state, the command held, fault bits."""
+        pos = self.position
+        if pos <= 0.0:
+            state = DOOR_CLOSED
+        elif pos >= 1.0:
+            state = DOOR_OPEN
+        elif self.motion < 0:
+            state = DOOR_CLOSING
+        elif self.motion > 0:
+            state = DOOR_OPENING
+        else:
+            state = DOOR_STOPPED
+        fault = (DOOR_FAULT_STALLED if self.stalled else 0) | (DOOR_FAULT_CMD_TIMEOUT if self.silenced else 0)
+        return self._status_row(position=min(100.0, max(0.0, 100.0 * pos)), state=state,
+                                commanded_open=1 if self.target_open else 0, fault=fault)
+
+
 @dataclass
 class DeviceTiming:
     """Device behaviour not in the truth parameters: latencies [s] and the wheels' command timeout [s].
@@ -349,11 +466,12 @@ class Devices:
     on the same state and with the same frames."""
 
     def __init__(self, icd: Icd, wheels: list[WheelNode], imu: ImuNode, star_tracker: StarTrackerNode,
-                 sender: E2ESender | None = None) -> None:
+                 sender: E2ESender | None = None, door: DoorNode | None = None) -> None:
         self.icd = icd
         self.wheels = wheels
         self.imu = imu
         self.star_tracker = star_tracker
+        self.door = door  # the aperture door's drive (None: no door, nothing of it on the bus)
         self.sender = sender or self.imu.sender  # the nodes' (shared) sender
         n = len(wheels)
         # the wheels' command state, one row each (WheelNode.state is a view of its row)
@@ -427,7 +545,8 @@ class Devices:
         return int(self.q_n[0])
 
     @classmethod
-    def for_world(cls, world: WorldLike, icd: Icd, timing: DeviceTiming | None = None) -> "Devices":
+    def for_world(cls, world: WorldLike, icd: Icd, timing: DeviceTiming | None = None,
+                  door: DoorParams | None = None) -> "Devices":
         timing = timing or DeviceTiming()
         n = int(world.n_wheels)
         if not 1 <= n <= 6:
@@ -441,6 +560,7 @@ class Devices:
             imu=ImuNode(icd, imu_rate, timing.imu_latency_s, sender=sender),
             star_tracker=StarTrackerNode(icd, st_rate, timing.star_tracker_latency_s, sender=sender),
             sender=sender,
+            door=DoorNode(icd, door, sender=sender) if door is not None else None,
         )
 
     # ------------------------------------------------------------------------------- the queue

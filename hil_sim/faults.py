@@ -19,6 +19,14 @@ Two kinds act on the wheel itself, not on frames (`WheelFailures`): ``wheel_stuc
 and ``wheel_no_torque`` (its motor or driver dies), for the wheel of message ``RWn_CMD`` / ``RWn_STATUS``
 from ``start_s`` on, for good (a failed mechanism does not heal at ``end_s``).
 
+Door failures act on the aperture door's mechanism (``hil_sim.devices.DoorNode``), not on frames; ``message``
+names one of the door's frames (DOOR_CMD or DOOR_STATUS) and the window is when the mechanism is failed:
+
+  door_stuck_open    the door cannot close (it stays where it is when commanded closed; the drive
+                     reports the stall)
+  door_stuck_closed  the door cannot open (likewise)
+  door_slow          a full stroke takes ``delay_s`` longer
+
 Every injected fault is appended to ``FaultInjector.log`` (simulation time, kind, message, frame id,
 detail) and to the ``hil_sim.faults`` logger. Random choices (``probability``, babble payloads) come from
 a seeded generator, so runs stay deterministic.
@@ -37,9 +45,12 @@ from fsw.bus.icd import Icd
 
 log = logging.getLogger("hil_sim.faults")
 
-FAULT_KINDS = ("drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent")
+FRAME_FAULT_KINDS = ("drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent")
+DOOR_FAULT_KINDS = ("door_stuck_open", "door_stuck_closed", "door_slow")
 # physical wheel faults -> the world's wheel failure mode (hil_sim.params.WHEEL_FAILURE_MODES)
 WHEEL_FAULT_MODES = {"wheel_stuck": "stuck", "wheel_no_torque": "no_torque"}
+FAULT_KINDS = FRAME_FAULT_KINDS + DOOR_FAULT_KINDS + tuple(WHEEL_FAULT_MODES)
+DOOR_MESSAGES = ("DOOR_CMD", "DOOR_STATUS")
 _WHEEL_MESSAGE = re.compile(r"RW([1-6])_(CMD|STATUS)")
 
 
@@ -75,6 +86,11 @@ class FaultSpec:
 
     def active(self, t_s: float) -> bool:
         return self.start_s <= t_s < self.end_s
+
+    @property
+    def on_frames(self) -> bool:
+        """A fault of the frames (the injector's), not of a device's mechanism (a door failure)."""
+        return self.kind in FRAME_FAULT_KINDS
 
 
 @dataclass(frozen=True)
@@ -139,6 +155,10 @@ class FaultInjector:
             raise ValueError(f"fault {f.kind} on {f.message}: end_s ({f.end_s}) must be after start_s ({f.start_s})")
         if f.kind == "delay" and not (f.delay_s and f.delay_s > 0):
             raise ValueError(f"fault delay on {f.message}: needs delay_s > 0 [s]")
+        if f.kind in DOOR_FAULT_KINDS and f.message not in DOOR_MESSAGES:
+            raise ValueError(f"fault {f.kind} on {f.message}: a door failure names a door frame, one of {DOOR_MESSAGES}")
+        if f.kind == "door_slow" and not (f.delay_s and f.delay_s > 0):
+            raise ValueError(f"fault door_slow on {f.message}: needs delay_s > 0 [s] (the extra stroke time)")
         if f.kind == "corrupt":
             dlc = self.icd.spec(f.message).dlc
             if f.bit is None or not 0 <= f.bit < 8 * dlc:
@@ -155,6 +175,11 @@ class FaultInjector:
         self.log.append(event)
         log.info("t=%.3f s injected %s on %s (0x%03X): %s", t_s, kind, message, frame_id, detail)
 
+    def record_device(self, t_s: float, f: FaultSpec, detail: str) -> None:
+        """Log a device failure (a door kind) when its window opens, as the frame faults are logged."""
+        spec = self.icd.messages.get(f.message)
+        self.record(t_s, f.kind, f.message, spec.frame_id if spec is not None else -1, detail)
+
     def _hits(self, f: FaultSpec) -> bool:
         return f.probability >= 1.0 or self.rng.random() < f.probability
 
@@ -167,7 +192,7 @@ class FaultInjector:
         window open and no delayed frame of ``direction`` due. The simulator then skips the injector
         (and the frame-by-frame path it needs) for the tick. Closes the windows ``process`` would."""
         for i, f in enumerate(self.faults):
-            if f.active(t_s):
+            if f.on_frames and f.active(t_s):
                 return False
             self._stuck_counter.pop(i, None)  # a window that closed releases its frozen counter
         return not any(t_due <= t_s + 1e-9 for t_due, _ in self._held[direction])
@@ -189,7 +214,7 @@ class FaultInjector:
         first and babble frames last.
         """
         out: list[can.Message] = self.release(t_s, direction) if extras else []
-        active = [(i, f) for i, f in enumerate(self.faults) if f.active(t_s)]
+        active = [(i, f) for i, f in enumerate(self.faults) if f.on_frames and f.active(t_s)]
         for i, f in enumerate(self.faults):  # a window that closed releases its frozen counter
             if not f.active(t_s):
                 self._stuck_counter.pop(i, None)

@@ -39,9 +39,9 @@ from fsw.bus.transport import recv_burst, send_batch, send_burst
 from hil_sim import device_kernels as dk
 from hil_sim.device_kernels import apply_received
 from hil_sim.devices import Devices, DeviceTiming, WorldLike
-from hil_sim.faults import FaultInjector, FaultSpec, WheelFailures, bus_faults
+from hil_sim.faults import DOOR_FAULT_KINDS, FaultInjector, FaultSpec, WheelFailures, bus_faults
 
-SIM_NODES = ("SIM", "IMU", "STR", "RW1", "RW2", "RW3", "RW4", "RW5", "RW6")
+SIM_NODES = ("SIM", "IMU", "STR", "RW1", "RW2", "RW3", "RW4", "RW5", "RW6", "DOOR")
 
 
 @dataclass
@@ -79,7 +79,8 @@ class Simulator:
                  timing: DeviceTiming | None = None, faults: Iterable[Any] = (), fault_seed: int = 0,
                  cycle_done_timeout_s: float = 2.0, clock: Callable[[], float] = time.monotonic,
                  on_frame: Callable[[str, float, can.Message], None] | None = None,
-                 on_burst: Callable[[str, float, FrameBurst, Iterable[int] | None], None] | None = None) -> None:
+                 on_burst: Callable[[str, float, FrameBurst, Iterable[int] | None], None] | None = None,
+                 door: Any = None) -> None:
         self.world = world
         self.bus = bus
         self.icd = icd or Icd()
@@ -100,11 +101,12 @@ class Simulator:
         self._j_dt = np.arange(n_sub + 1) * self.dt_s  # j * dt_s, j = 0..n_sub
         self._j_dt_end = float(self._j_dt[-1])
         self._world_samples = hasattr(world, "advance_sampled")
-        self.devices = Devices.for_world(world, self.icd, timing)
+        self.devices = Devices.for_world(world, self.icd, timing, door=door)
         self.n_wheels = len(self.devices.wheels)
         self.fault_specs = [FaultSpec.from_any(f) for f in faults or ()]  # as given (campaigns read them back)
         self.wheel_failures = WheelFailures(self.fault_specs)  # on the mechanism, at their time
         self.injector = FaultInjector(self.icd, bus_faults(self.fault_specs), seed=fault_seed)
+        self._init_door()
         self._faults = self.injector.faults  # (empty: the injector never acts, ``bool(injector)`` is False)
         self.cycle_done_timeout_s = cycle_done_timeout_s
         self.clock = clock
@@ -189,6 +191,43 @@ class Simulator:
         # Sensors sample the initial state (t = t0) before the first tick.
         self.devices.sample_sensors(world, self.t0_s)
 
+    def _init_door(self) -> None:
+        """The aperture door's drive (``door``: hil_sim.devices.DoorParams; None: no door and nothing of it on
+        the bus): its failures from the faults, its command's id and slot."""
+        self.door = self.devices.door
+        failures = [f for f in self.injector.faults if f.kind in DOOR_FAULT_KINDS]
+        if failures and self.door is None:
+            raise ValueError(f"fault {failures[0].kind}: this spacecraft has no door (spacecraft.door)")
+        if self.door is not None:
+            self.door.faults = failures
+            self.door._record = self.injector.record_device
+            self._door_cmd_id = self.icd.spec("DOOR_CMD").frame_id
+            self._door_open_col = self.icd.column("DOOR_CMD", "open")
+
+    def _door_rows(self, out: Any, idx: list, rows: list, t: float) -> Any:
+        """DOOR_STATUS appended to the tick's rows (``out`` of ``Devices.tick_rows`` with SYNC's
+        frames_following counted again, or the lists ``idx``/``rows``); returns ``out``."""
+        row = self.door.status_row(t)
+        if out is None:
+            idx.append(self.door.status_m)
+            rows.append(row)
+            return None
+        out_idx, out_rows, n = out
+        if n >= out_idx.shape[0]:
+            out_idx = np.concatenate([out_idx, np.zeros(8, dtype=out_idx.dtype)])
+            out_rows = np.concatenate([out_rows, np.zeros((8, out_rows.shape[1]))])
+        out_idx[n] = self.door.status_m
+        out_rows[n] = row
+        out_rows[0, self._sync_cols[1]] = float(min(n, 255))
+        return out_idx, out_rows, n + 1
+
+    def _door_commands(self, ids: np.ndarray, status: np.ndarray, values: np.ndarray, first: int, end: int,
+                       t_s: float) -> None:
+        """The delivered DOOR_CMD frames among frames first..end-1 of a classified burst, in order."""
+        for i in np.flatnonzero(ids[first:end] == self._door_cmd_id).tolist():
+            if status[first + i] <= 1:
+                self.door.on_command(values[first + i, self._door_open_col] >= 0.5, t_s)
+
     @property
     def _per_frame(self) -> bool:
         """Frames observed one by one, as messages (``on_frame`` without ``on_burst``; either may be set
@@ -218,7 +257,7 @@ class Simulator:
         tick = self.tick & 0xFFFFFFFF
         if self.wheel_failures:
             self._fail_wheels(t)
-        if not self._faults:
+        if not self._faults and self.door is None:
             # no fault to inject: SYNC first, then the device frames, made and encoded in one compiled call
             # where the world allows (alive counters are per message, so encoding SYNC with the others gives
             # the bytes it always had), one burst
@@ -237,6 +276,8 @@ class Simulator:
             idx, rows = self.devices.rows_due(t)
             status_idx, status_rows = self.devices.wheel_status_rows(self.world, t)
             idx, rows = idx + status_idx, rows + status_rows
+        if self.door is not None:
+            out = self._door_rows(out, idx if out is None else [], rows if out is None else [], t)
         if self.injector and not self.injector.passes_through(t):
             # faults active now: the frames one by one through the injector (it edits, drops and adds)
             if out is None:
@@ -291,6 +332,8 @@ class Simulator:
             # _sub_t(j) for j = 0..n_sub: (t0 + k T) + j dt, the same sums (made in the compiled call)
             t_k = self.t_s
             self.devices.step_period(self.world, self.dt_s, self.n_sub, t_k)
+            if self.door is not None:
+                self.door.advance(t_k, t_k + self._j_dt_end)
             # the receiver's check_timeouts(_sub_t(n_sub)) compiled
             rs = self._rc_state
             count_timeouts(t_k + self._j_dt_end, *self._ct_args)
@@ -304,6 +347,8 @@ class Simulator:
                 t = self._sub_t(j)
                 self.world.step(self.dt_s, self.devices.wheel_torques(t))
                 self.devices.sample_sensors(self.world, self._sub_t(j + 1))
+            if self.door is not None:
+                self.door.advance(self._sub_t(0), self._sub_t(self.n_sub))
             self.receiver.check_timeouts(self._sub_t(self.n_sub))
         self.tick += 1
         self.t_s = self.t0_s + self.tick * self.period_s
@@ -383,6 +428,8 @@ class Simulator:
                                     self._rc_table[3], self._rc_table[4], self._rc_tally, self._rc_state)
         rs = self._rc_state
         end = dk.receive_commands_packed(burst.ids, burst.lengths, burst.data, t_s, k, *args)
+        if self.door is not None:
+            self._door_commands(burst.ids, self._rc_status, self._rc_values, 0, end, t_s)
         if self.on_burst is not None and end:
             self._log_rx(burst, self._rc_status[:end].tolist(), 0, end, t_s)
         wheel_cmds, n_tally, heartbeats, cycle_done, stale, done = rs.tolist()
@@ -443,6 +490,8 @@ class Simulator:
         if not self._per_frame and not rx.fallback:
             # every frame judged by the compiled classifier: the delivered ones applied in one compiled call
             # (a CYCLE_DONE returns to here, in order, for its tick)
+            if self.door is not None:
+                self._door_commands(rx.burst.ids, rx.status, rx.values, first, end, t_s)
             counts = self._rx_counts
             i = first
             while i < end:
@@ -503,6 +552,8 @@ class Simulator:
             self._on_cycle_done(int(row[self._done_tick_col]))
         elif fid == self._heartbeat_id:
             self.stats.heartbeats += 1
+        elif self.door is not None and fid == self._door_cmd_id:
+            self.door.on_command(row[self._door_open_col] >= 0.5, t_s)
 
     def _on_cycle_done(self, tick: int) -> None:
         self.stats.cycle_done += 1

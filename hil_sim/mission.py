@@ -141,6 +141,18 @@ class Disturbance(_Model):
                                              "(0: white, redrawn every integration step)")
 
 
+class DoorTruth(_Model):
+    """A protective aperture door in front of the instrument, as built (maps onto hil_sim.devices.DoorParams).
+    Its drive is a CAN node: DOOR_CMD in, DOOR_STATUS out, every GNC tick."""
+
+    close_time_s: float = Field(gt=0, le=600, description="full stroke, open to closed [s]")
+    open_time_s: float = Field(gt=0, le=600, description="full stroke, closed to open [s]")
+    initially_open: bool = Field(False, description="the door's position at t = 0 (false: closed, as after launch)")
+    close_on_silence_s: float = Field(1.0, ge=0, le=60, description="the drive closes the door by itself after "
+                                      "this long without a valid DOOR_CMD, once it has had one [s] (0: it holds "
+                                      "its position)")
+
+
 class SpacecraftTruth(_Model):
     """The spacecraft as built (the flight software has its own, possibly imperfect, knowledge)."""
 
@@ -152,6 +164,8 @@ class SpacecraftTruth(_Model):
     imu: ImuTruth = Field(default_factory=ImuTruth)
     star_tracker: StarTrackerTruth = Field(default_factory=StarTrackerTruth)
     disturbance: Disturbance = Field(default_factory=Disturbance)
+    door: DoorTruth | None = Field(None, description="a protective aperture door in front of the instrument "
+                                   "(absent: no door, nothing of it on the bus)")
 
     @field_validator("inertia_B_kgm2")
     @classmethod
@@ -262,16 +276,22 @@ TimelineEntry = Annotated[Union[SetModeCommand, SetTargetCommand, SetGainsComman
 # ---------------------------------------------------------------------------------------------
 
 class BusFault(_Model):
-    """A fault injected on the frames of one DBC message during [start_s, end_s), or (wheel_stuck,
-    wheel_no_torque) the physical failure of the wheel of message RWn_CMD / RWn_STATUS from start_s on."""
+    """A fault injected on the frames of one DBC message during [start_s, end_s), a failure of the aperture
+    door's mechanism during that window (the door kinds), or (wheel_stuck, wheel_no_torque) the physical
+    failure of the wheel of message RWn_CMD / RWn_STATUS from start_s on."""
 
-    kind: Literal["drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent", "wheel_stuck",
-                  "wheel_no_torque"]
-    message: str = Field(description="DBC message name, e.g. IMU_RATE, ST_QUAT_A, RW2_STATUS (a wheel fault: "
-                         "its wheel's RWn_CMD or RWn_STATUS)")
+    kind: Literal["drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent", "door_stuck_open",
+                  "door_stuck_closed", "door_slow", "wheel_stuck", "wheel_no_torque"] = Field(
+        description="a fault of the frames (drop ... silent), a failure of the aperture door's mechanism "
+        "during the window (door_stuck_open: cannot close; door_stuck_closed: cannot open; door_slow: a stroke "
+        "takes delay_s longer), or a wheel's mechanism failing for good (wheel_stuck: seized bearing; "
+        "wheel_no_torque: dead motor or driver), see hil_sim.faults")
+    message: str = Field(description="DBC message name, e.g. IMU_RATE, ST_QUAT_A, RW2_STATUS (a door failure: "
+                         "DOOR_STATUS or DOOR_CMD; a wheel failure: its wheel's RWn_CMD or RWn_STATUS)")
     start_s: float = Field(ge=0, le=10 * 86400, description="start of the fault window, simulated time [s]")
     end_s: float = Field(gt=0, le=10 * 86400, description="end of the fault window, simulated time [s]")
-    delay_s: float | None = Field(None, gt=0, le=10, description="for kind=delay: extra latency [s]")
+    delay_s: float | None = Field(None, gt=0, le=10, description="for kind=delay: extra latency; for "
+                                  "kind=door_slow: extra time of a full stroke [s]")
     bit: int | None = Field(None, ge=0, le=63, description="for kind=corrupt: which payload bit to flip")
     probability: float = Field(1.0, gt=0, le=1, description="fraction of the frames in the window affected")
 
@@ -294,6 +314,9 @@ class Requirements(_Model):
         "e.g. IMU_STALE): fault scenarios")
     max_unexpected_fdir_events: int = Field(0, ge=0, description="FDIR_TRIPPED events of monitors not listed in "
                                             "expected_fdir_events")
+    max_instrument_exposure_s: float = Field(0.0, ge=0, le=10 * 86400, description="with a door (spacecraft.door): "
+                                             "time the instrument may look into a physical sky zone with the door "
+                                             "not fully closed, judged on truth [s]")
 
 
 class Simulation(_Model):
@@ -392,6 +415,9 @@ class Mission(_Model):
                     getattr(entry, k) is None for k in ("k1", "kappa", "eps", "rate_limit_deg_s")):
                 out.append((("timeline", i), "SET_GAINS sets nothing: give at least one of k1, kappa, eps, "
                             "rate_limit_deg_s"))
+        if fsw.door is not None and self.spacecraft.door is None:
+            out.append((("flight_software", "door"), "the flight software drives a door the spacecraft does not "
+                        "have: add spacecraft.door or remove flight_software.door"))
         times = [e.t_s for e in self.timeline]
         if times != sorted(times):
             out.append((("timeline",), "entries must be in increasing t_s order"))
@@ -403,6 +429,18 @@ class Mission(_Model):
                 out.append((("faults", i), "kind 'delay' needs delay_s"))
             if fault.kind == "corrupt" and fault.bit is None:
                 out.append((("faults", i), "kind 'corrupt' needs bit"))
+            if fault.kind.startswith("door_"):
+                if self.spacecraft.door is None:
+                    out.append((("faults", i, "kind"), f"{fault.kind}: the spacecraft has no door "
+                                "(spacecraft.door)"))
+                if fault.message not in ("DOOR_CMD", "DOOR_STATUS"):
+                    out.append((("faults", i, "message"), f"{fault.message}: a door failure names a door frame, "
+                                "DOOR_STATUS or DOOR_CMD"))
+                if fault.kind == "door_slow" and fault.delay_s is None:
+                    out.append((("faults", i), "kind 'door_slow' needs delay_s (the extra stroke time)"))
+            elif fault.message in ("DOOR_CMD", "DOOR_STATUS") and self.spacecraft.door is None:
+                out.append((("faults", i, "message"), f"{fault.message}: the spacecraft has no door "
+                            "(spacecraft.door)"))
             if re.fullmatch(r"RW([1-6])_(CMD|STATUS)", fault.message):
                 wheel = int(fault.message[2])
                 if wheel > n_wheels:
@@ -532,6 +570,17 @@ def world_params(mission: Mission) -> "WorldParams":
         epoch_utc=mission.epoch_utc.strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
         max_integration_step_s=1.0 / mission.simulation.dynamics_rate_hz,
     )
+
+
+def door_params(mission: Mission) -> Any:
+    """The aperture door as built (hil_sim.devices.DoorParams), None when the mission has no door."""
+    from hil_sim.devices import DoorParams
+
+    door = mission.spacecraft.door
+    if door is None:
+        return None
+    return DoorParams(close_time_s=door.close_time_s, open_time_s=door.open_time_s,
+                      initially_open=door.initially_open, close_on_silence_s=door.close_on_silence_s)
 
 
 def ra_dec_to_unit(ra_deg: float, dec_deg: float) -> np.ndarray:

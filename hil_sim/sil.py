@@ -274,9 +274,12 @@ def _ground_loop(monitor, fsw_started, stop_event, status_queue) -> None:
 class TruthRecorder:
     """Truth at every tick, kept in preallocated arrays (cheap in the loop), saved as an .npz."""
 
-    def __init__(self, n_ticks: int, n_wheels: int):
+    def __init__(self, n_ticks: int, n_wheels: int, door=None):
         n = n_ticks + 1
         self.n = 0
+        # the aperture door's truth (hil_sim.devices.DoorNode: its position, 0 closed .. 1 open), when there is one
+        self.door = door
+        self.door_position = np.zeros(n) if door is not None else None
         self.t_s = np.zeros(n)
         self.q_NB = np.zeros((n, 4))
         self.omega_BN_B = np.zeros((n, 3))
@@ -303,14 +306,17 @@ class TruthRecorder:
         self.earth_N[i] = truth.earth_N
         self.r_sc_N_km[i] = truth.r_sc_N_km
         self.cycle_done[i] = cycle_done
+        if self.door is not None:
+            self.door_position[i] = self.door.position
         self.n += 1
 
     def save(self, path: Path) -> None:
         n = self.n
+        door = {} if self.door_position is None else {"door_position": self.door_position[:n]}
         np.savez_compressed(path, t_s=self.t_s[:n], q_NB=self.q_NB[:n], omega_BN_B=self.omega_BN_B[:n],
                             wheel_speed_rad_s=self.wheel_speed_rad_s[:n], wheel_torque_Nm=self.wheel_torque_Nm[:n],
                             sun_N=self.sun_N[:n], moon_N=self.moon_N[:n], earth_N=self.earth_N[:n], r_sc_N_km=self.r_sc_N_km[:n],
-                            cycle_done=self.cycle_done[:n])
+                            cycle_done=self.cycle_done[:n], **door)
 
 
 class CandumpLog:
@@ -556,7 +562,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
     from fsw.bus.icd import Icd
     from fsw.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
     from hil_sim.lockstep import Simulator
-    from hil_sim.mission import world_params
+    from hil_sim.mission import door_params, world_params
     from hil_sim.world import World
 
     try:
@@ -627,9 +633,9 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         sim = Simulator(world, bus, Icd(), gnc_period_s=gnc_period,
                         dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz, faults=mission.faults,
                         fault_seed=mission.seed, cycle_done_timeout_s=options.cycle_done_timeout_s,
-                        on_frame=candump, on_burst=candump.log_burst)
+                        on_frame=candump, on_burst=candump.log_burst, door=door_params(mission))
         n_ticks = int(round(mission.duration_s / gnc_period))
-        recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels))
+        recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels), door=sim.devices.door)
         recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)
         fsw_proc = _start_fsw(run_dir, info.spec)
         if not options.realtime:

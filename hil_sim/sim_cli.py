@@ -102,7 +102,7 @@ def _run(args: argparse.Namespace) -> int:
     from fsw.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
     from ground.commanding import CommandSender
     from hil_sim.lockstep import Simulator
-    from hil_sim.mission import world_params
+    from hil_sim.mission import door_params, world_params
     from hil_sim.sil import (CANDUMP_FILE, SIM_STATS_FILE, TRUTH_FILE, CandumpLog, MissionRejected, RunOptions,
                              Timeline, TruthRecorder, _plain, _run_dir, prepare)
     from hil_sim.world import World
@@ -128,9 +128,9 @@ def _run(args: argparse.Namespace) -> int:
     candump = CandumpLog(out / CANDUMP_FILE, info.channel if info.interface == "socketcan" else "can0")
     sim = Simulator(world, bus, Icd(), gnc_period_s=gnc_period, dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz,
                     faults=mission.faults, fault_seed=mission.seed, on_frame=candump,
-                    on_burst=candump.log_burst)
+                    on_burst=candump.log_burst, door=door_params(mission))
     n_ticks = int(round(mission.duration_s / gnc_period))
-    recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels))
+    recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels), door=sim.devices.door)
     recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)
     sender = CommandSender(host=tc_host, port=tc_port, **signing)
     timeline = Timeline(mission, sender)

@@ -18,7 +18,11 @@ Requirements (``Mission.requirements``):
 * cycle slips: lockstep: ticks the flight software never answered with CYCLE_DONE (simulated time waits
   for it, so host-time overruns, reported alongside, cannot hurt the loop); real time: the flight
   software's GNC slip counter plus cycles whose CYCLE_DONE arrived after the next tick began;
-* FDIR: the expected FDIR trips occurred; no more unexpected ones than allowed.
+* FDIR: the expected FDIR trips occurred; no more unexpected ones than allowed;
+* instrument exposure (missions with a door, ``spacecraft.door``): the time the boresight spent inside a
+  physical sky zone with the door not fully closed (door truth: ``door_position`` > 0), at most
+  ``max_instrument_exposure_s``. Reported for every mission in ``summary.json`` (``exposure``; without a
+  door the instrument is always open) with its depth, the deepest margin among those samples.
 """
 from __future__ import annotations
 
@@ -64,6 +68,30 @@ def boresight_N(q_NB: np.ndarray, b_B: np.ndarray) -> np.ndarray:
     from gnc.attitude import quat_to_dcm
 
     return np.einsum("nij,j->ni", quat_to_dcm(q_NB), b_B) if len(q_NB) else np.zeros((0, 3))
+
+
+def instrument_exposure(t: np.ndarray, sky_zones: list[ZoneSeries], door_position: np.ndarray | None) -> dict[str, Any]:
+    """The instrument's exposure on truth: the samples where the boresight is inside a physical sky zone
+    (signed margin < 0) while the door is not fully closed (``door_position`` > 0, 0 closed .. 1 open; None:
+    no door, always open). ``exposure_s``: their time, each sample standing for the interval to the next;
+    ``depth_deg``: how deep the deepest of them is (0 when none); ``inside_s``: the time inside a zone,
+    door or not; ``first_t_s``: the first exposed sample's time (None when none)."""
+    out: dict[str, Any] = {"door": door_position is not None, "exposure_s": 0.0, "depth_deg": 0.0, "inside_s": 0.0,
+                           "first_t_s": None}
+    n = len(t)
+    if n == 0 or not sky_zones:
+        return out
+    margin = np.min(np.vstack([np.asarray(z.margin_deg, dtype=float) for z in sky_zones]), axis=0)
+    inside = margin < 0.0
+    exposed = inside if door_position is None else inside & (np.asarray(door_position, dtype=float) > 0.0)
+    dt = np.diff(np.asarray(t, dtype=float))
+    weight = np.append(dt, dt[-1] if len(dt) else 0.0)
+    out["inside_s"] = float(weight[inside].sum())
+    if exposed.any():
+        out["exposure_s"] = float(weight[exposed].sum())
+        out["depth_deg"] = float(-margin[exposed].min())
+        out["first_t_s"] = float(t[int(np.argmax(exposed))])
+    return out
 
 
 def _signed_margins(zone, X: np.ndarray) -> np.ndarray:
@@ -557,6 +585,17 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
                 ("missing: " + ", ".join(missing)) if missing else "all occurred")
     requirement("unexpected FDIR events", len(unexpected), f"<= {req.max_unexpected_fdir_events}",
                 len(unexpected) <= req.max_unexpected_fdir_events, ", ".join(unexpected) or "none")
+    exposure = instrument_exposure(t, [z for z in zones if z.kind == "sky"], truth.get("door_position"))
+    if mission.spacecraft.door is not None:
+        first = exposure["first_t_s"]
+        requirement("instrument exposure", exposure["exposure_s"], f"<= {_num(req.max_instrument_exposure_s)}",
+                    exposure["exposure_s"] <= req.max_instrument_exposure_s
+                    and (len(t) < 2 or "door_position" in truth),
+                    ("no door truth recorded" if len(t) >= 2 and "door_position" not in truth
+                     else f"inside a sky zone with the door open, {exposure['depth_deg']:.3f} deg deep at most, "
+                     f"from t = {first:.1f} s" if first is not None
+                     else f"never inside a sky zone with the door open (inside, door closed: "
+                     f"{exposure['inside_s']:.1f} s)"), "s")
     ground = _read_json(run_dir / "ground" / "ground_summary.json")
     wall = float(sim_stats.get("wall_s", 0.0) or 0.0)
     sim_s = float(sim_stats.get("sim_s", 0.0) or 0.0)
@@ -578,6 +617,7 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
         "requirements": results,
         "zones": {z.name: {"kind": z.kind, "min_margin_deg": float(z.margin_deg.min()) if len(z.margin_deg) else None}
                   for z in zones},
+        "exposure": exposure,
         "settling": settle,
         "fdir_trips": trips,
         "events": {"total": len(events), "by_name": _count(_event_name(e) for e in events)},

@@ -314,6 +314,10 @@ class FswBusDriver:
         self.period_s = 0.0
         self.last_tick: int | None = None
         self.tx_errors = 0
+        self._kept: dict[int, tuple[list, float] | None] = {}  # keep_latest: frame id -> (value row, time)
+        self._kept_ids = np.zeros(0, dtype=np.int64)
+        self._one_frame: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # send_frame's message index and row
+        self._ahead: list[FrameBurst] = []  # frames to send ahead of the next wheel commands (send_frame)
         self._init_lockstep(icd, n_wheels)
 
     def _init_lockstep(self, icd: Icd, n_wheels: int) -> None:
@@ -522,14 +526,59 @@ class FswBusDriver:
                                   self._tally, self._n_codes)
                     break
             burst = rx.burst
+            start = rx.pos
             end = rx.pos = self._collect_rows(burst.ids, burst.lengths, burst.data, rx.pos, K.NO_FID)
             if end < rx.n:  # the tick closed, or the gyro rows are full, or a frame for the Python path
                 if st[K.S_GROW]:
                     end = rx.pos = self._collect(burst.ids, burst.lengths, burst.data, end, K.NO_FID)
                 while end < rx.n and self._status_buf[end] == K.FALLBACK_CODE:
                     end = rx.pos = self._collect_fallback(rx, end)
+            if self._kept:
+                self._keep_rows(burst.ids, start, end)
             phase = st.item(K.S_PHASE)
         return self._settle()
+
+    # ------------------------------------------------------------------ device frames without a sample type
+    def keep_latest(self, name: str) -> None:
+        """Keep the newest delivered value row of message ``name`` (a device frame, such as the aperture
+        door's DOOR_STATUS, that a lockstep tick counts but makes no sample of) for :meth:`latest`."""
+        fid = self.icd.spec(name).frame_id
+        self._kept.setdefault(fid, None)
+        self._kept_ids = np.array(sorted(self._kept), dtype=np.int64)
+
+    def latest(self, name: str) -> tuple[list, float] | None:
+        """(value row, time received [s]: the tick's time in lockstep) of the newest delivered ``name`` frame
+        (``keep_latest``), None before the first. The row's slots are ``Icd.column``'s."""
+        return self._kept.get(self.icd.spec(name).frame_id)
+
+    def _keep_rows(self, ids: np.ndarray, first: int, end: int) -> None:
+        """The delivered frames of kept messages among frames first..end-1 of the lockstep burst."""
+        window = ids[first:end]
+        for fid in self._kept_ids.tolist():  # (one or two kept messages: a comparison each, no set search)
+            for i in np.flatnonzero(window == fid).tolist():
+                j = first + i
+                if 0 <= self._status_buf[j] <= 1:  # delivered (ok, ok_some_lost)
+                    self._kept[fid] = (self._values_buf[j].tolist(), float(self._ft[K.F_T_TICK]))
+
+    def send_frame(self, name: str, signals: dict[str, float], with_commands: bool = False) -> None:
+        """One frame of message ``name`` (E2E protected, encoded now), sent at once as a one-frame burst, or
+        with ``with_commands`` ahead of the next ``send_wheel_torques`` frames in their burst (one send; in
+        lockstep before CYCLE_DONE). A refused frame is counted in ``tx_errors``; a signal the message does
+        not have raises KeyError."""
+        one = self._one_frame.get(name)
+        if one is None:
+            one = self._one_frame[name] = (np.array([self.icd.message_index[name]], dtype=np.int64),
+                                           np.zeros((1, self._width)))
+        idx, row = one
+        row[0, :] = 0.0
+        col = self._col
+        for sig, value in signals.items():
+            row[0, col[name, sig]] = value
+        burst = self._sender.burst(idx, row)
+        if with_commands:
+            self._ahead.append(burst)
+        else:
+            self._send_burst(burst)
 
     def _collect(self, ids: np.ndarray, lengths: np.ndarray, data: np.ndarray, first: int, first_fid: int) -> int:
         """kernels.collect_rows on frames ``first``.. (growing the gyro rows when the kernel asks)."""
@@ -743,6 +792,8 @@ class FswBusDriver:
             i = self._wheel_index[fid]
             self._wheel_buf[i, :5] = [row[c] for c in self._wheel_cols]  # speed, torque, current, temp, fault
             self._ft[K.F_WHEEL_T + i] = now
+        elif fid in self._kept:
+            self._kept[fid] = (list(row), now)
 
     def _wheels_rx(self) -> list[float | None]:
         """The time of each wheel's newest status (None: none yet)."""
@@ -815,6 +866,9 @@ class FswBusDriver:
             burst = self._sender.burst(self._cmd_idx[:len(ids)], self._cmd_values[:len(ids)].copy(), out, done)
         else:
             burst = FrameBurst(ids, out, dlc)
+        if self._ahead:
+            burst = FrameBurst.join(self._ahead + [burst])
+            self._ahead = []
         self._send_burst(burst)
         if self._realtime:
             self._answer_latest_sync()

@@ -168,7 +168,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
     from fsw.bus import FswBusDriver, open_bus
     from fsw.telecommand import CommandDispatcher
     from hil_sim.lockstep import Simulator
-    from hil_sim.mission import world_params
+    from hil_sim.mission import door_params, world_params
     from hil_sim.sil import Timeline
     from hil_sim.world import World
 
@@ -189,7 +189,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
     fsw = None
     try:
         sim = Simulator(world, sim_bus, icd, gnc_period_s=cfg.gnc_period_s, faults=mission.faults,
-                        fault_seed=seed)
+                        fault_seed=seed, door=door_params(mission))
         driver = FswBusDriver(fsw_bus, icd, world.n_wheels)
         telemetry = _EventRecorder()
         dispatcher = CommandDispatcher(telemetry=None, port=None)
@@ -205,6 +205,10 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         n_ticks = int(round(mission.duration_s / cfg.gnc_period_s))
         truth = _TruthRows(n_ticks, world)
         truth.record()
+        door = sim.devices.door  # the aperture door's truth (its position) beside the world's, when there is one
+        door_position = np.zeros(n_ticks + 1) if door is not None else None
+        if door is not None:
+            door_position[0] = door.position
         estimates = _EstimateRows(n_ticks + 1)
         torques = np.zeros((n_ticks + 1, world.n_wheels))
         next_command_s = _next_command_s(timeline)
@@ -223,14 +227,20 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
                 torques[row] = fsw.last.wheel_torque_cmd_Nm  # held over the tick that follows
             sim.end_tick(wait_s=0.0)
             truth.record()
+            if door is not None:
+                door_position[row + 1] = door.position
         record = truth.arrays()
         record["wheel_torque_Nm"] = torques[:len(record["t_s"])]
+        if door is not None:
+            record["door_position"] = door_position[:len(record["t_s"])]
         trips = [str(a.get("monitor", "?")) for _, name, a in telemetry.events if name == "FDIR_TRIPPED"]
         rejected = sum(1 for _, name, _ in telemetry.events if name in ("CMD_REJECTED", "TARGET_REJECTED"))
         from hil_sim.summary import acknowledged_rate_limits
         acked = acknowledged_rate_limits(telemetry.events)
         metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected, acked)
         metrics.update(estimates.metrics(record))
+        if door is not None:  # how often the flight software shut the aperture door (DOOR_CLOSING events)
+            metrics["door_closes"] = float(sum(1 for _, name, _ in telemetry.events if name == "DOOR_CLOSING"))
         used = _read_back(paths, mission, world, initial, fsw, timeline.sent, sim)
         return RunResult(metrics=metrics, used=used, trajectory=trajectory, sim_time_s=float(record["t_s"][-1]),
                          events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events if n == "FDIR_TRIPPED"][:200])
@@ -263,7 +273,8 @@ def _icd():
 _METRIC_BETTER = {"min_margin_deg": "higher", "settling_time_s": "lower", "final_error_deg": "lower",
                   "peak_wheel_speed_fraction": "lower", "peak_body_rate_fraction": "lower", "cycle_slips": "lower",
                   "unexpected_fdir_events": "lower", "missing_expected_fdir_events": "lower",
-                  "rejected_commands": "lower"}
+                  "rejected_commands": "lower", "instrument_exposure_s": "lower",
+                  "instrument_exposure_depth_deg": "lower"}
 
 
 def metric_better(name: str) -> str | None:
@@ -295,6 +306,11 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     for z in zones:
         metrics[f"margin_{z.name}_deg"] = min(metrics.get(f"margin_{z.name}_deg", math.inf), float(z.margin_deg.min()))
     metrics["min_margin_deg"] = min((float(z.margin_deg.min()) for z in zones), default=math.inf)
+    # the instrument's exposure: time and depth inside a sky zone with the door not fully closed (always
+    # open without a door)
+    exposure = summary.instrument_exposure(t, [z for z in zones if z.kind == "sky"], truth.get("door_position"))
+    metrics["instrument_exposure_s"] = exposure["exposure_s"]
+    metrics["instrument_exposure_depth_deg"] = exposure["depth_deg"]
     err, segments = summary.error_series(mission, truth, y_N)
     spans = summary.settling(mission, t, err, segments)
     if "wheel_torque_Nm" in truth:

@@ -12,7 +12,7 @@ import pytest
 from fsw.bus.icd import DEFAULT_DBC_PATH, E2ESender, Icd, IcdError
 
 CONTRACT_MESSAGES = {"SYNC", "IMU_RATE", "ST_QUAT_A", "ST_QUAT_B", "FSW_HEARTBEAT", "CYCLE_DONE"} | {
-    f"RW{i}_{kind}" for i in range(1, 7) for kind in ("CMD", "STATUS")}
+    f"RW{i}_{kind}" for i in range(1, 7) for kind in ("CMD", "STATUS")} | {"DOOR_CMD", "DOOR_STATUS"}
 
 
 @pytest.fixture(scope="module")

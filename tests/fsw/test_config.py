@@ -108,7 +108,7 @@ def test_every_knowledge_source_is_what_knowledge_from_truth_copies() -> None:
 
     from fsw.config import KNOWLEDGE_SOURCES, knowledge_from_truth
 
-    data = yaml.safe_load((Path(__file__).resolve().parents[2] / "config" / "missions" / "demo-pointing.yaml").read_text())
+    data = yaml.safe_load((Path(__file__).resolve().parents[2] / "config" / "missions" / "demo-pointing-door.yaml").read_text())
     data["flight_software"] = {}
     data["initial_state"] = {"ra_dec_deg": [10.0, 20.0]}
     data["spacecraft"].setdefault("imu", {})["saturation_rad_s"] = 0.3
