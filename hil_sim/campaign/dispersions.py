@@ -255,6 +255,11 @@ def draw(disp: Dispersion, rng: np.random.Generator, nominal: Any) -> Params:
         keep = [int(i) for i in order if failed[i]][: disp.max_failed]
         params = {f"wheel{i + 1}": float(i in keep) for i in range(disp.n_wheels)}
         params["start_s"] = sample_scalar(disp.start_s, rng)
+        # the draws below exist only with the options that ask for them: campaigns without them draw as before
+        if disp.independent_starts:
+            params.update({f"start{i + 1}_s": sample_scalar(disp.start_s, rng) for i in range(disp.n_wheels)})
+        if disp.fault_kinds:
+            params.update({f"kind{i + 1}": float(rng.integers(len(disp.fault_kinds))) for i in range(disp.n_wheels)})
         return params
     raise DispersionError(f"unknown dispersion kind {type(disp).__name__}")
 
@@ -275,7 +280,7 @@ def nominal_params(disp: Dispersion, nominal: Any, drawn: Params) -> Params:
         plain = [to_plain(v) for v in disp.values]
         return {"index": float(plain.index(nominal))} if nominal in plain else {"index": -1.0}
     if isinstance(disp, WheelFailureDispersion):
-        return {**{k: 0.0 for k in drawn if k.startswith("wheel")}, "start_s": drawn["start_s"]}
+        return {**drawn, **{k: 0.0 for k in drawn if k.startswith("wheel")}}
     raise DispersionError(f"unknown dispersion kind {type(disp).__name__}")
 
 
@@ -284,7 +289,7 @@ def discrete_params(disp: Dispersion) -> set[str]:
     if isinstance(disp, ChoiceDispersion):
         return {"index"}
     if isinstance(disp, WheelFailureDispersion):
-        return {f"wheel{i + 1}" for i in range(disp.n_wheels)}
+        return {f"wheel{i + 1}" for i in range(disp.n_wheels)} | {f"kind{i + 1}" for i in range(disp.n_wheels)}
     return set()
 
 
@@ -322,10 +327,24 @@ def realize(disp: Dispersion, params: Params, nominal: Any) -> Any:
         entries = list(copy.deepcopy(nominal or []))
         for i in range(disp.n_wheels):
             if params[f"wheel{i + 1}"] >= 0.5:
-                entries.append({"kind": disp.fault_kind, "message": disp.message_template.format(n=i + 1),
-                                "start_s": float(params["start_s"]), "end_s": NEVER_ENDS_S})
+                kind, message = _wheel_fault(disp, params, i)
+                entries.append({"kind": kind, "message": message, "start_s": _wheel_start_s(params, i),
+                                "end_s": NEVER_ENDS_S})
         return entries
     raise DispersionError(f"unknown dispersion kind {type(disp).__name__}")
+
+
+def _wheel_fault(disp: WheelFailureDispersion, params: Params, i: int) -> tuple[str, str]:
+    """(fault kind, DBC message) of failed wheel ``i`` (0-based)."""
+    if not disp.fault_kinds:
+        return disp.fault_kind, disp.message_template.format(n=i + 1)
+    kind = disp.fault_kinds[int(round(params[f"kind{i + 1}"]))]
+    return kind, f"RW{i + 1}_{'STATUS' if kind == 'silent' else 'CMD'}"
+
+
+def _wheel_start_s(params: Params, i: int) -> float:
+    """Onset of wheel ``i``'s failure: its own draw with ``independent_starts``, else the shared one."""
+    return float(params.get(f"start{i + 1}_s", params["start_s"]))
 
 
 def expected_fdir_events(disp: Dispersion, params: Params, end_s: float) -> list[str]:
@@ -333,8 +352,8 @@ def expected_fdir_events(disp: Dispersion, params: Params, end_s: float) -> list
     enough before the end of the run (``end_s``) to be detected expects its ``expected_fdir_event``."""
     if not isinstance(disp, WheelFailureDispersion) or disp.expected_fdir_event is None:
         return []
-    failed = any(params[f"wheel{i + 1}"] >= 0.5 for i in range(disp.n_wheels))
-    return [disp.expected_fdir_event] if failed and params["start_s"] + disp.detection_s <= end_s else []
+    starts = [_wheel_start_s(params, i) for i in range(disp.n_wheels) if params[f"wheel{i + 1}"] >= 0.5]
+    return [disp.expected_fdir_event] if starts and min(starts) + disp.detection_s <= end_s else []
 
 
 def features(disp: Dispersion, params: Params) -> dict[str, float]:
@@ -346,8 +365,12 @@ def features(disp: Dispersion, params: Params) -> dict[str, float]:
         out = {f"{disp.name}.scale": float(params["scale"]),
                f"{disp.name}.misalignment_deg": math.degrees(float(np.linalg.norm(_rv(params))))}
     elif isinstance(disp, WheelFailureDispersion):
-        failed = sum(params[f"wheel{i + 1}"] >= 0.5 for i in range(disp.n_wheels))
-        out = {f"{disp.name}.failed": float(failed), f"{disp.name}.start_s": float(params["start_s"])}
+        failed = [i for i in range(disp.n_wheels) if params[f"wheel{i + 1}"] >= 0.5]
+        starts = sorted(_wheel_start_s(params, i) for i in failed)
+        out = {f"{disp.name}.failed": float(len(failed)),
+               f"{disp.name}.start_s": starts[0] if starts else float(params["start_s"])}
+        if disp.independent_starts and len(starts) > 1:
+            out[f"{disp.name}.last_start_s"] = starts[-1]
     elif isinstance(disp, EpochDispersion):
         out = {f"{disp.name}.offset_days": float(params["offset_s"]) / 86400.0}
     return out

@@ -166,7 +166,7 @@ def evaluate(plan: Plan, index: int, params: dict[str, dict[str, float]]) -> Run
         record.events = list(result.events)
         record.trajectory = {k: np.asarray(v) for k, v in result.trajectory.items()}
         dsp.check_landed(values, record.used)
-        record.verdicts = {c.name: c.holds(record.metrics.get(c.metric)) for c in plan.campaign.criteria}
+        record.verdicts = {c.name: c.judged(record.metrics) for c in plan.campaign.criteria}
         record.status = STATUS_PASS if all(record.verdicts.values()) else STATUS_FAIL
     except Exception as exc:  # a run that crashes is recorded and counted, never kills the campaign
         record.status = STATUS_ERROR

@@ -18,6 +18,7 @@ from __future__ import annotations
 import itertools
 import math
 import os
+import re
 from typing import Any, Sequence
 
 import numpy as np
@@ -274,7 +275,7 @@ _METRIC_BETTER = {"min_margin_deg": "higher", "settling_time_s": "lower", "final
                   "peak_wheel_speed_fraction": "lower", "peak_body_rate_fraction": "lower", "cycle_slips": "lower",
                   "unexpected_fdir_events": "lower", "missing_expected_fdir_events": "lower",
                   "rejected_commands": "lower", "instrument_exposure_s": "lower",
-                  "instrument_exposure_depth_deg": "lower"}
+                  "instrument_exposure_depth_deg": "lower", "wheels_lost": "lower"}
 
 
 def metric_better(name: str) -> str | None:
@@ -282,6 +283,23 @@ def metric_better(name: str) -> str | None:
     if name.startswith("margin_") and name.endswith("_deg"):
         return "higher"
     return _METRIC_BETTER.get(name)
+
+
+def wheels_lost(mission, end_s: float) -> set[int]:
+    """The wheels (0-based) that stop producing torque for good by ``end_s``: failed at start, seized or dead
+    (wheel_stuck, wheel_no_torque), or cut off from their commands (drop on RWn_CMD to the end of the run).
+    A wheel whose only fault is its status (drop or silent on RWn_STATUS) still obeys and is not lost."""
+    lost = {i for i, w in enumerate(mission.spacecraft.wheels) if w.failure != "none"}
+    for f in mission.faults:
+        match = re.fullmatch(r"RW([1-6])_(CMD|STATUS)", f.message)
+        if match is None or f.start_s > end_s:
+            continue
+        wheel = int(match.group(1)) - 1
+        if f.kind in ("wheel_stuck", "wheel_no_torque"):
+            lost.add(wheel)
+        elif f.kind == "drop" and match.group(2) == "CMD" and f.probability >= 1.0 and f.end_s >= end_s:
+            lost.add(wheel)
+    return lost
 
 
 def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycle_slips: float,
@@ -331,6 +349,7 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     metrics["unexpected_fdir_events"] = float(sum(1 for m in fdir_trips if m not in expected))
     metrics["missing_expected_fdir_events"] = float(sum(1 for m in expected if m not in fdir_trips))
     metrics["rejected_commands"] = float(rejected_commands)
+    metrics["wheels_lost"] = float(len(wheels_lost(mission, float(t[-1]))))
     # trajectory for the report (decimated)
     step = max(1, int(math.ceil(n / MAX_TRAJECTORY_POINTS)))
     traj: dict[str, np.ndarray] = {"t_s": t[::step], "boresight_N": y_N[::step], "error_deg": err[::step],

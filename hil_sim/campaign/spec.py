@@ -190,6 +190,11 @@ class WheelFailureDispersion(_Dispersion):
         "drop", description="drop / silent: the wheel's frames (message_template); wheel_stuck / wheel_no_torque: the "
         "wheel itself fails (seized bearing, dead motor) at the drawn time")
     message_template: str = Field("RW{n}_CMD", description="DBC message of wheel n (1-based)")
+    fault_kinds: list[Literal["drop", "silent", "wheel_stuck", "wheel_no_torque"]] | None = Field(
+        None, min_length=1, description="draw each failed wheel's kind uniformly from this list instead of "
+        "fault_kind (silent then names the wheel's RWn_STATUS, the others its RWn_CMD; message_template is unused)")
+    independent_starts: bool = Field(False, description="each failed wheel draws its own onset from start_s "
+                                     "(false: all fail at one drawn time)")
     expected_fdir_event: Literal[FDIR_MONITORS] | None = Field(  # type: ignore[valid-type]
         "WHEEL_FAULT", description="FDIR monitor that must trip in a run where a failure was drawn (added to the "
         "run's requirements.expected_fdir_events, so the isolation is expected and its absence fails); "
@@ -207,14 +212,12 @@ Dispersion = Annotated[Union[ScalarDispersion, VectorDispersion, DirectionDisper
 # Pass criteria, verdict, baseline tolerances
 # ---------------------------------------------------------------------------------------------
 
-class Criterion(_Model):
-    """A per-run requirement: ``metric op limit`` must hold (a missing or NaN metric fails)."""
+class Condition(_Model):
+    """``metric op limit`` on a run's metrics (a missing or NaN metric does not hold)."""
 
-    name: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]{0,47}$")
     metric: str = Field(description="a metric of the run summary, e.g. min_margin_deg")
     op: Literal["<", "<=", ">", ">=", "=="]
     limit: float
-    description: str = ""
 
     def holds(self, value: float | None) -> bool:
         if value is None or not math.isfinite(float(value)):
@@ -225,6 +228,26 @@ class Criterion(_Model):
 
     def text(self) -> str:
         return f"{self.metric} {self.op} {self.limit:g}"
+
+
+class Criterion(Condition):
+    """A per-run requirement: ``metric op limit`` must hold (a missing or NaN metric fails), in every run or,
+    with ``only_if``, in the runs where that condition holds (e.g. only_if wheels_lost <= 1)."""
+
+    name: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]{0,47}$")
+    description: str = ""
+    only_if: Condition | None = Field(None, description="judge only the runs where this holds; the others pass it")
+
+    def judged(self, metrics: dict[str, float]) -> bool:
+        """Whether this run's ``metrics`` meet the criterion (true where ``only_if`` excludes the run; a run
+        without the condition's metric is judged: what cannot be told apart is not excused)."""
+        cond = self.only_if
+        if cond is not None and cond.metric in metrics and not cond.holds(metrics[cond.metric]):
+            return True
+        return self.holds(metrics.get(self.metric))
+
+    def text(self) -> str:
+        return super().text() + (f" where {self.only_if.text()}" if self.only_if is not None else "")
 
 
 class Verdict(_Model):

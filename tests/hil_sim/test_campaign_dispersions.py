@@ -129,6 +129,39 @@ def test_wheel_failure_respects_cap_and_appends_faults():
     assert all(10 <= f[0]["start_s"] <= 20 for f in hit)
 
 
+def test_wheel_failure_draws_each_wheels_kind_and_onset_when_asked():
+    kinds = ["drop", "silent", "wheel_stuck", "wheel_no_torque"]
+    d = _disp(name="w", path="faults", kind="wheel_failure", n_wheels=4, probability=1.0, max_failed=2,
+              fault_kinds=kinds, independent_starts=True, start_s={"dist": "uniform", "low": 10, "high": 500})
+    base = [{"kind": "drop", "message": "IMU_RATE", "start_s": 1.0, "end_s": 2.0}]
+    faults = _sample(d, base, n=400)
+    assert all(f[0] == base[0] and len(f) == 3 for f in faults)  # composed with the base mission's own
+    added = [g for f in faults for g in f[1:]]
+    assert {g["kind"] for g in added} == set(kinds)
+    for g in added:  # a lost status silences the wheel's node; every other kind names its command frame
+        assert g["message"].endswith("_STATUS" if g["kind"] == "silent" else "_CMD")
+    assert all(f[1]["message"][:3] != f[2]["message"][:3] for f in faults)  # two different wheels
+    gaps = [abs(f[1]["start_s"] - f[2]["start_s"]) for f in faults]
+    assert min(gaps) < 5.0 and max(gaps) > 300.0  # onsets drawn apart, not one shared time
+    # the nominal run has no failure, whatever was drawn
+    drawn = dsp.draw(d, np.random.default_rng(3), base)
+    assert dsp.realize(d, dsp.nominal_params(d, base, drawn), base) == base
+
+
+def test_a_criterion_with_only_if_judges_only_the_runs_it_names():
+    spec = Campaign.model_validate({"schema_version": 1, "name": "t", "base_mission": "x.yaml", "runs": 1,
+                                    "master_seed": 0, "dispersions": [],
+                                    "criteria": [{"name": "keep_out", "metric": "min_margin_deg", "op": ">",
+                                                  "limit": 0, "only_if": {"metric": "wheels_lost", "op": "<=",
+                                                                          "limit": 1}}]})
+    c = spec.criteria[0]
+    assert c.judged({"min_margin_deg": 2.0, "wheels_lost": 1.0})
+    assert not c.judged({"min_margin_deg": -2.0, "wheels_lost": 1.0})
+    assert c.judged({"min_margin_deg": -2.0, "wheels_lost": 2.0})  # not this criterion's run
+    assert not c.judged({"min_margin_deg": -2.0})  # no condition metric: the run is judged
+    assert "where wheels_lost <= 1" in c.text()
+
+
 def test_realize_of_nominal_params_is_the_nominal():
     q = Rotation.from_euler("z", 40, degrees=True).as_quat(scalar_first=True).tolist()
     for d, nominal in ((_disp(name="a", path="q", kind="attitude"), q),
