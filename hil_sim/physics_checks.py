@@ -32,6 +32,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fsw.guidance.edge_rule import TARGET_IN_LAYER, clearance_needed_deg, target_layer
+from fsw.guidance.pointing import ZONE_REBUILD_TOL_DEG
 from gnc.wheels import fibonacci_sphere, wheel_authority
 
 if TYPE_CHECKING:
@@ -425,6 +427,10 @@ def _trim(folder: "Path") -> None:
 
 
 def _eps_in_use(mission: "Mission", eps_max: float) -> float:
+    """The eps the assumption check holds the law to: the configured eps as it is (a fixed eps that is not
+    admissible is an error to report, though the flight software would fly a lower one), or with 'auto'
+    the fraction of the admissible bound the flight software takes. Whether a target is usable at all is
+    `fsw.guidance.edge_rule.target_layer`, the flight software's own rule."""
     law = mission.flight_software.law
     if law.eps == "auto":
         return min(law.eps_fraction * eps_max, law.eps_max_used)
@@ -556,20 +562,37 @@ def _sweep_times(segment: Segment, sky: SkyZones, step_s: float | None) -> np.nd
     return np.linspace(segment.t_start_s, segment.t_end_s, count)
 
 
-def _target_in_zone(seg: Segment, t: float, k: int, sky: SkyZones, m_phys: float, m_law: float) -> str:
-    """The target-inside-a-zone error in plain words: where the target and the zone's centre are, and
-    how far to move the target."""
+def _hold(held: dict[str, list[float]], name: str, t_s: float) -> None:
+    """Extend zone ``name``'s window of covering the commanded target to ``t_s`` (its first window only)."""
+    window = held.setdefault(name, [t_s, t_s])
+    if t_s >= window[1]:
+        window[1] = t_s
+
+
+def _target_in_layer(seg: Segment, t: float, name: str, occ: int, eps: float, need_deg: float) -> str:
+    """The target-in-an-eps-layer error in plain words, with the flight software's event and the move."""
+    return (f"the target from {seg.source} at RA/Dec {_ra_dec(seg.target)} is outside zone '{name}' as the law "
+            f"sees it (inflated by law.margin_deg), but inside its eps-layer at t = {t:.0f} s (eps = {eps:.3g}): "
+            f"the flight software would hold short of it (ASSUMPTION_VIOLATED \"{TARGET_IN_LAYER.format(zone=occ)}\"); "
+            f"move it at least {need_deg:.2f} deg further from the zone")
+
+
+def _target_in_zone(seg: Segment, t: float, k: int, sky: SkyZones, m_phys: float, need_deg: float) -> str:
+    """The target-inside-a-zone error in plain words: where the target and the zone's centre are, what the
+    flight software would do, and how far to move the target (``need_deg``: out of the inflated zone and
+    its eps-layer)."""
     body = sky.bodies[k]
     centre = BODY_NAMES.get(body, "the zone's centre")
     here = f"the target from {seg.source} at RA/Dec {_ra_dec(seg.target)}"
     there = f"{centre} is at RA/Dec {_ra_dec(sky.centers(t)[k])}"
+    move = (f"move it at least {need_deg:.2f} deg further from {centre} (out of the zone as the law flies it, "
+            f"inflated by law.margin_deg = {sky.margin_deg:g} deg and the {ZONE_REBUILD_TOL_DEG:g} deg rebuild "
+            "tolerance, and out of the law's eps-layer)")
     if m_phys <= 0:
-        return (f"{here} is {-m_phys:.1f} deg inside zone '{sky.names[k]}' at t = {t:.0f} s: {there}; move it at "
-                f"least {-m_law:.1f} deg further from {centre} (the {-m_phys:.1f} deg into the zone plus the law "
-                f"margin, law.margin_deg = {sky.margin_deg:g} deg)")
-    return (f"{here} is only {m_phys:.2f} deg outside zone '{sky.names[k]}' at t = {t:.0f} s, within the "
-            f"{sky.margin_deg:g} deg law margin of the zone (law.margin_deg), so the flight software would reject "
-            f"it: {there}; move it at least {-m_law:.2f} deg further from {centre}")
+        return f"{here} is {-m_phys:.1f} deg inside zone '{sky.names[k]}' at t = {t:.0f} s: {there}; {move}"
+    return (f"{here} is only {m_phys:.2f} deg outside zone '{sky.names[k]}' at t = {t:.0f} s, inside it as the "
+            "law flies it, so the flight software would hold short of it "
+            f"(ASSUMPTION_VIOLATED \"target in the eps-layer of zone ...\"): {there}; {move}")
 
 
 def _check_pointing(mission, segments, report, step_s, quick: bool = False) -> None:
@@ -591,7 +614,8 @@ def _check_pointing(mission, segments, report, step_s, quick: bool = False) -> N
     for seg in (s for s in segments if s.mode == "POINTING"):
         times = _sweep_times(seg, sky, step_s)
         report.samples += len(times)
-        for t in times:
+        held: dict[str, list[float]] = {}  # zone -> [from, to] while it covers a target already commanded
+        for i, t in enumerate(times):
             phys, law_zones = sky.physical(float(t)), sky.law(float(t))
             target_inside = False
             for k, (zp, zl) in enumerate(zip(phys, law_zones)):
@@ -599,13 +623,28 @@ def _check_pointing(mission, segments, report, step_s, quick: bool = False) -> N
                 m_phys, m_law = signed_margin_deg(zp, seg.target), signed_margin_deg(zl, seg.target)
                 if m_law <= 0:
                     target_inside = True
-                    if (seg.source, sky.names[k]) not in seen:
+                    if i > 0:
+                        _hold(held, sky.names[k], float(t))
+                    elif (seg.source, sky.names[k]) not in seen:
                         seen.add((seg.source, sky.names[k]))
-                        report.add("error", "target", _target_in_zone(seg, float(t), k, sky, m_phys, m_law),
-                                   seg.loc, t_s=float(t), margin_deg=m_phys)
+                        need = clearance_needed_deg(seg.target, zl, law_zones, mission.flight_software.law,
+                                                    start_deg=max(0.0, -m_law))
+                        report.add("error", "target", _target_in_zone(seg, float(t), k, sky, m_phys, need),
+                                   seg.loc, t_s=float(t), margin_deg=m_phys, move_deg=need)
             if target_inside:
                 continue  # the assumptions fail with it: one root cause, one error
             flown = sky.as_flown(law_zones, seg.target)
+            occ, eps = target_layer(seg.target, flown.zones, mission.flight_software.law, flown.unmerged)
+            if occ >= 0:  # outside the inflated zone, but in its eps-layer: the law cannot fly to it
+                if i > 0:
+                    _hold(held, flown.names[occ], float(t))
+                elif (seg.source, flown.names[occ]) not in seen:
+                    seen.add((seg.source, flown.names[occ]))
+                    need = clearance_needed_deg(seg.target, flown.zones[occ], flown.zones,
+                                                mission.flight_software.law, flown.unmerged)
+                    report.add("error", "target", _target_in_layer(seg, float(t), flown.names[occ], occ, eps, need),
+                               seg.loc, t_s=float(t), eps=eps, move_deg=need)
+                continue
             for group, name in zip(flown.groups, flown.names):
                 if len(group) > 1 and ("merged", name) not in seen:
                     seen.add(("merged", name))
@@ -629,6 +668,14 @@ def _check_pointing(mission, segments, report, step_s, quick: bool = False) -> N
             eps_max = _check_assumptions_at(mission, flown.zones, where, kappa, report, seen)
             if math.isfinite(eps_max):
                 worst_eps_max = min(worst_eps_max, eps_max)
+        for name, (t_from, t_to) in held.items():
+            if (seg.source, name) in seen:
+                continue  # refused at its command time already: one root cause, one finding
+            report.add("warning", "target", f"from t = {t_from:.0f} s to {t_to:.0f} s zone '{name}' (as the law sees "
+                       f"it: inflated by law.margin_deg) covers the target from {seg.source}, commanded at t = "
+                       f"{seg.t_start_s:.0f} s: the flight software then holds outside it (ASSUMPTION_VIOLATED "
+                       f"\"{TARGET_IN_LAYER.format(zone=name)}\") and resumes the slew when the zone has moved "
+                       "off; the target is not reached in that window", seg.loc, t_s=t_from)
     if math.isfinite(worst_eps_max):
         eps = _eps_in_use(mission, worst_eps_max)
         report.add("info", "eps", f"POINTING: smallest admissible eps upper bound over the run {worst_eps_max:.4g}; "
@@ -682,7 +729,17 @@ def _check_quaternion(mission, segments, report, quick: bool = False) -> None:
             if seg.t_start_s == 0.0 and signed_margin_deg(zp, x0) <= 0:
                 report.add("error", "initial-state", f"the initial attitude is inside the forbidden-attitude zone "
                            f"'{name}': start outside it", ("initial_state", "q_NB"))
-        if target_inside or quick:
+        if target_inside:
+            continue
+        occ, eps = target_layer(seg.target, law_zones, fsw.law)
+        if occ >= 0:  # outside the inflated zone, inside its eps-layer: the law does not come to rest there
+            need = clearance_needed_deg(seg.target, law_zones[occ], law_zones, fsw.law)
+            report.add("error", "target", f"the attitude target from {seg.source} is outside the forbidden-attitude "
+                       f"zone '{names[occ]}' as the law sees it, but inside its eps-layer (eps = {eps:.3g}), where the "
+                       f"law does not come to rest at it: move it at least {need:.2f} deg on S^3 ({2 * need:.2f} deg "
+                       "of rotation) away", seg.loc, eps=eps, move_deg=need)
+            continue
+        if quick:
             continue
         where = _Where(seg.t_start_s, seg, names, zone_locs)
         eps_max = _check_assumptions_at(mission, law_zones, where, kappa, report, seen,

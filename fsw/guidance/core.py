@@ -12,6 +12,7 @@ import numpy as np
 from fsw.assumption_check import CheckResult
 from fsw.guidance._kernels import FP_WIDTH
 from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _saturate, _unit, signed_margin_deg
+from fsw.guidance.edge_rule import law_eps
 from fsw.guidance.ephemeris import SkyEphemeris
 from fsw.guidance.path_following import PathFollowing
 from fsw.guidance.path_planning import PathFollower
@@ -264,11 +265,7 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         return self._checks_dirty
 
     def _eps_for(self, eps_max: float) -> float:
-        auto = self.eps_cfg == "auto"
-        eps = min(self.cfg.law.eps_fraction * eps_max, self.cfg.law.eps_max_used) if auto else float(self.eps_cfg)
-        if not auto and eps >= eps_max:
-            eps = self.cfg.law.eps_fraction * eps_max
-        return max(eps, 1e-6)
+        return law_eps(self.cfg.law, eps_max, self.eps_cfg)
 
 
     # ------------------------------------------------------------------------------------- modes

@@ -25,6 +25,7 @@ from fsw.guidance._kernels import (
 from fsw.guidance.common import (
     _NAN3, _NAN4, GuidanceOutput, _angle_deg, _make_star_law, signed_margin_deg,
 )
+from fsw.guidance.edge_rule import TARGET_IN_LAYER
 from fsw.guidance.ephemeris import EPHEMERIS_NODE_S
 from fsw.guidance.watchdog import MIN_ERROR_DEG, RATE_FRACTION
 from fsw.guidance.zone_merging import ZoneGeometry
@@ -217,18 +218,18 @@ class PointingGuidance:
         zpack = self._law_zones_pack(merged)
         seps = None if zpack is None else zone_separations_nb(aim, *zpack).tolist()
         eps_max = self._fast_eps_max(aim, merged, geometry.unmerged, seps)
-        eps = self._eps_for(max(eps_max, 1e-5))
+        eps = self._eps_for(eps_max)
         target, occ = self._substitute_target(t_s, merged, eps, geometry.pending, y, aim, seps)
         if occ != self._occulted:
             if occ >= len(merged) and not self._escaping:
                 self.events("ASSUMPTION_VIOLATED", reason="target between two zones closing around the boresight: steering out of the gap")
             elif 0 <= occ < len(merged):
-                self.events("ASSUMPTION_VIOLATED", reason=f"target in the eps-layer of zone {occ}: steering to the nearest safe direction")
+                self.events("ASSUMPTION_VIOLATED", reason=TARGET_IN_LAYER.format(zone=occ))
             self._occulted = occ
             self._checks_dirty = True
         if occ >= 0:
             eps_max = ZoneGeometry.fast_eps_max(target, merged, geometry.unmerged)
-            eps = self._eps_for(max(eps_max, 1e-5))
+            eps = self._eps_for(eps_max)
         self._sky_target = target
         self._sky_eps, self._sky_eps_max = eps, eps_max
         self._current_eps = eps

@@ -114,7 +114,7 @@ class QuaternionGuidance:
             aim = self._s3_aim
             if self._s3_law is None:
                 eps_max = ZoneGeometry.fast_eps_max(aim, self.s3_law_zones)
-                eps = self._eps_for(max(eps_max, 1e-5))
+                eps = self._eps_for(eps_max)
                 self._s3_eps, self._s3_eps_max = eps, eps_max
                 self._current_eps = eps
                 if self.s3_use_gradient:
