@@ -103,27 +103,87 @@ def _results_dir(arg: str) -> Path:
     return found
 
 
+def _plan(campaign_file: str | Path, args: argparse.Namespace, runs: int | None):
+    from hil_sim.campaign.runner import build_plan
+    campaign = None
+    if args.duration is not None:
+        from hil_sim.campaign.spec import load_campaign
+        campaign = load_campaign(campaign_file).model_copy(update={"duration_s": args.duration})
+    return build_plan(campaign_file, mode=args.mode, runs=runs, campaign=campaign)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
-    from hil_sim.campaign.runner import (build_plan, default_out_dir, finalize, latest_out_dir, prepare_out_dir,
-                                         run_campaign)
+    from hil_sim.campaign.runner import default_out_dir, latest_out_dir
+    from hil_sim.campaign.suite import is_suite
     from hil_sim.yaml_loader import ConfigError
     console = _console()
     try:
-        campaign = None
-        if args.duration is not None:
-            from hil_sim.campaign.spec import load_campaign
-            campaign = load_campaign(args.campaign).model_copy(update={"duration_s": args.duration})
-        plan, base_path = build_plan(args.campaign, mode=args.mode, runs=args.runs, campaign=campaign)
+        if is_suite(args.campaign):
+            return _cmd_run_suite(args, console)
+        plan, base_path = _plan(args.campaign, args, args.runs)
     except (ConfigError, FileNotFoundError, ValueError) as exc:
         console.print(f"[red]campaign not started:[/red]\n{exc}")
         return 2
     out = args.out or (latest_out_dir(plan.campaign) if args.resume else None) or default_out_dir(plan.campaign)
+    results, interrupted = _fly(plan, base_path, args.campaign, out, args, console)
+    if results is None:
+        return 130
+    code = _print_results(console, results)
+    return 130 if interrupted else code
+
+
+def _cmd_run_suite(args: argparse.Namespace, console) -> int:
+    """A suite (hil_sim.campaign.suite): every member campaign into its folder, one verdict over all runs."""
+    from datetime import datetime, timezone
+
+    from hil_sim.campaign.suite import load_suite, run_suite, suite_text
+    suite = load_suite(args.campaign)
+    for member in suite.suite:  # every member refused before any flies (a bad member loses no hour of runs)
+        _plan(Path(args.campaign).resolve().parent / member.campaign, args, args.runs or member.runs)
+    if args.out is not None:
+        out = args.out
+    else:
+        found = sorted(Path("campaigns").glob(f"{suite.name}-*/suite.json")) if args.resume else []
+        out = found[-1].parent if found else Path("campaigns") / (
+            f"{suite.name}-{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%SZ')}")
+    interrupted = False
+
+    def member(campaign_file: Path, runs: int | None, folder: Path):
+        nonlocal interrupted
+        plan, base_path = _plan(campaign_file, args, args.runs or runs)
+        results, stopped = _fly(plan, base_path, campaign_file, folder, args, console)
+        if results is None or stopped:
+            interrupted = True
+            raise KeyboardInterrupt
+        console.print(results["verdict"].text())
+        return results
+
+    console.print(f"suite [bold]{suite.name}[/bold]: {len(suite.suite)} campaigns -> {out}")
+    try:
+        outcome = run_suite(args.campaign, out, member)
+    except KeyboardInterrupt:
+        console.print(f"[yellow]interrupted: finished runs kept in {out}; `keepout campaign run {args.campaign} "
+                      f"--out {out}` resumes[/yellow]")
+        return 130
+    total = outcome.verdict()
+    for m in outcome.members:
+        console.print(f"  {m.name}: {m.runs} runs, {m.failures} failed ({m.errors} errors), {m.wall_s:.0f} s")
+    colour = "[green]" if total.passed else ("[yellow]" if total.inconclusive else "[red]")
+    console.print(colour + suite_text(total))
+    console.print(f"results: {out / 'suite.json'}, {out / 'junit.xml'}")
+    return total.exit_code
+
+
+def _fly(plan, base_path: Path, campaign_file: str | Path, out: Path, args: argparse.Namespace, console):
+    """Run one campaign's plan into ``out`` and tabulate it: (results or None when interrupted while
+    tabulating, whether the runs were interrupted)."""
+    from hil_sim.campaign.runner import finalize, prepare_out_dir
     if args.scheduler:
         # before the output folder exists: a refused campaign leaves nothing behind (the ModuleNotFoundError
         # becomes one line with the pip command, hil_sim/cli.py)
         import distributed  # noqa: F401
     # the campaign file's absolute path, so `baseline save` finds its folder from anywhere
-    prepare_out_dir(out, plan, Path(args.campaign).resolve(), base_path)
+    prepare_out_dir(out, plan, Path(campaign_file).resolve(), base_path)
     where = f"Dask {args.scheduler}" if args.scheduler else f"{args.workers or 'all'} local workers"
     console.print(f"campaign [bold]{plan.campaign.name}[/bold]: {plan.campaign.runs} runs, mode {plan.mode}, "
                   f"{where} -> {out}")
@@ -132,14 +192,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         console.print(f"[yellow]interrupted: {len(outcome.records)} finished runs kept in {out}; "
                       f"`keepout campaign run {args.campaign} --out {out}` resumes[/yellow]")
     try:
-        results = finalize(plan, out, outcome.records, report=not args.no_report)
+        return finalize(plan, out, outcome.records, report=not args.no_report), outcome.interrupted
     except KeyboardInterrupt:
         # Ctrl-C after the last run, while tabulating: the runs' records are on disk, nothing is lost
         console.print(f"[yellow]interrupted while tabulating: {len(outcome.records)} finished runs kept in "
                       f"{out}; `keepout campaign report {out}` tabulates them[/yellow]")
-        return 130
-    code = _print_results(console, results)
-    return 130 if outcome.interrupted else code
+        return None, outcome.interrupted
 
 
 def _print_results(console, results) -> int:

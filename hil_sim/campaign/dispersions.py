@@ -28,7 +28,7 @@ from scipy.spatial.transform import Rotation
 
 from hil_sim.campaign.spec import (AttitudeDispersion, ChoiceDispersion, ClippedNormal, DirectionDispersion,
                                    Dispersion, EpochDispersion, InertiaDispersion, Normal, ScalarDispersion,
-                                   Uniform, VectorDispersion, WheelFailureDispersion)
+                                   Uniform, VectorDispersion, WheelFailureDispersion, FaultDispersion)
 
 Loc = tuple[str | int, ...]
 Params = dict[str, float]
@@ -261,6 +261,10 @@ def draw(disp: Dispersion, rng: np.random.Generator, nominal: Any) -> Params:
         if disp.fault_kinds:
             params.update({f"kind{i + 1}": float(rng.integers(len(disp.fault_kinds))) for i in range(disp.n_wheels)})
         return params
+    if isinstance(disp, FaultDispersion):
+        hit = rng.uniform() < disp.probability
+        index = int(rng.integers(len(disp.faults)))
+        return {"index": float(index if hit else -1), "start_s": sample_scalar(disp.start_s, rng)}
     raise DispersionError(f"unknown dispersion kind {type(disp).__name__}")
 
 
@@ -281,6 +285,8 @@ def nominal_params(disp: Dispersion, nominal: Any, drawn: Params) -> Params:
         return {"index": float(plain.index(nominal))} if nominal in plain else {"index": -1.0}
     if isinstance(disp, WheelFailureDispersion):
         return {**drawn, **{k: 0.0 for k in drawn if k.startswith("wheel")}}
+    if isinstance(disp, FaultDispersion):
+        return {**drawn, "index": -1.0}
     raise DispersionError(f"unknown dispersion kind {type(disp).__name__}")
 
 
@@ -290,6 +296,8 @@ def discrete_params(disp: Dispersion) -> set[str]:
         return {"index"}
     if isinstance(disp, WheelFailureDispersion):
         return {f"wheel{i + 1}" for i in range(disp.n_wheels)} | {f"kind{i + 1}" for i in range(disp.n_wheels)}
+    if isinstance(disp, FaultDispersion):
+        return {"index"}
     return set()
 
 
@@ -330,6 +338,19 @@ def realize(disp: Dispersion, params: Params, nominal: Any) -> Any:
                 kind, message = _wheel_fault(disp, params, i)
                 entries.append({"kind": kind, "message": message, "start_s": _wheel_start_s(params, i),
                                 "end_s": NEVER_ENDS_S})
+        return entries
+    if isinstance(disp, FaultDispersion):
+        entries = list(copy.deepcopy(nominal or []))
+        i = int(round(params["index"]))
+        if i >= 0:
+            f = disp.faults[i]
+            start = float(params["start_s"])
+            entry = {"kind": f.kind, "message": f.message, "start_s": start,
+                     "end_s": NEVER_ENDS_S if f.duration_s is None else start + f.duration_s}
+            entry.update({k: v for k, v in (("delay_s", f.delay_s), ("bit", f.bit)) if v is not None})
+            if f.probability < 1.0:
+                entry["probability"] = f.probability
+            entries.append(entry)
         return entries
     raise DispersionError(f"unknown dispersion kind {type(disp).__name__}")
 
@@ -373,6 +394,8 @@ def features(disp: Dispersion, params: Params) -> dict[str, float]:
             out[f"{disp.name}.last_start_s"] = starts[-1]
     elif isinstance(disp, EpochDispersion):
         out = {f"{disp.name}.offset_days": float(params["offset_s"]) / 86400.0}
+    elif isinstance(disp, FaultDispersion):
+        out = {f"{disp.name}.index": float(params["index"]), f"{disp.name}.start_s": float(params["start_s"])}
     return out
 
 
@@ -446,6 +469,12 @@ def _short(value: Any) -> str:
 # All dispersions of a run
 # ---------------------------------------------------------------------------------------------
 
+def appends(disp: Dispersion) -> bool:
+    """Whether ``disp`` appends to the list at its path (faults) rather than replacing the value there, so
+    that several such dispersions may share a path, each appending to what the earlier ones wrote."""
+    return isinstance(disp, (WheelFailureDispersion, FaultDispersion)) and not disp.also_paths
+
+
 def nominal_values(dispersions: Sequence[Dispersion], mission_model: Any) -> dict[str, Any]:
     """Nominal value at each dispersion's path, read from the validated base mission (defaults included).
     Raises DispersionError naming the dispersion when a path does not exist."""
@@ -462,7 +491,8 @@ def nominal_values(dispersions: Sequence[Dispersion], mission_model: Any) -> dic
             except DispersionError as exc:
                 raise DispersionError(f"dispersion '{disp.name}' also_paths: {exc}") from None
     paths = [p for d in dispersions for p in (d.path, *d.also_paths)]
-    dupes = sorted({p for p in paths if paths.count(p) > 1})
+    composed = {d.path for d in dispersions if appends(d)} - {d.path for d in dispersions if not appends(d)}
+    dupes = sorted({p for p in paths if paths.count(p) > 1} - composed)
     if dupes:
         raise DispersionError(f"several dispersions write the same path: {dupes}")
     return out

@@ -95,7 +95,9 @@ class Plan:
         """Value to write at each path (a dispersion's ``also_paths`` get the same value)."""
         out: dict[str, Any] = {}
         for d in self.campaign.dispersions:
-            value = dsp.realize(d, params[d.name], self.nominal[d.name])
+            # dispersions that append faults compose: each appends to what the earlier ones wrote
+            nominal = out.get(d.path, self.nominal[d.name]) if dsp.appends(d) else self.nominal[d.name]
+            value = dsp.realize(d, params[d.name], nominal)
             for path in (d.path, *d.also_paths):
                 out[path] = value
         return out

@@ -16,6 +16,7 @@ from typing import Annotated, Any, Literal, Union
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from fsw.dictionary import FDIR_MONITORS
+from hil_sim.faults import FAULT_KINDS
 from keepout_config import config_path
 
 SCHEMA_VERSION = 1
@@ -203,8 +204,32 @@ class WheelFailureDispersion(_Dispersion):
                                "expects no event (the wheel's command timeout and FDIR persistence take time) [s]")
 
 
+class FaultTemplate(_Model):
+    """A mission fault (see the mission's ``faults``) without its window: the dispersion draws the onset."""
+
+    kind: Literal[FAULT_KINDS] = Field(  # type: ignore[valid-type]
+        description="a mission fault kind (drop, delay, ..., door_stuck_open, wheel_stuck, ...)")
+    message: str = Field(description="DBC message, as in the mission's faults")
+    duration_s: float | None = Field(None, gt=0, description="window length [s]; omit: to the end of the run")
+    delay_s: float | None = Field(None, gt=0)
+    bit: int | None = Field(None, ge=0, le=63)
+    probability: float = Field(1.0, gt=0, le=1, description="per frame, as in the mission's faults")
+
+
+class FaultDispersion(_Dispersion):
+    """With probability ``probability``, one fault drawn uniformly from ``faults`` and appended to the list at
+    ``path`` (normally ``faults``, composed with the base mission's own), from an onset drawn from
+    ``start_s``: bus, sensor, door or wheel faults at any time of the run."""
+
+    kind: Literal["fault"]
+    faults: list[FaultTemplate] = Field(min_length=1)
+    probability: float = Field(1.0, gt=0, le=1, description="chance that a run gets a fault at all")
+    start_s: ScalarDistribution = Field(description="fault onset, simulated time [s]")
+
+
 Dispersion = Annotated[Union[ScalarDispersion, VectorDispersion, DirectionDispersion, AttitudeDispersion,
-                             InertiaDispersion, EpochDispersion, ChoiceDispersion, WheelFailureDispersion],
+                             InertiaDispersion, EpochDispersion, ChoiceDispersion, WheelFailureDispersion,
+                             FaultDispersion],
                        Field(discriminator="kind")]
 
 
