@@ -27,6 +27,7 @@ from typing import Any, Callable, Literal
 from pydantic import Field
 
 from hil_sim.campaign.spec import NAME_PATTERN, Verdict, _Model
+from keepout_config import config_path
 
 
 class SuiteMember(_Model):
@@ -44,6 +45,24 @@ class Suite(_Model):
     description: str = ""
     suite: list[SuiteMember] = Field(min_length=1)
     verdict: Verdict = Field(default_factory=Verdict)
+
+
+SUITE_SCHEMA_PATH = config_path("schema", "suite.schema.json")
+
+
+def suite_json_schema() -> dict[str, Any]:
+    """Draft-07 JSON Schema of a suite file (for editors, as the campaign schema)."""
+    from hil_sim.mission import DRAFT07, _draft07
+    raw = Suite.model_json_schema(ref_template="#/definitions/{model}")
+    definitions = raw.pop("$defs", {})
+    return {"$schema": DRAFT07, **_draft07(raw), "definitions": {k: _draft07(v) for k, v in sorted(definitions.items())}}
+
+
+def write_suite_schema(path: str | Path = SUITE_SCHEMA_PATH) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(suite_json_schema(), indent=2) + "\n", encoding="utf-8")
+    return path
 
 
 def is_suite(path: str | Path) -> bool:

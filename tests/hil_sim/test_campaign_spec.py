@@ -21,9 +21,21 @@ def test_committed_schema_is_the_generated_one():
         "regenerate: python -c 'from hil_sim.campaign.spec import write_json_schema; write_json_schema()'"
 
 
+def test_committed_suite_schema_is_the_generated_one():
+    from hil_sim.campaign.suite import SUITE_SCHEMA_PATH, suite_json_schema
+    assert json.loads(SUITE_SCHEMA_PATH.read_text()) == suite_json_schema(), \
+        "regenerate: python -c 'from hil_sim.campaign.suite import write_suite_schema; write_suite_schema()'"
+
+
 @pytest.mark.parametrize("path", CAMPAIGNS, ids=lambda p: p.name)
 def test_shipped_campaign_validates_and_builds(path):
+    from hil_sim.campaign.suite import SUITE_SCHEMA_PATH, is_suite, load_suite
     first = path.read_text().splitlines()[0]
+    if is_suite(path):  # a suite: its schema, and every member is a shipped campaign (tested here too)
+        assert first == "# yaml-language-server: $schema=../schema/suite.schema.json"
+        jsonschema.Draft7Validator(json.loads(SUITE_SCHEMA_PATH.read_text())).validate(yaml.safe_load(path.read_text()))
+        assert all((path.parent / m.campaign).resolve() in CAMPAIGNS for m in load_suite(path).suite)
+        return
     assert first == "# yaml-language-server: $schema=../schema/campaign.schema.json"
     jsonschema.Draft7Validator(json.loads(SCHEMA_PATH.read_text())).validate(yaml.safe_load(path.read_text()))
     plan, base = build_plan(path)  # every dispersion path exists and a dispersed mission validates
