@@ -564,6 +564,12 @@ class FlightSoftware:
                             "control three axes")
                 return True
             if not self._restore_silent_wheel(wheel):
+                # truly lost with too few left for three axes: out of the allocation all the same, so the
+                # rest give the least-squares torque (what they can of it) instead of a share sent to a dead
+                # wheel; the caller enters SAFE
+                ctl.restore(wheel, active=False)
+                self.wheel_residual.forget()
+                self._event("WHEEL_ISOLATED", wheel=wheel + 1)
                 return False
             second = False  # three usable wheels again: fly on
         self.wheel_residual.forget()

@@ -318,3 +318,29 @@ def test_a_burst_of_corrupt_frames_is_a_bus_fault_counted_and_reported_once_a_mi
     events = [e for e in loop.tm.recent_events if e.name == "BUS_CORRUPT"]
     assert [e.args["count"] for e in events] == [42, 40, 123]
     assert not [e for e in loop.tm.recent_events if e.name in ("WHEEL_FAULT", "WHEEL_ISOLATED")]
+
+
+def test_two_wheels_truly_lost_leave_the_allocation_and_the_rest_give_the_least_squares_torque(loop) -> None:
+    """A second wheel truly lost (not only its status) leaves too few for three axes: SAFE, and the dead
+    wheel is taken out of the allocation all the same, so the remaining two give the body torque's
+    least-squares part (what they can of it) instead of sending a share to a wheel that cannot act."""
+    import numpy as np
+
+    from fsw.fdir import FdirAction
+
+    fsw = loop.fsw
+    ctl = fsw.control
+    assert ctl.n == 4
+    fsw.fdir.wheel_fault_reasons[:] = ["drive fault"] * 4
+    fsw._execute(FdirAction("isolate_wheel", "WHEEL_FAULT", 0))
+    assert ctl.active.tolist() == [False, True, True, True]
+    fsw._execute(FdirAction("isolate_wheel", "WHEEL_FAULT", 2))
+    assert ctl.active.tolist() == [False, True, False, True] and fsw.guidance.mode == "SAFE"
+    torque = np.array([0.01, -0.02, 0.015])
+    G = ctl.G[:, [1, 3]]
+    tau = ctl.M @ torque
+    assert tau[0] == 0.0 and tau[2] == 0.0
+    best = np.linalg.lstsq(G, -torque, rcond=None)[0]  # the reaction of the two that are left
+    assert np.allclose(tau[[1, 3]], best)
+    isolated = [e.args["wheel"] for e in loop.tm.recent_events if e.name == "WHEEL_ISOLATED"]
+    assert isolated == [1, 3]
