@@ -42,6 +42,9 @@ REACHED_ERROR_DEG = 0.05
 REACHED_RATE_DEG_S = 0.01
 REACHED_DWELL_S = 5.0
 _CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
+# longest run of cycles [s] in which a wheel's status frames arrive only corrupt and the wheel still counts
+# as heard (a bus fault); past it nothing has been read from the wheel for that long: silence
+CORRUPT_STATUS_HEARD_S = 10.0
 # the E2E classes that housekeeping totals over the received messages
 _HK_CLASSES = ("ok", "ok_some_lost", "crc_error", "wrong_sequence", "repeated", "bad_length", "out_of_range", "timeout")
 _FDIR_HK_KEYS: dict[str, str] = {}  # FDIR monitor name -> its HK channel (fdir_<monitor>), filled as met
@@ -230,6 +233,15 @@ class FlightSoftware:
         self._imu_seen = False
         self._st_seen = False
         self._wheel_seen = np.zeros(self.n_wheels, dtype=np.bool_)
+        # wheels whose status frames arrive but fail E2E: heard, not silent (_heard_through_corruption)
+        self._wheel_status_msgs = [f"RW{i + 1}_STATUS" for i in range(self.n_wheels)]
+        self._wheel_corrupt_src: dict | None = None
+        self._wheel_corrupt_dicts: list = []
+        self._wheel_corrupt_seen: list[int] = []
+        self._wheel_corrupt_since = [math.nan] * self.n_wheels
+        self._wheel_corrupt_pairs: tuple[list, list] = ([], [])
+        self._wheel_corrupt_total = 0
+        self._wheel_corrupt_streak = False
         self.inject_overrun_s = 0.0  # test hook: busy-wait this long in the next GNC cycle
         self.last: CycleRecord | None = None
         self.mode_reason = "INIT"
@@ -432,6 +444,7 @@ class FlightSoftware:
             faults = np.array([w.fault if w is not None else -1 for w in wheels], dtype=np.int64)
         else:
             speeds, faults = wheel_arrays
+        faults = self._heard_through_corruption(faults)
 
         # ---- estimation (propagate across every IMU sample of the tick)
         est = self.estimator
@@ -516,6 +529,46 @@ class FlightSoftware:
         elif st_fresh and not self._st_was_valid:
             self._event("ST_RECOVERED", outage_s=self.t_s - self._st_outage_start)
         self._st_was_valid = st_fresh
+
+    def _heard_through_corruption(self, faults: np.ndarray) -> np.ndarray:
+        """Wheel fault flags with a wheel whose status frames arrived this cycle but failed E2E (CRC, length,
+        range, sequence) counted as heard, not silent (no flag, its speed unknown): corrupt frames are a bus
+        fault (BUS_CORRUPT), not a wheel's, and the wheel still obeys its commands. A streak of such cycles
+        longer than CORRUPT_STATUS_HEARD_S is silence after all (nothing has been read from it for that long)."""
+        counters = self.driver.counters
+        if counters is not self._wheel_corrupt_src:
+            self._wheel_corrupt_src = counters
+            self._wheel_corrupt_dicts = [counters.get(m) for m in self._wheel_status_msgs]
+            self._wheel_corrupt_seen = [self._status_rejections(d) for d in self._wheel_corrupt_dicts]
+            pairs = [(d, k) for d in self._wheel_corrupt_dicts if d is not None for k in _CORRUPT_CLASSES]
+            self._wheel_corrupt_pairs = ([d for d, _ in pairs], [k for _, k in pairs])
+            self._wheel_corrupt_total = sum(self._wheel_corrupt_seen)
+        # the usual cycle: no status frame rejected since the last one and no streak running (a C-level sum)
+        total = sum(map(dict.get, *self._wheel_corrupt_pairs, repeat(0)))
+        if total == self._wheel_corrupt_total and not self._wheel_corrupt_streak:
+            return faults
+        self._wheel_corrupt_total = total
+        out = faults
+        for i, d in enumerate(self._wheel_corrupt_dicts):
+            total = self._status_rejections(d)
+            rejected = total != self._wheel_corrupt_seen[i]
+            self._wheel_corrupt_seen[i] = total
+            if faults[i] >= 0 or not rejected:
+                self._wheel_corrupt_since[i] = math.nan
+                continue
+            self._wheel_corrupt_streak = True
+            if math.isnan(self._wheel_corrupt_since[i]):
+                self._wheel_corrupt_since[i] = self.t_s
+            if self.t_s - self._wheel_corrupt_since[i] <= CORRUPT_STATUS_HEARD_S:
+                if out is faults:
+                    out = np.array(faults, dtype=np.int64)
+                out[i] = 0
+        self._wheel_corrupt_streak = any(not math.isnan(t) for t in self._wheel_corrupt_since)
+        return out
+
+    @staticmethod
+    def _status_rejections(counts: dict | None) -> int:
+        return 0 if counts is None else sum(counts.get(k, 0) for k in _CORRUPT_CLASSES)
 
     def _corrupt_deltas(self) -> tuple[int, int]:
         """(IMU, star tracker) frames rejected by E2E since the last cycle."""
