@@ -22,6 +22,7 @@ _COMMAND_MODULES = (
     "hil_sim.init_cli",   # keepout init DIR
     "hil_sim.export_cli",  # keepout export RUN --format csv|mat|parquet
     "hil_sim.sky_cli",    # keepout sky MISSION --at T | --from T0 --to T1 --step S
+    "hil_sim.budget",     # keepout budget MISSION
 )
 
 def description_of(doc: str) -> str:

@@ -28,6 +28,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
+from hil_sim.orbit import orbit_position_row_N_km
 from hil_sim.params import SpacecraftParams
 
 # Rows of the per-wheel parameter array W[field, i, m].
@@ -38,9 +39,9 @@ MODE_HEALTHY, MODE_STUCK, MODE_NO_TORQUE = 0, 1, 2
 _MODE_CODES = {"none": MODE_HEALTHY, "stuck": MODE_STUCK, "no_torque": MODE_NO_TORQUE}
 
 # Rows of the per-run body array B[field, m]: inertia (9, row major), inverse of I_s (9), constant torque (3),
-# Gauss-Markov std (1) and correlation time (1).
-B_I, B_IS_INV, B_TAU_CONST, B_DIST_STD, B_DIST_TAU = 0, 9, 18, 21, 22
-B_FIELDS = 23
+# Gauss-Markov std (1) and correlation time (1), gravity gradient on (1.0) or off (0.0).
+B_I, B_IS_INV, B_TAU_CONST, B_DIST_STD, B_DIST_TAU, B_GG = 0, 9, 18, 21, 22, 23
+B_FIELDS = 24
 
 # Wheel status fault bits (wheel_status().fault)
 FAULT_STUCK = 1
@@ -77,6 +78,7 @@ def pack_spacecraft(params: Sequence[SpacecraftParams]) -> tuple[np.ndarray, np.
         B[B_TAU_CONST:B_TAU_CONST + 3, m] = p.disturbance.constant_B_Nm
         B[B_DIST_STD, m] = p.disturbance.random_std_Nm
         B[B_DIST_TAU, m] = p.disturbance.random_correlation_time_s
+        B[B_GG, m] = 1.0 if p.disturbance.gravity_gradient else 0.0
         X0[0:4, m] = p.q_NB0
         X0[4:7, m] = p.omega_BN_B0_rad_s
         update_free_inertia(G, W, B, m)
@@ -203,9 +205,46 @@ def step_coefficients(W: np.ndarray, B: np.ndarray, dt_sub: float) -> tuple[np.n
     return np.ascontiguousarray(decay), gm, has_coulomb
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _add_gravity_gradient(X, B, ORB, m, t_s, r, tau):
+    """tau[:, m] += the gravity-gradient torque on run m at t_s: 3 mu / |r|^3 (u x I u), u the unit vector
+    from the Earth's centre to the spacecraft in body axes (orbit row m of ORB, attitude X[0:4, m])."""
+    orbit_position_row_N_km(ORB, m, t_s, r)
+    rn2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    rn = math.sqrt(rn2)
+    coef = 3.0 * ORB[m, 13] / (rn2 * rn)  # mu [km^3/s^2] / r^3 [km^3]: 1/s^2, the units cancel
+    nx, ny, nz = r[0] / rn, r[1] / rn, r[2] / rn
+    q0, q1, q2, q3 = X[0, m], X[1, m], X[2, m], X[3, m]
+    # u_B = R(q)^T u_N, R(q) the rotation of body vectors into N (columns: the body axes in N)
+    ux = (1.0 - 2.0 * (q2 * q2 + q3 * q3)) * nx + 2.0 * (q1 * q2 + q0 * q3) * ny + 2.0 * (q1 * q3 - q0 * q2) * nz
+    uy = 2.0 * (q1 * q2 - q0 * q3) * nx + (1.0 - 2.0 * (q1 * q1 + q3 * q3)) * ny + 2.0 * (q2 * q3 + q0 * q1) * nz
+    uz = 2.0 * (q1 * q3 + q0 * q2) * nx + 2.0 * (q2 * q3 - q0 * q1) * ny + (1.0 - 2.0 * (q1 * q1 + q2 * q2)) * nz
+    jx = B[0, m] * ux + B[1, m] * uy + B[2, m] * uz
+    jy = B[3, m] * ux + B[4, m] * uy + B[5, m] * uz
+    jz = B[6, m] * ux + B[7, m] * uy + B[8, m] * uz
+    tau[0, m] += coef * (uy * jz - uz * jy)
+    tau[1, m] += coef * (uz * jx - ux * jz)
+    tau[2, m] += coef * (ux * jy - uy * jx)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _external(tau, tau_gg, x, B, ORB, t_s, rpos, any_gg):
+    """The external torque at one RK4 stage: ``tau`` (constant and random, held over the sub-step) alone, or
+    with ``any_gg`` that plus the gravity gradient of state ``x`` at ``t_s`` in ``tau_gg``."""
+    if not any_gg:
+        return tau
+    for m in range(tau.shape[1]):
+        tau_gg[0, m] = tau[0, m]
+        tau_gg[1, m] = tau[1, m]
+        tau_gg[2, m] = tau[2, m]
+        if B[B_GG, m] > 0.0:
+            _add_gravity_gradient(x, B, ORB, m, t_s, rpos, tau_gg)
+    return tau_gg
+
+
 @njit(cache=True, error_model="numpy")
 def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
-                        DECAY, GM, HAS_COULOMB, WORK):
+                        DECAY, GM, HAS_COULOMB, WORK, ORB, t0_s):
     """Advance every run by n_sub RK4 steps of dt_sub seconds, the torque command U_CMD[m] (M, N) held.
 
     X (7+N, M) state, updated in place; D (3, M) Gauss-Markov disturbance state (N m), updated;
@@ -213,7 +252,11 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
     disturbance (ignored where its std is 0); U_APPLIED (N, M) out: motor torque actually applied on the last
     sub-step; FLAGS (N, M) out: fault bits (stuck, no torque, speed limit, saturated); DECAY, GM, HAS_COULOMB
     from ``step_coefficients(W, B, dt_sub)``; WORK scratch of ``work_shape(N, M)`` (kept by the caller so a
-    100 Hz step does not allocate). Returns False, having changed nothing, if a command is NaN or infinite.
+    100 Hz step does not allocate). ORB: the runs' packed orbits (hil_sim.orbit) and t0_s the time at the
+    start of the step, for the gravity-gradient torque of the runs that have it on (B[B_GG]): evaluated at
+    every RK4 stage from the stage's attitude and orbit position (the constant and random torques are held
+    over the sub-step). Returns False,
+    having changed nothing, if a command is NaN or infinite.
     """
     K, M = X.shape
     N = G.shape[0]
@@ -238,9 +281,14 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
     if nan_if_bad != 0.0 or not math.isfinite(nan_if_bad):
         return False
     any_random = False
+    any_gg = False
     for m in range(M):
         if GM[1, m] > 0.0:
             any_random = True
+        if B[B_GG, m] > 0.0:
+            any_gg = True
+    rpos = np.empty(3)
+    tau_gg = np.empty((3, M) if any_gg else (3, 0))
     for s in range(n_sub):
         _wheel_electronics(X, u_cmd, W, u_motor, U_APPLIED, FLAGS)
         if any_random:
@@ -250,13 +298,18 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
         for j in range(3):
             for m in range(M):
                 tau[j, m] = B[B_TAU_CONST + j, m] + D[j, m]
-        _derivative(X, u_motor, tau, G, W, B, HAS_COULOMB, k1, h, r, u_net)
+        t_s = t0_s + s * dt_sub
+        _derivative(X, u_motor, _external(tau, tau_gg, X, B, ORB, t_s, rpos, any_gg), G, W, B, HAS_COULOMB, k1,
+                    h, r, u_net)
         _axpy(xt, X, 0.5 * dt_sub, k1)
-        _derivative(xt, u_motor, tau, G, W, B, HAS_COULOMB, k2, h, r, u_net)
+        _derivative(xt, u_motor, _external(tau, tau_gg, xt, B, ORB, t_s + 0.5 * dt_sub, rpos, any_gg), G, W, B,
+                    HAS_COULOMB, k2, h, r, u_net)
         _axpy(xt, X, 0.5 * dt_sub, k2)
-        _derivative(xt, u_motor, tau, G, W, B, HAS_COULOMB, k3, h, r, u_net)
+        _derivative(xt, u_motor, _external(tau, tau_gg, xt, B, ORB, t_s + 0.5 * dt_sub, rpos, any_gg), G, W, B,
+                    HAS_COULOMB, k3, h, r, u_net)
         _axpy(xt, X, dt_sub, k3)
-        _derivative(xt, u_motor, tau, G, W, B, HAS_COULOMB, k4, h, r, u_net)
+        _derivative(xt, u_motor, _external(tau, tau_gg, xt, B, ORB, t_s + dt_sub, rpos, any_gg), G, W, B,
+                    HAS_COULOMB, k4, h, r, u_net)
         c = dt_sub / 6.0
         for j in range(K):
             for m in range(M):

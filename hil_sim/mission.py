@@ -139,6 +139,8 @@ class Disturbance(_Model):
     random_std_Nm: float = Field(0.0, ge=0, le=1, description="stationary 1-sigma of the random part [N m]")
     random_correlation_time_s: float = Field(60.0, ge=0, le=1e6, description="its correlation time [s] "
                                              "(0: white, redrawn every integration step)")
+    gravity_gradient: bool = Field(False, description="add the gravity-gradient torque 3 mu / r^3 (u x I u) from the "
+                                   "orbit and the true inertia (u: the Earth-to-spacecraft direction in body axes)")
 
 
 class DoorTruth(_Model):
@@ -546,7 +548,8 @@ def world_params(mission: Mission) -> "WorldParams":
         inertia_B_kgm2=tuple(tuple(row) for row in sc.inertia_B_kgm2), wheels=wheels,
         disturbance=DisturbanceParams(constant_B_Nm=tuple(sc.disturbance.constant_B_Nm),
                                       random_std_Nm=sc.disturbance.random_std_Nm,
-                                      random_correlation_time_s=sc.disturbance.random_correlation_time_s),
+                                      random_correlation_time_s=sc.disturbance.random_correlation_time_s,
+                                      gravity_gradient=sc.disturbance.gravity_gradient),
         q_NB0=tuple(mission.initial_state.q_NB), omega_BN_B0_rad_s=tuple(mission.initial_state.omega_BN_B_rad_s))
     imu = sc.imu
     st = sc.star_tracker

@@ -67,6 +67,16 @@ The truth (`spacecraft`, `orbit`, `epoch_utc`) is written once: the flight softw
 `flight_software` takes the same values unless the file gives it other ones (an imperfect knowledge), and
 a campaign's dispersions change the truth alone.
 
+Environment torques: `spacecraft.disturbance` holds a constant torque, a random (Gauss-Markov) torque and,
+with `gravity_gradient: true`, the gravity-gradient torque 3 mu / r^3 (u x I u) from the orbit and the true
+inertia, evaluated at every integration stage (it agrees with Basilisk 2.12's GravityGradientEffector to
+5e-13 rad over an orbit: `tests/hil_sim/test_gravity_gradient.py`). Off by default: missions without it fly
+exactly as before. `keepout budget FILE` prints the disturbance and momentum budget per effect over one
+orbit and one day, attitude held inertially at the initial one: the peak torque, the momentum accumulated
+per body axis, the largest it gets and the worst wheel's speed when the wheels absorb it (`--json FILE`
+writes the rows). Solar radiation pressure, drag and a magnetic dipole are not in the truth models yet; the
+budget says so.
+
 In the tables, *required* means the key has no default; a range `(a, b]` excludes a and includes b.
 """
 

@@ -118,6 +118,7 @@ class DisturbanceParams:
     random_std_Nm: float = 0.0
     random_correlation_time_s: float = 60.0
     seed: int | None = None
+    gravity_gradient: bool = False  # 3 mu / r^3 (u x I u) from the orbit and the true inertia
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "constant_B_Nm", _vec(self.constant_B_Nm, 3, "disturbance.constant_B_Nm"))

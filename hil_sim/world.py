@@ -110,7 +110,7 @@ def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
     """Step all runs (dynamics), then their orbit positions and Sun/Moon/Earth directions at t_end_s.
     Returns False (and changes nothing) if any torque command is NaN or infinite."""
     if not dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
-                                   DECAY, GM, HAS_COULOMB, WORK):
+                                   DECAY, GM, HAS_COULOMB, WORK, ORB, t_end_s - n_sub * dt_sub):
         return False
     _aux_at(t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX)
     return True
@@ -164,7 +164,7 @@ def _world_period_kernel(X, D, TEMP, G, W, B, U_SEQ, NORMALS_SEQ, dt_sub, n_sub,
     i_imu = i_st = 0
     for j in range(J):
         if not dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_SEQ[j], NORMALS_SEQ[j], dt_sub, n_sub, U_APPLIED,
-                                       FLAGS, DECAY, GM, HAS_COULOMB, WORK):
+                                       FLAGS, DECAY, GM, HAS_COULOMB, WORK, ORB, CLOCK[0] if j == 0 else T_END[j - 1]):
             if j > 0 and aux_step != j - 1:
                 _aux_at(T_END[j - 1], ORB, sun_c, moon_c, eph_t0, eph_h, AUX)
             return j

@@ -1,0 +1,62 @@
+"""`keepout budget`: the momentum budget per effect, with the simulator's own torques."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from hil_sim import dynamics as dyn
+from hil_sim.budget import _gravity_gradient_torques, budget
+from hil_sim.cli import main
+from hil_sim.mission import Mission, world_params
+from hil_sim.orbit import orbit_elements_array
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _smallsat(gravity_gradient: bool) -> dict:
+    data = yaml.safe_load((ROOT / "config" / "missions" / "smallsat-example.yaml").read_text())
+    data["spacecraft"]["disturbance"]["gravity_gradient"] = gravity_gradient
+    data["spacecraft"]["inertia_B_kgm2"] = [[0.28, 0.01, 0.0], [0.01, 0.30, 0.0], [0.0, 0.0, 0.17]]
+    return data
+
+
+def test_the_constant_torque_row_is_torque_times_time_and_its_wheel_speed() -> None:
+    mission = Mission.model_validate(_smallsat(False))
+    rows = {(r.effect, r.span): r for r in budget(mission)}
+    assert not any(effect == "gravity gradient" for effect, _ in rows)  # off: no row
+    day = rows[("constant torque", "day")]
+    tau = np.asarray(mission.spacecraft.disturbance.constant_B_Nm)
+    np.testing.assert_allclose(day.momentum_end_B_Nms, tau * 86_400.0, rtol=1e-12)
+    G = np.array([w.axis_B for w in mission.spacecraft.wheels]).T
+    speeds = np.linalg.pinv(G) @ (tau * 86_400.0) / np.array([w.spin_inertia_kgm2 for w in mission.spacecraft.wheels])
+    limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
+    assert math.isclose(day.wheel_speed_fraction, float(np.max(np.abs(speeds) / limits)), rel_tol=1e-9)
+
+
+def test_the_gravity_gradient_is_the_simulators_own_torque() -> None:
+    mission = Mission.model_validate(_smallsat(True))
+    wp = world_params(mission)
+    t = np.array([0.0, 1234.5, 4000.0])
+    budget_tau = _gravity_gradient_torques(mission, t)
+    G, W, B, X = dyn.pack_spacecraft([wp.spacecraft])
+    ORB = orbit_elements_array(wp.orbit)[None, :]
+    for k, tk in enumerate(t.tolist()):
+        tau = np.zeros((3, 1))
+        dyn._add_gravity_gradient(X, B, ORB, 0, tk, np.empty(3), tau)
+        np.testing.assert_allclose(budget_tau[k], tau[:, 0], rtol=1e-12, atol=1e-20)
+    assert np.max(np.abs(budget_tau)) > 1e-9  # an inertia with products: a torque to see
+
+
+def test_budget_command_prints_the_table_and_writes_json(tmp_path, capsys) -> None:
+    path = tmp_path / "gg.yaml"
+    path.write_text(yaml.safe_dump(_smallsat(True), sort_keys=False))
+    assert main(["budget", str(path), "--json", str(tmp_path / "b.json")]) == 0
+    out = capsys.readouterr().out
+    assert "gravity" in out and "not in the truth models yet" in out
+    record = json.loads((tmp_path / "b.json").read_text())
+    assert {r["effect"] for r in record["rows"]} >= {"constant torque", "gravity gradient", "total (deterministic)"}
+    assert main(["budget", str(tmp_path / "missing.yaml")]) == 2
