@@ -142,15 +142,10 @@ def test_every_wheel_lost_mid_slew_the_door_keeps_the_exposure_at_zero() -> None
     assert doored["door_closes"] >= 1
 
 
-def test_a_door_stuck_open_is_reported_and_its_exposure_judged() -> None:
+def _fly_with_events(mission, seed: int) -> tuple[dict, list]:
+    """A fast-mode run's metrics and every event its flight software raised, as (name, arguments)."""
     from hil_sim.campaign import fast
 
-    mission = _wheels_lost("demo-pointing-door")
-    # the door jams open at 30 s, before the wheels are lost: the flight software commands it shut and
-    # reports the stall; the exposure is what it is without a door
-    stuck = mission.faults[0].model_copy(update={"kind": "door_stuck_open", "message": "DOOR_STATUS",
-                                                 "start_s": 30.0, "end_s": 600.0})
-    mission = mission.model_copy(update={"faults": [stuck, *mission.faults]})
     events: list = []
     recorder = fast._EventRecorder.event
 
@@ -160,9 +155,21 @@ def test_a_door_stuck_open_is_reported_and_its_exposure_judged() -> None:
 
     fast._EventRecorder.event = keep
     try:
-        metrics = fast.run_fast(mission, 20260425).metrics
+        return fast.run_fast(mission, seed).metrics, events
     finally:
         fast._EventRecorder.event = recorder
+
+
+def test_a_door_stuck_open_is_reported_and_its_exposure_judged() -> None:
+    from hil_sim.campaign import fast
+
+    mission = _wheels_lost("demo-pointing-door")
+    # the door jams open at 30 s, before the wheels are lost: the flight software commands it shut and
+    # reports the stall; the exposure is what it is without a door
+    stuck = mission.faults[0].model_copy(update={"kind": "door_stuck_open", "message": "DOOR_STATUS",
+                                                 "start_s": 30.0, "end_s": 600.0})
+    mission = mission.model_copy(update={"faults": [stuck, *mission.faults]})
+    metrics, events = _fly_with_events(mission, 20260425)
     bare = fast.run_fast(_wheels_lost("demo-pointing"), 20260425).metrics
     assert metrics["door_closes"] >= 1
     assert {"fault": "STALLED"} in [{"fault": a["fault"]} for n, a in events if n == "DOOR_FAULT"]
@@ -195,8 +202,6 @@ def test_sil_run_shuts_the_door_over_the_bus(tmp_path: Path) -> None:
 
 
 def test_in_quaternion_mode_the_door_watches_the_sky_zones() -> None:
-    from hil_sim.campaign import fast
-
     data = _mission_data("demo-quaternion")
     data["duration_s"] = 30.0
     data["timeline"] = [e for e in data["timeline"] if e["t_s"] <= 30.0]
@@ -204,18 +209,7 @@ def test_in_quaternion_mode_the_door_watches_the_sky_zones() -> None:
     data["flight_software"].setdefault("pointing", {})["zones"] = [
         {"name": "sun", "body": "sun", "geometry": {"shape": "cone", "half_angle_deg": 30.0}}]
     mission = load_mission("m.yaml", text=yaml.safe_dump(data))
-    events: list = []
-    recorder = fast._EventRecorder.event
-
-    def keep(self, name, /, time_s=None, **args):
-        events.append((name, args))
-        return recorder(self, name, time_s=time_s, **args)
-
-    fast._EventRecorder.event = keep
-    try:
-        metrics = fast.run_fast(mission, 1).metrics
-    finally:
-        fast._EventRecorder.event = recorder
+    metrics, events = _fly_with_events(mission, 1)
     # the attitude zones are the guidance's margins there; the door opened on the boresight's sky margin
     opening = [a for n, a in events if n == "DOOR_OPENING"]
     assert len(opening) == 1 and opening[0]["margin_deg"] == pytest.approx(metrics["margin_sun_deg"], abs=3.0)
