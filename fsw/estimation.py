@@ -372,6 +372,9 @@ def star_tracker_noise_B(cfg, q_BS: np.ndarray) -> np.ndarray:
 
 
 _NO_SAMPLES = np.zeros((0, 3))
+_CONJUGATE = np.array([1.0, -1.0, -1.0, -1.0])
+# low-pass time constant of the rate taken from star-tracker fixes while the gyro is silent [s]
+GYROLESS_TAU_S = 1.0
 _NO_QUATERNION = np.array([1.0, 0.0, 0.0, 0.0])
 
 
@@ -414,6 +417,7 @@ class AttitudeEstimator:
         # the last gyro sample, start of the next interval (`_prev_sample`): overwritten by the compiled cycle
         self._prev_buf = np.full(3, np.nan)
         self._has_prev = False
+        self._fix_prev: np.ndarray | None = None  # the last fused attitude of a cycle without gyro samples
 
     @property
     def _prev_sample(self) -> np.ndarray | None:
@@ -487,9 +491,37 @@ class AttitudeEstimator:
             self.q_SB, self.R_st_B, P0, self._consts, dt_s, st_latency_s, q_norm, self._has_prev, self.initialized, has_st)
         self._has_prev = samples.shape[0] > 0
         self.star_tracker_used = used
+        if samples.shape[0] == 0:
+            self._gyroless_rate(dt_s, used)
+        else:
+            self._fix_prev = None
         self.coasting_s = 0.0 if used else self.coasting_s + dt_s
         self.last_innovation_deg = innov_deg
         return innov_deg
+
+    def _gyroless_rate(self, dt_s: float, used: bool) -> None:
+        """A cycle without a gyro sample: the rate estimate follows the change of the attitude between two
+        consecutive fused star-tracker fixes, low-passed over GYROLESS_TAU_S (the tracker's noise,
+        differentiated at 10 Hz, is ~0.2 deg/s about its boresight). Held as it was, the last rate went on
+        steering the rate loop for the whole outage: SAFE damped a rate that was no longer there and spun
+        the body up to several times its limit (a 30 s IMU silence in the release campaign). Without a fix
+        either, the rate is held, as before."""
+        if not (used and self.initialized):
+            self._fix_prev = None
+            return
+        prev, self._fix_prev = self._fix_prev, self.q_NB.copy()
+        if prev is None:
+            return
+        # q_NB(t + dt) = q_NB(t) (x) dq with dq the body's rotation over dt: dq = conj(q_prev) (x) q_now
+        dq = quat_multiply_nb(prev * _CONJUGATE, np.ascontiguousarray(self.q_NB))
+        if dq[0] < 0.0:
+            dq = -dq
+        v = dq[1:]
+        sin_half = float(np.linalg.norm(v))
+        if sin_half > 0.0:
+            rate = (2.0 * math.atan2(sin_half, float(dq[0])) / (sin_half * dt_s)) * v
+            a = dt_s / (GYROLESS_TAU_S + dt_s)
+            self.omega_BN_B = self.omega_BN_B + a * (rate - self.omega_BN_B)
 
     def _attitude_trace(self) -> float:
         # = float(np.trace(self.P[0:3, 0:3])) (same summation order), without numpy's call overhead

@@ -300,6 +300,12 @@ def _numpy_cycle(est, dt_s, samples, q_NS, st_latency_s):
         np.ascontiguousarray(est.q_SB, dtype=float), float(st_latency_s), est.cfg.star_tracker_max_age_s,
         est.cfg.innovation_gate_deg, est.R_st_B, P0)
     est.coasting_s = 0.0 if used else est.coasting_s + dt_s
+    # the gyro-less rate (`AttitudeEstimator._gyroless_rate`) is Python after the compiled cycle, the same
+    # code on both sides: what this compares is the cycle
+    if n == 0:
+        est._gyroless_rate(dt_s, used)
+    else:
+        est._fix_prev = None
     return used, rejected, innov_deg
 
 
@@ -408,3 +414,21 @@ def test_estimator_tick_is_estimator_cycle_in_place() -> None:
         if k == 200:  # forget the attitude: the next fix initialises again
             initialized = False
     assert kinds == {"used", "rejected", "coast"}, kinds
+
+
+def test_without_gyro_the_rate_follows_the_star_tracker_fixes() -> None:
+    """No gyro sample, a fused fix every cycle: the rate estimate converges to the body's true rate (low-pass
+    of the attitude's change between fixes), instead of staying at its last value."""
+    from fsw.estimation import GYROLESS_TAU_S
+
+    cfg = EstimatorConfig(gyro_arw_rad_s_sqrt_hz=1e-4, gyro_bias_rw_rad_s2_sqrt_hz=1e-6, star_tracker_sigma_arcsec=1.0)
+    q_BS = np.array([1.0, 0.0, 0.0, 0.0])
+    est = AttitudeEstimator(cfg, q_BS)
+    w_true = np.array([0.004, -0.002, 0.003])
+    rot = Rotation.identity()
+    est.step(0.1, w_true, np.roll(rot.as_quat(), 1))  # initialised with a gyro
+    est.omega_BN_B = np.array([0.02, 0.0, 0.0])  # a stale rate, as at the start of an outage
+    for _ in range(int(10 * GYROLESS_TAU_S / 0.1)):
+        rot = rot * Rotation.from_rotvec(w_true * 0.1)
+        est.step(0.1, None, np.roll(rot.as_quat(), 1))
+    np.testing.assert_allclose(est.omega_BN_B, w_true, atol=2e-4)
