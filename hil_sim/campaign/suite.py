@@ -131,7 +131,7 @@ def run_suite(path: str | Path, out: Path, run_member: RunMember) -> SuiteOutcom
     (out / "suite.json").write_text(json.dumps({
         "suite": suite.name, "verdict": total.word, "text": text, "runs": total.runs,
         "failures": total.failures, "errors": total.errors, "success_lower_bound": total.success_lower_bound,
-        "members": [{"campaign": m.name, "folder": str(m.folder), "runs": m.runs, "failures": m.failures,
+        "members": [{"campaign": m.name, "folder": m.folder.name, "runs": m.runs, "failures": m.failures,
                      "errors": m.errors, "wall_s": round(m.wall_s, 1), "verdict": m.verdict_text}
                     for m in outcome.members]}, indent=1) + "\n", encoding="utf-8")
     _merged_junit(suite, junits, total, out / "junit.xml")
