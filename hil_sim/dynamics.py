@@ -187,7 +187,7 @@ def _wheel_electronics(X, u_cmd, W, u_motor, U_APPLIED, FLAGS):
 
 def work_shape(n_wheels: int, n_runs: int) -> tuple[int, int]:
     """Shape of the scratch array ``dynamics_step_batch`` needs."""
-    return 5 * (7 + n_wheels) + 9 + 3 * n_wheels, n_runs
+    return 5 * (7 + n_wheels) + 9 + 3 * n_wheels + 6, n_runs
 
 
 def step_coefficients(W: np.ndarray, B: np.ndarray, dt_sub: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -228,18 +228,15 @@ def _add_gravity_gradient(X, B, ORB, m, t_s, r, tau):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _external(tau, tau_gg, x, B, ORB, t_s, rpos, any_gg):
-    """The external torque at one RK4 stage: ``tau`` (constant and random, held over the sub-step) alone, or
-    with ``any_gg`` that plus the gravity gradient of state ``x`` at ``t_s`` in ``tau_gg``."""
-    if not any_gg:
-        return tau
+def _with_gravity_gradient(tau, tau_gg, x, B, ORB, t_s, rpos):
+    """tau_gg = ``tau`` (constant and random, held over the sub-step) plus, for the runs that have it on, the
+    gravity gradient of state ``x`` at ``t_s``: the external torque at one RK4 stage."""
     for m in range(tau.shape[1]):
         tau_gg[0, m] = tau[0, m]
         tau_gg[1, m] = tau[1, m]
         tau_gg[2, m] = tau[2, m]
         if B[B_GG, m] > 0.0:
             _add_gravity_gradient(x, B, ORB, m, t_s, rpos, tau_gg)
-    return tau_gg
 
 
 @njit(cache=True, error_model="numpy")
@@ -273,6 +270,8 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
     u_net = WORK[o:o + N]
     u_motor = WORK[o + N:o + 2 * N]
     u_cmd = WORK[o + 2 * N:o + 3 * N]  # the command is held: transpose it once, not every sub-step
+    tau_gg = WORK[o + 3 * N:o + 3 * N + 3]  # a stage's external torque with the gravity gradient
+    rpos = WORK[o + 3 * N + 3:o + 3 * N + 6, 0]  # the orbit position of one run (scratch; no allocation per call)
     nan_if_bad = 0.0  # x * 0 is 0 for finite x and NaN for NaN or inf: one branch-free pass checks them all
     for i in range(N):
         for m in range(M):
@@ -287,8 +286,7 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
             any_random = True
         if B[B_GG, m] > 0.0:
             any_gg = True
-    rpos = np.empty(3)
-    tau_gg = np.empty((3, M) if any_gg else (3, 0))
+    ext = tau_gg if any_gg else tau  # the stages' external torque (one choice a call, none a stage)
     for s in range(n_sub):
         _wheel_electronics(X, u_cmd, W, u_motor, U_APPLIED, FLAGS)
         if any_random:
@@ -299,17 +297,21 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
             for m in range(M):
                 tau[j, m] = B[B_TAU_CONST + j, m] + D[j, m]
         t_s = t0_s + s * dt_sub
-        _derivative(X, u_motor, _external(tau, tau_gg, X, B, ORB, t_s, rpos, any_gg), G, W, B, HAS_COULOMB, k1,
-                    h, r, u_net)
+        if any_gg:
+            _with_gravity_gradient(tau, ext, X, B, ORB, t_s, rpos)
+        _derivative(X, u_motor, ext, G, W, B, HAS_COULOMB, k1, h, r, u_net)
         _axpy(xt, X, 0.5 * dt_sub, k1)
-        _derivative(xt, u_motor, _external(tau, tau_gg, xt, B, ORB, t_s + 0.5 * dt_sub, rpos, any_gg), G, W, B,
-                    HAS_COULOMB, k2, h, r, u_net)
+        if any_gg:
+            _with_gravity_gradient(tau, ext, xt, B, ORB, t_s + 0.5 * dt_sub, rpos)
+        _derivative(xt, u_motor, ext, G, W, B, HAS_COULOMB, k2, h, r, u_net)
         _axpy(xt, X, 0.5 * dt_sub, k2)
-        _derivative(xt, u_motor, _external(tau, tau_gg, xt, B, ORB, t_s + 0.5 * dt_sub, rpos, any_gg), G, W, B,
-                    HAS_COULOMB, k3, h, r, u_net)
+        if any_gg:
+            _with_gravity_gradient(tau, ext, xt, B, ORB, t_s + 0.5 * dt_sub, rpos)
+        _derivative(xt, u_motor, ext, G, W, B, HAS_COULOMB, k3, h, r, u_net)
         _axpy(xt, X, dt_sub, k3)
-        _derivative(xt, u_motor, _external(tau, tau_gg, xt, B, ORB, t_s + dt_sub, rpos, any_gg), G, W, B,
-                    HAS_COULOMB, k4, h, r, u_net)
+        if any_gg:
+            _with_gravity_gradient(tau, ext, xt, B, ORB, t_s + dt_sub, rpos)
+        _derivative(xt, u_motor, ext, G, W, B, HAS_COULOMB, k4, h, r, u_net)
         c = dt_sub / 6.0
         for j in range(K):
             for m in range(M):
