@@ -51,7 +51,8 @@ DOOR_FAULT_KINDS = ("door_stuck_open", "door_stuck_closed", "door_slow")
 WHEEL_FAULT_MODES = {"wheel_stuck": "stuck", "wheel_no_torque": "no_torque"}
 FAULT_KINDS = FRAME_FAULT_KINDS + DOOR_FAULT_KINDS + tuple(WHEEL_FAULT_MODES)
 DOOR_MESSAGES = ("DOOR_CMD", "DOOR_STATUS")
-_WHEEL_MESSAGE = re.compile(r"RW([1-6])_(CMD|STATUS)")
+# a wheel named by its command or status frame (group 1: the 1-based wheel, group 2: CMD or STATUS)
+WHEEL_MESSAGE = re.compile(r"RW([1-6])_(CMD|STATUS)")
 
 
 @dataclass(frozen=True)
@@ -110,7 +111,7 @@ class WheelFailures:
         for f in (FaultSpec.from_any(f) for f in faults):
             if f.kind not in WHEEL_FAULT_MODES:
                 continue
-            match = _WHEEL_MESSAGE.fullmatch(f.message)
+            match = WHEEL_MESSAGE.fullmatch(f.message)
             if match is None:
                 raise ValueError(f"fault {f.kind} on {f.message!r}: name the wheel by its RWn_CMD or RWn_STATUS message")
             pending.append((f.start_s, int(match.group(1)) - 1, WHEEL_FAULT_MODES[f.kind], f))

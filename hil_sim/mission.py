@@ -13,7 +13,6 @@ components. Every physical key carries its unit in its name (``_deg``, ``_s``, `
 from __future__ import annotations
 
 import math
-import re
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
@@ -23,6 +22,7 @@ from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field,
 
 from fsw.config import KNOWLEDGE_SOURCES, FswConfig
 from fsw.dictionary import FDIR_MONITORS
+from hil_sim.faults import DOOR_MESSAGES, WHEEL_MESSAGE
 from hil_sim.mission_docs import SUFFIX_UNITS
 from keepout_config import config_path
 
@@ -435,16 +435,17 @@ class Mission(_Model):
                 if self.spacecraft.door is None:
                     out.append((("faults", i, "kind"), f"{fault.kind}: the spacecraft has no door "
                                 "(spacecraft.door)"))
-                if fault.message not in ("DOOR_CMD", "DOOR_STATUS"):
+                if fault.message not in DOOR_MESSAGES:
                     out.append((("faults", i, "message"), f"{fault.message}: a door failure names a door frame, "
                                 "DOOR_STATUS or DOOR_CMD"))
                 if fault.kind == "door_slow" and fault.delay_s is None:
                     out.append((("faults", i), "kind 'door_slow' needs delay_s (the extra stroke time)"))
-            elif fault.message in ("DOOR_CMD", "DOOR_STATUS") and self.spacecraft.door is None:
+            elif fault.message in DOOR_MESSAGES and self.spacecraft.door is None:
                 out.append((("faults", i, "message"), f"{fault.message}: the spacecraft has no door "
                             "(spacecraft.door)"))
-            if re.fullmatch(r"RW([1-6])_(CMD|STATUS)", fault.message):
-                wheel = int(fault.message[2])
+            wheel_message = WHEEL_MESSAGE.fullmatch(fault.message)
+            if wheel_message:
+                wheel = int(wheel_message.group(1))
                 if wheel > n_wheels:
                     out.append((("faults", i, "message"), f"{fault.message}: the spacecraft has only "
                                 f"{n_wheels} wheels"))

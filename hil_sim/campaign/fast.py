@@ -18,13 +18,13 @@ from __future__ import annotations
 import itertools
 import math
 import os
-import re
 from typing import Any, Sequence
 
 import numpy as np
 
 from hil_sim.campaign import dispersions as dsp
 from hil_sim.campaign.execute import MAX_TRAJECTORY_POINTS, RunResult
+from hil_sim.faults import WHEEL_FAULT_MODES, WHEEL_MESSAGE
 
 _channel_ids = itertools.count()
 
@@ -291,11 +291,11 @@ def wheels_lost(mission, end_s: float) -> set[int]:
     A wheel whose only fault is its status (drop or silent on RWn_STATUS) still obeys and is not lost."""
     lost = {i for i, w in enumerate(mission.spacecraft.wheels) if w.failure != "none"}
     for f in mission.faults:
-        match = re.fullmatch(r"RW([1-6])_(CMD|STATUS)", f.message)
+        match = WHEEL_MESSAGE.fullmatch(f.message)
         if match is None or f.start_s > end_s:
             continue
         wheel = int(match.group(1)) - 1
-        if f.kind in ("wheel_stuck", "wheel_no_torque"):
+        if f.kind in WHEEL_FAULT_MODES:
             lost.add(wheel)
         elif f.kind == "drop" and match.group(2) == "CMD" and f.probability >= 1.0 and f.end_s >= end_s:
             lost.add(wheel)
