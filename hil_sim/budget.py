@@ -43,24 +43,23 @@ class Row:
 
 
 def _gravity_gradient_torques(mission, t: np.ndarray) -> np.ndarray:
-    """(len(t), 3) gravity-gradient torque [N m] in body axes at times ``t``, attitude held at the initial one."""
+    """(len(t), 3) gravity-gradient torque [N m] in body axes at times ``t``, attitude held at the initial one:
+    the simulator's own kernel (`hil_sim.dynamics._add_gravity_gradient`) on the mission's packed spacecraft."""
+    from hil_sim import dynamics as dyn
     from hil_sim.mission import world_params
-    from hil_sim.orbit import orbit_elements_array, orbit_position_N_km
+    from hil_sim.orbit import orbit_elements_array
 
     wp = world_params(mission)
-    elements = orbit_elements_array(wp.orbit)
-    J = np.asarray(wp.spacecraft.inertia_B_kgm2, dtype=float)
-    q0, q1, q2, q3 = wp.spacecraft.q_NB0
-    R = np.array([[1 - 2 * (q2 * q2 + q3 * q3), 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
-                  [2 * (q1 * q2 + q0 * q3), 1 - 2 * (q1 * q1 + q3 * q3), 2 * (q2 * q3 - q0 * q1)],
-                  [2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2)]])  # body -> N
+    _, _, B, X = dyn.pack_spacecraft([wp.spacecraft])
+    B[dyn.B_GG] = 1.0
+    orbit = orbit_elements_array(wp.orbit)[None, :]
     r = np.empty(3)
+    tau = np.zeros((3, 1))
     out = np.empty((t.size, 3))
     for k, tk in enumerate(t.tolist()):
-        orbit_position_N_km(elements, tk, r)
-        rn = float(np.linalg.norm(r))
-        u = R.T @ (r / rn)
-        out[k] = 3.0 * wp.orbit.mu_km3_s2 / rn**3 * np.cross(u, J @ u)
+        tau[:] = 0.0
+        dyn._add_gravity_gradient(X, B, orbit, 0, tk, r, tau)
+        out[k] = tau[:, 0]
     return out
 
 

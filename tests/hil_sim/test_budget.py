@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from hil_sim import dynamics as dyn
 from hil_sim.budget import _gravity_gradient_torques, budget
 from hil_sim.cli import main
 from hil_sim.mission import Mission, world_params
@@ -37,18 +36,30 @@ def test_the_constant_torque_row_is_torque_times_time_and_its_wheel_speed() -> N
     assert math.isclose(day.wheel_speed_fraction, float(np.max(np.abs(speeds) / limits)), rel_tol=1e-9)
 
 
-def test_the_gravity_gradient_is_the_simulators_own_torque() -> None:
+def test_the_gravity_gradient_row_integrates_the_torque_written_out_by_hand() -> None:
+    """The budget's torque (the simulator's kernel) against 3 mu / r^3 (u x I u) written out here, and the
+    row's momentum against the trapezoid sum of it."""
+    from hil_sim.orbit import orbit_position_N_km
+
     mission = Mission.model_validate(_smallsat(True))
     wp = world_params(mission)
+    J = np.asarray(wp.spacecraft.inertia_B_kgm2)
+    q0, *qv = wp.spacecraft.q_NB0
+    qv = np.asarray(qv)
+    R = (q0 * q0 - qv @ qv) * np.eye(3) + 2 * np.outer(qv, qv) + 2 * q0 * np.array(
+        [[0, -qv[2], qv[1]], [qv[2], 0, -qv[0]], [-qv[1], qv[0], 0]])  # body -> N
     t = np.array([0.0, 1234.5, 4000.0])
-    budget_tau = _gravity_gradient_torques(mission, t)
-    G, W, B, X = dyn.pack_spacecraft([wp.spacecraft])
-    ORB = orbit_elements_array(wp.orbit)[None, :]
+    r = np.empty(3)
     for k, tk in enumerate(t.tolist()):
-        tau = np.zeros((3, 1))
-        dyn._add_gravity_gradient(X, B, ORB, 0, tk, np.empty(3), tau)
-        np.testing.assert_allclose(budget_tau[k], tau[:, 0], rtol=1e-12, atol=1e-20)
-    assert np.max(np.abs(budget_tau)) > 1e-9  # an inertia with products: a torque to see
+        orbit_position_N_km(orbit_elements_array(wp.orbit), tk, r)
+        u = R.T @ (r / np.linalg.norm(r))
+        by_hand = 3 * wp.orbit.mu_km3_s2 / np.linalg.norm(r) ** 3 * np.cross(u, J @ u)
+        np.testing.assert_allclose(_gravity_gradient_torques(mission, t)[k], by_hand, rtol=1e-9, atol=1e-20)
+    assert np.max(np.abs(_gravity_gradient_torques(mission, t))) > 1e-9  # an inertia with products: a torque
+    orbit = next(r for r in budget(mission) if r.effect == "gravity gradient" and r.span == "orbit")
+    ts = np.linspace(0.0, orbit.span_s, int(math.ceil(orbit.span_s / 10.0)) + 1)
+    tau = _gravity_gradient_torques(mission, ts)
+    np.testing.assert_allclose(orbit.momentum_end_B_Nms, np.trapezoid(tau, ts, axis=0), rtol=1e-9, atol=1e-15)
 
 
 def test_budget_command_prints_the_table_and_writes_json(tmp_path, capsys) -> None:
