@@ -136,31 +136,29 @@ def _cmd_run_suite(args: argparse.Namespace, console) -> int:
     """A suite (hil_sim.campaign.suite): every member campaign into its folder, one verdict over all runs."""
     from datetime import datetime, timezone
 
-    from hil_sim.campaign.suite import load_suite, run_suite, suite_text
+    from hil_sim.campaign.suite import load_suite, member_paths, run_suite, suite_text
     suite = load_suite(args.campaign)
-    for member in suite.suite:  # every member refused before any flies (a bad member loses no hour of runs)
-        _plan(Path(args.campaign).resolve().parent / member.campaign, args, args.runs or member.runs)
+    # every member planned before any flies (a bad member loses no hour of runs), each plan then flown
+    plans = {path: _plan(path, args, args.runs or member.runs)
+             for member, path in zip(suite.suite, member_paths(suite, args.campaign))}
     if args.out is not None:
         out = args.out
     else:
         found = sorted(Path("campaigns").glob(f"{suite.name}-*/suite.json")) if args.resume else []
         out = found[-1].parent if found else Path("campaigns") / (
             f"{suite.name}-{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%SZ')}")
-    interrupted = False
 
     def member(campaign_file: Path, runs: int | None, folder: Path):
-        nonlocal interrupted
-        plan, base_path = _plan(campaign_file, args, args.runs or runs)
+        plan, base_path = plans[campaign_file]
         results, stopped = _fly(plan, base_path, campaign_file, folder, args, console)
         if results is None or stopped:
-            interrupted = True
             raise KeyboardInterrupt
         console.print(results["verdict"].text())
         return results
 
     console.print(f"suite [bold]{suite.name}[/bold]: {len(suite.suite)} campaigns -> {out}")
     try:
-        outcome = run_suite(args.campaign, out, member)
+        outcome = run_suite(suite, args.campaign, out, member)
     except KeyboardInterrupt:
         console.print(f"[yellow]interrupted: finished runs kept in {out}; `keepout campaign run {args.campaign} "
                       f"--out {out}` resumes[/yellow]")

@@ -106,19 +106,26 @@ class SuiteOutcome:
 RunMember = Callable[[Path, int | None, Path], dict[str, Any]]
 
 
-def run_suite(path: str | Path, out: Path, run_member: RunMember) -> SuiteOutcome:
-    """Fly every member with ``run_member(campaign file, runs, folder) -> finalized results`` (see
-    `hil_sim.campaign.runner.finalize`) into ``out/<member name>``; write ``suite.json`` and a ``junit.xml``
-    holding every member's."""
+def member_paths(suite: Suite, path: str | Path) -> list[Path]:
+    """Each member's campaign file, relative to the suite file ``path``; a clear error for a missing one."""
     path = Path(path).resolve()
-    suite = load_suite(path)
-    out.mkdir(parents=True, exist_ok=True)
-    outcome = SuiteOutcome(suite)
-    junits = []
+    out = []
     for member in suite.suite:
         campaign_path = (path.parent / member.campaign).resolve()
         if not campaign_path.is_file():
             raise FileNotFoundError(f"{path}: suite member '{member.campaign}' not found (looked for {campaign_path})")
+        out.append(campaign_path)
+    return out
+
+
+def run_suite(suite: Suite, path: str | Path, out: Path, run_member: RunMember) -> SuiteOutcome:
+    """Fly every member of ``suite`` (loaded from ``path``) with ``run_member(campaign file, runs, folder) ->
+    finalized results`` (see `hil_sim.campaign.runner.finalize`) into ``out/<member name>``; write
+    ``suite.json`` and a ``junit.xml`` holding every member's."""
+    out.mkdir(parents=True, exist_ok=True)
+    outcome = SuiteOutcome(suite)
+    junits = []
+    for member, campaign_path in zip(suite.suite, member_paths(suite, path)):
         folder = out / campaign_path.stem
         t0 = time.monotonic()
         results = run_member(campaign_path, member.runs, folder)
