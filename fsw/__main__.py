@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         cfg = load_fsw_config(args.config)
-        mission_bus, mission_bitrate = load_bus_settings(args.config)
+        mission_bus, mission_bitrate, bus_authentication = load_bus_settings(args.config)
     except ConfigError as exc:
         print(f"fsw: {exc}", file=sys.stderr)
         return 2
@@ -115,9 +115,15 @@ def run(args: argparse.Namespace) -> int:
     except BusUnavailableError as exc:
         print(f"fsw: bus unavailable: {exc}", file=sys.stderr)
         return 3
+    icd = Icd(args.dbc) if args.dbc else Icd()
     try:
-        uplink, downlink = link_associations(cfg, args.config, args.key_file)
-    except KeyFileError as exc:
+        key = link_key(cfg, args.config, args.key_file)
+        uplink, downlink = link_associations(cfg, key)
+        if bus_authentication:
+            from fsw.bus.secoc import secure
+
+            bus = secure(bus, icd, key, "FSW")
+    except (KeyFileError, ValueError) as exc:  # (SecOCError: an ICD without authenticator frames)
         bus.shutdown()
         print(f"fsw: {exc}", file=sys.stderr)
         return 2
@@ -126,7 +132,6 @@ def run(args: argparse.Namespace) -> int:
     tm_cfg = cfg.tmtc
     tm_port = tm_cfg.telemetry_port if args.tm_port is None else args.tm_port
     tc_port = tm_cfg.telecommand_port if args.tc_port is None else args.tc_port
-    icd = Icd(args.dbc) if args.dbc else Icd()
     driver = FswBusDriver(bus, icd, len(cfg.spacecraft.wheels))
     telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port, security=downlink,
                                 multicast_interface=tm_cfg.telemetry_multicast_interface,
@@ -145,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, _stop)
     signal.signal(signal.SIGINT, _stop)
     realtime = args.realtime or (not args.lockstep and cfg.rates.tick_source == "clock")
-    print(f"fsw: ready: bus {bus_spec}, {'real time' if realtime else 'lockstep'}, telemetry to "
+    print(f"fsw: ready: bus {bus_spec}{' (SecOC)' if bus_authentication else ''}, {'real time' if realtime else 'lockstep'}, telemetry to "
           f"{tm_cfg.telemetry_host}:{tm_port}, telecommands on {dispatcher.address[0]}:{dispatcher.address[1]}",
           flush=True)
     code = 0
@@ -166,19 +171,23 @@ def run(args: argparse.Namespace) -> int:
     return code
 
 
-def link_associations(cfg, config_path: str, key_file: str | None = None):
-    """(uplink receiver, downlink sender) associations from the mission's key file (``key_file``
-    overrides it). Raises KeyFileError when there is no usable key: the flight software never runs an
-    unauthenticated uplink."""
-    from fsw.dictionary import DICTIONARY
-    from fsw.link_security import (SPI_TM, KeyFileError, SecurityAssociation, load_key_file, mission_key_path,
-                                   uplink_receiver)
+def link_key(cfg, config_path: str, key_file: str | None = None) -> bytes:
+    """The run's link key, from the mission's key file (``key_file`` overrides it). Raises KeyFileError
+    when there is no usable key: the flight software never runs an unauthenticated uplink."""
+    from fsw.link_security import KeyFileError, load_key_file, mission_key_path
 
     path = key_file or mission_key_path(cfg.tmtc.security.key_file, config_path)
     if path is None:
         raise KeyFileError(f"{config_path}: flight_software.tmtc.security.key_file: no link key named; make "
                            "one with `keepout ground keygen FILE` and name it there (or pass --key-file)")
-    key = load_key_file(path)
+    return load_key_file(path)
+
+
+def link_associations(cfg, key: bytes):
+    """(uplink receiver, downlink sender) associations of the link key ``key``."""
+    from fsw.dictionary import DICTIONARY
+    from fsw.link_security import SPI_TM, SecurityAssociation, uplink_receiver
+
     uplink = uplink_receiver(key, cfg.tmtc.security.tc_window, resync_opcode=DICTIONARY.command("SEC_RESYNC").opcode)
     return uplink, SecurityAssociation(key, SPI_TM)
 

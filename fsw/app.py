@@ -758,6 +758,7 @@ class FlightSoftware:
             "bus_alive_errors": n["wrong_sequence"] + n["ok_some_lost"],
             "bus_repeated": n["repeated"],
             "bus_decode_errors": n["bad_length"] + n["out_of_range"] + getattr(getattr(self.driver, "bus", None), "decode_errors", 0),
+            "bus_auth_failures": getattr(getattr(self.driver, "bus", None), "auth_failures", 0),
             "bus_timeouts": n["timeout"],
             "bus_tx_errors": getattr(self, "_bus_tx_errors", 0),
             "bus_unknown_ids": bus.get("unknown_id", 0) + bus.get("error_frame", 0),

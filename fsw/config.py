@@ -14,7 +14,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 from pathlib import Path
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal, NamedTuple, Union
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -643,9 +643,16 @@ def udp_port_or_zero(text: str) -> int:
     return 0 if text.strip() == "0" else udp_port(text)
 
 
-def load_bus_settings(path: str | Path) -> tuple[str, int | None]:
-    """The bus spec and CAN bit rate [bit/s] a mission YAML names (top-level ``bus`` and
-    ``bus_bitrate_bps``; ``auto`` and None when absent, as in a bare FswConfig YAML)."""
+class BusSettings(NamedTuple):
+    spec: str
+    bitrate: int | None
+    authentication: bool
+
+
+def load_bus_settings(path: str | Path) -> BusSettings:
+    """The bus spec, CAN bit rate [bit/s] and frame authentication a mission YAML names (top-level ``bus``,
+    ``bus_bitrate_bps`` and ``bus_authentication``; ``auto``, None and False when absent, as in a bare
+    FswConfig YAML)."""
     p = Path(path)
     data = _read_yaml(p)
     data = data if isinstance(data, dict) else {}
@@ -656,7 +663,10 @@ def load_bus_settings(path: str | Path) -> tuple[str, int | None]:
     if bitrate is not None and (isinstance(bitrate, bool) or not isinstance(bitrate, int)
                                 or not 10000 <= bitrate <= 1000000):
         raise ConfigError(f"{p}: bus_bitrate_bps: expected an integer in 10000..1000000 [bit/s], got {bitrate!r}")
-    return bus, bitrate
+    authentication = data.get("bus_authentication", False)
+    if not isinstance(authentication, bool):
+        raise ConfigError(f"{p}: bus_authentication: expected true or false, got {authentication!r}")
+    return BusSettings(bus, bitrate, authentication)
 
 
 def parse_fsw_config(data: dict, source: str = "<dict>", prefix: str = "") -> FswConfig:

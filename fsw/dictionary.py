@@ -621,6 +621,8 @@ _HK_CHANNELS: list[Channel] = [
     Channel("bus_decode_errors", "U32", "", "bus frames that failed to decode, and datagrams on the bus that are not frames (dropped)", Limits(yellow=(None, 0))),
     Channel("bus_corrupt_bursts", "U32", "", "housekeeping periods with 5 or more frames failing their CRC or "
             "decoding: bus faults (BUS_CORRUPT)", Limits(yellow=(None, 0))),
+    Channel("bus_auth_failures", "U32", "", "bus_authentication: frames and authenticators the SecOC layer "
+            "refused (forged, replayed, injected or not covered by a valid MAC)", Limits(yellow=(None, 0))),
     Channel("bus_timeouts", "U32", "", "ticks with missing sensor frames", Limits(yellow=(None, 0))),
     Channel("bus_tx_errors", "U32", "", "bus transmit failures", Limits(yellow=(None, 0))),
     Channel("bus_unknown_ids", "U32", "", "bus frames with an identifier not in the ICD (or error/extended/remote frames)",

@@ -341,6 +341,10 @@ class Mission(_Model):
     bus_bitrate_bps: int = Field(500000, ge=10000, le=1000000, description="CAN bit rate [bit/s] a hardware "
                                  "interface (pcan, kvaser, vector, slcan, ...) is opened with; SocketCAN takes the "
                                  "kernel's setting, the loopback transports have none")
+    bus_authentication: bool = Field(
+        False, description="true: every batch of frames on the bus carries a SecOC-style authenticator (a MAC "
+        "and a freshness value, keyed from the run's link key) and each end uses only the frames it "
+        "authenticates: injected, forged and replayed frames are counted and dropped (docs/security.md)")
     tmtc_ports: Literal["auto", "fixed"] = Field(
         "auto", description="auto: the SIL picks free UDP ports for telemetry and telecommands for each run "
         "(parallel runs never collide) and writes them into the config it saves; fixed: use "

@@ -552,6 +552,13 @@ def run_sil(options: RunOptions) -> RunResult:
             signal.signal(signal.SIGTERM, previous_sigterm)
 
 
+def _auth_stats(bus) -> dict:
+    """simulator.json's ``bus_authentication`` entry: what the simulator's SecOC layer accepted and refused
+    (nothing when the mission does not authenticate its bus)."""
+    counters = getattr(bus, "counters", None)
+    return {"bus_authentication": counters.as_dict()} if hasattr(counters, "as_dict") else {}
+
+
 def _raise_terminated(signum, frame) -> None:  # noqa: ARG001
     raise Terminated()
 
@@ -580,7 +587,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
     # The run's own link key (0600, in the run folder): the flight software, the ground and the timeline
     # sign and verify with it; no key is ever shared between runs or written into a YAML.
     key_path = run_dir / LINK_KEY_FILE
-    write_key_file(key_path)
+    link_key = write_key_file(key_path)
     ground = ctx.Process(target=ground_process, name="keepout-ground",
                          args=(str(ground_dir), endpoints.to_json_dict(), tmtc.telemetry_port if fixed_ports else 0,
                                port_queue, ready, fsw_started, stop_event, status_queue, os.getpid()),
@@ -622,6 +629,10 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
             bus = open_bus(info.spec, run_id=run_dir.name, bitrate=mission.bus_bitrate_bps)
         except (BusUnavailableError, OSError) as exc:
             raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
+        if mission.bus_authentication:
+            from fsw.bus.secoc import secure
+
+            bus = secure(bus, Icd(), link_key, "SIM")
         from ground.commanding import CommandSender, signing_sender_args
 
         sender = CommandSender(host=endpoints.tc_host, port=tc_port, **signing_sender_args(key_path))
@@ -712,6 +723,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
                      "loop_cpu_s": loop_cpu_s, "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
                      "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
                      "bus_decode_errors": int(getattr(bus, "decode_errors", 0)),
+                     **_auth_stats(bus),
                      "faults_injected": [list(map(_plain, e)) if isinstance(e, tuple) else _plain(e)
                                          for e in getattr(sim.injector, "log", [])],
                      "telecommands": timeline.sent if timeline else [],

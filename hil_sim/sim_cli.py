@@ -85,16 +85,29 @@ class _Resync:
     command: str = "SEC_RESYNC"
 
 
-def _signing(args: argparse.Namespace, mission) -> dict[str, Any]:
-    """CommandSender arguments that sign with the link key (raises ValueError naming what is missing)."""
+def _key_file(args: argparse.Namespace, mission, purpose: str) -> str:
+    """The link key file (raises ValueError naming what is missing)."""
     from fsw.link_security import mission_key_path
-    from ground.commanding import signing_sender_args
 
     key_file = args.key_file or mission_key_path(mission.flight_software.tmtc.security.key_file, args.mission)
     if key_file is None:
-        raise ValueError(f"{args.mission}: no link key to sign telecommands: pass --key-file FILE (the one "
+        raise ValueError(f"{args.mission}: no link key to {purpose}: pass --key-file FILE (the one "
                          "`keepout fsw` uses) or name flight_software.tmtc.security.key_file")
-    return signing_sender_args(key_file)
+    return str(key_file)
+
+
+def _signing(args: argparse.Namespace, mission) -> dict[str, Any]:
+    """CommandSender arguments that sign with the link key (raises ValueError naming what is missing)."""
+    from ground.commanding import signing_sender_args
+
+    return signing_sender_args(_key_file(args, mission, "sign telecommands"))
+
+
+def _link_key(args: argparse.Namespace, mission) -> bytes:
+    """The link key the bus's SecOC keys come from (mission bus_authentication: true)."""
+    from fsw.link_security import load_key_file
+
+    return load_key_file(_key_file(args, mission, "authenticate the bus (bus_authentication: true)"))
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -104,7 +117,7 @@ def _run(args: argparse.Namespace) -> int:
     from hil_sim.lockstep import Simulator
     from hil_sim.mission import door_params, world_params
     from hil_sim.sil import (CANDUMP_FILE, SIM_STATS_FILE, TRUTH_FILE, CandumpLog, MissionRejected, RunOptions,
-                             Timeline, TruthRecorder, _plain, _run_dir, prepare)
+                             Timeline, TruthRecorder, _auth_stats, _plain, _run_dir, prepare)
     from hil_sim.world import World
 
     try:
@@ -113,6 +126,7 @@ def _run(args: argparse.Namespace) -> int:
         tc_host, tc_port = _tc_address(args.tc, mission)
         # (KeyFileError is a ValueError); no key needed when nothing is sent
         signing = _signing(args, mission) if mission.timeline and not args.no_timeline else {}
+        link_key = _link_key(args, mission) if mission.bus_authentication else None
     except (MissionRejected, BusSpecError, ValueError) as exc:
         print(f"keepout sim: {exc}", file=sys.stderr)
         return EXIT_REJECTED
@@ -121,6 +135,10 @@ def _run(args: argparse.Namespace) -> int:
     except (BusUnavailableError, OSError) as exc:
         print(f"keepout sim: bus {info.spec} cannot be opened: {exc}", file=sys.stderr)
         return EXIT_NOT_STARTED
+    if link_key is not None:
+        from fsw.bus.secoc import secure
+
+        bus = secure(bus, Icd(), link_key, "SIM")
     out = args.out if args.out is not None else _run_dir(Path("runs"), f"{mission.name}-sim")
     out.mkdir(parents=True, exist_ok=True)
     world = World(world_params(mission), seed=mission.seed)
@@ -155,7 +173,7 @@ def _run(args: argparse.Namespace) -> int:
         stats = {**sim.stats.__dict__, "aborted": aborted, "clock": "realtime" if args.realtime else "lockstep",
                  "bus": info.spec, "bus_note": info.note, "bitrate_bps": mission.bus_bitrate_bps, "wall_s": wall_s,
                  "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames,
-                 "bus_decode_errors": int(getattr(bus, "decode_errors", 0)),
+                 "bus_decode_errors": int(getattr(bus, "decode_errors", 0)), **_auth_stats(bus),
                  "telecommands": timeline.sent, "telecommand_errors": timeline.errors}
         (out / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n")
     if code == EXIT_NOT_STARTED:

@@ -34,6 +34,8 @@ DEFAULT_DBC_PATH = config_path("icd", "keepout.dbc")
 
 E2E_CRC_SIGNAL = "E2E_CRC"
 E2E_COUNTER_SIGNAL = "E2E_Counter"
+SECOC_ATTRIBUTE = "SecOCAuthenticator"
+SECOC_LAYOUT = [("frame_id", 0, 11), ("freshness_lsb", 11, 21), ("mac", 32, 32)]  # fsw.bus.secoc's frame
 
 
 class IcdError(ValueError):
@@ -209,7 +211,12 @@ class Icd:
         self.messages: dict[str, MessageSpec] = {}
         self.by_id: dict[int, MessageSpec] = {}
         seen_ids: dict[int, str] = {}
+        # SecOC authenticator frames (fsw.bus.secoc) belong to the layer below E2E: node -> frame id
+        self.authenticators: dict[str, int] = {}
         for message in self.db.messages:
+            if int(_attribute(message, SECOC_ATTRIBUTE, 0)):
+                self._authenticator(message)
+                continue
             spec = self._spec(message)
             if spec.data_id in seen_ids:
                 raise IcdError(
@@ -233,6 +240,17 @@ class Icd:
         if signal == E2E_COUNTER_SIGNAL:
             return 1
         return 2 + spec.signals.index(signal)
+
+    def _authenticator(self, message: Any) -> None:
+        where = f"{self.path}: message {message.name}"
+        layout = [(s.name, s.start, s.length) for s in message.signals]
+        if message.is_extended_frame or message.length != 8 or layout != SECOC_LAYOUT or len(message.senders) != 1:
+            raise IcdError(f"{where}: a SecOC authenticator is an 8-byte classic frame with one sender and "
+                           f"the signals {SECOC_LAYOUT} (name, start bit, length)")
+        node = message.senders[0]
+        if node in self.authenticators:
+            raise IcdError(f"{where}: node {node} has a second SecOC authenticator")
+        self.authenticators[node] = message.frame_id
 
     def _spec(self, message: Any) -> MessageSpec:
         where = f"{self.path}: message {message.name}"

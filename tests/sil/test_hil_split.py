@@ -29,13 +29,13 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _start_fsw(bus: str, tmp_path: Path) -> tuple[subprocess.Popen, Path, int]:
+def _start_fsw(bus: str, tmp_path: Path, mission: Path = MISSION) -> tuple[subprocess.Popen, Path, int]:
     from fsw.link_security import write_key_file
 
     tc_port = _free_port()
     log = tmp_path / "fsw.log"
     write_key_file(tmp_path / "bench.key")  # the bench's link key: both sides are given it
-    proc = subprocess.Popen([*KEEPOUT, "fsw", str(MISSION), "--bus", bus, "--tc-port", str(tc_port),
+    proc = subprocess.Popen([*KEEPOUT, "fsw", str(mission), "--bus", bus, "--tc-port", str(tc_port),
                              "--tm-port", str(_free_port()), "--first-sync-timeout-s", "300",
                              "--key-file", str(tmp_path / "bench.key")],
                             stdout=open(log, "w"), stderr=subprocess.STDOUT, cwd=ROOT)
@@ -47,11 +47,15 @@ def _start_fsw(bus: str, tmp_path: Path) -> tuple[subprocess.Popen, Path, int]:
     return proc, log, tc_port
 
 
-def _fly_split(bus: str, tmp_path: Path, duration_s: float) -> None:
-    fsw, log, tc_port = _start_fsw(bus, tmp_path)
+def _fly_split(bus: str, tmp_path: Path, duration_s: float, authenticated: bool = False) -> None:
+    mission = MISSION
+    if authenticated:
+        mission = tmp_path / "demo-pointing.yaml"
+        mission.write_text(MISSION.read_text() + "\nbus_authentication: true\n")
+    fsw, log, tc_port = _start_fsw(bus, tmp_path, mission)
     try:
         out = tmp_path / "sim"
-        sim = subprocess.run([*KEEPOUT, "sim", str(MISSION), "--bus", bus, "--duration", str(duration_s),
+        sim = subprocess.run([*KEEPOUT, "sim", str(mission), "--bus", bus, "--duration", str(duration_s),
                               "--tc", f"127.0.0.1:{tc_port}", "--out", str(out),
                               "--key-file", str(tmp_path / "bench.key")],
                              capture_output=True, text=True, cwd=ROOT, timeout=1200)
@@ -70,6 +74,10 @@ def _fly_split(bus: str, tmp_path: Path, duration_s: float) -> None:
     assert check["pass"], check
     assert names["keep-out margin sun"]["pass"] and names["keep-out margin moon"]["pass"]
     assert names["settling (timeline[0])"]["pass"]  # the slew happened: the flight software flew it
+    if authenticated:  # every frame the simulator used was authenticated, none refused
+        auth = stats["bus_authentication"]
+        assert auth["frames_accepted"] >= 2 * ticks and auth["bad_mac"] == auth["unauthenticated"] == 0
+        assert "(SecOC)" in log.read_text()
 
 
 def test_split_flies_demo_pointing_over_udp_multicast(tmp_path: Path) -> None:
@@ -81,6 +89,17 @@ def test_split_flies_demo_pointing_over_udp_multicast(tmp_path: Path) -> None:
 @pytest.mark.socketcan
 def test_split_flies_demo_pointing_over_socketcan(tmp_path: Path) -> None:
     _fly_split("socketcan:vcan0", tmp_path, duration_s=300.0)
+
+
+@pytest.mark.socketcan
+def test_split_flies_with_bus_authentication_over_socketcan(tmp_path: Path) -> None:
+    _fly_split("socketcan:vcan0", tmp_path, duration_s=300.0, authenticated=True)
+
+
+def test_split_flies_with_bus_authentication_over_udp_multicast(tmp_path: Path) -> None:
+    rng = random.Random()
+    bus = f"udp_multicast:{UDP_GROUP_PREFIX}.{rng.randint(1, 254)}.{rng.randint(1, 254)}:{rng.randint(44000, 59000)}"
+    _fly_split(bus, tmp_path, duration_s=300.0, authenticated=True)
 
 
 def test_sim_without_flight_software_says_what_to_start(tmp_path: Path) -> None:
