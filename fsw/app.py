@@ -24,13 +24,13 @@ import numpy as np
 from fsw.assumption_check import MAX_RESTARTS, AssumptionChecker
 from fsw.bus.driver import TickInputs
 from fsw.control import RateController
+from fsw.dictionary import MODES
 from fsw.door import DoorController
 from fsw.estimation import _NO_SAMPLES, AttitudeEstimator
 from fsw.executive import Executive
 from fsw.fdir import STATUS_LOST, Fdir, WheelSpeedResidual
 from fsw.guidance import Guidance
 
-MODES = ("SAFE", "POINTING", "QUATERNION")
 # A housekeeping period in which at least BUS_BURST_FRAMES frames fail their CRC or do not decode is a burst:
 # a bus fault (BUS_CORRUPT, one a minute at most, and the bus_corrupt_bursts counter), not a sensor's or a
 # wheel's (those monitors judge their own frames' absence, with their own persistence).

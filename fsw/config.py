@@ -22,6 +22,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Quat = Annotated[list[float], Field(min_length=4, max_length=4)]
 
+MAX_WHEELS = 6  # RW1..RW6: the wheel frames of the ICD (config/icd/keepout.dbc; a test checks it)
+
 
 class _Strict(BaseModel):
     # allow_inf_nan=False: a NaN or inf in a gain or a vector would otherwise reach the control loop
@@ -86,7 +88,7 @@ class SpacecraftConfig(_Strict):
         min_length=3, max_length=3,
         description="Spacecraft inertia about the centre of mass in body frame [kg m^2], symmetric positive definite.",
     )
-    wheels: list[WheelConfig] = Field(default_factory=_pyramid_wheels, min_length=3, max_length=6, description="Reaction wheels (3..6), in bus order RW1..RWn.")
+    wheels: list[WheelConfig] = Field(default_factory=_pyramid_wheels, min_length=3, max_length=MAX_WHEELS, description="Reaction wheels (3..6), in bus order RW1..RWn.")
     star_tracker_q_BS: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Star-tracker mounting quaternion q_BS (rotates star-tracker vectors into body), scalar first.")
     max_rate_deg_s: float = Field(1.0, gt=0.0, le=20.0, description="Body rate limit: the angular-velocity command is scaled so |omega_cmd| never exceeds it [deg/s].")
     star_tracker_max_rate_deg_s: float = Field(2.0, gt=0.0, le=90.0, description="Body rate above which the star tracker gives no attitude [deg/s]; SET_GAINS may not raise the rate limit past it.")

@@ -1,12 +1,19 @@
 """The terminal display of ``keepout ground``: key channels coloured by their limits, link, events."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from fsw.dictionary import LimitState, TelemetryDictionary
 
-if TYPE_CHECKING:
-    from ground.monitor import GroundMonitor
+
+class MonitorView(Protocol):
+    """What the display reads of a monitor (ground.monitor.GroundMonitor, which draws through it)."""
+
+    dictionary: TelemetryDictionary
+    latest: dict[str, Any]
+    latest_time_s: Any
+    stats: Any
+    events: Any
 
 KEY_CHANNELS = (
     "mode", "safe_phase", "cycle", "pointing_error_deg", "att_error_deg", "margin_min_deg",
@@ -32,7 +39,7 @@ def limit_state(dictionary: TelemetryDictionary, name: str, value: Any) -> Limit
 class LiveDisplay:
     """A rich Live table of a monitor, redrawn by the monitor's receive loop."""
 
-    def __init__(self, monitor: GroundMonitor) -> None:
+    def __init__(self, monitor: MonitorView) -> None:
         from rich.console import Console
         from rich.live import Live
 
@@ -52,7 +59,7 @@ class LiveDisplay:
         self.live.update(render_tables(self.monitor), refresh=True)
 
 
-def render_tables(monitor: GroundMonitor) -> Any:
+def render_tables(monitor: MonitorView) -> Any:
     """A rich renderable: key channels with limit colours, link statistics and the latest events."""
     from rich.console import Group
     from rich.table import Table

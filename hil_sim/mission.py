@@ -20,10 +20,9 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 import numpy as np
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from fsw.config import KNOWLEDGE_SOURCES, FswConfig
+from fsw.config import KNOWLEDGE_SOURCES, MAX_WHEELS, FswConfig
 from fsw.dictionary import FDIR_MONITORS
 from hil_sim.faults import DOOR_MESSAGES, WHEEL_MESSAGE
-from hil_sim.mission_docs import SUFFIX_UNITS
 from keepout_config import config_path
 
 if TYPE_CHECKING:
@@ -31,7 +30,6 @@ if TYPE_CHECKING:
     from hil_sim.yaml_loader import Marked
 
 SCHEMA_VERSION = 1
-MAX_WHEELS = 6  # RW1..RW6 in config/icd/keepout.dbc
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 
@@ -623,7 +621,15 @@ def load_mission_marked(path: str | Path, *, text: str | None = None) -> tuple[M
 # ---------------------------------------------------------------------------------------------
 
 Loc = tuple[str | int, ...]
-# The unit a key's name ends with (the project's convention): mission_docs' table, longest suffix first.
+# Units read from a key's suffix (the project's convention) when its description gives none in [brackets]:
+# the validator names them in range errors, and mission_docs prints them.
+SUFFIX_UNITS = (("_rad_per_sqrt_s", "rad/sqrt(s)"), ("_rad_s_per_sqrt_s", "rad/s/sqrt(s)"),
+                ("_rad_s_sqrt_hz", "rad/s/sqrt(Hz)"), ("_rad_s2_sqrt_hz", "rad/s^2/sqrt(Hz)"),
+                ("_Nm_per_rad_s", "N m s/rad"), ("_deg_s3", "deg/s^3"), ("_deg_s2", "deg/s^2"), ("_deg_s", "deg/s"),
+                ("_rad_s", "rad/s"), ("_1_s", "1/s"), ("_arcsec", "arcsec"), ("_deg", "deg"), ("_rad", "rad"),
+                ("_kgm2", "kg m^2"), ("_Nm", "N m"), ("_km", "km"), ("_hz", "Hz"), ("_Hz", "Hz"), ("_ppm", "ppm"),
+                ("_bps", "bit/s"), ("_utc", "UTC"), ("_s", "s"))
+# longest suffix first
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = tuple(sorted(SUFFIX_UNITS, key=lambda item: -len(item[0])))
 # Units a value may have been typed in by mistake, per unit of the key: (name, factor to the key's unit).
 _MISTAKEN_UNITS: dict[str, tuple[tuple[str, float], ...]] = {

@@ -14,6 +14,8 @@ from typing import Any
 
 from keepout_config import config_path
 
+from hil_sim.mission import SUFFIX_UNITS, mission_json_schema
+
 DOCS_PATH = Path(__file__).resolve().parent.parent / "docs" / "missions.md"  # in a checkout (docs/ is not installed)
 EXAMPLE_PATH = config_path("missions", "smallsat-example.yaml")
 
@@ -40,15 +42,6 @@ Then `keepout config validate FILE` (schema and the load-time physics errors, ea
 `keepout config check FILE` (the full physics report: the paper's assumptions over the run, eps, kappa,
 wheel authority) and `keepout sil run FILE`.
 """
-
-# units read from a key's suffix when its description gives none in [brackets]
-# (also the validator's: hil_sim.mission.key_unit names the unit in range errors)
-SUFFIX_UNITS = (("_rad_per_sqrt_s", "rad/sqrt(s)"), ("_rad_s_per_sqrt_s", "rad/s/sqrt(s)"),
-                ("_rad_s_sqrt_hz", "rad/s/sqrt(Hz)"), ("_rad_s2_sqrt_hz", "rad/s^2/sqrt(Hz)"),
-                ("_Nm_per_rad_s", "N m s/rad"), ("_deg_s3", "deg/s^3"), ("_deg_s2", "deg/s^2"), ("_deg_s", "deg/s"),
-                ("_rad_s", "rad/s"), ("_1_s", "1/s"), ("_arcsec", "arcsec"), ("_deg", "deg"), ("_rad", "rad"),
-                ("_kgm2", "kg m^2"), ("_Nm", "N m"), ("_km", "km"), ("_hz", "Hz"), ("_Hz", "Hz"), ("_ppm", "ppm"),
-                ("_bps", "bit/s"), ("_utc", "UTC"), ("_s", "s"))
 
 HEADER = """# Mission files: reference
 
@@ -259,7 +252,6 @@ def _variant(node: dict, count: int) -> str:
 
 def mission_docs() -> str:
     """The text of docs/missions.md, from the mission schema."""
-    from hil_sim.mission import mission_json_schema
 
     schema = mission_json_schema()
     example = EXAMPLE_PATH.read_text(encoding="utf-8").rstrip()

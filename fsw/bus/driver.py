@@ -35,16 +35,16 @@ from typing import Callable, NamedTuple, Sequence
 import can
 import numpy as np
 
-from fsw.bus import kernels as K
+import fsw.bus.kernels as K
 from fsw.bus.burst import FrameBurst
 from fsw.bus.e2e import CODE_CLASS, CheckedBurst, CheckedFrame, E2EReceiver
 from fsw.bus.icd import E2ESender, Icd
 from fsw.bus.kernels import MAX_DLC
 from fsw.bus.transport import recv_burst, send_batch
+from fsw.config import MAX_WHEELS
 
 FSW_NODE = "FSW"
 _F8 = np.dtype(np.float64)
-MAX_WHEELS = 6
 TX_TIMEOUT_S = 0.05  # how long a send may wait for room in the transmit queue
 # Once every announced frame of a tick has arrived but some failed E2E, the tick waits this much longer
 # (queue empty) for good frames before it closes incomplete: the simulator sends a tick as one burst, so

@@ -18,47 +18,15 @@ from typing import TYPE_CHECKING, Any, Iterable, Mapping, NamedTuple
 
 import numpy as np
 
-from fsw.bus.kernels import ECHO_CODE, classify_rows, FALLBACK_CODE, KIND_ECHO, KIND_FALLBACK, KIND_UNKNOWN, UNKNOWN_CODE
+from fsw.bus.crc import crc8_sae_j1850, e2e_crc  # noqa: F401  (re-exported: the E2E CRC lives in fsw.bus.crc)
+from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_FALLBACK, KIND_UNKNOWN, OLD_FRAME_WINDOW,
+                             UNKNOWN_CODE, classify_rows)
 
 if TYPE_CHECKING:  # pragma: no cover
     import can
 
     from fsw.bus.burst import FrameBurst
     from fsw.bus.icd import Icd
-
-# ---------------------------------------------------------------------------------------------- CRC-8
-_POLY = 0x1D
-
-
-def _make_table() -> tuple[int, ...]:
-    table = []
-    for byte in range(256):
-        crc = byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ _POLY) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-        table.append(crc)
-    return tuple(table)
-
-
-_TABLE = _make_table()
-
-
-def crc8_sae_j1850(data: bytes | bytearray | Iterable[int], crc: int = 0xFF, final_xor: bool = True) -> int:
-    """CRC-8 SAE J1850: poly 0x1D, init 0xFF, xor-out 0xFF (check value of b"123456789" is 0x4B).
-
-    ``crc`` is the running register (so a CRC can be computed over pieces); pass ``final_xor=False`` for
-    all but the last piece.
-    """
-    for byte in data:
-        crc = _TABLE[(crc ^ byte) & 0xFF]
-    return crc ^ 0xFF if final_xor else crc
-
-
-def e2e_crc(data_id: int, payload_without_crc: bytes | bytearray) -> int:
-    """Profile-1 style CRC over the 16-bit data ID (low byte first) and the payload after the CRC byte."""
-    reg = crc8_sae_j1850((data_id & 0xFF, (data_id >> 8) & 0xFF), final_xor=False)
-    return crc8_sae_j1850(payload_without_crc, crc=reg)
-
 
 # ---------------------------------------------------------------------------------------- classes
 OK = "ok"
@@ -72,9 +40,6 @@ OUT_OF_RANGE = "out_of_range"      # CRC good but a signal outside its ICD range
 UNKNOWN_ID = "unknown_id"          # identifier not in the ICD (or extended/remote/error frame)
 
 DELIVERED = frozenset({OK, OK_SOME_LOST})
-# A counter this many steps behind the reference is taken for a delayed old frame (see _sequence); with a
-# 4-bit counter a larger backwards step cannot be told from a forward jump, which resynchronises.
-OLD_FRAME_WINDOW = 3
 FRAME_CLASSES = (OK, OK_SOME_LOST, REPEATED, WRONG_SEQUENCE, CRC_ERROR, BAD_LENGTH, OUT_OF_RANGE)
 ALL_CLASSES = FRAME_CLASSES + (TIMEOUT,)
 BUS_KEY = "_bus"  # counters for frames that cannot be attributed to an ICD message

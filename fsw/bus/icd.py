@@ -24,8 +24,8 @@ import cantools
 import numpy as np
 from keepout_config import config_path
 
-from fsw.bus.e2e import _TABLE as _CRC_TABLE
-from fsw.bus.e2e import crc8_sae_j1850, e2e_crc
+from fsw.bus.crc import CRC_TABLE as _CRC_TABLE
+from fsw.bus.crc import crc8_sae_j1850, e2e_crc
 from fsw.bus.burst import FrameBurst
 from fsw.bus.burst import data_frame as _data_frame
 from fsw.bus.kernels import MAX_DLC, CodecTable, encode_burst

@@ -32,7 +32,9 @@ OK_CODE, OK_SOME_LOST_CODE, REPEATED_CODE, WRONG_SEQUENCE_CODE = 0, 1, 2, 3
 CRC_ERROR_CODE, BAD_LENGTH_CODE, OUT_OF_RANGE_CODE = 4, 5, 6
 # kind_of_id entries below 0 (>= 0: the message index)
 KIND_UNKNOWN, KIND_ECHO, KIND_FALLBACK = -1, -2, -3
-OLD_FRAME_WINDOW = 3  # see fsw.bus.e2e
+# A counter this many steps behind the reference is taken for a delayed old frame (see E2EReceiver._sequence);
+# with a 4-bit counter a larger backwards step cannot be told from a forward jump, which resynchronises.
+OLD_FRAME_WINDOW = 3
 MAX_DLC = 8
 
 

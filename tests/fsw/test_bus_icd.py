@@ -187,3 +187,14 @@ def test_encoded_frames_are_plain_classic_data_frames(icd: Icd) -> None:
         if slot != "__weakref__":
             assert getattr(msg, slot) == getattr(ref, slot), slot
     assert type(msg.data) is bytearray and msg.dlc == icd.spec("SYNC").dlc
+
+
+def test_the_wheel_count_limit_is_the_icds() -> None:
+    """MAX_WHEELS (fsw.config, used by the mission schema and the bus driver) is the number of wheels the
+    ICD has frames for: RWn_CMD and RWn_STATUS for n = 1..MAX_WHEELS, and no more."""
+    from fsw.config import MAX_WHEELS
+
+    icd = Icd()
+    for kind in ("CMD", "STATUS"):
+        wheels = sorted(int(name[2:].split("_")[0]) for name in icd.messages if name.startswith("RW") and name.endswith(kind))
+        assert wheels == list(range(1, MAX_WHEELS + 1)), (kind, wheels)

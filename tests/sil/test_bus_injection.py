@@ -153,16 +153,16 @@ def test_random_frames_with_valid_identifiers_cannot_move_onboard_time(tmp_path:
 
 @pytest.mark.slow
 def test_random_frames_with_valid_identifiers_cannot_touch_an_authenticated_run(tmp_path: Path) -> None:
-    """Forged frames against a run with bus_authentication: none is used, the run flies to its end and
-    passes. (At a few thousand frames a second: a flood that takes the host's CPUs, as the one above at
-    ~50 a millisecond, still slows the loop until cycles slip and telemetry is lost, a denial of service
-    that no authentication prevents; docs/security.md.)"""
-    code, output, run_dir = _fly_under_attack(tmp_path / "run", _random_frames(_flight_side_ids(), pause_s=0.01),
+    """Forged frames (~1,000 a second) against a run with bus_authentication: none is used, the run flies to
+    its end and meets its requirements. (A faster flood still fills the sockets' buffers: the kernel drops a
+    genuine frame now and then, a lost CYCLE_DONE costs a lockstep timeout, cycles slip and telemetry is
+    lost, a denial of service no authentication prevents; bench/bus_attacks.py, docs/security.md.)"""
+    code, output, run_dir = _fly_under_attack(tmp_path / "run", _random_frames(_flight_side_ids(), pause_s=0.05),
                                               _authenticated_mission(tmp_path))
     _flew_safely(run_dir, output)
     truth = __import__("numpy").load(run_dir / "truth.npz")
     assert float(truth["t_s"][-1]) == pytest.approx(DURATION_S, abs=1.0)
-    assert _last_hk(run_dir, "bus_auth_failures") > 1000 and _last_hk(run_dir, "bus_crc_errors") == 0
+    assert _last_hk(run_dir, "bus_auth_failures") > 500 and _last_hk(run_dir, "bus_crc_errors") == 0
     assert _last_hk(run_dir, "wheels_isolated") == 0
 
 
@@ -217,7 +217,7 @@ def test_an_earlier_runs_traffic_replayed_into_an_authenticated_run_is_refused(t
                         break
                     for msg in recorded[i:i + 50]:
                         bus.send(msg)
-                    time.sleep(0.001)
+                    time.sleep(0.02)  # ~2,500 frames a second: an attack, not a flood that starves the CPUs
         except can.CanError:
             pass
         finally:
