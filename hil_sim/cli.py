@@ -23,6 +23,7 @@ _COMMAND_MODULES = (
     "hil_sim.export_cli",  # keepout export RUN --format csv|mat|parquet
     "hil_sim.sky_cli",    # keepout sky MISSION --at T | --from T0 --to T1 --step S
     "hil_sim.budget",     # keepout budget MISSION
+    "hil_sim.truth_cli",  # keepout truth MISSION --duration D --out FILE.npz
 )
 
 def description_of(doc: str) -> str:

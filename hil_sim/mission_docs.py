@@ -68,7 +68,10 @@ exactly as before. `keepout budget FILE` prints the disturbance and momentum bud
 orbit and one day, attitude held inertially at the initial one: the peak torque, the momentum accumulated
 per body axis, the largest it gets and the worst wheel's speed when the wheels absorb it (`--json FILE`
 writes the rows). Solar radiation pressure, drag and a magnetic dipole are not in the truth models yet; the
-budget says so.
+budget says so. `keepout truth FILE --duration S --out truth.npz` propagates the truth models alone (no
+flight software, wheel motors commanding zero) and writes the SIL's truth.npz layout plus the inertial
+angular momentum `H_N_Nms`, with a one-line summary: attitude drift, largest body rate and the momentum
+the disturbances added.
 
 In the tables, *required* means the key has no default; a range `(a, b]` excludes a and includes b.
 """

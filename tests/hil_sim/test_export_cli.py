@@ -76,7 +76,7 @@ def test_csv_and_mat_read_back_equal_truth_npz(run_dir, tmp_path, capsys):
     written = capsys.readouterr().out
     assert all(f"wrote {tmp_path / 'csv' / name}.csv" in written for name in export_cli.TABLES)
 
-    csv = {name: pd.read_csv(tmp_path / "csv" / f"{name}.csv") for name in export_cli.TABLES}
+    csv = {name: pd.read_csv(tmp_path / "csv" / f"{name}.csv", float_precision="round_trip") for name in export_cli.TABLES}
     _assert_truth_equal(csv["truth"], truth)
     mat = loadmat(tmp_path / "mat" / "run.mat", simplify_cells=True)
     assert set(export_cli.TABLES) <= set(mat)
