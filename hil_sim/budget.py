@@ -120,13 +120,10 @@ def _budget(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from hil_sim.mission import load_mission
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission import load_mission_or_report
 
-    try:
-        mission = load_mission(args.mission)
-    except ConfigError as exc:
-        print(exc, file=sys.stderr)
+    mission = load_mission_or_report(args.mission)
+    if mission is None:
         return EXIT_REJECTED
     rows = budget(mission)
     table = Table(title=f"{mission.name}: disturbance and momentum budget (attitude held inertially)")

@@ -13,6 +13,7 @@ components. Every physical key carries its unit in its name (``_deg``, ``_s``, `
 from __future__ import annotations
 
 import math
+import sys
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
@@ -598,6 +599,17 @@ def ra_dec_to_unit(ra_deg: float, dec_deg: float) -> np.ndarray:
 def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
     """Load and validate a mission file; raise yaml_loader.ConfigError listing every problem."""
     return load_mission_marked(path, text=text)[0]
+
+
+def load_mission_or_report(path: str | Path) -> Mission | None:
+    """`load_mission` for a command: None when the file is refused, its problems printed to stderr."""
+    from hil_sim.yaml_loader import ConfigError
+
+    try:
+        return load_mission(path)
+    except ConfigError as exc:
+        print(exc, file=sys.stderr)
+        return None
 
 
 def load_mission_marked(path: str | Path, *, text: str | None = None) -> tuple[Mission, "Marked"]:

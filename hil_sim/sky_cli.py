@@ -289,14 +289,11 @@ def _closed(points: np.ndarray) -> np.ndarray:
 
 
 def _sky(args: argparse.Namespace) -> int:
-    from hil_sim.mission import load_mission
+    from hil_sim.mission import load_mission_or_report
     from hil_sim.physics_checks import SkyZones, ZoneBuildError
-    from hil_sim.yaml_loader import ConfigError
 
-    try:
-        mission = load_mission(args.mission)
-    except ConfigError as exc:
-        print(exc, file=sys.stderr)
+    mission = load_mission_or_report(args.mission)
+    if mission is None:
         return EXIT_REJECTED
     try:
         epoch = mission.epoch_utc

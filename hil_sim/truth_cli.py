@@ -83,13 +83,10 @@ def _positive(text: str) -> float:
 
 
 def _truth(args: argparse.Namespace) -> int:
-    from hil_sim.mission import load_mission
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission import load_mission_or_report
 
-    try:
-        mission = load_mission(args.mission)
-    except ConfigError as exc:
-        print(exc, file=sys.stderr)
+    mission = load_mission_or_report(args.mission)
+    if mission is None:
         return EXIT_REJECTED
     if args.out.suffix != ".npz":
         print(f"keepout truth: --out {args.out}: the truth is written as .npz (e.g. truth.npz)", file=sys.stderr)
