@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from pathlib import Path
 
 
 BENCH_FIRST_SYNC_TIMEOUT_S = 600.0  # `keepout fsw`: the simulator is started by hand, maybe on another computer
@@ -53,6 +54,9 @@ def add_arguments(p: argparse.ArgumentParser, first_sync_default: float | None =
     p.add_argument("--first-sync-timeout-s", type=float, default=first_sync_default,
                    help="lockstep: wait this long for the simulator's first SYNC (default: "
                         f"{first_sync_default or 'rates.lockstep_timeout_s'})")
+    p.add_argument("--bus-file", default=None, metavar="FILE",
+                   help="write the bus spec actually opened (e.g. udp_multicast:GROUP:PORT, chosen at random for "
+                        "udp_multicast without a group) to FILE, for `keepout sim --bus \"$(cat FILE)\"`")
     p.add_argument("--run-id", default=None, help="run id for per-run UDP multicast endpoints (bus 'auto')")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--lockstep", action="store_true", help="tick on simulator SYNC frames")
@@ -107,14 +111,24 @@ def run(args: argparse.Namespace) -> int:
     from fsw.telemetry import TelemetrySender
 
     bus_spec = args.bus if args.bus is not None else mission_bus
+    opened: list = []
     try:
-        bus = open_bus(bus_spec, args.run_id, bitrate=args.bitrate if args.bitrate is not None else mission_bitrate)
+        bus = open_bus(bus_spec, args.run_id, info_out=opened,
+                       bitrate=args.bitrate if args.bitrate is not None else mission_bitrate)
     except BusSpecError as exc:
         print(f"fsw: --bus {bus_spec!r}: {exc}", file=sys.stderr)
         return 2
     except BusUnavailableError as exc:
         print(f"fsw: bus unavailable: {exc}", file=sys.stderr)
         return 3
+    bus_spec = opened[0].spec  # the concrete spec: the group and port a random udp_multicast picked
+    if args.bus_file:
+        try:
+            Path(args.bus_file).write_text(bus_spec + "\n")
+        except OSError as exc:
+            bus.shutdown()
+            print(f"fsw: --bus-file {args.bus_file}: {exc.strerror or exc}", file=sys.stderr)
+            return 2
     icd = Icd(args.dbc) if args.dbc else Icd()
     try:
         key = link_key(cfg, args.config, args.key_file)
