@@ -121,7 +121,8 @@ def _run(args: argparse.Namespace) -> int:
     from hil_sim.world import World
 
     try:
-        mission, _ = prepare(RunOptions(mission=args.mission, bus=args.bus, duration_s=args.duration))
+        options = RunOptions(mission=args.mission, bus=args.bus, duration_s=args.duration)
+        mission, _ = prepare(options)
         info = resolve_spec(mission.bus)
         tc_host, tc_port = _tc_address(args.tc, mission)
         # (KeyFileError is a ValueError); no key needed when nothing is sent
@@ -178,7 +179,7 @@ def _run(args: argparse.Namespace) -> int:
         (out / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n")
     if code == EXIT_NOT_STARTED:
         return code
-    passed, results = _truth_check(out, mission)
+    passed, results = _truth_check(out, mission, options.planned_duration_s)
     for line in result_lines(results):
         print(line)
     print(f"keepout sim: {sim.tick} ticks in {wall_s:.1f} s wall, {sim.stats.cycle_done_timeouts} unanswered; "
@@ -204,11 +205,13 @@ def _loop(sim, world, recorder, timeline, n_ticks: int, args: argparse.Namespace
     return EXIT_PASS, ""
 
 
-def _truth_check(out: Path, mission) -> tuple[bool, list[dict[str, Any]]]:
-    """The mission's requirements that truth alone decides, written to ``truth_check.json``."""
+def _truth_check(out: Path, mission, planned_duration_s: float | None = None) -> tuple[bool, list[dict[str, Any]]]:
+    """The mission's requirements that truth alone decides, written to ``truth_check.json``: the SIL's
+    judge, rows, limits and verdict (``planned_duration_s``: the mission file's duration when --duration
+    shortened the run, so targets past the end are "not reached", as `keepout sil run` says)."""
     from hil_sim.summary import evaluate
 
-    summary, _ = evaluate(out, mission, status="completed")
+    summary, _ = evaluate(out, mission, status="completed", planned_duration_s=planned_duration_s)
     results = [r for r in summary["requirements"] if r["name"].startswith(TRUTH_REQUIREMENTS)]
     passed = bool(results) and all(r["pass"] for r in results)
     (out / TRUTH_CHECK_FILE).write_text(json.dumps({"pass": passed, "requirements": results}, indent=1,
