@@ -286,8 +286,8 @@ class FlightSoftware:
         except TypeError:
             self.telemetry.event(name, **args)
 
-    def _on_slip(self, group: str, exec_ms: float, total: int) -> None:
-        self._event("CYCLE_SLIP", rate_group=group, exec_time_ms=exec_ms, count=total)
+    def _on_slip(self, group: str, exec_ms: float, total: int, late_ms: float = 0.0) -> None:
+        self._event("CYCLE_SLIP", rate_group=group, exec_time_ms=exec_ms, count=total, late_ms=late_ms)
 
     @property
     def mode(self) -> str:

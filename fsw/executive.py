@@ -78,21 +78,24 @@ class JitterStats:
 class Executive:
     """Runs ``gnc_task(inputs, slipped_before)`` every tick and ``hk_task()`` every ``hk_divider`` ticks.
 
-    ``on_slip(group, exec_ms, total)`` is called (throttled) to emit the warning event.
+    ``on_slip(group, exec_ms, total, late_ms)`` is called (throttled) to emit the warning event: how long the
+    cycle ran and, in real time, how late it started (a cycle that starts late on a loaded host slips
+    however short it runs; in lockstep the start is the SYNC's, so late_ms is 0).
     """
 
     STOP_POLL_S = 0.2  # longest a stop request waits for a blocking lockstep receive [s]; a wake-up this often costs nothing
 
     def __init__(self, gnc_rate_hz: float, hk_rate_hz: float, slip_event_throttle_s: float,
                  gnc_task: Callable[..., object], hk_task: Callable[[], object],
-                 on_slip: Callable[[str, float, int], object] | None = None,
+                 on_slip: Callable[[str, float, int, float], object] | None = None,
                  clock: Callable[[], float] = time.perf_counter):
         self.period_s = 1.0 / gnc_rate_hz
         self.hk_divider = max(1, round(gnc_rate_hz / hk_rate_hz))
         self.throttle_s = slip_event_throttle_s
         self.gnc_task = gnc_task
         self.hk_task = hk_task
-        self.on_slip = on_slip or (lambda group, exec_ms, total: None)
+        self.on_slip = on_slip or (lambda group, exec_ms, total, late_ms: None)
+        self.start_late_s = 0.0  # real time: how late the current cycle started
         self.clock = clock
         self.gnc = RateGroupStats("GNC")
         self.hk = RateGroupStats("HK")
@@ -114,7 +117,7 @@ class Executive:
         now = self.clock()
         if now - group.last_slip_event_t >= self.throttle_s:
             group.last_slip_event_t = now
-            self.on_slip(group.name, 1e3 * exec_s, group.slips)
+            self.on_slip(group.name, 1e3 * exec_s, group.slips, 1e3 * self.start_late_s)
 
     def run_tick(self, inputs, tick: int, budget_s: float) -> float:
         """GNC (and HK when due) for one tick; returns the end time on self.clock."""
@@ -195,6 +198,7 @@ class Executive:
                 if remaining > spin_s:
                     sleep(remaining - spin_s)
             self.jitter.record(now - start_sched)
+            self.start_late_s = now - start_sched
             inputs = collect()
             end = self.run_tick(inputs, k, P - (now - start_sched))
             n += 1

@@ -19,7 +19,7 @@ class FakeClock:
         self.t += dt
 
 
-def _executive(clock, exec_times, hk_log, slip_log, throttle_s=10.0):
+def _executive(clock, exec_times, hk_log, slip_log, throttle_s=10.0, late_log=None):
     it = iter(exec_times)
 
     def gnc(inputs, slipped_before):
@@ -29,7 +29,12 @@ def _executive(clock, exec_times, hk_log, slip_log, throttle_s=10.0):
         hk_log.append(clock.t)
         clock.t += 0.002
 
-    return Executive(10.0, 1.0, throttle_s, gnc, hk, lambda g, ms, n: slip_log.append((g, round(ms, 3), n)), clock=clock)
+    def on_slip(g, ms, n, late_ms):
+        slip_log.append((g, round(ms, 3), n))
+        if late_log is not None:
+            late_log.append(late_ms)
+
+    return Executive(10.0, 1.0, throttle_s, gnc, hk, on_slip, clock=clock)
 
 
 def test_lockstep_counts_overruns_and_skipped_ticks_and_runs_housekeeping_every_tenth_tick() -> None:
@@ -79,6 +84,23 @@ def test_realtime_schedule_jitter_and_missed_starts() -> None:
     assert n == 30 - 2
     assert max(ex.jitter.recent) < 1e-9  # the fake clock is exact: every start on schedule
     assert slips and slips[0][0] == "GNC"
+
+
+def test_a_realtime_slip_says_how_late_the_cycle_started() -> None:
+    """On a loaded host the process wakes late: the cycle starts 150 ms after its time and slips however
+    short it runs. The event used to say only "exec 0.60 ms", which reads as a fast cycle."""
+    clock = FakeClock()
+    hk, slips, late = [], [], []
+    woken = iter([0.0] * 5 + [0.15] + [0.0] * 100)
+
+    def oversleep(dt: float) -> None:
+        clock.t += dt + next(woken)
+
+    ex = _executive(clock, [0.0006] * 40, hk, slips, late_log=late)
+    ex.run_realtime(lambda: SimpleNamespace(), duration_s=2.0, sleep=oversleep, spin_s=0.0)
+    assert slips and slips[0][1] < 1.0  # it ran 0.6 ms ...
+    assert late[0] == pytest.approx(150.0, abs=1.0)  # ... but started 150 ms late
+    assert ex.gnc.slips >= 1
 
 
 def test_realtime_first_cycle_starts_at_once_then_every_period() -> None:

@@ -163,11 +163,11 @@ def test_events_are_throttled_per_window_and_the_suppression_is_reported() -> No
     tm = TelemetrySender(DICTIONARY, port=None)
     throttle = DICTIONARY.event("CYCLE_SLIP").throttle
     assert throttle == 3
-    sent = [tm.event("CYCLE_SLIP", time_s=0.1 * i, rate_group="GNC", exec_time_ms=150.0, count=i)
+    sent = [tm.event("CYCLE_SLIP", time_s=0.1 * i, rate_group="GNC", exec_time_ms=150.0, count=i, late_ms=0.0)
             for i in range(8)]
     assert sent == [True] * 3 + [False] * 5
     assert tm.counters["events_throttled"] == 5
-    assert tm.event("CYCLE_SLIP", time_s=10.5, rate_group="GNC", exec_time_ms=150.0, count=9)
+    assert tm.event("CYCLE_SLIP", time_s=10.5, rate_group="GNC", exec_time_ms=150.0, count=9, late_ms=0.0)
     names = [e.name for e in tm.recent_events]
     assert names[-2:] == ["EVENTS_THROTTLED", "CYCLE_SLIP"]
     assert tm.recent_events[-2].args == {"event": "CYCLE_SLIP", "count": 5}
