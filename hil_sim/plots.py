@@ -136,11 +136,17 @@ def _sky_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, sky_zone
     fig.colorbar(sc, ax=ax_loc, label="time [s]")
     for s in series["segments"]:
         if s.mode == "POINTING":
-            for ax, (x, y) in ((ax_sky, skyplot.mollweide_lon_lat(s.target)),
-                               (ax_loc, skyplot.local_xy_deg(s.target, center))):
-                ax.plot(x, y, marker="*", ms=14, color="k", ls="none", zorder=4)
-                ax.annotate(f"target @{s.t_start_s:.0f} s", (x[0], y[0]), textcoords="offset points",
-                            xytext=(6, 6), fontsize=8)
+            label = f"target @{s.t_start_s:.0f} s"
+            x, y = skyplot.mollweide_lon_lat(s.target)
+            ax_sky.plot(x, y, marker="*", ms=14, color="k", ls="none", zorder=4)
+            # the RA tick labels run along the equator: the label goes on the target's side of it, clear of them
+            away = math.copysign(max(abs(y[0]) + math.radians(4.0), math.radians(14.0)), y[0] if y[0] else 1.0)
+            ax_sky.annotate(label, (x[0], y[0]), xytext=(x[0], away), textcoords="data", fontsize=8,
+                            ha="center", va="bottom" if away > 0 else "top", zorder=6,
+                            bbox=dict(boxstyle="round,pad=0.15", fc="white", alpha=0.8, lw=0))
+            x, y = skyplot.local_xy_deg(s.target, center)
+            ax_loc.plot(x, y, marker="*", ms=14, color="k", ls="none", zorder=4)
+            ax_loc.annotate(label, (x[0], y[0]), textcoords="offset points", xytext=(6, 6), fontsize=8)
     skyplot.sky_points(ax_sky, y_N[:1], marker="o", color="k", zorder=5, label="start")
     ax_loc.plot(*skyplot.local_xy_deg(y_N[:1], center), marker="o", color="k", ls="none", label="start")
     skyplot.format_full_sky(ax_sky)

@@ -82,7 +82,7 @@ def test_sil_plots_have_units_on_every_axis_and_the_sky_convention(tmp_path, fig
     from test_summary_table import _drifting_run
 
     from hil_sim.plots import write_plots
-    run_dir, mission = _drifting_run(tmp_path, "demo-pointing")
+    run_dir, mission = _drifting_run(tmp_path, "demo-pointing", duration_s=310.0)  # its third target near Dec 0
     written = write_plots(run_dir, mission)
     assert {p.name for p in written} >= {"sky.png", "margins.png", "wheels.png"}
     _assert_units_on_every_axis(figures)
@@ -92,6 +92,12 @@ def test_sil_plots_have_units_on_every_axis_and_the_sky_convention(tmp_path, fig
     local = next(ax for ax in sky.axes if ax.name == "rectilinear" and not hasattr(ax, "_colorbar"))
     assert local.get_xlim()[0] > local.get_xlim()[1]  # east to the left there too
     assert local.get_aspect() == 1.0  # true angles
+    # the targets' labels leave the RA tick labels readable (they used to sit on them)
+    renderer = sky.canvas.get_renderer()
+    labels = [t.get_window_extent(renderer) for t in full.texts if t.get_text().startswith("target")]
+    ticks = [t.get_window_extent(renderer) for t in full.get_xticklabels() if t.get_text()]
+    assert labels and ticks
+    assert not [(a, b) for a in labels for b in ticks if a.overlaps(b)]
 
 
 def test_campaign_report_plots_have_units_and_the_same_ra_convention(tmp_path, figures):
