@@ -495,9 +495,9 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
         results.append({"name": name, "value": _rounded(value), "unit": unit, "limit": limit, "pass": bool(passed),
                         "detail": detail})
 
-    def not_judged(name: str, why: str) -> None:
+    def not_judged(name: str, why: str, value: str = "not reached") -> None:
         # a requirement the run could not reach: shown, and kept out of the verdict
-        results.append({"name": name, "value": "not reached", "unit": "", "limit": "-", "pass": True,
+        results.append({"name": name, "value": value, "unit": "", "limit": "-", "pass": True,
                         "judged": False, "detail": why})
 
     sim_stats = _read_json(run_dir / "simulator.json")
@@ -538,7 +538,10 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
                     f"{s['commanded_at_s']:.1f} s; final error "
                     + (f"{final:.4f} deg" if final is not None else "unknown (no samples)"), "s")
     if unjudged_last:
-        not_judged("final pointing error", "the run was shortened before the last target's settling deadline")
+        final = float(err[-1]) if len(t) else math.nan
+        # the error at the end is still what a person flying a shortened run wants to see
+        not_judged("final pointing error", "the run was shortened before the last target's settling deadline",
+                   f"not reached ({_rounded(final)} deg at the end)" if math.isfinite(final) else "not reached")
     if len(t):
         final = float(err[-1])
         if not unjudged_last:
@@ -677,11 +680,11 @@ def _cell(value: Any, unit: str = "") -> str:
 def format_summary(summary: dict[str, Any], total_wall_s: float | None = None) -> str:
     """The requirement table and the verdict line. ``total_wall_s``: wall time of the whole command, start-up
     included (the summary's own ``wall_s`` is the simulation loop alone)."""
-    lines = [f"{'requirement':38s} {'value':>20s}  {'limit':22s} result"]
-    for r in summary["requirements"]:
-        unit = r.get("unit", "")
-        lines.append(f"{r['name'][:38]:38s} {_cell(r['value'], unit)[:20]:>20s}  "
-                     f"{_cell(r['limit'], unit)[:22]:22s} {'n/a' if r.get('judged') is False else 'PASS' if r['pass'] else 'FAIL'}")
+    rows = [(r["name"][:38], _cell(r["value"], r.get("unit", "")), _cell(r["limit"], r.get("unit", ""))[:22],
+             "n/a" if r.get("judged") is False else "PASS" if r["pass"] else "FAIL") for r in summary["requirements"]]
+    width = max([20] + [len(value) for _, value, _, _ in rows])  # a value is never cut: it is what was measured
+    lines = [f"{'requirement':38s} {'value':>{width}s}  {'limit':22s} result"]
+    lines += [f"{name:38s} {value:>{width}s}  {limit:22s} {result}" for name, value, limit, result in rows]
     speed = summary.get("speed_x_realtime")
     status = summary.get("status", "completed")
     verdict = "PASS" if summary["pass"] else ("FAIL" if status == "completed" else status.split(":")[0].upper())
