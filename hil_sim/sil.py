@@ -559,6 +559,23 @@ def _auth_stats(bus) -> dict:
     return {"bus_authentication": counters.as_dict()} if hasattr(counters, "as_dict") else {}
 
 
+class SilenceWatch:
+    """Counts the ticks in a row in which the flight software was not heard from, to end a run whose flight
+    software hung. In lockstep a tick is heard when its CYCLE_DONE came. In real time a CYCLE_DONE that
+    came late (after the next tick began: a cycle slip, which the judge counts) still shows the flight
+    software alive: on a loaded host three late answers in a row used to end the run as "answered none of
+    the last 3 ticks", which was not true."""
+
+    def __init__(self, realtime: bool) -> None:
+        self.realtime = realtime
+        self.missed_in_row = 0
+
+    def after_tick(self, answered_in_time: bool, any_answer_came: bool) -> int:
+        heard = answered_in_time or (self.realtime and any_answer_came)
+        self.missed_in_row = 0 if heard else self.missed_in_row + 1
+        return self.missed_in_row
+
+
 def _raise_terminated(signum, frame) -> None:  # noqa: ARG001
     raise Terminated()
 
@@ -671,12 +688,13 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
         error_of = _truth_error_function(mission, boresight_B)
         started_wall = time.monotonic()
         cpu_at_start = _loop_cpu_s(fsw_proc, ground)
-        missed_in_row = 0
+        silence = SilenceWatch(options.realtime)
         for _ in range(n_ticks):
             timeline.release(sim.t_s)
+            answers = sim.stats.cycle_done
             done = sim.run_tick(options.realtime)
             recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
-            missed_in_row = 0 if done else missed_in_row + 1
+            missed_in_row = silence.after_tick(done, sim.stats.cycle_done > answers)
             # a crash shows within FSW_POLL_TICKS ticks (waitpid is a system call: ~15 us in the vcan-vm guest)
             if not done or sim.tick % FSW_POLL_TICKS == 0:
                 _check_alive(fsw_proc, ground, sim.t_s, run_dir)

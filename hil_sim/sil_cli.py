@@ -33,7 +33,7 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--no-progress", action="store_true", help="no progress bar (CI logs)")
     run.add_argument("--max-missed-ticks", type=_positive_int, default=3, metavar="N",
                      help="ticks in a row the flight software may leave unanswered before the run is ended as "
-                          "hung (default 3; raise it for real-time runs on a busy computer)")
+                          "hung (default 3; in real time a late answer is a cycle slip, not silence)")
     run.set_defaults(func=_run)
 
 
