@@ -23,6 +23,7 @@ from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field,
 
 from fsw.config import KNOWLEDGE_SOURCES, MAX_WHEELS, FswConfig
 from fsw.dictionary import FDIR_MONITORS
+from gnc.ephemeris import EARTH_RADIUS_KM
 from hil_sim.faults import DOOR_MESSAGES, WHEEL_MESSAGE
 from keepout_config import config_path
 
@@ -184,8 +185,6 @@ class SpacecraftTruth(_Model):
                              "(I1 + I2 >= I3): no rigid body has this inertia")
         return value
 
-
-EARTH_RADIUS_KM = 6378.137
 
 
 class Orbit(_Model):

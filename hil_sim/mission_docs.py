@@ -70,8 +70,9 @@ per body axis, the largest it gets and the worst wheel's speed when the wheels a
 writes the rows). Solar radiation pressure, drag and a magnetic dipole are not in the truth models yet; the
 budget says so. `keepout truth FILE --duration S --out truth.npz` propagates the truth models alone (no
 flight software, wheel motors commanding zero) and writes the SIL's truth.npz layout plus the inertial
-angular momentum `H_N_Nms`, with a one-line summary: attitude drift, largest body rate and the momentum
-the disturbances added.
+angular momentum `H_N_Nms` and `sunlit_fraction` (the share of the Sun's disc seen past the Earth: the
+conical umbra and penumbra, as Basilisk's eclipse module computes them), with a summary: attitude drift,
+largest body rate, the momentum the disturbances added and the time in the Earth's shadow.
 
 In the tables, *required* means the key has no default; a range `(a, b]` excludes a and includes b.
 """

@@ -23,12 +23,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from hil_sim.eclipse import SUN_RADIUS_KM
+
 if TYPE_CHECKING:
     from hil_sim.mission import Mission
     from hil_sim.physics_checks import SkyZones
 
 EXIT_REJECTED = 2
-SUN_RADIUS_KM = 695_700.0  # IAU 2015 nominal solar radius
 MOON_RADIUS_KM = 1_737.4
 MAX_SAMPLES = 100_000
 

@@ -35,10 +35,10 @@ from typing import Any
 
 import numpy as np
 
+from gnc.ephemeris import EARTH_RADIUS_KM
 from hil_sim.physics_checks import d_s_to_deg, schedule
 
 ZONE_REBUILD_DEG = 0.001  # rebuild a moving star zone when its centre moved more than this (margin error bound)
-EARTH_RADIUS_KM = 6378.137
 
 
 @dataclass

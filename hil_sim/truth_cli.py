@@ -6,8 +6,10 @@ the spacecraft does when nobody flies it, as a GNC engineer looks at a disturban
 control loop exists. Writes the truth in the SIL run's truth.npz layout (``t_s``, ``q_NB``,
 ``omega_BN_B``, ``wheel_speed_rad_s``, ``wheel_torque_Nm``, ``sun_N``, ``moon_N``, ``earth_N``,
 ``r_sc_N_km``, ``cycle_done`` all false: no flight software answered) plus ``H_N_Nms``, the total angular
-momentum in inertial axes, and prints a summary: the attitude drift, the largest body rate and the change
-of angular momentum (what the disturbances put in). ``keepout export`` and the plots read the file as a
+momentum in inertial axes, and ``sunlit_fraction``, the share of the Sun's disc seen past the Earth (0 in
+the umbra, 1 in full Sun: the conical shadow of hil_sim.eclipse), and prints a summary: the attitude drift,
+the largest body rate, the change of angular momentum (what the disturbances put in) and the time in the
+Earth's shadow. ``keepout export`` and the plots read the file as a
 run's truth.
 """
 from __future__ import annotations
@@ -43,17 +45,25 @@ def propagate(mission, duration_s: float, step_s: float) -> dict[str, np.ndarray
         recorder.record(world, zero, False)
         momentum[k] = world.batch.angular_momentum_N()[0]
     n = recorder.n
-    return {"t_s": recorder.t_s[:n], "q_NB": recorder.q_NB[:n], "omega_BN_B": recorder.omega_BN_B[:n],
+    from hil_sim.eclipse import sunlit_fraction
+
+    sun_km, _ = world.batch.ephemeris.positions_N_km(recorder.t_s[:n])
+    return {"sunlit_fraction": sunlit_fraction(recorder.r_sc_N_km[:n], sun_km), "t_s": recorder.t_s[:n], "q_NB": recorder.q_NB[:n], "omega_BN_B": recorder.omega_BN_B[:n],
             "wheel_speed_rad_s": recorder.wheel_speed_rad_s[:n], "wheel_torque_Nm": recorder.wheel_torque_Nm[:n],
             "sun_N": recorder.sun_N[:n], "moon_N": recorder.moon_N[:n], "earth_N": recorder.earth_N[:n],
             "r_sc_N_km": recorder.r_sc_N_km[:n], "cycle_done": recorder.cycle_done[:n], "H_N_Nms": momentum[:n]}
 
 
 def summary(truth: dict[str, np.ndarray]) -> dict[str, float]:
-    """Attitude drift from the initial attitude [deg], largest body rate [deg/s], |H_end - H_start| [N m s]."""
+    """Attitude drift from the initial attitude [deg], largest body rate [deg/s], |H_end - H_start| [N m s],
+    the share of the time in the Earth's shadow (umbra, and penumbra) and the number of eclipses begun."""
     q = truth["q_NB"]
     drift = 2.0 * np.degrees(np.arccos(np.clip(np.abs(q @ q[0]), 0.0, 1.0)))
-    return {"duration_s": float(truth["t_s"][-1] - truth["t_s"][0]),
+    lit = truth["sunlit_fraction"]
+    shadow = lit < 1.0
+    return {"umbra_fraction": float(np.mean(lit == 0.0)), "penumbra_fraction": float(np.mean(shadow & (lit > 0.0))),
+            "eclipses": int(np.count_nonzero(shadow[1:] & ~shadow[:-1])),
+            "duration_s": float(truth["t_s"][-1] - truth["t_s"][0]),
             "attitude_drift_deg": float(drift[-1]), "attitude_drift_max_deg": float(drift.max()),
             "body_rate_max_deg_s": float(np.degrees(np.linalg.norm(truth["omega_BN_B"], axis=1)).max()),
             "momentum_change_Nms": float(np.linalg.norm(truth["H_N_Nms"][-1] - truth["H_N_Nms"][0]))}
@@ -104,5 +114,7 @@ def _truth(args: argparse.Namespace) -> int:
     print(f"{mission.name}: {s['duration_s']:.0f} s of truth, wheels held, no flight software -> {args.out}\n"
           f"  attitude drift {s['attitude_drift_deg']:.3f} deg at the end ({s['attitude_drift_max_deg']:.3f} max), "
           f"body rate up to {s['body_rate_max_deg_s']:.4f} deg/s, angular momentum changed by "
-          f"{s['momentum_change_Nms']:.3e} N m s")
+          f"{s['momentum_change_Nms']:.3e} N m s\n"
+          f"  in the Earth's shadow {100 * s['umbra_fraction']:.1f} % of the time (umbra) + "
+          f"{100 * s['penumbra_fraction']:.2f} % (penumbra), {s['eclipses']} eclipse(s) begun")
     return 0

@@ -39,6 +39,8 @@ def test_without_external_torque_angular_momentum_is_conserved(tmp_path: Path) -
     assert 2 * np.degrees(np.arccos(min(1.0, abs(float(q[-1] @ q[0]))))) > 30.0  # a tumble, not a rest
     assert np.abs(h - h[0]).max() < 1e-9 * np.linalg.norm(h[0])
     assert truth["t_s"][-1] == pytest.approx(300.0) and not truth["cycle_done"].any()
+    # demo-pointing is geostationary near the equinox of its epoch: in full Sun for these 300 s
+    assert truth["sunlit_fraction"].shape == truth["t_s"].shape and np.all(truth["sunlit_fraction"] == 1.0)
 
 
 def test_a_constant_body_torque_adds_its_integral_along_the_attitude(tmp_path: Path) -> None:
