@@ -130,10 +130,17 @@ class MonitorState:
         self.last: dict[str, dict] = {}
         self.first_t: dict[str, float] = {}
         self.seen: dict[str, int] = {}
+        # SecOC authenticators (missions with bus_authentication): named, not "unknown"; E2E does not judge them
+        self.authenticators = {fid: f"SECOC_{node}" for node, fid in icd.authenticators.items()}
+        self.authenticators_seen = 0
+
+    def _name(self, frame: Any) -> str:
+        return frame.name or self.authenticators.get(frame.frame_id) or f"0x{frame.frame_id:03X}"
 
     def feed(self, msg: Any, now: float):
         frame = self.receiver.classify(msg, now)
-        name = frame.name or f"0x{frame.frame_id:03X}"
+        self.authenticators_seen += frame.name is None and frame.frame_id in self.authenticators
+        name = self._name(frame)
         self.seen[name] = self.seen.get(name, 0) + 1
         self.first_t.setdefault(name, now)
         if frame.delivered:
@@ -141,7 +148,7 @@ class MonitorState:
         return frame
 
     def line(self, frame: Any) -> str:
-        name = frame.name or f"0x{frame.frame_id:03X}"
+        name = self._name(frame)
         values = self.last.get(name, {}) if frame.delivered else {}
         text = " ".join(f"{k}={_fmt(v)}" for k, v in values.items())
         return f"{frame.t:12.3f} {name:<14} {frame.status:<14} {text}"
@@ -152,16 +159,16 @@ class MonitorState:
         table = Table(title="keepout bus (E2E-checked, config/icd/keepout.dbc)")
         for col in ("message", "frames", "rate Hz", "last values", "E2E not ok"):
             table.add_column(col)
-        for name in sorted(self.seen, key=lambda n: self.icd.messages[n].frame_id if n in self.icd.messages else -1):
+        for name in sorted(self.seen, key=lambda n: self.icd.messages[n].frame_id if n in self.icd.messages else 2048):
             span = now - self.first_t[name]
             rate = f"{(self.seen[name] - 1) / span:.1f}" if span > 0 and self.seen[name] > 1 else "-"
             values = " ".join(f"{k}={_fmt(v)}" for k, v in self.last.get(name, {}).items())
             counts = self.receiver.counters.get(name, {})
             bad = " ".join(f"{k}:{v}" for k, v in counts.items() if v and k != "ok")
             table.add_row(name, str(self.seen[name]), rate, values, bad)
-        bus_counts = self.receiver.counters["_bus"]
-        if bus_counts["unknown_id"]:
-            table.caption = f"unknown ids: {bus_counts['unknown_id']}"
+        unknown = self.receiver.counters["_bus"]["unknown_id"] - self.authenticators_seen
+        if unknown:
+            table.caption = f"unknown ids: {unknown}"
         return table
 
 

@@ -122,6 +122,19 @@ def test_monitor_lines_show_decoded_values_and_e2e_class() -> None:
     assert table.row_count == 5
 
 
+def test_monitor_names_secoc_authenticators_and_does_not_call_them_unknown() -> None:
+    from fsw.bus.secoc import authenticator
+
+    icd = Icd()
+    sync = _frames(icd)[0]
+    auth = authenticator(bytes(32), icd.authenticators["SIM"], 1, sync)
+    stray = can.Message(arbitration_id=0x7AB, data=b"\x01", is_extended_id=False)
+    state = bus_cli.MonitorState(icd)
+    lines = [state.line(state.feed(msg, 1.0)) for msg in (sync, auth, stray)]
+    assert "SECOC_SIM" in lines[1] and "0x7AB" in lines[2]
+    assert state.table(2.0).caption == "unknown ids: 1"  # the stray frame, not the authenticator
+
+
 def test_bad_bus_spec_is_a_clear_error(capsys: pytest.CaptureFixture) -> None:
     assert keepout_main(["bus", "log", "--bus", "canbus:9", "--count", "1"]) == 2
     assert "accepted: auto | socketcan" in capsys.readouterr().err
