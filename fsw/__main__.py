@@ -95,11 +95,10 @@ def run(args: argparse.Namespace) -> int:
 
     if os.environ.get(PARENT_PID_ENV):  # started by the SIL: end with it, whatever ends it
         die_with_parent()
-    from fsw.config import ConfigError, load_bus_settings, load_fsw_config
+    from fsw.config import ConfigError, load_fsw_run_config
 
     try:
-        cfg = load_fsw_config(args.config)
-        mission_bus, mission_bitrate, bus_authentication = load_bus_settings(args.config)
+        cfg, (mission_bus, mission_bitrate, bus_authentication) = load_fsw_run_config(args.config)
     except ConfigError as exc:
         print(f"fsw: {exc}", file=sys.stderr)
         return 2

@@ -613,12 +613,21 @@ def _read_yaml(p: Path):
 
 def load_fsw_config(path: str | Path) -> FswConfig:
     """Load an FswConfig from a mission YAML (key ``flight_software:``) or a bare FswConfig YAML."""
+    return load_fsw_run_config(path)[0]
+
+
+def load_fsw_run_config(path: str | Path) -> tuple[FswConfig, BusSettings]:
+    """The flight software's configuration and its bus settings from one reading of the file."""
     p = Path(path)
     data = _read_yaml(p)
     if data is None:
         data = {}
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping at the top level, got {type(data).__name__}")
+    return _fsw_config_of(data, p), _bus_settings_of(data, p)
+
+
+def _fsw_config_of(data: dict, p: Path) -> FswConfig:
     prefix = ""
     if "flight_software" in data:
         # a mission file: what its flight_software section leaves out is the truth written in the file
@@ -657,7 +666,10 @@ def load_bus_settings(path: str | Path) -> BusSettings:
     FswConfig YAML)."""
     p = Path(path)
     data = _read_yaml(p)
-    data = data if isinstance(data, dict) else {}
+    return _bus_settings_of(data if isinstance(data, dict) else {}, p)
+
+
+def _bus_settings_of(data: dict, p: Path) -> BusSettings:
     bus = data.get("bus", "auto")
     bitrate = data.get("bus_bitrate_bps")
     if not isinstance(bus, str):
