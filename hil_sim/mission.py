@@ -342,7 +342,9 @@ class Mission(_Model):
     bus_authentication: bool = Field(
         False, description="true: every batch of frames on the bus carries a SecOC-style authenticator (a MAC "
         "and a freshness value, keyed from the run's link key) and each end uses only the frames it "
-        "authenticates: injected, forged and replayed frames are counted and dropped (docs/security.md)")
+        "authenticates: injected, forged and replayed frames are counted and dropped (docs/security.md). "
+        "Applies to `keepout sil run` and `keepout fsw` / `keepout sim`; a fast-mode campaign flies in one "
+        "process, with no bus to protect")
     tmtc_ports: Literal["auto", "fixed"] = Field(
         "auto", description="auto: the SIL picks free UDP ports for telemetry and telecommands for each run "
         "(parallel runs never collide) and writes them into the config it saves; fixed: use "
