@@ -94,10 +94,13 @@ def test_random_frames_with_valid_identifiers_cannot_move_onboard_time(tmp_path:
     assert summary["status"] in ("completed",) or summary["status"].startswith("crashed: fsw"), summary["status"]
     truth = __import__("numpy").load(run_dir / "truth.npz")
     sim_s = float(truth["t_s"][-1])
-    assert _last_hk(run_dir, "bus_crc_errors") > 1000  # the frames did reach the flight software
-    assert _last_hk(run_dir, "wheels_isolated") == 0
-    cycles = _last_hk(run_dir, "cycles")
-    assert cycles <= round(sim_s * 10) + 1  # onboard time never ran ahead of the simulator's
+    hk = last_housekeeping(run_dir)
+    if not hk:  # stalled before its first housekeeping packet (1 Hz): the attack did arrive, and early
+        assert summary["status"].startswith("crashed: fsw") and sim_s < 2.0, (summary["status"], sim_s)
+        return
+    assert int(hk["bus_crc_errors"]) > 100  # the frames did reach the flight software
+    assert int(hk["wheels_isolated"]) == 0
+    assert int(hk["cycles"]) <= round(sim_s * 10) + 1  # onboard time never ran ahead of the simulator's
 
 
 @pytest.mark.slow
