@@ -29,6 +29,15 @@ def add_cli(subparsers: Any) -> None:
     web.set_defaults(func=_cmd_web)
 
 
+def archive_title(archive: Path) -> str:
+    """The name Open MCT's tree shows for an archive: its run's folder name (a SIL run keeps its ground
+    archive in RUN/ground, whose own name says nothing), else the archive folder's."""
+    archive = Path(archive).resolve()
+    if archive.name == "ground" and any((archive.parent / f).exists() for f in ("summary.json", "mission.yaml")):
+        return archive.parent.name
+    return archive.name
+
+
 def _source(args: argparse.Namespace) -> tuple[Path, Path | None, Any]:
     """(archive dir, mission config path or None, endpoints or None) of the command line."""
     from ground.link import Endpoints, find_run
@@ -63,7 +72,7 @@ def _cmd_web(args: argparse.Namespace) -> int:
 
             security = downlink_receiver(load_key_file(args.web_key_file or archive.parent / LINK_KEY_FILE))
         ground = WebGround(dictionary, archive, openmct_dir, cfg=cfg, endpoints=endpoints, security=security,
-                           title=endpoints.run_id if endpoints else archive.name)
+                           title=endpoints.run_id if endpoints else archive_title(archive))
         sock = bind(args.host, args.port)
     except (WebSetupError, LinkError, ConfigError, DictionaryError, ValueError) as exc:
         print(f"keepout ground web: {exc}", file=sys.stderr)

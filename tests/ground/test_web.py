@@ -198,3 +198,19 @@ def test_bad_command_lines_are_one_line_errors(tmp_path: Path, capsys) -> None:
     assert f"--archive {tmp_path}: no tm_raw.bin there" in capsys.readouterr().err
     assert main(["ground", "web", "--run", str(tmp_path)]) == 2
     assert "no endpoints.json there" in capsys.readouterr().err
+
+
+def test_an_archive_replay_is_named_after_its_run_not_ground(tmp_path) -> None:
+    """`keepout ground web --archive RUN/ground`: the tree's root said "ground"; it is the run's name."""
+    from ground.web.cli import archive_title
+
+    run = tmp_path / "demo-pointing-20261129-030421-405d1a"
+    (run / "ground").mkdir(parents=True)
+    (run / "mission.yaml").write_text("name: demo-pointing\n")
+    assert archive_title(run / "ground") == run.name
+    elsewhere = tmp_path / "copied-archive"
+    elsewhere.mkdir()
+    assert archive_title(elsewhere) == "copied-archive"
+    bare = tmp_path / "x" / "ground"  # a folder named ground that is not in a run folder keeps its name
+    bare.mkdir(parents=True)
+    assert archive_title(bare) == "ground"
