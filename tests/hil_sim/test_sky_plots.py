@@ -93,7 +93,9 @@ def test_sil_plots_have_units_on_every_axis_and_the_sky_convention(tmp_path, fig
     assert local.get_xlim()[0] > local.get_xlim()[1]  # east to the left there too
     assert local.get_aspect() == 1.0  # true angles
     # the targets' labels leave the RA tick labels readable (they used to sit on them)
-    renderer = sky.canvas.get_renderer()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(sky).get_renderer()  # (a closed figure's canvas may be the base one)
     labels = [t.get_window_extent(renderer) for t in full.texts if t.get_text().startswith("target")]
     ticks = [t.get_window_extent(renderer) for t in full.get_xticklabels() if t.get_text()]
     assert labels and ticks
