@@ -32,11 +32,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests" / "sil"))  # bus_attack_kit: the attacker, shared with the tests
-from bus_attack_kit import (flight_side_ids, flood, fly_under_attack, last_housekeeping, listener,  # noqa: E402
-                            random_frames, replayed)
+from bus_attack_kit import (BATCH, flight_side_ids, flood, fly_under_attack, last_housekeeping,  # noqa: E402
+                            listener, random_frames, replayed)
 
 MISSION = ROOT / "config" / "missions" / "demo-pointing.yaml"
-PAUSE_S = 0.01  # between batches of 50 frames
+PAUSE_S = 0.01  # between batches of BATCH frames
 
 
 def _fly(mission: Path, out: Path, duration_s: float, attack) -> dict:
@@ -81,7 +81,7 @@ def main() -> int:
                       f"{row['wheels_isolated']!s:>8s}  {', '.join(row['failed'])}", flush=True)
         replayed_frames = {auth: len(r) for auth, r in recordings.items()}
     result = {"bench": "bus_attacks", "mission": MISSION.name, "duration_s": args.duration,
-              "frames_per_batch": 50, "pause_s": PAUSE_S, "replayed_frames": replayed_frames,
+              "frames_per_batch": BATCH, "pause_s": PAUSE_S, "replayed_frames": replayed_frames,
               "load_avg": os.getloadavg(), "rows": rows}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")

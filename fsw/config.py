@@ -660,16 +660,10 @@ class BusSettings(NamedTuple):
     authentication: bool
 
 
-def load_bus_settings(path: str | Path) -> BusSettings:
+def _bus_settings_of(data: dict, p: Path) -> BusSettings:
     """The bus spec, CAN bit rate [bit/s] and frame authentication a mission YAML names (top-level ``bus``,
     ``bus_bitrate_bps`` and ``bus_authentication``; ``auto``, None and False when absent, as in a bare
     FswConfig YAML)."""
-    p = Path(path)
-    data = _read_yaml(p)
-    return _bus_settings_of(data if isinstance(data, dict) else {}, p)
-
-
-def _bus_settings_of(data: dict, p: Path) -> BusSettings:
     bus = data.get("bus", "auto")
     bitrate = data.get("bus_bitrate_bps")
     if not isinstance(bus, str):

@@ -552,7 +552,7 @@ def run_sil(options: RunOptions) -> RunResult:
             signal.signal(signal.SIGTERM, previous_sigterm)
 
 
-def _auth_stats(bus) -> dict:
+def auth_stats(bus) -> dict:
     """simulator.json's ``bus_authentication`` entry: what the simulator's SecOC layer accepted and refused
     (nothing when the mission does not authenticate its bus)."""
     counters = getattr(bus, "counters", None)
@@ -741,7 +741,7 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
                      "loop_cpu_s": loop_cpu_s, "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
                      "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
                      "bus_decode_errors": int(getattr(bus, "decode_errors", 0)),
-                     **_auth_stats(bus),
+                     **auth_stats(bus),
                      "faults_injected": [list(map(_plain, e)) if isinstance(e, tuple) else _plain(e)
                                          for e in getattr(sim.injector, "log", [])],
                      "telecommands": timeline.sent if timeline else [],

@@ -117,7 +117,7 @@ def _run(args: argparse.Namespace) -> int:
     from hil_sim.lockstep import Simulator
     from hil_sim.mission import door_params, world_params
     from hil_sim.sil import (CANDUMP_FILE, SIM_STATS_FILE, TRUTH_FILE, CandumpLog, MissionRejected, RunOptions,
-                             Timeline, TruthRecorder, _auth_stats, _plain, _run_dir, prepare)
+                             Timeline, TruthRecorder, _plain, _run_dir, auth_stats, prepare)
     from hil_sim.world import World
 
     try:
@@ -174,7 +174,7 @@ def _run(args: argparse.Namespace) -> int:
         stats = {**sim.stats.__dict__, "aborted": aborted, "clock": "realtime" if args.realtime else "lockstep",
                  "bus": info.spec, "bus_note": info.note, "bitrate_bps": mission.bus_bitrate_bps, "wall_s": wall_s,
                  "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames,
-                 "bus_decode_errors": int(getattr(bus, "decode_errors", 0)), **_auth_stats(bus),
+                 "bus_decode_errors": int(getattr(bus, "decode_errors", 0)), **auth_stats(bus),
                  "telecommands": timeline.sent, "telecommand_errors": timeline.errors}
         (out / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n")
     if code == EXIT_NOT_STARTED:

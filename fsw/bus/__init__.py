@@ -5,7 +5,8 @@ modules (cantools, python-can, numba for the burst codec in ``fsw.bus.kernels``)
 package only.
 """
 from fsw.bus.driver import FswBusDriver, ImuSample, LatestInputs, StarTrackerSample, TickInputs, WheelStatus
-from fsw.bus.e2e import E2EReceiver, ReceivedFrame, crc8_sae_j1850, e2e_crc
+from fsw.bus.crc import crc8_sae_j1850, e2e_crc
+from fsw.bus.e2e import E2EReceiver, ReceivedFrame
 from fsw.bus.icd import DEFAULT_DBC_PATH, E2ESender, Icd, IcdError, MessageSpec
 from fsw.bus.transport import (
     BusInfo,

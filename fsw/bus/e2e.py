@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Iterable, Mapping, NamedTuple
 
 import numpy as np
 
-from fsw.bus.crc import crc8_sae_j1850, e2e_crc  # noqa: F401  (re-exported: the E2E CRC lives in fsw.bus.crc)
+from fsw.bus.crc import e2e_crc
 from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_FALLBACK, KIND_UNKNOWN, OLD_FRAME_WINDOW,
                              UNKNOWN_CODE, classify_rows)
 

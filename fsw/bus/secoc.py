@@ -35,7 +35,7 @@ import hmac
 import struct
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any, Iterable, Sequence
 
 import can
@@ -95,8 +95,7 @@ class SecOCCounters:
         return self.bad_mac + self.unauthenticated + self.foreign
 
     def as_dict(self) -> dict[str, int]:
-        return {"frames_accepted": self.frames_accepted, "bad_mac": self.bad_mac,
-                "unauthenticated": self.unauthenticated, "foreign": self.foreign}
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -201,11 +200,12 @@ class SecOCBus(can.BusABC):
 
     def _verify(self, auth: can.Message) -> None:
         data = bytes(auth.data)
-        queue = self._held.get(_WORD.unpack_from(data)[0] & _ID_MASK) if len(data) == 8 else None
+        word = _WORD.unpack_from(data)[0] if len(data) == 8 else None
+        queue = self._held.get(word & _ID_MASK) if word is not None else None
         if not queue:
             self.counters.bad_mac += 1
             return
-        freshness = next_freshness(self._rx_freshness, _WORD.unpack_from(data)[0] >> ID_BITS)
+        freshness = next_freshness(self._rx_freshness, word >> ID_BITS)
         tag = data[_WORD.size:]
         for i in range(len(queue) - 1, -1, -1):  # newest first: the genuine frame came just before
             if hmac.compare_digest(mac(self.assoc.rx_key, self.assoc.rx_auth_id, freshness, queue[i]), tag):

@@ -124,7 +124,7 @@ def test_nan_missing_and_unknown_signals_are_refused(icd: Icd) -> None:
 
 def _cantools_frame_bytes(spec, values: dict, counter: int) -> bytes:
     """The reference: the frame as cantools packs it (CRC signal zero, CRC over bytes 1.., then again)."""
-    from fsw.bus.e2e import e2e_crc
+    from fsw.bus.crc import e2e_crc
 
     v = dict(values, E2E_Counter=counter & 0x0F, E2E_CRC=0)
     payload = spec.db_message.encode(v, scaling=True, padding=False, strict=False)

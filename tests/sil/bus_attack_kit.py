@@ -20,6 +20,7 @@ import can
 
 ROOT = Path(__file__).resolve().parents[2]
 Attack = Callable[[str, int, threading.Event], None]
+BATCH = 50  # frames an attack sends between pauses
 
 
 def fly_under_attack(out: Path, attack: Attack, mission: Path, duration_s: float,
@@ -80,7 +81,7 @@ def flood(batches: Callable[[], Iterable[list[can.Message]]], pause_s: float) ->
     return attack
 
 
-def random_frames(ids: list[int], seed: int = 7, size: int = 50) -> Iterator[list[can.Message]]:
+def random_frames(ids: list[int], seed: int = 7, size: int = BATCH) -> Iterator[list[can.Message]]:
     """Batches of frames with identifiers from ``ids`` and random 8-byte payloads, for ever."""
     rnd = random.Random(seed)
     while True:
@@ -88,7 +89,7 @@ def random_frames(ids: list[int], seed: int = 7, size: int = 50) -> Iterator[lis
                            data=bytes(rnd.getrandbits(8) for _ in range(8))) for _ in range(size)]
 
 
-def replayed(frames: list[can.Message], size: int = 50) -> Iterator[list[can.Message]]:
+def replayed(frames: list[can.Message], size: int = BATCH) -> Iterator[list[can.Message]]:
     """``frames`` in batches, over and over."""
     while True:
         for i in range(0, len(frames), size):
