@@ -209,96 +209,122 @@ def _ray_windows(V, Bd, x_d, cos_eps, lo, hi, centres, radii, order, starts, sam
     folded into lo[k] (min) and hi[k] (max).
 
     r_v(t)^T b = a_x cos t + a_v sin t = A cos(t - phi): within theta_eps for |t - phi| <= alpha,
-    alpha = arccos(cos_eps / A); the window may wrap past t = +-pi, hence the three shifts. A pair (v, b)
-    with A < cos_eps adds nothing. Most do: the directions come in groups (`_direction_clusters`), and a
-    group is skipped for b when a bound proves A < cos_eps for all its members. The bound is exact, not a
-    heuristic: |a_v| = |b.v| <= |b.c| + |b| rho for centre c and radius rho >= |v - c| (Cauchy-Schwarz), and
-    a group is skipped only when (bound + _CULL_MARGIN)^2 < cos_eps^2 - a_x^2 - _CULL_MARGIN_SQ, margins
-    far above the rounding of these sums; every pair left is computed exactly as before, and min/max do not
-    depend on the order, so lo and hi are bit-identical to the full double loop.
-
-    Of the pairs that do meet the layer, most cannot widen the window found so far. With a_v > 0 (phi in
-    (0, pi)) and cos_eps > 0 (alpha <= pi/2) only the unshifted window can meet [0, pi], and its ends need
-    no arc function: with S = sqrt(A^2 - cos_eps^2), cos(phi -+ alpha) = (a_x cos_eps +- a_v S) / A^2 and
-    sin(phi -+ alpha) = (a_v cos_eps -+ a_x S) / A^2. The pair is skipped when these prove
-    0 <= phi - alpha and lo + mu < phi - alpha (via cos, monotone on [0, pi]), and phi + alpha < hi - mu with
-    phi + alpha <= pi, each with margins; mu = 1e-7 rad far exceeds the rounding of phi and alpha, which is
-    below 1e-11 rad where S / A >= 1e-4 (pairs with smaller S are always computed). Visiting the samples
-    nearest to and farthest from x_d first (sample_order) makes the windows nearly final early. With
-    a_v <= 0 (phi in [-pi, 0], the half circle through -v) the pair adds nothing when
-    sin(phi + alpha) < 0 and sin(phi - alpha) < 0 (its window and the 2 pi-shifted one miss [0, pi]).
+    alpha = arccos(cos_eps / A) (`_fold_window`). A pair (v, b) with A < cos_eps adds nothing. Most do: the
+    directions come in groups (`_direction_clusters`), and a group is skipped for b when a bound proves
+    A < cos_eps for all its members (`_group_out_of_reach`). Of the pairs that do meet the layer, most
+    cannot widen the window found so far (`_window_cannot_widen`). Both skips are exact, not heuristics:
+    every pair left is computed exactly as before, and min/max do not depend on the order, so lo and hi are
+    bit-identical to the full double loop. Visiting the samples nearest to and farthest from x_d first
+    (sample_order) makes the windows nearly final early.
     """
-    nb = Bd.shape[0]
-    dim = Bd.shape[1]
     nv = V.shape[0]
-    two_pi = 2.0 * np.pi
     cos_eps_sq = cos_eps * cos_eps
     mu = 1e-7
     skips = cos_eps > 0.0
     cos_lo = np.full(nv, -2.0)  # cos(lo[k] + mu); -2: no skip yet
     cos_hi = np.full(nv, 2.0)  # cos(hi[k] - mu); 2: no skip yet
     for l in sample_order:
-        a_x = 0.0
-        norm_b_sq = 0.0
-        for c in range(dim):
-            a_x += Bd[l, c] * x_d[c]
-            norm_b_sq += Bd[l, c] * Bd[l, c]
+        a_x, norm_b_sq = _dot_and_norm_sq(Bd, l, x_d)
         need = cos_eps_sq - a_x * a_x - _CULL_MARGIN_SQ  # a pair can count only if a_v^2 >= about this
         norm_b = np.sqrt(norm_b_sq)
         for j in range(centres.shape[0]):
-            if need > 0.0:
-                bc = 0.0
-                for c in range(dim):
-                    bc += Bd[l, c] * centres[j, c]
-                bound = abs(bc) + norm_b * radii[j] + _CULL_MARGIN
-                if bound * bound < need:
-                    continue
+            if need > 0.0 and _group_out_of_reach(Bd, l, centres, radii, j, norm_b, need):
+                continue
             for m in range(starts[j], starts[j + 1]):
                 k = order[m]
-                a_v = 0.0
-                for c in range(dim):
-                    a_v += Bd[l, c] * V[k, c]
+                a_v = _row_dot(Bd, l, V, k)
                 A = np.sqrt(a_x * a_x + a_v * a_v)
                 if A < cos_eps or A == 0.0:
                     continue
-                if skips:
-                    A_sq = A * A
-                    S = np.sqrt(max(A_sq - cos_eps_sq, 0.0))
-                    tol = _CULL_MARGIN
-                    if S < 1e-4 * A:
-                        pass  # alpha too ill-conditioned for the bounds: compute
-                    elif a_v <= 0.0:
-                        # phi in [-pi, 0]: nothing unless phi + alpha >= 0 or phi - alpha <= -pi
-                        # (the quotients by A^2 > 0 are compared as products: the margins cover the rounding)
-                        if a_v * cos_eps + a_x * S < -tol * A_sq and a_v * cos_eps - a_x * S < -tol * A_sq:
-                            continue
-                    else:
-                        lo_ok = (a_v * cos_eps - a_x * S > tol * A_sq
-                                 and a_x * cos_eps + a_v * S < (cos_lo[k] - tol) * A_sq)
-                        hi_ok = lo_ok and (a_v * cos_eps + a_x * S > tol * A_sq
-                                           and a_x * cos_eps - a_v * S > (cos_hi[k] + tol) * A_sq)
-                        if hi_ok:
-                            continue  # the window [phi - alpha, phi + alpha] lies inside (lo, hi)
-                r = cos_eps / A
-                alpha = np.arccos(r if r > -1.0 else -1.0)
-                phi = np.arctan2(a_v, a_x)
+                if skips and _window_cannot_widen(a_x, a_v, A, cos_eps, cos_eps_sq, cos_lo[k], cos_hi[k]):
+                    continue
                 lo_k, hi_k = lo[k], hi[k]
-                for shift in (-two_pi, 0.0, two_pi):
-                    t_lo = phi + shift - alpha
-                    t_hi = phi + shift + alpha
-                    if t_lo < 0.0:
-                        t_lo = 0.0
-                    if t_hi > np.pi:
-                        t_hi = np.pi
-                    if t_lo <= t_hi:
-                        if t_lo < lo[k]:
-                            lo[k] = t_lo
-                        if t_hi > hi[k]:
-                            hi[k] = t_hi
+                _fold_window(lo, hi, k, a_x, a_v, A, cos_eps)
                 if lo[k] != lo_k:
                     cos_lo[k] = np.cos(lo[k] + mu) if lo[k] + mu < np.pi else -2.0
                 if hi[k] != hi_k:
                     cos_hi[k] = np.cos(hi[k] - mu) if hi[k] - mu > 0.0 else 2.0
+
+
+@njit(cache=True, inline="always")
+def _dot_and_norm_sq(Bd, l, x_d):
+    """(Bd[l] . x_d, |Bd[l]|^2), summed in coordinate order."""
+    a_x = 0.0
+    norm_b_sq = 0.0
+    for c in range(Bd.shape[1]):
+        a_x += Bd[l, c] * x_d[c]
+        norm_b_sq += Bd[l, c] * Bd[l, c]
+    return a_x, norm_b_sq
+
+
+@njit(cache=True, inline="always")
+def _row_dot(P, i, Q, j):
+    """P[i] . Q[j], summed in coordinate order (row views would cost an allocation per pair)."""
+    s = 0.0
+    for c in range(P.shape[1]):
+        s += P[i, c] * Q[j, c]
+    return s
+
+
+@njit(cache=True, inline="always")
+def _group_out_of_reach(Bd, l, centres, radii, j, norm_b, need):
+    """True when no direction of group j can bring sample l within theta_eps: |a_v| = |b.v| <= |b.c| + |b| rho
+    for centre c and radius rho >= |v - c| (Cauchy-Schwarz), and the group is skipped only when
+    (bound + _CULL_MARGIN)^2 < cos_eps^2 - a_x^2 - _CULL_MARGIN_SQ (``need``), margins far above the
+    rounding of these sums."""
+    bound = abs(_row_dot(Bd, l, centres, j)) + norm_b * radii[j] + _CULL_MARGIN
+    return bound * bound < need
+
+
+@njit(cache=True, inline="always")
+def _window_cannot_widen(a_x, a_v, A, cos_eps, cos_eps_sq, cos_lo_k, cos_hi_k):
+    """True when the pair's window provably adds nothing to (lo, hi), whose ends are known through
+    cos_lo_k = cos(lo + mu) and cos_hi_k = cos(hi - mu).
+
+    With a_v > 0 (phi in (0, pi)) and cos_eps > 0 (alpha <= pi/2) only the unshifted window can meet
+    [0, pi], and its ends need no arc function: with S = sqrt(A^2 - cos_eps^2),
+    cos(phi -+ alpha) = (a_x cos_eps +- a_v S) / A^2 and sin(phi -+ alpha) = (a_v cos_eps -+ a_x S) / A^2.
+    The pair is skipped when these prove 0 <= phi - alpha and lo + mu < phi - alpha (via cos, monotone on
+    [0, pi]), and phi + alpha < hi - mu with phi + alpha <= pi, each with margins; mu = 1e-7 rad far exceeds
+    the rounding of phi and alpha, which is below 1e-11 rad where S / A >= 1e-4 (pairs with smaller S are
+    always computed). With a_v <= 0 (phi in [-pi, 0], the half circle through -v) the pair adds nothing
+    when sin(phi + alpha) < 0 and sin(phi - alpha) < 0 (its window and the 2 pi-shifted one miss [0, pi]).
+    """
+    A_sq = A * A
+    S = np.sqrt(max(A_sq - cos_eps_sq, 0.0))
+    tol = _CULL_MARGIN
+    if S < 1e-4 * A:
+        return False  # alpha too ill-conditioned for the bounds: compute
+    if a_v <= 0.0:
+        # (the quotients by A^2 > 0 are compared as products: the margins cover the rounding)
+        return a_v * cos_eps + a_x * S < -tol * A_sq and a_v * cos_eps - a_x * S < -tol * A_sq
+    lo_ok = (a_v * cos_eps - a_x * S > tol * A_sq
+             and a_x * cos_eps + a_v * S < (cos_lo_k - tol) * A_sq)
+    # the window [phi - alpha, phi + alpha] lies inside (lo, hi)
+    return lo_ok and (a_v * cos_eps + a_x * S > tol * A_sq
+                      and a_x * cos_eps - a_v * S > (cos_hi_k + tol) * A_sq)
+
+
+@njit(cache=True, inline="always")
+def _fold_window(lo, hi, k, a_x, a_v, A, cos_eps):
+    """Fold the pair's window [phi - alpha, phi + alpha], clipped to [0, pi], into (lo[k], hi[k]); it may
+    wrap past t = +-pi, hence the three shifts."""
+    two_pi = 2.0 * np.pi
+    r = cos_eps / A
+    alpha = np.arccos(r if r > -1.0 else -1.0)
+    phi = np.arctan2(a_v, a_x)
+    for shift in (-two_pi, 0.0, two_pi):
+        t_lo = phi + shift - alpha
+        t_hi = phi + shift + alpha
+        if t_lo < 0.0:
+            t_lo = 0.0
+        if t_hi > np.pi:
+            t_hi = np.pi
+        if t_lo <= t_hi:
+            if t_lo < lo[k]:
+                lo[k] = t_lo
+            if t_hi > hi[k]:
+                hi[k] = t_hi
 
 
 @njit(cache=True)
@@ -497,100 +523,28 @@ def check_assumptions(
     eps may be a function of eps_max (the eps the flight software would pick): the check then runs once
     instead of a probe for eps_max and a second full check (the pair separations are the costly part).
     """
-    x_d = np.asarray(target, dtype=float)
-    if x_d.ndim != 1 or abs(np.linalg.norm(x_d) - 1.0) > 1e-6:
-        raise ValueError(f"target must be a unit vector, got {target!r}")
-    x_d = x_d / np.linalg.norm(x_d)
-    zones = list(zones)
-    if not zones:
-        raise ValueError("at least one zone is required")
-    for i, z in enumerate(zones):
-        if int(z.dim) != x_d.shape[0]:
-            raise ValueError(f"zone {i} lives in R^{z.dim}, the target in R^{x_d.shape[0]}")
+    x_d = _unit_target(target)
+    zones = _zones_around(x_d, zones)
     eps_of = eps if callable(eps) else None  # chosen from eps_max below
     eps = float("nan") if eps_of is not None else float(eps)
-    if law is None:
-        law = "gradient" if (kappa is None and all(_is_cone(z) for z in zones)) else "star"
-    if law not in ("star", "gradient"):
-        raise ValueError(f"law must be 'star' or 'gradient', got {law!r}")
-    if law == "gradient" and not all(_is_cone(z) for z in zones):
-        bad = [i for i, z in enumerate(zones) if not _is_cone(z)]
-        raise ValueError(f"the gradient law needs conic zones; zones {bad} are not cones")
+    law = _law_for(zones, law, kappa)
     errors: list[str] = []
     warnings: list[str] = []
     notes: list[str] = []
 
     if eps_of is None and not eps > 0.0:
         errors.append(f"eps = {eps} must be > 0")
-
-    # -- x_d outside U, eps_bar ------------------------------------------------------------------
-    target_seps = [_signed(z, x_d) for z in zones]
-    for i, s in enumerate(target_seps):
-        if s <= 0.0:
-            errors.append(f"target x_d = {_fmt(x_d)} is inside zone {i} (signed separation {s:.6g})")
+    target_seps = _check_target_outside(x_d, zones, errors)
     target_sep = max(min(target_seps), 0.0)
-    nearest_zone = int(np.argmin(target_seps))
-
-    # -- kernels -----------------------------------------------------------------------------------
-    for i, z in enumerate(zones):
-        g = np.asarray(z.kernel, float)
-        sg = _signed(z, g)
-        if not sg < 0.0:
-            errors.append(f"zone {i}: kernel g_{i} = {_fmt(g)} is not strictly inside the zone (signed separation {sg:.6g})")
-        if z.contains(-g):
-            errors.append(f"zone {i}: -g_{i} = {_fmt(-g)} lies in the zone, so g_{i} cannot be a kernel point (sigma(U_{i}))")
-        if _angle(g, -x_d) < 1e-9:
-            if law == "star":
-                errors.append(f"zone {i}: g_{i} = -x_d; the star-shaped law needs g_i != -x_d (geodesics G(x_d, g_i) undefined)")
-            else:
-                notes.append(f"zone {i}: g_{i} = -x_d (allowed for the gradient law's cones)")
-
-    # -- Assumption 1 --------------------------------------------------------------------------------
-    pair_seps = {}
-    delta = np.pi / 2.0
-    worst_pair = None
-    for i in range(len(zones)):
-        for j in range(i + 1, len(zones)):
-            dmin, a, b = zone_pair_separation(zones[i], zones[j])
-            pair_seps[(i, j)] = dmin
-            if dmin <= 0.0:
-                errors.append(f"Assumption 1: zones {i} and {j} touch or overlap (separation {dmin:.3g}, near {_fmt(a)})")
-                continue
-            d_ij = 0.5 * float(np.arccos(np.clip(1.0 - dmin, -1.0, 1.0)))
-            if d_ij < delta:
-                delta, worst_pair = d_ij, (i, j)
-    if any(v <= 0.0 for v in pair_seps.values()):
-        delta = 0.0
+    _check_kernels(x_d, zones, law, errors, notes)
+    pair_seps, delta, worst_pair = _check_assumption_1(zones, errors, notes)
     one_minus_cos_delta = 1.0 - float(np.cos(delta))
     eps_max = min(target_sep, one_minus_cos_delta)
     if eps_of is not None:
         eps = float(eps_of(eps_max))
         if not eps > 0.0:
             errors.insert(0, f"eps = {eps} must be > 0")  # where the check on a given eps puts it
-    if len(zones) > 1 and worst_pair is not None:
-        notes.append(
-            f"Assumption 1: delta = {np.degrees(delta):.4f} deg (closest pair: zones {worst_pair[0]} and {worst_pair[1]}, "
-            f"min separation {pair_seps[worst_pair]:.6g}), 1 - cos(delta) = {one_minus_cos_delta:.6g}"
-        )
-
-    # -- eps interval --------------------------------------------------------------------------------
-    if eps >= target_sep and target_sep > 0.0:
-        errors.append(
-            f"eps = {eps:.6g} is not below eps_bar < d_s(x_d, U) = {target_sep:.6g} (zone {nearest_zone} is "
-            f"{np.degrees(np.arccos(1 - target_sep)):.3f} deg from x_d): x_d lies in the eps-layer, so the law "
-            "is not k1 x_d at the target and a spurious equilibrium appears near x_d"
-        )
-    if len(zones) > 1 and eps >= one_minus_cos_delta:
-        i, j = worst_pair if worst_pair is not None else (0, 1)
-        errors.append(
-            f"eps = {eps:.6g} is not below 1 - cos(delta) = {one_minus_cos_delta:.6g} (zones {i} and {j}): "
-            "their eps-dilations are not guaranteed disjoint"
-        )
-    if law == "gradient":
-        for i, z in enumerate(zones):
-            reach = float(z.half_angle) + float(np.arccos(np.clip(1.0 - eps, -1.0, 1.0)))
-            if reach >= np.pi:
-                errors.append(f"zone {i}: half-angle + eps-layer width = {np.degrees(reach):.3f} deg >= 180 deg")
+    _check_eps_interval(zones, eps, target_seps, one_minus_cos_delta, worst_pair, law, errors)
 
     report = AssumptionReport(
         ok=False,
@@ -608,28 +562,141 @@ def check_assumptions(
         notes.append("gradient law: Assumption 2 and kappa are not needed (Theorem for conic constraints)")
         report.ok = not errors
         return report
-
-    # -- Assumption 2 --------------------------------------------------------------------------------
     if check_r_sets and len(zones) > 1 and eps > 0 and delta > 0:
-        overlaps, info = r_sets_overlap(x_d, zones, eps)
-        for i, j, w in overlaps:
-            errors.append(
-                f"Assumption 2: R_{i} and R_{j} overlap (e.g. at x = {_fmt(w)}); zones {i} and {j} shadow each other "
-                "as seen from x_d, so a trajectory can cycle between their layers"
-            )
-        notes.append(
-            f"Assumption 2 checked on {info['directions']} rays from x_d (about {info['direction_step_deg']:.2f} deg apart), "
-            f"boundary samples {info['boundary_spacing_deg']:.3f} deg apart"
-            + ("" if overlaps else ": R_i pairwise disjoint")
-        )
+        _check_assumption_2(x_d, zones, eps, errors, notes)
+    kbars = _kappa_bars(report, x_d, zones, eps, kappa)
+    _check_kappa(report, kbars, x_d, kappa, eps, target_seps)
+    report.ok = not errors
+    return report
 
-    # -- kappa_bar -----------------------------------------------------------------------------------
+
+def _unit_target(target) -> np.ndarray:
+    x_d = np.asarray(target, dtype=float)
+    if x_d.ndim != 1 or abs(np.linalg.norm(x_d) - 1.0) > 1e-6:
+        raise ValueError(f"target must be a unit vector, got {target!r}")
+    return x_d / np.linalg.norm(x_d)
+
+
+def _zones_around(x_d: np.ndarray, zones: Sequence) -> list:
+    """The zones as a list, at least one, all in the target's space."""
+    zones = list(zones)
+    if not zones:
+        raise ValueError("at least one zone is required")
+    for i, z in enumerate(zones):
+        if int(z.dim) != x_d.shape[0]:
+            raise ValueError(f"zone {i} lives in R^{z.dim}, the target in R^{x_d.shape[0]}")
+    return zones
+
+
+def _law_for(zones: list, law: str | None, kappa: float | None) -> str:
+    """The law checked: the one asked for, else the gradient law for cones without kappa (see check_assumptions)."""
+    if law is None:
+        law = "gradient" if (kappa is None and all(_is_cone(z) for z in zones)) else "star"
+    if law not in ("star", "gradient"):
+        raise ValueError(f"law must be 'star' or 'gradient', got {law!r}")
+    if law == "gradient" and not all(_is_cone(z) for z in zones):
+        bad = [i for i, z in enumerate(zones) if not _is_cone(z)]
+        raise ValueError(f"the gradient law needs conic zones; zones {bad} are not cones")
+    return law
+
+
+def _check_target_outside(x_d: np.ndarray, zones: list, errors: list[str]) -> list[float]:
+    """x_d outside U: the signed separation of x_d from each zone (eps_bar is below their minimum)."""
+    target_seps = [_signed(z, x_d) for z in zones]
+    for i, s in enumerate(target_seps):
+        if s <= 0.0:
+            errors.append(f"target x_d = {_fmt(x_d)} is inside zone {i} (signed separation {s:.6g})")
+    return target_seps
+
+
+def _check_kernels(x_d: np.ndarray, zones: list, law: str, errors: list[str], notes: list[str]) -> None:
+    """Every g_i strictly inside U_i, -g_i outside it, and g_i != -x_d for the star-shaped law."""
+    for i, z in enumerate(zones):
+        g = np.asarray(z.kernel, float)
+        sg = _signed(z, g)
+        if not sg < 0.0:
+            errors.append(f"zone {i}: kernel g_{i} = {_fmt(g)} is not strictly inside the zone (signed separation {sg:.6g})")
+        if z.contains(-g):
+            errors.append(f"zone {i}: -g_{i} = {_fmt(-g)} lies in the zone, so g_{i} cannot be a kernel point (sigma(U_{i}))")
+        if _angle(g, -x_d) < 1e-9:
+            if law == "star":
+                errors.append(f"zone {i}: g_{i} = -x_d; the star-shaped law needs g_i != -x_d (geodesics G(x_d, g_i) undefined)")
+            else:
+                notes.append(f"zone {i}: g_{i} = -x_d (allowed for the gradient law's cones)")
+
+
+def _check_assumption_1(zones: list, errors: list[str], notes: list[str]) -> tuple[dict, float, tuple | None]:
+    """Assumption 1: (pair separations, delta, the closest pair); delta is 0 when some pair touches."""
+    pair_seps = {}
+    delta = np.pi / 2.0
+    worst_pair = None
+    for i in range(len(zones)):
+        for j in range(i + 1, len(zones)):
+            dmin, a, b = zone_pair_separation(zones[i], zones[j])
+            pair_seps[(i, j)] = dmin
+            if dmin <= 0.0:
+                errors.append(f"Assumption 1: zones {i} and {j} touch or overlap (separation {dmin:.3g}, near {_fmt(a)})")
+                continue
+            d_ij = 0.5 * float(np.arccos(np.clip(1.0 - dmin, -1.0, 1.0)))
+            if d_ij < delta:
+                delta, worst_pair = d_ij, (i, j)
+    if any(v <= 0.0 for v in pair_seps.values()):
+        delta = 0.0
+    if len(zones) > 1 and worst_pair is not None:
+        notes.append(
+            f"Assumption 1: delta = {np.degrees(delta):.4f} deg (closest pair: zones {worst_pair[0]} and {worst_pair[1]}, "
+            f"min separation {pair_seps[worst_pair]:.6g}), 1 - cos(delta) = {1.0 - float(np.cos(delta)):.6g}"
+        )
+    return pair_seps, delta, worst_pair
+
+
+def _check_eps_interval(zones: list, eps: float, target_seps: list[float], one_minus_cos_delta: float,
+                        worst_pair: tuple | None, law: str, errors: list[str]) -> None:
+    """eps below eps_bar and 1 - cos(delta); for the gradient law, each cone and its layer short of 180 deg."""
+    target_sep = max(min(target_seps), 0.0)
+    if eps >= target_sep and target_sep > 0.0:
+        errors.append(
+            f"eps = {eps:.6g} is not below eps_bar < d_s(x_d, U) = {target_sep:.6g} (zone {int(np.argmin(target_seps))} is "
+            f"{np.degrees(np.arccos(1 - target_sep)):.3f} deg from x_d): x_d lies in the eps-layer, so the law "
+            "is not k1 x_d at the target and a spurious equilibrium appears near x_d"
+        )
+    if len(zones) > 1 and eps >= one_minus_cos_delta:
+        i, j = worst_pair if worst_pair is not None else (0, 1)
+        errors.append(
+            f"eps = {eps:.6g} is not below 1 - cos(delta) = {one_minus_cos_delta:.6g} (zones {i} and {j}): "
+            "their eps-dilations are not guaranteed disjoint"
+        )
+    if law == "gradient":
+        for i, z in enumerate(zones):
+            reach = float(z.half_angle) + float(np.arccos(np.clip(1.0 - eps, -1.0, 1.0)))
+            if reach >= np.pi:
+                errors.append(f"zone {i}: half-angle + eps-layer width = {np.degrees(reach):.3f} deg >= 180 deg")
+
+
+def _check_assumption_2(x_d: np.ndarray, zones: list, eps: float, errors: list[str], notes: list[str]) -> None:
+    """Assumption 2: the R_i pairwise disjoint, on rays from x_d (r_sets_overlap)."""
+    overlaps, info = r_sets_overlap(x_d, zones, eps)
+    for i, j, w in overlaps:
+        errors.append(
+            f"Assumption 2: R_{i} and R_{j} overlap (e.g. at x = {_fmt(w)}); zones {i} and {j} shadow each other "
+            "as seen from x_d, so a trajectory can cycle between their layers"
+        )
+    notes.append(
+        f"Assumption 2 checked on {info['directions']} rays from x_d (about {info['direction_step_deg']:.2f} deg apart), "
+        f"boundary samples {info['boundary_spacing_deg']:.3f} deg apart"
+        + ("" if overlaps else ": R_i pairwise disjoint")
+    )
+
+
+def _kappa_bars(report: AssumptionReport, x_d: np.ndarray, zones: list, eps: float, kappa: float | None) -> list:
+    """kappa_bar_i per zone; geodesics to -g_i through a zone are errors, and with kappa given the undesired
+    equilibria on them go into the report."""
     kbars = []
     for i, z in enumerate(zones):
         info = kappa_bar_for_zone(x_d, z, eps)
         kbars.append(info["kappa_bar"])
         if info["hits_zone"]:
-            errors.append(
+            report.errors.append(
                 f"zone {i}: the geodesic from x_d to -g_{i} passes through the zone (at {_fmt(info['x'])}); "
                 "no kappa removes the undesired equilibria there"
             )
@@ -638,34 +705,45 @@ def check_assumptions(
             for eq in _equilibria_on_geodesic(info, eps, float(kappa), x_d, g):
                 eq["zone"] = i
                 report.undesired_equilibria.append(eq)
+    return kbars
+
+
+def _check_kappa(report: AssumptionReport, kbars: list, x_d: np.ndarray, kappa: float | None, eps: float,
+                 target_seps: list[float]) -> None:
+    """kappa_bar (the largest of the zones') into the report, and kappa judged against it."""
+    target_sep = max(min(target_seps), 0.0)
     target_in_layer = eps >= target_sep
     if target_in_layer:
         # q^- grows without bound as x -> x_d along the geodesic, so no kappa is sufficient
         kbars = [np.inf if target_seps[i] <= eps else k for i, k in enumerate(kbars)]
     report.kappa_bar_per_zone = kbars
     report.kappa_bar = float(max(kbars)) if kbars else 0.0
-    stable = [e for e in report.undesired_equilibria if e["stable"]]
-    where = ""
-    if stable:
-        e = stable[0]
-        where = (
-            f"; stable undesired equilibrium at x = {_fmt(e['x'])} (zone {e['zone']}), "
-            f"{np.degrees(_angle(e['x'], x_d)):.3f} deg from x_d"
-        )
+    where = _stable_equilibrium_clause(report, x_d)
     if kappa is not None and target_in_layer:
-        errors.append(
-            f"x_d is inside the eps-layer of zone {nearest_zone} (d_s(x_d, U) = {target_sep:.6g} <= eps = {eps:.6g}): "
+        report.errors.append(
+            f"x_d is inside the eps-layer of zone {int(np.argmin(target_seps))} (d_s(x_d, U) = {target_sep:.6g} <= eps = {eps:.6g}): "
             f"no kappa is sufficient (kappa_bar = inf){where}"
         )
     elif kappa is not None and np.isfinite(report.kappa_bar):
         if float(kappa) <= report.kappa_bar:
             i = int(np.argmax(kbars))
-            errors.append(
+            report.errors.append(
                 f"kappa = {float(kappa):.6g} <= kappa_bar = {report.kappa_bar:.6g} (zone {i}, on the geodesic from x_d "
                 f"to -g_{i}): the field can vanish there and create a STABLE undesired equilibrium{where}; "
                 f"choose kappa > {report.kappa_bar:.6g}"
             )
     elif kappa is None and report.kappa_bar > 0:
-        warnings.append(f"kappa not given; it must exceed kappa_bar = {report.kappa_bar:.6g}")
-    report.ok = not errors
-    return report
+        report.warnings.append(f"kappa not given; it must exceed kappa_bar = {report.kappa_bar:.6g}")
+
+
+def _stable_equilibrium_clause(report: AssumptionReport, x_d: np.ndarray) -> str:
+    """'; stable undesired equilibrium at ...' for the first stable one in the report, else ''."""
+    stable = [e for e in report.undesired_equilibria if e["stable"]]
+    if not stable:
+        return ""
+    e = stable[0]
+    return (
+        f"; stable undesired equilibrium at x = {_fmt(e['x'])} (zone {e['zone']}), "
+        f"{np.degrees(_angle(e['x'], x_d)):.3f} deg from x_d"
+    )
+
