@@ -73,13 +73,13 @@ def _pct(values, q):
 def bench_cycle(cycles: int) -> dict:
     from closed_loop_kit import DirectLoop, RecordingDriver
 
-    from fsw.app import FlightSoftware
+    from fsw.assembly import build_flight_software
     from fsw.dictionary import DICTIONARY
     from fsw.telemetry import TelemetrySender
 
     world, cfg, _ = _world_and_cfg()
     tm = TelemetrySender(DICTIONARY, port=None)  # packets are built and encoded, not sent
-    fsw = FlightSoftware(cfg, RecordingDriver(len(cfg.spacecraft.wheels)), telemetry=tm)
+    fsw = build_flight_software(cfg, driver=RecordingDriver(len(cfg.spacecraft.wheels)), telemetry=tm)
     loop = DirectLoop(fsw, world, cfg.gnc_period_s)
     loop.prime()
     wall, cpu = [], []
@@ -124,8 +124,8 @@ def _simulator_process(bus_spec: str, ticks: int, ready, done, rt_priority: int 
 
 
 def bench_realtime(seconds: float, rt_priority: int = 0) -> dict:
-    from fsw.app import FlightSoftware
-    from fsw.bus import FswBusDriver, Icd, open_bus
+    from fsw.assembly import build_flight_software
+    from fsw.bus import open_bus
 
     port = 43000 + os.getpid() % 1000
     spec = f"udp_multicast:239.74.163.{os.getpid() % 200 + 2}:{port}"
@@ -141,8 +141,7 @@ def bench_realtime(seconds: float, rt_priority: int = 0) -> dict:
     from fsw.dictionary import DICTIONARY
     from fsw.telemetry import TelemetrySender
 
-    fsw = FlightSoftware(cfg, FswBusDriver(bus, Icd(), len(cfg.spacecraft.wheels)),
-                         telemetry=TelemetrySender(DICTIONARY, port=None))  # events kept, no socket
+    fsw = build_flight_software(cfg, bus, telemetry=TelemetrySender(DICTIONARY, port=None))  # events kept, no socket
     n = fsw.run_realtime(seconds)
     ex = fsw.executive
     jitter_ms = 1e3 * np.asarray(ex.jitter.recent)
@@ -168,7 +167,7 @@ def bench_margin(margins: list[float], seconds: float) -> list[dict]:
     from closed_loop_kit import DirectLoop, RecordingDriver, boresight_N
     from scipy.spatial.transform import Rotation
 
-    from fsw.app import FlightSoftware
+    from fsw.assembly import build_flight_software
     from fsw.guidance import Guidance
     from gnc import sky_zones
 
@@ -197,7 +196,7 @@ def bench_margin(margins: list[float], seconds: float) -> list[dict]:
             q = np.roll(rot.as_quat(), 1)
             kin = min(kin, min(signed_deg(z, boresight_N(q, b)) for z in zones))
         # (b) the real loop
-        fsw = FlightSoftware(cfg, RecordingDriver(len(cfg.spacecraft.wheels)))
+        fsw = build_flight_software(cfg, driver=RecordingDriver(len(cfg.spacecraft.wheels)))
         loop = DirectLoop(fsw, world, cfg.gnc_period_s)
         loop.prime()
         real = 180.0

@@ -102,8 +102,8 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"fsw: {exc}", file=sys.stderr)
         return 2
-    from fsw.app import FlightSoftware
-    from fsw.bus import BusSpecError, BusUnavailableError, FswBusDriver, Icd, open_bus
+    from fsw.assembly import build_flight_software
+    from fsw.bus import BusSpecError, BusUnavailableError, Icd, open_bus
     from fsw.dictionary import DICTIONARY
     from fsw.link_security import KeyFileError
     from fsw.telecommand import CommandDispatcher
@@ -145,7 +145,6 @@ def run(args: argparse.Namespace) -> int:
     tm_cfg = cfg.tmtc
     tm_port = tm_cfg.telemetry_port if args.tm_port is None else args.tm_port
     tc_port = tm_cfg.telecommand_port if args.tc_port is None else args.tc_port
-    driver = FswBusDriver(bus, icd, len(cfg.spacecraft.wheels))
     telemetry = TelemetrySender(DICTIONARY, tm_cfg.telemetry_host, tm_port, security=downlink,
                                 multicast_interface=tm_cfg.telemetry_multicast_interface,
                                 multicast_ttl=tm_cfg.telemetry_multicast_ttl)
@@ -155,7 +154,16 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         print(f"fsw: cannot bind the telecommand socket {tm_cfg.telecommand_bind_host}:{tc_port}: {exc}", file=sys.stderr)
         return 2
-    fsw = FlightSoftware(cfg, driver, telemetry, dispatcher)
+    from fsw.plugins import PluginError
+
+    try:
+        fsw = build_flight_software(cfg, bus, icd, telemetry=telemetry, dispatcher=dispatcher)
+    except PluginError as exc:
+        dispatcher.close()
+        telemetry.close()
+        bus.shutdown()
+        print(f"fsw: {args.config}: flight_software.plugins: {exc}", file=sys.stderr)
+        return 2
 
     def _stop(signum, frame):  # noqa: ARG001
         fsw.stop()

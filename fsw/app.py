@@ -183,7 +183,10 @@ class CycleRecord:
 
 
 class FlightSoftware:
-    def __init__(self, config, driver, telemetry=None, dispatcher=None, clock=time.perf_counter):
+    """``plugins``: `fsw.plugins.Plugin`s (at most one guidance, one estimator) flown under keepout's guard
+    (`fsw.plugin_guard`); without them the cycle runs keepout's own code only. `fsw.assembly` builds it."""
+
+    def __init__(self, config, driver, telemetry=None, dispatcher=None, clock=time.perf_counter, plugins=()):
         self.cfg = config
         self.driver = driver
         self.telemetry = telemetry if telemetry is not None else _NullTelemetry()
@@ -196,8 +199,11 @@ class FlightSoftware:
         self.period_s = config.gnc_period_s
         self.t_s = 0.0
         self.cycle = 0
+        self.plugins = {p.kind: p for p in plugins}
         self.estimator = AttitudeEstimator(config.estimator, np.asarray(config.spacecraft.star_tracker_q_BS))
         self.guidance = Guidance(config, events=self._event)
+        if self.plugins:
+            self._install_plugins()
         self.control = RateController(config)
         self.fdir = Fdir(config, self.n_wheels, event=self._event)
         self.wheel_residual = WheelSpeedResidual(self.control.Js)
@@ -250,6 +256,26 @@ class FlightSoftware:
             self._register_commands(dispatcher)
         self._warm_up()
         self._event("FSW_STARTED", gnc_rate_hz=config.rates.gnc_rate_hz)
+        if self.plugins:
+            self._start_plugins()
+
+    def _install_plugins(self) -> None:
+        """The selected plug-ins in place of keepout's estimator and guidance law, each inside its guard."""
+        from fsw.plugin_guard import GuardedEstimator, GuardedGuidance
+
+        cfg = self.cfg
+        if "estimator" in self.plugins:
+            self.estimator = GuardedEstimator(cfg.estimator, np.asarray(cfg.spacecraft.star_tracker_q_BS),
+                                              self.plugins["estimator"], self._event)
+        if "guidance" in self.plugins:
+            self.guidance = GuardedGuidance(cfg, self.plugins["guidance"], lambda: self.set_mode("SAFE", "FDIR"),
+                                            events=self._event)
+
+    def _start_plugins(self) -> None:
+        if "guidance" in self.plugins:
+            self.guidance.arm()  # after the warm-up: the plug-in sees flight states only
+        for kind, plugin in self.plugins.items():
+            self._event("PLUGIN_STARTED", kind=kind.upper(), name=plugin.name[:40])
 
     def _warm_up(self) -> None:
         """Load the compiled kernels, freeze the heap and start the check worker now, so the first cycle is

@@ -469,6 +469,22 @@ class TmTcConfig(_Strict):
                 "by the link key only"]
 
 
+class PluginsConfig(_Strict):
+    """A user's own guidance law or estimator in place of keepout's, by entry-point name (docs/plugins.md). Keep-out stays keepout's: its margins, rate limit, FDIR and plug-in guard watch a plug-in."""
+
+    guidance: str | None = Field(None, min_length=1, description="Entry-point name in the group keepout.guidance of the guidance law flown in POINTING and QUATERNION; none: keepout's own laws.")
+    estimator: str | None = Field(None, min_length=1, description="Entry-point name in the group keepout.estimator of the attitude estimator; none: keepout's own MEKF.")
+
+    @field_validator("guidance", "estimator")
+    @classmethod
+    def _installed(cls, v: str | None, info) -> str | None:
+        from fsw.plugins import installed, unknown_name_message
+
+        if v is not None and v not in installed(info.field_name):
+            raise ValueError(unknown_name_message(info.field_name, v))
+        return v
+
+
 class FswConfig(_Strict):
     """Complete flight-software configuration (embedded in the mission YAML under ``flight_software:``)."""
 
@@ -485,6 +501,7 @@ class FswConfig(_Strict):
     safe: SafeConfig = Field(default_factory=SafeConfig)
     fdir: FdirConfig = Field(default_factory=FdirConfig)
     tmtc: TmTcConfig = Field(default_factory=TmTcConfig)
+    plugins: PluginsConfig = Field(default_factory=PluginsConfig)
     door: DoorConfig | None = Field(None, description="The protective aperture door the flight software drives (default: present, with the spacecraft's stroke times, when spacecraft.door is given; absent otherwise).")
 
     @field_validator("epoch_utc")

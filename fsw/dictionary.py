@@ -523,6 +523,7 @@ TC_COMMON_FAILURE_CODES = ("PACKET_TOO_SHORT", "PACKET_TOO_LONG", "BAD_HEADER", 
 TC_COMPLETION_FAILURE_CODES = ("EXECUTION_FAILED",)
 TARGET_KINDS = ("DIRECTION", "QUATERNION")
 MODE_REASONS = ("INIT", "TELECOMMAND", "FDIR", "AUTONOMOUS")
+PLUGIN_KINDS = ("GUIDANCE", "ESTIMATOR")  # fsw.plugins: which part of the GNC a plug-in replaces
 
 # Wheel speed limits: typical small-satellite reaction wheels saturate at ~6000 rpm (628 rad/s).
 _WHEEL_SPEED_LIMITS = Limits(yellow=(-500.0, 500.0), red=(-600.0, 600.0))
@@ -802,6 +803,11 @@ EVENTS: tuple[EventDef, ...] = (
     EventDef("DOOR_FAULT", 83, Severity.WARNING_HI, "aperture door fault: {fault} (door {position_pct:.1f} % open)",
              (Arg("fault", "ENUM", enum=DOOR_FAULTS), Arg("position_pct", "F32", "%")),
              throttle=5, throttle_window_s=10.0),
+    EventDef("PLUGIN_STARTED", 90, Severity.ACTIVITY_HI, "{kind} plug-in {name} flying under keepout's guard",
+             (Arg("kind", "ENUM", enum=PLUGIN_KINDS), Arg("name", "STRING", description="its entry-point name"))),
+    EventDef("PLUGIN_STOPPED", 91, Severity.WARNING_HI, "{kind} plug-in {name} stopped: {reason}",
+             (Arg("kind", "ENUM", enum=PLUGIN_KINDS), Arg("name", "STRING", description="its entry-point name"),
+              _REASON)),
     EventDef("CYCLE_SLIP", 50, Severity.WARNING_LO,
              "{rate_group} cycle slip: started {late_ms:.2f} ms late, ran {exec_time_ms:.2f} ms ({count} total)",
              (Arg("rate_group", "ENUM", enum=RATE_GROUPS), Arg("exec_time_ms", "F32", "ms"), Arg("count", "U32"),

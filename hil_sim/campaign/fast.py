@@ -27,6 +27,8 @@ from hil_sim.campaign.execute import MAX_TRAJECTORY_POINTS, RunResult
 from hil_sim.faults import WHEEL_FAULT_MODES, WHEEL_MESSAGE
 
 _channel_ids = itertools.count()
+# the events a run's result lists: FDIR's trips, and a plug-in stopped by keepout's guard
+_RESULT_EVENTS = ("FDIR_TRIPPED", "PLUGIN_STOPPED")
 
 # Mission paths whose value lands in WorldParams under another name (read back from the world).
 _WORLD_FIELDS = {
@@ -165,8 +167,8 @@ class _InProcessSender:
 
 def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] = ()) -> RunResult:
     """Run one mission in this process (see the module docstring). ``seed``: the world's noise seed."""
-    from fsw.app import FlightSoftware
-    from fsw.bus import FswBusDriver, open_bus
+    from fsw.assembly import build_flight_software
+    from fsw.bus import open_bus
     from fsw.telecommand import CommandDispatcher
     from hil_sim.lockstep import Simulator
     from hil_sim.mission import door_params, world_params
@@ -191,7 +193,6 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
     try:
         sim = Simulator(world, sim_bus, icd, gnc_period_s=cfg.gnc_period_s, faults=mission.faults,
                         fault_seed=seed, door=door_params(mission))
-        driver = FswBusDriver(fsw_bus, icd, world.n_wheels)
         telemetry = _EventRecorder()
         dispatcher = CommandDispatcher(telemetry=None, port=None)
         # The flight software's clock is the simulation clock: a cycle's execution time on this (shared)
@@ -200,7 +201,9 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         # It reads sim.t_s as set below at each tick's start and at the stop: the simulator advances
         # its tick only in end_tick, so between those points sim.t_s is that value (read ~5 times a cycle).
         now_s = [sim.t_s]
-        fsw = FlightSoftware(cfg, driver, telemetry=telemetry, dispatcher=dispatcher, clock=lambda: now_s[0])
+        fsw = build_flight_software(cfg, fsw_bus, icd, telemetry=telemetry, dispatcher=dispatcher,
+                                    clock=lambda: now_s[0])
+        driver = fsw.driver
         sender = _InProcessSender(dispatcher)
         timeline = Timeline(mission, sender)
         n_ticks = int(round(mission.duration_s / cfg.gnc_period_s))
@@ -240,11 +243,14 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         acked = acknowledged_rate_limits(telemetry.events)
         metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected, acked)
         metrics.update(estimates.metrics(record))
+        if fsw.plugins:
+            from fsw.assembly import plugin_metrics
+            metrics.update(plugin_metrics(fsw))
         if door is not None:  # how often the flight software shut the aperture door (DOOR_CLOSING events)
             metrics["door_closes"] = float(sum(1 for _, name, _ in telemetry.events if name == "DOOR_CLOSING"))
         used = _read_back(paths, mission, world, initial, fsw, timeline.sent, sim)
         return RunResult(metrics=metrics, used=used, trajectory=trajectory, sim_time_s=float(record["t_s"][-1]),
-                         events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events if n == "FDIR_TRIPPED"][:200])
+                         events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events if n in _RESULT_EVENTS][:200])
     finally:
         if fsw is not None:
             now_s[0] = sim.t_s  # the flight software's clock at its stop
