@@ -127,103 +127,143 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray, *,
     out = []
     t = truth["t_s"]
     for z in mission.flight_software.pointing.zones:
-        if z.body == "inertial":
-            centers = np.repeat(np.asarray(z.direction_N, dtype=float)[None, :], len(t), axis=0)
-        else:
-            centers = truth[f"{z.body}_N"]
-        extra = 0.0
-        if z.body == "earth" and z.add_body_angular_radius and len(t):
-            r = float(np.linalg.norm(truth["r_sc_N_km"][0]))
-            extra = math.degrees(math.asin(min(1.0, EARTH_RADIUS_KM / r)))
+        centers, extra = _zone_centers(z, truth, t)
         builder = sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra)
-        if z.geometry.shape == "cone":  # exact at every sample: angle to the centre minus the half-angle
-            c = centers / np.linalg.norm(centers, axis=1, keepdims=True)
-            margins = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", y_N, c), -1.0, 1.0))) \
-                - (z.geometry.half_angle_deg + extra)
-            ks = range(0, len(t), max(1, int(30.0 / max(t[1] - t[0], 1e-9))) if len(t) > 1 else 1)
-            if minimum_only:
-                ks = ks[-1:]
-            history = [(float(t[k]), np.asarray(builder.build(c[k]).boundary(180))) for k in ks]
-            out.append(ZoneSeries(z.name, "sky", margins, history))
+        if z.geometry.shape == "cone":
+            out.append(_cone_series(z, builder, centers, extra, y_N, t, minimum_only))
             continue
-        # stretches of samples judged against one zone: rebuilt when its centre moved (ZONE_REBUILD_DEG)
-        stretches = []
-        start = 0
-        cos_tol = math.cos(math.radians(ZONE_REBUILD_DEG))
-        while start < len(t):
-            c0 = centers[start] / np.linalg.norm(centers[start])
-            moved = (centers[start:] @ c0) / np.linalg.norm(centers[start:], axis=1) < cos_tol
-            stop = start + (int(np.argmax(moved)) if moved.any() else len(t) - start)
-            stop = max(stop, start + 1)
-            stretches.append((start, stop, c0))
-            start = stop
-        # the stretches whose zone boundary is kept for the plots: one every 30 s or more
-        shown: list[int] = []
-        for i, (start, _, _) in enumerate(stretches):
-            if not shown or t[start] - t[stretches[shown[-1]][0]] >= 30.0:
-                shown.append(i)
-        shown_set = set(shown)
-        margins = np.empty(len(t))
-        if not minimum_only:
-            history = []
-            for i, (start, stop, c0) in enumerate(stretches):
-                zone = builder.build(c0)
-                margins[start:stop] = _signed_margins(zone, y_N[start:stop])
-                if i in shown_set:
-                    history.append((float(t[start]), np.asarray(zone.boundary(180))))
-            out.append(ZoneSeries(z.name, "sky", margins, history))
-            continue
-        radius_deg = _star_radius_bound_deg(builder)
-        bounds = []
-        for start, stop, c0 in stretches:
-            if radius_deg is None:
-                bounds.append(np.full(stop - start, -math.inf))
-                continue
-            y = y_N[start:stop]
-            angle_deg = np.degrees(2.0 * np.arctan2(np.linalg.norm(y - c0, axis=1), np.linalg.norm(y + c0, axis=1)))
-            bounds.append(np.where(np.isnan(angle_deg), -math.inf, angle_deg - radius_deg))
-        lowest = np.array([b.min() if len(b) else math.inf for b in bounds])
-        for (start, stop, _), b in zip(stretches, bounds):
-            margins[start:stop] = b
-        evaluated = np.zeros(len(t), dtype=bool)
-        best = math.inf
-        built = {}
-
-        def evaluate(i: int, sel: np.ndarray) -> None:
-            # the margins of samples sel of stretch i: per sample the full series' own values
-            nonlocal best
-            start, stop, c0 = stretches[i]
-            sel = sel[~evaluated[start:stop][sel]]
-            if not len(sel):
-                return
-            if i not in built:
-                built[i] = builder.build(c0)
-            m = _signed_margins(built[i], np.ascontiguousarray(y_N[start:stop][sel]))
-            margins[start + sel] = m
-            evaluated[start + sel] = True
-            best = min(best, float(m.min()))
-
-        for i in np.argsort(lowest, kind="stable"):
-            if best >= 0.0 and lowest[i] > best + SKIP_SLACK_DEG:
-                break  # this stretch and all after it cannot hold the minimum
-            if best == math.inf:  # the sample of lowest bound first: its margin bounds the minimum
-                evaluate(i, np.array([int(np.argmin(bounds[i]))]))
-            everything = np.arange(len(bounds[i]))
-            evaluate(i, everything if best < 0.0 else np.flatnonzero(~(bounds[i] > best + SKIP_SLACK_DEG)))
-        if best < 0.0:  # inside a zone: every sample judged
-            for i in range(len(stretches)):
-                evaluate(i, np.arange(len(bounds[i])))
-        history = []
-        if shown:
-            i = shown[-1]
-            c0 = stretches[i][2]
-            if i in built:
-                zone = built[i]
-            else:  # only its boundary: the search structure is not needed for a plot
-                zone = _boundary_only_zone(builder, c0)
-            history.append((float(t[stretches[i][0]]), np.asarray(zone.boundary(180))))
-        out.append(ZoneSeries(z.name, "sky", margins, history))
+        stretches = _stretches(centers, t)
+        shown = _shown_stretches(stretches, t)
+        if minimum_only:
+            out.append(_star_series_minimum(z, builder, stretches, shown, y_N, t))
+        else:
+            out.append(_star_series_full(z, builder, stretches, set(shown), y_N, t))
     return out
+
+
+def _zone_centers(z, truth: dict[str, np.ndarray], t: np.ndarray) -> tuple[np.ndarray, float]:
+    """The zone's centre at every sample, and what it adds to the zone's size [deg] (the Earth's angular
+    radius, for an Earth zone that asks for it)."""
+    if z.body == "inertial":
+        centers = np.repeat(np.asarray(z.direction_N, dtype=float)[None, :], len(t), axis=0)
+    else:
+        centers = truth[f"{z.body}_N"]
+    extra = 0.0
+    if z.body == "earth" and z.add_body_angular_radius and len(t):
+        r = float(np.linalg.norm(truth["r_sc_N_km"][0]))
+        extra = math.degrees(math.asin(min(1.0, EARTH_RADIUS_KM / r)))
+    return centers, extra
+
+
+def _cone_series(z, builder, centers: np.ndarray, extra: float, y_N: np.ndarray, t: np.ndarray,
+                 minimum_only: bool) -> ZoneSeries:
+    """A cone is exact at every sample: the angle to the centre minus the half-angle."""
+    c = centers / np.linalg.norm(centers, axis=1, keepdims=True)
+    margins = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", y_N, c), -1.0, 1.0))) \
+        - (z.geometry.half_angle_deg + extra)
+    ks = range(0, len(t), max(1, int(30.0 / max(t[1] - t[0], 1e-9))) if len(t) > 1 else 1)
+    if minimum_only:
+        ks = ks[-1:]
+    history = [(float(t[k]), np.asarray(builder.build(c[k]).boundary(180))) for k in ks]
+    return ZoneSeries(z.name, "sky", margins, history)
+
+
+def _stretches(centers: np.ndarray, t: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
+    """(start, stop, centre) of the stretches of samples judged against one zone: rebuilt when its centre
+    moved (ZONE_REBUILD_DEG)."""
+    stretches = []
+    start = 0
+    cos_tol = math.cos(math.radians(ZONE_REBUILD_DEG))
+    while start < len(t):
+        c0 = centers[start] / np.linalg.norm(centers[start])
+        moved = (centers[start:] @ c0) / np.linalg.norm(centers[start:], axis=1) < cos_tol
+        stop = start + (int(np.argmax(moved)) if moved.any() else len(t) - start)
+        stop = max(stop, start + 1)
+        stretches.append((start, stop, c0))
+        start = stop
+    return stretches
+
+
+def _shown_stretches(stretches: list, t: np.ndarray) -> list[int]:
+    """The stretches whose zone boundary is kept for the plots: one every 30 s or more."""
+    shown: list[int] = []
+    for i, (start, _, _) in enumerate(stretches):
+        if not shown or t[start] - t[stretches[shown[-1]][0]] >= 30.0:
+            shown.append(i)
+    return shown
+
+
+def _star_series_full(z, builder, stretches: list, shown_set: set[int], y_N: np.ndarray,
+                      t: np.ndarray) -> ZoneSeries:
+    """Every sample of every stretch evaluated, the shown stretches' boundaries kept."""
+    margins = np.empty(len(t))
+    history = []
+    for i, (start, stop, c0) in enumerate(stretches):
+        zone = builder.build(c0)
+        margins[start:stop] = _signed_margins(zone, y_N[start:stop])
+        if i in shown_set:
+            history.append((float(t[start]), np.asarray(zone.boundary(180))))
+    return ZoneSeries(z.name, "sky", margins, history)
+
+
+def _stretch_lower_bounds(builder, stretches: list, y_N: np.ndarray) -> list[np.ndarray]:
+    """Per stretch, each sample's lower bound of its margin: the angle to the centre minus the zone's
+    largest angular radius (-inf where no radius bound is known)."""
+    radius_deg = _star_radius_bound_deg(builder)
+    bounds = []
+    for start, stop, c0 in stretches:
+        if radius_deg is None:
+            bounds.append(np.full(stop - start, -math.inf))
+            continue
+        y = y_N[start:stop]
+        angle_deg = np.degrees(2.0 * np.arctan2(np.linalg.norm(y - c0, axis=1), np.linalg.norm(y + c0, axis=1)))
+        bounds.append(np.where(np.isnan(angle_deg), -math.inf, angle_deg - radius_deg))
+    return bounds
+
+
+def _star_series_minimum(z, builder, stretches: list, shown: list[int], y_N: np.ndarray,
+                         t: np.ndarray) -> ZoneSeries:
+    """The minimum-only series (see sky_zone_series): lower bounds where no sample can hold the minimum."""
+    bounds = _stretch_lower_bounds(builder, stretches, y_N)
+    lowest = np.array([b.min() if len(b) else math.inf for b in bounds])
+    margins = np.empty(len(t))
+    for (start, stop, _), b in zip(stretches, bounds):
+        margins[start:stop] = b
+    evaluated = np.zeros(len(t), dtype=bool)
+    best = math.inf
+    built = {}
+
+    def evaluate(i: int, sel: np.ndarray) -> None:
+        # the margins of samples sel of stretch i: per sample the full series' own values
+        nonlocal best
+        start, stop, c0 = stretches[i]
+        sel = sel[~evaluated[start:stop][sel]]
+        if not len(sel):
+            return
+        if i not in built:
+            built[i] = builder.build(c0)
+        m = _signed_margins(built[i], np.ascontiguousarray(y_N[start:stop][sel]))
+        margins[start + sel] = m
+        evaluated[start + sel] = True
+        best = min(best, float(m.min()))
+
+    for i in np.argsort(lowest, kind="stable"):
+        if best >= 0.0 and lowest[i] > best + SKIP_SLACK_DEG:
+            break  # this stretch and all after it cannot hold the minimum
+        if best == math.inf:  # the sample of lowest bound first: its margin bounds the minimum
+            evaluate(i, np.array([int(np.argmin(bounds[i]))]))
+        everything = np.arange(len(bounds[i]))
+        evaluate(i, everything if best < 0.0 else np.flatnonzero(~(bounds[i] > best + SKIP_SLACK_DEG)))
+    if best < 0.0:  # inside a zone: every sample judged
+        for i in range(len(stretches)):
+            evaluate(i, np.arange(len(bounds[i])))
+    history = []
+    if shown:
+        i = shown[-1]
+        # only its boundary, when the stretch was never built: the search structure is not needed for a plot
+        zone = built[i] if i in built else _boundary_only_zone(builder, stretches[i][2])
+        history.append((float(t[stretches[i][0]]), np.asarray(zone.boundary(180))))
+    return ZoneSeries(z.name, "sky", margins, history)
 
 
 def _star_radius_bound_deg(builder) -> float | None:
@@ -463,6 +503,23 @@ def telemetry_completeness(ground: dict[str, Any], sim_s: float, rates) -> tuple
     return not problems, "; ".join(problems) or "no gaps; packet counts match the simulated time"
 
 
+class _Requirements:
+    """The requirement rows of a summary, in the order they are judged."""
+
+    def __init__(self) -> None:
+        self.results: list[dict[str, Any]] = []
+
+    def requirement(self, name: str, value: Any, limit: Any, passed: bool, detail: str = "", unit: str = "") -> None:
+        # value and limit in the same unit (``unit``), numbers rounded for a person to read
+        self.results.append({"name": name, "value": _rounded(value), "unit": unit, "limit": limit,
+                             "pass": bool(passed), "detail": detail})
+
+    def not_judged(self, name: str, why: str, value: str = "not reached") -> None:
+        # a requirement the run could not reach: shown, and kept out of the verdict
+        self.results.append({"name": name, "value": value, "unit": "", "limit": "-", "pass": True,
+                             "judged": False, "detail": why})
+
+
 def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str | None = None,
              planned_duration_s: float | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
     """(summary dict for JSON, series for plots).
@@ -478,127 +535,27 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
     req = mission.requirements
     truth = load_truth(run_dir)
     t = truth["t_s"]
-    b_B = np.asarray(mission.spacecraft.instrument_boresight_B, dtype=float)
-    y_N = boresight_N(truth["q_NB"], b_B)
-    zones = sky_zone_series(mission, truth, y_N) if mission.flight_software.pointing.zones else []
-    q_lift = lifted_quaternions(mission, truth)
-    if mission.flight_software.quaternion.zones:
-        zones += attitude_zone_series(mission, q_lift)
-    err, segments = error_series(mission, truth, y_N)
-    settle = settling(mission, t, err, segments)
-    if "wheel_torque_Nm" in truth:
-        add_torque_variation(settle, t, truth["wheel_torque_Nm"])
-    results: list[dict[str, Any]] = []
-
-    def requirement(name: str, value: Any, limit: Any, passed: bool, detail: str = "", unit: str = "") -> None:
-        # value and limit in the same unit (``unit``), numbers rounded for a person to read
-        results.append({"name": name, "value": _rounded(value), "unit": unit, "limit": limit, "pass": bool(passed),
-                        "detail": detail})
-
-    def not_judged(name: str, why: str, value: str = "not reached") -> None:
-        # a requirement the run could not reach: shown, and kept out of the verdict
-        results.append({"name": name, "value": value, "unit": "", "limit": "-", "pass": True,
-                        "judged": False, "detail": why})
+    y_N, zones, q_lift, err, segments, settle = _judged_series(mission, truth)
+    reqs = _Requirements()
 
     sim_stats = _read_json(run_dir / "simulator.json")
     if len(t) < 2:
-        requirement("truth recorded", int(len(t)), ">= 2", False, "the run produced no truth samples", "samples")
+        reqs.requirement("truth recorded", int(len(t)), ">= 2", False, "the run produced no truth samples", "samples")
     if sim_stats.get("aborted"):
-        requirement("run completed", "no", "yes", False, str(sim_stats["aborted"]))
-    for z in zones:
-        if len(z.margin_deg):
-            i = int(np.argmin(z.margin_deg))
-            requirement(f"keep-out margin {z.name}", float(z.margin_deg[i]),
-                        f"> {_num(req.min_keepout_margin_deg)}", float(z.margin_deg[i]) > req.min_keepout_margin_deg,
-                        f"minimum signed margin to the physical {z.kind} zone at t = {t[i]:.1f} s", "deg")
-    t_end = float(t[-1]) if len(t) else 0.0
-    cut_short = planned_duration_s is not None and t_end < planned_duration_s - 1e-6
-    unjudged_last = False
-    for s in (s for s in settle if s["judged"]):
-        deadline_s = (s["commanded_at_s"] + req.max_settling_time_s if req.max_settling_time_s is not None
-                      else planned_duration_s if cut_short else s["until_s"])
-        if cut_short and s["settled_at_s"] is None and deadline_s > t_end + 1e-6:
-            s["judged"] = False
-            unjudged_last = s is settle[-1]
-            not_judged(f"settling ({s['target_from']})",
-                       f"the run was shortened to {t_end:.0f} s, before this target's settling deadline at "
-                       f"{deadline_s:.0f} s (commanded at {s['commanded_at_s']:.1f} s)")
-            continue
-        ok = s["settled_at_s"] is not None
-        # the value is a time after the command, so the limit is one too: the time left before the next
-        # target (or the end), or max_settling_time_s when it is shorter
-        span_s = s["until_s"] - s["commanded_at_s"]
-        limit_s = span_s if req.max_settling_time_s is None else min(span_s, req.max_settling_time_s)
-        if req.max_settling_time_s is not None:
-            ok = ok and s["settling_time_s"] <= req.max_settling_time_s
-        final = s["final_error_deg"]
-        requirement(f"settling ({s['target_from']})", "not settled" if s["settling_time_s"] is None
-                    else s["settling_time_s"], f"<= {_num(limit_s)}", ok,
-                    f"to within {_num(req.settling_tolerance_deg)} deg of the target commanded at "
-                    f"{s['commanded_at_s']:.1f} s; final error "
-                    + (f"{final:.4f} deg" if final is not None else "unknown (no samples)"), "s")
-    if unjudged_last:
-        final = float(err[-1]) if len(t) else math.nan
-        # the error at the end is still what a person flying a shortened run wants to see
-        not_judged("final pointing error", "the run was shortened before the last target's settling deadline",
-                   f"not reached ({_rounded(final)} deg at the end)" if math.isfinite(final) else "not reached")
+        reqs.requirement("run completed", "no", "yes", False, str(sim_stats["aborted"]))
+    _judge_keepout_margins(reqs, zones, t, req)
+    unjudged_last = _judge_settling(reqs, settle, t, req, planned_duration_s)
+    _judge_final_error(reqs, err, t, req, unjudged_last)
     if len(t):
-        final = float(err[-1])
-        if not unjudged_last:
-            requirement("final pointing error", final, f"< {_num(req.max_final_pointing_error_deg)}",
-                        math.isfinite(final) and final < req.max_final_pointing_error_deg,
-                        "truth error to the active target at the end", "deg")
-        limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
-        frac = np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]
-        peak = float(frac.max())
-        w = int(np.argmax(frac.max(axis=0)))
-        requirement("peak wheel speed", 100.0 * peak, f"<= {_num(100.0 * req.max_wheel_speed_fraction)}",
-                    peak <= req.max_wheel_speed_fraction,
-                    f"wheel {w + 1}: {float(np.abs(truth['wheel_speed_rad_s'][:, w]).max()):.1f} rad/s of "
-                    f"{limits[w]:.0f} rad/s", "% of max")
-        rate_frac, rate_t = peak_body_rate_fraction(mission, truth, acknowledged_rate_limits_of_run(run_dir))
-        requirement("peak body rate", round(100.0 * rate_frac, 2), f"<= {_num(100.0 * req.max_body_rate_fraction)}",
-                    rate_frac <= req.max_body_rate_fraction,
-                    f"true |omega| / the configured rate limit, at t = {rate_t:.1f} s", "% of max")
+        _judge_wheel_speed_and_body_rate(reqs, run_dir, mission, truth)
     hk = _hk_last(run_dir, ("slips_gnc", "cycles", "fdir_trips", "bus_crc_errors", "bus_alive_errors",
                             "bus_timeouts", "tc_accepted", "tc_rejected"))
-    missed = int(sim_stats.get("cycle_done_timeouts", 0)) + int(sim_stats.get("cycle_done_late", 0))
-    fsw_slips = int(hk["slips_gnc"]) if "slips_gnc" in hk else None
-    if sim_stats.get("clock") == "realtime":
-        # real time: a slip is a cycle that overran its period, as the flight software counts them,
-        # plus cycles whose CYCLE_DONE came after the next tick began
-        slips = None if fsw_slips is None else fsw_slips + missed
-        requirement("cycle slips", "unknown" if slips is None else slips, f"<= {req.max_cycle_slips}",
-                    slips is not None and slips <= req.max_cycle_slips,
-                    f"flight software GNC slips {fsw_slips} + late cycles {missed}" if slips is not None
-                    else "no housekeeping telemetry reached the ground: slips unknown")
-    else:
-        # lockstep: simulated time waits for the flight software, so a slow cycle on the host cannot
-        # hurt the loop; what can is a tick the flight software never answered
-        requirement("cycle slips", missed, f"<= {req.max_cycle_slips}", missed <= req.max_cycle_slips,
-                    f"lockstep ticks without CYCLE_DONE: {missed}; host-time overruns counted by the flight "
-                    f"software (not a loop fault in lockstep): {fsw_slips}")
+    _judge_cycle_slips(reqs, sim_stats, hk, req)
     events = _ground_events(run_dir)
-    trips = [str(_event_args(e).get("monitor", "?")) for e in events if _event_name(e) == "FDIR_TRIPPED"]
-    expected = list(req.expected_fdir_events)
-    missing = [m for m in expected if m not in trips]
-    unexpected = [m for m in trips if m not in expected]
-    occurred = [m for m in dict.fromkeys(trips) if m in expected]
-    requirement("expected FDIR events", ", ".join(occurred) or "none", ", ".join(expected) or "none", not missing,
-                ("missing: " + ", ".join(missing)) if missing else "all occurred")
-    requirement("unexpected FDIR events", len(unexpected), f"<= {req.max_unexpected_fdir_events}",
-                len(unexpected) <= req.max_unexpected_fdir_events, ", ".join(unexpected) or "none")
+    trips = _judge_fdir_events(reqs, events, req)
     exposure = instrument_exposure(t, [z for z in zones if z.kind == "sky"], truth.get("door_position"))
     if mission.spacecraft.door is not None:
-        first = exposure["first_t_s"]
-        requirement("instrument exposure", exposure["exposure_s"], f"<= {_num(req.max_instrument_exposure_s)}",
-                    exposure["exposure_s"] <= req.max_instrument_exposure_s
-                    and (len(t) < 2 or "door_position" in truth),
-                    ("no door truth recorded" if len(t) >= 2 and "door_position" not in truth
-                     else f"inside a sky zone with the door open, {exposure['depth_deg']:.3f} deg deep at most, "
-                     f"from t = {first:.1f} s" if first is not None
-                     else f"never inside a sky zone with the door open (inside, door closed: "
-                     f"{exposure['inside_s']:.1f} s)"), "s")
+        _judge_exposure(reqs, exposure, t, truth, req)
     ground = _read_json(run_dir / "ground" / "ground_summary.json")
     wall = float(sim_stats.get("wall_s", 0.0) or 0.0)
     sim_s = float(sim_stats.get("sim_s", 0.0) or 0.0)
@@ -616,8 +573,8 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
         "wall_s": wall,
         "speed_x_realtime": sim_s / wall if wall > 0 else None,
         "telemetry_complete": {"complete": tm_complete, "detail": tm_detail},
-        "pass": all(r["pass"] for r in results) and status == "completed",
-        "requirements": results,
+        "pass": all(r["pass"] for r in reqs.results) and status == "completed",
+        "requirements": reqs.results,
         "zones": {z.name: {"kind": z.kind, "min_margin_deg": float(z.margin_deg.min()) if len(z.margin_deg) else None}
                   for z in zones},
         "exposure": exposure,
@@ -632,6 +589,142 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
     series = {"t_s": t, "error_deg": err, "zones": zones, "y_N": y_N, "q_lift": q_lift, "truth": truth,
               "segments": segments}
     return summary, series
+
+
+def _judged_series(mission, truth: dict[str, np.ndarray]) -> tuple:
+    """What the requirements are judged on: (boresight y_N, zone margin series, lifted quaternions, pointing
+    error, its target segments, settling per target)."""
+    t = truth["t_s"]
+    b_B = np.asarray(mission.spacecraft.instrument_boresight_B, dtype=float)
+    y_N = boresight_N(truth["q_NB"], b_B)
+    zones = sky_zone_series(mission, truth, y_N) if mission.flight_software.pointing.zones else []
+    q_lift = lifted_quaternions(mission, truth)
+    if mission.flight_software.quaternion.zones:
+        zones += attitude_zone_series(mission, q_lift)
+    err, segments = error_series(mission, truth, y_N)
+    settle = settling(mission, t, err, segments)
+    if "wheel_torque_Nm" in truth:
+        add_torque_variation(settle, t, truth["wheel_torque_Nm"])
+    return y_N, zones, q_lift, err, segments, settle
+
+
+def _judge_keepout_margins(reqs: _Requirements, zones: list[ZoneSeries], t: np.ndarray, req) -> None:
+    for z in zones:
+        if len(z.margin_deg):
+            i = int(np.argmin(z.margin_deg))
+            reqs.requirement(f"keep-out margin {z.name}", float(z.margin_deg[i]),
+                             f"> {_num(req.min_keepout_margin_deg)}", float(z.margin_deg[i]) > req.min_keepout_margin_deg,
+                             f"minimum signed margin to the physical {z.kind} zone at t = {t[i]:.1f} s", "deg")
+
+
+def _judge_settling(reqs: _Requirements, settle: list[dict[str, Any]], t: np.ndarray, req,
+                    planned_duration_s: float | None) -> bool:
+    """One requirement per judged target; a target of a shortened run whose deadline lies beyond the run's
+    end is not judged. Returns whether that happened to the last target."""
+    t_end = float(t[-1]) if len(t) else 0.0
+    cut_short = planned_duration_s is not None and t_end < planned_duration_s - 1e-6
+    unjudged_last = False
+    for s in (s for s in settle if s["judged"]):
+        deadline_s = (s["commanded_at_s"] + req.max_settling_time_s if req.max_settling_time_s is not None
+                      else planned_duration_s if cut_short else s["until_s"])
+        if cut_short and s["settled_at_s"] is None and deadline_s > t_end + 1e-6:
+            s["judged"] = False
+            unjudged_last = s is settle[-1]
+            reqs.not_judged(f"settling ({s['target_from']})",
+                            f"the run was shortened to {t_end:.0f} s, before this target's settling deadline at "
+                            f"{deadline_s:.0f} s (commanded at {s['commanded_at_s']:.1f} s)")
+            continue
+        ok = s["settled_at_s"] is not None
+        # the value is a time after the command, so the limit is one too: the time left before the next
+        # target (or the end), or max_settling_time_s when it is shorter
+        span_s = s["until_s"] - s["commanded_at_s"]
+        limit_s = span_s if req.max_settling_time_s is None else min(span_s, req.max_settling_time_s)
+        if req.max_settling_time_s is not None:
+            ok = ok and s["settling_time_s"] <= req.max_settling_time_s
+        final = s["final_error_deg"]
+        reqs.requirement(f"settling ({s['target_from']})", "not settled" if s["settling_time_s"] is None
+                         else s["settling_time_s"], f"<= {_num(limit_s)}", ok,
+                         f"to within {_num(req.settling_tolerance_deg)} deg of the target commanded at "
+                         f"{s['commanded_at_s']:.1f} s; final error "
+                         + (f"{final:.4f} deg" if final is not None else "unknown (no samples)"), "s")
+    return unjudged_last
+
+
+def _judge_final_error(reqs: _Requirements, err: np.ndarray, t: np.ndarray, req, unjudged_last: bool) -> None:
+    """The truth error at the end; not judged when the last target's settling was not."""
+    if unjudged_last:
+        final = float(err[-1]) if len(t) else math.nan
+        # the error at the end is still what a person flying a shortened run wants to see
+        reqs.not_judged("final pointing error", "the run was shortened before the last target's settling deadline",
+                        f"not reached ({_rounded(final)} deg at the end)" if math.isfinite(final) else "not reached")
+    elif len(t):
+        final = float(err[-1])
+        reqs.requirement("final pointing error", final, f"< {_num(req.max_final_pointing_error_deg)}",
+                         math.isfinite(final) and final < req.max_final_pointing_error_deg,
+                         "truth error to the active target at the end", "deg")
+
+
+def _judge_wheel_speed_and_body_rate(reqs: _Requirements, run_dir: Path, mission, truth: dict[str, np.ndarray]) -> None:
+    req = mission.requirements
+    limits = np.array([w.max_speed_rad_s for w in mission.spacecraft.wheels])
+    frac = np.abs(truth["wheel_speed_rad_s"]) / limits[None, :]
+    peak = float(frac.max())
+    w = int(np.argmax(frac.max(axis=0)))
+    reqs.requirement("peak wheel speed", 100.0 * peak, f"<= {_num(100.0 * req.max_wheel_speed_fraction)}",
+                     peak <= req.max_wheel_speed_fraction,
+                     f"wheel {w + 1}: {float(np.abs(truth['wheel_speed_rad_s'][:, w]).max()):.1f} rad/s of "
+                     f"{limits[w]:.0f} rad/s", "% of max")
+    rate_frac, rate_t = peak_body_rate_fraction(mission, truth, acknowledged_rate_limits_of_run(run_dir))
+    reqs.requirement("peak body rate", round(100.0 * rate_frac, 2), f"<= {_num(100.0 * req.max_body_rate_fraction)}",
+                     rate_frac <= req.max_body_rate_fraction,
+                     f"true |omega| / the configured rate limit, at t = {rate_t:.1f} s", "% of max")
+
+
+def _judge_cycle_slips(reqs: _Requirements, sim_stats: dict[str, Any], hk: dict[str, Any], req) -> None:
+    missed = int(sim_stats.get("cycle_done_timeouts", 0)) + int(sim_stats.get("cycle_done_late", 0))
+    fsw_slips = int(hk["slips_gnc"]) if "slips_gnc" in hk else None
+    if sim_stats.get("clock") == "realtime":
+        # real time: a slip is a cycle that overran its period, as the flight software counts them,
+        # plus cycles whose CYCLE_DONE came after the next tick began
+        slips = None if fsw_slips is None else fsw_slips + missed
+        reqs.requirement("cycle slips", "unknown" if slips is None else slips, f"<= {req.max_cycle_slips}",
+                         slips is not None and slips <= req.max_cycle_slips,
+                         f"flight software GNC slips {fsw_slips} + late cycles {missed}" if slips is not None
+                         else "no housekeeping telemetry reached the ground: slips unknown")
+    else:
+        # lockstep: simulated time waits for the flight software, so a slow cycle on the host cannot
+        # hurt the loop; what can is a tick the flight software never answered
+        reqs.requirement("cycle slips", missed, f"<= {req.max_cycle_slips}", missed <= req.max_cycle_slips,
+                         f"lockstep ticks without CYCLE_DONE: {missed}; host-time overruns counted by the flight "
+                         f"software (not a loop fault in lockstep): {fsw_slips}")
+
+
+def _judge_fdir_events(reqs: _Requirements, events: list[dict[str, Any]], req) -> list[str]:
+    """The expected FDIR trips all seen, few unexpected ones; returns the trips (monitor names) in order."""
+    trips = [str(_event_args(e).get("monitor", "?")) for e in events if _event_name(e) == "FDIR_TRIPPED"]
+    expected = list(req.expected_fdir_events)
+    missing = [m for m in expected if m not in trips]
+    unexpected = [m for m in trips if m not in expected]
+    occurred = [m for m in dict.fromkeys(trips) if m in expected]
+    reqs.requirement("expected FDIR events", ", ".join(occurred) or "none", ", ".join(expected) or "none", not missing,
+                     ("missing: " + ", ".join(missing)) if missing else "all occurred")
+    reqs.requirement("unexpected FDIR events", len(unexpected), f"<= {req.max_unexpected_fdir_events}",
+                     len(unexpected) <= req.max_unexpected_fdir_events, ", ".join(unexpected) or "none")
+    return trips
+
+
+def _judge_exposure(reqs: _Requirements, exposure: dict[str, Any], t: np.ndarray, truth: dict[str, np.ndarray],
+                    req) -> None:
+    """Time inside a sky zone with the door open (a run without door truth cannot pass)."""
+    first = exposure["first_t_s"]
+    reqs.requirement("instrument exposure", exposure["exposure_s"], f"<= {_num(req.max_instrument_exposure_s)}",
+                     exposure["exposure_s"] <= req.max_instrument_exposure_s
+                     and (len(t) < 2 or "door_position" in truth),
+                     ("no door truth recorded" if len(t) >= 2 and "door_position" not in truth
+                      else f"inside a sky zone with the door open, {exposure['depth_deg']:.3f} deg deep at most, "
+                      f"from t = {first:.1f} s" if first is not None
+                      else f"never inside a sky zone with the door open (inside, door closed: "
+                      f"{exposure['inside_s']:.1f} s)"), "s")
 
 
 def summary_json(summary: dict[str, Any]) -> str:
