@@ -84,6 +84,33 @@ class Simulator:
         self.world = world
         self.bus = bus
         self.icd = icd or Icd()
+        self._init_timing(world, gnc_period_s, dynamics_dt_s)
+        self._world_samples = hasattr(world, "advance_sampled")
+        self.devices = Devices.for_world(world, self.icd, timing, door=door)
+        self.n_wheels = len(self.devices.wheels)
+        self.fault_specs = [FaultSpec.from_any(f) for f in faults or ()]  # as given (campaigns read them back)
+        self.wheel_failures = WheelFailures(self.fault_specs)  # on the mechanism, at their time
+        self.injector = FaultInjector(self.icd, bus_faults(self.fault_specs), seed=fault_seed)
+        self._init_door()
+        self._faults = self.injector.faults  # (empty: the injector never acts, ``bool(injector)`` is False)
+        self.cycle_done_timeout_s = cycle_done_timeout_s
+        self.clock = clock
+        if on_burst is not None and on_frame is None:
+            raise ValueError("on_burst needs on_frame (the frames of the fault injector's paths are messages)")
+        self.on_frame = on_frame
+        self.on_burst = on_burst
+        self._init_sync()
+        self._init_receiver()
+        self._init_receive_commands()
+        # Lockstep waits wake only for CYCLE_DONE where the bus can filter wake-ups (socketcan): the wheel
+        # commands before it queue without a context switch each (see _receive_until_done).
+        self._wait_for = getattr(bus, "wait_for", None)
+        if self._wait_for is not None:
+            bus.watch([self._cycle_done_id])
+        self._init_clock(world)
+
+    def _init_timing(self, world: WorldLike, gnc_period_s: float, dynamics_dt_s: float | None) -> None:
+        """The GNC period T (whole milliseconds, for SYNC.period_ms) and the dynamics steps within it."""
         if dynamics_dt_s is None:
             params = getattr(world, "params", None)
             dynamics_dt_s = float(getattr(params, "max_integration_step_s", 0.01))
@@ -100,20 +127,9 @@ class Simulator:
         self.dt_s = gnc_period_s / n_sub
         self._j_dt = np.arange(n_sub + 1) * self.dt_s  # j * dt_s, j = 0..n_sub
         self._j_dt_end = float(self._j_dt[-1])
-        self._world_samples = hasattr(world, "advance_sampled")
-        self.devices = Devices.for_world(world, self.icd, timing, door=door)
-        self.n_wheels = len(self.devices.wheels)
-        self.fault_specs = [FaultSpec.from_any(f) for f in faults or ()]  # as given (campaigns read them back)
-        self.wheel_failures = WheelFailures(self.fault_specs)  # on the mechanism, at their time
-        self.injector = FaultInjector(self.icd, bus_faults(self.fault_specs), seed=fault_seed)
-        self._init_door()
-        self._faults = self.injector.faults  # (empty: the injector never acts, ``bool(injector)`` is False)
-        self.cycle_done_timeout_s = cycle_done_timeout_s
-        self.clock = clock
-        if on_burst is not None and on_frame is None:
-            raise ValueError("on_burst needs on_frame (the frames of the fault injector's paths are messages)")
-        self.on_frame = on_frame
-        self.on_burst = on_burst
+
+    def _init_sync(self) -> None:
+        """SYNC's sender, row and columns, and the command columns the received frames are applied by."""
         self._sync_sender = self.devices.sender  # one sender (alive counters per message) for all SIM nodes
         self._sync_m = self.icd.message_index["SYNC"]
         self._sync_row = [0.0] * self.icd.table.start.shape[1]
@@ -123,6 +139,9 @@ class Simulator:
         self._tick_lsb_col = self.icd.column("RW1_CMD", "tick_lsb")
         self._done_tick_col = self.icd.column("CYCLE_DONE", "tick")
         self._rx: CheckedBurst | None = None  # frames read off the bus, not yet handled
+
+    def _init_receiver(self) -> None:
+        """The receiver of the flight software's frames (its own left out) and the per-frame apply's tables."""
         own = self.icd.ids_sent_by(*SIM_NODES)
         watch = [f"RW{i}_CMD" for i in range(1, self.n_wheels + 1)] + ["CYCLE_DONE"]
         self.receiver = E2EReceiver(self.icd, ignore_ids=own, watch=watch)
@@ -139,7 +158,10 @@ class Simulator:
         apply_received(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 1)), 0, 0,
                        self._cmd_wheel_of_id, self._torque_col, self._tick_lsb_col, self._cycle_done_id,
                        self._done_tick_col, self._heartbeat_id, 0.0, self.devices.wheel_state, self._rx_counts)
-        # receive_commands' arrays (a tick's commands classified, counted and applied in one compiled call):
+
+    def _init_receive_commands(self) -> None:
+        """The arrays of receive_commands (a tick's commands classified, counted and applied in one compiled
+        call)."""
         # the constants packed once, the tally of (counter key, count) pairs and its targets, the state
         n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE (as the flight-side driver)
         n_messages = len(self.icd.message_names)
@@ -176,11 +198,10 @@ class Simulator:
                                    np.zeros((0, MAX_DLC), dtype=np.uint8), 0.0, 0, self._rc_status, self._rc_values,
                                    self._rc_consts, d.packed_f, d.packed_i, self._rc_table[3], self._rc_table[4],
                                    self._rc_tally, self._rc_state)
-        # Lockstep waits wake only for CYCLE_DONE where the bus can filter wake-ups (socketcan): the wheel
-        # commands before it queue without a context switch each (see _receive_until_done).
-        self._wait_for = getattr(bus, "wait_for", None)
-        if self._wait_for is not None:
-            bus.watch([self._cycle_done_id])
+
+    def _init_clock(self, world: WorldLike) -> None:
+        """Tick 0 at the world's time, no tick open; the sensors sample the initial state (t = t0) before the
+        first tick."""
         self.tick = 0
         self.t0_s = float(world.t)
         self.t_s = self.t0_s + self.tick * self.period_s
@@ -188,7 +209,6 @@ class Simulator:
         self._done_ticks: set[int] = set()
         self._tick_open = False
         self._awaiting: int | None = None
-        # Sensors sample the initial state (t = t0) before the first tick.
         self.devices.sample_sensors(world, self.t0_s)
 
     def _init_door(self) -> None:
