@@ -262,6 +262,20 @@ class LatestInputs:
     imu_samples: list[ImuSample] = field(default_factory=list)
 
 
+# kernels.C_* slots: the value-row column of each signal collect_rows reads
+_COLLECT_SIGNALS = ((K.C_TICK, ("SYNC", "tick")), (K.C_FOLLOWING, ("SYNC", "frames_following")),
+                    (K.C_PERIOD, ("SYNC", "period_ms")), (K.C_IMU_X, ("IMU_RATE", "omega_x")),
+                    (K.C_IMU_Y, ("IMU_RATE", "omega_y")), (K.C_IMU_Z, ("IMU_RATE", "omega_z")),
+                    (K.C_IMU_SAT, ("IMU_RATE", "saturated")), (K.C_QW, ("ST_QUAT_A", "q_w")),
+                    (K.C_QX, ("ST_QUAT_A", "q_x")), (K.C_VALID, ("ST_QUAT_A", "valid")),
+                    (K.C_BLIND, ("ST_QUAT_A", "blind_source")), (K.C_SEQ_A, ("ST_QUAT_A", "sample_seq")),
+                    (K.C_QY, ("ST_QUAT_B", "q_y")), (K.C_QZ, ("ST_QUAT_B", "q_z")),
+                    (K.C_SEQ_B, ("ST_QUAT_B", "sample_seq")), (K.C_AGE, ("ST_QUAT_B", "age_ms")),
+                    (K.C_SPEED, ("RW1_STATUS", "speed")), (K.C_TORQUE, ("RW1_STATUS", "torque")),
+                    (K.C_CURRENT, ("RW1_STATUS", "current")), (K.C_TEMP, ("RW1_STATUS", "temp")),
+                    (K.C_FAULT, ("RW1_STATUS", "fault")))
+
+
 class FswBusDriver:
     """The flight software's bus driver (see module docstring).
 
@@ -322,7 +336,7 @@ class FswBusDriver:
 
     def _init_lockstep(self, icd: Icd, n_wheels: int) -> None:
         """The arrays of the compiled lockstep tick (kernels.collect_rows): its state, what it does with each
-        frame id, the signals' slots, and the tick's decoded samples."""
+        frame id, the signals' slots, and the tick's decoded samples; then the compiled command encoder's."""
         # kernels.S_*: phase, counts, pending SYNC, samples; then the tally (key, count pairs)
         self._n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE
         n_tally = (len(icd.message_names) + 1) * self._n_codes
@@ -330,28 +344,11 @@ class FswBusDriver:
         self._st_i = self._st_all[:K.S_SIZE]
         col = self._col
         cfg = np.zeros(K.C_SIZE, dtype=np.int64)
-        for slot, key in ((K.C_TICK, ("SYNC", "tick")), (K.C_FOLLOWING, ("SYNC", "frames_following")),
-                          (K.C_PERIOD, ("SYNC", "period_ms")), (K.C_IMU_X, ("IMU_RATE", "omega_x")),
-                          (K.C_IMU_Y, ("IMU_RATE", "omega_y")), (K.C_IMU_Z, ("IMU_RATE", "omega_z")),
-                          (K.C_IMU_SAT, ("IMU_RATE", "saturated")), (K.C_QW, ("ST_QUAT_A", "q_w")),
-                          (K.C_QX, ("ST_QUAT_A", "q_x")), (K.C_VALID, ("ST_QUAT_A", "valid")),
-                          (K.C_BLIND, ("ST_QUAT_A", "blind_source")), (K.C_SEQ_A, ("ST_QUAT_A", "sample_seq")),
-                          (K.C_QY, ("ST_QUAT_B", "q_y")), (K.C_QZ, ("ST_QUAT_B", "q_z")),
-                          (K.C_SEQ_B, ("ST_QUAT_B", "sample_seq")), (K.C_AGE, ("ST_QUAT_B", "age_ms")),
-                          (K.C_SPEED, ("RW1_STATUS", "speed")), (K.C_TORQUE, ("RW1_STATUS", "torque")),
-                          (K.C_CURRENT, ("RW1_STATUS", "current")), (K.C_TEMP, ("RW1_STATUS", "temp")),
-                          (K.C_FAULT, ("RW1_STATUS", "fault"))):
+        for slot, key in _COLLECT_SIGNALS:
             cfg[slot] = col[key]
         cfg[K.C_N_CODES] = self._n_codes
         cfg[K.C_BUS_ROW] = len(icd.message_names)
-        role = np.full(2048, K.ROLE_NONE, dtype=np.int64)
-        role[[i for i in self._device_ids if 0 <= i < 2048]] = K.ROLE_DEVICE
-        role[self._sync_id] = K.ROLE_SYNC
-        role[self._imu_id] = K.ROLE_IMU
-        role[icd.spec("ST_QUAT_A").frame_id] = K.ROLE_ST_A
-        role[icd.spec("ST_QUAT_B").frame_id] = K.ROLE_ST_B
-        for fid, w in self._wheel_index.items():
-            role[fid] = K.ROLE_WHEEL + w
+        role = self._frame_roles(icd)
         kind_of_id, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t = self.receiver.kernel_state
         self._watch, watch_limit = self.receiver.watched_timeouts()
         cfg[K.C_OFF_KIND] = K.C_SIZE
@@ -392,6 +389,22 @@ class FswBusDriver:
         self._bind_collect()
         self._rx_reuse = _LockstepRx(None, 0)  # the lockstep burst being read (one object, reused)
         self._no_frames = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 8), dtype=np.uint8))
+        self._init_commands(icd, n_wheels, width)
+
+    def _frame_roles(self, icd: Icd) -> np.ndarray:
+        """role_of_id for collect_rows: what the lockstep tick does with a delivered frame of each id."""
+        role = np.full(2048, K.ROLE_NONE, dtype=np.int64)
+        role[[i for i in self._device_ids if 0 <= i < 2048]] = K.ROLE_DEVICE
+        role[self._sync_id] = K.ROLE_SYNC
+        role[self._imu_id] = K.ROLE_IMU
+        role[icd.spec("ST_QUAT_A").frame_id] = K.ROLE_ST_A
+        role[icd.spec("ST_QUAT_B").frame_id] = K.ROLE_ST_B
+        for fid, w in self._wheel_index.items():
+            role[fid] = K.ROLE_WHEEL + w
+        return role
+
+    def _init_commands(self, icd: Icd, n_wheels: int, width: int) -> None:
+        """The wheel commands' and the heartbeat's frames, encoded by kernels.command_rows."""
         # the commands' frame ids / lengths (with and without CYCLE_DONE; never edited: bursts share them)
         ids = np.array([icd.spec(icd.message_names[m]).frame_id for m in self._cmd_idx], dtype=np.int64)
         dlc = icd.table.dlc[self._cmd_idx].copy()
