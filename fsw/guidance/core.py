@@ -32,10 +32,20 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
 
     MODES = ("SAFE", "POINTING", "QUATERNION")
 
-    def __init__(self, cfg, events=None):
+    def __init__(self, cfg, events=None) -> None:
         self.cfg = cfg
         self.events = events or (lambda name, **args: None)
         self.mode = cfg.initial_mode
+        self._init_law_and_limits(cfg)
+        self._init_targets(cfg)
+        self._init_sky_slots(cfg)
+        self._init_pointing_cycle_state()
+        self._init_safe_and_checks()
+        self._init_path_guidance(cfg)
+        self.last_t_s = 0.0
+
+    def _init_law_and_limits(self, cfg) -> None:
+        """The law's gains and what the rate loop can follow."""
         self.k1 = cfg.law.k1
         self.kappa = cfg.law.kappa
         self.eps_cfg = cfg.law.eps
@@ -45,6 +55,9 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self.bandwidth_rad_s = cfg.control.rate_bandwidth_rad_s
         self._governor_margins: list[float] | None = None
         self.rate_cap_deg_s = math.inf  # lowered when a wheel is lost (reduce_slew_authority)
+
+    def _init_targets(self, cfg) -> None:
+        """The ephemeris, the boresight and the targets of each mode."""
         self.ephem = SkyEphemeris(cfg)
         p = cfg.pointing
         self.b_B = np.asarray(p.boresight_B, dtype=float)
@@ -55,6 +68,10 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self.sun_axis_B = np.asarray(cfg.safe.sun_axis_B, dtype=float)
         self.no_fix_s = 0.0
         self.acquisition_omega_B = _acquisition_rate_B(cfg, self.b_B)
+
+    def _init_sky_slots(self, cfg) -> None:
+        """One slot per configured sky zone, with its zone builders (the law's, fast, and the margin's)."""
+        p = cfg.pointing
         margin = cfg.law.margin_deg
         self.slots: list[_SkySlot] = []
         for i, z in enumerate(p.zones):
@@ -72,6 +89,9 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self.sky_geometry = ZoneGeometry(3, cfg.law.merge_gap_deg)
         if self.slots:
             _warm_batch_kernels([s.builder_law for s in self.slots])
+
+    def _init_pointing_cycle_state(self) -> None:
+        """What the POINTING and S^3 cycles keep between cycles: nothing kept yet, no path planned."""
         self._sky_law = None
         self._sky_law_key = None
         # the compiled POINTING cycle's packed state (`PointingGuidance._pointing`): the slots and their
@@ -96,7 +116,9 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self._build_s3_zones()
         self._q_lift: np.ndarray | None = None
         self._drop_s3_path()  # no S^3 path yet: the law heads for the target until one is planned
-        # SAFE mode state
+
+    def _init_safe_and_checks(self) -> None:
+        """SAFE mode's state, the assumption-check cache, occultation and escape."""
         self.safe_phase = "RATE_DAMPING"
         self._damped_s = 0.0
         self._safe_sun: np.ndarray | None = None  # the Sun direction the Sun-safe aim was chosen for
@@ -111,14 +133,15 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self._escaping = False
         self._escape_point: np.ndarray | None = None
         self._escape_event_t = -math.inf
-        # path guidance: the follower of the planned slew path, the law's aim on it, when it was planned
+
+    def _init_path_guidance(self, cfg) -> None:
+        """The follower of the planned slew path, the law's aim on it, when it was planned, the watchdog."""
         self._follower: PathFollower | None = None
         self._aim: np.ndarray = self.target_N
         self._aim_k = -1
         self._plan_due = True
         self._planned_t = -math.inf
         self._watchdog = ProgressWatchdog(cfg.law.stall_watchdog_s)
-        self.last_t_s = 0.0
 
     # ------------------------------------------------------------------------------ configuration
     def set_mode(self, mode: str) -> None:
