@@ -387,9 +387,7 @@ def plot_s2(study: Study, res: RunResult, out: Path) -> list[str]:
     import matplotlib.pyplot as plt
 
     eps = study.params["eps"]
-    x_d = study.target
     colors = plt.cm.tab10(np.arange(10))
-    zone_color = "#c0392b"
     layers = []
     for z in study.zones:
         _, rho = z.bounding_cap
@@ -400,43 +398,64 @@ def plot_s2(study: Study, res: RunResult, out: Path) -> list[str]:
     # two 3-D views of the sphere
     for panel, (elev, azim) in enumerate(((20, -60), (-35, 130))):
         ax = fig.add_subplot(1, 3, panel + 1, projection="3d")
-        u, v = np.mgrid[0 : 2 * np.pi : 60j, 0 : np.pi : 30j]
-        ax.plot_surface(np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color="#dfe6ee", alpha=0.25, linewidth=0)
-        view = np.array([np.cos(np.radians(elev)) * np.cos(np.radians(azim)), np.cos(np.radians(elev)) * np.sin(np.radians(azim)), np.sin(np.radians(elev))])
+        _draw_s2_view(ax, study, res, boundaries, layers, colors, elev, azim)
+    _draw_s2_map(fig.add_subplot(1, 3, 3), study, res, boundaries, layers, colors)
+    fig.suptitle(f"{study.title}: zones (red), eps-layers (dashed, eps={eps}), kernels (yellow), x_d (star)")
+    fig.tight_layout()
+    name = "s2_star_sphere.png"
+    fig.savefig(out / name, dpi=110)
+    plt.close(fig)
+    return [name, _plot_s2_separation(study, res, out, colors)]
 
-        def draw(P, **kw):
-            P = np.asarray(P)
-            vis = P @ view > -0.05
-            Q = np.where(vis[:, None], P * 1.003, np.nan)
-            ax.plot(Q[:, 0], Q[:, 1], Q[:, 2], **kw)
 
-        for i, z in enumerate(study.zones):
-            draw(boundaries[i], color=zone_color, lw=1.6)
-            for c in layers[i]:
-                draw(c, color=zone_color, lw=0.7, ls="--")
-            g = z.kernel
-            if g @ view > 0:
-                ax.scatter(*g, color="gold", edgecolor="k", s=30, zorder=5)
-        for r in range(res.x.shape[1]):
-            draw(res.x[:, r], color=colors[r % 10], lw=1.2)
-            if res.x[0, r] @ view > 0:
-                ax.scatter(*res.x[0, r], color=colors[r % 10], marker="o", s=18)
-        if x_d @ view > 0:
-            ax.scatter(*x_d, color="k", marker="*", s=120)
-        ax.view_init(elev=elev, azim=azim)
-        ax.set_box_aspect((1, 1, 1), zoom=1.35)
-        ax.set_axis_off()
-        ax.set_title(f"view elev {elev}, azim {azim}")
-    # azimuthal equidistant map about x_d (the whole sphere; -x_d on the outer circle)
-    ax = fig.add_subplot(1, 3, 3)
+_S2_ZONE_COLOR = "#c0392b"
+
+
+def _draw_s2_view(ax, study: Study, res: RunResult, boundaries: list[np.ndarray], layers: list,
+                  colors: np.ndarray, elev: float, azim: float) -> None:
+    """The sphere seen from (elev, azim): zones, their eps-layers, kernels, runs and x_d on the near side."""
+    x_d = study.target
+    u, v = np.mgrid[0 : 2 * np.pi : 60j, 0 : np.pi : 30j]
+    ax.plot_surface(np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v), color="#dfe6ee", alpha=0.25, linewidth=0)
+    view = np.array([np.cos(np.radians(elev)) * np.cos(np.radians(azim)), np.cos(np.radians(elev)) * np.sin(np.radians(azim)), np.sin(np.radians(elev))])
+
+    def draw(P, **kw):
+        P = np.asarray(P)
+        vis = P @ view > -0.05
+        Q = np.where(vis[:, None], P * 1.003, np.nan)
+        ax.plot(Q[:, 0], Q[:, 1], Q[:, 2], **kw)
+
+    for i, z in enumerate(study.zones):
+        draw(boundaries[i], color=_S2_ZONE_COLOR, lw=1.6)
+        for c in layers[i]:
+            draw(c, color=_S2_ZONE_COLOR, lw=0.7, ls="--")
+        g = z.kernel
+        if g @ view > 0:
+            ax.scatter(*g, color="gold", edgecolor="k", s=30, zorder=5)
+    for r in range(res.x.shape[1]):
+        draw(res.x[:, r], color=colors[r % 10], lw=1.2)
+        if res.x[0, r] @ view > 0:
+            ax.scatter(*res.x[0, r], color=colors[r % 10], marker="o", s=18)
+    if x_d @ view > 0:
+        ax.scatter(*x_d, color="k", marker="*", s=120)
+    ax.view_init(elev=elev, azim=azim)
+    ax.set_box_aspect((1, 1, 1), zoom=1.35)
+    ax.set_axis_off()
+    ax.set_title(f"view elev {elev}, azim {azim}")
+
+
+def _draw_s2_map(ax, study: Study, res: RunResult, boundaries: list[np.ndarray], layers: list,
+                 colors: np.ndarray) -> None:
+    """Azimuthal equidistant map about x_d (the whole sphere; -x_d on the outer circle)."""
+    x_d = study.target
     basis = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) if abs(x_d[2]) > 0.9 else np.linalg.qr(np.column_stack([x_d, np.eye(3)]))[0][:, 1:3].T
     for i, z in enumerate(study.zones):
         P = _azimuthal(boundaries[i], x_d, basis)
-        ax.fill(P[:, 0], P[:, 1], color=zone_color, alpha=0.35, lw=0)
-        ax.plot(P[:, 0], P[:, 1], color=zone_color, lw=1.2)
+        ax.fill(P[:, 0], P[:, 1], color=_S2_ZONE_COLOR, alpha=0.35, lw=0)
+        ax.plot(P[:, 0], P[:, 1], color=_S2_ZONE_COLOR, lw=1.2)
         for c in layers[i]:
             C = _azimuthal(c, x_d, basis)
-            ax.plot(C[:, 0], C[:, 1], color=zone_color, lw=0.6, ls="--")
+            ax.plot(C[:, 0], C[:, 1], color=_S2_ZONE_COLOR, lw=0.6, ls="--")
         G = _azimuthal(z.kernel[None, :], x_d, basis)
         ax.scatter(G[:, 0], G[:, 1], color="gold", edgecolor="k", s=30, zorder=5)
         ax.annotate(f"U{i + 1}", G[0] + 6, fontsize=8)
@@ -451,12 +470,13 @@ def plot_s2(study: Study, res: RunResult, out: Path) -> list[str]:
     ax.set_aspect("equal")
     ax.set_title("azimuthal equidistant map about x_d (deg)")
     ax.legend(fontsize=6, loc="lower left", ncol=2)
-    fig.suptitle(f"{study.title}: zones (red), eps-layers (dashed, eps={eps}), kernels (yellow), x_d (star)")
-    fig.tight_layout()
-    name = "s2_star_sphere.png"
-    fig.savefig(out / name, dpi=110)
-    plt.close(fig)
 
+
+def _plot_s2_separation(study: Study, res: RunResult, out: Path, colors: np.ndarray) -> str:
+    """Separation from the unsafe set and convergence to x_d over time, per run; returns the file name."""
+    import matplotlib.pyplot as plt
+
+    eps = study.params["eps"]
     fig, ax = plt.subplots(1, 2, figsize=(11, 3.8))
     for r in range(res.x.shape[1]):
         ax[0].plot(res.t, res.signed_sep[:, r], color=colors[r % 10], lw=1, label=f"run {r + 1}")
@@ -472,10 +492,10 @@ def plot_s2(study: Study, res: RunResult, out: Path) -> list[str]:
     ax[1].set_title("convergence")
     ax[0].legend(fontsize=6, ncol=3)
     fig.tight_layout()
-    name2 = "s2_star_separation.png"
-    fig.savefig(out / name2, dpi=110)
+    name = "s2_star_separation.png"
+    fig.savefig(out / name, dpi=110)
     plt.close(fig)
-    return [name, name2]
+    return name
 
 
 def plot_s3(study: Study, res: RunResult, out: Path, extra: tuple[Study, RunResult] | None = None) -> list[str]:
