@@ -19,6 +19,7 @@ import numpy as np
 from fsw.dictionary import TelemetryDictionary
 from ground.archive import RAW_ARCHIVE, raw_records
 from ground.verify import ACK_PACKET
+from ground.web.alarms import AlarmBook
 from ground.web.catalog import SKY_KEY, channel_key, radec_deg
 
 if TYPE_CHECKING:
@@ -28,6 +29,7 @@ if TYPE_CHECKING:
 SKY_PERIOD_S = 1.0  # onboard seconds between sky points
 ZONE_OUTLINE_POINTS = 48
 FDIR_EVENTS = ("FDIR_TRIPPED", "FDIR_CLEARED")
+TIME_DOMAINS = ("utc", "onboard_s")
 
 
 def ack_point(dictionary: TelemetryDictionary, utc: float, packet: DecodedTm) -> dict[str, Any]:
@@ -93,20 +95,25 @@ class History:
     rows: dict[str, tuple[list[float], list[float], list[tuple[Any, ...]]]] = field(default_factory=dict)
     points: dict[str, list[dict[str, Any]]] = field(default_factory=dict)  # events, fdir, acks, sky
 
-    def query(self, key: str, columns: dict[str, tuple[str, int]], start_ms: float, end_ms: float,
-              latest: bool = False, outline: str = "all") -> list[dict[str, Any]]:
-        """Points of stream ``key`` with ``start_ms <= utc <= end_ms`` (only the last one if ``latest``)."""
+    def query(self, key: str, columns: dict[str, tuple[str, int]], start: float, end: float,
+              latest: bool = False, outline: str = "all", domain: str = "utc") -> list[dict[str, Any]]:
+        """Points of stream ``key`` with ``start <= time <= end`` (only the last one if ``latest``), in the
+        time ``domain``: ``utc`` (ground receive time [ms]) or ``onboard_s`` (onboard time [s], what a
+        replay is plotted against: the packets' own clock, not the moment they reached the ground)."""
+        if domain not in TIME_DOMAINS:
+            raise ValueError(f"domain must be one of {', '.join(TIME_DOMAINS)}")
         where = columns.get(key)
         if where is not None:
             packet, index = where
             utcs, onboard, rows = self.rows.get(packet, ([], [], []))
-            lo, hi = bisect.bisect_left(utcs, start_ms), bisect.bisect_right(utcs, end_ms)
+            times = utcs if domain == "utc" else onboard
+            lo, hi = bisect.bisect_left(times, start), bisect.bisect_right(times, end)
             span = range(hi - 1, hi) if latest and hi > lo else range(lo, hi)
             return [{"id": key, "utc": utcs[i], "onboard_s": onboard[i], "value": rows[i][index]}
                     for i in span if rows[i][index] is not None]
         points = self.points.get(key, [])
-        utcs = [p["utc"] for p in points]
-        lo, hi = bisect.bisect_left(utcs, start_ms), bisect.bisect_right(utcs, end_ms)
+        times = [p[domain] for p in points]
+        lo, hi = bisect.bisect_left(times, start), bisect.bisect_right(times, end)
         selected = points[hi - 1:hi] if latest and hi > lo else points[lo:hi]
         if key == SKY_KEY and outline == "last" and len(selected) > 1:  # the trail needs the boresight only
             selected = [{k: v for k, v in p.items() if k != "zones"} for p in selected[:-1]] + selected[-1:]
@@ -194,9 +201,10 @@ class ArchiveReader:
     """Reads a growing ``tm_raw.bin`` incrementally into a ``History`` (a live run's archive grows while
     it is browsed; a torn final record is read again on the next refresh)."""
 
-    def __init__(self, archive_dir: Path, maker: PointMaker) -> None:
+    def __init__(self, archive_dir: Path, maker: PointMaker, alarms: AlarmBook | None = None) -> None:
         self.path = Path(archive_dir) / RAW_ARCHIVE
         self.maker = maker
+        self.alarms = alarms
         self.history = History()
         self.offset = 0
         self.decode_errors = 0
@@ -216,12 +224,19 @@ class ArchiveReader:
                 self.decode_errors += 1
                 continue
             self.maker.record(self.history, rx_time_s, packet)
+            if self.alarms is not None:
+                self.alarms.observe(rx_time_s, packet)
         return count
 
     def span_ms(self) -> tuple[float, float] | None:
         """First and last ground receive time in the archive [ms], or None when it is empty."""
-        times = [rows[0][0] for rows in self.history.rows.values() if rows[0]]
-        ends = [rows[0][-1] for rows in self.history.rows.values() if rows[0]]
-        times += [p[0]["utc"] for p in self.history.points.values() if p]
-        ends += [p[-1]["utc"] for p in self.history.points.values() if p]
+        return self.span("utc")
+
+    def span(self, domain: str) -> tuple[float, float] | None:
+        """First and last time of the archive in a time domain (``TIME_DOMAINS``), or None when it is empty."""
+        column = TIME_DOMAINS.index(domain)
+        times = [rows[column][0] for rows in self.history.rows.values() if rows[column]]
+        ends = [rows[column][-1] for rows in self.history.rows.values() if rows[column]]
+        times += [p[0][domain] for p in self.history.points.values() if p]
+        ends += [p[-1][domain] for p in self.history.points.values() if p]
         return (min(times), max(ends)) if times else None

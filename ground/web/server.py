@@ -33,8 +33,9 @@ from aiohttp import WSCloseCode, WSMsgType, web
 
 from fsw.dictionary import TelemetryDictionary
 from ground.link import Endpoints, open_telemetry
-from ground.web.catalog import build_objects
-from ground.web.points import ArchiveReader, PointMaker
+from ground.web.alarms import ACKS_FILE, AlarmBook
+from ground.web.catalog import build_objects, display_names
+from ground.web.points import TIME_DOMAINS, ArchiveReader, PointMaker
 
 if TYPE_CHECKING:
     from fsw.config import FswConfig
@@ -107,9 +108,11 @@ class WebGround:
                  cfg: FswConfig | None = None, endpoints: Endpoints | None = None, title: str = "keepout",
                  security: SecurityAssociation | None = None) -> None:
         self.dictionary = dictionary
-        self.objects = build_objects(dictionary, title)
+        self.objects = build_objects(dictionary, title, cfg)
         self.telemetry_keys = {k for k, o in self.objects.items() if "telemetry" in o}
-        self.reader = ArchiveReader(archive_dir, PointMaker(dictionary, cfg))
+        acks = Path(archive_dir) / ACKS_FILE if os.access(archive_dir, os.W_OK) else None
+        self.reader = ArchiveReader(archive_dir, PointMaker(dictionary, cfg),
+                                    AlarmBook(dictionary, display_names(dictionary, cfg), acks))
         self.live_maker = PointMaker(dictionary, cfg)
         self.endpoints = endpoints
         self.security = security  # the downlink association: live packets must verify against the link key
@@ -127,6 +130,8 @@ class WebGround:
         app.router.add_get("/api/objects", self._objects)
         app.router.add_get("/api/run", self._run)
         app.router.add_get("/api/history/{key}", self._history)
+        app.router.add_get("/api/alarms", self._alarms)
+        app.router.add_post("/api/alarms/ack", self._acknowledge)
         app.router.add_get("/api/realtime", self._realtime)
         app.router.add_static("/keepout/", STATIC_DIR)
         app.router.add_static("/openmct/", self.openmct_dir)
@@ -142,25 +147,55 @@ class WebGround:
 
     async def _run(self, request: web.Request) -> web.Response:
         self.reader.refresh()
-        span = self.reader.span_ms()
+        span, onboard = self.reader.span("utc"), self.reader.span("onboard_s")
         return web.json_response({
             "title": self.title, "run_id": self.endpoints.run_id if self.endpoints else None,
             "live": self._sock is not None, "span_ms": list(span) if span else None,
+            "onboard_span_s": list(onboard) if onboard else None,
             "archive_decode_errors": self.reader.decode_errors, **self.counters})
 
     async def _history(self, request: web.Request) -> web.Response:
         key = request.match_info["key"]
         if key not in self.telemetry_keys:
             raise web.HTTPNotFound(text=f"unknown telemetry key {key!r}")
+        domain = request.query.get("domain", "utc")
+        if domain not in TIME_DOMAINS:
+            raise web.HTTPBadRequest(text=f"domain must be one of {', '.join(TIME_DOMAINS)}")
         try:
             start, end = float(request.query.get("start", "-inf")), float(request.query.get("end", "inf"))
         except ValueError:
-            raise web.HTTPBadRequest(text="start and end must be numbers (ms since 1970)") from None
+            raise web.HTTPBadRequest(text="start and end must be numbers (ms since 1970, or onboard s with "
+                                          "domain=onboard_s)") from None
         self.reader.refresh()
         points = self.reader.history.query(key, self.reader.maker.columns, start, end,
                                            latest=request.query.get("strategy") == "latest",
-                                           outline=request.query.get("outline", "all"))
+                                           outline=request.query.get("outline", "all"), domain=domain)
         return web.json_response(points)
+
+    async def _alarms(self, request: web.Request) -> web.Response:
+        self.reader.refresh()
+        return web.json_response(self.reader.alarms.to_json())
+
+    async def _acknowledge(self, request: web.Request) -> web.Response:
+        """``{"ids": [n, ...]}`` or ``{"all": true}``: the operator acknowledges alarms."""
+        try:
+            body = await request.json()
+        except ValueError:
+            raise web.HTTPBadRequest(text='expected JSON: {"ids": [n, ...]} or {"all": true}') from None
+        self.reader.refresh()
+        book = self.reader.alarms
+        if isinstance(body, dict) and body.get("all") is True and set(body) <= {"all", "operator"}:
+            ids = [a.alarm_id for a in book.alarms]
+        elif (isinstance(body, dict) and set(body) <= {"ids", "operator"} and isinstance(body.get("ids"), list)
+              and all(isinstance(i, int) and not isinstance(i, bool) for i in body["ids"])):
+            ids = body["ids"]
+        else:
+            raise web.HTTPBadRequest(text='expected JSON: {"ids": [n, ...]} or {"all": true}')
+        try:
+            newly = book.acknowledge(ids, str(body.get("operator", ""))[:40])
+        except KeyError as exc:
+            raise web.HTTPBadRequest(text=str(exc.args[0])) from None
+        return web.json_response({"acknowledged": newly, **book.to_json()})
 
     async def _realtime(self, request: web.Request) -> web.WebSocketResponse:
         ws = web.WebSocketResponse(heartbeat=30.0, max_msg_size=MAX_CLIENT_MESSAGE_BYTES)

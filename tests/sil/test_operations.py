@@ -72,6 +72,8 @@ LAD_VALUE_JS = """name => {
     return row ? row.querySelector('.js-third-data').textContent.trim() : null;
 }"""
 TABLE_TEXT_JS = "() => [...document.querySelectorAll('.js-telemetry-table__content')].map(t => t.innerText).join('\\n')"
+LEGEND_JS = "() => [...document.querySelectorAll('.plot-series-name')].map(e => e.textContent.trim())"
+ALARM_SOURCES_JS = "() => [...document.querySelectorAll('.keepout-alarms__row')].map(r => r.children[2].textContent)"
 
 
 @pytest.mark.slow
@@ -109,6 +111,13 @@ def test_live_run_two_monitors_open_mct_and_verified_commands(tmp_path: Path) ->
                               and page.evaluate(LAD_VALUE_JS, "cycle"), 60, "a cycle value in the page")
             _wait_for(lambda: page.evaluate(LAD_VALUE_JS, "cycle") not in (None, first), 30,
                       f"the cycle value to update from {first}")
+            # the console reads at a glance live too: series named after the mission's zones, values to
+            # their resolution, the alarm list filled as the run raises them
+            legend = _wait_for(lambda: page.evaluate(LEGEND_JS), 30, "the margins legend")
+            assert {"margin to sun (estimate) deg", "margin to moon (estimate) deg"} <= set(legend), legend
+            assert re.fullmatch(r"-?\d+\.\d\d", page.evaluate(LAD_VALUE_JS, "pointing_error_deg") or ""), \
+                page.evaluate(LAD_VALUE_JS, "pointing_error_deg")
+            _wait_for(lambda: page.evaluate(ALARM_SOURCES_JS), 60, "an alarm in the alarm view")
 
             results = [_send(run_dir, "NOOP"), _send(run_dir, "SET_MODE", "POINTING")]
             for name, result in zip(("NOOP", "SET_MODE"), results):

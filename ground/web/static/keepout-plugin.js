@@ -1,9 +1,61 @@
 /*
  * The keepout plugin for Open MCT (the nasa/openmct-tutorial pattern: a dictionary plugin, a historical and
- * a realtime telemetry provider), kept thin: the objects, their units and limits come from the server's
- * /api/objects (built from the flight dictionary), history from /api/history, live points from one
- * WebSocket (/api/realtime). Adds a limit provider (yellow/red from the dictionary) and the sky view.
+ * a realtime telemetry provider), kept thin: the objects, their names, units, display resolution and limits
+ * come from the server's /api/objects (built from the flight dictionary and the run's mission), history from
+ * /api/history, live points from one WebSocket (/api/realtime), alarms from /api/alarms. Adds a limit
+ * provider (yellow/red from the dictionary), an onboard time system (a replay plotted on the packets' own
+ * clock), the sky view and the alarm view.
  */
+
+/*
+ * Sky geometry, kept free of the page so the browser test can call it: an equirectangular map of RA 360..0
+ * (left to right, as the sky is seen) and Dec 90..-90.
+ */
+const KeepoutSky = {
+    // A boresight trail as segments that never cross the map: a step of over 180 deg in RA is the wrap
+    // through 0/360, where the line breaks; a missing point breaks it too.
+    trailSegments: function (points) {
+        const segments = [];
+        let current = [];
+        let previous = null;
+        points.forEach((radec) => {
+            if (!radec || (previous && Math.abs(radec[0] - previous[0]) > 180)) {
+                if (current.length) { segments.push(current); }
+                current = [];
+            }
+            if (radec) { current.push(radec); }
+            previous = radec;
+        });
+        if (current.length) { segments.push(current); }
+        return segments;
+    },
+    // A zone outline as one closed ring with continuous RA (it may run past 0 or 360: the caller draws it
+    // again shifted by 360 deg). An outline round a pole turns through 360 deg of RA: it is closed along
+    // the map's top or bottom edge, so the fill covers the pole.
+    zoneRing: function (outline) {
+        const ring = [];
+        outline.forEach((radec) => {
+            if (!radec) { return; }
+            let ra = radec[0];
+            if (ring.length) {
+                const last = ring[ring.length - 1][0];
+                ra += 360 * Math.round((last - ra) / 360);
+            }
+            ring.push([ra, radec[1]]);
+        });
+        if (ring.length < 3) { return {ring: ring, pole: 0}; }
+        const first = ring[0];
+        let closing = first[0] - ring[ring.length - 1][0];
+        closing -= 360 * Math.round(closing / 360);
+        const turn = ring[ring.length - 1][0] + closing - first[0];
+        if (Math.abs(turn) < 180) { return {ring: ring, pole: 0}; }
+        const pole = ring.reduce((sum, p) => sum + p[1], 0) >= 0 ? 90 : -90;
+        const end = ring[ring.length - 1][0] + closing;
+        ring.push([end, pole], [first[0], pole]);
+        return {ring: ring, pole: pole};
+    }
+};
+
 function KeepoutPlugin(run) {
     const NAMESPACE = 'keepout';
     let objectsPromise = null;
@@ -104,7 +156,8 @@ function KeepoutPlugin(run) {
         supportsSubscribe: isKeepoutTelemetry,
         supportsBatching: () => true,
         request: function (domainObject, options) {
-            const params = new URLSearchParams({start: options.start, end: options.end});
+            const params = new URLSearchParams({start: options.start, end: options.end,
+                                                domain: options.domain || 'utc'});
             if (options.strategy === 'latest') { params.set('strategy', 'latest'); }
             if (options.outline) { params.set('outline', options.outline); }
             return fetch(`/api/history/${domainObject.identifier.key}?${params}`)
@@ -129,6 +182,7 @@ function KeepoutPlugin(run) {
 
     // ---- the sky view: equirectangular map (RA 360..0 left to right, as the sky is seen) ----
     const BODY_COLOURS = {sun: '#ffcc33', moon: '#c8c8d8', earth: '#4f9dff', inertial: '#bb88ff'};
+    const LABEL_COLOUR = '#9aa4ae';
 
     function skyView(openmct, domainObject) {
         let canvas = null;
@@ -139,37 +193,19 @@ function KeepoutPlugin(run) {
         const onBounds = (bounds, isTick) => { if (!isTick) { load(); } else { prune(bounds.start); draw(); } };
 
         function prune(start) {
-            trail = trail.filter((p) => p.utc >= start);
+            const domain = openmct.time.getTimeSystem().key;
+            trail = trail.filter((p) => p[domain] >= start);
         }
 
         function load() {
             const bounds = openmct.time.getBounds();
-            telemetryProvider.request(domainObject, {start: bounds.start, end: bounds.end, outline: 'last'})
+            telemetryProvider.request(domainObject, {start: bounds.start, end: bounds.end, outline: 'last',
+                                                     domain: openmct.time.getTimeSystem().key})
                 .then((points) => {
                     trail = points;
                     latest = points.length ? points[points.length - 1] : latest;
                     draw();
                 });
-        }
-
-        function xy(radec, width, height) {
-            return [(360 - radec[0]) / 360 * width, (90 - radec[1]) / 180 * height];
-        }
-
-        function polyline(ctx, points, width, height) {
-            // break the line where it wraps round RA 0/360
-            let previous = null;
-            ctx.beginPath();
-            points.forEach((radec) => {
-                if (!radec) { previous = null; return; }
-                const [x, y] = xy(radec, width, height);
-                if (previous === null || Math.abs(radec[0] - previous[0]) > 180) {
-                    ctx.moveTo(x, y);
-                } else {
-                    ctx.lineTo(x, y);
-                }
-                previous = radec;
-            });
         }
 
         function draw() {
@@ -178,59 +214,88 @@ function KeepoutPlugin(run) {
             const height = Math.max(120, Math.min(canvas.clientHeight || 300, width / 2));
             canvas.width = width;
             canvas.height = height;
+            const left = 34;
+            const bottom = 30;  // room for the Dec and RA labels and the caption
+            const mapW = width - left;
+            const mapH = height - bottom;
+            const x = (ra) => left + (360 - ra) / 360 * mapW;
+            const y = (dec) => (90 - dec) / 180 * mapH;
             const ctx = canvas.getContext('2d');
             ctx.fillStyle = '#101418';
             ctx.fillRect(0, 0, width, height);
-            ctx.strokeStyle = '#2c343c';
-            ctx.lineWidth = 1;
-            for (let ra = 0; ra <= 360; ra += 30) {
-                ctx.beginPath(); ctx.moveTo(ra / 360 * width, 0); ctx.lineTo(ra / 360 * width, height); ctx.stroke();
-            }
-            for (let dec = -60; dec <= 60; dec += 30) {
-                const y = (90 - dec) / 180 * height;
-                ctx.beginPath(); ctx.moveTo(0, y); ctx.lineTo(width, y); ctx.stroke();
-            }
+            grid(ctx, x, y, left, mapW, mapH);
+            ctx.save();
+            ctx.beginPath(); ctx.rect(left, 0, mapW, mapH); ctx.clip();
             if (latest) {
-                (latest.zones || []).forEach((zone) => {
-                    const colour = BODY_COLOURS[zone.body] || '#ff5555';
-                    ctx.strokeStyle = colour;
-                    ctx.fillStyle = colour + '33';
-                    ctx.lineWidth = 2;
-                    polyline(ctx, zone.outline.concat([zone.outline[0]]), width, height);
-                    ctx.stroke();
-                    ctx.fill();
-                    if (zone.centre) {
-                        const [x, y] = xy(zone.centre, width, height);
-                        ctx.fillStyle = colour;
-                        ctx.fillText(zone.name, x + 4, y - 4);
-                    }
-                });
+                (latest.zones || []).forEach((zone) => drawZone(ctx, zone, x, y));
                 Object.entries(latest.bodies || {}).forEach(([body, radec]) => {
                     if (!radec) { return; }
-                    const [x, y] = xy(radec, width, height);
                     ctx.fillStyle = BODY_COLOURS[body] || '#fff';
-                    ctx.beginPath(); ctx.arc(x, y, 4, 0, 2 * Math.PI); ctx.fill();
+                    ctx.beginPath(); ctx.arc(x(radec[0]), y(radec[1]), 4, 0, 2 * Math.PI); ctx.fill();
                 });
             }
             ctx.strokeStyle = '#7dff9a';
             ctx.lineWidth = 2;
-            polyline(ctx, trail.map((p) => p.boresight), width, height);
-            ctx.stroke();
+            KeepoutSky.trailSegments(trail.map((p) => p.boresight)).forEach((segment) => {
+                ctx.beginPath();
+                segment.forEach(([ra, dec], i) => (i ? ctx.lineTo : ctx.moveTo).call(ctx, x(ra), y(dec)));
+                ctx.stroke();
+            });
             if (latest && latest.target) {
-                const [x, y] = xy(latest.target, width, height);
                 ctx.strokeStyle = '#ffffff';
-                ctx.strokeRect(x - 5, y - 5, 10, 10);
+                ctx.strokeRect(x(latest.target[0]) - 5, y(latest.target[1]) - 5, 10, 10);
             }
             if (latest && latest.boresight) {
-                const [x, y] = xy(latest.boresight, width, height);
                 ctx.fillStyle = '#7dff9a';
-                ctx.beginPath(); ctx.arc(x, y, 5, 0, 2 * Math.PI); ctx.fill();
+                ctx.beginPath(); ctx.arc(x(latest.boresight[0]), y(latest.boresight[1]), 5, 0, 2 * Math.PI); ctx.fill();
             }
+            ctx.restore();
             ctx.fillStyle = '#d0d0d0';
             const margin = latest && latest.margin_min_deg !== null && latest.margin_min_deg !== undefined
                 ? `${latest.margin_min_deg.toFixed(2)} deg` : '-';
-            ctx.fillText(`boresight trail (green), target (square), zones by body; RA 360..0, Dec -90..90; ` +
-                         `t = ${latest ? latest.onboard_s.toFixed(1) : '-'} s, min margin ${margin}`, 6, height - 6);
+            ctx.fillText(`boresight trail (green), target (square), zones by body (physical, not inflated); ` +
+                         `t = ${latest ? latest.onboard_s.toFixed(1) : '-'} s onboard, smallest margin ${margin} ` +
+                         `(onboard estimate)`, 6, height - 4);
+        }
+
+        function grid(ctx, x, y, left, mapW, mapH) {
+            ctx.strokeStyle = '#2c343c';
+            ctx.lineWidth = 1;
+            ctx.fillStyle = LABEL_COLOUR;
+            ctx.font = '10px sans-serif';
+            ctx.textAlign = 'center';
+            for (let ra = 0; ra <= 360; ra += 30) {
+                ctx.beginPath(); ctx.moveTo(x(ra), 0); ctx.lineTo(x(ra), mapH); ctx.stroke();
+                ctx.fillText(`${ra}\u00b0`, Math.min(Math.max(x(ra), left + 12), left + mapW - 12), mapH + 11);
+            }
+            ctx.textAlign = 'right';
+            for (let dec = -60; dec <= 60; dec += 30) {
+                ctx.beginPath(); ctx.moveTo(left, y(dec)); ctx.lineTo(left + mapW, y(dec)); ctx.stroke();
+                ctx.fillText(`${dec > 0 ? '+' : ''}${dec}\u00b0`, left - 4, y(dec) + 3);
+            }
+            ctx.textAlign = 'start';
+            ctx.fillText('RA', left + mapW - 14, mapH - 4);
+            ctx.fillText('Dec', left + 2, 10);
+        }
+
+        function drawZone(ctx, zone, x, y) {
+            const colour = BODY_COLOURS[zone.body] || '#ff5555';
+            const {ring} = KeepoutSky.zoneRing(zone.outline);
+            if (ring.length < 3) { return; }
+            ctx.strokeStyle = colour;
+            ctx.fillStyle = colour + '33';
+            ctx.lineWidth = 2;
+            [-360, 0, 360].forEach((shift) => {  // a zone across RA 0/360 shows on both edges of the map
+                ctx.beginPath();
+                ring.forEach(([ra, dec], i) => (i ? ctx.lineTo : ctx.moveTo).call(ctx, x(ra + shift), y(dec)));
+                ctx.closePath();
+                ctx.fill();
+                ctx.stroke();
+            });
+            if (zone.centre) {
+                ctx.fillStyle = colour;
+                ctx.fillText(zone.name, x(zone.centre[0]) + 4, y(zone.centre[1]) - 4);
+            }
         }
 
         return {
@@ -259,6 +324,86 @@ function KeepoutPlugin(run) {
         };
     }
 
+    // ---- the alarm view: every alarm of the run, newest first, each acknowledged by the operator ----
+    const SEVERITY_COLOURS = {RED: '#ff4d4d', FATAL: '#ff4d4d', YELLOW: '#ffcc33', WARNING_HI: '#ffcc33'};
+
+    function alarmView() {
+        let root = null;
+        let timer = null;
+
+        function acknowledge(body) {
+            return fetch('/api/alarms/ack', {method: 'POST', headers: {'Content-Type': 'application/json'},
+                                             body: JSON.stringify(body)})
+                .then((response) => response.json()).then(render);
+        }
+
+        function cell(row, text, className) {
+            const td = document.createElement('td');
+            td.textContent = text;
+            if (className) { td.className = className; }
+            row.appendChild(td);
+            return td;
+        }
+
+        function render(book) {
+            if (!root) { return; }
+            root.innerHTML = '';
+            const header = document.createElement('div');
+            header.className = 'keepout-alarms__header';
+            header.textContent = `${book.unacknowledged} unacknowledged of ${book.alarms.length} alarms `;
+            const all = document.createElement('button');
+            all.className = 'c-button keepout-alarms__ack-all';
+            all.textContent = 'Acknowledge all';
+            all.disabled = book.unacknowledged === 0;
+            all.onclick = () => acknowledge({all: true});
+            header.appendChild(all);
+            root.appendChild(header);
+            const table = document.createElement('table');
+            table.className = 'keepout-alarms__table';
+            const head = table.insertRow();
+            ['Onboard t [s]', 'Severity', 'Source', 'Message', 'State', ''].forEach((h) => cell(head, h, 'keepout-alarms__th'));
+            book.alarms.slice().reverse().forEach((alarm) => {
+                const row = table.insertRow();
+                row.className = 'keepout-alarms__row' + (alarm.acknowledged ? ' is-acknowledged' : ' is-unacknowledged');
+                row.dataset.alarmId = alarm.alarm_id;
+                cell(row, alarm.onboard_s.toFixed(1));
+                cell(row, alarm.severity, 'keepout-alarms__severity').style.color = SEVERITY_COLOURS[alarm.severity] || '';
+                cell(row, alarm.source);
+                cell(row, alarm.message, 'keepout-alarms__message');
+                cell(row, alarm.cleared_onboard_s === null ? 'active' : `cleared ${alarm.cleared_onboard_s.toFixed(1)} s`);
+                const action = cell(row, '');
+                if (alarm.acknowledged) {
+                    action.textContent = 'acknowledged';
+                } else {
+                    const button = document.createElement('button');
+                    button.className = 'c-button keepout-alarms__ack';
+                    button.textContent = 'Acknowledge';
+                    button.onclick = () => acknowledge({ids: [alarm.alarm_id]});
+                    action.appendChild(button);
+                }
+            });
+            root.appendChild(table);
+        }
+
+        function poll() {
+            fetch('/api/alarms').then((response) => response.json()).then(render).catch(() => {});
+        }
+
+        return {
+            show: function (element) {
+                root = document.createElement('div');
+                root.className = 'keepout-alarms';
+                element.appendChild(root);
+                poll();
+                timer = setInterval(poll, 1000);
+            },
+            destroy: function () {
+                clearInterval(timer);
+                root = null;
+            }
+        };
+    }
+
     return function install(openmct) {
         openmct.objects.addRoot({namespace: NAMESPACE, key: 'root'});
         // Views (plots, tables) keep their settings in their object: kept in this page's memory only, the
@@ -282,6 +427,10 @@ function KeepoutPlugin(run) {
         openmct.types.addType('keepout.events', {
             name: 'keepout event stream', description: 'Events of the flight software', cssClass: 'icon-tabular-realtime'
         });
+        openmct.types.addType('keepout.alarms', {
+            name: 'keepout alarms', description: 'Limit violations, FDIR trips and keep-out events to acknowledge',
+            cssClass: 'icon-alert-triangle'
+        });
         openmct.types.addType('keepout.sky', {
             name: 'keepout sky view', description: 'Boresight trail and keep-out zones', cssClass: 'icon-image'
         });
@@ -293,6 +442,22 @@ function KeepoutPlugin(run) {
             view: (domainObject) => skyView(openmct, domainObject),
             priority: () => 1000
         });
+        openmct.objectViews.addProvider({
+            key: 'keepout.alarms', name: 'Alarms', cssClass: 'icon-alert-triangle',
+            canView: (domainObject) => domainObject.type === 'keepout.alarms',
+            view: () => alarmView(),
+            priority: () => 1000
+        });
+        // Onboard time: seconds since the mission start on the packets' own clock, what a replay is read in.
+        openmct.telemetry.addFormat({
+            key: 'keepout.onboard',
+            format: (value) => (typeof value === 'number' ? `${value.toFixed(1)} s` : value),
+            parse: (text) => (typeof text === 'number' ? text : parseFloat(String(text))),
+            validate: (text) => !Number.isNaN(parseFloat(String(text)))
+        });
+        openmct.time.addTimeSystem({key: 'onboard_s', name: 'Onboard time', cssClass: 'icon-clock',
+                                    timeFormat: 'keepout.onboard', durationFormat: 'keepout.onboard',
+                                    isUTCBased: false});
         connect();
     };
 }
