@@ -39,26 +39,39 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
 
     if sky_zones or mission.flight_software.pointing.zones or any(s.mode == "POINTING" for s in series["segments"]):
         written.append(_sky_plot(plt, run_dir, mission, series, t, sky_zones))
-
     if att_zones or any(s.mode == "QUATERNION" for s in series["segments"]):
-        fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
-        q = series["q_lift"]
-        for i, name in enumerate(("eta", "q1", "q2", "q3")):
-            ax1.plot(t, q[:, i], label=name)
-        for s in series["segments"]:
-            if s.mode == "QUATERNION":
-                for i in range(4):
-                    ax1.hlines(s.target[i], s.t_start_s, s.t_end_s, colors=f"C{i}", linestyles=":", lw=1)
-        ax1.set_ylabel("q_NB components (lifted, truth) [-]")
-        ax1.legend(ncol=4, fontsize=8)
-        ax1.set_title(f"{mission.name}: attitude on S^3 (dotted: targets)")
-        ax2.semilogy(t, np.maximum(series["error_deg"], 1e-4))
-        ax2.set_ylabel("attitude error [deg]")
-        ax2.set_xlabel("time [s]")
-        for ax in (ax1, ax2):
-            ax.grid(alpha=0.3)
-        written.append(_save(fig, run_dir / "attitude.png"))
+        written.append(_attitude_plot(plt, run_dir, mission, series, t))
+    written.append(_margins_plot(plt, run_dir, mission, series, t))
+    written.append(_wheels_plot(plt, run_dir, mission, truth, t))
+    est = _estimation_error(run_dir, truth)
+    if est is not None:
+        written.append(_estimation_plot(plt, run_dir, mission, *est))
+    return written
 
+
+def _attitude_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray) -> Path:
+    """The lifted attitude quaternion against time with the QUATERNION targets, and the attitude error."""
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    q = series["q_lift"]
+    for i, name in enumerate(("eta", "q1", "q2", "q3")):
+        ax1.plot(t, q[:, i], label=name)
+    for s in series["segments"]:
+        if s.mode == "QUATERNION":
+            for i in range(4):
+                ax1.hlines(s.target[i], s.t_start_s, s.t_end_s, colors=f"C{i}", linestyles=":", lw=1)
+    ax1.set_ylabel("q_NB components (lifted, truth) [-]")
+    ax1.legend(ncol=4, fontsize=8)
+    ax1.set_title(f"{mission.name}: attitude on S^3 (dotted: targets)")
+    ax2.semilogy(t, np.maximum(series["error_deg"], 1e-4))
+    ax2.set_ylabel("attitude error [deg]")
+    ax2.set_xlabel("time [s]")
+    for ax in (ax1, ax2):
+        ax.grid(alpha=0.3)
+    return _save(fig, run_dir / "attitude.png")
+
+
+def _margins_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray) -> Path:
+    """Signed margin to every physical zone with the requirement and the law's inflation, and the error."""
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
     for z in series["zones"]:
         ax1.plot(t, z.margin_deg, label=f"{z.name} ({z.kind})")
@@ -78,8 +91,11 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
     ax2.legend(fontsize=8)
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
-    written.append(_save(fig, run_dir / "margins.png"))
+    return _save(fig, run_dir / "margins.png")
 
+
+def _wheels_plot(plt, run_dir: Path, mission, truth: dict, t: np.ndarray) -> Path:
+    """Wheel speeds (with the requirement's limit) and the torques the wheel nodes applied."""
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
     for i, w in enumerate(mission.spacecraft.wheels):
         ax1.plot(t, truth["wheel_speed_rad_s"][:, i], label=f"RW{i + 1}")
@@ -94,21 +110,20 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
     ax2.set_xlabel("time [s]")
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
-    written.append(_save(fig, run_dir / "wheels.png"))
+    return _save(fig, run_dir / "wheels.png")
 
-    est = _estimation_error(run_dir, truth)
-    if est is not None:
-        te, err_deg, sigma3_deg = est
-        fig, ax = plt.subplots(figsize=(10, 4))
-        ax.semilogy(te, np.maximum(err_deg, 1e-5), label="|estimate - truth| (attitude angle)")
-        ax.semilogy(te, np.maximum(sigma3_deg, 1e-5), ls="--", label="3-sigma from cov_trace")
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("attitude error [deg]")
-        ax.set_title(f"{mission.name}: attitude estimation error (flight software telemetry vs truth)")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        written.append(_save(fig, run_dir / "estimation.png"))
-    return written
+
+def _estimation_plot(plt, run_dir: Path, mission, te: np.ndarray, err_deg: np.ndarray, sigma3_deg: np.ndarray) -> Path:
+    """The flight software's attitude estimation error against truth, with its own 3-sigma."""
+    fig, ax = plt.subplots(figsize=(10, 4))
+    ax.semilogy(te, np.maximum(err_deg, 1e-5), label="|estimate - truth| (attitude angle)")
+    ax.semilogy(te, np.maximum(sigma3_deg, 1e-5), ls="--", label="3-sigma from cov_trace")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("attitude error [deg]")
+    ax.set_title(f"{mission.name}: attitude estimation error (flight software telemetry vs truth)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, run_dir / "estimation.png")
 
 
 def _sky_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, sky_zones: list) -> Path:
