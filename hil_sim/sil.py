@@ -580,134 +580,57 @@ def _raise_terminated(signum, frame) -> None:  # noqa: ARG001
     raise Terminated()
 
 
+@dataclass
+class _RunParts:
+    """What one run has started or built so far: each part stays None until it exists, so that the shutdown
+    stops, closes and saves exactly what there is, however far the run got."""
+
+    options: RunOptions
+    mission: Any
+    run_dir: Path
+    bus_info: Any  # fsw.bus.transport's resolved bus spec
+    endpoints: Any  # ground.link endpoints, rewritten as ports and pids become known
+    ground: Any = None  # the ground monitor's process
+    port_queue: Any = None
+    status_queue: Any = None
+    ready: Any = None
+    fsw_started: Any = None
+    stop_event: Any = None
+    key_path: Path | None = None
+    link_key: bytes | None = None
+    tc_port: int | None = None
+    fsw_proc: subprocess.Popen | None = None
+    bus: Any = None
+    candump: CandumpLog | None = None
+    recorder: TruthRecorder | None = None
+    world: Any = None
+    sim: Any = None
+    timeline: Timeline | None = None
+    n_ticks: int = 0
+    abort_reason: str = ""
+    started_wall: float = field(default_factory=time.monotonic)
+    cpu_at_start: dict | None = None
+    progress: _Progress = field(default_factory=lambda: _Progress(False, 0.0, ""))
+    running: bool = False  # the flight software has started: from here on every end of the run is judged
+
+
 def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
     """Start the ground and the flight software, run the simulator; returns (status, exit code or None
     for 'judge the requirements'). Raises RunNotStarted until the flight software has started."""
-    from fsw.bus.icd import Icd
-    from fsw.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
-    from hil_sim.lockstep import Simulator
-    from hil_sim.mission import door_params, world_params
-    from hil_sim.world import World
+    from fsw.bus.transport import BusSpecError, resolve_spec
 
     try:
         info = resolve_spec(mission.bus, run_id=run_dir.name)
     except BusSpecError as exc:
         raise MissionRejected(f"bus {mission.bus!r}: {exc}") from None
-    fixed_ports = mission.tmtc_ports == "fixed"
-    tmtc = mission.flight_software.tmtc
-    endpoints = _endpoints(mission, run_dir.name, info.spec, options.realtime)
-
-    ctx = mp.get_context("spawn")
-    port_queue, status_queue = ctx.Queue(), ctx.Queue(maxsize=4)
-    ready, fsw_started, stop_event = ctx.Event(), ctx.Event(), ctx.Event()
-    ground_dir = run_dir / GROUND_DIR
-    # The run's own link key (0600, in the run folder): the flight software, the ground and the timeline
-    # sign and verify with it; no key is ever shared between runs or written into a YAML.
-    key_path = run_dir / LINK_KEY_FILE
-    link_key = write_key_file(key_path)
-    ground = ctx.Process(target=ground_process, name="keepout-ground",
-                         args=(str(ground_dir), endpoints.to_json_dict(), tmtc.telemetry_port if fixed_ports else 0,
-                               port_queue, ready, fsw_started, stop_event, status_queue, os.getpid()),
-                         kwargs={"key_file": str(key_path)})
-    fsw_proc: subprocess.Popen | None = None
-    bus = None
-    candump = None
-    recorder = None
-    sim = None
-    timeline = None
+    run = _RunParts(options, mission, run_dir, info, _endpoints(mission, run_dir.name, info.spec, options.realtime))
+    _prepare_ground(run)
     status, code = STATUS_COMPLETED, None
-    abort_reason = ""
-    started_wall = time.monotonic()
-    cpu_at_start: dict | None = None
-    progress = _Progress(False, 0.0, "")
-    running = False  # the flight software has started: from here on every end of the run is judged
     try:
-        ground.start()
-        if not ready.wait(60.0):
-            raise RunNotStarted("the ground monitor did not start within 60 s")
-        tm_port = port_queue.get(timeout=10.0)
-        if isinstance(tm_port, str):
-            raise RunNotStarted(f"the ground monitor could not start: {tm_port}")
-        tc_port = tmtc.telecommand_port if fixed_ports else _free_udp_port()
-        data = _config_used(mission, bus_spec=info.spec, tm_host=endpoints.tm_host, tm_port=tm_port,
-                            tc_port=tc_port, realtime=options.realtime)
-        data["flight_software"]["tmtc"]["security"]["key_file"] = LINK_KEY_FILE  # beside the config used
-        write_config(run_dir, data, Path(options.mission))
-        endpoints = dataclasses.replace(endpoints, tm_port=tm_port, tc_port=tc_port,
-                                        pids={"sil": os.getpid(), "ground": ground.pid})
-        endpoints.write(run_dir)
-        if options.announce:
-            print(f"run {run_dir}: attach with `keepout ground --run {run_dir}` or "
-                  f"`keepout ground web --run {run_dir}`", flush=True)
-
-        # Open the simulator's end of the bus and build the world (astropy ephemeris nodes take a few
-        # seconds) before the flight software starts: it waits only lockstep_timeout_s for SYNC(0).
-        try:
-            bus = open_bus(info.spec, run_id=run_dir.name, bitrate=mission.bus_bitrate_bps)
-        except (BusUnavailableError, OSError) as exc:
-            raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
-        if mission.bus_authentication:
-            from fsw.bus.secoc import secure
-
-            bus = secure(bus, Icd(), link_key, "SIM")
-        from ground.commanding import CommandSender, signing_sender_args
-
-        sender = CommandSender(host=endpoints.tc_host, port=tc_port, **signing_sender_args(key_path))
-        timeline = Timeline(mission, sender)
-        world = World(world_params(mission), seed=mission.seed)
-        world.truth  # noqa: B018  (evaluates the ephemeris at t = 0 now, not during the first tick)
-        candump = CandumpLog(run_dir / CANDUMP_FILE, info.channel if info.interface == "socketcan" else "vcan0")
-        gnc_period = 1.0 / mission.flight_software.rates.gnc_rate_hz
-        sim = Simulator(world, bus, Icd(), gnc_period_s=gnc_period,
-                        dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz, faults=mission.faults,
-                        fault_seed=mission.seed, cycle_done_timeout_s=options.cycle_done_timeout_s,
-                        on_frame=candump, on_burst=candump.log_burst, door=door_params(mission))
-        n_ticks = int(round(mission.duration_s / gnc_period))
-        recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels), door=sim.devices.door)
-        recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)
-        fsw_proc = _start_fsw(run_dir, info.spec)
-        if not options.realtime:
-            _no_wakeup_preemption(fsw_proc.pid)
-        endpoints = dataclasses.replace(endpoints, pids={**endpoints.pids, "fsw": fsw_proc.pid})
-        endpoints.write(run_dir)
-        deadline = time.monotonic() + options.fsw_start_timeout_s
-        while not fsw_started.wait(0.2):
-            if fsw_proc.poll() is not None:
-                raise RunNotStarted(f"the flight software exited with code {fsw_proc.returncode} before it "
-                                    f"started; see {run_dir / FSW_LOG}:\n" + _tail(run_dir / FSW_LOG))
-            if not ground.is_alive():
-                raise RunNotStarted(f"the ground monitor exited (code {ground.exitcode}) before the flight "
-                                    f"software started")
-            if time.monotonic() > deadline:
-                raise RunNotStarted(f"no FSW_STARTED event from the flight software within "
-                                    f"{options.fsw_start_timeout_s:.0f} s; see {run_dir / FSW_LOG}")
-        running = True
-
-        progress = _Progress(options.progress, mission.duration_s, info.note)
-        boresight_B = np.asarray(mission.spacecraft.instrument_boresight_B)
-        error_of = _truth_error_function(mission, boresight_B)
-        started_wall = time.monotonic()
-        cpu_at_start = _loop_cpu_s(fsw_proc, ground)
-        silence = SilenceWatch(options.realtime)
-        for _ in range(n_ticks):
-            timeline.release(sim.t_s)
-            answers = sim.stats.cycle_done
-            done = sim.run_tick(options.realtime)
-            recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
-            missed_in_row = silence.after_tick(done, sim.stats.cycle_done > answers)
-            # a crash shows within FSW_POLL_TICKS ticks (waitpid is a system call: ~15 us in the vcan-vm guest)
-            if not done or sim.tick % FSW_POLL_TICKS == 0:
-                _check_alive(fsw_proc, ground, sim.t_s, run_dir)
-            if missed_in_row >= options.max_consecutive_missed:
-                abort_reason = (f"the flight software answered none of the last {missed_in_row} ticks "
-                                f"(t = {sim.t_s:.1f} s): run ended early")
-                break
-            if progress.enabled and progress.due():  # the truth error only for a redraw (5 a second)
-                progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s),
-                                status_queue)
-        progress.update(sim.t_s, time.monotonic() - started_wall, error_of(world.truth, sim.t_s), status_queue,
-                        force=True)
-        _check_alive(fsw_proc, ground, sim.t_s, run_dir)
+        _start_ground(run)
+        _build_simulator(run)
+        _start_flight_software(run)
+        _simulate(run)
     except KeyboardInterrupt:
         status, code = STATUS_INTERRUPTED, EXIT_INTERRUPTED
     except Terminated:
@@ -715,42 +638,183 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
     except ProcessCrashed as exc:
         status, code = str(exc), EXIT_CRASHED
     except Exception as exc:  # noqa: BLE001 - after the start, a failure here is the simulator's crash
-        if not running:
+        if not run.running:
             raise
-        where = f"t = {sim.t_s:.1f} s" if sim is not None else "start"
+        where = f"t = {run.sim.t_s:.1f} s" if run.sim is not None else "start"
         reason = f"{exc.strerror} ({exc.filename})" if isinstance(exc, OSError) and exc.strerror else \
             f"{type(exc).__name__}: {exc}"
         status, code = f"crashed: simulator at {where}: {reason}", EXIT_CRASHED
     finally:
-        # neither a second Ctrl-C nor a SIGTERM may cut the orderly shutdown short
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        previous_term = (signal.signal(signal.SIGTERM, signal.SIG_IGN)
-                         if threading.current_thread() is threading.main_thread() else None)
-        wall_s = time.monotonic() - started_wall
-        loop_cpu_s = _loop_cpu_s(fsw_proc, ground, since=cpu_at_start) if cpu_at_start else {}
-        progress.stop()
-        _stop_children(fsw_proc, ground, stop_event)
-        if (run_dir / ENDPOINTS_FILE).exists():
-            _quietly(lambda: dataclasses.replace(endpoints, state="finished").write(run_dir))
-        for close in (bus.shutdown if bus is not None else None, candump.close if candump is not None else None):
-            _quietly(close)
-        if recorder is not None:
-            _quietly(lambda: recorder.save(run_dir / TRUTH_FILE))
-        if sim is not None:
-            stats = {**sim.stats.__dict__, "aborted": abort_reason, "clock": "realtime" if options.realtime else "lockstep", "bus": info.spec, "bus_note": info.note, "wall_s": wall_s,
-                     "loop_cpu_s": loop_cpu_s, "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
-                     "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
-                     "bus_decode_errors": int(getattr(bus, "decode_errors", 0)),
-                     **auth_stats(bus),
-                     "faults_injected": [list(map(_plain, e)) if isinstance(e, tuple) else _plain(e)
-                                         for e in getattr(sim.injector, "log", [])],
-                     "telecommands": timeline.sent if timeline else [],
-                     "telecommand_errors": timeline.errors if timeline else []}
-            _quietly(lambda: (run_dir / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n"))
-        signal.signal(signal.SIGINT, previous)
-        if previous_term is not None:
-            signal.signal(signal.SIGTERM, previous_term)
+        _shut_down(run)
     return status, code
+
+
+def _prepare_ground(run: _RunParts) -> None:
+    """The ground monitor's process (not started yet), its queues and events, and the run's link key."""
+    ctx = mp.get_context("spawn")
+    run.port_queue, run.status_queue = ctx.Queue(), ctx.Queue(maxsize=4)
+    run.ready, run.fsw_started, run.stop_event = ctx.Event(), ctx.Event(), ctx.Event()
+    # The run's own link key (0600, in the run folder): the flight software, the ground and the timeline
+    # sign and verify with it; no key is ever shared between runs or written into a YAML.
+    run.key_path = run.run_dir / LINK_KEY_FILE
+    run.link_key = write_key_file(run.key_path)
+    tmtc = run.mission.flight_software.tmtc
+    run.ground = ctx.Process(target=ground_process, name="keepout-ground",
+                             args=(str(run.run_dir / GROUND_DIR), run.endpoints.to_json_dict(),
+                                   tmtc.telemetry_port if run.mission.tmtc_ports == "fixed" else 0,
+                                   run.port_queue, run.ready, run.fsw_started, run.stop_event, run.status_queue,
+                                   os.getpid()),
+                             kwargs={"key_file": str(run.key_path)})
+
+
+def _start_ground(run: _RunParts) -> None:
+    """Start the ground monitor, then write the config used and the endpoints with the ports it took."""
+    options, mission, run_dir = run.options, run.mission, run.run_dir
+    run.ground.start()
+    if not run.ready.wait(60.0):
+        raise RunNotStarted("the ground monitor did not start within 60 s")
+    tm_port = run.port_queue.get(timeout=10.0)
+    if isinstance(tm_port, str):
+        raise RunNotStarted(f"the ground monitor could not start: {tm_port}")
+    tmtc = mission.flight_software.tmtc
+    run.tc_port = tmtc.telecommand_port if mission.tmtc_ports == "fixed" else _free_udp_port()
+    data = _config_used(mission, bus_spec=run.bus_info.spec, tm_host=run.endpoints.tm_host, tm_port=tm_port,
+                        tc_port=run.tc_port, realtime=options.realtime)
+    data["flight_software"]["tmtc"]["security"]["key_file"] = LINK_KEY_FILE  # beside the config used
+    write_config(run_dir, data, Path(options.mission))
+    run.endpoints = dataclasses.replace(run.endpoints, tm_port=tm_port, tc_port=run.tc_port,
+                                        pids={"sil": os.getpid(), "ground": run.ground.pid})
+    run.endpoints.write(run_dir)
+    if options.announce:
+        print(f"run {run_dir}: attach with `keepout ground --run {run_dir}` or "
+              f"`keepout ground web --run {run_dir}`", flush=True)
+
+
+def _build_simulator(run: _RunParts) -> None:
+    """Open the simulator's end of the bus and build the world, the simulator, the telecommand timeline and
+    the recorders. Done before the flight software starts (astropy ephemeris nodes take a few seconds): it
+    waits only lockstep_timeout_s for SYNC(0)."""
+    from fsw.bus.icd import Icd
+    from fsw.bus.transport import BusUnavailableError, open_bus
+    from ground.commanding import CommandSender, signing_sender_args
+    from hil_sim.lockstep import Simulator
+    from hil_sim.mission import door_params, world_params
+    from hil_sim.world import World
+
+    mission, info = run.mission, run.bus_info
+    try:
+        run.bus = open_bus(info.spec, run_id=run.run_dir.name, bitrate=mission.bus_bitrate_bps)
+    except (BusUnavailableError, OSError) as exc:
+        raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
+    if mission.bus_authentication:
+        from fsw.bus.secoc import secure
+
+        run.bus = secure(run.bus, Icd(), run.link_key, "SIM")
+    sender = CommandSender(host=run.endpoints.tc_host, port=run.tc_port, **signing_sender_args(run.key_path))
+    run.timeline = Timeline(mission, sender)
+    run.world = World(world_params(mission), seed=mission.seed)
+    run.world.truth  # noqa: B018  (evaluates the ephemeris at t = 0 now, not during the first tick)
+    run.candump = CandumpLog(run.run_dir / CANDUMP_FILE, info.channel if info.interface == "socketcan" else "vcan0")
+    gnc_period = 1.0 / mission.flight_software.rates.gnc_rate_hz
+    run.sim = Simulator(run.world, run.bus, Icd(), gnc_period_s=gnc_period,
+                        dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz, faults=mission.faults,
+                        fault_seed=mission.seed, cycle_done_timeout_s=run.options.cycle_done_timeout_s,
+                        on_frame=run.candump, on_burst=run.candump.log_burst, door=door_params(mission))
+    run.n_ticks = int(round(mission.duration_s / gnc_period))
+    run.recorder = TruthRecorder(run.n_ticks, len(mission.spacecraft.wheels), door=run.sim.devices.door)
+    run.recorder.record(run.world, np.zeros(len(mission.spacecraft.wheels)), True)
+
+
+def _start_flight_software(run: _RunParts) -> None:
+    """Start the flight software and wait for its FSW_STARTED event to reach the ground."""
+    run_dir = run.run_dir
+    run.fsw_proc = _start_fsw(run_dir, run.bus_info.spec)
+    if not run.options.realtime:
+        _no_wakeup_preemption(run.fsw_proc.pid)
+    run.endpoints = dataclasses.replace(run.endpoints, pids={**run.endpoints.pids, "fsw": run.fsw_proc.pid})
+    run.endpoints.write(run_dir)
+    deadline = time.monotonic() + run.options.fsw_start_timeout_s
+    while not run.fsw_started.wait(0.2):
+        if run.fsw_proc.poll() is not None:
+            raise RunNotStarted(f"the flight software exited with code {run.fsw_proc.returncode} before it "
+                                f"started; see {run_dir / FSW_LOG}:\n" + _tail(run_dir / FSW_LOG))
+        if not run.ground.is_alive():
+            raise RunNotStarted(f"the ground monitor exited (code {run.ground.exitcode}) before the flight "
+                                f"software started")
+        if time.monotonic() > deadline:
+            raise RunNotStarted(f"no FSW_STARTED event from the flight software within "
+                                f"{run.options.fsw_start_timeout_s:.0f} s; see {run_dir / FSW_LOG}")
+    run.running = True
+
+
+def _simulate(run: _RunParts) -> None:
+    """The simulator's ticks: telecommands released, truth recorded, the flight software watched."""
+    options, sim, world = run.options, run.sim, run.world
+    run.progress = _Progress(options.progress, run.mission.duration_s, run.bus_info.note)
+    error_of = _truth_error_function(run.mission, np.asarray(run.mission.spacecraft.instrument_boresight_B))
+    run.started_wall = time.monotonic()
+    run.cpu_at_start = _loop_cpu_s(run.fsw_proc, run.ground)
+    silence = SilenceWatch(options.realtime)
+    for _ in range(run.n_ticks):
+        run.timeline.release(sim.t_s)
+        answers = sim.stats.cycle_done
+        done = sim.run_tick(options.realtime)
+        run.recorder.record(world, sim.devices.wheel_torques(sim.t_s), done)
+        missed_in_row = silence.after_tick(done, sim.stats.cycle_done > answers)
+        # a crash shows within FSW_POLL_TICKS ticks (waitpid is a system call: ~15 us in the vcan-vm guest)
+        if not done or sim.tick % FSW_POLL_TICKS == 0:
+            _check_alive(run.fsw_proc, run.ground, sim.t_s, run.run_dir)
+        if missed_in_row >= options.max_consecutive_missed:
+            run.abort_reason = (f"the flight software answered none of the last {missed_in_row} ticks "
+                                f"(t = {sim.t_s:.1f} s): run ended early")
+            break
+        if run.progress.enabled and run.progress.due():  # the truth error only for a redraw (5 a second)
+            run.progress.update(sim.t_s, time.monotonic() - run.started_wall, error_of(world.truth, sim.t_s),
+                                run.status_queue)
+    run.progress.update(sim.t_s, time.monotonic() - run.started_wall, error_of(world.truth, sim.t_s),
+                        run.status_queue, force=True)
+    _check_alive(run.fsw_proc, run.ground, sim.t_s, run.run_dir)
+
+
+def _shut_down(run: _RunParts) -> None:
+    """Stop the children, close the bus and the candump log, save the truth and the simulator's statistics:
+    whatever of them the run got to."""
+    # neither a second Ctrl-C nor a SIGTERM may cut the orderly shutdown short
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    previous_term = (signal.signal(signal.SIGTERM, signal.SIG_IGN)
+                     if threading.current_thread() is threading.main_thread() else None)
+    wall_s = time.monotonic() - run.started_wall
+    loop_cpu_s = _loop_cpu_s(run.fsw_proc, run.ground, since=run.cpu_at_start) if run.cpu_at_start else {}
+    run.progress.stop()
+    _stop_children(run.fsw_proc, run.ground, run.stop_event)
+    if (run.run_dir / ENDPOINTS_FILE).exists():
+        _quietly(lambda: dataclasses.replace(run.endpoints, state="finished").write(run.run_dir))
+    for close in (run.bus.shutdown if run.bus is not None else None,
+                  run.candump.close if run.candump is not None else None):
+        _quietly(close)
+    if run.recorder is not None:
+        _quietly(lambda: run.recorder.save(run.run_dir / TRUTH_FILE))
+    if run.sim is not None:
+        stats = _simulator_stats(run, wall_s, loop_cpu_s)
+        _quietly(lambda: (run.run_dir / SIM_STATS_FILE).write_text(json.dumps(_plain(stats), indent=1) + "\n"))
+    signal.signal(signal.SIGINT, previous)
+    if previous_term is not None:
+        signal.signal(signal.SIGTERM, previous_term)
+
+
+def _simulator_stats(run: _RunParts, wall_s: float, loop_cpu_s: dict) -> dict[str, Any]:
+    """simulator.json: the simulator's counters, how the run ended and what it injected and sent."""
+    sim, bus, candump, timeline = run.sim, run.bus, run.candump, run.timeline
+    return {**sim.stats.__dict__, "aborted": run.abort_reason, "clock": "realtime" if run.options.realtime else "lockstep",
+            "bus": run.bus_info.spec, "bus_note": run.bus_info.note, "wall_s": wall_s,
+            "loop_cpu_s": loop_cpu_s, "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
+            "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
+            "bus_decode_errors": int(getattr(bus, "decode_errors", 0)),
+            **auth_stats(bus),
+            "faults_injected": [list(map(_plain, e)) if isinstance(e, tuple) else _plain(e)
+                                for e in getattr(sim.injector, "log", [])],
+            "telecommands": timeline.sent if timeline else [],
+            "telecommand_errors": timeline.errors if timeline else []}
 
 
 def _process_cpu_s(pid: int | None) -> float | None:
