@@ -597,11 +597,26 @@ def _target_in_zone(seg: Segment, t: float, k: int, sky: SkyZones, m_phys: float
 
 def _check_pointing(mission, segments, report, step_s, quick: bool = False) -> None:
     sky = SkyZones(mission)
-    fsw = mission.flight_software
-    kappa = fsw.law.kappa
     seen: set = set()
     worst_eps_max = math.inf
-    # the initial boresight (truth) must not start inside a physical zone
+    _check_initial_boresight(mission, sky, report)
+    for seg in (s for s in segments if s.mode == "POINTING"):
+        times = _sweep_times(seg, sky, step_s)
+        report.samples += len(times)
+        held: dict[str, list[float]] = {}  # zone -> [from, to] while it covers a target already commanded
+        for i, t in enumerate(times):
+            eps_max = _check_pointing_at(mission, sky, seg, i, float(t), held, report, seen, quick)
+            if math.isfinite(eps_max):
+                worst_eps_max = min(worst_eps_max, eps_max)
+        _report_held_targets(seg, held, report, seen)
+    if math.isfinite(worst_eps_max):
+        eps = _eps_in_use(mission, worst_eps_max)
+        report.add("info", "eps", f"POINTING: smallest admissible eps upper bound over the run {worst_eps_max:.4g}; "
+                   f"eps in use {eps:.4g}", eps_max=worst_eps_max, eps=eps)
+
+
+def _check_initial_boresight(mission, sky: SkyZones, report) -> None:
+    """The initial boresight (truth) must not start inside a physical zone."""
     from gnc.attitude import quat_rotate
     y0 = np.asarray(quat_rotate(np.asarray(mission.initial_state.q_NB), np.asarray(mission.spacecraft.instrument_boresight_B)))
     for k, zone in enumerate(sky.physical(0.0)):
@@ -611,75 +626,95 @@ def _check_pointing(mission, segments, report, step_s, quick: bool = False) -> N
                        f"{-m:.2f} deg inside zone '{sky.names[k]}' ({BODY_NAMES.get(sky.bodies[k], 'its centre')} is "
                        f"at RA/Dec {_ra_dec(sky.centers(0.0)[k])}): start outside it, e.g. give initial_state as "
                        "RA/Dec + roll away from the zone", ("initial_state",), margin_deg=m)
-    for seg in (s for s in segments if s.mode == "POINTING"):
-        times = _sweep_times(seg, sky, step_s)
-        report.samples += len(times)
-        held: dict[str, list[float]] = {}  # zone -> [from, to] while it covers a target already commanded
-        for i, t in enumerate(times):
-            phys, law_zones = sky.physical(float(t)), sky.law(float(t))
-            target_inside = False
-            for k, (zp, zl) in enumerate(zip(phys, law_zones)):
-                _kernel_check(sky.names[k], zp, report, seen, ZONES_LOC + (k, "geometry"))
-                m_phys, m_law = signed_margin_deg(zp, seg.target), signed_margin_deg(zl, seg.target)
-                if m_law <= 0:
-                    target_inside = True
-                    if i > 0:
-                        _hold(held, sky.names[k], float(t))
-                    elif (seg.source, sky.names[k]) not in seen:
-                        seen.add((seg.source, sky.names[k]))
-                        need = clearance_needed_deg(seg.target, zl, law_zones, mission.flight_software.law,
-                                                    start_deg=max(0.0, -m_law))
-                        report.add("error", "target", _target_in_zone(seg, float(t), k, sky, m_phys, need),
-                                   seg.loc, t_s=float(t), margin_deg=m_phys, move_deg=need)
-            if target_inside:
-                continue  # the assumptions fail with it: one root cause, one error
-            flown = sky.as_flown(law_zones, seg.target)
-            occ, eps = target_layer(seg.target, flown.zones, mission.flight_software.law, flown.unmerged)
-            if occ >= 0:  # outside the inflated zone, but in its eps-layer: the law cannot fly to it
-                if i > 0:
-                    _hold(held, flown.names[occ], float(t))
-                elif (seg.source, flown.names[occ]) not in seen:
-                    seen.add((seg.source, flown.names[occ]))
-                    need = clearance_needed_deg(seg.target, flown.zones[occ], flown.zones,
-                                                mission.flight_software.law, flown.unmerged)
-                    report.add("error", "target", _target_in_layer(seg, float(t), flown.names[occ], occ, eps, need),
-                               seg.loc, t_s=float(t), eps=eps, move_deg=need)
-                continue
-            for group, name in zip(flown.groups, flown.names):
-                if len(group) > 1 and ("merged", name) not in seen:
-                    seen.add(("merged", name))
-                    report.add("info", "merge", f"t = {t:.0f} s: zones {' and '.join(repr(sky.names[k]) for k in group)} "
-                               f"are closer than law.merge_gap_deg = {sky.merge_gap_deg:g} deg: the flight software "
-                               "flies them as one zone", t_s=float(t))
-            for i, j in flown.unmerged:
-                if (seg.source, "unmerged", i, j) in seen:
-                    continue
-                seen.add((seg.source, "unmerged", i, j))
-                gap = _cap_gap_deg(flown.zones[i], flown.zones[j])
-                report.add("error", "merge", f"t = {t:.0f} s: zones '{flown.names[i]}' and '{flown.names[j]}' are "
-                           f"{gap:.2f} deg apart as the law sees them (inflated by law.margin_deg), closer than "
-                           f"law.merge_gap_deg = {sky.merge_gap_deg:g} deg, but the flight software cannot merge "
-                           f"them: the target from {seg.source} lies between them, so it would steer out of the "
-                           "gap and never reach the target; move the target out of the gap", seg.loc,
-                           t_s=float(t), gap_deg=gap)
-            if flown.unmerged or quick:
-                continue
-            where = _Where(float(t), seg, flown.names, [ZONES_LOC + (g[0],) for g in flown.groups])
-            eps_max = _check_assumptions_at(mission, flown.zones, where, kappa, report, seen)
-            if math.isfinite(eps_max):
-                worst_eps_max = min(worst_eps_max, eps_max)
-        for name, (t_from, t_to) in held.items():
-            if (seg.source, name) in seen:
-                continue  # refused at its command time already: one root cause, one finding
-            report.add("warning", "target", f"from t = {t_from:.0f} s to {t_to:.0f} s zone '{name}' (as the law sees "
-                       f"it: inflated by law.margin_deg) covers the target from {seg.source}, commanded at t = "
-                       f"{seg.t_start_s:.0f} s: the flight software then holds outside it (ASSUMPTION_VIOLATED "
-                       f"\"{TARGET_IN_LAYER.format(zone=name)}\") and resumes the slew when the zone has moved "
-                       "off; the target is not reached in that window", seg.loc, t_s=t_from)
-    if math.isfinite(worst_eps_max):
-        eps = _eps_in_use(mission, worst_eps_max)
-        report.add("info", "eps", f"POINTING: smallest admissible eps upper bound over the run {worst_eps_max:.4g}; "
-                   f"eps in use {eps:.4g}", eps_max=worst_eps_max, eps=eps)
+
+
+def _check_pointing_at(mission, sky: SkyZones, seg, i: int, t: float, held: dict[str, list[float]], report,
+                       seen: set, quick: bool) -> float:
+    """Sample i (time t) of a POINTING segment: the target clear of the zones and their layers as the law
+    flies them, the merges, then (unless ``quick``) the assumptions; returns their eps_max (inf: none)."""
+    phys, law_zones = sky.physical(t), sky.law(t)
+    if _target_in_law_zones(mission, sky, seg, i, t, phys, law_zones, held, report, seen):
+        return math.inf  # the assumptions fail with it: one root cause, one error
+    flown = sky.as_flown(law_zones, seg.target)
+    if _target_in_flown_layer(mission, seg, i, t, flown, held, report, seen):
+        return math.inf
+    _report_merges(sky, seg, t, flown, report, seen)
+    if flown.unmerged or quick:
+        return math.inf
+    where = _Where(t, seg, flown.names, [ZONES_LOC + (g[0],) for g in flown.groups])
+    return _check_assumptions_at(mission, flown.zones, where, mission.flight_software.law.kappa, report, seen)
+
+
+def _target_in_law_zones(mission, sky: SkyZones, seg, i: int, t: float, phys: list, law_zones: list,
+                         held: dict[str, list[float]], report, seen: set) -> bool:
+    """Whether the target lies in a zone as the law sees it (inflated): an error at the segment's start,
+    later a zone that moved over it (held); each zone's kernel checked once on the way."""
+    target_inside = False
+    for k, (zp, zl) in enumerate(zip(phys, law_zones)):
+        _kernel_check(sky.names[k], zp, report, seen, ZONES_LOC + (k, "geometry"))
+        m_phys, m_law = signed_margin_deg(zp, seg.target), signed_margin_deg(zl, seg.target)
+        if m_law <= 0:
+            target_inside = True
+            if i > 0:
+                _hold(held, sky.names[k], t)
+            elif (seg.source, sky.names[k]) not in seen:
+                seen.add((seg.source, sky.names[k]))
+                need = clearance_needed_deg(seg.target, zl, law_zones, mission.flight_software.law,
+                                            start_deg=max(0.0, -m_law))
+                report.add("error", "target", _target_in_zone(seg, t, k, sky, m_phys, need),
+                           seg.loc, t_s=t, margin_deg=m_phys, move_deg=need)
+    return target_inside
+
+
+def _target_in_flown_layer(mission, seg, i: int, t: float, flown, held: dict[str, list[float]], report,
+                           seen: set) -> bool:
+    """Whether the target lies outside the inflated zones but in one's eps-layer, where the law cannot fly
+    to it (an error at the segment's start, later held)."""
+    occ, eps = target_layer(seg.target, flown.zones, mission.flight_software.law, flown.unmerged)
+    if occ < 0:
+        return False
+    if i > 0:
+        _hold(held, flown.names[occ], t)
+    elif (seg.source, flown.names[occ]) not in seen:
+        seen.add((seg.source, flown.names[occ]))
+        need = clearance_needed_deg(seg.target, flown.zones[occ], flown.zones,
+                                    mission.flight_software.law, flown.unmerged)
+        report.add("error", "target", _target_in_layer(seg, t, flown.names[occ], occ, eps, need),
+                   seg.loc, t_s=t, eps=eps, move_deg=need)
+    return True
+
+
+def _report_merges(sky: SkyZones, seg, t: float, flown, report, seen: set) -> None:
+    """Zones flown as one (info, once each), and zones too close to fly apart that cannot merge (error)."""
+    for group, name in zip(flown.groups, flown.names):
+        if len(group) > 1 and ("merged", name) not in seen:
+            seen.add(("merged", name))
+            report.add("info", "merge", f"t = {t:.0f} s: zones {' and '.join(repr(sky.names[k]) for k in group)} "
+                       f"are closer than law.merge_gap_deg = {sky.merge_gap_deg:g} deg: the flight software "
+                       "flies them as one zone", t_s=t)
+    for i, j in flown.unmerged:
+        if (seg.source, "unmerged", i, j) in seen:
+            continue
+        seen.add((seg.source, "unmerged", i, j))
+        gap = _cap_gap_deg(flown.zones[i], flown.zones[j])
+        report.add("error", "merge", f"t = {t:.0f} s: zones '{flown.names[i]}' and '{flown.names[j]}' are "
+                   f"{gap:.2f} deg apart as the law sees them (inflated by law.margin_deg), closer than "
+                   f"law.merge_gap_deg = {sky.merge_gap_deg:g} deg, but the flight software cannot merge "
+                   f"them: the target from {seg.source} lies between them, so it would steer out of the "
+                   "gap and never reach the target; move the target out of the gap", seg.loc,
+                   t_s=t, gap_deg=gap)
+
+
+def _report_held_targets(seg, held: dict[str, list[float]], report, seen: set) -> None:
+    """A warning per zone that covered the segment's target for a while after it was commanded."""
+    for name, (t_from, t_to) in held.items():
+        if (seg.source, name) in seen:
+            continue  # refused at its command time already: one root cause, one finding
+        report.add("warning", "target", f"from t = {t_from:.0f} s to {t_to:.0f} s zone '{name}' (as the law sees "
+                   f"it: inflated by law.margin_deg) covers the target from {seg.source}, commanded at t = "
+                   f"{seg.t_start_s:.0f} s: the flight software then holds outside it (ASSUMPTION_VIOLATED "
+                   f"\"{TARGET_IN_LAYER.format(zone=name)}\") and resumes the slew when the zone has moved "
+                   "off; the target is not reached in that window", seg.loc, t_s=t_from)
 
 
 def _cap_gap_deg(zone_a, zone_b) -> float:
