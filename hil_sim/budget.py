@@ -7,10 +7,13 @@ gradient is an attitude fixed in inertial space; a pointing timeline changes it)
 momentum accumulated per body axis at the end of the span and the largest it reaches, and the wheel speed
 that momentum implies when the wheels absorb it with the minimum-norm allocation, as a fraction of each
 wheel's limit. The random torque (first-order Gauss-Markov, std sigma, correlation time tau) is given as the
-1-sigma momentum of its random walk, sigma sqrt(2 tau t) for t >> tau. The effects not in the truth models
-yet (solar radiation pressure, drag, the magnetic dipole) are listed as such, not left out silently.
+1-sigma momentum of its random walk, sigma sqrt(2 tau t) for t >> tau. Solar radiation pressure on the
+spacecraft's facets, when the mission turns it on, gets its row (the Sun from the truth ephemeris, zero in the
+Earth's shadow). The effects not in the truth models yet (drag, the magnetic dipole) are listed as such, not
+left out silently.
 
-The torques are the simulator's own (`hil_sim.dynamics`: the same formula, the same Keplerian orbit).
+The torques are the simulator's own (`hil_sim.dynamics` and `hil_sim.environment`: the same kernels, the same
+Keplerian orbit).
 """
 from __future__ import annotations
 
@@ -27,7 +30,7 @@ from hil_sim.cli import description_of
 DAY_S = 86_400.0
 SAMPLE_S = 10.0
 EXIT_REJECTED = 2
-NOT_MODELLED = ("solar radiation pressure", "aerodynamic drag", "residual magnetic dipole")
+NOT_MODELLED = ("aerodynamic drag", "residual magnetic dipole")
 
 
 @dataclass
@@ -63,6 +66,25 @@ def _gravity_gradient_torques(mission, t: np.ndarray) -> np.ndarray:
     return out
 
 
+def _environment_torques(mission, t: np.ndarray) -> np.ndarray:
+    """(len(t), len(EFFECTS), 3) environment torques [N m] in body axes at times ``t``, attitude held at the
+    initial one: the simulator's own kernels (`hil_sim.environment.environment_torques_B`) on the mission's
+    world, the Sun from its truth ephemeris."""
+    from hil_sim import environment as env
+    from hil_sim.mission import world_params
+    from hil_sim.world import WorldBatch
+
+    batch = WorldBatch([world_params(mission)], seed=mission.seed)
+    sun_km, _ = batch.ephemeris.positions_N_km(t)
+    out = np.zeros((t.size, len(env.EFFECTS), 3))
+    tau = np.zeros((1, len(env.EFFECTS), 3))
+    for k, tk in enumerate(t.tolist()):
+        env.hold_sun(batch.B, sun_km[k])
+        env.environment_torques_B(batch.X, batch.B, batch.ORB, tk, tau)
+        out[k] = tau[0]
+    return out
+
+
 def _wheel_fraction(mission, h_B: np.ndarray) -> float:
     """The worst wheel's speed for the wheels to absorb ``h_B`` (minimum norm), as a fraction of its limit."""
     wheels = mission.spacecraft.wheels
@@ -82,6 +104,7 @@ def _row(mission, effect: str, span: str, t: np.ndarray, tau: np.ndarray, note: 
 
 def budget(mission) -> list[Row]:
     """The budget rows of ``mission`` (see the module docstring)."""
+    from hil_sim.environment import EFFECTS, environment_effects
     from hil_sim.mission import world_params
 
     wp = world_params(mission)
@@ -97,6 +120,13 @@ def budget(mission) -> list[Row]:
             gg = _gravity_gradient_torques(mission, t)
             total += gg
             rows.append(_row(mission, "gravity gradient", span, t, gg, "attitude held at the initial one"))
+        effects = environment_effects(mission)
+        if effects:
+            env_tau = _environment_torques(mission, t)
+            for k, name in enumerate(EFFECTS):
+                if name in effects:
+                    total += env_tau[:, k]
+                    rows.append(_row(mission, name, span, t, env_tau[:, k], "attitude held at the initial one"))
         rows.append(_row(mission, "total (deterministic)", span, t, total))
         if dist.random_std_Nm > 0:
             sigma_h = dist.random_std_Nm * math.sqrt(2.0 * max(dist.random_correlation_time_s, SAMPLE_S) * span_s)

@@ -28,6 +28,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
+from hil_sim import environment as env
 from hil_sim.orbit import orbit_position_row_N_km
 from hil_sim.params import SpacecraftParams
 
@@ -39,9 +40,11 @@ MODE_HEALTHY, MODE_STUCK, MODE_NO_TORQUE = 0, 1, 2
 _MODE_CODES = {"none": MODE_HEALTHY, "stuck": MODE_STUCK, "no_torque": MODE_NO_TORQUE}
 
 # Rows of the per-run body array B[field, m]: inertia (9, row major), inverse of I_s (9), constant torque (3),
-# Gauss-Markov std (1) and correlation time (1), gravity gradient on (1.0) or off (0.0).
+# Gauss-Markov std (1) and correlation time (1), gravity gradient on (1.0) or off (0.0). When a run of the batch
+# has an environment effect on (solar radiation pressure, ...), hil_sim.environment's rows follow.
 B_I, B_IS_INV, B_TAU_CONST, B_DIST_STD, B_DIST_TAU, B_GG = 0, 9, 18, 21, 22, 23
 B_FIELDS = 24
+assert env.ENV_FLAGS == B_FIELDS
 
 # Wheel status fault bits (wheel_status().fault)
 FAULT_STUCK = 1
@@ -82,6 +85,9 @@ def pack_spacecraft(params: Sequence[SpacecraftParams]) -> tuple[np.ndarray, np.
         X0[0:4, m] = p.q_NB0
         X0[4:7, m] = p.omega_BN_B0_rad_s
         update_free_inertia(G, W, B, m)
+    rows = env.environment_rows(params)
+    if rows is not None:
+        B = np.ascontiguousarray(np.vstack([B, rows]))
     return G, W, B, X0
 
 
@@ -228,15 +234,18 @@ def _add_gravity_gradient(X, B, ORB, m, t_s, r, tau):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _with_gravity_gradient(tau, tau_gg, x, B, ORB, t_s, rpos):
-    """tau_gg = ``tau`` (constant and random, held over the sub-step) plus, for the runs that have it on, the
-    gravity gradient of state ``x`` at ``t_s``: the external torque at one RK4 stage."""
+def _with_gravity_gradient(tau, tau_gg, x, B, ORB, t_s, rpos, has_env):
+    """tau_gg = ``tau`` (constant and random, held over the sub-step) plus, for the runs that have them on, the
+    gravity gradient and (``has_env``: B has hil_sim.environment's rows) the environment torques of state ``x``
+    at ``t_s``: the external torque at one RK4 stage."""
     for m in range(tau.shape[1]):
         tau_gg[0, m] = tau[0, m]
         tau_gg[1, m] = tau[1, m]
         tau_gg[2, m] = tau[2, m]
         if B[B_GG, m] > 0.0:
             _add_gravity_gradient(x, B, ORB, m, t_s, rpos, tau_gg)
+        if has_env and B[env.ENV_FLAGS, m] != 0.0:
+            env.add_environment_torque(x, B, ORB, m, t_s, rpos, tau_gg)
 
 
 @njit(cache=True, error_model="numpy")
@@ -252,7 +261,8 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
     100 Hz step does not allocate). ORB: the runs' packed orbits (hil_sim.orbit) and t0_s the time at the
     start of the step, for the gravity-gradient torque of the runs that have it on (B[B_GG]): evaluated at
     every RK4 stage from the stage's attitude and orbit position (the constant and random torques are held
-    over the sub-step). Returns False,
+    over the sub-step). The environment torques (hil_sim.environment) likewise, for the runs that have them
+    on, with the Sun held in B over the step. Returns False,
     having changed nothing, if a command is NaN or infinite.
     """
     K, M = X.shape
@@ -281,10 +291,11 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
         return False
     any_random = False
     any_gg = False
+    has_env = B.shape[0] > B_FIELDS  # only then does B have the environment's rows
     for m in range(M):
         if GM[1, m] > 0.0:
             any_random = True
-        if B[B_GG, m] > 0.0:
+        if B[B_GG, m] > 0.0 or (has_env and B[env.ENV_FLAGS, m] != 0.0):
             any_gg = True
     ext = tau_gg if any_gg else tau  # the stages' external torque (one choice a call, none a stage)
     for s in range(n_sub):
@@ -298,19 +309,19 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
                 tau[j, m] = B[B_TAU_CONST + j, m] + D[j, m]
         t_s = t0_s + s * dt_sub
         if any_gg:
-            _with_gravity_gradient(tau, ext, X, B, ORB, t_s, rpos)
+            _with_gravity_gradient(tau, ext, X, B, ORB, t_s, rpos, has_env)
         _derivative(X, u_motor, ext, G, W, B, HAS_COULOMB, k1, h, r, u_net)
         _axpy(xt, X, 0.5 * dt_sub, k1)
         if any_gg:
-            _with_gravity_gradient(tau, ext, xt, B, ORB, t_s + 0.5 * dt_sub, rpos)
+            _with_gravity_gradient(tau, ext, xt, B, ORB, t_s + 0.5 * dt_sub, rpos, has_env)
         _derivative(xt, u_motor, ext, G, W, B, HAS_COULOMB, k2, h, r, u_net)
         _axpy(xt, X, 0.5 * dt_sub, k2)
         if any_gg:
-            _with_gravity_gradient(tau, ext, xt, B, ORB, t_s + 0.5 * dt_sub, rpos)
+            _with_gravity_gradient(tau, ext, xt, B, ORB, t_s + 0.5 * dt_sub, rpos, has_env)
         _derivative(xt, u_motor, ext, G, W, B, HAS_COULOMB, k3, h, r, u_net)
         _axpy(xt, X, dt_sub, k3)
         if any_gg:
-            _with_gravity_gradient(tau, ext, xt, B, ORB, t_s + dt_sub, rpos)
+            _with_gravity_gradient(tau, ext, xt, B, ORB, t_s + dt_sub, rpos, has_env)
         _derivative(xt, u_motor, ext, G, W, B, HAS_COULOMB, k4, h, r, u_net)
         c = dt_sub / 6.0
         for j in range(K):

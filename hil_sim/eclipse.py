@@ -11,7 +11,10 @@ computes it too (`tests/hil_sim/test_eclipse.py` compares the two on a Basilisk 
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from gnc.ephemeris import EARTH_RADIUS_KM
 
@@ -22,18 +25,37 @@ def sunlit_fraction(r_sc_N_km: np.ndarray, r_sun_N_km: np.ndarray, earth_radius_
                     sun_radius_km: float = SUN_RADIUS_KM) -> np.ndarray:
     """Fraction of the Sun's disc visible from the spacecraft, 0 (umbra) .. 1 (full Sun): (n,) for
     geocentric positions (n, 3) [km] of the spacecraft and of the Sun (or (3,) each, a scalar array)."""
-    r = np.asarray(r_sc_N_km, dtype=float)
-    s = np.asarray(r_sun_N_km, dtype=float) - r  # the Sun from the spacecraft
-    rn = np.linalg.norm(r, axis=-1)
-    sn = np.linalg.norm(s, axis=-1)
-    a = np.arcsin(np.clip(sun_radius_km / sn, -1.0, 1.0))
-    b = np.arcsin(np.clip(earth_radius_km / rn, -1.0, 1.0))
-    c = np.arccos(np.clip(np.sum(-r * s, axis=-1) / (rn * sn), -1.0, 1.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        x = (c * c + a * a - b * b) / (2.0 * c)
-        y = np.sqrt(np.maximum(a * a - x * x, 0.0))
-        overlap = (a * a * np.arccos(np.clip(x / a, -1.0, 1.0)) + b * b * np.arccos(np.clip((c - x) / b, -1.0, 1.0))
-                   - c * y)
-    partial = 1.0 - overlap / (np.pi * a * a)
-    annular = 1.0 - (b * b) / (a * a)
-    return np.where(c >= a + b, 1.0, np.where(c <= b - a, 0.0, np.where(c <= a - b, annular, partial)))
+    r, sun = np.broadcast_arrays(np.asarray(r_sc_N_km, dtype=float), np.asarray(r_sun_N_km, dtype=float))
+    rows_r, rows_s = np.ascontiguousarray(r.reshape(-1, 3)), np.ascontiguousarray(sun.reshape(-1, 3))
+    out = np.empty(rows_r.shape[0])
+    _sunlit_rows(rows_r, rows_s, float(earth_radius_km), float(sun_radius_km), out)
+    return out.reshape(r.shape[:-1])
+
+
+@njit(cache=True, error_model="numpy")
+def _sunlit_rows(r, sun, earth_radius_km, sun_radius_km, out):
+    for k in range(r.shape[0]):
+        out[k] = sunlit_fraction_at(r[k, 0], r[k, 1], r[k, 2], sun[k, 0] - r[k, 0], sun[k, 1] - r[k, 1],
+                                    sun[k, 2] - r[k, 2], earth_radius_km, sun_radius_km)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def sunlit_fraction_at(rx, ry, rz, sx, sy, sz, earth_radius_km, sun_radius_km):
+    """The sunlit fraction for one geometry: r the spacecraft from the Earth's centre, s the Sun from the
+    spacecraft [km]. The kernel the truth models call at every integration stage (solar radiation pressure)."""
+    rn = math.sqrt(rx * rx + ry * ry + rz * rz)
+    sn = math.sqrt(sx * sx + sy * sy + sz * sz)
+    a = math.asin(min(sun_radius_km / sn, 1.0))
+    b = math.asin(min(earth_radius_km / rn, 1.0))
+    c = math.acos(min(max(-(rx * sx + ry * sy + rz * sz) / (rn * sn), -1.0), 1.0))
+    if c >= a + b:
+        return 1.0
+    if c <= b - a:
+        return 0.0
+    if c <= a - b:
+        return 1.0 - (b * b) / (a * a)
+    x = (c * c + a * a - b * b) / (2.0 * c)
+    y = math.sqrt(max(a * a - x * x, 0.0))
+    overlap = (a * a * math.acos(min(max(x / a, -1.0), 1.0)) + b * b * math.acos(min(max((c - x) / b, -1.0), 1.0))
+               - c * y)
+    return 1.0 - overlap / (math.pi * a * a)

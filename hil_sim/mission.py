@@ -141,6 +141,41 @@ class Disturbance(_Model):
                                              "(0: white, redrawn every integration step)")
     gravity_gradient: bool = Field(False, description="add the gravity-gradient torque 3 mu / r^3 (u x I u) from the "
                                    "orbit and the true inertia (u: the Earth-to-spacecraft direction in body axes)")
+    solar_radiation_pressure: bool = Field(False, description="add the solar-radiation-pressure torque on "
+                                           "spacecraft.facets (hil_sim.environment), zero in the Earth's umbra and "
+                                           "scaled by the sunlit fraction of the Sun's disc in the penumbra")
+    solar_flux_W_m2: float = Field(1361.0, ge=1300, le=1420, description="solar flux at 1 AU [W/m^2] (1361: the "
+                                   "total solar irradiance at solar minimum, Kopp & Lean 2011; it varies by ~0.1 % "
+                                   "over a solar cycle and ~3 % over the year with the distance, which is modelled)")
+
+
+class Facet(_Model):
+    """One flat outer surface of the spacecraft, for the environment torques (maps onto
+    hil_sim.params.FacetParams). Light not reflected (1 - specular - diffuse) is absorbed."""
+
+    area_m2: float = Field(gt=0, le=1000, description="area [m^2]")
+    normal_B: Vec3 = Field(description="outward unit normal in body axes (its norm within 1e-6 of 1: a normal "
+                           "that is not one is a typing mistake, not a direction to normalise)")
+    centre_of_pressure_B_m: bounded_vec3(100.0) = Field(description="centre of pressure (the facet's centroid) "
+                                                        "from the centre of mass, in body axes [m]")
+    specular: float = Field(0.0, ge=0, le=1, description="specular reflection coefficient")
+    diffuse: float = Field(0.0, ge=0, le=1, description="diffuse reflection coefficient")
+
+    @field_validator("normal_B")
+    @classmethod
+    def _unit_normal(cls, value: list[float]) -> list[float]:
+        norm = math.sqrt(sum(v * v for v in value))
+        if abs(norm - 1.0) > 1e-6:
+            raise ValueError(f"the normal's norm is {norm:.9g}; give the outward unit normal (norm within 1e-6 "
+                             "of 1), e.g. [0.0, 0.0, 1.0]")
+        return [v / norm for v in value]
+
+    @model_validator(mode="after")
+    def _optical(self) -> "Facet":
+        if self.specular + self.diffuse > 1.0:
+            raise ValueError(f"specular + diffuse = {self.specular + self.diffuse:g} exceeds 1: of the light a "
+                             "facet receives, specular + diffuse is reflected and the rest absorbed; lower one of them")
+        return self
 
 
 class DoorTruth(_Model):
@@ -168,6 +203,8 @@ class SpacecraftTruth(_Model):
     disturbance: Disturbance = Field(default_factory=Disturbance)
     door: DoorTruth | None = Field(None, description="a protective aperture door in front of the instrument "
                                    "(absent: no door, nothing of it on the bus)")
+    facets: list[Facet] = Field([], max_length=64, description="the outer surfaces, for the environment torques "
+                                "(disturbance.solar_radiation_pressure); none: no such torque can be computed")
 
     @field_validator("inertia_B_kgm2")
     @classmethod
@@ -395,6 +432,11 @@ class Mission(_Model):
         if np.linalg.matrix_rank(axes, tol=1e-6) < 3:
             out.append((("spacecraft", "wheels"), "the wheel axes do not span 3 axes: some body torques "
                         "cannot be produced"))
+        dist = self.spacecraft.disturbance
+        if dist.solar_radiation_pressure and not self.spacecraft.facets:
+            out.append((("spacecraft", "disturbance", "solar_radiation_pressure"), "solar radiation pressure acts "
+                        "on the spacecraft's surfaces: give them as spacecraft.facets (area_m2, normal_B, "
+                        "centre_of_pressure_B_m, specular, diffuse), or set it false"))
         if self.orbit.semi_major_axis_km * (1 - self.orbit.eccentricity) < EARTH_RADIUS_KM + 150:
             out.append((("orbit",), f"perigee radius {self.orbit.semi_major_axis_km * (1 - self.orbit.eccentricity):.1f} km "
                         f"is below {EARTH_RADIUS_KM + 150:.0f} km (150 km altitude): the orbit hits the atmosphere"))
@@ -539,8 +581,8 @@ def attitude_from_ra_dec(ra_deg: float, dec_deg: float, roll_deg: float, boresig
 
 def world_params(mission: Mission) -> "WorldParams":
     """The truth-model parameters (hil_sim.params.WorldParams) this mission describes."""
-    from hil_sim.params import (DisturbanceParams, ImuParams, OrbitParams, SpacecraftParams, StarTrackerParams,
-                                WheelParams, WorldParams)
+    from hil_sim.params import (DisturbanceParams, FacetParams, ImuParams, OrbitParams, SpacecraftParams,
+                                StarTrackerParams, WheelParams, WorldParams)
 
     sc = mission.spacecraft
     speeds = mission.initial_state.wheel_speeds_rad_s or [0.0] * len(sc.wheels)
@@ -554,8 +596,13 @@ def world_params(mission: Mission) -> "WorldParams":
         disturbance=DisturbanceParams(constant_B_Nm=tuple(sc.disturbance.constant_B_Nm),
                                       random_std_Nm=sc.disturbance.random_std_Nm,
                                       random_correlation_time_s=sc.disturbance.random_correlation_time_s,
-                                      gravity_gradient=sc.disturbance.gravity_gradient),
-        q_NB0=tuple(mission.initial_state.q_NB), omega_BN_B0_rad_s=tuple(mission.initial_state.omega_BN_B_rad_s))
+                                      gravity_gradient=sc.disturbance.gravity_gradient,
+                                      solar_radiation_pressure=sc.disturbance.solar_radiation_pressure,
+                                      solar_flux_W_m2=sc.disturbance.solar_flux_W_m2),
+        q_NB0=tuple(mission.initial_state.q_NB), omega_BN_B0_rad_s=tuple(mission.initial_state.omega_BN_B_rad_s),
+        facets=tuple(FacetParams(area_m2=f.area_m2, normal_B=tuple(f.normal_B),
+                                 centre_of_pressure_B_m=tuple(f.centre_of_pressure_B_m), specular=f.specular,
+                                 diffuse=f.diffuse) for f in sc.facets))
     imu = sc.imu
     st = sc.star_tracker
     orbit = mission.orbit
@@ -640,7 +687,8 @@ SUFFIX_UNITS = (("_rad_per_sqrt_s", "rad/sqrt(s)"), ("_rad_s_per_sqrt_s", "rad/s
                 ("_rad_s_sqrt_hz", "rad/s/sqrt(Hz)"), ("_rad_s2_sqrt_hz", "rad/s^2/sqrt(Hz)"),
                 ("_Nm_per_rad_s", "N m s/rad"), ("_deg_s3", "deg/s^3"), ("_deg_s2", "deg/s^2"), ("_deg_s", "deg/s"),
                 ("_rad_s", "rad/s"), ("_1_s", "1/s"), ("_arcsec", "arcsec"), ("_deg", "deg"), ("_rad", "rad"),
-                ("_kgm2", "kg m^2"), ("_Nm", "N m"), ("_km", "km"), ("_hz", "Hz"), ("_Hz", "Hz"), ("_ppm", "ppm"),
+                ("_kgm2", "kg m^2"), ("_Nm", "N m"), ("_km", "km"), ("_W_m2", "W/m^2"), ("_m2", "m^2"), ("_m", "m"),
+                ("_hz", "Hz"), ("_Hz", "Hz"), ("_ppm", "ppm"),
                 ("_bps", "bit/s"), ("_utc", "UTC"), ("_s", "s"))
 # longest suffix first
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = tuple(sorted(SUFFIX_UNITS, key=lambda item: -len(item[0])))

@@ -67,12 +67,18 @@ inertia, evaluated at every integration stage (it agrees with Basilisk 2.12's Gr
 exactly as before. `keepout budget FILE` prints the disturbance and momentum budget per effect over one
 orbit and one day, attitude held inertially at the initial one: the peak torque, the momentum accumulated
 per body axis, the largest it gets and the worst wheel's speed when the wheels absorb it (`--json FILE`
-writes the rows). Solar radiation pressure, drag and a magnetic dipole are not in the truth models yet; the
-budget says so. `keepout truth FILE --duration S --out truth.npz` propagates the truth models alone (no
+writes the rows). With `solar_radiation_pressure: true` and the spacecraft's surfaces under
+`spacecraft.facets` (area, outward unit normal, centre of pressure from the centre of mass, specular and
+diffuse coefficients; the rest is absorbed), the solar-radiation-pressure torque on each lit facet, zero in the
+Earth's umbra and scaled by the sunlit fraction in the penumbra (it agrees with Basilisk 2.12's
+facetSRPDynamicEffector to rounding, torque for torque, and to 5e-14 rad over a sunlit arc:
+`tests/hil_sim/test_srp.py`; [environment.md](environment.md) has a worked budget). Drag and a magnetic dipole
+are not in the truth models yet; the budget says so. `keepout truth FILE --duration S --out truth.npz` propagates the truth models alone (no
 flight software, wheel motors commanding zero) and writes the SIL's truth.npz layout plus the inertial
 angular momentum `H_N_Nms` and `sunlit_fraction` (the share of the Sun's disc seen past the Earth: the
-conical umbra and penumbra, as Basilisk's eclipse module computes them), with a summary: attitude drift,
-largest body rate, the momentum the disturbances added and the time in the Earth's shadow.
+conical umbra and penumbra, as Basilisk's eclipse module computes them) and each environment torque turned
+on (`srp_torque_B_Nm`), with a summary: attitude drift, largest body rate, the momentum the disturbances added,
+the time in the Earth's shadow and each environment torque's peak.
 
 In the tables, *required* means the key has no default; a range `(a, b]` excludes a and includes b.
 """

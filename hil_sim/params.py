@@ -119,12 +119,47 @@ class DisturbanceParams:
     random_correlation_time_s: float = 60.0
     seed: int | None = None
     gravity_gradient: bool = False  # 3 mu / r^3 (u x I u) from the orbit and the true inertia
+    # Solar radiation pressure on the spacecraft's facets (SpacecraftParams.facets), zero in the umbra and
+    # scaled by the sunlit fraction in the penumbra (hil_sim.environment).
+    solar_radiation_pressure: bool = False
+    solar_flux_W_m2: float = 1361.0  # at 1 AU (total solar irradiance, Kopp & Lean 2011)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "constant_B_Nm", _vec(self.constant_B_Nm, 3, "disturbance.constant_B_Nm"))
         object.__setattr__(self, "random_std_Nm", _nonneg(self.random_std_Nm, "disturbance.random_std_Nm"))
         object.__setattr__(self, "random_correlation_time_s",
                            _nonneg(self.random_correlation_time_s, "disturbance.random_correlation_time_s"))
+        object.__setattr__(self, "solar_flux_W_m2", _positive(self.solar_flux_W_m2, "disturbance.solar_flux_W_m2"))
+
+
+@dataclass(frozen=True)
+class FacetParams:
+    """One flat surface of the spacecraft for the environment torques: its area, outward unit normal and
+    centre of pressure (from the centre of mass) in body axes, and its optical coefficients (specular,
+    diffuse; the rest of the light is absorbed)."""
+
+    area_m2: float
+    normal_B: tuple[float, float, float]
+    centre_of_pressure_B_m: tuple[float, float, float]
+    specular: float = 0.0
+    diffuse: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "area_m2", _positive(self.area_m2, "facet.area_m2"))
+        normal = np.asarray(_vec(self.normal_B, 3, "facet.normal_B"))
+        if abs(float(np.linalg.norm(normal)) - 1.0) > 1e-6:
+            raise ValueError(f"facet.normal_B: must be a unit vector, |n| = {np.linalg.norm(normal):.9f}")
+        object.__setattr__(self, "normal_B", tuple(float(x) for x in normal / np.linalg.norm(normal)))
+        object.__setattr__(self, "centre_of_pressure_B_m",
+                           _vec(self.centre_of_pressure_B_m, 3, "facet.centre_of_pressure_B_m"))
+        for name in ("specular", "diffuse"):
+            value = _nonneg(getattr(self, name), f"facet.{name}")
+            if value > 1.0:
+                raise ValueError(f"facet.{name}: must be within [0, 1], got {value!r}")
+            object.__setattr__(self, name, value)
+        if self.specular + self.diffuse > 1.0:
+            raise ValueError(f"facet: specular + diffuse = {self.specular + self.diffuse:g} exceeds 1 "
+                             "(the absorbed share is 1 - specular - diffuse)")
 
 
 def _default_wheels() -> tuple[WheelParams, ...]:
@@ -141,6 +176,7 @@ class SpacecraftParams:
     disturbance: DisturbanceParams = field(default_factory=DisturbanceParams)
     q_NB0: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
     omega_BN_B0_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    facets: tuple[FacetParams, ...] = ()  # the outer surfaces, for solar radiation pressure and drag
 
     def __post_init__(self) -> None:
         inertia = np.asarray(self.inertia_B_kgm2, dtype=float)
@@ -162,6 +198,12 @@ class SpacecraftParams:
                              "definite (the hub inertia includes the wheels locked)")
         object.__setattr__(self, "q_NB0", _unit_quat(self.q_NB0, "spacecraft.q_NB0"))
         object.__setattr__(self, "omega_BN_B0_rad_s", _vec(self.omega_BN_B0_rad_s, 3, "spacecraft.omega_BN_B0_rad_s"))
+        facets = tuple(FacetParams(**f) if isinstance(f, dict) else f for f in self.facets)
+        if not all(isinstance(f, FacetParams) for f in facets):
+            raise ValueError("spacecraft.facets: each entry must be a FacetParams or a dict of its fields")
+        object.__setattr__(self, "facets", facets)
+        if self.disturbance.solar_radiation_pressure and not facets:
+            raise ValueError("spacecraft.facets: solar radiation pressure needs the spacecraft's facets")
 
 
 @dataclass(frozen=True)
@@ -328,6 +370,9 @@ def _from_dict(cls: type, data: dict[str, Any], where: str) -> Any:
         elif cls is SpacecraftParams and key == "wheels":
             value = tuple(_from_dict(WheelParams, w, f"{where}.wheels[{i}]") if isinstance(w, dict) else w
                           for i, w in enumerate(value))
+        elif cls is SpacecraftParams and key == "facets":
+            value = tuple(_from_dict(FacetParams, f, f"{where}.facets[{i}]") if isinstance(f, dict) else f
+                          for i, f in enumerate(value))
         elif cls is SpacecraftParams and key == "inertia_B_kgm2":
             value = tuple(tuple(row) for row in value)
         elif isinstance(value, list):

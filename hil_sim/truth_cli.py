@@ -6,7 +6,8 @@ the spacecraft does when nobody flies it, as a GNC engineer looks at a disturban
 control loop exists. Writes the truth in the SIL run's truth.npz layout (``t_s``, ``q_NB``,
 ``omega_BN_B``, ``wheel_speed_rad_s``, ``wheel_torque_Nm``, ``sun_N``, ``moon_N``, ``earth_N``,
 ``r_sc_N_km``, ``cycle_done`` all false: no flight software answered) plus ``H_N_Nms``, the total angular
-momentum in inertial axes, and ``sunlit_fraction``, the share of the Sun's disc seen past the Earth (0 in
+momentum in inertial axes, each environment torque the mission turns on in body axes (``srp_torque_B_Nm``:
+solar radiation pressure, hil_sim.environment), and ``sunlit_fraction``, the share of the Sun's disc seen past the Earth (0 in
 the umbra, 1 in full Sun: the conical shadow of hil_sim.eclipse), and prints a summary: the attitude drift,
 the largest body rate, the change of angular momentum (what the disturbances put in) and the time in the
 Earth's shadow. ``keepout export`` and the plots read the file as a
@@ -28,6 +29,7 @@ EXIT_REJECTED = 2
 
 def propagate(mission, duration_s: float, step_s: float) -> dict[str, np.ndarray]:
     """The truth of ``mission`` over ``duration_s``, recorded every ``step_s``, wheels commanding zero."""
+    from hil_sim.environment import EFFECT_KEYS, EFFECTS, environment_effects
     from hil_sim.mission import world_params
     from hil_sim.sil import TruthRecorder
     from hil_sim.world import World
@@ -39,11 +41,16 @@ def propagate(mission, duration_s: float, step_s: float) -> dict[str, np.ndarray
     zero = np.zeros(n_wheels)
     momentum = np.empty((n_steps + 1, 3))
     momentum[0] = world.batch.angular_momentum_N()[0]
+    effects = [k for k, name in enumerate(EFFECTS) if name in environment_effects(mission)]
+    env_torque = np.zeros((n_steps + 1, len(EFFECTS), 3))
+    env_torque[0] = world.batch.environment_torques_B()[0]
     recorder.record(world, zero, False)
     for k in range(1, n_steps + 1):
         world.step(min(step_s, duration_s - (k - 1) * step_s), zero)
         recorder.record(world, zero, False)
         momentum[k] = world.batch.angular_momentum_N()[0]
+        if effects:
+            env_torque[k] = world.batch.environment_torques_B()[0]
     n = recorder.n
     from hil_sim.eclipse import sunlit_fraction
 
@@ -51,7 +58,8 @@ def propagate(mission, duration_s: float, step_s: float) -> dict[str, np.ndarray
     return {"sunlit_fraction": sunlit_fraction(recorder.r_sc_N_km[:n], sun_km), "t_s": recorder.t_s[:n], "q_NB": recorder.q_NB[:n], "omega_BN_B": recorder.omega_BN_B[:n],
             "wheel_speed_rad_s": recorder.wheel_speed_rad_s[:n], "wheel_torque_Nm": recorder.wheel_torque_Nm[:n],
             "sun_N": recorder.sun_N[:n], "moon_N": recorder.moon_N[:n], "earth_N": recorder.earth_N[:n],
-            "r_sc_N_km": recorder.r_sc_N_km[:n], "cycle_done": recorder.cycle_done[:n], "H_N_Nms": momentum[:n]}
+            "r_sc_N_km": recorder.r_sc_N_km[:n], "cycle_done": recorder.cycle_done[:n], "H_N_Nms": momentum[:n],
+            **{EFFECT_KEYS[k]: env_torque[:n, k] for k in effects}}
 
 
 def summary(truth: dict[str, np.ndarray]) -> dict[str, float]:
@@ -61,7 +69,10 @@ def summary(truth: dict[str, np.ndarray]) -> dict[str, float]:
     drift = 2.0 * np.degrees(np.arccos(np.clip(np.abs(q @ q[0]), 0.0, 1.0)))
     lit = truth["sunlit_fraction"]
     shadow = lit < 1.0
-    return {"umbra_fraction": float(np.mean(lit == 0.0)), "penumbra_fraction": float(np.mean(shadow & (lit > 0.0))),
+    from hil_sim.environment import EFFECT_KEYS
+
+    peaks = {f"{key}_peak": float(np.linalg.norm(truth[key], axis=1).max()) for key in EFFECT_KEYS if key in truth}
+    return {**peaks, "umbra_fraction": float(np.mean(lit == 0.0)), "penumbra_fraction": float(np.mean(shadow & (lit > 0.0))),
             "eclipses": int(np.count_nonzero(shadow[1:] & ~shadow[:-1])),
             "duration_s": float(truth["t_s"][-1] - truth["t_s"][0]),
             "attitude_drift_deg": float(drift[-1]), "attitude_drift_max_deg": float(drift.max()),
@@ -93,6 +104,7 @@ def _positive(text: str) -> float:
 
 
 def _truth(args: argparse.Namespace) -> int:
+    from hil_sim.environment import EFFECT_KEYS, EFFECTS
     from hil_sim.mission import load_mission_or_report
 
     mission = load_mission_or_report(args.mission)
@@ -117,4 +129,7 @@ def _truth(args: argparse.Namespace) -> int:
           f"{s['momentum_change_Nms']:.3e} N m s\n"
           f"  in the Earth's shadow {100 * s['umbra_fraction']:.1f} % of the time (umbra) + "
           f"{100 * s['penumbra_fraction']:.2f} % (penumbra), {s['eclipses']} eclipse(s) begun")
+    for key, name in zip(EFFECT_KEYS, EFFECTS):
+        if f"{key}_peak" in s:
+            print(f"  {name}: torque up to {s[f'{key}_peak']:.3e} N m ({key} in the file)")
     return 0

@@ -24,6 +24,7 @@ from numba import njit
 
 from gnc.ephemeris import julian_date_tdb, parse_utc
 from hil_sim import dynamics as dyn
+from hil_sim import environment as env
 from hil_sim import sensors as sen
 from hil_sim.ephemeris_truth import TruthEphemeris, spline_eval
 from hil_sim.orbit import orbit_elements_array, orbit_position_row_N_km
@@ -109,11 +110,21 @@ def _world_step_kernel(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APP
                        WORK, t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX):
     """Step all runs (dynamics), then their orbit positions and Sun/Moon/Earth directions at t_end_s.
     Returns False (and changes nothing) if any torque command is NaN or infinite."""
+    if B.shape[0] > dyn.B_FIELDS:
+        _hold_sun(B, sun_c, eph_t0, eph_h, t_end_s - n_sub * dt_sub)
     if not dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
                                    DECAY, GM, HAS_COULOMB, WORK, ORB, t_end_s - n_sub * dt_sub):
         return False
     _aux_at(t_end_s, ORB, sun_c, moon_c, eph_t0, eph_h, AUX)
     return True
+
+
+@njit(cache=True, error_model="numpy")
+def _hold_sun(B, sun_c, eph_t0, eph_h, t_s):
+    """The Sun's position at the start of a step into B, for the environment torques (held over the step)."""
+    sun = np.empty(3)
+    spline_eval(sun_c, eph_t0, eph_h, t_s, sun)
+    env.hold_sun(B, sun)
 
 
 @njit(cache=True, error_model="numpy")
@@ -162,7 +173,10 @@ def _world_period_kernel(X, D, TEMP, G, W, B, U_SEQ, NORMALS_SEQ, dt_sub, n_sub,
         T_END[j] = t
     aux_step = -1
     i_imu = i_st = 0
+    has_env = B.shape[0] > dyn.B_FIELDS
     for j in range(J):
+        if has_env:
+            _hold_sun(B, sun_c, eph_t0, eph_h, CLOCK[0] if j == 0 else T_END[j - 1])
         if not dyn.dynamics_step_batch(X, D, TEMP, G, W, B, U_SEQ[j], NORMALS_SEQ[j], dt_sub, n_sub, U_APPLIED,
                                        FLAGS, DECAY, GM, HAS_COULOMB, WORK, ORB, CLOCK[0] if j == 0 else T_END[j - 1]):
             if j > 0 and aux_step != j - 1:
@@ -595,6 +609,17 @@ class WorldBatch:
 
     def angular_momentum_N(self) -> np.ndarray:
         return dyn.angular_momentum_N(self.X, self.G, self.W, self.B)
+
+    def environment_torques_B(self) -> np.ndarray:
+        """Each environment effect's torque (hil_sim.environment.EFFECTS) on every run at the current state and
+        time, (M, len(EFFECTS), 3) [N m] in body axes: the dynamics' own kernels; zero where an effect is off."""
+        out = np.zeros((self.n_runs, len(env.EFFECTS), 3))
+        if self.B.shape[0] > dyn.B_FIELDS:
+            eph_t0, sun_c, _ = self.ephemeris.table
+            # the next step holds its own Sun: overwriting the held one here changes nothing it computes
+            _hold_sun(self.B, sun_c, eph_t0, self.ephemeris.node_spacing_s, self._t)
+            env.environment_torques_B(self.X, self.B, self.ORB, self._t, out)
+        return out
 
     def wheel_currents_A(self) -> np.ndarray:
         """Motor currents (M, N), A."""

@@ -1,0 +1,146 @@
+"""Environment torques on the spacecraft's facets: solar radiation pressure (more to come in this module).
+
+Each effect is optional (``spacecraft.disturbance``); a run with none of them on packs no rows here and the
+dynamics step does exactly what it did without this module. A run with one on gets extra rows in the body
+array B of ``hil_sim.dynamics`` (after its ``B_FIELDS`` rows): the effects' switches, the Sun's position
+(from the Earth's centre, written by the world kernels at the start of every step and held over it, as a
+simulator's input message is) and the facets. The torques are evaluated at every RK4 stage from the stage's
+attitude and orbit position, like the gravity gradient.
+
+Solar radiation pressure on a flat facet of area A, outward unit normal n and centre of pressure c (from the
+centre of mass), lit at cos(theta) = n . s > 0 (s: the unit vector to the Sun):
+
+    F = -P A cos(theta) [ (1 - rho_s) s + 2 (rho_d / 3 + rho_s cos(theta)) n ],   tau = c x F
+
+with P = (flux / c_light) (1 AU / |r_sun - r|)^2 times the sunlit fraction of the Sun's disc (the conical
+shadow of hil_sim.eclipse: 0 in the umbra), rho_s and rho_d the specular and diffuse reflection
+coefficients (the rest is absorbed). This is Basilisk's facetSRPDynamicEffector model; facets shadowing one
+another are not modelled (a convex body has none).
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+from numba import njit
+
+from gnc.ephemeris import EARTH_RADIUS_KM
+from hil_sim.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
+from hil_sim.orbit import orbit_position_row_N_km
+from hil_sim.params import SpacecraftParams
+
+SPEED_OF_LIGHT_M_S = 299_792_458.0
+AU_KM = 149_597_870.7
+
+# Rows of B after hil_sim.dynamics.B_FIELDS (24): switches (bits), the Sun held over the step, the solar flux,
+# the number of facets, then FACET_FIELDS rows per facet from ENV_FACETS on.
+ENV_FLAGS, ENV_SUN, ENV_FLUX, ENV_N_FACETS = 24, 25, 28, 29
+ENV_FACETS = 30
+FACET_AREA, FACET_NORMAL, FACET_COP, FACET_SPECULAR, FACET_DIFFUSE = 0, 1, 4, 7, 8
+FACET_FIELDS = 9
+SRP = 1  # bit of ENV_FLAGS
+EFFECTS = ("solar radiation pressure",)  # the order of environment_torques_B's rows
+EFFECT_KEYS = ("srp_torque_B_Nm",)  # their names in `keepout truth`'s file
+
+
+def environment_effects(mission) -> list[str]:
+    """The names (EFFECTS) of the environment effects a mission (hil_sim.mission.Mission) turns on."""
+    dist = mission.spacecraft.disturbance
+    return [name for name, on in zip(EFFECTS, (dist.solar_radiation_pressure,)) if on]
+
+
+def environment_rows(params: Sequence[SpacecraftParams]) -> np.ndarray | None:
+    """The rows to append to the dynamics' B (ENV_FACETS + FACET_FIELDS * facets, M) for a batch, or None when
+    no run has an environment effect on (B is then exactly as without this module)."""
+    flags = [SRP if p.disturbance.solar_radiation_pressure else 0 for p in params]
+    if not any(flags):
+        return None
+    n_facets = max(len(p.facets) for p in params)
+    rows = np.zeros((ENV_FACETS + FACET_FIELDS * n_facets, len(params)))
+    for m, p in enumerate(params):
+        rows[ENV_FLAGS, m] = flags[m]
+        rows[ENV_FLUX, m] = p.disturbance.solar_flux_W_m2
+        rows[ENV_N_FACETS, m] = len(p.facets)
+        for k, f in enumerate(p.facets):
+            o = ENV_FACETS + FACET_FIELDS * k
+            rows[o + FACET_AREA, m] = f.area_m2
+            rows[o + FACET_NORMAL:o + FACET_NORMAL + 3, m] = f.normal_B
+            rows[o + FACET_COP:o + FACET_COP + 3, m] = f.centre_of_pressure_B_m
+            rows[o + FACET_SPECULAR, m] = f.specular
+            rows[o + FACET_DIFFUSE, m] = f.diffuse
+    return rows[ENV_FLAGS:]
+
+
+@njit(cache=True, error_model="numpy")
+def hold_sun(B, sun_N_km):
+    """Every run's Sun position (from the Earth's centre, km) for the coming step."""
+    for m in range(B.shape[1]):
+        B[ENV_SUN, m] = sun_N_km[0]
+        B[ENV_SUN + 1, m] = sun_N_km[1]
+        B[ENV_SUN + 2, m] = sun_N_km[2]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def to_body(q0, q1, q2, q3, x, y, z):
+    """R(q)^T v: a vector in N into body axes (R(q) rotates body vectors into N)."""
+    return ((1.0 - 2.0 * (q2 * q2 + q3 * q3)) * x + 2.0 * (q1 * q2 + q0 * q3) * y + 2.0 * (q1 * q3 - q0 * q2) * z,
+            2.0 * (q1 * q2 - q0 * q3) * x + (1.0 - 2.0 * (q1 * q1 + q3 * q3)) * y + 2.0 * (q2 * q3 + q0 * q1) * z,
+            2.0 * (q1 * q3 + q0 * q2) * x + 2.0 * (q2 * q3 - q0 * q1) * y + (1.0 - 2.0 * (q1 * q1 + q2 * q2)) * z)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def srp_torque(B, m, q0, q1, q2, q3, rx, ry, rz):
+    """The solar-radiation-pressure torque [N m] in body axes on run m at attitude q and position r [km]."""
+    sx, sy, sz = B[ENV_SUN, m] - rx, B[ENV_SUN + 1, m] - ry, B[ENV_SUN + 2, m] - rz
+    lit = sunlit_fraction_at(rx, ry, rz, sx, sy, sz, EARTH_RADIUS_KM, SUN_RADIUS_KM)
+    tx = ty = tz = 0.0
+    if lit == 0.0:
+        return tx, ty, tz
+    sn = math.sqrt(sx * sx + sy * sy + sz * sz)
+    ux, uy, uz = to_body(q0, q1, q2, q3, sx / sn, sy / sn, sz / sn)
+    au = AU_KM / sn
+    pressure = B[ENV_FLUX, m] / SPEED_OF_LIGHT_M_S * au * au * lit
+    for k in range(int(B[ENV_N_FACETS, m])):
+        o = ENV_FACETS + FACET_FIELDS * k
+        nx, ny, nz = B[o + FACET_NORMAL, m], B[o + FACET_NORMAL + 1, m], B[o + FACET_NORMAL + 2, m]
+        cos = nx * ux + ny * uy + nz * uz
+        if cos <= 0.0:
+            continue  # the facet faces away from the Sun
+        spec = B[o + FACET_SPECULAR, m]
+        k_s = -pressure * B[o + FACET_AREA, m] * cos
+        a = k_s * (1.0 - spec)
+        b = k_s * 2.0 * (B[o + FACET_DIFFUSE, m] / 3.0 + spec * cos)
+        fx, fy, fz = a * ux + b * nx, a * uy + b * ny, a * uz + b * nz
+        cx, cy, cz = B[o + FACET_COP, m], B[o + FACET_COP + 1, m], B[o + FACET_COP + 2, m]
+        tx += cy * fz - cz * fy
+        ty += cz * fx - cx * fz
+        tz += cx * fy - cy * fx
+    return tx, ty, tz
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def add_environment_torque(X, B, ORB, m, t_s, r, tau):
+    """tau[:, m] += the environment torques of run m at t_s (state X[:, m]); r: scratch (3,)."""
+    flags = int(B[ENV_FLAGS, m])
+    orbit_position_row_N_km(ORB, m, t_s, r)
+    q0, q1, q2, q3 = X[0, m], X[1, m], X[2, m], X[3, m]
+    if flags & SRP:
+        tx, ty, tz = srp_torque(B, m, q0, q1, q2, q3, r[0], r[1], r[2])
+        tau[0, m] += tx
+        tau[1, m] += ty
+        tau[2, m] += tz
+
+
+@njit(cache=True, error_model="numpy")
+def environment_torques_B(X, B, ORB, t_s, out):
+    """Each effect's torque [N m] on every run at t_s, state X: out (M, len(EFFECTS), 3), zero where off
+    (what `keepout truth` records and `keepout budget` integrates: the kernels of the dynamics step)."""
+    r = np.empty(3)
+    for m in range(X.shape[1]):
+        flags = int(B[ENV_FLAGS, m])
+        orbit_position_row_N_km(ORB, m, t_s, r)
+        q0, q1, q2, q3 = X[0, m], X[1, m], X[2, m], X[3, m]
+        out[m, 0, 0] = out[m, 0, 1] = out[m, 0, 2] = 0.0
+        if flags & SRP:
+            out[m, 0, 0], out[m, 0, 1], out[m, 0, 2] = srp_torque(B, m, q0, q1, q2, q3, r[0], r[1], r[2])

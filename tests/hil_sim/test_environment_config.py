@@ -1,0 +1,143 @@
+"""The environment torques as a mission configures them: refused at load with the file position and the fix
+when unphysical, off by default (no rows in the dynamics, the budget and the truth file as before), and, on,
+recorded by `keepout truth` and counted by `keepout budget` with the simulator's own kernels."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from hil_sim import dynamics as dyn
+from hil_sim.mission import Mission, load_mission, world_params
+from hil_sim.yaml_loader import ConfigError
+
+ROOT = Path(__file__).resolve().parents[2]
+SMALLSAT = ROOT / "config" / "missions" / "smallsat-example.yaml"
+# a 20 kg 12U-like box, its centre of mass 2 cm off the middle along z (what makes a torque)
+BOX = [{"area_m2": a, "normal_B": n, "centre_of_pressure_B_m": c, "specular": s, "diffuse": d}
+       for a, n, c, s, d in (
+           (0.06, [1, 0, 0], [0.113, 0.0, 0.02], 0.1, 0.3), (0.06, [-1, 0, 0], [-0.113, 0.0, 0.02], 0.1, 0.3),
+           (0.08, [0, 1, 0], [0.0, 0.113, 0.02], 0.1, 0.3), (0.08, [0, -1, 0], [0.0, -0.113, 0.02], 0.1, 0.3),
+           (0.05, [0, 0, 1], [0.0, 0.0, 0.19], 0.0, 0.4), (0.05, [0, 0, -1], [0.0, 0.0, -0.15], 0.0, 0.4))]
+
+
+def _smallsat(**disturbance) -> dict:
+    data = yaml.safe_load(SMALLSAT.read_text())
+    data["spacecraft"]["disturbance"].update(disturbance)
+    data["spacecraft"]["facets"] = [dict(f) for f in BOX]
+    return data
+
+
+def _problems(data: dict, tmp_path: Path) -> list[str]:
+    path = tmp_path / "mission.yaml"
+    with pytest.raises(ConfigError) as info:
+        load_mission(path, text=yaml.safe_dump(data, sort_keys=False))
+    lines = str(info.value).splitlines()
+    assert all(line.startswith(f"{path}:") for line in lines), lines
+    return lines
+
+
+@pytest.mark.parametrize("key, value, says", [
+    ("area_m2", 0.0, "facets[1].area_m2: Input should be greater than 0 m^2"),
+    ("area_m2", -0.2, "facets[1].area_m2: Input should be greater than 0 m^2"),
+    ("normal_B", [0.0, 0.9, 0.0], "facets[1].normal_B: the normal's norm is 0.9; give the outward unit normal"),
+    ("specular", 0.8, "facets[1]: specular + diffuse = 1.1 exceeds 1"),
+])
+def test_an_unphysical_facet_is_refused_at_its_key(tmp_path, key, value, says) -> None:
+    data = _smallsat(solar_radiation_pressure=True)
+    data["spacecraft"]["facets"][1][key] = value
+    if key == "specular":
+        data["spacecraft"]["facets"][1]["diffuse"] = 0.3
+    (line,) = _problems(data, tmp_path)
+    assert says in line
+    assert line.split(":")[1].isdigit() and line.split(":")[2].split()[0].isdigit()  # file:line:col
+
+
+def test_pressure_without_facets_is_refused_with_the_fix(tmp_path) -> None:
+    data = _smallsat(solar_radiation_pressure=True)
+    data["spacecraft"]["facets"] = []
+    (line,) = _problems(data, tmp_path)
+    assert "spacecraft.disturbance.solar_radiation_pressure" in line and "give them as spacecraft.facets" in line
+
+
+def test_a_dipole_of_nan_and_an_orbit_in_the_atmosphere_are_refused(tmp_path) -> None:
+    data = _smallsat()
+    data["spacecraft"]["disturbance"]["constant_B_Nm"] = [math.nan, 0.0, 0.0]
+    data["orbit"]["semi_major_axis_km"] = 6400.0
+    lines = _problems(data, tmp_path)
+    assert any("constant_B_Nm[0]: Input should be a finite number" in line for line in lines)
+    assert any("orbit.semi_major_axis_km: Input should be greater than" in line for line in lines)
+    data = _smallsat()
+    data["orbit"]["semi_major_axis_km"] = 6378.137 + 120.0
+    data["flight_software"] = {**data["flight_software"], "orbit": {"radius_km": 6378.137 + 120.0}}
+    assert any("below" in line and "150 km" in line for line in _problems(data, tmp_path))
+
+
+def test_off_by_default_the_dynamics_get_no_rows() -> None:
+    for name in ("smallsat-example.yaml", "demo-pointing.yaml"):
+        mission = load_mission(ROOT / "config" / "missions" / name)
+        assert not mission.spacecraft.disturbance.solar_radiation_pressure
+        _, _, B, _ = dyn.pack_spacecraft([world_params(mission).spacecraft])
+        assert B.shape[0] == dyn.B_FIELDS
+
+
+def test_the_budget_row_is_the_kernel_and_the_kernel_the_formula() -> None:
+    """The budget's SRP torque at a few times against the facet formula written out here (Sun from the truth
+    ephemeris, full Sun at these times), and its momentum against the trapezoid sum of the torque."""
+    from hil_sim.budget import _environment_torques, budget
+    from hil_sim.eclipse import sunlit_fraction
+    from hil_sim.orbit import orbit_elements_array, orbit_position_N_km
+    from hil_sim.world import WorldBatch
+
+    mission = Mission.model_validate(_smallsat(solar_radiation_pressure=True))
+    wp = world_params(mission)
+    t = np.array([0.0, 600.0, 1200.0])
+    sun_km, _ = WorldBatch([wp]).ephemeris.positions_N_km(t)
+    q0, *qv = wp.spacecraft.q_NB0
+    qv = np.asarray(qv)
+    R = (q0 * q0 - qv @ qv) * np.eye(3) + 2 * np.outer(qv, qv) + 2 * q0 * np.array(
+        [[0, -qv[2], qv[1]], [qv[2], 0, -qv[0]], [-qv[1], qv[0], 0]])  # body -> N
+    ours = _environment_torques(mission, t)[:, 0]
+    for k in range(t.size):
+        r = np.empty(3)
+        orbit_position_N_km(orbit_elements_array(wp.orbit), float(t[k]), r)
+        assert sunlit_fraction(r, sun_km[k]) == 1.0
+        s = R.T @ (sun_km[k] - r)
+        pressure = 1361.0 / 299_792_458.0 * (149_597_870.7 / np.linalg.norm(s)) ** 2
+        s /= np.linalg.norm(s)
+        tau = np.zeros(3)
+        for f in BOX:
+            n, c = np.asarray(f["normal_B"], float), np.asarray(f["centre_of_pressure_B_m"])
+            cos = n @ s
+            if cos > 0:
+                force = -pressure * f["area_m2"] * cos * ((1 - f["specular"]) * s
+                                                         + 2 * (f["diffuse"] / 3 + f["specular"] * cos) * n)
+                tau += np.cross(c, force)
+        np.testing.assert_allclose(ours[k], tau, rtol=1e-10, atol=1e-22)
+    assert np.linalg.norm(ours, axis=1).min() > 1e-9
+    rows = {(r.effect, r.span): r for r in budget(mission)}
+    orbit = rows[("solar radiation pressure", "orbit")]
+    ts = np.linspace(0.0, orbit.span_s, int(math.ceil(orbit.span_s / 10.0)) + 1)
+    tau = _environment_torques(mission, ts)[:, 0]
+    h = np.sum(0.5 * (tau[1:] + tau[:-1]) * np.diff(ts)[:, None], axis=0)
+    np.testing.assert_allclose(orbit.momentum_end_B_Nms, h, rtol=1e-12)
+    assert ("solar radiation pressure", "day") in rows
+    off = {r.effect for r in budget(Mission.model_validate(_smallsat()))}
+    assert "solar radiation pressure" not in off
+
+
+def test_truth_records_the_torque_the_world_applies(tmp_path) -> None:
+    from hil_sim.truth_cli import propagate, summary
+
+    on = Mission.model_validate(_smallsat(solar_radiation_pressure=True))
+    truth = propagate(on, 60.0, 10.0)
+    assert truth["srp_torque_B_Nm"].shape == (7, 3) and np.linalg.norm(truth["srp_torque_B_Nm"], axis=1).min() > 1e-9
+    assert summary(truth)["srp_torque_B_Nm_peak"] == pytest.approx(np.linalg.norm(truth["srp_torque_B_Nm"], axis=1).max())
+    # the torque changes the motion: without it the momentum differs by about its integral
+    off = propagate(Mission.model_validate(_smallsat()), 60.0, 10.0)
+    assert "srp_torque_B_Nm" not in off
+    dh = np.linalg.norm(truth["H_N_Nms"][-1] - off["H_N_Nms"][-1])
+    assert dh == pytest.approx(60.0 * np.linalg.norm(truth["srp_torque_B_Nm"].mean(axis=0)), rel=0.05)
