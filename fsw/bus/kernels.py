@@ -413,28 +413,11 @@ def star_tracker_pair(st, ft, cfg, st_half, now):  # pragma: no cover - compiled
     st[S_ST_HAVE_B] = 0
 
 
-@njit("int64(int64[::1], float64[:, ::1], int64[::1], float64[::1], int64[::1], int64[:, ::1], float64[::1], "
-      "float64[:, ::1], int64[::1], int64[::1], uint8[:, ::1], int64, int64)", cache=True)
-def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, lengths, data, first,
-                 first_fid):  # pragma: no cover - compiled
-    """FswBusDriver.collect_tick's work on frames ``first``.. of a burst (``ids``, ``lengths``, ``data``), in one
-    call (the driver's arrays come first, bound once: functools.partial), each frame classified as
-    :func:`classify_rows` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``) and counted
-    in ``tally`` ((message row * n_codes + code, count) pairs, ``st[S_NTALLY]`` of them), then what the
-    driver does with it, by phase (``st[S_PHASE]``):
-
-      * waiting for SYNC(k): a delivered SYNC after the last tick starts tick k (t_k = k * period, the
-        timeout supervision on the first tick); one at or before it is stale (counted); a delivered device
-        frame belongs to no announced tick (counted unexpected);
-      * tick k: a delivered device frame is received (the gyro's into ``imu`` rows (x, y, z, saturated),
-        the star tracker's halves into ``st_half`` (a sample when both halves of one ``sample_seq`` are
-        in), a wheel's status into ``ft``'s rows (F_WHEEL_ROWS) and the tick's speeds and fault flags
-        (F_WHEEL_SPEED, S_WHEEL_FAULT), the saturated gyro samples counted), one that fails E2E
-        counts as failed; a SYNC of a later tick is kept pending and closes the tick, an older one is
-        stale; the announced count of received frames closes it. A closed tick runs :func:`finish_tick`.
-
-    Returns the index after the last frame handled: where the tick closed or the burst ended, or before a
-    frame for the Python path (``status`` FALLBACK_CODE) or a gyro frame with ``imu`` full (``st[S_GROW]``)."""
+@njit(cache=True, inline="always")
+def _collect_views(consts, ft, st_all):  # pragma: no cover - compiled
+    """collect_rows' views of the packed arrays (the layout FswBusDriver._init_lockstep writes): cfg, the
+    codec table (msg_i, sig_i, sig_f), the state st and its tally, the per-id kind and role, the CRC table,
+    the watched messages and their limits, and the star tracker's halves."""
     cfg = consts[:C_SIZE]
     m_n, s_n, width = cfg[C_N_MSG], cfg[C_N_SIG], cfg[C_WIDTH]
     msg_i = consts[cfg[C_OFF_MSG]:cfg[C_OFF_MSG] + 4 * m_n].reshape((m_n, 4))
@@ -448,22 +431,107 @@ def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, l
     watch = consts[cfg[C_OFF_WATCH]:cfg[C_OFF_WATCH] + cfg[C_N_WATCH]]
     watch_limit = ft[F_SIZE:F_SIZE + cfg[C_N_WATCH]]
     st_half = ft[cfg[C_OFF_HALVES]:cfg[C_OFF_HALVES] + 2 * width].reshape((2, width))
+    return cfg, msg_i, sig_i, sig_f, st, tally, kind_of_id, role_of_id, crc_table, watch, watch_limit, st_half
+
+
+@njit(cache=True)
+def _between_ticks(st, ft, cfg, values, j, role, seq, last_ok_t):  # pragma: no cover - compiled
+    """A delivered frame while waiting for SYNC(k): a plausible SYNC starts tick k, a device frame belongs to
+    no announced tick."""
+    if role == ROLE_SYNC:
+        if _sync_plausible(st, ft, cfg, values, j, st[S_HAS_LAST], st[S_LAST]):
+            _start_tick(st, ft, cfg, values, j, seq, last_ok_t)
+    elif role >= ROLE_DEVICE:
+        st[S_UNEXPECTED] += 1
+
+
+@njit(cache=True)
+def _sync_in_tick(st, ft, cfg, values, j):  # pragma: no cover - compiled
+    """A delivered SYNC during tick k: one of a later tick is kept pending and closes tick k, an older one is
+    stale (counted by _sync_plausible)."""
+    tk = np.int64(values[j, cfg[C_TICK]])
+    if _sync_plausible(st, ft, cfg, values, j, 1, st[S_TICK]):
+        # the next tick already started: keep its SYNC, close this one
+        st[S_PENDING] = 1
+        st[S_P_TICK] = tk
+        st[S_P_FOLLOWING] = np.int64(values[j, cfg[C_FOLLOWING]])
+        ft[F_P_PERIOD_MS] = values[j, cfg[C_PERIOD]]
+        st[S_PHASE] = PHASE_DONE
+
+
+@njit(cache=True)
+def _receive_gyro(st, cfg, values, j, imu):  # pragma: no cover - compiled
+    """The gyro frame's (x, y, z, saturated) as the tick's next ``imu`` row, the saturated ones counted."""
+    k = st[S_IMU_N]
+    imu[k, 0] = values[j, cfg[C_IMU_X]]
+    imu[k, 1] = values[j, cfg[C_IMU_Y]]
+    imu[k, 2] = values[j, cfg[C_IMU_Z]]
+    imu[k, 3] = values[j, cfg[C_IMU_SAT]]
+    if imu[k, 3] != 0.0:
+        st[S_IMU_SAT] += 1
+    st[S_IMU_N] = k + 1
+
+
+@njit(cache=True)
+def _receive_star_tracker_half(st, ft, cfg, values, j, h, st_half, now):  # pragma: no cover - compiled
+    """Half h (0: ST_QUAT_A, 1: ST_QUAT_B) into ``st_half``: a sample once both of one ``sample_seq`` are in."""
+    for c in range(values.shape[1]):
+        st_half[h, c] = values[j, c]
+    st[S_ST_HAVE_A + h] = 1
+    st[S_ST_SEQ_A + h] = np.int64(values[j, cfg[C_SEQ_A if h == 0 else C_SEQ_B]])
+    star_tracker_pair(st, ft, cfg, st_half, now)
+
+
+@njit(cache=True)
+def _receive_wheel_status(st, ft, cfg, values, j, w, now):  # pragma: no cover - compiled
+    """Wheel w's status into ``ft``'s rows (F_WHEEL_ROWS), the tick's speed and fault flag."""
+    r = F_WHEEL_ROWS + 5 * w
+    ft[r] = values[j, cfg[C_SPEED]]
+    ft[r + 1] = values[j, cfg[C_TORQUE]]
+    ft[r + 2] = values[j, cfg[C_CURRENT]]
+    ft[r + 3] = values[j, cfg[C_TEMP]]
+    ft[r + 4] = values[j, cfg[C_FAULT]]
+    ft[F_WHEEL_T + w] = now
+    st[S_WHEEL_NEW + w] = 1
+    ft[F_WHEEL_SPEED + w] = ft[r]
+    st[S_WHEEL_FAULT + w] = np.int64(ft[r + 4])  # truncation, as WheelStatus' int()
+
+
+@njit("int64(int64[::1], float64[:, ::1], int64[::1], float64[::1], int64[::1], int64[:, ::1], float64[::1], "
+      "float64[:, ::1], int64[::1], int64[::1], uint8[:, ::1], int64, int64)", cache=True)
+def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, lengths, data, first,
+                 first_fid):  # pragma: no cover - compiled
+    """FswBusDriver.collect_tick's work on frames ``first``.. of a burst (``ids``, ``lengths``, ``data``), in one
+    call (the driver's arrays come first, bound once: functools.partial), each frame classified as
+    :func:`classify_rows` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``) and counted
+    in ``tally`` ((message row * n_codes + code, count) pairs, ``st[S_NTALLY]`` of them), then what the
+    driver does with it, by phase (``st[S_PHASE]``):
+
+      * waiting for SYNC(k) (:func:`_between_ticks`): a delivered SYNC after the last tick starts tick k
+        (t_k = k * period, the timeout supervision on the first tick); one at or before it is stale
+        (counted); a delivered device frame belongs to no announced tick (counted unexpected);
+      * tick k: a delivered device frame is received (:func:`_receive_gyro`, :func:`_receive_star_tracker_half`,
+        :func:`_receive_wheel_status`), one that fails E2E counts as failed; a SYNC of a later tick is kept
+        pending and closes the tick, an older one is stale (:func:`_sync_in_tick`); the announced count of
+        received frames closes it. A closed tick runs :func:`finish_tick`.
+
+    Returns the index after the last frame handled: where the tick closed or the burst ended, or before a
+    frame for the Python path (``status`` FALLBACK_CODE) or a gyro frame with ``imu`` full (``st[S_GROW]``)."""
+    (cfg, msg_i, sig_i, sig_f, st, tally, kind_of_id, role_of_id, crc_table, watch, watch_limit,
+     st_half) = _collect_views(consts, ft, st_all)
     n = ids.shape[0]
     n_codes = cfg[C_N_CODES]
-    bus_row = cfg[C_BUS_ROW]
-    n_kind = kind_of_id.shape[0]
     i = first
     if st[S_PHASE] == PHASE_SYNC and st[S_PENDING] != 0:
         _start_tick(st, ft, cfg, values, -1, seq, last_ok_t)  # a SYNC seen while finishing the last tick
     while i < n and st[S_PHASE] != PHASE_DONE:
         now = ft[F_T_TICK]
         if i == first and first_fid != NO_FID:  # judged by the Python path: status[i], values[i] and counts set
-            fid = first_fid
             code = status[i]
-            role = role_of_id[fid] if 0 <= fid < role_of_id.shape[0] else ROLE_NONE
+            role = role_of_id[first_fid] if 0 <= first_fid < role_of_id.shape[0] else ROLE_NONE
         else:
             fid = ids[i]
-            if fid < 0 or fid >= n_kind:
+            if fid < 0 or fid >= kind_of_id.shape[0]:
                 status[i] = FALLBACK_CODE
                 return i
             m = kind_of_id[fid]
@@ -474,7 +542,7 @@ def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, l
             if m < 0:
                 code = UNKNOWN_CODE if m == KIND_UNKNOWN else ECHO_CODE
                 status[i] = code
-                _tally(tally, st, bus_row * n_codes + code)
+                _tally(tally, st, cfg[C_BUS_ROW] * n_codes + code)
             else:
                 if role == ROLE_IMU and st[S_PHASE] == PHASE_TICK and st[S_IMU_N] >= imu.shape[0]:
                     st[S_GROW] = 1
@@ -489,54 +557,21 @@ def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, l
                 st[S_FAILED] += 1
             continue
         if st[S_PHASE] == PHASE_SYNC:
-            if role == ROLE_SYNC:
-                if _sync_plausible(st, ft, cfg, values, j, st[S_HAS_LAST], st[S_LAST]):
-                    _start_tick(st, ft, cfg, values, j, seq, last_ok_t)
-            elif role >= ROLE_DEVICE:
-                st[S_UNEXPECTED] += 1
+            _between_ticks(st, ft, cfg, values, j, role, seq, last_ok_t)
             continue
         # PHASE_TICK
         if role == ROLE_SYNC:
-            tk = np.int64(values[j, cfg[C_TICK]])
-            if _sync_plausible(st, ft, cfg, values, j, 1, st[S_TICK]):
-                # the next tick already started: keep its SYNC, close this one
-                st[S_PENDING] = 1
-                st[S_P_TICK] = tk
-                st[S_P_FOLLOWING] = np.int64(values[j, cfg[C_FOLLOWING]])
-                ft[F_P_PERIOD_MS] = values[j, cfg[C_PERIOD]]
-                st[S_PHASE] = PHASE_DONE
+            _sync_in_tick(st, ft, cfg, values, j)
             continue
         if role < ROLE_DEVICE:
             continue
         st[S_RECEIVED] += 1
         if role == ROLE_IMU:
-            k = st[S_IMU_N]
-            imu[k, 0] = values[j, cfg[C_IMU_X]]
-            imu[k, 1] = values[j, cfg[C_IMU_Y]]
-            imu[k, 2] = values[j, cfg[C_IMU_Z]]
-            imu[k, 3] = values[j, cfg[C_IMU_SAT]]
-            if imu[k, 3] != 0.0:
-                st[S_IMU_SAT] += 1
-            st[S_IMU_N] = k + 1
+            _receive_gyro(st, cfg, values, j, imu)
         elif role == ROLE_ST_A or role == ROLE_ST_B:
-            h = role - ROLE_ST_A
-            for c in range(values.shape[1]):
-                st_half[h, c] = values[j, c]
-            st[S_ST_HAVE_A + h] = 1
-            st[S_ST_SEQ_A + h] = np.int64(values[j, cfg[C_SEQ_A if h == 0 else C_SEQ_B]])
-            star_tracker_pair(st, ft, cfg, st_half, now)
+            _receive_star_tracker_half(st, ft, cfg, values, j, role - ROLE_ST_A, st_half, now)
         elif role >= ROLE_WHEEL:
-            w = role - ROLE_WHEEL
-            r = F_WHEEL_ROWS + 5 * w
-            ft[r] = values[j, cfg[C_SPEED]]
-            ft[r + 1] = values[j, cfg[C_TORQUE]]
-            ft[r + 2] = values[j, cfg[C_CURRENT]]
-            ft[r + 3] = values[j, cfg[C_TEMP]]
-            ft[r + 4] = values[j, cfg[C_FAULT]]
-            ft[F_WHEEL_T + w] = now
-            st[S_WHEEL_NEW + w] = 1
-            ft[F_WHEEL_SPEED + w] = ft[r]
-            st[S_WHEEL_FAULT + w] = np.int64(ft[r + 4])  # truncation, as WheelStatus' int()
+            _receive_wheel_status(st, ft, cfg, values, j, role - ROLE_WHEEL, now)
         if st[S_RECEIVED] >= st[S_EXPECTED]:
             st[S_PHASE] = PHASE_DONE
     if st[S_PHASE] == PHASE_DONE:  # (never called once the tick is closed)
