@@ -5,13 +5,16 @@ place of keepout's in POINTING and QUATERNION. Every cycle keepout's own step ru
 margins the FDIR watches are keepout's, computed on the estimate; then the plug-in's command, limited to
 keepout's rate limit and braking rule, replaces keepout's. The braking rule is keepout's governor
 (`fsw.guidance.slew_limits`): while a zone comes closer the command is held to the rate from which the rate
-loop can still stop before that zone's physical boundary, so SAFE's rate damping, entered at the guard
-limit, stops the boresight outside the zone. The guard stops the plug-in for the rest of the run and puts the
-spacecraft in SAFE (keepout's rate damping) when
+loop can still stop before that zone's physical boundary, so what takes over at the guard limit can stop
+outside the zone. The guard stops the plug-in for the rest of the run when
 
 * a keep-out margin falls below the guard limit, ``max(law.margin_deg, fdir.keepout_yellow.limit)``, and
   is still falling: keepout's own law never takes the boresight into that layer;
 * the plug-in raises, or returns anything but three finite numbers.
+
+Then POINTING enters SAFE (rate damping first); QUATERNION flies on with keepout's own law, because SAFE's
+Sun acquisition knows no forbidden-attitude zone (a plug-in stopped 2 deg from one in demo-quaternion was
+turned through it by SAFE, 0.13 deg deep; keepout's law kept 0.8 deg).
 
 `GuardedEstimator` runs keepout's MEKF beside the plug-in estimator every cycle; FDIR keeps reading the
 MEKF's innovation. The plug-in's attitude is flown while it stays within ``estimator.innovation_gate_deg``
@@ -67,13 +70,13 @@ class GuardedGuidance(Guidance):
         nearest = self._nearest_closing_deg(out.margins_deg)
         if nearest < self.guard_limit_deg:
             return self._stop(f"margin {nearest:.2f} deg below the guard limit {self.guard_limit_deg:.2f} "
-                              "deg and falling", t_s, dt_s, q_NB, omega_BN_B)
+                              "deg and falling", t_s, dt_s, q_NB, omega_BN_B, out)
         try:
             cmd = np.asarray(self.plugin.impl.command(self._input(out, t_s, dt_s, q_NB, omega_BN_B)), dtype=float)
         except Exception as exc:  # noqa: BLE001 - a user's law that fails is stopped, not the flight software
-            return self._stop(_fault_text(exc), t_s, dt_s, q_NB, omega_BN_B)
+            return self._stop(_fault_text(exc), t_s, dt_s, q_NB, omega_BN_B, out)
         if cmd.shape != (3,) or not np.isfinite(cmd).all():
-            return self._stop(f"command {cmd.tolist()!r} is not three finite numbers", t_s, dt_s, q_NB, omega_BN_B)
+            return self._stop(f"command {cmd.tolist()!r} is not three finite numbers", t_s, dt_s, q_NB, omega_BN_B, out)
         self.commands += 1
         return dataclasses.replace(out, omega_cmd_BN_B=_saturate(cmd, min(self.max_rate_rad_s, self._braking_rate(nearest))))
 
@@ -108,11 +111,17 @@ class GuardedGuidance(Guidance):
             sun_N=np.array(out.sun_N, dtype=float), moon_N=np.array(out.moon_N, dtype=float),
             max_rate_rad_s=self.max_rate_rad_s)
 
-    def _stop(self, reason: str, t_s: float, dt_s: float, q_NB: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
+    def _stop(self, reason: str, t_s: float, dt_s: float, q_NB: np.ndarray, omega: np.ndarray,
+              own: GuidanceOutput) -> GuidanceOutput:
+        """Stop the plug-in. POINTING enters SAFE (this cycle already SAFE's command). QUATERNION flies on
+        with keepout's own law (``own``, this cycle's): SAFE's Sun acquisition knows no forbidden-attitude
+        zone and can turn the spacecraft through one, while the law steers round them and its governor brakes."""
         self.stopped = True
         self.events("PLUGIN_STOPPED", kind="GUIDANCE", name=self.plugin.name[:40], reason=reason[:110])
+        if self.mode == "QUATERNION":
+            return own
         self._request_safe()
-        return super().step(t_s, dt_s, q_NB, omega)  # this cycle already SAFE's
+        return super().step(t_s, dt_s, q_NB, omega)
 
 
 class GuardedEstimator:

@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import pytest
+import yaml
 
 from plugin_kit import ROOT, example_site, loaded_plugin_modules, short_mission, use_paths, write_distribution
 
@@ -97,6 +98,25 @@ def test_a_law_steering_at_the_sun_is_stopped_before_the_zone(plugins):
     # ... and the guard's braking and SAFE kept the instrument out of the physical zone, judged on truth
     assert m["instrument_exposure_s"] == 0.0 and m["min_margin_deg"] > 0.0
     assert not any("KEEP_OUT" in e for e in result.events)
+
+
+def test_a_law_stopped_in_quaternion_mode_hands_over_to_keepouts_law(plugins):
+    """demo-quaternion's first slew runs straight at its radiator-Sun zone along the geodesic."""
+    from hil_sim.campaign.fast import run_fast
+    from hil_sim.mission import load_mission
+
+    data = yaml.safe_load((ROOT / "config" / "missions" / "demo-quaternion.yaml").read_text())
+    data["duration_s"] = 80.0
+    data["timeline"] = []  # its second target comes later
+    data["flight_software"]["plugins"] = {"guidance": "geodesic"}
+    (plugins / "q.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    result = run_fast(load_mission(plugins / "q.yaml"), seed=1)
+    stops = _stops(result)
+    assert len(stops) == 1 and "guard limit" in stops[0], result.events
+    m = result.metrics
+    assert m["margin_radiator-sun_deg"] < 2.0  # the plug-in took the attitude into the guard layer ...
+    assert m["min_margin_deg"] > 0.0  # ... and keepout's law, taking over, kept it out of the zone
+    assert not any("SAFE" in e for e in result.events)
 
 
 @pytest.mark.parametrize("law, reason", [("fails-later", "RuntimeError: law diverged"),
