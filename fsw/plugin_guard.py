@@ -104,11 +104,15 @@ class GuardedGuidance(Guidance):
             zones = tuple(s.law for s in self.slots if s.law is not None)
         else:
             zones = tuple(self.s3_law_zones)
+        sun, moon = out.sun_N, out.moon_N
+        if not np.isfinite(sun).all():  # QUATERNION's output carries no sky: the plug-in gets it all the same
+            sky = self.ephem.directions(t_s)
+            sun, moon = sky["sun"], sky["moon"]
         return GuidanceInput(
             t_s=t_s, dt_s=dt_s, mode=self.mode, q_NB=np.array(q_NB, dtype=float), omega_BN_B=np.array(omega, dtype=float),
             boresight_B=self.b_B.copy(), target_N=self.target_N.copy() if pointing else _NAN3.copy(),
             q_target_NB=_NAN4.copy() if pointing else self.q_target.copy(), zones=zones,
-            sun_N=np.array(out.sun_N, dtype=float), moon_N=np.array(out.moon_N, dtype=float),
+            sun_N=np.array(sun, dtype=float), moon_N=np.array(moon, dtype=float),
             max_rate_rad_s=self.max_rate_rad_s)
 
     def _stop(self, reason: str, t_s: float, dt_s: float, q_NB: np.ndarray, omega: np.ndarray,

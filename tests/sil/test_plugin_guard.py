@@ -36,6 +36,20 @@ class NotANumber:
         return np.array([math.nan, 0.0, 0.0])
 
 
+SEEN = []
+
+
+class Recorder:
+    """Holds still and keeps what it was given."""
+
+    def __init__(self, cfg):
+        pass
+
+    def command(self, state):
+        SEEN.append(state)
+        return np.zeros(3)
+
+
 def _qmul(a, b):
     a0, a1, a2, a3 = a
     b0, b1, b2, b3 = b
@@ -67,7 +81,8 @@ def plugins(tmp_path, monkeypatch):
     (site / "bad_plugins.py").parent.mkdir(parents=True)
     (site / "bad_plugins.py").write_text(BAD_PLUGINS)
     write_distribution(site, "bad-plugins", {
-        "keepout.guidance": {"fails-later": "bad_plugins:FailsLater", "not-a-number": "bad_plugins:NotANumber"},
+        "keepout.guidance": {"fails-later": "bad_plugins:FailsLater", "not-a-number": "bad_plugins:NotANumber",
+                             "recorder": "bad_plugins:Recorder"},
         "keepout.estimator": {"tilted": "bad_plugins:Tilted"}})
     use_paths(monkeypatch, example_site(site))
     loaded_plugin_modules()
@@ -100,17 +115,48 @@ def test_a_law_steering_at_the_sun_is_stopped_before_the_zone(plugins):
     assert not any("KEEP_OUT" in e for e in result.events)
 
 
+def _demo_quaternion(tmp_path, duration_s: float, **plugins):
+    data = yaml.safe_load((ROOT / "config" / "missions" / "demo-quaternion.yaml").read_text())
+    data["duration_s"] = duration_s
+    data["timeline"] = []  # its second target comes later
+    data["flight_software"]["plugins"] = plugins
+    path = tmp_path / "q.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def test_the_law_is_given_its_mode_target_zones_and_sky(plugins):
+    import numpy as np
+
+    from hil_sim.campaign.fast import run_fast
+    from hil_sim.mission import load_mission
+
+    for path, mode, n_zones in ((short_mission(plugins / "p.yaml", 12.0, guidance="recorder"), "POINTING", 2),
+                                (_demo_quaternion(plugins, 12.0, guidance="recorder"), "QUATERNION", 2)):
+        import bad_plugins
+
+        bad_plugins.SEEN.clear()
+        mission = load_mission(path)
+        run_fast(mission, seed=1)
+        seen = bad_plugins.SEEN
+        assert len(seen) > 30 and {s.mode for s in seen} == {mode}
+        last = seen[-1]
+        assert len(last.zones) == n_zones and all(hasattr(z, "signed_separation") for z in last.zones)
+        assert np.isfinite(last.sun_N).all() and np.isfinite(last.moon_N).all()
+        assert abs(np.linalg.norm(last.q_NB) - 1.0) < 1e-9 and last.max_rate_rad_s > 0.0
+        if mode == "POINTING":
+            assert np.isfinite(last.target_N).all() and np.isnan(last.q_target_NB).all()
+        else:
+            assert np.allclose(last.q_target_NB, mission.flight_software.quaternion.target_q_NB, atol=1e-6)
+            assert np.isnan(last.target_N).all()
+
+
 def test_a_law_stopped_in_quaternion_mode_hands_over_to_keepouts_law(plugins):
     """demo-quaternion's first slew runs straight at its radiator-Sun zone along the geodesic."""
     from hil_sim.campaign.fast import run_fast
     from hil_sim.mission import load_mission
 
-    data = yaml.safe_load((ROOT / "config" / "missions" / "demo-quaternion.yaml").read_text())
-    data["duration_s"] = 80.0
-    data["timeline"] = []  # its second target comes later
-    data["flight_software"]["plugins"] = {"guidance": "geodesic"}
-    (plugins / "q.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
-    result = run_fast(load_mission(plugins / "q.yaml"), seed=1)
+    result = run_fast(load_mission(_demo_quaternion(plugins, 80.0, guidance="geodesic")), seed=1)
     stops = _stops(result)
     assert len(stops) == 1 and "guard limit" in stops[0], result.events
     m = result.metrics
@@ -148,7 +194,7 @@ def test_an_unknown_plugin_name_is_refused_at_load_time(plugins):
         load_mission(mission)
     text = str(err.value)
     assert "typo.yaml" in text and "flight_software.plugins.guidance" in text
-    assert "keepout.guidance" in text and "installed: fails-later, geodesic, not-a-number, sun-seeker" in text
+    assert "keepout.guidance" in text and "installed: fails-later, geodesic, not-a-number, recorder, sun-seeker" in text
     # the flight software process refuses it the same way, with the configuration error's exit code
     proc = subprocess.run([sys.executable, "-m", "fsw", "--config", str(mission)], cwd=ROOT, capture_output=True,
                           text=True, timeout=120)
