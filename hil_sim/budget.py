@@ -7,10 +7,10 @@ gradient is an attitude fixed in inertial space; a pointing timeline changes it)
 momentum accumulated per body axis at the end of the span and the largest it reaches, and the wheel speed
 that momentum implies when the wheels absorb it with the minimum-norm allocation, as a fraction of each
 wheel's limit. The random torque (first-order Gauss-Markov, std sigma, correlation time tau) is given as the
-1-sigma momentum of its random walk, sigma sqrt(2 tau t) for t >> tau. Solar radiation pressure on the
-spacecraft's facets, when the mission turns it on, gets its row (the Sun from the truth ephemeris, zero in the
-Earth's shadow). The effects not in the truth models yet (drag, the magnetic dipole) are listed as such, not
-left out silently.
+1-sigma momentum of its random walk, sigma sqrt(2 tau t) for t >> tau. Solar radiation pressure and drag on
+the spacecraft's facets, when the mission turns them on, get their rows (the Sun from the truth ephemeris,
+zero in the Earth's shadow; the co-rotating exponential atmosphere). The effect not in the truth models yet
+(the magnetic dipole) is listed as such, not left out silently.
 
 The torques are the simulator's own (`hil_sim.dynamics` and `hil_sim.environment`: the same kernels, the same
 Keplerian orbit).
@@ -30,7 +30,7 @@ from hil_sim.cli import description_of
 DAY_S = 86_400.0
 SAMPLE_S = 10.0
 EXIT_REJECTED = 2
-NOT_MODELLED = ("aerodynamic drag", "residual magnetic dipole")
+NOT_MODELLED = ("residual magnetic dipole",)
 
 
 @dataclass

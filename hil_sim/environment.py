@@ -1,4 +1,4 @@
-"""Environment torques on the spacecraft's facets: solar radiation pressure (more to come in this module).
+"""Environment torques on the spacecraft's facets: solar radiation pressure and aerodynamic drag.
 
 Each effect is optional (``spacecraft.disturbance``); a run with none of them on packs no rows here and the
 dynamics step does exactly what it did without this module. A run with one on gets extra rows in the body
@@ -16,6 +16,15 @@ with P = (flux / c_light) (1 AU / |r_sun - r|)^2 times the sunlit fraction of th
 shadow of hil_sim.eclipse: 0 in the umbra), rho_s and rho_d the specular and diffuse reflection
 coefficients (the rest is absorbed). This is Basilisk's facetSRPDynamicEffector model; facets shadowing one
 another are not modelled (a convex body has none).
+
+Aerodynamic drag on a facet facing the flow, cos(theta) = n . v_hat > 0, v the velocity relative to the air:
+
+    F = -1/2 rho |v|^2 C_D A cos(theta) v_hat,   tau = c x F,   v = v_orbit - omega_E x r
+
+an exponential atmosphere rho = rho_ref exp(-(|r| - R_E - h_ref) / H) above the WGS-84 equatorial sphere,
+rotating with the Earth about N's z axis (the pole's precession since J2000, ~0.3 deg, moves the air by
+less than 0.01 % of the orbital speed). Basilisk's facetDragDynamicEffector model, with its
+exponentialAtmosphere and zeroWindModel.
 """
 from __future__ import annotations
 
@@ -27,33 +36,37 @@ from numba import njit
 
 from gnc.ephemeris import EARTH_RADIUS_KM
 from hil_sim.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
-from hil_sim.orbit import orbit_position_row_N_km
+from hil_sim.orbit import orbit_position_row_N_km, orbit_velocity_row_N_km_s
 from hil_sim.params import SpacecraftParams
 
 SPEED_OF_LIGHT_M_S = 299_792_458.0
 AU_KM = 149_597_870.7
+EARTH_ROTATION_RAD_S = 7.292115e-5  # sidereal (IERS), as Basilisk's zeroWindModel takes it
 
 # Rows of B after hil_sim.dynamics.B_FIELDS (24): switches (bits), the Sun held over the step, the solar flux,
-# the number of facets, then FACET_FIELDS rows per facet from ENV_FACETS on.
+# the number of facets, the atmosphere (reference density, its altitude, scale height, the Earth's rotation),
+# then FACET_FIELDS rows per facet from ENV_FACETS on.
 ENV_FLAGS, ENV_SUN, ENV_FLUX, ENV_N_FACETS = 24, 25, 28, 29
-ENV_FACETS = 30
-FACET_AREA, FACET_NORMAL, FACET_COP, FACET_SPECULAR, FACET_DIFFUSE = 0, 1, 4, 7, 8
-FACET_FIELDS = 9
-SRP = 1  # bit of ENV_FLAGS
-EFFECTS = ("solar radiation pressure",)  # the order of environment_torques_B's rows
-EFFECT_KEYS = ("srp_torque_B_Nm",)  # their names in `keepout truth`'s file
+ENV_RHO, ENV_H_REF, ENV_SCALE_H, ENV_OMEGA_E = 30, 31, 32, 33
+ENV_FACETS = 46
+FACET_AREA, FACET_NORMAL, FACET_COP, FACET_SPECULAR, FACET_DIFFUSE, FACET_CD = 0, 1, 4, 7, 8, 9
+FACET_FIELDS = 10
+SRP, DRAG = 1, 2  # bits of ENV_FLAGS
+EFFECTS = ("solar radiation pressure", "aerodynamic drag")  # the order of environment_torques_B's rows
+EFFECT_KEYS = ("srp_torque_B_Nm", "drag_torque_B_Nm")  # their names in `keepout truth`'s file
 
 
 def environment_effects(mission) -> list[str]:
     """The names (EFFECTS) of the environment effects a mission (hil_sim.mission.Mission) turns on."""
     dist = mission.spacecraft.disturbance
-    return [name for name, on in zip(EFFECTS, (dist.solar_radiation_pressure,)) if on]
+    return [name for name, on in zip(EFFECTS, (dist.solar_radiation_pressure, dist.aerodynamic_drag)) if on]
 
 
 def environment_rows(params: Sequence[SpacecraftParams]) -> np.ndarray | None:
     """The rows to append to the dynamics' B (ENV_FACETS + FACET_FIELDS * facets, M) for a batch, or None when
     no run has an environment effect on (B is then exactly as without this module)."""
-    flags = [SRP if p.disturbance.solar_radiation_pressure else 0 for p in params]
+    flags = [(SRP if p.disturbance.solar_radiation_pressure else 0) | (DRAG if p.disturbance.aerodynamic_drag else 0)
+             for p in params]
     if not any(flags):
         return None
     n_facets = max(len(p.facets) for p in params)
@@ -62,6 +75,9 @@ def environment_rows(params: Sequence[SpacecraftParams]) -> np.ndarray | None:
         rows[ENV_FLAGS, m] = flags[m]
         rows[ENV_FLUX, m] = p.disturbance.solar_flux_W_m2
         rows[ENV_N_FACETS, m] = len(p.facets)
+        d = p.disturbance
+        rows[ENV_RHO:ENV_OMEGA_E + 1, m] = (d.atmosphere_density_kg_m3, d.atmosphere_reference_altitude_km,
+                                            d.atmosphere_scale_height_km, EARTH_ROTATION_RAD_S)
         for k, f in enumerate(p.facets):
             o = ENV_FACETS + FACET_FIELDS * k
             rows[o + FACET_AREA, m] = f.area_m2
@@ -69,6 +85,7 @@ def environment_rows(params: Sequence[SpacecraftParams]) -> np.ndarray | None:
             rows[o + FACET_COP:o + FACET_COP + 3, m] = f.centre_of_pressure_B_m
             rows[o + FACET_SPECULAR, m] = f.specular
             rows[o + FACET_DIFFUSE, m] = f.diffuse
+            rows[o + FACET_CD, m] = f.drag_coefficient
     return rows[ENV_FLAGS:]
 
 
@@ -120,16 +137,54 @@ def srp_torque(B, m, q0, q1, q2, q3, rx, ry, rz):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def drag_torque(B, m, q0, q1, q2, q3, rx, ry, rz, vx, vy, vz):
+    """The aerodynamic drag torque [N m] in body axes on run m at attitude q, position r [km] and inertial
+    velocity v [km/s]."""
+    w = B[ENV_OMEGA_E, m]
+    # the velocity relative to the co-rotating air, m/s: v - omega_E z x r
+    ax, ay, az = 1e3 * (vx + w * ry), 1e3 * (vy - w * rx), 1e3 * vz
+    speed = math.sqrt(ax * ax + ay * ay + az * az)
+    tx = ty = tz = 0.0
+    if speed <= 1e-12:
+        return tx, ty, tz
+    ux, uy, uz = to_body(q0, q1, q2, q3, ax / speed, ay / speed, az / speed)
+    h = math.sqrt(rx * rx + ry * ry + rz * rz) - EARTH_RADIUS_KM
+    dynamic = 0.5 * B[ENV_RHO, m] * math.exp(-(h - B[ENV_H_REF, m]) / B[ENV_SCALE_H, m]) * speed * speed
+    for k in range(int(B[ENV_N_FACETS, m])):
+        o = ENV_FACETS + FACET_FIELDS * k
+        cos = B[o + FACET_NORMAL, m] * ux + B[o + FACET_NORMAL + 1, m] * uy + B[o + FACET_NORMAL + 2, m] * uz
+        if cos <= 0.0:
+            continue  # in the facet's wake
+        f = -dynamic * B[o + FACET_CD, m] * B[o + FACET_AREA, m] * cos
+        fx, fy, fz = f * ux, f * uy, f * uz
+        cx, cy, cz = B[o + FACET_COP, m], B[o + FACET_COP + 1, m], B[o + FACET_COP + 2, m]
+        tx += cy * fz - cz * fy
+        ty += cz * fx - cx * fz
+        tz += cx * fy - cy * fx
+    return tx, ty, tz
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _effect_torque(effect, B, ORB, m, t_s, q0, q1, q2, q3, r):
+    """Effect ``effect`` (an index of EFFECTS) on run m; r: its position at t_s [km]."""
+    if effect == 0:
+        return srp_torque(B, m, q0, q1, q2, q3, r[0], r[1], r[2])
+    vx, vy, vz = orbit_velocity_row_N_km_s(ORB, m, t_s)
+    return drag_torque(B, m, q0, q1, q2, q3, r[0], r[1], r[2], vx, vy, vz)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def add_environment_torque(X, B, ORB, m, t_s, r, tau):
     """tau[:, m] += the environment torques of run m at t_s (state X[:, m]); r: scratch (3,)."""
     flags = int(B[ENV_FLAGS, m])
     orbit_position_row_N_km(ORB, m, t_s, r)
     q0, q1, q2, q3 = X[0, m], X[1, m], X[2, m], X[3, m]
-    if flags & SRP:
-        tx, ty, tz = srp_torque(B, m, q0, q1, q2, q3, r[0], r[1], r[2])
-        tau[0, m] += tx
-        tau[1, m] += ty
-        tau[2, m] += tz
+    for effect in range(len(EFFECTS)):
+        if flags & (1 << effect):
+            tx, ty, tz = _effect_torque(effect, B, ORB, m, t_s, q0, q1, q2, q3, r)
+            tau[0, m] += tx
+            tau[1, m] += ty
+            tau[2, m] += tz
 
 
 @njit(cache=True, error_model="numpy")
@@ -141,6 +196,8 @@ def environment_torques_B(X, B, ORB, t_s, out):
         flags = int(B[ENV_FLAGS, m])
         orbit_position_row_N_km(ORB, m, t_s, r)
         q0, q1, q2, q3 = X[0, m], X[1, m], X[2, m], X[3, m]
-        out[m, 0, 0] = out[m, 0, 1] = out[m, 0, 2] = 0.0
-        if flags & SRP:
-            out[m, 0, 0], out[m, 0, 1], out[m, 0, 2] = srp_torque(B, m, q0, q1, q2, q3, r[0], r[1], r[2])
+        for effect in range(len(EFFECTS)):
+            out[m, effect, 0] = out[m, effect, 1] = out[m, effect, 2] = 0.0
+            if flags & (1 << effect):
+                out[m, effect, 0], out[m, effect, 1], out[m, effect, 2] = _effect_torque(
+                    effect, B, ORB, m, t_s, q0, q1, q2, q3, r)

@@ -147,6 +147,16 @@ class Disturbance(_Model):
     solar_flux_W_m2: float = Field(1361.0, ge=1300, le=1420, description="solar flux at 1 AU [W/m^2] (1361: the "
                                    "total solar irradiance at solar minimum, Kopp & Lean 2011; it varies by ~0.1 % "
                                    "over a solar cycle and ~3 % over the year with the distance, which is modelled)")
+    aerodynamic_drag: bool = Field(False, description="add the aerodynamic drag torque on spacecraft.facets "
+                                   "(hil_sim.environment): an exponential atmosphere rotating with the Earth")
+    atmosphere_density_kg_m3: float = Field(6.967e-13, gt=0, le=1e-6, description="the atmosphere's density at "
+                                            "atmosphere_reference_altitude_km [kg/m^3] (default: 500 km, moderate "
+                                            "solar activity, Vallado's table 8-4; it varies ~10x over a solar "
+                                            "cycle at 550 km)")
+    atmosphere_reference_altitude_km: float = Field(500.0, ge=100, le=2000, description="altitude of that "
+                                                    "density above the equatorial radius [km]")
+    atmosphere_scale_height_km: float = Field(63.822, gt=1, le=1000, description="scale height H: the density "
+                                              "is that density times exp(-(h - reference altitude) / H) [km]")
 
 
 class Facet(_Model):
@@ -160,6 +170,8 @@ class Facet(_Model):
                                                         "from the centre of mass, in body axes [m]")
     specular: float = Field(0.0, ge=0, le=1, description="specular reflection coefficient")
     diffuse: float = Field(0.0, ge=0, le=1, description="diffuse reflection coefficient")
+    drag_coefficient: float = Field(2.2, ge=0, le=10, description="drag coefficient C_D (2.0-2.5 for a flat "
+                                    "plate in free-molecular flow)")
 
     @field_validator("normal_B")
     @classmethod
@@ -204,7 +216,8 @@ class SpacecraftTruth(_Model):
     door: DoorTruth | None = Field(None, description="a protective aperture door in front of the instrument "
                                    "(absent: no door, nothing of it on the bus)")
     facets: list[Facet] = Field([], max_length=64, description="the outer surfaces, for the environment torques "
-                                "(disturbance.solar_radiation_pressure); none: no such torque can be computed")
+                                "(disturbance.solar_radiation_pressure, aerodynamic_drag); none: no such torque can "
+                                "be computed")
 
     @field_validator("inertia_B_kgm2")
     @classmethod
@@ -433,10 +446,11 @@ class Mission(_Model):
             out.append((("spacecraft", "wheels"), "the wheel axes do not span 3 axes: some body torques "
                         "cannot be produced"))
         dist = self.spacecraft.disturbance
-        if dist.solar_radiation_pressure and not self.spacecraft.facets:
-            out.append((("spacecraft", "disturbance", "solar_radiation_pressure"), "solar radiation pressure acts "
-                        "on the spacecraft's surfaces: give them as spacecraft.facets (area_m2, normal_B, "
-                        "centre_of_pressure_B_m, specular, diffuse), or set it false"))
+        for key, what in (("solar_radiation_pressure", "solar radiation pressure"), ("aerodynamic_drag", "drag")):
+            if getattr(dist, key) and not self.spacecraft.facets:
+                out.append((("spacecraft", "disturbance", key), f"{what} acts on the spacecraft's surfaces: give "
+                            "them as spacecraft.facets (area_m2, normal_B, centre_of_pressure_B_m, specular, "
+                            "diffuse, drag_coefficient), or set it false"))
         if self.orbit.semi_major_axis_km * (1 - self.orbit.eccentricity) < EARTH_RADIUS_KM + 150:
             out.append((("orbit",), f"perigee radius {self.orbit.semi_major_axis_km * (1 - self.orbit.eccentricity):.1f} km "
                         f"is below {EARTH_RADIUS_KM + 150:.0f} km (150 km altitude): the orbit hits the atmosphere"))
@@ -598,11 +612,15 @@ def world_params(mission: Mission) -> "WorldParams":
                                       random_correlation_time_s=sc.disturbance.random_correlation_time_s,
                                       gravity_gradient=sc.disturbance.gravity_gradient,
                                       solar_radiation_pressure=sc.disturbance.solar_radiation_pressure,
-                                      solar_flux_W_m2=sc.disturbance.solar_flux_W_m2),
+                                      solar_flux_W_m2=sc.disturbance.solar_flux_W_m2,
+                                      aerodynamic_drag=sc.disturbance.aerodynamic_drag,
+                                      atmosphere_density_kg_m3=sc.disturbance.atmosphere_density_kg_m3,
+                                      atmosphere_reference_altitude_km=sc.disturbance.atmosphere_reference_altitude_km,
+                                      atmosphere_scale_height_km=sc.disturbance.atmosphere_scale_height_km),
         q_NB0=tuple(mission.initial_state.q_NB), omega_BN_B0_rad_s=tuple(mission.initial_state.omega_BN_B_rad_s),
         facets=tuple(FacetParams(area_m2=f.area_m2, normal_B=tuple(f.normal_B),
                                  centre_of_pressure_B_m=tuple(f.centre_of_pressure_B_m), specular=f.specular,
-                                 diffuse=f.diffuse) for f in sc.facets))
+                                 diffuse=f.diffuse, drag_coefficient=f.drag_coefficient) for f in sc.facets))
     imu = sc.imu
     st = sc.star_tracker
     orbit = mission.orbit
@@ -687,9 +705,9 @@ SUFFIX_UNITS = (("_rad_per_sqrt_s", "rad/sqrt(s)"), ("_rad_s_per_sqrt_s", "rad/s
                 ("_rad_s_sqrt_hz", "rad/s/sqrt(Hz)"), ("_rad_s2_sqrt_hz", "rad/s^2/sqrt(Hz)"),
                 ("_Nm_per_rad_s", "N m s/rad"), ("_deg_s3", "deg/s^3"), ("_deg_s2", "deg/s^2"), ("_deg_s", "deg/s"),
                 ("_rad_s", "rad/s"), ("_1_s", "1/s"), ("_arcsec", "arcsec"), ("_deg", "deg"), ("_rad", "rad"),
-                ("_kgm2", "kg m^2"), ("_Nm", "N m"), ("_km", "km"), ("_W_m2", "W/m^2"), ("_m2", "m^2"), ("_m", "m"),
-                ("_hz", "Hz"), ("_Hz", "Hz"), ("_ppm", "ppm"),
-                ("_bps", "bit/s"), ("_utc", "UTC"), ("_s", "s"))
+                ("_kg_m3", "kg/m^3"), ("_kgm2", "kg m^2"), ("_Nm", "N m"), ("_km", "km"), ("_W_m2", "W/m^2"),
+                ("_m2", "m^2"), ("_m", "m"), ("_hz", "Hz"), ("_Hz", "Hz"), ("_ppm", "ppm"), ("_bps", "bit/s"),
+                ("_utc", "UTC"), ("_s", "s"))
 # longest suffix first
 UNIT_SUFFIXES: tuple[tuple[str, str], ...] = tuple(sorted(SUFFIX_UNITS, key=lambda item: -len(item[0])))
 # Units a value may have been typed in by mistake, per unit of the key: (name, factor to the key's unit).

@@ -72,12 +72,15 @@ writes the rows). With `solar_radiation_pressure: true` and the spacecraft's sur
 diffuse coefficients; the rest is absorbed), the solar-radiation-pressure torque on each lit facet, zero in the
 Earth's umbra and scaled by the sunlit fraction in the penumbra (it agrees with Basilisk 2.12's
 facetSRPDynamicEffector to rounding, torque for torque, and to 5e-14 rad over a sunlit arc:
-`tests/hil_sim/test_srp.py`; [environment.md](environment.md) has a worked budget). Drag and a magnetic dipole
-are not in the truth models yet; the budget says so. `keepout truth FILE --duration S --out truth.npz` propagates the truth models alone (no
+`tests/hil_sim/test_srp.py`). With `aerodynamic_drag: true`, the drag torque on the same facets (each with
+its `drag_coefficient`) in an exponential atmosphere rotating with the Earth (`atmosphere_*` keys; Basilisk's
+facetDragDynamicEffector with exponentialAtmosphere and zeroWindModel to rounding, torque for torque:
+`tests/hil_sim/test_drag.py`). [environment.md](environment.md) has the models, their checks and a worked
+budget. A magnetic dipole is not in the truth models yet; the budget says so. `keepout truth FILE --duration S --out truth.npz` propagates the truth models alone (no
 flight software, wheel motors commanding zero) and writes the SIL's truth.npz layout plus the inertial
 angular momentum `H_N_Nms` and `sunlit_fraction` (the share of the Sun's disc seen past the Earth: the
 conical umbra and penumbra, as Basilisk's eclipse module computes them) and each environment torque turned
-on (`srp_torque_B_Nm`), with a summary: attitude drift, largest body rate, the momentum the disturbances added,
+on (`srp_torque_B_Nm`, `drag_torque_B_Nm`), with a summary: attitude drift, largest body rate, the momentum the disturbances added,
 the time in the Earth's shadow and each environment torque's peak.
 
 In the tables, *required* means the key has no default; a range `(a, b]` excludes a and includes b.

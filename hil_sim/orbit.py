@@ -46,10 +46,9 @@ def orbit_position_N_km(elements, t_s, out):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def orbit_position_row_N_km(ORB, m, t_s, out):
-    """Position of run m (row m of the packed elements ORB) at t into out[0:3]; Kepler's equation by Newton
-    to 1e-14 rad (skipped for a circular orbit, where E = M)."""
-    a = ORB[m, 0]
+def _eccentric_anomaly(ORB, m, t_s):
+    """Run m's eccentric anomaly at t: Kepler's equation by Newton to 1e-14 rad (skipped for a circular
+    orbit, where E = M)."""
     e = ORB[m, 1]
     M = ORB[m, 3] + ORB[m, 2] * t_s
     M -= 2.0 * math.pi * math.floor(M / (2.0 * math.pi))
@@ -60,6 +59,29 @@ def orbit_position_row_N_km(ORB, m, t_s, out):
         E -= dE
         if abs(dE) < 1e-14:
             break
+    return E
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def orbit_velocity_row_N_km_s(ORB, m, t_s):
+    """Velocity (vx, vy, vz) of run m (row m of the packed elements ORB) at t, km/s (a tuple: no allocation
+    at every integration stage)."""
+    a = ORB[m, 0]
+    e = ORB[m, 1]
+    E = _eccentric_anomaly(ORB, m, t_s)
+    E_dot = ORB[m, 2] / (1.0 - e * math.cos(E))
+    xp = -a * math.sin(E) * E_dot
+    yp = a * math.sqrt(1.0 - e * e) * math.cos(E) * E_dot
+    return (ORB[m, 4] * xp + ORB[m, 5] * yp, ORB[m, 7] * xp + ORB[m, 8] * yp, ORB[m, 10] * xp + ORB[m, 11] * yp)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def orbit_position_row_N_km(ORB, m, t_s, out):
+    """Position of run m (row m of the packed elements ORB) at t into out[0:3]; Kepler's equation by Newton
+    to 1e-14 rad (skipped for a circular orbit, where E = M)."""
+    a = ORB[m, 0]
+    e = ORB[m, 1]
+    E = _eccentric_anomaly(ORB, m, t_s)
     xp = a * (math.cos(E) - e)
     yp = a * math.sqrt(1.0 - e * e) * math.sin(E)
     for j in range(3):
@@ -87,11 +109,4 @@ class KeplerOrbit:
 
     def velocity_N_km_s(self, t_s: float) -> np.ndarray:
         """Analytic two-body velocity at t."""
-        a, e, n = self.elements[0], self.elements[1], self.elements[2]
-        M = self.elements[3] + n * t_s
-        E = M
-        for _ in range(50):
-            E -= (E - e * math.sin(E) - M) / (1.0 - e * math.cos(E))
-        Edot = n / (1.0 - e * math.cos(E))
-        vp = np.array([-a * math.sin(E) * Edot, a * math.sqrt(1 - e * e) * math.cos(E) * Edot, 0.0])
-        return self.elements[4:13].reshape(3, 3) @ vp
+        return np.array(orbit_velocity_row_N_km_s(self.elements.reshape(1, -1), 0, float(t_s)))

@@ -123,26 +123,37 @@ class DisturbanceParams:
     # scaled by the sunlit fraction in the penumbra (hil_sim.environment).
     solar_radiation_pressure: bool = False
     solar_flux_W_m2: float = 1361.0  # at 1 AU (total solar irradiance, Kopp & Lean 2011)
+    # Aerodynamic drag on the facets in an exponential atmosphere rotating with the Earth:
+    # rho = atmosphere_density_kg_m3 exp(-(h - atmosphere_reference_altitude_km) / atmosphere_scale_height_km),
+    # the defaults the 500-600 km band of Vallado's table 8-4 (Fundamentals of Astrodynamics, 4th ed.).
+    aerodynamic_drag: bool = False
+    atmosphere_density_kg_m3: float = 6.967e-13
+    atmosphere_reference_altitude_km: float = 500.0
+    atmosphere_scale_height_km: float = 63.822
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "constant_B_Nm", _vec(self.constant_B_Nm, 3, "disturbance.constant_B_Nm"))
         object.__setattr__(self, "random_std_Nm", _nonneg(self.random_std_Nm, "disturbance.random_std_Nm"))
         object.__setattr__(self, "random_correlation_time_s",
                            _nonneg(self.random_correlation_time_s, "disturbance.random_correlation_time_s"))
-        object.__setattr__(self, "solar_flux_W_m2", _positive(self.solar_flux_W_m2, "disturbance.solar_flux_W_m2"))
+        for name in ("solar_flux_W_m2", "atmosphere_density_kg_m3", "atmosphere_scale_height_km"):
+            object.__setattr__(self, name, _positive(getattr(self, name), f"disturbance.{name}"))
+        name = "atmosphere_reference_altitude_km"
+        object.__setattr__(self, name, _nonneg(getattr(self, name), f"disturbance.{name}"))
 
 
 @dataclass(frozen=True)
 class FacetParams:
     """One flat surface of the spacecraft for the environment torques: its area, outward unit normal and
     centre of pressure (from the centre of mass) in body axes, and its optical coefficients (specular,
-    diffuse; the rest of the light is absorbed)."""
+    diffuse; the rest of the light is absorbed) and drag coefficient."""
 
     area_m2: float
     normal_B: tuple[float, float, float]
     centre_of_pressure_B_m: tuple[float, float, float]
     specular: float = 0.0
     diffuse: float = 0.0
+    drag_coefficient: float = 2.2  # C_D of a flat plate in free-molecular flow, the usual 2.0-2.5
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "area_m2", _positive(self.area_m2, "facet.area_m2"))
@@ -157,6 +168,7 @@ class FacetParams:
             if value > 1.0:
                 raise ValueError(f"facet.{name}: must be within [0, 1], got {value!r}")
             object.__setattr__(self, name, value)
+        object.__setattr__(self, "drag_coefficient", _nonneg(self.drag_coefficient, "facet.drag_coefficient"))
         if self.specular + self.diffuse > 1.0:
             raise ValueError(f"facet: specular + diffuse = {self.specular + self.diffuse:g} exceeds 1 "
                              "(the absorbed share is 1 - specular - diffuse)")
@@ -202,8 +214,8 @@ class SpacecraftParams:
         if not all(isinstance(f, FacetParams) for f in facets):
             raise ValueError("spacecraft.facets: each entry must be a FacetParams or a dict of its fields")
         object.__setattr__(self, "facets", facets)
-        if self.disturbance.solar_radiation_pressure and not facets:
-            raise ValueError("spacecraft.facets: solar radiation pressure needs the spacecraft's facets")
+        if (self.disturbance.solar_radiation_pressure or self.disturbance.aerodynamic_drag) and not facets:
+            raise ValueError("spacecraft.facets: solar radiation pressure and drag need the spacecraft's facets")
 
 
 @dataclass(frozen=True)

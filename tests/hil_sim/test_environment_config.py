@@ -45,6 +45,7 @@ def _problems(data: dict, tmp_path: Path) -> list[str]:
     ("area_m2", -0.2, "facets[1].area_m2: Input should be greater than 0 m^2"),
     ("normal_B", [0.0, 0.9, 0.0], "facets[1].normal_B: the normal's norm is 0.9; give the outward unit normal"),
     ("specular", 0.8, "facets[1]: specular + diffuse = 1.1 exceeds 1"),
+    ("drag_coefficient", -1.0, "facets[1].drag_coefficient: Input should be greater than or equal to 0"),
 ])
 def test_an_unphysical_facet_is_refused_at_its_key(tmp_path, key, value, says) -> None:
     data = _smallsat(solar_radiation_pressure=True)
@@ -56,11 +57,12 @@ def test_an_unphysical_facet_is_refused_at_its_key(tmp_path, key, value, says) -
     assert line.split(":")[1].isdigit() and line.split(":")[2].split()[0].isdigit()  # file:line:col
 
 
-def test_pressure_without_facets_is_refused_with_the_fix(tmp_path) -> None:
-    data = _smallsat(solar_radiation_pressure=True)
+@pytest.mark.parametrize("key", ["solar_radiation_pressure", "aerodynamic_drag"])
+def test_an_effect_on_facets_without_facets_is_refused_with_the_fix(tmp_path, key) -> None:
+    data = _smallsat(**{key: True})
     data["spacecraft"]["facets"] = []
     (line,) = _problems(data, tmp_path)
-    assert "spacecraft.disturbance.solar_radiation_pressure" in line and "give them as spacecraft.facets" in line
+    assert f"spacecraft.disturbance.{key}" in line and "give them as spacecraft.facets" in line
 
 
 def test_a_dipole_of_nan_and_an_orbit_in_the_atmosphere_are_refused(tmp_path) -> None:
@@ -126,18 +128,45 @@ def test_the_budget_row_is_the_kernel_and_the_kernel_the_formula() -> None:
     np.testing.assert_allclose(orbit.momentum_end_B_Nms, h, rtol=1e-12)
     assert ("solar radiation pressure", "day") in rows
     off = {r.effect for r in budget(Mission.model_validate(_smallsat()))}
-    assert "solar radiation pressure" not in off
+    assert "solar radiation pressure" not in off and "aerodynamic drag" not in off
+
+
+def test_the_budget_drag_row_is_the_formula_in_co_rotating_air() -> None:
+    from hil_sim.budget import _environment_torques, budget
+    from hil_sim.orbit import KeplerOrbit
+
+    mission = Mission.model_validate(_smallsat(aerodynamic_drag=True))
+    wp = world_params(mission)
+    t = np.array([0.0, 2000.0])
+    ours = _environment_torques(mission, t)[:, 1]
+    q0, *qv = wp.spacecraft.q_NB0
+    qv = np.asarray(qv)
+    R = (q0 * q0 - qv @ qv) * np.eye(3) + 2 * np.outer(qv, qv) + 2 * q0 * np.array(
+        [[0, -qv[2], qv[1]], [qv[2], 0, -qv[0]], [-qv[1], qv[0], 0]])  # body -> N
+    orbit = KeplerOrbit(wp.orbit)
+    for k, tk in enumerate(t.tolist()):
+        r, v = orbit.position_N_km(tk), orbit.velocity_N_km_s(tk)
+        v_rel = 1e3 * (v - np.cross([0.0, 0.0, 7.292115e-5], r))
+        rho = 6.967e-13 * np.exp(-(np.linalg.norm(r) - 6378.137 - 500.0) / 63.822)
+        u = R.T @ v_rel / np.linalg.norm(v_rel)
+        tau = sum(np.cross(f["centre_of_pressure_B_m"], -0.5 * rho * (v_rel @ v_rel) * 2.2 * f["area_m2"]
+                           * (np.asarray(f["normal_B"]) @ u) * u) for f in BOX if np.asarray(f["normal_B"]) @ u > 0)
+        np.testing.assert_allclose(ours[k], tau, rtol=1e-10, atol=1e-22)
+    assert np.linalg.norm(ours, axis=1).min() > 1e-9
+    assert {("aerodynamic drag", "orbit"), ("aerodynamic drag", "day")} <= {(r.effect, r.span) for r in budget(mission)}
 
 
 def test_truth_records_the_torque_the_world_applies(tmp_path) -> None:
     from hil_sim.truth_cli import propagate, summary
 
-    on = Mission.model_validate(_smallsat(solar_radiation_pressure=True))
+    on = Mission.model_validate(_smallsat(solar_radiation_pressure=True, aerodynamic_drag=True))
     truth = propagate(on, 60.0, 10.0)
+    assert np.linalg.norm(truth["drag_torque_B_Nm"], axis=1).min() > 1e-9
     assert truth["srp_torque_B_Nm"].shape == (7, 3) and np.linalg.norm(truth["srp_torque_B_Nm"], axis=1).min() > 1e-9
     assert summary(truth)["srp_torque_B_Nm_peak"] == pytest.approx(np.linalg.norm(truth["srp_torque_B_Nm"], axis=1).max())
     # the torque changes the motion: without it the momentum differs by about its integral
     off = propagate(Mission.model_validate(_smallsat()), 60.0, 10.0)
     assert "srp_torque_B_Nm" not in off
     dh = np.linalg.norm(truth["H_N_Nms"][-1] - off["H_N_Nms"][-1])
-    assert dh == pytest.approx(60.0 * np.linalg.norm(truth["srp_torque_B_Nm"].mean(axis=0)), rel=0.05)
+    tau = truth["srp_torque_B_Nm"] + truth["drag_torque_B_Nm"]
+    assert dh == pytest.approx(60.0 * np.linalg.norm(tau.mean(axis=0)), rel=0.05)

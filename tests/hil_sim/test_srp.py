@@ -67,12 +67,16 @@ def test_the_torque_is_basilisks_on_600_geometries(inputs) -> None:
     assert np.all(ours[factor == 0] == 0.0)
 
 
-def _propagate(inputs: dict, times: np.ndarray, srp: bool = True) -> np.ndarray:
-    """q_NB at ``times`` for the reference's spacecraft, orbit and fixed Sun: the dynamics step itself, with
-    Basilisk's step (RK4, 0.1 s)."""
-    G, W, B, X = dyn.pack_spacecraft([_spacecraft(inputs, srp)])
-    if srp:
-        env.hold_sun(B, np.asarray(inputs["sun_N_km"]))
+def _propagate(inputs: dict, times: np.ndarray, sc: SpacecraftParams, earth_rotation_rad_s: float | None = None
+               ) -> np.ndarray:
+    """q_NB and omega_BN_B at ``times`` for spacecraft ``sc`` on the reference's orbit (and fixed Sun): the
+    dynamics step itself, with Basilisk's step (RK4, 0.1 s). ``earth_rotation_rad_s``: the air's, if not the
+    Earth's."""
+    G, W, B, X = dyn.pack_spacecraft([sc])
+    if B.shape[0] > dyn.B_FIELDS:
+        env.hold_sun(B, np.asarray(inputs.get("sun_N_km", [1.5e8, 0.0, 0.0])))
+        if earth_rotation_rad_s is not None:
+            B[env.ENV_OMEGA_E] = earth_rotation_rad_s
     o = inputs["orbit"]
     orb = orbit_elements_array(OrbitParams(
         semi_major_axis_km=inputs["earth_radius_m"] / 1e3 + o["altitude_km"], eccentricity=0.0,
@@ -95,7 +99,7 @@ def test_one_orbit_through_the_shadow_matches_basilisk(inputs) -> None:
     ref = np.loadtxt(DATA / "srp_reference.csv", delimiter=",", skiprows=1)
     t, q_ref, w_ref, shadow = ref[:, 0], ref[:, 1:5], ref[:, 5:8], ref[:, 11]
     assert (shadow == 0).sum() > 100 and (shadow == 1).sum() > 100
-    ours = _propagate(inputs, t)
+    ours = _propagate(inputs, t, _spacecraft(inputs))
     att = np.array([attitude_error_angle(a, b) for a, b in zip(ours[:, 0:4], q_ref)])
     rate = np.abs(ours[:, 4:7] - w_ref).max(axis=1)
     # Up to the first shadow entry the models are the same (the Sun held, the facets, the step): agreement to
@@ -113,5 +117,5 @@ def test_one_orbit_through_the_shadow_matches_basilisk(inputs) -> None:
     assert rate.max() < 2e-8, f"body rate differs by {rate.max():.3e} rad/s"
     assert att.max() < 5e-5, f"attitude differs by {att.max():.3e} rad"
     # and the effect is there to see: without it the attitude is off by far more
-    plain = _propagate(inputs, t[[0, -1]], srp=False)
+    plain = _propagate(inputs, t[[0, -1]], _spacecraft(inputs, srp=False))
     assert attitude_error_angle(plain[-1, 0:4], q_ref[-1]) > 100 * att.max()
