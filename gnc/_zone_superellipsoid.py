@@ -147,9 +147,6 @@ def _fgh(x, geom, w, dim, n, G, H, wk):
     q = geom[0]
     e = geom[1]
     mode = int(geom[2])
-    ob = 3 + dim
-    oa = 3 + dim + 2 * dim * n
-    nn = n * n
     # scratch layout
     s = wk[0:3]
     Ds = wk[3:12]      # [k*n + l]
@@ -162,46 +159,13 @@ def _fgh(x, geom, w, dim, n, G, H, wk):
     Bty = wk[56:59]
     Mm = wk[60:69]     # diag(a) Ds, [k*n + l]
     if mode != 1:
-        floor = 1e-300 if e >= 2.0 else _W_FLOOR
-        for k in range(n):
-            aw = max(abs(w[k]), floor)
-            sg = 1.0 if w[k] >= 0.0 else -1.0
-            v = _pow(aw, e, mode)
-            s[k] = sg * v
-            d1 = e * v / aw
-            Ds[k] = d1                       # diagonal only
-            D2[k] = sg * (e - 1.0) * d1 / aw
+        _s_power(w, e, mode, n, s, Ds, D2)
     else:
-        acc = 0.0
-        for k in range(n):
-            acc += abs(w[k]) ** q
-        N = acc ** (1.0 / q)
-        Nl = wk[69:72]
-        for k in range(n):
-            sg = 1.0 if w[k] >= 0.0 else -1.0
-            Nl[k] = sg * abs(w[k]) ** (q - 1.0) * N ** (1.0 - q)
-            s[k] = w[k] / N
-        N2 = N * N
-        N3 = N2 * N
-        for k in range(n):
-            for l in range(n):
-                Ds[k * n + l] = (1.0 / N if k == l else 0.0) - w[k] * Nl[l] / N2
-        for k in range(n):
-            for l in range(n):
-                for m in range(n):
-                    Nlm = (1.0 - q) * Nl[l] * Nl[m] / N
-                    if l == m:
-                        Nlm += (q - 1.0) * max(abs(w[l]), _W_FLOOR) ** (q - 2.0) * N ** (1.0 - q)
-                    v = -w[k] * Nlm / N2 + 2.0 * w[k] * Nl[l] * Nl[m] / N3
-                    if k == l:
-                        v -= Nl[m] / N2
-                    if k == m:
-                        v -= Nl[l] / N2
-                    D2[k * nn + l * n + m] = v
+        _s_radial(w, q, n, s, Ds, D2, wk[69:72])
     yy = 0.0
     F = 0.0
     for i in range(dim):
-        r = ob + i * n
+        r = 3 + dim + i * n
         v = geom[3 + i]
         for k in range(n):
             v += geom[r + k] * s[k]
@@ -210,6 +174,64 @@ def _fgh(x, geom, w, dim, n, G, H, wk):
         F += x[i] * v
     ny = math.sqrt(yy)
     F /= ny
+    _b_projections(x, geom, y, F, ny, dim, n, Btx, Bty, Btg)
+    inv = 1.0 / yy
+    if mode != 1:
+        _gh_power(geom, Ds, D2, Btx, Bty, Btg, F, inv, dim, n, G, H, Jx, Jy)
+    else:
+        _gh_radial(geom, Ds, D2, Btx, Bty, Btg, F, inv, dim, n, G, H, Jx, Jy, Mm)
+    return F
+
+
+@njit(cache=True, inline="always")
+def _s_power(w, e, mode, n, s, Ds, D2):
+    """s_k = sign(w_k) |w_k|^e (modes 0 and 2) and its derivatives, both diagonal: Ds[k], D2[k]."""
+    floor = 1e-300 if e >= 2.0 else _W_FLOOR
+    for k in range(n):
+        aw = max(abs(w[k]), floor)
+        sg = 1.0 if w[k] >= 0.0 else -1.0
+        v = _pow(aw, e, mode)
+        s[k] = sg * v
+        d1 = e * v / aw
+        Ds[k] = d1                       # diagonal only
+        D2[k] = sg * (e - 1.0) * d1 / aw
+
+
+@njit(cache=True, inline="always")
+def _s_radial(w, q, n, s, Ds, D2, Nl):
+    """s = w / ||w||_q (mode 1), its Jacobian Ds[k*n + l] and second derivatives D2[k*nn + l*n + m];
+    Nl: scratch for the gradient of ||w||_q."""
+    nn = n * n
+    acc = 0.0
+    for k in range(n):
+        acc += abs(w[k]) ** q
+    N = acc ** (1.0 / q)
+    for k in range(n):
+        sg = 1.0 if w[k] >= 0.0 else -1.0
+        Nl[k] = sg * abs(w[k]) ** (q - 1.0) * N ** (1.0 - q)
+        s[k] = w[k] / N
+    N2 = N * N
+    N3 = N2 * N
+    for k in range(n):
+        for l in range(n):
+            Ds[k * n + l] = (1.0 / N if k == l else 0.0) - w[k] * Nl[l] / N2
+    for k in range(n):
+        for l in range(n):
+            for m in range(n):
+                Nlm = (1.0 - q) * Nl[l] * Nl[m] / N
+                if l == m:
+                    Nlm += (q - 1.0) * max(abs(w[l]), _W_FLOOR) ** (q - 2.0) * N ** (1.0 - q)
+                v = -w[k] * Nlm / N2 + 2.0 * w[k] * Nl[l] * Nl[m] / N3
+                if k == l:
+                    v -= Nl[m] / N2
+                if k == m:
+                    v -= Nl[l] / N2
+                D2[k * nn + l * n + m] = v
+
+
+@njit(cache=True, inline="always")
+def _b_projections(x, geom, y, F, ny, dim, n, Btx, Bty, Btg):
+    """B^T x, B^T yhat and B^T g_y, g_y = (x - f yhat) / |y| (plain B: the columns of the geometry's B)."""
     obb = 3 + dim + dim * n  # plain B
     for k in range(n):
         gx = 0.0
@@ -222,45 +244,54 @@ def _fgh(x, geom, w, dim, n, G, H, wk):
         Btx[k] = gx
         Bty[k] = gy
         Btg[k] = (gx - F * gy) / ny
-    inv = 1.0 / yy
-    if mode != 1:
+
+
+@njit(cache=True, inline="always")
+def _gh_power(geom, Ds, D2, Btx, Bty, Btg, F, inv, dim, n, G, H, Jx, Jy):
+    """G and H for the diagonal Ds and D2 of modes 0 and 2 (J = B diag(a Ds))."""
+    oa = 3 + dim + 2 * dim * n
+    for l in range(n):
+        ml = geom[oa + l] * Ds[l]
+        G[l] = ml * Btg[l]
+        Jx[l] = ml * Btx[l]
+        Jy[l] = ml * Bty[l]
+    for l in range(n):
+        ml = geom[oa + l] * Ds[l]
+        for m in range(n):
+            h = (-(Jx[l] * Jy[m] + Jy[l] * Jx[m]) + 3.0 * F * Jy[l] * Jy[m]) * inv
+            if l == m:
+                h += -F * ml * ml * inv + Btg[l] * geom[oa + l] * D2[l]
+            H[l * n + m] = h
+
+
+@njit(cache=True, inline="always")
+def _gh_radial(geom, Ds, D2, Btx, Bty, Btg, F, inv, dim, n, G, H, Jx, Jy, Mm):
+    """G and H for the full Ds and D2 of mode 1 (Mm = diag(a) Ds, J = B Mm)."""
+    oa = 3 + dim + 2 * dim * n
+    nn = n * n
+    for k in range(n):
         for l in range(n):
-            ml = geom[oa + l] * Ds[l]
-            G[l] = ml * Btg[l]
-            Jx[l] = ml * Btx[l]
-            Jy[l] = ml * Bty[l]
-        for l in range(n):
-            ml = geom[oa + l] * Ds[l]
-            for m in range(n):
-                h = (-(Jx[l] * Jy[m] + Jy[l] * Jx[m]) + 3.0 * F * Jy[l] * Jy[m]) * inv
-                if l == m:
-                    h += -F * ml * ml * inv + Btg[l] * geom[oa + l] * D2[l]
-                H[l * n + m] = h
-    else:
+            Mm[k * n + l] = geom[oa + k] * Ds[k * n + l]
+    for l in range(n):
+        g = 0.0
+        jx = 0.0
+        jy = 0.0
         for k in range(n):
-            for l in range(n):
-                Mm[k * n + l] = geom[oa + k] * Ds[k * n + l]
-        for l in range(n):
-            g = 0.0
-            jx = 0.0
-            jy = 0.0
+            g += Mm[k * n + l] * Btg[k]
+            jx += Mm[k * n + l] * Btx[k]
+            jy += Mm[k * n + l] * Bty[k]
+        G[l] = g
+        Jx[l] = jx
+        Jy[l] = jy
+    for l in range(n):
+        for m in range(n):
+            mtm = 0.0
             for k in range(n):
-                g += Mm[k * n + l] * Btg[k]
-                jx += Mm[k * n + l] * Btx[k]
-                jy += Mm[k * n + l] * Bty[k]
-            G[l] = g
-            Jx[l] = jx
-            Jy[l] = jy
-        for l in range(n):
-            for m in range(n):
-                mtm = 0.0
-                for k in range(n):
-                    mtm += Mm[k * n + l] * Mm[k * n + m]
-                h = (-(Jx[l] * Jy[m] + Jy[l] * Jx[m]) - F * mtm + 3.0 * F * Jy[l] * Jy[m]) * inv
-                for k in range(n):
-                    h += Btg[k] * geom[oa + k] * D2[k * nn + l * n + m]
-                H[l * n + m] = h
-    return F
+                mtm += Mm[k * n + l] * Mm[k * n + m]
+            h = (-(Jx[l] * Jy[m] + Jy[l] * Jx[m]) - F * mtm + 3.0 * F * Jy[l] * Jy[m]) * inv
+            for k in range(n):
+                h += Btg[k] * geom[oa + k] * D2[k * nn + l * n + m]
+            H[l * n + m] = h
 
 
 @njit(cache=True)
@@ -325,66 +356,11 @@ def newton_ascent(x, geom, w0, dim, n, w_out, wk, target):
     for _ in range(100):
         its += 1
         _tangent_basis(w, n, T)
-        wg = 0.0
-        for k in range(n):
-            wg += w[k] * G[k]
-        for i in range(m):
-            acc = 0.0
-            for k in range(n):
-                acc += T[k * m + i] * G[k]
-            gT[i] = acc
-            for j in range(m):
-                acc = 0.0
-                for k in range(n):
-                    tki = T[k * m + i]
-                    for l in range(n):
-                        acc += tki * H[k * n + l] * T[l * m + j]
-                HT[i * m + j] = acc - (wg if i == j else 0.0)
-        newton_step = False
+        _tangent_model(w, G, H, T, n, gT, HT)
         if m == 1:
-            if HT[0] < 0.0:
-                d[0] = -gT[0] / HT[0]
-                newton_step = True
-            else:
-                d[0] = radius if gT[0] >= 0.0 else -radius
+            newton_step = _step_on_circle(gT, HT, radius, d)
         else:
-            # Eigen-decomposition of the symmetric 2x2 Hessian: Newton along directions of negative
-            # curvature, a trust-length ascent step along a direction of non-negative curvature (a
-            # flat ridge into a cusp has one tiny positive eigenvalue; plain gradient steps zigzag).
-            ha = HT[0]
-            hb = 0.5 * (HT[1] + HT[2])
-            hc = HT[3]
-            mid = 0.5 * (ha + hc)
-            disc = math.sqrt(0.25 * (ha - hc) * (ha - hc) + hb * hb)
-            lam1 = mid - disc
-            lam2 = mid + disc
-            if abs(hb) > 1e-300:
-                if abs(lam1 - ha) >= abs(lam1 - hc):
-                    v0, v1 = hb, lam1 - ha
-                else:
-                    v0, v1 = lam1 - hc, hb
-                nv = math.sqrt(v0 * v0 + v1 * v1)
-                v0 /= nv
-                v1 /= nv
-            elif ha <= hc:
-                v0, v1 = 1.0, 0.0
-            else:
-                v0, v1 = 0.0, 1.0
-            g1 = v0 * gT[0] + v1 * gT[1]
-            g2 = -v1 * gT[0] + v0 * gT[1]
-            newton_step = True
-            if lam1 < 0.0:
-                c1 = -g1 / lam1
-            else:
-                c1 = radius if g1 > 0.0 else (-radius if g1 < 0.0 else 0.0)
-                newton_step = False
-            if lam2 < 0.0:
-                c2 = -g2 / lam2
-            else:
-                c2 = radius if g2 > 0.0 else (-radius if g2 < 0.0 else 0.0)
-                newton_step = False
-            d[0] = c1 * v0 - c2 * v1
-            d[1] = c1 * v1 + c2 * v0
+            newton_step = _step_on_sphere(gT, HT, radius, d)
         nd = 0.0
         for i in range(m):
             nd += d[i] * d[i]
@@ -396,23 +372,8 @@ def newton_ascent(x, geom, w0, dim, n, w_out, wk, target):
                 d[i] *= radius / nd
             nd = radius
             newton_step = False
-        nw = 0.0
-        for k in range(n):
-            v = w[k]
-            for i in range(m):
-                v += T[k * m + i] * d[i]
-            w_try[k] = v
-            nw += v * v
-        nw = math.sqrt(nw)
-        for k in range(n):
-            w_try[k] /= nw
-        # Predicted gain of the Newton step, -g^T H^-1 g / 2 = g^T d / 2. For a maximum of any order
-        # p >= 2 (f = f* - c |w - w*|^p, e.g. the nearly degenerate maxima next to a fin, where
-        # Newton is only linear) the remaining error f* - f is at most 2 (p-1)/p <= 2 times the
-        # predicted gain, so a gain below 1e-14 means f is within 2e-14 of the local maximum.
-        gain = 0.0
-        for i in range(m):
-            gain += 0.5 * gT[i] * d[i]
+        _retract(w, T, d, n, w_try)
+        gain = _predicted_gain(gT, d, m)
         converged = newton_step and (nd < 1e-11 or gain < 1e-14)
         # by the same bound this local maximum stays below f + 2 gain: if that cannot beat the best
         # value found so far (target), the run is pointless. Only trusted for short Newton steps
@@ -440,6 +401,109 @@ def newton_ascent(x, geom, w0, dim, n, w_out, wk, target):
     for k in range(n):
         w_out[k] = w[k]
     return f, its
+
+
+@njit(cache=True, inline="always")
+def _tangent_model(w, G, H, T, n, gT, HT):
+    """The Riemannian gradient gT = T^T G and Hessian HT = T^T H T - (w^T G) I in the tangent basis T."""
+    m = n - 1
+    wg = 0.0
+    for k in range(n):
+        wg += w[k] * G[k]
+    for i in range(m):
+        acc = 0.0
+        for k in range(n):
+            acc += T[k * m + i] * G[k]
+        gT[i] = acc
+        for j in range(m):
+            acc = 0.0
+            for k in range(n):
+                tki = T[k * m + i]
+                for l in range(n):
+                    acc += tki * H[k * n + l] * T[l * m + j]
+            HT[i * m + j] = acc - (wg if i == j else 0.0)
+
+
+@njit(cache=True, inline="always")
+def _step_on_circle(gT, HT, radius, d):
+    """The step d on S^1: Newton where the curvature is negative, else the trust length uphill. Returns
+    whether it is a Newton step."""
+    if HT[0] < 0.0:
+        d[0] = -gT[0] / HT[0]
+        return True
+    d[0] = radius if gT[0] >= 0.0 else -radius
+    return False
+
+
+@njit(cache=True, inline="always")
+def _step_on_sphere(gT, HT, radius, d):
+    """The step d on S^2, from the eigen-decomposition of the symmetric 2x2 Hessian: Newton along directions
+    of negative curvature, a trust-length ascent step along a direction of non-negative curvature (a flat
+    ridge into a cusp has one tiny positive eigenvalue; plain gradient steps zigzag). Returns whether it is
+    a Newton step (negative curvature both ways)."""
+    ha = HT[0]
+    hb = 0.5 * (HT[1] + HT[2])
+    hc = HT[3]
+    mid = 0.5 * (ha + hc)
+    disc = math.sqrt(0.25 * (ha - hc) * (ha - hc) + hb * hb)
+    lam1 = mid - disc
+    lam2 = mid + disc
+    if abs(hb) > 1e-300:
+        if abs(lam1 - ha) >= abs(lam1 - hc):
+            v0, v1 = hb, lam1 - ha
+        else:
+            v0, v1 = lam1 - hc, hb
+        nv = math.sqrt(v0 * v0 + v1 * v1)
+        v0 /= nv
+        v1 /= nv
+    elif ha <= hc:
+        v0, v1 = 1.0, 0.0
+    else:
+        v0, v1 = 0.0, 1.0
+    g1 = v0 * gT[0] + v1 * gT[1]
+    g2 = -v1 * gT[0] + v0 * gT[1]
+    newton_step = True
+    if lam1 < 0.0:
+        c1 = -g1 / lam1
+    else:
+        c1 = radius if g1 > 0.0 else (-radius if g1 < 0.0 else 0.0)
+        newton_step = False
+    if lam2 < 0.0:
+        c2 = -g2 / lam2
+    else:
+        c2 = radius if g2 > 0.0 else (-radius if g2 < 0.0 else 0.0)
+        newton_step = False
+    d[0] = c1 * v0 - c2 * v1
+    d[1] = c1 * v1 + c2 * v0
+    return newton_step
+
+
+@njit(cache=True, inline="always")
+def _predicted_gain(gT, d, m):
+    """Predicted gain of the Newton step, -g^T H^-1 g / 2 = g^T d / 2. For a maximum of any order p >= 2
+    (f = f* - c |w - w*|^p, e.g. the nearly degenerate maxima next to a fin, where Newton is only linear)
+    the remaining error f* - f is at most 2 (p-1)/p <= 2 times the predicted gain, so a gain below 1e-14
+    means f is within 2e-14 of the local maximum."""
+    gain = 0.0
+    for i in range(m):
+        gain += 0.5 * gT[i] * d[i]
+    return gain
+
+
+@njit(cache=True, inline="always")
+def _retract(w, T, d, n, w_try):
+    """w_try = (w + T d) / |w + T d|: the tangent step taken back onto the sphere."""
+    m = n - 1
+    nw = 0.0
+    for k in range(n):
+        v = w[k]
+        for i in range(m):
+            v += T[k * m + i] * d[i]
+        w_try[k] = v
+        nw += v * v
+    nw = math.sqrt(nw)
+    for k in range(n):
+        w_try[k] /= nw
 
 
 @njit(cache=True, inline="always")
@@ -569,14 +633,61 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
     n = dim - 1
     G = grid[0]
     k = grid[1]
-    m = grid[2]
-    sc = grid[3]
-    per_super = sc if n == 2 else sc * sc
     M = cells.shape[0]
-    Ms = supers.shape[0]
     N = samples.shape[0] // 2
     kk = k if n == 2 else k * k
-    # 1. cap bounds of the super-cells
+    # 1.-2. the samples of every cell whose cap bound beats the best sample so far, scored
+    evaluated = np.zeros(M, dtype=np.bool_)
+    cell_best = np.empty(M)
+    vals = np.empty(N)
+    best_sample, best_cell, n_cells = _score_cells(x, samples, cells, supers, grid, evaluated, cell_best, vals)
+    # 3. Newton ascent from the best sample (necessarily a discrete local maximum): its value f1 >=
+    #    best sample tightens the candidate threshold below
+    best_j = _best_sample_of_cell(vals, best_cell, n, G, k, grid)
+    w_try = np.empty(n)
+    wk = np.empty(_WORK)
+    best, its = newton_ascent(x, geom, samples[N + best_j, :n], dim, n, w_try, wk, -2.0)
+    if best < best_sample:  # an ascent cannot end lower; guard against a failed step sequence
+        best = best_sample
+        for t in range(n):
+            w_try[t] = samples[N + best_j, t]
+    for t in range(n):
+        w_best[t] = w_try[t]
+    # 4. other discrete local maxima that could still beat it
+    cand = np.empty(N, dtype=np.int64)
+    cand_val = np.empty(N)
+    ncand = _candidates(best, vals, evaluated, cell_best, cells, grid, cell_of, n, dim, G, k, cand, cand_val)
+    # 5. Newton ascent from those candidates, best first, while their covering bound can still win
+    best, n_newton, n_iter = _ascend_from_candidates(x, geom, samples, cells, cell_of, vals, cand, cand_val, ncand,
+                                                     best_j, best, w_best, w_try, wk, dim, n, N)
+    stats[0] = n_cells
+    stats[1] = n_cells * kk
+    stats[2] = 1 + n_newton
+    stats[3] = its + n_iter
+    y = wk[0:dim]
+    _point(x, geom, w_best, dim, n, y)
+    ny = 0.0
+    for i in range(dim):
+        ny += y[i] * y[i]
+    ny = math.sqrt(ny)
+    for i in range(dim):
+        b_best[i] = y[i] / ny
+    return best
+
+
+@njit(cache=True)
+def _score_cells(x, samples, cells, supers, grid, evaluated, cell_best, vals):
+    """Steps 1 and 2: the cap bounds of the super-cells; in every super-cell whose bound beats the best sample
+    so far, the samples of every cell whose own cap bound beats it scored into vals (the best super-cell
+    first, the best cell of a super-cell first), the cells marked evaluated with their best value.
+    Returns (best sample value, its cell, cells scored)."""
+    dim = x.shape[0]
+    n = dim - 1
+    G = grid[0]
+    k = grid[1]
+    sc = grid[3]
+    per_super = sc if n == 2 else sc * sc
+    Ms = supers.shape[0]
     ubs = np.empty(Ms)
     top = 0
     for S in range(Ms):
@@ -586,11 +697,6 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
         ubs[S] = _cap_bound(ct, supers[S, dim], supers[S, dim + 1])
         if ubs[S] > ubs[top]:
             top = S
-    # 2. in every super-cell whose bound beats the best sample so far, score the samples of every
-    #    cell whose own cap bound beats it (the best cell of a super-cell first)
-    evaluated = np.zeros(M, dtype=np.bool_)
-    cell_best = np.empty(M)
-    vals = np.empty(N)
     ubc = np.empty(per_super)
     best_sample = -2.0
     best_cell = 0
@@ -620,37 +726,35 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
             if cell_best[P] > best_sample:
                 best_sample = cell_best[P]
                 best_cell = P
-    # 3. Newton ascent from the best sample (necessarily a discrete local maximum): its value f1 >=
-    #    best sample tightens the candidate threshold below
+    return best_sample, best_cell, n_cells
+
+
+@njit(cache=True)
+def _best_sample_of_cell(vals, P, n, G, k, grid):
+    """The index of the best scored sample of cell P (the first of equal ones)."""
     best_j = 0
     bv = -3.0
     if n == 2:
-        for j in range(best_cell * k, best_cell * k + k):
+        for j in range(P * k, P * k + k):
             if vals[j] > bv:
                 bv = vals[j]
                 best_j = j
     else:
-        first = grid[4 + best_cell]
+        first = grid[4 + P]
         for ii in range(k):
             for j in range(first + ii * G, first + ii * G + k):
                 if vals[j] > bv:
                     bv = vals[j]
                     best_j = j
-    w_try = np.empty(n)
-    wk = np.empty(_WORK)
-    best, its = newton_ascent(x, geom, samples[N + best_j, :n], dim, n, w_try, wk, -2.0)
-    if best < best_sample:  # an ascent cannot end lower; guard against a failed step sequence
-        best = best_sample
-        for t in range(n):
-            w_try[t] = samples[N + best_j, t]
-    for t in range(n):
-        w_best[t] = w_try[t]
-    n_newton = 1
-    n_iter = its
-    # 4. other discrete local maxima that could still beat it: the global maximum lies within angle h
-    #    of a sample v, so cos(arccos(v) - h) > best, i.e. v > cos(arccos(best) + h)
-    cand = np.empty(64, dtype=np.int64)
-    cand_val = np.empty(64)
+    return best_j
+
+
+@njit(cache=True)
+def _candidates(best, vals, evaluated, cell_best, cells, grid, cell_of, n, dim, G, k, cand, cand_val):
+    """Step 4: the discrete local maxima that could still beat ``best``, into cand (samples) and cand_val
+    (their negated values), room for every sample; returns their count. The global maximum lies within
+    angle h of a sample v, so cos(arccos(v) - h) > best, i.e. v > cos(arccos(best) + h)."""
+    M = cells.shape[0]
     ncand = 0
     bs = min(best, 1.0)
     sbs = math.sqrt(max(0.0, 1.0 - bs * bs))
@@ -661,51 +765,52 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
         if cell_best[P] < thr:
             continue
         if n == 2:
-            j0 = P * k
-            for t in range(k):
-                j = j0 + t
+            for j in range(P * k, P * k + k):
                 v = vals[j]
                 if v >= thr and _is_local_max(j, v, vals, evaluated, cell_of, n, G):
-                    if ncand == cand.shape[0]:
-                        cand = np.concatenate((cand, np.empty(ncand, dtype=np.int64)))
-                        cand_val = np.concatenate((cand_val, np.empty(ncand)))
                     cand[ncand] = j
                     cand_val[ncand] = -v
                     ncand += 1
-        else:
-            first = grid[4 + P]
-            r0 = first % (G * G)
-            i0 = r0 // G
-            j0 = r0 - i0 * G
-            # all 8 neighbour cells on the face and scored: every neighbour value of every sample of
-            # this cell is valid, and the local-maximum test is a branch-free max of 8 values
-            ring = True
-            for q in range(8):
-                cq = grid[4 + M + 8 * P + q]
-                if cq < 0 or not evaluated[cq]:
-                    ring = False
-            for ii in range(k):
-                base = first + ii * G
-                for t in range(k):
-                    j = base + t
-                    v = vals[j]
-                    if v < thr:
-                        continue
-                    if ring:
-                        mv = max(max(max(vals[j - G - 1], vals[j - G]), max(vals[j - G + 1], vals[j - 1])),
-                                 max(max(vals[j + 1], vals[j + G - 1]), max(vals[j + G], vals[j + G + 1])))
-                        is_max = mv <= v
-                    else:
-                        is_max = _is_local_max_face(j, i0 + ii, j0 + t, v, vals, evaluated, cell_of, G, i0, j0, k)
-                    if is_max:
-                        if ncand == cand.shape[0]:
-                            cand = np.concatenate((cand, np.empty(ncand, dtype=np.int64)))
-                            cand_val = np.concatenate((cand_val, np.empty(ncand)))
-                        cand[ncand] = j
-                        cand_val[ncand] = -v
-                        ncand += 1
+            continue
+        first = grid[4 + P]
+        r0 = first % (G * G)
+        i0 = r0 // G
+        j0 = r0 - i0 * G
+        # all 8 neighbour cells on the face and scored: every neighbour value of every sample of
+        # this cell is valid, and the local-maximum test is a branch-free max of 8 values
+        ring = True
+        for q in range(8):
+            cq = grid[4 + M + 8 * P + q]
+            if cq < 0 or not evaluated[cq]:
+                ring = False
+        for ii in range(k):
+            base = first + ii * G
+            for t in range(k):
+                j = base + t
+                v = vals[j]
+                if v < thr:
+                    continue
+                if ring:
+                    mv = max(max(max(vals[j - G - 1], vals[j - G]), max(vals[j - G + 1], vals[j - 1])),
+                             max(max(vals[j + 1], vals[j + G - 1]), max(vals[j + G], vals[j + G + 1])))
+                    is_max = mv <= v
+                else:
+                    is_max = _is_local_max_face(j, i0 + ii, j0 + t, v, vals, evaluated, cell_of, G, i0, j0, k)
+                if is_max:
+                    cand[ncand] = j
+                    cand_val[ncand] = -v
+                    ncand += 1
+    return ncand
+
+
+@njit(cache=True)
+def _ascend_from_candidates(x, geom, samples, cells, cell_of, vals, cand, cand_val, ncand, best_j, best, w_best,
+                            w_try, wk, dim, n, N):
+    """Step 5: a Newton ascent from each candidate but ``best_j``, best first, while its covering bound can
+    still beat ``best``; w_best follows the best. Returns (best, Newton runs, their iterations)."""
     order = np.argsort(cand_val[:ncand])
-    # 5. Newton ascent from those candidates, best first, while their covering bound can still win
+    n_newton = 0
+    n_iter = 0
     for r in range(ncand):
         j = cand[order[r]]
         if j == best_j:
@@ -725,19 +830,7 @@ def boundary_max(x, geom, samples, cells, supers, grid, cell_of, w_best, b_best,
             best = f
             for t in range(n):
                 w_best[t] = w_try[t]
-    stats[0] = n_cells
-    stats[1] = n_cells * kk
-    stats[2] = n_newton
-    stats[3] = n_iter
-    y = wk[0:dim]
-    _point(x, geom, w_best, dim, n, y)
-    ny = 0.0
-    for i in range(dim):
-        ny += y[i] * y[i]
-    ny = math.sqrt(ny)
-    for i in range(dim):
-        b_best[i] = y[i] / ny
-    return best
+    return best, n_newton, n_iter
 
 
 @njit(cache=True)
