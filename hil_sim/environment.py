@@ -1,4 +1,5 @@
-"""Environment torques on the spacecraft's facets: solar radiation pressure and aerodynamic drag.
+"""Environment torques: solar radiation pressure and aerodynamic drag on the spacecraft's facets, and the
+torque of a residual magnetic dipole in the Earth's field.
 
 Each effect is optional (``spacecraft.disturbance``); a run with none of them on packs no rows here and the
 dynamics step does exactly what it did without this module. A run with one on gets extra rows in the body
@@ -25,6 +26,10 @@ an exponential atmosphere rho = rho_ref exp(-(|r| - R_E - h_ref) / H) above the 
 rotating with the Earth about N's z axis (the pole's precession since J2000, ~0.3 deg, moves the air by
 less than 0.01 % of the orbital speed). Basilisk's facetDragDynamicEffector model, with its
 exponentialAtmosphere and zeroWindModel.
+
+A residual dipole m (body axes, A m^2) in the Earth's field feels tau = m x B_B, the field a centred dipole
+turning with the Earth (hil_sim.geomagnetic: IGRF's degree-1 part at the epoch; Basilisk's
+magneticFieldCenteredDipole, and MtbEffector's m x B).
 """
 from __future__ import annotations
 
@@ -36,6 +41,7 @@ from numba import njit
 
 from gnc.ephemeris import EARTH_RADIUS_KM
 from hil_sim.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
+from hil_sim.geomagnetic import IGRF_REFERENCE_RADIUS_KM
 from hil_sim.orbit import orbit_position_row_N_km, orbit_velocity_row_N_km_s
 from hil_sim.params import SpacecraftParams
 
@@ -45,28 +51,32 @@ EARTH_ROTATION_RAD_S = 7.292115e-5  # sidereal (IERS), as Basilisk's zeroWindMod
 
 # Rows of B after hil_sim.dynamics.B_FIELDS (24): switches (bits), the Sun held over the step, the solar flux,
 # the number of facets, the atmosphere (reference density, its altitude, scale height, the Earth's rotation),
+# the residual dipole (3), the Earth's dipole m = (g11, h11, g10) [T] and the Earth rotation angle at t = 0,
 # then FACET_FIELDS rows per facet from ENV_FACETS on.
 ENV_FLAGS, ENV_SUN, ENV_FLUX, ENV_N_FACETS = 24, 25, 28, 29
 ENV_RHO, ENV_H_REF, ENV_SCALE_H, ENV_OMEGA_E = 30, 31, 32, 33
+ENV_DIPOLE, ENV_EARTH_DIPOLE, ENV_ERA0 = 34, 37, 40
 ENV_FACETS = 46
 FACET_AREA, FACET_NORMAL, FACET_COP, FACET_SPECULAR, FACET_DIFFUSE, FACET_CD = 0, 1, 4, 7, 8, 9
 FACET_FIELDS = 10
-SRP, DRAG = 1, 2  # bits of ENV_FLAGS
-EFFECTS = ("solar radiation pressure", "aerodynamic drag")  # the order of environment_torques_B's rows
-EFFECT_KEYS = ("srp_torque_B_Nm", "drag_torque_B_Nm")  # their names in `keepout truth`'s file
+SRP, DRAG, DIPOLE = 1, 2, 4  # bits of ENV_FLAGS
+# the order of environment_torques_B's rows, and their names in `keepout truth`'s file
+EFFECTS = ("solar radiation pressure", "aerodynamic drag", "residual magnetic dipole")
+EFFECT_KEYS = ("srp_torque_B_Nm", "drag_torque_B_Nm", "dipole_torque_B_Nm")
 
 
 def environment_effects(mission) -> list[str]:
     """The names (EFFECTS) of the environment effects a mission (hil_sim.mission.Mission) turns on."""
     dist = mission.spacecraft.disturbance
-    return [name for name, on in zip(EFFECTS, (dist.solar_radiation_pressure, dist.aerodynamic_drag)) if on]
+    on = (dist.solar_radiation_pressure, dist.aerodynamic_drag, any(dist.residual_dipole_B_Am2))
+    return [name for name, is_on in zip(EFFECTS, on) if is_on]
 
 
 def environment_rows(params: Sequence[SpacecraftParams]) -> np.ndarray | None:
     """The rows to append to the dynamics' B (ENV_FACETS + FACET_FIELDS * facets, M) for a batch, or None when
     no run has an environment effect on (B is then exactly as without this module)."""
     flags = [(SRP if p.disturbance.solar_radiation_pressure else 0) | (DRAG if p.disturbance.aerodynamic_drag else 0)
-             for p in params]
+             | (DIPOLE if any(p.disturbance.residual_dipole_B_Am2) else 0) for p in params]
     if not any(flags):
         return None
     n_facets = max(len(p.facets) for p in params)
@@ -78,6 +88,8 @@ def environment_rows(params: Sequence[SpacecraftParams]) -> np.ndarray | None:
         d = p.disturbance
         rows[ENV_RHO:ENV_OMEGA_E + 1, m] = (d.atmosphere_density_kg_m3, d.atmosphere_reference_altitude_km,
                                             d.atmosphere_scale_height_km, EARTH_ROTATION_RAD_S)
+        g10, g11, h11 = d.geomagnetic_dipole_T
+        rows[ENV_DIPOLE:ENV_ERA0 + 1, m] = (*d.residual_dipole_B_Am2, g11, h11, g10, d.earth_rotation_angle_rad)
         for k, f in enumerate(p.facets):
             o = ENV_FACETS + FACET_FIELDS * k
             rows[o + FACET_AREA, m] = f.area_m2
@@ -107,6 +119,13 @@ def to_body(q0, q1, q2, q3, x, y, z):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _moment(B, m, o, fx, fy, fz):
+    """c x F: the moment about the centre of mass of force F on the facet at row o (its centre of pressure c)."""
+    cx, cy, cz = B[o + FACET_COP, m], B[o + FACET_COP + 1, m], B[o + FACET_COP + 2, m]
+    return cy * fz - cz * fy, cz * fx - cx * fz, cx * fy - cy * fx
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def srp_torque(B, m, q0, q1, q2, q3, rx, ry, rz):
     """The solar-radiation-pressure torque [N m] in body axes on run m at attitude q and position r [km]."""
     sx, sy, sz = B[ENV_SUN, m] - rx, B[ENV_SUN + 1, m] - ry, B[ENV_SUN + 2, m] - rz
@@ -128,11 +147,8 @@ def srp_torque(B, m, q0, q1, q2, q3, rx, ry, rz):
         k_s = -pressure * B[o + FACET_AREA, m] * cos
         a = k_s * (1.0 - spec)
         b = k_s * 2.0 * (B[o + FACET_DIFFUSE, m] / 3.0 + spec * cos)
-        fx, fy, fz = a * ux + b * nx, a * uy + b * ny, a * uz + b * nz
-        cx, cy, cz = B[o + FACET_COP, m], B[o + FACET_COP + 1, m], B[o + FACET_COP + 2, m]
-        tx += cy * fz - cz * fy
-        ty += cz * fx - cx * fz
-        tz += cx * fy - cy * fx
+        mx, my, mz = _moment(B, m, o, a * ux + b * nx, a * uy + b * ny, a * uz + b * nz)
+        tx, ty, tz = tx + mx, ty + my, tz + mz
     return tx, ty, tz
 
 
@@ -156,12 +172,34 @@ def drag_torque(B, m, q0, q1, q2, q3, rx, ry, rz, vx, vy, vz):
         if cos <= 0.0:
             continue  # in the facet's wake
         f = -dynamic * B[o + FACET_CD, m] * B[o + FACET_AREA, m] * cos
-        fx, fy, fz = f * ux, f * uy, f * uz
-        cx, cy, cz = B[o + FACET_COP, m], B[o + FACET_COP + 1, m], B[o + FACET_COP + 2, m]
-        tx += cy * fz - cz * fy
-        ty += cz * fx - cx * fz
-        tz += cx * fy - cy * fx
+        mx, my, mz = _moment(B, m, o, f * ux, f * uy, f * uz)
+        tx, ty, tz = tx + mx, ty + my, tz + mz
     return tx, ty, tz
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def dipole_field_N(B, m, rx, ry, rz, t_s):
+    """The Earth's field [T] in N at position r [km] and time t_s: the centred dipole of run m, in the
+    Earth-fixed frame turned by the rotation angle ERA0 + omega_E t about z."""
+    th = B[ENV_ERA0, m] + B[ENV_OMEGA_E, m] * t_s
+    c, s = math.cos(th), math.sin(th)
+    rn = math.sqrt(rx * rx + ry * ry + rz * rz)
+    ux, uy, uz = (c * rx + s * ry) / rn, (c * ry - s * rx) / rn, rz / rn  # r_hat, Earth-fixed
+    k = IGRF_REFERENCE_RADIUS_KM / rn
+    k = k * k * k
+    mx, my, mz = B[ENV_EARTH_DIPOLE, m], B[ENV_EARTH_DIPOLE + 1, m], B[ENV_EARTH_DIPOLE + 2, m]
+    d = 3.0 * (mx * ux + my * uy + mz * uz)
+    bx, by, bz = k * (d * ux - mx), k * (d * uy - my), k * (d * uz - mz)
+    return c * bx - s * by, s * bx + c * by, bz
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def dipole_torque(B, m, q0, q1, q2, q3, rx, ry, rz, t_s):
+    """The residual dipole's torque m x B [N m] in body axes on run m at attitude q, position r [km], t_s."""
+    nx, ny, nz = dipole_field_N(B, m, rx, ry, rz, t_s)
+    bx, by, bz = to_body(q0, q1, q2, q3, nx, ny, nz)
+    mx, my, mz = B[ENV_DIPOLE, m], B[ENV_DIPOLE + 1, m], B[ENV_DIPOLE + 2, m]
+    return my * bz - mz * by, mz * bx - mx * bz, mx * by - my * bx
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -169,6 +207,8 @@ def _effect_torque(effect, B, ORB, m, t_s, q0, q1, q2, q3, r):
     """Effect ``effect`` (an index of EFFECTS) on run m; r: its position at t_s [km]."""
     if effect == 0:
         return srp_torque(B, m, q0, q1, q2, q3, r[0], r[1], r[2])
+    if effect == 2:
+        return dipole_torque(B, m, q0, q1, q2, q3, r[0], r[1], r[2], t_s)
     vx, vy, vz = orbit_velocity_row_N_km_s(ORB, m, t_s)
     return drag_torque(B, m, q0, q1, q2, q3, r[0], r[1], r[2], vx, vy, vz)
 

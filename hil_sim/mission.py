@@ -157,6 +157,11 @@ class Disturbance(_Model):
                                                     "density above the equatorial radius [km]")
     atmosphere_scale_height_km: float = Field(63.822, gt=1, le=1000, description="scale height H: the density "
                                               "is that density times exp(-(h - reference altitude) / H) [km]")
+    residual_dipole_B_Am2: bounded_vec3(1000.0) = Field([0.0, 0.0, 0.0], description="the spacecraft's residual "
+                                                       "magnetic dipole in body axes [A m^2] (a CubeSat ~0.01-0.1, "
+                                                       "a small satellite ~1); it feels m x B in the Earth's field, "
+                                                       "a centred dipole from IGRF-14 at the epoch (ppigrf) turning "
+                                                       "with the Earth. Zero: off")
 
 
 class Facet(_Model):
@@ -616,7 +621,8 @@ def world_params(mission: Mission) -> "WorldParams":
                                       aerodynamic_drag=sc.disturbance.aerodynamic_drag,
                                       atmosphere_density_kg_m3=sc.disturbance.atmosphere_density_kg_m3,
                                       atmosphere_reference_altitude_km=sc.disturbance.atmosphere_reference_altitude_km,
-                                      atmosphere_scale_height_km=sc.disturbance.atmosphere_scale_height_km),
+                                      atmosphere_scale_height_km=sc.disturbance.atmosphere_scale_height_km,
+                                      **_geomagnetic(mission)),
         q_NB0=tuple(mission.initial_state.q_NB), omega_BN_B0_rad_s=tuple(mission.initial_state.omega_BN_B_rad_s),
         facets=tuple(FacetParams(area_m2=f.area_m2, normal_B=tuple(f.normal_B),
                                  centre_of_pressure_B_m=tuple(f.centre_of_pressure_B_m), specular=f.specular,
@@ -643,6 +649,18 @@ def world_params(mission: Mission) -> "WorldParams":
         epoch_utc=mission.epoch_utc.strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
         max_integration_step_s=1.0 / mission.simulation.dynamics_rate_hz,
     )
+
+
+def _geomagnetic(mission: Mission) -> dict[str, Any]:
+    """The residual dipole and, when it is not zero, the Earth's dipole field at the epoch (IGRF, via
+    hil_sim.geomagnetic) for DisturbanceParams."""
+    dipole = tuple(mission.spacecraft.disturbance.residual_dipole_B_Am2)
+    if not any(dipole):
+        return {}
+    from hil_sim.geomagnetic import dipole_coefficients_T, earth_rotation_angle_rad
+
+    return {"residual_dipole_B_Am2": dipole, "geomagnetic_dipole_T": dipole_coefficients_T(mission.epoch_utc),
+            "earth_rotation_angle_rad": earth_rotation_angle_rad(mission.epoch_utc)}
 
 
 def door_params(mission: Mission) -> Any:
@@ -705,7 +723,7 @@ SUFFIX_UNITS = (("_rad_per_sqrt_s", "rad/sqrt(s)"), ("_rad_s_per_sqrt_s", "rad/s
                 ("_rad_s_sqrt_hz", "rad/s/sqrt(Hz)"), ("_rad_s2_sqrt_hz", "rad/s^2/sqrt(Hz)"),
                 ("_Nm_per_rad_s", "N m s/rad"), ("_deg_s3", "deg/s^3"), ("_deg_s2", "deg/s^2"), ("_deg_s", "deg/s"),
                 ("_rad_s", "rad/s"), ("_1_s", "1/s"), ("_arcsec", "arcsec"), ("_deg", "deg"), ("_rad", "rad"),
-                ("_kg_m3", "kg/m^3"), ("_kgm2", "kg m^2"), ("_Nm", "N m"), ("_km", "km"), ("_W_m2", "W/m^2"),
+                ("_kg_m3", "kg/m^3"), ("_kgm2", "kg m^2"), ("_Nm", "N m"), ("_km", "km"), ("_W_m2", "W/m^2"), ("_Am2", "A m^2"),
                 ("_m2", "m^2"), ("_m", "m"), ("_hz", "Hz"), ("_Hz", "Hz"), ("_ppm", "ppm"), ("_bps", "bit/s"),
                 ("_utc", "UTC"), ("_s", "s"))
 # longest suffix first

@@ -130,6 +130,12 @@ class DisturbanceParams:
     atmosphere_density_kg_m3: float = 6.967e-13
     atmosphere_reference_altitude_km: float = 500.0
     atmosphere_scale_height_km: float = 63.822
+    # A residual magnetic dipole of the spacecraft (A m^2, body axes; zero: off) in the Earth's field, a centred
+    # dipole of Gauss coefficients (g10, g11, h11) [T] turning with the Earth, whose rotation angle at the
+    # epoch is given (hil_sim.geomagnetic makes both from IGRF at the mission epoch).
+    residual_dipole_B_Am2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    geomagnetic_dipole_T: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    earth_rotation_angle_rad: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "constant_B_Nm", _vec(self.constant_B_Nm, 3, "disturbance.constant_B_Nm"))
@@ -140,6 +146,13 @@ class DisturbanceParams:
             object.__setattr__(self, name, _positive(getattr(self, name), f"disturbance.{name}"))
         name = "atmosphere_reference_altitude_km"
         object.__setattr__(self, name, _nonneg(getattr(self, name), f"disturbance.{name}"))
+        for name in ("residual_dipole_B_Am2", "geomagnetic_dipole_T"):
+            object.__setattr__(self, name, _vec(getattr(self, name), 3, f"disturbance.{name}"))
+        if any(self.residual_dipole_B_Am2) and not any(self.geomagnetic_dipole_T):
+            raise ValueError("disturbance.geomagnetic_dipole_T: a residual dipole needs the Earth's field "
+                             "(hil_sim.geomagnetic.dipole_coefficients_T at the epoch)")
+        if not math.isfinite(self.earth_rotation_angle_rad):
+            raise ValueError("disturbance.earth_rotation_angle_rad: must be finite")
 
 
 @dataclass(frozen=True)

@@ -67,7 +67,8 @@ def test_budget_command_prints_the_table_and_writes_json(tmp_path, capsys) -> No
     path.write_text(yaml.safe_dump(_smallsat(True), sort_keys=False))
     assert main(["budget", str(path), "--json", str(tmp_path / "b.json")]) == 0
     out = capsys.readouterr().out
-    assert "gravity" in out and "not in the truth models yet" in out
+    assert "gravity" in out and "off in this mission (not counted)" in out and "residual magnetic dipole" in out
     record = json.loads((tmp_path / "b.json").read_text())
+    assert record["off"] == ["solar radiation pressure", "aerodynamic drag", "residual magnetic dipole"]
     assert {r["effect"] for r in record["rows"]} >= {"constant torque", "gravity gradient", "total (deterministic)"}
     assert main(["budget", str(tmp_path / "missing.yaml")]) == 2

@@ -170,3 +170,33 @@ def test_truth_records_the_torque_the_world_applies(tmp_path) -> None:
     dh = np.linalg.norm(truth["H_N_Nms"][-1] - off["H_N_Nms"][-1])
     tau = truth["srp_torque_B_Nm"] + truth["drag_torque_B_Nm"]
     assert dh == pytest.approx(60.0 * np.linalg.norm(tau.mean(axis=0)), rel=0.05)
+
+
+def test_a_residual_dipole_of_nan_is_refused_and_zero_is_off(tmp_path) -> None:
+    data = _smallsat()
+    data["spacecraft"]["disturbance"]["residual_dipole_B_Am2"] = [0.1, math.nan, 0.0]
+    (line,) = _problems(data, tmp_path)
+    assert "spacecraft.disturbance.residual_dipole_B_Am2[1]: Input should be a finite number" in line
+    mission = Mission.model_validate(_smallsat())
+    assert world_params(mission).spacecraft.disturbance.geomagnetic_dipole_T == (0.0, 0.0, 0.0)
+    on = world_params(Mission.model_validate(_smallsat(residual_dipole_B_Am2=[0.05, 0.0, 0.0])))
+    assert -3.1e-5 < on.spacecraft.disturbance.geomagnetic_dipole_T[0] < -2.8e-5  # g10 ~ -29,300 nT in 2026
+
+
+def test_truth_records_the_dipole_torque_m_cross_b() -> None:
+    from hil_sim import environment as env
+    from hil_sim.truth_cli import propagate
+    from hil_sim.world import WorldBatch
+
+    mission = Mission.model_validate(_smallsat(residual_dipole_B_Am2=[0.02, -0.01, 0.03]))
+    truth = propagate(mission, 20.0, 10.0)
+    batch = WorldBatch([world_params(mission)])
+    for k, t in enumerate(truth["t_s"].tolist()):
+        q = truth["q_NB"][k]
+        b_N = np.array(env.dipole_field_N(batch.B, 0, *truth["r_sc_N_km"][k], t))
+        assert 1e-5 < np.linalg.norm(b_N) < 6e-5  # T: the Earth's field at 550 km
+        q0, qv = q[0], q[1:]
+        R = (q0 * q0 - qv @ qv) * np.eye(3) + 2 * np.outer(qv, qv) + 2 * q0 * np.array(
+            [[0, -qv[2], qv[1]], [qv[2], 0, -qv[0]], [-qv[1], qv[0], 0]])  # body -> N
+        np.testing.assert_allclose(truth["dipole_torque_B_Nm"][k], np.cross([0.02, -0.01, 0.03], R.T @ b_N),
+                                   rtol=1e-9, atol=1e-20)

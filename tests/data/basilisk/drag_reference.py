@@ -14,21 +14,17 @@ orbit are srp_reference.py's (imported from beside this file), each facet with a
 """
 from __future__ import annotations
 
-import csv
-import datetime
 import json
 import math
 from pathlib import Path
 
 import numpy as np
-from Basilisk import __version__ as bsk_version
 from Basilisk.architecture import messaging
 from Basilisk.simulation import exponentialAtmosphere, facetDragDynamicEffector, zeroWindModel
-from Basilisk.utilities import macros
 from Basilisk.utilities import RigidBodyKinematics as rbk
 
-from srp_reference import (DURATION_S, FACETS, INERTIA, N_GEOMETRIES, OMEGA0, ORBIT, SAMPLE_S, SIGMA0, STEP_S,
-                           base_sim, initial_state, sign_continuous_q)
+from srp_reference import (FACETS, N_GEOMETRIES, STEP_S, TRAJECTORY_HEADER, base_sim, fly, provenance,
+                           write_csv)
 
 HERE = Path(__file__).resolve().parent
 DRAG_COEFFICIENTS = [2.2, 2.2, 2.1, 2.1, 2.3, 2.3, 2.0, 2.0]  # one per facet of FACETS
@@ -123,49 +119,23 @@ def torque_table() -> list[list[float]]:
     return rows
 
 
-def trajectory(wind: bool) -> tuple[list[list[float]], dict]:
-    sim, sc, drag, atmo, air, earth, keep = _sim(wind)
-    initial_state(sc, earth)
-    state_log = sc.scStateOutMsg.recorder(macros.sec2nano(SAMPLE_S))
-    sim.AddModelToTask("task", state_log)
-    sim.InitializeSimulation()
-    sim.ConfigureStopTime(macros.sec2nano(DURATION_S))
-    sim.ExecuteSimulation()
-    t = state_log.times() * macros.NANO2SEC
-    rows = [[t[k], *q, *state_log.omega_BN_B[k], *state_log.r_BN_N[k]]
-            for k, q in enumerate(sign_continuous_q(state_log.sigma_BN))]
-    return rows, {"earth_mu_m3_s2": earth.mu, "earth_radius_m": earth.radEquator}
-
-
-def _write(name: str, header: list[str], rows: list[list[float]]) -> None:
-    with open(HERE / name, "w", newline="") as f:
-        out = csv.writer(f)
-        out.writerow(header)
-        out.writerows([[repr(float(v)) for v in row] for row in rows])
-
-
 def main() -> None:
-    _write("drag_reference_torques.csv", ["q0", "q1", "q2", "q3", "r_x_km", "r_y_km", "r_z_km", "v_x_km_s",
-                                          "v_y_km_s", "v_z_km_s", "density_kg_m3", "v_air_x_m_s", "v_air_y_m_s",
-                                          "v_air_z_m_s", "tau_x", "tau_y", "tau_z", "f_x", "f_y", "f_z"],
-           torque_table())
-    header = ["t_s", "q0", "q1", "q2", "q3", "wx", "wy", "wz", "r_x_m", "r_y_m", "r_z_m"]
-    rows, earth = trajectory(wind=True)
-    _write("drag_reference.csv", header, rows)
-    _write("drag_reference_still.csv", header, trajectory(wind=False)[0])
+    write_csv("drag_reference_torques.csv", ["q0", "q1", "q2", "q3", "r_x_km", "r_y_km", "r_z_km", "v_x_km_s",
+                                             "v_y_km_s", "v_z_km_s", "density_kg_m3", "v_air_x_m_s", "v_air_y_m_s",
+                                             "v_air_z_m_s", "tau_x", "tau_y", "tau_z", "f_x", "f_y", "f_z"],
+              torque_table())
+    for name, wind in (("drag_reference.csv", True), ("drag_reference_still.csv", False)):
+        sim, sc, drag, atmo, air, earth, keep = _sim(wind)
+        rows, earth_constants = fly(sim, sc, earth)
+        write_csv(name, TRAJECTORY_HEADER, rows)
     (HERE / "drag_reference.json").write_text(json.dumps({
-        "basilisk": bsk_version, "generator": "tests/data/basilisk/drag_reference.py",
-        "generated_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
-        "modules": "Spacecraft hub (rigid, no wheels), point-mass Earth gravity, facetDragDynamicEffector "
-                   "(atmoDensInMsg from exponentialAtmosphere, windVelInMsg from zeroWindModel)",
+        **provenance("drag_reference.py", "Spacecraft hub (rigid, no wheels), point-mass Earth gravity, "
+                     "facetDragDynamicEffector (atmoDensInMsg from exponentialAtmosphere, windVelInMsg from "
+                     "zeroWindModel)"),
         "facets": [{**f, "drag_coefficient": cd} for f, cd in zip(FACETS, DRAG_COEFFICIENTS)],
         "reference_density_kg_m3": RHO_REF_KG_M3, "reference_altitude_km": H_REF_KM,
         "scale_height_km": SCALE_HEIGHT_KM, "planet_radius_m": PLANET_RADIUS_M,
-        "earth_rotation_rad_s": OMEGA_EARTH_RAD_S, "inertia_B_kgm2": INERTIA, "mass_kg": MASS_KG,
-        "sigma_BN0": SIGMA0, "omega_BN_B0_rad_s": OMEGA0, "orbit": ORBIT, **earth,
-        "integrator": f"RK4, {STEP_S} s", "duration_s": DURATION_S, "sample_s": SAMPLE_S,
-        "frames": "q is the Euler parameter set of sigma_BN (scalar first), the same four numbers as keepout's "
-                  "q_NB; omega, torque and force in body axes; r_N in metres (trajectory) or km (table)",
+        "earth_rotation_rad_s": OMEGA_EARTH_RAD_S, "mass_kg": MASS_KG, **earth_constants,
     }, indent=1) + "\n")
 
 

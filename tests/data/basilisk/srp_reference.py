@@ -176,46 +176,58 @@ def sign_continuous_q(sigma_log) -> list[np.ndarray]:
     return out
 
 
-def trajectory() -> tuple[list[list[float]], dict]:
-    sim, sc, srp, shadow, earth, keep = _sim()
+def fly(sim, sc, earth, extra: tuple = ()) -> tuple[list[list[float]], dict]:
+    """One orbit from initial_state(): rows of t, q, omega_BN_B, r_N [m] every SAMPLE_S, then one column per
+    (message, field) of ``extra``; and the Earth's mu and radius."""
     initial_state(sc, earth)
     state_log = sc.scStateOutMsg.recorder(macros.sec2nano(SAMPLE_S))
-    shadow_log = shadow.eclipseOutMsgs[0].recorder(macros.sec2nano(SAMPLE_S))
-    sim.AddModelToTask("task", state_log)
-    sim.AddModelToTask("task", shadow_log)
+    logs = [message.recorder(macros.sec2nano(SAMPLE_S)) for message, _ in extra]
+    for log in (state_log, *logs):
+        sim.AddModelToTask("task", log)
     sim.InitializeSimulation()
     sim.ConfigureStopTime(macros.sec2nano(DURATION_S))
     sim.ExecuteSimulation()
     t = state_log.times() * macros.NANO2SEC
-    rows = [[t[k], *q, *state_log.omega_BN_B[k], *state_log.r_BN_N[k], shadow_log.shadowFactor[k]]
+    rows = [[t[k], *q, *state_log.omega_BN_B[k], *state_log.r_BN_N[k],
+             *(getattr(log, field)[k] for log, (_, field) in zip(logs, extra))]
             for k, q in enumerate(sign_continuous_q(state_log.sigma_BN))]
     return rows, {"earth_mu_m3_s2": earth.mu, "earth_radius_m": earth.radEquator}
 
 
-def main() -> None:
-    with open(HERE / "srp_reference_torques.csv", "w", newline="") as f:
+TRAJECTORY_HEADER = ["t_s", "q0", "q1", "q2", "q3", "wx", "wy", "wz", "r_x_m", "r_y_m", "r_z_m"]
+
+
+def write_csv(name: str, header: list[str], rows: list[list[float]]) -> None:
+    with open(HERE / name, "w", newline="") as f:
         out = csv.writer(f)
-        out.writerow(["q0", "q1", "q2", "q3", "r_x_km", "r_y_km", "r_z_km", "sun_x_km", "sun_y_km", "sun_z_km",
-                      "shadow_factor", "tau_x", "tau_y", "tau_z", "f_x", "f_y", "f_z"])
-        out.writerows([[repr(float(v)) for v in row] for row in torque_table()])
-    rows, earth = trajectory()
-    with open(HERE / "srp_reference.csv", "w", newline="") as f:
-        out = csv.writer(f)
-        out.writerow(["t_s", "q0", "q1", "q2", "q3", "wx", "wy", "wz", "r_x_m", "r_y_m", "r_z_m", "shadow_factor"])
+        out.writerow(header)
         out.writerows([[repr(float(v)) for v in row] for row in rows])
+
+
+def provenance(generator: str, modules: str) -> dict:
+    """The JSON's common part: where the data came from and the spacecraft, orbit and integrator."""
+    return {"basilisk": bsk_version, "generator": f"tests/data/basilisk/{generator}",
+            "generated_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"), "modules": modules,
+            "inertia_B_kgm2": INERTIA, "sigma_BN0": SIGMA0, "omega_BN_B0_rad_s": OMEGA0, "orbit": ORBIT,
+            "integrator": f"RK4, {STEP_S} s", "duration_s": DURATION_S, "sample_s": SAMPLE_S,
+            "frames": "q is the Euler parameter set of sigma_BN (scalar first), the same four numbers as keepout's "
+                      "q_NB; vectors in body axes but the field (N); r_N in metres (trajectory) or km (table)"}
+
+
+def main() -> None:
+    write_csv("srp_reference_torques.csv", ["q0", "q1", "q2", "q3", "r_x_km", "r_y_km", "r_z_km", "sun_x_km",
+                                            "sun_y_km", "sun_z_km", "shadow_factor", "tau_x", "tau_y", "tau_z",
+                                            "f_x", "f_y", "f_z"], torque_table())
+    sim, sc, srp, shadow, earth, keep = _sim()
+    rows, earth_constants = fly(sim, sc, earth, ((shadow.eclipseOutMsgs[0], "shadowFactor"),))
+    write_csv("srp_reference.csv", TRAJECTORY_HEADER + ["shadow_factor"], rows)
     (HERE / "srp_reference.json").write_text(json.dumps({
-        "basilisk": bsk_version, "generator": "tests/data/basilisk/srp_reference.py",
-        "generated_utc": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d"),
-        "modules": "Spacecraft hub (rigid, no wheels), point-mass Earth gravity, facetSRPDynamicEffector "
-                   "(sunInMsg, sunEclipseInMsg from the eclipse module)",
+        **provenance("srp_reference.py", "Spacecraft hub (rigid, no wheels), point-mass Earth gravity, "
+                     "facetSRPDynamicEffector (sunInMsg, sunEclipseInMsg from the eclipse module)"),
         "solar_flux_W_m2": 1368.0, "speed_of_light_m_s": 299792458.0, "au_m": AU_M,
         "note": "facetSRPDynamicEffector.cpp's constants (solarRadFlux 1368 W/m^2, speedLight, AstU)",
-        "facets": FACETS, "inertia_B_kgm2": INERTIA, "mass_kg": 50.0, "sigma_BN0": SIGMA0,
-        "omega_BN_B0_rad_s": OMEGA0, "orbit": ORBIT, **earth, "sun_N_km": (AU_M * SUN_DIR / 1e3).tolist(),
+        "facets": FACETS, "mass_kg": 50.0, **earth_constants, "sun_N_km": (AU_M * SUN_DIR / 1e3).tolist(),
         "earth_radius_km_eclipse": astroConstants.REQ_EARTH, "sun_radius_km_eclipse": astroConstants.REQ_SUN,
-        "integrator": f"RK4, {STEP_S} s", "duration_s": DURATION_S, "sample_s": SAMPLE_S,
-        "frames": "q is the Euler parameter set of sigma_BN (scalar first), the same four numbers as keepout's "
-                  "q_NB; omega, torque and force in body axes; r_N in metres (trajectory) or km (table)",
     }, indent=1) + "\n")
 
 
