@@ -49,7 +49,8 @@ class GuardedGuidance(Guidance):
 
     ``request_safe``: the flight software's way into SAFE (it reports the mode change)."""
 
-    def __init__(self, cfg, plugin: Plugin, request_safe: Callable[[], None], events=None):
+    def __init__(self, cfg: Any, plugin: Plugin, request_safe: Callable[[], None],
+                 events: Callable[..., Any] | None = None):
         super().__init__(cfg, events=events)
         self.plugin = plugin
         self._request_safe = request_safe
@@ -132,7 +133,7 @@ class GuardedEstimator:
     """The attitude estimate the GNC cycle reads (`AttitudeEstimator`'s attributes), from a plug-in watched
     by keepout's MEKF (``reference``), which runs every cycle whatever the plug-in does."""
 
-    def __init__(self, cfg, q_BS: np.ndarray, plugin: Plugin, event: Callable[..., Any]):
+    def __init__(self, cfg: Any, q_BS: np.ndarray, plugin: Plugin, event: Callable[..., Any]):
         self.reference = AttitudeEstimator(cfg, q_BS)
         self.plugin = plugin
         self._event = event

@@ -60,6 +60,21 @@ def test_sil_run_flies_the_example_plugins(tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
+def test_sil_run_reports_a_sun_seeking_plugin_stopped_outside_the_zone(tmp_path, monkeypatch):
+    use_paths(monkeypatch, example_site(tmp_path / "site"))
+    mission = short_mission(tmp_path / "seeker.yaml", DURATION_S, guidance="sun-seeker")
+    code, summary, events = _finish(_sil(mission, tmp_path / "runs"), tmp_path / "runs")
+    stops = [e["args"] for e in events if e.get("event") == "PLUGIN_STOPPED"]
+    assert len(stops) == 1 and stops[0]["kind"] == "GUIDANCE" and "guard limit" in stops[0]["reason"], stops
+    to_safe = [e["args"] for e in events if e.get("event") == "MODE_CHANGED" and e["args"]["to_mode"] == "SAFE"]
+    assert to_safe and to_safe[0]["cause"] == "FDIR"
+    results = {r["name"]: r for r in summary["requirements"]}
+    assert results["keep-out margin sun"]["pass"] and 0.0 < results["keep-out margin sun"]["value"] < 3.0
+    # the run does not pass: the target was never reached (SAFE since the stop), and it says so
+    assert not results["settling (timeline[0])"]["pass"] and code != 0
+
+
+@pytest.mark.slow
 def test_fast_campaign_flies_the_example_plugins(tmp_path, monkeypatch):
     use_paths(monkeypatch, example_site(tmp_path / "site"))
     mission = short_mission(tmp_path / "plugged.yaml", DURATION_S, guidance="geodesic", estimator="star-gyro")
