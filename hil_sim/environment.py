@@ -34,7 +34,7 @@ magneticFieldCenteredDipole, and MtbEffector's m x B).
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from numba import njit
@@ -59,24 +59,28 @@ ENV_DIPOLE, ENV_EARTH_DIPOLE, ENV_ERA0 = 34, 37, 40
 ENV_FACETS = 46
 FACET_AREA, FACET_NORMAL, FACET_COP, FACET_SPECULAR, FACET_DIFFUSE, FACET_CD = 0, 1, 4, 7, 8, 9
 FACET_FIELDS = 10
-SRP, DRAG, DIPOLE = 1, 2, 4  # bits of ENV_FLAGS
+# bit k of ENV_FLAGS: effect k of EFFECTS on
 # the order of environment_torques_B's rows, and their names in `keepout truth`'s file
 EFFECTS = ("solar radiation pressure", "aerodynamic drag", "residual magnetic dipole")
 EFFECT_KEYS = ("srp_torque_B_Nm", "drag_torque_B_Nm", "dipole_torque_B_Nm")
 
 
-def environment_effects(mission) -> list[str]:
+def effects_on(disturbance: Any) -> tuple[bool, bool, bool]:
+    """Which of EFFECTS a disturbance (the mission's, or hil_sim.params.DisturbanceParams: the same names)
+    turns on."""
+    d = disturbance
+    return d.solar_radiation_pressure, d.aerodynamic_drag, any(d.residual_dipole_B_Am2)
+
+
+def environment_effects(mission: Any) -> list[str]:
     """The names (EFFECTS) of the environment effects a mission (hil_sim.mission.Mission) turns on."""
-    dist = mission.spacecraft.disturbance
-    on = (dist.solar_radiation_pressure, dist.aerodynamic_drag, any(dist.residual_dipole_B_Am2))
-    return [name for name, is_on in zip(EFFECTS, on) if is_on]
+    return [name for name, on in zip(EFFECTS, effects_on(mission.spacecraft.disturbance)) if on]
 
 
 def environment_rows(params: Sequence[SpacecraftParams]) -> np.ndarray | None:
     """The rows to append to the dynamics' B (ENV_FACETS + FACET_FIELDS * facets, M) for a batch, or None when
     no run has an environment effect on (B is then exactly as without this module)."""
-    flags = [(SRP if p.disturbance.solar_radiation_pressure else 0) | (DRAG if p.disturbance.aerodynamic_drag else 0)
-             | (DIPOLE if any(p.disturbance.residual_dipole_B_Am2) else 0) for p in params]
+    flags = [sum(1 << k for k, on in enumerate(effects_on(p.disturbance)) if on) for p in params]
     if not any(flags):
         return None
     n_facets = max(len(p.facets) for p in params)

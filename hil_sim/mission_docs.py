@@ -79,12 +79,15 @@ facetDragDynamicEffector with exponentialAtmosphere and zeroWindModel to roundin
 budget. With `residual_dipole_B_Am2` not zero, the torque m x B of the spacecraft's residual dipole in the
 Earth's field, a centred dipole from IGRF-14 at the epoch (ppigrf) turning with the Earth (Basilisk's
 magneticFieldCenteredDipole and MtbEffector to rounding: `tests/hil_sim/test_geomagnetic.py`, which also
-bounds its distance from the full IGRF at 550 km). `keepout truth FILE --duration S --out truth.npz` propagates the truth models alone (no
-flight software, wheel motors commanding zero) and writes the SIL's truth.npz layout plus the inertial
-angular momentum `H_N_Nms` and `sunlit_fraction` (the share of the Sun's disc seen past the Earth: the
-conical umbra and penumbra, as Basilisk's eclipse module computes them) and each environment torque turned
-on (`srp_torque_B_Nm`, `drag_torque_B_Nm`, `dipole_torque_B_Nm`), with a summary: attitude drift, largest body rate, the momentum the disturbances added,
-the time in the Earth's shadow and each environment torque's peak.
+bounds its distance from the full IGRF at 550 km).
+
+`keepout truth FILE --duration S --out truth.npz` propagates the truth models alone (no flight software,
+wheel motors commanding zero) and writes the SIL's truth.npz layout plus the inertial angular momentum
+`H_N_Nms`, `sunlit_fraction` (the share of the Sun's disc seen past the Earth: the conical umbra and
+penumbra, as Basilisk's eclipse module computes them) and each environment torque turned on
+(`srp_torque_B_Nm`, `drag_torque_B_Nm`, `dipole_torque_B_Nm`), with a summary: attitude drift, largest body
+rate, the momentum the disturbances added, the time in the Earth's shadow and each environment torque's
+peak.
 
 In the tables, *required* means the key has no default; a range `(a, b]` excludes a and includes b.
 """
