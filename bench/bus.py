@@ -41,7 +41,7 @@ def frame_bits_nominal(dlc: int) -> int:
 
 def bus_load(n_wheels: int, gnc_hz: float = 10.0, imu_hz: float = 100.0, st_hz: float = 10.0,
              door: bool = False) -> dict:
-    from fsw.bus import Icd
+    from comms.bus import Icd
 
     icd = Icd()
     per_cycle = {"SYNC": 1.0, "IMU_RATE": imu_hz / gnc_hz, "ST_QUAT_A": st_hz / gnc_hz, "ST_QUAT_B": st_hz / gnc_hz,
@@ -72,7 +72,7 @@ def _receiver_proc(spec: str, n: int, mode: str, out_path: str) -> None:
     """Child process: receive ``n`` SYNC frames (tick = sequence), record monotonic arrival times."""
     import numpy as np
 
-    from fsw.bus import Icd, open_bus
+    from comms.bus import Icd, open_bus
 
     icd = Icd()
     sync_id = icd.spec("SYNC").frame_id
@@ -106,7 +106,7 @@ def transport_figures(spec: str, n_latency: int, n_throughput: int) -> dict:
     """One-way latency (paced sends) and frames/s (back-to-back sends) between two processes."""
     import numpy as np
 
-    from fsw.bus import E2ESender, Icd, open_bus
+    from comms.bus import E2ESender, Icd, open_bus
 
     icd = Icd()
     out: dict = {"spec": spec}
@@ -152,7 +152,8 @@ def lockstep_rate(spec: str, ticks: int, repeats: int = 5) -> dict:
 
     ``repeats`` windows of ``ticks`` ticks: the median is the figure, the best window shows what the loop
     does when the shared host leaves it alone."""
-    from fsw.bus import FswBusDriver, Icd, open_bus
+    from fsw.bus import FswBusDriver
+    from comms.bus import Icd, open_bus
     from hil_sim.lockstep import RateDampingResponder, Simulator
     from hil_sim.params import SpacecraftParams, WorldParams
     from hil_sim.world import World
@@ -208,7 +209,7 @@ def lockstep_rate_real_fsw(spec: str, ticks: int, mission_path: Path) -> dict:
     """SIL loop rate with the real flight software process (``python -m fsw --lockstep``) on the bus."""
     import socket
 
-    from fsw.bus import Icd, open_bus
+    from comms.bus import Icd, open_bus
     from hil_sim.lockstep import Simulator
     from hil_sim.mission import load_mission, world_params
     from hil_sim.world import World
@@ -257,7 +258,7 @@ def receiver_fuzz(n: int) -> dict:
     import can
     import numpy as np
 
-    from fsw.bus import E2EReceiver, Icd
+    from comms.bus import E2EReceiver, Icd
 
     icd = Icd()
     rx = E2EReceiver(icd, ignore_ids=icd.ids_sent_by("FSW"))
@@ -334,7 +335,7 @@ def main() -> int:
     n_lat, n_thr, ticks, n_fuzz = (500, 5000, 100, 100_000) if args.quick else (2000, 20000, 300, 200_000)
     results: dict = {"date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "host": os.uname().nodename}
     results["bus_load"] = [bus_load(6), bus_load(4), bus_load(6, door=True), bus_load(4, door=True)]
-    from fsw.bus.transport import random_udp_endpoint
+    from comms.bus.transport import random_udp_endpoint
 
     group, port = random_udp_endpoint()
     udp = f"udp_multicast:{group}:{port}"

@@ -173,16 +173,16 @@ def _frame_path_floor(names: list[str], repeats: int = 7, ticks: int = 2000) -> 
       the E2E receiver (CRC, decode, range and counter checks) on the receiving side, over that bus,
       frame by frame;
     * ``icd_e2e_burst``: the same work as fast mode does it: the tick's frames encoded in one compiled
-      call, carried as one burst, classified in one compiled call (fsw/bus/kernels.py).
+      call, carried as one burst, classified in one compiled call (comms/bus/kernels.py).
 
     Medians of ``repeats`` runs of ``ticks`` ticks, in microseconds per tick."""
     import collections
 
     import numpy as np
 
-    from fsw.bus import E2EReceiver, E2ESender, Icd, open_bus
-    from fsw.bus.icd import _data_frame
-    from fsw.bus.transport import recv_burst, send_burst
+    from comms.bus import E2EReceiver, E2ESender, Icd, open_bus
+    from comms.bus.icd import _data_frame
+    from comms.bus.transport import recv_burst, send_burst
 
     icd = Icd()
     # mid-range values: every frame passes the codec's and the receiver's range checks

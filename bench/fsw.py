@@ -74,7 +74,7 @@ def bench_cycle(cycles: int) -> dict:
     from closed_loop_kit import DirectLoop, RecordingDriver
 
     from fsw.assembly import build_flight_software
-    from fsw.dictionary import DICTIONARY
+    from comms.dictionary import DICTIONARY
     from fsw.telemetry import TelemetrySender
 
     world, cfg, _ = _world_and_cfg()
@@ -107,7 +107,7 @@ def bench_cycle(cycles: int) -> dict:
 
 # --------------------------------------------------------------------------------------- 2. realtime
 def _simulator_process(bus_spec: str, ticks: int, ready, done, rt_priority: int = 0) -> None:
-    from fsw.bus import Icd, open_bus
+    from comms.bus import Icd, open_bus
     from hil_sim.lockstep import Simulator
 
     if rt_priority:  # the simulator stands in for hardware, which keeps its own time whatever the host does
@@ -125,7 +125,7 @@ def _simulator_process(bus_spec: str, ticks: int, ready, done, rt_priority: int 
 
 def bench_realtime(seconds: float, rt_priority: int = 0) -> dict:
     from fsw.assembly import build_flight_software
-    from fsw.bus import open_bus
+    from comms.bus import open_bus
 
     port = 43000 + os.getpid() % 1000
     spec = f"udp_multicast:239.74.163.{os.getpid() % 200 + 2}:{port}"
@@ -138,7 +138,7 @@ def bench_realtime(seconds: float, rt_priority: int = 0) -> dict:
     bus = open_bus(spec)
     sim.start()
     ready.wait(60)
-    from fsw.dictionary import DICTIONARY
+    from comms.dictionary import DICTIONARY
     from fsw.telemetry import TelemetrySender
 
     fsw = build_flight_software(cfg, bus, telemetry=TelemetrySender(DICTIONARY, port=None))  # events kept, no socket

@@ -38,7 +38,7 @@ import msgpack
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from fsw.bus import Icd  # noqa: E402
+from comms.bus import Icd
 
 ICD_IDS = tuple(sorted(m.frame_id for m in Icd().messages.values()))  # every frame of the ICD (the DBC)
 

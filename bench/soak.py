@@ -187,8 +187,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from closed_loop_kit import BusLoop, attitude_with_boresight, fsw_config_for, slew_geometry
-    from fsw.dictionary import DICTIONARY
-    from fsw.telecommand import CommandDispatcher, encode_command
+    from comms.dictionary import DICTIONARY
+    from fsw.telecommand import CommandDispatcher
+    from comms.telecommand import encode_command
     from fsw.telemetry import TelemetrySender
     from hil_sim.params import SpacecraftParams, StarTrackerParams, WorldParams
     from hil_sim.world import World

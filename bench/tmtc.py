@@ -28,10 +28,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
 sys.path.insert(0, str(ROOT))
 
-from fsw.dictionary import DICTIONARY  # noqa: E402
+from comms.dictionary import DICTIONARY  # noqa: E402
 from ground.monitor import GroundMonitor, run_ground_monitor
-from fsw.telecommand import CommandDispatcher, encode_command
-from fsw.telemetry import TelemetrySender, decode_tm_packet
+from fsw.telecommand import CommandDispatcher
+from comms.telecommand import encode_command
+from fsw.telemetry import TelemetrySender
+from comms.telemetry import decode_tm_packet
 
 RESULTS = Path(__file__).resolve().parent / "results" / "tmtc.json"
 

@@ -103,9 +103,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"fsw: {exc}", file=sys.stderr)
         return 2
     from fsw.assembly import build_flight_software
-    from fsw.bus import BusSpecError, BusUnavailableError, Icd, open_bus
-    from fsw.dictionary import DICTIONARY
-    from fsw.link_security import KeyFileError
+    from comms.bus import BusSpecError, BusUnavailableError, Icd, open_bus
+    from comms.dictionary import DICTIONARY
+    from comms.link_security import KeyFileError
     from fsw.telecommand import CommandDispatcher
     from fsw.telemetry import TelemetrySender
 
@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
         key = link_key(cfg, args.config, args.key_file)
         uplink, downlink = link_associations(cfg, key)
         if bus_authentication:
-            from fsw.bus.secoc import secure
+            from comms.bus.secoc import secure
 
             bus = secure(bus, icd, key, "FSW")
     except (KeyFileError, ValueError) as exc:  # (SecOCError: an ICD without authenticator frames)
@@ -195,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
 def link_key(cfg, config_path: str, key_file: str | None = None) -> bytes:
     """The run's link key, from the mission's key file (``key_file`` overrides it). Raises KeyFileError
     when there is no usable key: the flight software never runs an unauthenticated uplink."""
-    from fsw.link_security import KeyFileError, load_key_file, mission_key_path
+    from comms.link_security import KeyFileError, load_key_file, mission_key_path
 
     path = key_file or mission_key_path(cfg.tmtc.security.key_file, config_path)
     if path is None:
@@ -206,8 +206,8 @@ def link_key(cfg, config_path: str, key_file: str | None = None) -> bytes:
 
 def link_associations(cfg, key: bytes):
     """(uplink receiver, downlink sender) associations of the link key ``key``."""
-    from fsw.dictionary import DICTIONARY
-    from fsw.link_security import SPI_TM, SecurityAssociation, uplink_receiver
+    from comms.dictionary import DICTIONARY
+    from comms.link_security import SPI_TM, SecurityAssociation, uplink_receiver
 
     uplink = uplink_receiver(key, cfg.tmtc.security.tc_window, resync_opcode=DICTIONARY.command("SEC_RESYNC").opcode)
     return uplink, SecurityAssociation(key, SPI_TM)

@@ -24,7 +24,7 @@ import numpy as np
 from fsw.assumption_check import MAX_RESTARTS, AssumptionChecker
 from fsw.bus.driver import TickInputs
 from fsw.control import RateController
-from fsw.dictionary import MODES
+from comms.dictionary import MODES
 from fsw.door import DoorController
 from fsw.estimation import _NO_SAMPLES, AttitudeEstimator
 from fsw.executive import Executive
@@ -351,13 +351,13 @@ class FlightSoftware:
     def _cmd_set_mode(self, mode) -> None:
         mode = str(mode)
         if mode not in MODES:
-            from fsw.telecommand import CommandValidationError
+            from comms.telecommand import CommandValidationError
 
             raise CommandValidationError(f"SET_MODE: unknown mode {mode!r}")
         self.set_mode(mode, "TELECOMMAND")
 
     def _cmd_set_target(self, kind, c0, c1, c2, c3=0.0) -> None:
-        from fsw.telecommand import CommandValidationError
+        from comms.telecommand import CommandValidationError
 
         kind = str(kind)
         if kind == "DIRECTION":
@@ -391,7 +391,7 @@ class FlightSoftware:
         return ["ATTITUDE"] * len(self.guidance.s3_law_zones)
 
     def _cmd_set_gains(self, k1, kappa, eps, rate_limit_deg_s) -> None:
-        from fsw.telecommand import CommandValidationError
+        from comms.telecommand import CommandValidationError
 
         try:
             self.guidance.set_gains(k1, kappa, "auto" if eps == 0 else eps, rate_limit_deg_s)

@@ -30,7 +30,8 @@ def build_flight_software(cfg: Any, bus: Any = None, icd: Any = None, *, driver:
     ``telemetry`` and ``dispatcher``: the TM sink and the TC dispatcher (None: events kept in memory, no
     telecommands); ``clock``: the executive's clock (the simulation's in fast mode, so runs reproduce)."""
     if driver is None:
-        from fsw.bus import FswBusDriver, Icd
+        from fsw.bus import FswBusDriver
+        from comms.bus import Icd
 
         driver = FswBusDriver(bus, icd if icd is not None else Icd(), len(cfg.spacecraft.wheels))
     return FlightSoftware(cfg, driver, telemetry, dispatcher, clock=clock, plugins=selected_plugins(cfg))

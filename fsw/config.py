@@ -400,7 +400,7 @@ class OrbitKnowledge(_Strict):
 
 
 class LinkSecurityConfig(_Strict):
-    """Link security (fsw.link_security, in the manner of CCSDS SDLS): MAC and anti-replay on TC and TM."""
+    """Link security (comms.link_security, in the manner of CCSDS SDLS): MAC and anti-replay on TC and TM."""
 
     key_file: str | None = Field(None, description="Path of the link key file (hex, mode 0600; `keepout ground keygen FILE` makes one), relative to the mission file's folder. Never the key itself. Required by the flight software process; the SIL makes a fresh key for every run in its run folder and uses that instead.")
     tc_window: int = Field(1024, ge=1, le=1_000_000, description="Anti-replay window: an uplink security sequence number is accepted when above the last accepted one by at most this much; beyond it only SEC_RESYNC is.")

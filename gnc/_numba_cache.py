@@ -1,6 +1,6 @@
 """Where keepout's compiled numba kernels are cached, and when a cached kernel is still the right one.
 
-Every ``@njit(cache=True)`` kernel in the code packages (gnc, fsw, hil_sim, ground) goes through
+Every ``@njit(cache=True)`` kernel in the code packages (gnc, comms, fsw, hil_sim, ground) goes through
 `SourceClosureLocator`, put first in numba's locator list as soon as numba's caching module loads
 (`gnc._after_numba`, armed by ``import gnc``; fsw and hil_sim import gnc first, so no kernel is decorated
 before it). Kernels added later are covered with no edit: the locator takes any function whose file
@@ -35,7 +35,7 @@ from numba.core import caching, config
 # numba >= 0.61 names it CacheImpl, earlier _CacheImpl: the class whose _locator_classes numba walks
 _CACHE_IMPL = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl")
 
-PACKAGES = ("gnc", "fsw", "hil_sim", "ground")  # the code packages whose imports make up a kernel's closure
+PACKAGES = ("gnc", "comms", "fsw", "hil_sim", "ground")  # the code packages whose imports make up a kernel's closure
 STAMP_VERSION = 1  # bump when the stamp's meaning changes: every cached kernel is then compiled again
 # the cache machinery: imported by every package's __init__, compiled into no kernel (STAMP_VERSION covers it)
 _NOT_SOURCES = frozenset({"gnc._numba_cache", "gnc._after_numba"})

@@ -13,10 +13,10 @@ import struct
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator
 
-from fsw.dictionary import DICTIONARY, TelemetryDictionary
+from comms.dictionary import DICTIONARY, TelemetryDictionary
 
 if TYPE_CHECKING:
-    from fsw.telemetry import DecodedTm
+    from comms.telemetry import DecodedTm
 
 RAW_RECORD = struct.Struct("!dI")  # rx time (s, UNIX), packet length (bytes)
 RAW_ARCHIVE = "tm_raw.bin"
@@ -53,7 +53,7 @@ def raw_records(path: str | Path, offset: int = 0) -> Iterator[tuple[float, byte
 def decode_archive(archive_dir: str | Path, dictionary: TelemetryDictionary = DICTIONARY
                    ) -> Iterator[tuple[float, DecodedTm | None, bytes]]:
     """Yield (rx_time_s, decoded packet or None if undecodable, raw bytes) from a raw archive."""
-    from fsw.telemetry import TelemetryDecodeError, decode_tm_packet
+    from comms.telemetry import TelemetryDecodeError, decode_tm_packet
 
     for rx_time_s, raw in read_raw_archive(Path(archive_dir) / RAW_ARCHIVE):
         try:

@@ -11,8 +11,8 @@ from pathlib import Path
 from typing import Any
 
 from fsw.config import udp_port, udp_port_or_zero
-from fsw.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DEFAULT_TM_PORT, DICTIONARY, TelemetryDictionary
-from fsw.link_security import LINK_KEY_FILE, downlink_receiver, load_key_file
+from comms.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DEFAULT_TM_PORT, DICTIONARY, TelemetryDictionary
+from comms.link_security import LINK_KEY_FILE, downlink_receiver, load_key_file
 from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
 from ground.commanding import CommandSender, signing_sender_args
 from ground.link import LOOPBACK, Endpoints, LinkError, find_run, open_telemetry
@@ -127,7 +127,7 @@ def _key_file(explicit: str | None, config_path: str | None, run_dir: Path | Non
         return str(run_dir / LINK_KEY_FILE)
     if config_path:
         from fsw.config import load_fsw_config
-        from fsw.link_security import mission_key_path
+        from comms.link_security import mission_key_path
 
         path = mission_key_path(load_fsw_config(config_path).tmtc.security.key_file, config_path)
         if path is not None:
@@ -137,7 +137,7 @@ def _key_file(explicit: str | None, config_path: str | None, run_dir: Path | Non
 
 
 def _cmd_keygen(args: argparse.Namespace) -> int:
-    from fsw.link_security import write_key_file
+    from comms.link_security import write_key_file
 
     try:
         write_key_file(args.key_path)
@@ -235,7 +235,7 @@ class _RunFinished:
 
 
 def _cmd_monitor(args: argparse.Namespace) -> int:
-    from fsw.dictionary import DictionaryError
+    from comms.dictionary import DictionaryError
 
     try:
         dictionary = _load_dictionary(args.dictionary)
@@ -272,7 +272,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
 
 
 def _cmd_send(args: argparse.Namespace) -> int:
-    from fsw.dictionary import ArgError, DictionaryError
+    from comms.dictionary import ArgError, DictionaryError
     from ground import verify
 
     run = args.send_run if args.send_run is not None else args.run
@@ -349,7 +349,7 @@ def _send_endpoints(args: argparse.Namespace, run: str | None) -> tuple[Endpoint
 
 
 def _cmd_decode(args: argparse.Namespace) -> int:
-    from fsw.dictionary import DictionaryError
+    from comms.dictionary import DictionaryError
 
     archive = Path(args.archive_dir)
     if not (archive / RAW_ARCHIVE).exists():
@@ -373,7 +373,7 @@ def _cmd_decode(args: argparse.Namespace) -> int:
 
 
 def _cmd_xtce(args: argparse.Namespace) -> int:
-    from fsw.dictionary import DictionaryError
+    from comms.dictionary import DictionaryError
     from ground.xtce import to_xtce, write_xtce
 
     try:

@@ -6,9 +6,9 @@ import socket
 from pathlib import Path
 from typing import Any
 
-from fsw.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DICTIONARY, TelemetryDictionary
-from fsw.link_security import SPI_TC, SecurityAssociation, SequenceFile, load_key_file
-from fsw.telemetry import SEQ_MODULO
+from comms.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DICTIONARY, TelemetryDictionary
+from comms.link_security import SPI_TC, SecurityAssociation, SequenceFile, load_key_file
+from comms.telemetry import SEQ_MODULO
 
 
 def signing_sender_args(key_file: str | Path) -> dict[str, Any]:
@@ -21,7 +21,7 @@ def signing_sender_args(key_file: str | Path) -> dict[str, Any]:
 class CommandSender:
     """Sends telecommands to the flight software, with its own TC sequence count.
 
-    ``security``: the uplink association (``fsw.link_security``) that signs every command; its security
+    ``security``: the uplink association (``comms.link_security``) that signs every command; its security
     sequence numbers come from ``sequence`` (a ``SequenceFile`` shared by every sender of the key), else
     from the association itself. Without ``security`` commands go out plain (the flight software refuses
     them: unit tests of the flight side only).
@@ -46,7 +46,7 @@ class CommandSender:
 
     def send(self, command: str | int, *args: Any, check_range: bool = True, **kwargs: Any) -> bytes:
         """Encode and send; positional or keyword args (raises ``ArgError`` naming a bad arg)."""
-        from fsw.telecommand import encode_command
+        from comms.telecommand import encode_command
 
         if args and kwargs:
             raise TypeError("pass command args either positionally or by name, not both")

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Any, Protocol
 
-from fsw.dictionary import LimitState, TelemetryDictionary
+from comms.dictionary import LimitState, TelemetryDictionary
 
 
 class MonitorView(Protocol):

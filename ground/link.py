@@ -128,7 +128,7 @@ def open_telemetry(endpoints: Endpoints, *, port: int | None = None,
     ``port`` overrides ``endpoints.tm_port``; 0 lets the kernel choose a free one (read it back with
     ``getsockname()``): the SIL's own ground opens the run's socket this way before the port is known.
     Raises ``LinkError`` naming the address when the socket cannot be opened. The caller reads with
-    ``recv`` / ``select`` and decodes with ``fsw.telemetry.decode_tm_packet`` (as ``GroundMonitor`` does).
+    ``recv`` / ``select`` and decodes with ``comms.telemetry.decode_tm_packet`` (as ``GroundMonitor`` does).
     """
     port = endpoints.tm_port if port is None else port
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

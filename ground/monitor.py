@@ -6,7 +6,7 @@ limit-checks every channel that has dictionary limits (each GREEN/YELLOW/RED tra
 ``limits.jsonl``) and keeps the latest values and events for displays. On close
 ``ground_summary.json`` holds per-APID counts, gaps, decode errors and per-channel limit statistics.
 
-With a downlink ``security`` association (``fsw.link_security``; the SIL and the CLI always give one)
+With a downlink ``security`` association (``comms.link_security``; the SIL and the CLI always give one)
 every datagram must carry a valid MAC and a security sequence number above the last one. Only those are
 archived, as the plain packet they carry: a forged, unauthenticated or replayed packet is counted by
 reason (``stats.rejected``, shown live and in the summary) and kept apart in ``tm_rejected.bin``, never
@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
-from fsw.dictionary import DEFAULT_HOST, DEFAULT_TM_PORT, DICTIONARY, Limits, TelemetryDictionary
-from fsw.telemetry import SEQ_MODULO
+from comms.dictionary import DEFAULT_HOST, DEFAULT_TM_PORT, DICTIONARY, Limits, TelemetryDictionary
+from comms.telemetry import SEQ_MODULO
 from ground.archive import (
     DECODED_ARCHIVE,
     EVENTS_ARCHIVE,
@@ -43,8 +43,8 @@ from ground.display import LiveDisplay
 if TYPE_CHECKING:
     import threading
 
-    from fsw.link_security import SecurityAssociation
-    from fsw.telemetry import DecodedTm
+    from comms.link_security import SecurityAssociation
+    from comms.telemetry import DecodedTm
 
 # A backwards jump larger than this is read as a flight-software restart, not as 16000 lost packets.
 MAX_PLAUSIBLE_GAP = SEQ_MODULO // 2
@@ -90,7 +90,7 @@ class _DatagramBatch:
     be a ``recv`` each (Linux; ``libc`` None elsewhere, and then the monitor reads datagram by datagram)."""
 
     def __init__(self, sock: socket.socket) -> None:
-        from fsw.bus.mmsg import IoVec, MMsgHdr, libc
+        from comms.bus.mmsg import IoVec, MMsgHdr, libc
 
         self.libc = libc
         self.fd = sock.fileno()
@@ -245,7 +245,7 @@ class GroundMonitor:
             self._sock.setblocking(False)
         self._batch: _DatagramBatch | None = None
         if self._sock is not None:
-            from fsw.bus.mmsg import libc
+            from comms.bus.mmsg import libc
 
             if libc is not None:
                 self._batch = _DatagramBatch(self._sock)
@@ -298,7 +298,7 @@ class GroundMonitor:
 
     def process(self, raw: bytes, rx_time_s: float | None = None) -> DecodedTm | None:
         """Archive ``raw`` first (nothing is lost even if it cannot be decoded), then decode it."""
-        from fsw.telemetry import TelemetryDecodeError, decode_tm_packet
+        from comms.telemetry import TelemetryDecodeError, decode_tm_packet
 
         rx_time_s = time.time() if rx_time_s is None else rx_time_s
         self.stats.datagrams += 1
@@ -340,7 +340,7 @@ class GroundMonitor:
 
     def _authenticate(self, raw: bytes, rx_time_s: float) -> bytes | None:
         """The plain packet inside an authentic, fresh secured one; None (counted, quarantined) otherwise."""
-        from fsw.link_security import SecurityError
+        from comms.link_security import SecurityError
 
         try:
             return self.security.unprotect(raw)[0]
@@ -498,7 +498,7 @@ def run_ground_monitor(archive_dir: str, host: str = DEFAULT_HOST, port: int = D
     is put on ``port_queue`` (a multiprocessing Queue) before ``ready`` is set. ``key_file``: the link
     key; telemetry is then verified (see the module docstring).
     """
-    from fsw.link_security import downlink_receiver, load_key_file
+    from comms.link_security import downlink_receiver, load_key_file
 
     dictionary = TelemetryDictionary.load(dictionary_path) if dictionary_path else DICTIONARY
     security = downlink_receiver(load_key_file(key_file)) if key_file else None

@@ -1,6 +1,6 @@
 """Verified commanding: send one telecommand and wait for its acknowledgements (PUS service 1 style).
 
-The flight software answers every telecommand with ``TC_ACK`` packets (``fsw.dictionary``: acceptance
+The flight software answers every telecommand with ``TC_ACK`` packets (``comms.dictionary``: acceptance
 success or failure with a reason code, then for an accepted command completion success or failure), each
 quoting the command's request id (its first four octets). ``send_verified`` sends the command, reads the
 telemetry until the reports for that request id settle it, and returns the outcome; ``keepout ground
@@ -25,9 +25,9 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from fsw.dictionary import TC_REASON_DOCS, TelemetryDictionary
-from fsw.link_security import SecurityAssociation
-from fsw.telemetry import decode_tm_packet
+from comms.dictionary import TC_REASON_DOCS, TelemetryDictionary
+from comms.link_security import SecurityAssociation
+from comms.telemetry import decode_tm_packet
 from ground.commanding import CommandSender
 
 EXIT_COMPLETED, EXIT_NOT_SENT, EXIT_BAD_INPUT, EXIT_REJECTED, EXIT_FAILED, EXIT_NO_ACK = 0, 1, 2, 3, 4, 5

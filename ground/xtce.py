@@ -23,7 +23,7 @@ import datetime as dt
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from fsw.dictionary import (
+from comms.dictionary import (
     DICTIONARY,
     MAX_STRING_LEN,
     TC_ACK_REPORTS,
@@ -252,7 +252,7 @@ def to_xtce(dictionary: TelemetryDictionary = DICTIONARY) -> str:
     header = _el(space, "Header", version=dictionary.version, validationStatus="Working",
                  date=dt.date.today().isoformat())
     notes = _el(header, "NoteSet")
-    _el(notes, "Note", "Generated from the keepout telemetry dictionary (fsw/dictionary.py) by `keepout ground "
+    _el(notes, "Note", "Generated from the keepout telemetry dictionary (comms/dictionary.py) by `keepout ground "
                        "xtce`. Byte order big-endian. Every packet ends with a CRC-16/CCITT-FALSE (poly 0x1021, "
                        "init 0xFFFF) over everything before it. Telecommand verification reports: "
                        + ", ".join(f"{name} (PUS subtype {subtype})" for name, subtype in TC_ACK_REPORTS) + ".")

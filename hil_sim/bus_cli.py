@@ -48,8 +48,8 @@ def add_cli(subparsers: Any) -> None:
 
 
 def _open(args: argparse.Namespace):
-    from fsw.bus.icd import Icd
-    from fsw.bus.transport import BusSpecError, BusUnavailableError, open_bus
+    from comms.bus.icd import Icd
+    from comms.bus.transport import BusSpecError, BusUnavailableError, open_bus
 
     info: list = []
     try:
@@ -123,7 +123,7 @@ class MonitorState:
     """Per-message view: count, rate, last decoded values, E2E classification counts."""
 
     def __init__(self, icd: Any) -> None:
-        from fsw.bus.e2e import E2EReceiver
+        from comms.bus.e2e import E2EReceiver
 
         self.icd = icd
         self.receiver = E2EReceiver(icd)  # passive: judges every node's frames

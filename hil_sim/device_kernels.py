@@ -18,8 +18,8 @@ import math
 import numpy as np
 from numba import njit
 
-from fsw.bus.burst import MAX_DLC
-from fsw.bus.kernels import FALLBACK_CODE, _tally, encode_range, judge_frame, unjudged_code
+from comms.bus.burst import MAX_DLC
+from comms.bus.kernels import FALLBACK_CODE, _tally, encode_range, judge_frame, unjudged_code
 from hil_sim import world as wd
 from hil_sim.dynamics import W_KT
 from hil_sim.world import _world_period_kernel, view1, view2, view3
@@ -315,7 +315,7 @@ RC_SIZE = 8
 def receive_commands(ids, lengths, data, first, status, values, now, awaited, consts, msg_i, sig_i, sig_f, seq,
                      last_ok_t, wheel_state, tally, rs):
     """``Simulator``'s receive of frames ``first``.. of a burst in one call: each frame classified as
-    ``fsw.bus.kernels.classify_rows`` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``)
+    ``comms.bus.kernels.classify_rows`` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``)
     and counted in ``tally`` as ``collect_rows`` counts (``rs[RS_NTALLY]`` pairs), then a delivered one
     applied as :func:`apply_received` applies it (wheel commands into ``wheel_state``; heartbeats, CYCLE_DONEs
     and stale ones, i.e. for another tick than ``awaited``, counted in ``rs``; ``rs[RS_DONE]`` set by

@@ -25,8 +25,8 @@ from typing import Any, NamedTuple, Protocol, Sequence
 import can
 import numpy as np
 
-from fsw.bus.burst import FrameBurst
-from fsw.bus.icd import E2ESender, Icd
+from comms.bus.burst import FrameBurst
+from comms.bus.icd import E2ESender, Icd
 from hil_sim import device_kernels as dk
 from hil_sim.device_kernels import WS_APPLIED, WS_CMD, WS_LAST_T, WS_TICK
 from hil_sim.world import pack_arrays

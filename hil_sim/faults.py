@@ -41,7 +41,7 @@ from typing import Any, Iterable, Sequence
 import can
 import numpy as np
 
-from fsw.bus.icd import Icd
+from comms.bus.icd import Icd
 
 log = logging.getLogger("hil_sim.faults")
 

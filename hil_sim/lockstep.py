@@ -31,11 +31,11 @@ from typing import Any, Callable, Iterable
 import can
 import numpy as np
 
-from fsw.bus.burst import FrameBurst
-from fsw.bus.e2e import NO_STOP, PYTHON_RUN, CheckedBurst, CheckedFrame, E2EReceiver
-from fsw.bus.kernels import ECHO_CODE, MAX_DLC, count_timeouts
-from fsw.bus.icd import Icd
-from fsw.bus.transport import recv_burst, send_batch, send_burst
+from comms.bus.burst import FrameBurst
+from comms.bus.e2e import NO_STOP, PYTHON_RUN, CheckedBurst, CheckedFrame, E2EReceiver
+from comms.bus.kernels import ECHO_CODE, MAX_DLC, count_timeouts
+from comms.bus.icd import Icd
+from comms.bus.transport import recv_burst, send_batch, send_burst
 from hil_sim import device_kernels as dk
 from hil_sim.device_kernels import apply_received
 from hil_sim.devices import Devices, DeviceTiming, WorldLike
@@ -729,7 +729,8 @@ def _responder_main(argv: list[str] | None = None) -> int:
 
     import numpy as np
 
-    from fsw.bus import FswBusDriver, open_bus
+    from fsw.bus import FswBusDriver
+    from comms.bus import open_bus
 
     parser = argparse.ArgumentParser(description="minimal flight-software stand-in answering SYNC frames")
     parser.add_argument("--bus", required=True, help="bus spec, e.g. socketcan:vcan0")

@@ -22,7 +22,7 @@ import numpy as np
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from fsw.config import KNOWLEDGE_SOURCES, MAX_WHEELS, FswConfig
-from fsw.dictionary import FDIR_MONITORS
+from comms.dictionary import FDIR_MONITORS
 from gnc.ephemeris import EARTH_RADIUS_KM
 from hil_sim.faults import DOOR_MESSAGES, WHEEL_MESSAGE
 from keepout_config import config_path
@@ -54,7 +54,7 @@ UnitQuat = Annotated[list[float], Field(min_length=4, max_length=4,
 
 FdirMonitor = Literal[FDIR_MONITORS]  # type: ignore[valid-type]  (the telemetry dictionary's monitors)
 # auto, the loopback transports, or any python-can interface as INTERFACE:CHANNEL[,KEY=VALUE...] (checked
-# further by fsw.bus.transport.resolve_spec when the run starts)
+# further by comms.bus.transport.resolve_spec when the run starts)
 BUS_PATTERN = (r"^(auto|socketcan(:[A-Za-z0-9_]+)?|udp_multicast(:[0-9a-fA-F.:]+:[0-9]+)?|virtual(:[A-Za-z0-9_]+)?"
                r"|[a-z0-9_]+:[^\s,]+(,[A-Za-z_][A-Za-z0-9_]*=[^\s,]+)*)$")
 

@@ -51,7 +51,7 @@ import numpy as np
 import yaml
 
 from fsw.lifetime import PARENT_PID_ENV, die_with_parent
-from fsw.link_security import LINK_KEY_FILE, write_key_file
+from comms.link_security import LINK_KEY_FILE, write_key_file
 from ground.link import ENDPOINTS_FILE, settle_orphaned_runs
 from keepout_config import config_path
 
@@ -207,7 +207,7 @@ def ground_process(archive_dir: str, endpoints: dict, port: int, port_queue, rea
     """
     die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from fsw.link_security import downlink_receiver, load_key_file
+    from comms.link_security import downlink_receiver, load_key_file
     from ground.link import Endpoints, LinkError, open_telemetry
     from ground.monitor import GroundMonitor
 
@@ -355,7 +355,7 @@ class CandumpLog:
         return self._stamp + ident + (data if type(data) is bytearray else bytes(data)).hex().upper() + "\n"
 
     def log_burst(self, direction: str, t_s: float, burst, rows: Iterable[int] | None = None) -> None:
-        """Frames ``rows`` (indices, in order; None: all) of a ``fsw.bus.burst.FrameBurst`` sent or received
+        """Frames ``rows`` (indices, in order; None: all) of a ``comms.bus.burst.FrameBurst`` sent or received
         at ``t_s``: the lines the per-frame call writes for ``burst.message(i)``, formatted from the burst's
         arrays (one hex string of the whole data block) and written at once. A frame with id -1 (not a plain
         classic data frame: extended, remote, error, FD) is formatted from its message."""
@@ -588,7 +588,7 @@ class _RunParts:
     options: RunOptions
     mission: Any
     run_dir: Path
-    bus_info: Any  # fsw.bus.transport's resolved bus spec
+    bus_info: Any  # comms.bus.transport's resolved bus spec
     endpoints: Any  # ground.link endpoints, rewritten as ports and pids become known
     ground: Any = None  # the ground monitor's process
     port_queue: Any = None
@@ -617,7 +617,7 @@ class _RunParts:
 def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
     """Start the ground and the flight software, run the simulator; returns (status, exit code or None
     for 'judge the requirements'). Raises RunNotStarted until the flight software has started."""
-    from fsw.bus.transport import BusSpecError, resolve_spec
+    from comms.bus.transport import BusSpecError, resolve_spec
 
     try:
         info = resolve_spec(mission.bus, run_id=run_dir.name)
@@ -694,8 +694,8 @@ def _build_simulator(run: _RunParts) -> None:
     """Open the simulator's end of the bus and build the world, the simulator, the telecommand timeline and
     the recorders. Done before the flight software starts (astropy ephemeris nodes take a few seconds): it
     waits only lockstep_timeout_s for SYNC(0)."""
-    from fsw.bus.icd import Icd
-    from fsw.bus.transport import BusUnavailableError, open_bus
+    from comms.bus.icd import Icd
+    from comms.bus.transport import BusUnavailableError, open_bus
     from ground.commanding import CommandSender, signing_sender_args
     from hil_sim.lockstep import Simulator
     from hil_sim.mission import door_params, world_params
@@ -707,7 +707,7 @@ def _build_simulator(run: _RunParts) -> None:
     except (BusUnavailableError, OSError) as exc:
         raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
     if mission.bus_authentication:
-        from fsw.bus.secoc import secure
+        from comms.bus.secoc import secure
 
         run.bus = secure(run.bus, Icd(), run.link_key, "SIM")
     sender = CommandSender(host=run.endpoints.tc_host, port=run.tc_port, **signing_sender_args(run.key_path))

@@ -87,7 +87,7 @@ class _Resync:
 
 def _key_file(args: argparse.Namespace, mission, purpose: str) -> str:
     """The link key file (raises ValueError naming what is missing)."""
-    from fsw.link_security import mission_key_path
+    from comms.link_security import mission_key_path
 
     key_file = args.key_file or mission_key_path(mission.flight_software.tmtc.security.key_file, args.mission)
     if key_file is None:
@@ -105,14 +105,14 @@ def _signing(args: argparse.Namespace, mission) -> dict[str, Any]:
 
 def _link_key(args: argparse.Namespace, mission) -> bytes:
     """The link key the bus's SecOC keys come from (mission bus_authentication: true)."""
-    from fsw.link_security import load_key_file
+    from comms.link_security import load_key_file
 
     return load_key_file(_key_file(args, mission, "authenticate the bus (bus_authentication: true)"))
 
 
 def _run(args: argparse.Namespace) -> int:
-    from fsw.bus.icd import Icd
-    from fsw.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
+    from comms.bus.icd import Icd
+    from comms.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
     from ground.commanding import CommandSender
     from hil_sim.lockstep import Simulator
     from hil_sim.mission import door_params, world_params
@@ -137,7 +137,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"keepout sim: bus {info.spec} cannot be opened: {exc}", file=sys.stderr)
         return EXIT_NOT_STARTED
     if link_key is not None:
-        from fsw.bus.secoc import secure
+        from comms.bus.secoc import secure
 
         bus = secure(bus, Icd(), link_key, "SIM")
     out = args.out if args.out is not None else _run_dir(Path("runs"), f"{mission.name}-sim")

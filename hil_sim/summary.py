@@ -487,7 +487,7 @@ TM_END_SLACK_PACKETS = 2
 def telemetry_completeness(ground: dict[str, Any], sim_s: float, rates) -> tuple[bool, str]:
     """Did the ground receive all the telemetry of ``sim_s`` simulated seconds? (no sequence gaps, and
     the GNC and housekeeping packet counts match the simulated time at the flight software's rates)."""
-    from fsw.dictionary import GNC_APID, HK_APID
+    from comms.dictionary import GNC_APID, HK_APID
 
     if not ground:
         return False, "the ground wrote no ground_summary.json: it did not end normally"

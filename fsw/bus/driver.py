@@ -18,7 +18,7 @@ announced tick (after a tick closed, before the next SYNC: replayed, injected or
 (``unexpected_frames``) and not used. See docs/bus.md for what E2E can and cannot stop.
 
 A lockstep tick costs a handful of Python calls whatever its frames: one compiled call per burst read
-(``fsw.bus.kernels.collect_rows``) classifies the frames on the receiver's state, counts them, keeps the
+(``comms.bus.kernels.collect_rows``) classifies the frames on the receiver's state, counts them, keeps the
 tick's bookkeeping and writes the decoded samples into this driver's arrays; the counts reach the
 receiver's per-message counters once per tick, and ``TickInputs`` holds the gyro samples as one array
 (its ``ImuSample`` list is built when first read). The wheel commands and CYCLE_DONE are limited and
@@ -35,12 +35,12 @@ from typing import Callable, NamedTuple, Sequence
 import can
 import numpy as np
 
-import fsw.bus.kernels as K
-from fsw.bus.burst import FrameBurst
-from fsw.bus.e2e import CODE_CLASS, CheckedBurst, CheckedFrame, E2EReceiver
-from fsw.bus.icd import E2ESender, Icd
-from fsw.bus.kernels import MAX_DLC
-from fsw.bus.transport import recv_burst, send_batch
+import comms.bus.kernels as K
+from comms.bus.burst import FrameBurst
+from comms.bus.e2e import CODE_CLASS, CheckedBurst, CheckedFrame, E2EReceiver
+from comms.bus.icd import E2ESender, Icd
+from comms.bus.kernels import MAX_DLC
+from comms.bus.transport import recv_burst, send_batch
 from fsw.config import MAX_WHEELS
 
 FSW_NODE = "FSW"

@@ -111,7 +111,7 @@ def rate_limit_problem(rate_limit_deg_s: float, eps: float | str, cfg, accel_deg
 
 
 class GainsRefused(ValueError):
-    """SET_GAINS refused: ``code`` is the acknowledgement's reason code (fsw.dictionary.TC_REASONS)."""
+    """SET_GAINS refused: ``code`` is the acknowledgement's reason code (comms.dictionary.TC_REASONS)."""
 
     def __init__(self, code: str, message: str) -> None:
         super().__init__(message if message.startswith(code) else f"{code}: {message}")

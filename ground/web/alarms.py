@@ -14,10 +14,10 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from fsw.dictionary import LimitState, TelemetryDictionary
+from comms.dictionary import LimitState, TelemetryDictionary
 
 if TYPE_CHECKING:
-    from fsw.telemetry import DecodedTm
+    from comms.telemetry import DecodedTm
 
 ACKS_FILE = "alarm_acks.jsonl"
 ALARM_EVENTS = ("FDIR_TRIPPED", "KEEP_OUT_MARGIN_LOW", "KEEP_OUT_VIOLATION")

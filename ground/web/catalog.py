@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Any
 
-from fsw.dictionary import Channel, TelemetryDictionary, vector_groups
+from comms.dictionary import Channel, TelemetryDictionary, vector_groups
 
 if TYPE_CHECKING:
     from fsw.config import FswConfig

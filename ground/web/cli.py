@@ -57,7 +57,7 @@ def _cmd_web(args: argparse.Namespace) -> int:
     import asyncio
 
     from fsw.config import ConfigError, load_fsw_config
-    from fsw.dictionary import DICTIONARY, DictionaryError, TelemetryDictionary
+    from comms.dictionary import DICTIONARY, DictionaryError, TelemetryDictionary
     from ground.link import LinkError
     from ground.web.server import WebGround, WebSetupError, bind, find_openmct, serve
 
@@ -68,7 +68,7 @@ def _cmd_web(args: argparse.Namespace) -> int:
         cfg = load_fsw_config(config) if config is not None else None
         security = None
         if endpoints is not None and endpoints.state == "running":
-            from fsw.link_security import LINK_KEY_FILE, downlink_receiver, load_key_file
+            from comms.link_security import LINK_KEY_FILE, downlink_receiver, load_key_file
 
             security = downlink_receiver(load_key_file(args.web_key_file or archive.parent / LINK_KEY_FILE))
         ground = WebGround(dictionary, archive, openmct_dir, cfg=cfg, endpoints=endpoints, security=security,

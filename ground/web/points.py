@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fsw.dictionary import TelemetryDictionary
+from comms.dictionary import TelemetryDictionary
 from ground.archive import RAW_ARCHIVE, raw_records
 from ground.verify import ACK_PACKET
 from ground.web.alarms import AlarmBook
@@ -24,7 +24,7 @@ from ground.web.catalog import SKY_KEY, channel_key, radec_deg
 
 if TYPE_CHECKING:
     from fsw.config import FswConfig
-    from fsw.telemetry import DecodedTm
+    from comms.telemetry import DecodedTm
 
 SKY_PERIOD_S = 1.0  # onboard seconds between sky points
 ZONE_OUTLINE_POINTS = 48
@@ -211,7 +211,7 @@ class ArchiveReader:
 
     def refresh(self) -> int:
         """Read what was appended since the last call; returns the number of packets read."""
-        from fsw.telemetry import TelemetryDecodeError, decode_tm_packet
+        from comms.telemetry import TelemetryDecodeError, decode_tm_packet
 
         if not self.path.exists():
             return 0

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 from aiohttp import WSCloseCode, WSMsgType, web
 
-from fsw.dictionary import TelemetryDictionary
+from comms.dictionary import TelemetryDictionary
 from ground.link import Endpoints, open_telemetry
 from ground.web.alarms import ACKS_FILE, AlarmBook
 from ground.web.catalog import build_objects, display_names
@@ -39,7 +39,7 @@ from ground.web.points import TIME_DOMAINS, ArchiveReader, PointMaker
 
 if TYPE_CHECKING:
     from fsw.config import FswConfig
-    from fsw.link_security import SecurityAssociation
+    from comms.link_security import SecurityAssociation
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 OPENMCT_ENV = "KEEPOUT_OPENMCT_DIR"
@@ -235,8 +235,8 @@ class WebGround:
 
     def _on_telemetry(self) -> None:
         """Read what arrived, turn it into points, and queue each client the points it subscribed to."""
-        from fsw.link_security import SecurityError
-        from fsw.telemetry import TelemetryDecodeError, decode_tm_packet
+        from comms.link_security import SecurityError
+        from comms.telemetry import TelemetryDecodeError, decode_tm_packet
 
         rx_time_s = time.time()
         wanted = set().union(*(c.keys for c in self.clients)) if self.clients else set()

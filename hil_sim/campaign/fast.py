@@ -157,8 +157,8 @@ class _InProcessSender:
         self.decoded: list[tuple[str, dict]] = []
 
     def send(self, name: str, **args: Any) -> None:
-        from fsw.dictionary import DICTIONARY
-        from fsw.telecommand import decode_command, encode_command
+        from comms.dictionary import DICTIONARY
+        from comms.telecommand import decode_command, encode_command
         data = encode_command(DICTIONARY, name, args, seq_count=self.seq)
         self.seq += 1
         self.decoded.append((name, dict(decode_command(DICTIONARY, data)[1])))
@@ -168,7 +168,7 @@ class _InProcessSender:
 def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] = ()) -> RunResult:
     """Run one mission in this process (see the module docstring). ``seed``: the world's noise seed."""
     from fsw.assembly import build_flight_software
-    from fsw.bus import open_bus
+    from comms.bus import open_bus
     from fsw.telecommand import CommandDispatcher
     from hil_sim.lockstep import Simulator
     from hil_sim.mission import door_params, world_params
@@ -270,7 +270,7 @@ _ICD = None
 def _icd():
     global _ICD  # one parsed DBC per worker process (parsing costs ~100 ms)
     if _ICD is None:
-        from fsw.bus import Icd
+        from comms.bus import Icd
         _ICD = Icd()
     return _ICD
 

@@ -3,7 +3,7 @@
 The dispersed mission is written to a YAML file and run like ``keepout sil run``: simulator in this
 worker process, the flight software (``python -m fsw``) and the ground monitor as their own processes,
 lockstep over ``udp_multicast`` with a multicast group and port drawn at random for each run
-(`fsw.bus.transport.random_udp_endpoint`), so runs executing side by side never share a bus. (SocketCAN's vcan0 is one shared bus: a campaign of
+(`comms.bus.transport.random_udp_endpoint`), so runs executing side by side never share a bus. (SocketCAN's vcan0 is one shared bus: a campaign of
 several concurrent runs cannot use it, so a mission's ``socketcan`` bus is replaced here.)
 
 The run is judged by the same ``fast.judge`` on the run folder's ``truth.npz`` and the FDIR trips and

@@ -15,7 +15,7 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from fsw.dictionary import FDIR_MONITORS
+from comms.dictionary import FDIR_MONITORS
 from hil_sim.faults import FAULT_KINDS
 from keepout_config import config_path
 

@@ -146,7 +146,8 @@ class BusLoop:
 
     def __init__(self, cfg, world, faults=(), telemetry=None, dispatcher=None, clock=None):
         from fsw.app import FlightSoftware
-        from fsw.bus import FswBusDriver, Icd, open_bus
+        from fsw.bus import FswBusDriver
+        from comms.bus import Icd, open_bus
         from hil_sim.lockstep import Simulator
 
         BusLoop._channel += 1

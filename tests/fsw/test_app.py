@@ -15,9 +15,11 @@ import pytest
 import yaml
 
 from closed_loop_kit import BusLoop, fsw_config_for
-from fsw.dictionary import DICTIONARY, FDIR_STATES, MODES
-from fsw.telecommand import CommandDispatcher, encode_command
-from fsw.telemetry import TelemetrySender, decode_tm_packet
+from comms.dictionary import DICTIONARY, FDIR_STATES, MODES
+from fsw.telecommand import CommandDispatcher
+from comms.telecommand import encode_command
+from fsw.telemetry import TelemetrySender
+from comms.telemetry import decode_tm_packet
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -126,7 +128,7 @@ def _free_udp_port() -> tuple[socket.socket, int]:
 
 
 def test_process_entry_runs_and_stops_when_the_simulator_is_silent(tmp_path) -> None:
-    from fsw.link_security import downlink_receiver, write_key_file
+    from comms.link_security import downlink_receiver, write_key_file
 
     rx, port = _free_udp_port()
     key = write_key_file(tmp_path / "link.key")
@@ -285,7 +287,7 @@ def test_the_warm_up_freezes_the_start_up_heap_before_fsw_started(loop, monkeypa
 
 def test_process_entry_refuses_to_run_without_a_private_link_key(tmp_path) -> None:
     """No key named, or a key file others can read: exit 2 with one line naming the file and the fix."""
-    from fsw.link_security import write_key_file
+    from comms.link_security import write_key_file
 
     path = tmp_path / "mission.yaml"
     path.write_text(yaml.safe_dump({"flight_software": {"tmtc": {"telecommand_port": 0}}}))

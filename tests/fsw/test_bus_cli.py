@@ -11,8 +11,8 @@ from pathlib import Path
 import can
 import pytest
 
-from fsw.bus import E2ESender, Icd, open_bus
-from fsw.bus.transport import random_udp_endpoint
+from comms.bus import E2ESender, Icd, open_bus
+from comms.bus.transport import random_udp_endpoint
 from hil_sim import bus_cli
 from hil_sim.cli import main as keepout_main
 
@@ -123,7 +123,7 @@ def test_monitor_lines_show_decoded_values_and_e2e_class() -> None:
 
 
 def test_monitor_names_secoc_authenticators_and_does_not_call_them_unknown() -> None:
-    from fsw.bus.secoc import authenticator
+    from comms.bus.secoc import authenticator
 
     icd = Icd()
     sync = _frames(icd)[0]

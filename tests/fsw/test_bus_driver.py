@@ -9,8 +9,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fsw.bus import E2ESender, FswBusDriver, Icd, open_bus
-from fsw.bus.e2e import BUS_KEY, E2EReceiver
+from comms.bus import E2ESender, Icd, open_bus
+from fsw.bus import FswBusDriver
+from comms.bus.e2e import BUS_KEY, E2EReceiver
 
 _channels = itertools.count()
 

@@ -1,4 +1,4 @@
-"""The driver's compiled lockstep tick (fsw.bus.kernels.collect_rows) and command encoder (command_rows)
+"""The driver's compiled lockstep tick (comms.bus.kernels.collect_rows) and command encoder (command_rows)
 against plain references: a frame-by-frame driver on the receiver's Python path (the rules of
 FswBusDriver.collect_tick as they were written before the kernel), and E2ESender.frame with Python's
 limits. Random ticks with lost, repeated, corrupted, reordered, stale, foreign and non-data frames, read
@@ -12,10 +12,11 @@ import can
 import numpy as np
 import pytest
 
-from fsw.bus import E2ESender, FswBusDriver, Icd, TickInputs
-from fsw.bus.burst import FrameBurst
+from comms.bus import E2ESender, Icd
+from fsw.bus import FswBusDriver, TickInputs
+from comms.bus.burst import FrameBurst
 from fsw.bus.driver import ImuSample, StarTrackerSample, WheelStatus
-from fsw.bus.e2e import E2EReceiver
+from comms.bus.e2e import E2EReceiver
 
 
 @pytest.fixture(scope="module")

@@ -4,10 +4,10 @@ from __future__ import annotations
 import can
 import pytest
 
-from fsw.bus.crc import crc8_sae_j1850, e2e_crc
-from fsw.bus.e2e import (BAD_LENGTH, BUS_KEY, CRC_ERROR, OK, OK_SOME_LOST, OUT_OF_RANGE, REPEATED, TIMEOUT,
+from comms.bus.crc import crc8_sae_j1850, e2e_crc
+from comms.bus.e2e import (BAD_LENGTH, BUS_KEY, CRC_ERROR, OK, OK_SOME_LOST, OUT_OF_RANGE, REPEATED, TIMEOUT,
                          UNKNOWN_ID, WRONG_SEQUENCE, E2EReceiver)
-from fsw.bus.icd import E2ESender, Icd
+from comms.bus.icd import E2ESender, Icd
 
 
 @pytest.fixture(scope="module")

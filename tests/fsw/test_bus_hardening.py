@@ -6,7 +6,8 @@ import can
 import pytest
 from test_bus_driver import buses, icd  # noqa: F401  (the virtual-bus pair and the ICD: shared fixtures)
 
-from fsw.bus import E2ESender, FswBusDriver, Icd
+from comms.bus import E2ESender, Icd
+from fsw.bus import FswBusDriver
 
 
 def _status(i: int) -> dict:
@@ -111,7 +112,7 @@ def test_a_sync_far_ahead_or_with_another_period_cannot_move_onboard_time(icd: I
     """A forged SYNC that passes E2E by chance (a random payload's CRC matches 1 time in 256) used to start
     its tick: one with tick 47,500,000,000 put onboard time at 4.75e9 s and every later real SYNC was stale.
     Now a SYNC more than MAX_SYNC_STEP ticks ahead, or with another period, is counted and ignored."""
-    from fsw.bus import kernels as K
+    from comms.bus import kernels as K
 
     sim, fsw = buses
     tx = E2ESender(icd)
@@ -129,7 +130,7 @@ def test_a_sync_far_ahead_or_with_another_period_cannot_move_onboard_time(icd: I
 def test_a_run_of_consecutive_syncs_far_ahead_is_followed_again(icd: Icd, buses) -> None:
     """A simulator that really moved on while the flight software was stalled is not locked out: a run of
     RESYNC_RUN SYNCs one tick apart is followed (a replayed log or random frames make no such run)."""
-    from fsw.bus import kernels as K
+    from comms.bus import kernels as K
 
     sim, fsw = buses
     tx = E2ESender(icd)
@@ -152,7 +153,7 @@ def test_datagrams_that_are_not_frames_are_dropped_and_counted() -> None:
 
     import msgpack
 
-    from fsw.bus.transport import open_bus
+    from comms.bus.transport import open_bus
 
     where: list = []
     bus = open_bus("udp_multicast", info_out=where)
@@ -220,7 +221,7 @@ def test_a_message_python_can_accepts_but_with_ill_typed_fields_is_dropped() -> 
 
     import msgpack
 
-    from fsw.bus.udp_loopback import LoopbackUdpMulticastBus
+    from comms.bus.udp_loopback import LoopbackUdpMulticastBus
 
     bus = LoopbackUdpMulticastBus.__new__(LoopbackUdpMulticastBus)  # the decoder alone, no socket
     bus.decode_errors, bus._fd_frames = 0, False

@@ -9,7 +9,7 @@ import cantools
 import numpy as np
 import pytest
 
-from fsw.bus.icd import DEFAULT_DBC_PATH, E2ESender, Icd, IcdError
+from comms.bus.icd import DEFAULT_DBC_PATH, E2ESender, Icd, IcdError
 
 CONTRACT_MESSAGES = {"SYNC", "IMU_RATE", "ST_QUAT_A", "ST_QUAT_B", "FSW_HEARTBEAT", "CYCLE_DONE"} | {
     f"RW{i}_{kind}" for i in range(1, 7) for kind in ("CMD", "STATUS")} | {"DOOR_CMD", "DOOR_STATUS"}
@@ -124,7 +124,7 @@ def test_nan_missing_and_unknown_signals_are_refused(icd: Icd) -> None:
 
 def _cantools_frame_bytes(spec, values: dict, counter: int) -> bytes:
     """The reference: the frame as cantools packs it (CRC signal zero, CRC over bytes 1.., then again)."""
-    from fsw.bus.crc import e2e_crc
+    from comms.bus.crc import e2e_crc
 
     v = dict(values, E2E_Counter=counter & 0x0F, E2E_CRC=0)
     payload = spec.db_message.encode(v, scaling=True, padding=False, strict=False)

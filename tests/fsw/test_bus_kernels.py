@@ -1,13 +1,13 @@
-"""The compiled burst codec (fsw.bus.kernels) against the per-frame codec: same bytes, same classification."""
+"""The compiled burst codec (comms.bus.kernels) against the per-frame codec: same bytes, same classification."""
 from __future__ import annotations
 
 import can
 import numpy as np
 import pytest
 
-from fsw.bus import E2EReceiver, E2ESender, Icd, e2e_crc
-from fsw.bus.burst import FrameBurst
-from fsw.bus.transport import open_bus, recv_burst, send_burst
+from comms.bus import E2EReceiver, E2ESender, Icd, e2e_crc
+from comms.bus.burst import FrameBurst
+from comms.bus.transport import open_bus, recv_burst, send_burst
 
 
 @pytest.fixture(scope="module")
@@ -77,7 +77,7 @@ def _damaged_frames(icd: Icd, rng: np.random.Generator, sender: E2ESender) -> li
 
 
 class _Reference:
-    """The receiver's rules written out plainly in Python (fsw.bus.e2e's docstrings), frame by frame, with
+    """The receiver's rules written out plainly in Python (comms.bus.e2e's docstrings), frame by frame, with
     cantools decoding: what the compiled classification must reproduce."""
 
     def __init__(self, icd: Icd, ignore: frozenset[int]) -> None:
@@ -199,7 +199,7 @@ def test_light_virtual_bus_carries_bursts_and_plain_readers_see_the_same_frames(
 def test_encode_burst_matches_encode_rows_on_the_packed_table(icd: Icd) -> None:
     """kernels.encode_burst (E2ESender's: counters/sent as one array, the table packed) gives encode_rows'
     bytes, counters and stopping row, also where a row is refused."""
-    from fsw.bus.kernels import encode_burst
+    from comms.bus.kernels import encode_burst
 
     rng = np.random.default_rng(7)
     table, m = icd.table, len(icd.message_names)

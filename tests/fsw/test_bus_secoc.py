@@ -1,4 +1,4 @@
-"""SecOC-style frame authentication (fsw.bus.secoc): only frames whose authenticator's MAC matches, under a
+"""SecOC-style frame authentication (comms.bus.secoc): only frames whose authenticator's MAC matches, under a
 freshness value above the last accepted one, reach the flight software or the simulator. Forged, injected
 and replayed frames (of this run or of an earlier one) are counted and dropped; frames injected between a
 genuine frame and its authenticator do not void it."""
@@ -11,9 +11,10 @@ from pathlib import Path
 import can
 import pytest
 
-from fsw.bus import E2ESender, FswBusDriver, Icd, open_bus
-from fsw.bus.icd import IcdError
-from fsw.bus.secoc import CANDIDATES, SecOCBus, association, authenticator, next_freshness, secure
+from comms.bus import E2ESender, Icd, open_bus
+from fsw.bus import FswBusDriver
+from comms.bus.icd import IcdError
+from comms.bus.secoc import CANDIDATES, SecOCBus, association, authenticator, next_freshness, secure
 
 _channels = itertools.count()
 KEY = bytes(range(32))

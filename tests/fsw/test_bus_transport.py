@@ -6,8 +6,8 @@ import time
 import can
 import pytest
 
-from fsw.bus import transport
-from fsw.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
+from comms.bus import transport
+from comms.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
 
 
 def test_resolve_explicit_specs() -> None:
@@ -212,7 +212,7 @@ def test_udp_multicast_bus_reads_what_python_can_reads() -> None:
 
 @pytest.mark.parametrize("seed", range(20))
 def test_burst_of_messages_is_from_messages(seed: int) -> None:
-    from fsw.bus.burst import FrameBurst
+    from comms.bus.burst import FrameBurst
 
     frames = _frames(seed, 1 + seed)
     if seed % 3 == 0:  # a frame the table cannot judge: the general path, same result
@@ -328,7 +328,7 @@ def test_light_virtual_bus_delivers_like_the_virtual_bus() -> None:
 def test_classic_frame_bytes_are_python_cans(msg: can.Message) -> None:
     from can.interfaces.socketcan.socketcan import build_can_frame
 
-    from fsw.bus.socketcan_batch import classic_frame
+    from comms.bus.socketcan_batch import classic_frame
 
     assert classic_frame(msg) == build_can_frame(msg)
 
@@ -374,7 +374,7 @@ def test_socketcan_recv_burst_takes_everything_queued_up_to_the_limit() -> None:
 @pytest.mark.socketcan
 def test_socketcan_batch_send_delivers_every_frame_in_order_to_both_bus_kinds() -> None:
     """A burst larger than one sendmmsg (BATCH) reaches a batch bus and python-can's own bus alike."""
-    from fsw.bus.socketcan_batch import BATCH, BatchSocketcanBus
+    from comms.bus.socketcan_batch import BATCH, BatchSocketcanBus
 
     a, b = open_bus("socketcan:vcan0"), open_bus("socketcan:vcan0")
     plain = can.Bus(interface="socketcan", channel="vcan0")

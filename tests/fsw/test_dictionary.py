@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fsw import dictionary as d
-from fsw.dictionary import (
+from comms import dictionary as d
+from comms.dictionary import (
     DICTIONARY,
     Arg,
     ArgError,
@@ -33,9 +33,9 @@ COMMITTED_JSON = REPO / "config" / "telemetry_dictionary.json"
 
 
 def test_committed_json_equals_generated() -> None:
-    assert COMMITTED_JSON.exists(), "run `python -m fsw.dictionary --out config/telemetry_dictionary.json`"
+    assert COMMITTED_JSON.exists(), "run `python -m comms.dictionary --out config/telemetry_dictionary.json`"
     assert COMMITTED_JSON.read_text() == DICTIONARY.to_json(), (
-        "config/telemetry_dictionary.json is stale: regenerate with `python -m fsw.dictionary`"
+        "config/telemetry_dictionary.json is stale: regenerate with `python -m comms.dictionary`"
     )
 
 

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from fsw.bus import Icd
+from comms.bus import Icd
 from fsw.config import DoorConfig
 from fsw.door import DoorController, approach_reach_deg
 

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from closed_loop_kit import BusLoop, attitude_with_boresight, fsw_config_for
-from fsw.dictionary import DICTIONARY
-from fsw.telecommand import CommandDispatcher, encode_command
+from comms.dictionary import DICTIONARY
+from fsw.telecommand import CommandDispatcher
+from comms.telecommand import encode_command
 from fsw.telemetry import TelemetrySender
 
 EPOCH = "2030-03-29T12:00:00Z"

@@ -1,4 +1,4 @@
-"""Link security (fsw.link_security): MAC, anti-replay window, resynchronisation, key files, the uplink
+"""Link security (comms.link_security): MAC, anti-replay window, resynchronisation, key files, the uplink
 that cannot lose a command silently, and the loopback-only telecommand binding."""
 from __future__ import annotations
 
@@ -8,12 +8,14 @@ import stat
 
 import pytest
 
-from fsw.dictionary import DICTIONARY
-from fsw.link_security import (BAD_MAC, MAC_LEN, OUTSIDE_WINDOW, REPLAY, SPI_TC, SPI_TM, UNAUTHENTICATED,
+from comms.dictionary import DICTIONARY
+from comms.link_security import (BAD_MAC, MAC_LEN, OUTSIDE_WINDOW, REPLAY, SPI_TC, SPI_TM, UNAUTHENTICATED,
                                KeyFileError, SecurityAssociation, SecurityError, SequenceFile, downlink_receiver,
                                load_key_file, uplink_receiver, write_key_file)
-from fsw.telecommand import CommandDispatcher, encode_command
-from fsw.telemetry import TelemetrySender, decode_tm_packet
+from fsw.telecommand import CommandDispatcher
+from comms.telecommand import encode_command
+from fsw.telemetry import TelemetrySender
+from comms.telemetry import decode_tm_packet
 
 KEY = bytes(range(32))
 RESYNC = DICTIONARY.command("SEC_RESYNC").opcode
@@ -273,7 +275,7 @@ def test_uplink_junk_is_housekeeping_not_a_flood_of_warning_events() -> None:
     ground = _ground()
     bad = bytearray(encode_command(DICTIONARY, "SET_MODE", ["POINTING"], seq_count=1))
     bad[8] = 200  # mode index out of range
-    from fsw.telemetry import crc16_ccitt
+    from comms.telemetry import crc16_ccitt
 
     bad = bytes(bad[:-2]) + crc16_ccitt(bytes(bad[:-2])).to_bytes(2, "big")
     result = dispatcher.handle_datagram(ground.protect(bad, sn=10_000))

@@ -12,13 +12,14 @@ import yaml
 
 from closed_loop_kit import BusLoop, attitude_with_boresight, fsw_config_for
 from fsw.config import FswConfig
-from fsw.dictionary import DICTIONARY
+from comms.dictionary import DICTIONARY
 from fsw.guidance import Guidance
 from fsw.guidance.slew_limits import (
     allowed_braking_deg,
     BRAKING_RESERVE_DEG, braking_distance_deg, braking_problem, layer_angle_deg, rate_for_distance_deg_s,
 )
-from fsw.telecommand import CommandDispatcher, encode_command
+from fsw.telecommand import CommandDispatcher
+from comms.telecommand import encode_command
 from fsw.telemetry import TelemetrySender
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -11,15 +11,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fsw.dictionary import DICTIONARY, MAX_TC_PACKET_LEN, TC_APID, ArgError
-from fsw.telecommand import (
-    CommandDispatcher,
-    CommandExecutionError,
-    CommandValidationError,
-    encode_command,
-    encode_tc_packet,
-)
-from fsw.telemetry import TelemetrySender, crc16_ccitt
+from comms.dictionary import DICTIONARY, MAX_TC_PACKET_LEN, TC_APID, ArgError
+from fsw.telecommand import CommandDispatcher
+from comms.telecommand import CommandExecutionError, CommandValidationError, encode_command, encode_tc_packet
+from fsw.telemetry import TelemetrySender
+from comms.telemetry import crc16_ccitt
 
 
 def tc_packet_by_hand(apid: int, seq: int, payload: bytes, packet_type: int = 1) -> bytes:
@@ -194,7 +190,7 @@ class CapturingTelemetry(TelemetrySender):
 
 def _acks(raw_packets: list[bytes]) -> list[tuple[str, int, int, int, str]]:
     """(report, request id, sequence count, opcode, reason code) of every TC_ACK packet, decoded."""
-    from fsw.telemetry import decode_tm_packet
+    from comms.telemetry import decode_tm_packet
 
     decoded = [decode_tm_packet(DICTIONARY, raw) for raw in raw_packets]
     return [(p.values["ack_report"], p.values["ack_request_id"], p.values["ack_tc_seq"], p.values["ack_opcode"],

@@ -11,15 +11,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fsw.dictionary import DICTIONARY, EVENT_APID, GNC_APID, HK_APID, DictionaryError
-from fsw.telemetry import (
-    SEQ_MODULO,
-    TelemetryDecodeError,
-    TelemetrySender,
-    crc16_ccitt,
-    decode_tm_packet,
-    encode_event_packet,
-)
+from comms.dictionary import DICTIONARY, EVENT_APID, GNC_APID, HK_APID, DictionaryError
+from comms.telemetry import SEQ_MODULO, TelemetryDecodeError, crc16_ccitt, decode_tm_packet, encode_event_packet
+from fsw.telemetry import TelemetrySender
 
 
 def crc16_ccitt_bitwise(data: bytes) -> int:
@@ -251,7 +245,7 @@ def test_decoder_and_ground_survive_any_datagram(data: st.DataObject) -> None:
 def test_primary_header_fields_read_as_spacepackets_reads_them(raw: bytes) -> None:
     from spacepackets.ccsds.spacepacket import SpacePacketHeader
 
-    from fsw.telemetry import primary_header_fields
+    from comms.telemetry import primary_header_fields
 
     header = SpacePacketHeader.unpack(raw)
     assert primary_header_fields(raw) == (header.ccsds_version, int(header.packet_type), header.apid,
@@ -309,14 +303,14 @@ def test_update_fast_paths_store_what_the_general_path_stores(data: st.DataObjec
 def test_tm_packets_are_the_bytes_spacepackets_builds(apid: int, seq: int, time_s: float, payload: bytes) -> None:
     from spacepackets.ccsds.spacepacket import PacketType, SpacePacket, SpacePacketHeader
 
-    from fsw.dictionary import TM_SECONDARY_HEADER
-    from fsw.telemetry import _frame
+    from comms.dictionary import TM_SECONDARY_HEADER
+    from comms.telemetry import frame_tm_packet
 
     sec = TM_SECONDARY_HEADER.pack(time_s)
     header = SpacePacketHeader(packet_type=PacketType.TM, apid=apid, seq_count=seq % SEQ_MODULO,
                                data_len=len(sec) + len(payload) + 1, sec_header_flag=True)
     body = SpacePacket(header, sec_header=sec, user_data=payload).pack()
-    assert _frame(apid, seq, time_s, payload) == bytes(body) + struct.pack("!H", crc16_ccitt_bitwise(bytes(body)))
+    assert frame_tm_packet(apid, seq, time_s, payload) == bytes(body) + struct.pack("!H", crc16_ccitt_bitwise(bytes(body)))
 
 
 @settings(max_examples=200, deadline=None)
@@ -328,7 +322,7 @@ def test_channel_record_is_json_float_of_every_value(values: dict, time_s: float
     """to_json_dict rewrites exactly the non-finite floats as strings, as _json_float of each value does."""
     import json
 
-    from fsw.telemetry import DecodedTm, _json_float
+    from comms.telemetry import DecodedTm, _json_float
 
     packet = DecodedTm(GNC_APID, 7, time_s, "channels", "GNC", dict(values))
     record = packet.to_json_dict()

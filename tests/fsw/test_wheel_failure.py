@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from closed_loop_kit import BusLoop, attitude_with_boresight, fsw_config_for
-from fsw.dictionary import DICTIONARY
+from comms.dictionary import DICTIONARY
 from fsw.fdir import WheelSpeedResidual
 from fsw.telemetry import TelemetrySender
 

@@ -27,9 +27,9 @@ from typing import Any
 
 import can
 
-from fsw.dictionary import DICTIONARY
-from fsw.link_security import SPI_TC, SPI_TM, SecurityAssociation, downlink_receiver, uplink_receiver
-from fsw.telecommand import encode_command, encode_tc_packet
+from comms.dictionary import DICTIONARY
+from comms.link_security import SPI_TC, SPI_TM, SecurityAssociation, downlink_receiver, uplink_receiver
+from comms.telecommand import encode_command, encode_tc_packet
 
 ROOT = Path(__file__).resolve().parents[2]
 KEY = bytes(range(100, 132))  # the fuzzer is an insider: it can sign, to reach the code behind the MAC
@@ -63,7 +63,7 @@ def _mutate(rng: random.Random, data: bytes) -> bytes:
 
 def _fix_crc(data: bytes) -> bytes:
     """Recompute a space packet's trailing CRC-16 (and length field): what a forger does."""
-    from fsw.telemetry import crc16_ccitt
+    from comms.telemetry import crc16_ccitt
 
     if len(data) < 8:
         return data
@@ -181,7 +181,8 @@ class CanTarget:
     """The flight software's bus receiver: ``FswBusDriver`` in lockstep and real-time collection."""
 
     def __init__(self) -> None:
-        from fsw.bus import E2ESender, FswBusDriver, Icd
+        from comms.bus import E2ESender, Icd
+        from fsw.bus import FswBusDriver
 
         self.icd = Icd()
         self.bus = _ScriptedBus()
@@ -224,13 +225,13 @@ class CanTarget:
             self.tick += rng.choice((1, 1, 1, 0, -3, 1000))
             values = {"tick": self.tick % 2**32, "frames_following": rng.randrange(256),
                       "period_ms": rng.choice((100, 1, 65535, 0))}
-            return self._frame("SYNC", values) or self._random_frame(rng)
+            return self.frame_tm_packet("SYNC", values) or self._random_frame(rng)
         if kind in (1, 2):  # a valid frame of a random message with random (possibly out-of-range) values
             name = rng.choice(self.names)
             spec = self.icd.messages[name]
             values = {s: rng.choice((rng.uniform(*spec.ranges[s]), rng.choice(EVIL_FLOATS[3:]), 0))
                       for s in spec.signals}
-            msg = self._frame(name, values)
+            msg = self.frame_tm_packet(name, values)
             if msg is None:
                 return self._random_frame(rng)
             if kind == 2:
@@ -239,7 +240,7 @@ class CanTarget:
             return msg
         return self._random_frame(rng)
 
-    def _frame(self, name: str, values: dict) -> can.Message | None:
+    def frame_tm_packet(self, name: str, values: dict) -> can.Message | None:
         """The sender's frame, or None when the ICD refuses the values (the sender checks ranges)."""
         import cantools
 

@@ -119,8 +119,9 @@ def test_found_by_fuzzing_f32_telemetry_beyond_float32_saturates_instead_of_rais
     flight software's telemetry sender (a GNC cycle would have died on it); it is sent as +-inf."""
     import math
 
-    from fsw.dictionary import DICTIONARY
-    from fsw.telemetry import TelemetrySender, decode_tm_packet
+    from comms.dictionary import DICTIONARY
+    from fsw.telemetry import TelemetrySender
+    from comms.telemetry import decode_tm_packet
 
     f32 = next(c.name for c in DICTIONARY.packet("GNC").channels if c.type == "F32")
     sender = TelemetrySender(DICTIONARY, port=None)

@@ -11,8 +11,9 @@ from pathlib import Path
 
 from rich.console import Console
 
-from fsw.dictionary import DICTIONARY, Channel, EventDef, PacketDef, Severity
-from fsw.telemetry import TelemetrySender, crc16_ccitt, encode_event_packet, encode_tm_packet
+from comms.dictionary import DICTIONARY, Channel, EventDef, PacketDef, Severity
+from fsw.telemetry import TelemetrySender
+from comms.telemetry import crc16_ccitt, encode_event_packet, encode_tm_packet
 from ground.display import render_tables
 from ground.monitor import GroundMonitor
 

@@ -1,4 +1,6 @@
-"""The arrows that must never exist: fsw -> ground, fsw -> hil_sim, ground -> hil_sim (read from the source)."""
+"""The arrows that must never exist (read from the source): fsw -> ground, fsw -> hil_sim, ground -> hil_sim,
+the contract (comms) -> any of its ends; and what ground and the simulator may still take from the flight
+software besides the contract, each named with its reason."""
 from __future__ import annotations
 
 import ast
@@ -32,5 +34,51 @@ def test_package_never_imports_the_forbidden_one(package: str, forbidden: str) -
     assert forbidden not in imports, f"{package} imports {forbidden} in {sorted(imports[forbidden])}"
 
 
-def test_ground_reads_the_flight_dictionary() -> None:
-    assert "fsw" in _imported_top_packages("ground")
+def _imported_modules(package: str, top: str) -> dict[str, set[str]]:
+    """Every module of package ``top`` that ``package`` imports (as written) -> the files importing it."""
+    found: dict[str, set[str]] = {}
+    for path in sorted((ROOT / package).rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module] if node.module != top else [f"{top}.{a.name}" for a in node.names]
+            else:
+                continue
+            for name in names:
+                if name.split(".")[0] == top:
+                    found.setdefault(name, set()).add(str(path.relative_to(ROOT)))
+    return found
+
+
+# What ground and the simulator may still take from the flight software, each for one reason. The contract
+# they share (bus ICD and codec, TM/TC codecs, dictionary, link security) is comms; nothing else of fsw.
+GROUND_FROM_FSW = {
+    "fsw.config": "the run's flight configuration: zones and wheels to name the console's series, ports",
+    "fsw.guidance": "the onboard sky ephemeris, so the console draws the zones where the flight software sees them",
+}
+SIMULATOR_FROM_FSW = {
+    "fsw.config": "the mission's flight-software section is validated by the flight's own models",
+    "fsw.guidance": "the mission validator applies the flight's own zone, edge and slew rules",
+    "fsw.assembly": "the composition root: the fast mode and the SIL build the flight software through it",
+    "fsw.lifetime": "a child process dies with its parent (the same rule for every process keepout starts)",
+    "fsw.safe_yaml": "one YAML reader (limits on size, depth, aliases) for every mission file",
+    "fsw.telecommand": "the fast mode feeds telecommands to the in-process flight software's dispatcher",
+    "fsw.bus": "a minimal stand-in flight software answering SYNC (the lockstep bench's responder) uses the flight driver",
+}
+
+
+@pytest.mark.parametrize("forbidden", ["fsw", "ground", "hil_sim"])
+def test_the_contract_depends_on_no_end(forbidden: str) -> None:
+    imports = _imported_top_packages("comms")
+    assert "comms" in imports, "no imports found under comms/: the scan is broken"
+    assert forbidden not in imports, f"comms imports {forbidden} in {sorted(imports[forbidden])}"
+
+
+@pytest.mark.parametrize(("package", "allowed"), [("ground", GROUND_FROM_FSW), ("hil_sim", SIMULATOR_FROM_FSW)])
+def test_ground_and_simulator_take_only_the_contract_and_named_parts_of_fsw(package: str, allowed: dict[str, str]) -> None:
+    used = _imported_modules(package, "fsw")
+    stray = {m: sorted(files) for m, files in used.items()
+             if not any(m == a or m.startswith(a + ".") for a in allowed)}
+    assert not stray, f"{package} reaches into flight internals: {stray}"
+    assert _imported_modules(package, "comms"), f"{package} takes nothing from comms: the scan is broken"

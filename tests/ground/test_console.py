@@ -22,8 +22,8 @@ from pathlib import Path
 import pytest
 
 from fsw.config import load_fsw_config
-from fsw.dictionary import DICTIONARY, Severity
-from fsw.telemetry import DecodedTm
+from comms.dictionary import DICTIONARY, Severity
+from comms.telemetry import DecodedTm
 from ground.web.alarms import ACKS_FILE, AlarmBook
 from ground.web.catalog import build_objects, channel_key, decimals, resolution, zone_labels
 from ground.web.points import History

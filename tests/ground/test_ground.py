@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
-from fsw.dictionary import DICTIONARY, GNC_APID, HK_APID, LimitState
+from comms.dictionary import DICTIONARY, GNC_APID, HK_APID, LimitState
 from ground.archive import (
     DECODED_ARCHIVE,
     EVENTS_ARCHIVE,
@@ -25,9 +25,10 @@ from ground.archive import (
 from ground.cli import main
 from ground.display import limit_state, render_tables
 from ground.monitor import GroundMonitor, run_ground_monitor
-from fsw.link_security import SPI_TM, SecurityAssociation, downlink_receiver, uplink_receiver, write_key_file
+from comms.link_security import SPI_TM, SecurityAssociation, downlink_receiver, uplink_receiver, write_key_file
 from fsw.telecommand import CommandDispatcher
-from fsw.telemetry import TelemetrySender, encode_tm_packet
+from fsw.telemetry import TelemetrySender
+from comms.telemetry import encode_tm_packet
 
 RESYNC = DICTIONARY.command("SEC_RESYNC").opcode
 

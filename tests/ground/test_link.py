@@ -9,8 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from fsw.dictionary import DICTIONARY
-from fsw.telemetry import TelemetrySender, decode_tm_packet
+from comms.dictionary import DICTIONARY
+from fsw.telemetry import TelemetrySender
+from comms.telemetry import decode_tm_packet
 from ground.cli import main
 from ground.link import ENDPOINTS_FILE, Endpoints, LinkError, find_run, open_telemetry, random_group
 
@@ -122,7 +123,7 @@ def test_cli_monitor_attaches_to_a_run_and_refuses_a_finished_one(tmp_path: Path
     run_dir = tmp_path / "runs" / "demo-1"
     run_dir.mkdir(parents=True)
     _endpoints(port, group).write(run_dir)
-    from fsw.link_security import LINK_KEY_FILE, write_key_file
+    from comms.link_security import LINK_KEY_FILE, write_key_file
 
     write_key_file(run_dir / LINK_KEY_FILE)  # the run's link key, as the SIL makes it
     assert main(["ground", "--run", str(run_dir), "--duration", "0.3", "--no-live"]) == 0

@@ -7,8 +7,8 @@ import socket
 import time
 from pathlib import Path
 
-from fsw.dictionary import DICTIONARY
-from fsw.link_security import SPI_TM, SecurityAssociation, downlink_receiver, write_key_file
+from comms.dictionary import DICTIONARY
+from comms.link_security import SPI_TM, SecurityAssociation, downlink_receiver, write_key_file
 from fsw.telemetry import TelemetrySender
 from ground.archive import EVENTS_ARCHIVE, RAW_ARCHIVE, REJECTED_ARCHIVE, SUMMARY_FILE, read_events, read_raw_archive
 from ground.display import render_tables

@@ -13,8 +13,8 @@ from collections.abc import Iterator
 
 import pytest
 
-from fsw.dictionary import DICTIONARY
-from fsw.link_security import SPI_TM, SecurityAssociation, uplink_receiver, write_key_file
+from comms.dictionary import DICTIONARY
+from comms.link_security import SPI_TM, SecurityAssociation, uplink_receiver, write_key_file
 from fsw.telecommand import CommandDispatcher
 from fsw.telemetry import TelemetrySender
 from ground.cli import main

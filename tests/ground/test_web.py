@@ -17,8 +17,8 @@ from pathlib import Path
 import aiohttp
 import pytest
 
-from fsw.dictionary import DICTIONARY
-from fsw.link_security import LINK_KEY_FILE, SPI_TM, SecurityAssociation, load_key_file, write_key_file
+from comms.dictionary import DICTIONARY
+from comms.link_security import LINK_KEY_FILE, SPI_TM, SecurityAssociation, load_key_file, write_key_file
 from fsw.telemetry import TelemetrySender
 from ground.link import Endpoints, open_telemetry, random_group
 from ground.monitor import GroundMonitor

@@ -18,9 +18,11 @@ from typing import Any
 import pytest
 import xmlschema
 
-from fsw.dictionary import DICTIONARY
-from fsw.telecommand import CommandDispatcher, encode_command
-from fsw.telemetry import TelemetrySender, decode_tm_packet
+from comms.dictionary import DICTIONARY
+from fsw.telecommand import CommandDispatcher
+from comms.telecommand import encode_command
+from fsw.telemetry import TelemetrySender
+from comms.telemetry import decode_tm_packet
 from ground.cli import main
 from ground.xtce import to_xtce
 
@@ -180,7 +182,7 @@ def test_telecommands_encode_from_their_xtce_description(xtce_text: str) -> None
     """Build SET_TARGET's bytes from the meta-command alone (fixed header fields, opcode assignment, typed
     arguments), fill in what a ground system's CCSDS post-processor fills (sequence count, length, CRC),
     and compare with the project's encoder."""
-    from fsw.telemetry import crc16_ccitt
+    from comms.telemetry import crc16_ccitt
 
     root = ET.fromstring(xtce_text)
     cmd_meta = root.find(f"{NS}CommandMetaData")

@@ -10,8 +10,9 @@ import can
 import numpy as np
 import pytest
 
-from fsw.bus import FswBusDriver, Icd, open_bus
-from fsw.bus.burst import FrameBurst
+from fsw.bus import FswBusDriver
+from comms.bus import Icd, open_bus
+from comms.bus.burst import FrameBurst
 from hil_sim.faults import FaultSpec
 from hil_sim.lockstep import RateDampingResponder, Simulator
 from hil_sim.params import SpacecraftParams, WorldParams

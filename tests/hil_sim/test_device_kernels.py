@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from fsw.bus.icd import Icd
+from comms.bus.icd import Icd
 from hil_sim import device_kernels as dk
 from hil_sim.devices import Devices, ImuNode, StarTrackerNode, WheelNode
 from hil_sim.params import WorldParams
@@ -243,9 +243,9 @@ def test_receive_commands_matches_the_per_burst_path(icd: Icd, seed: int) -> Non
     """Simulator's compiled receive of a tick's frames (device_kernels.receive_commands) against the
     per-burst path it replaces (classify_until, apply_received, the receiver's Python path): the same E2E
     counters, statistics, sequence state, wheel commands and world, tick by tick."""
-    from fsw.bus import open_bus
-    from fsw.bus.burst import FrameBurst
-    from fsw.bus.transport import send_burst
+    from comms.bus import open_bus
+    from comms.bus.burst import FrameBurst
+    from comms.bus.transport import send_burst
     from hil_sim.lockstep import Simulator
 
     rng = np.random.default_rng(seed)

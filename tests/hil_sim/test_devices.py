@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fsw.bus.e2e import E2EReceiver
-from fsw.bus.icd import Icd
+from comms.bus.e2e import E2EReceiver
+from comms.bus.icd import Icd
 from hil_sim.devices import (FAULT_CMD_TIMEOUT, FAULT_DRIVE, FAULT_OVERSPEED, Devices, DeviceTiming, ImuNode,
                              StarTrackerNode, WheelNode)
 

@@ -7,7 +7,8 @@ import itertools
 import numpy as np
 import pytest
 
-from fsw.bus import FswBusDriver, Icd, open_bus
+from fsw.bus import FswBusDriver
+from comms.bus import Icd, open_bus
 from hil_sim.devices import (DOOR_CLOSED, DOOR_CLOSING, DOOR_FAULT_CMD_TIMEOUT, DOOR_FAULT_STALLED, DOOR_OPEN,
                              DOOR_OPENING, DoorNode, DoorParams)
 from hil_sim.faults import FaultInjector, FaultSpec

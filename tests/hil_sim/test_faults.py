@@ -6,7 +6,8 @@ import itertools
 import numpy as np
 import pytest
 
-from fsw.bus import FswBusDriver, Icd, open_bus
+from fsw.bus import FswBusDriver
+from comms.bus import Icd, open_bus
 from hil_sim.faults import FaultInjector, FaultSpec
 from hil_sim.lockstep import RateDampingResponder, Simulator
 from hil_sim.params import SpacecraftParams, WorldParams

@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fsw.bus import FswBusDriver, Icd, open_bus
-from fsw.bus.transport import random_udp_endpoint
+from fsw.bus import FswBusDriver
+from comms.bus import Icd, open_bus
+from comms.bus.transport import random_udp_endpoint
 from hil_sim.lockstep import RateDampingResponder, Simulator
 from hil_sim.params import SpacecraftParams, WorldParams
 from hil_sim.world import World

@@ -7,7 +7,7 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGES = ("gnc", "fsw", "ground", "hil_sim", "keepout_config")
+PACKAGES = ("gnc", "comms", "fsw", "ground", "hil_sim", "keepout_config")
 
 
 def _module_name(path: Path) -> str:
@@ -80,7 +80,7 @@ def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def test_the_scan_sees_the_imports() -> None:
     graph = _graph()
-    assert "fsw.bus.crc" in graph["fsw.bus.icd"] and "fsw.dictionary" in graph["ground.monitor"]
+    assert "comms.bus.crc" in graph["comms.bus.icd"] and "comms.dictionary" in graph["ground.monitor"]
 
 
 def test_the_circle_finder_finds_a_circle() -> None:

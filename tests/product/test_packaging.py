@@ -14,7 +14,7 @@ import pytest
 from hil_sim import cli
 
 ROOT = Path(__file__).resolve().parents[2]
-CODE_PACKAGES = ("gnc", "fsw", "ground", "hil_sim")
+CODE_PACKAGES = ("gnc", "comms", "fsw", "ground", "hil_sim")
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 
 
@@ -71,7 +71,7 @@ def test_the_default_bus_needs_no_extra():
 
 
 def test_config_files_are_found_through_the_package():
-    from fsw.bus.icd import DEFAULT_DBC_PATH
+    from comms.bus.icd import DEFAULT_DBC_PATH
     from hil_sim.campaign.spec import SCHEMA_PATH as CAMPAIGN_SCHEMA
     from hil_sim.mission import SCHEMA_PATH as MISSION_SCHEMA
     from hil_sim.sil import DEFAULT_MISSION
@@ -172,7 +172,7 @@ def test_the_built_wheel_runs_from_an_empty_folder(tmp_path):
 
     version = run(keepout, "--version")
     assert version.returncode == 0 and version.stdout.strip() == "keepout 0.1.0", version
-    where = run(py, "-c", "import hil_sim.sil as s, fsw.bus.icd as i; print(s.DEFAULT_MISSION); "
+    where = run(py, "-c", "import hil_sim.sil as s, comms.bus.icd as i; print(s.DEFAULT_MISSION); "
                           "print(i.DEFAULT_DBC_PATH)")
     for line in where.stdout.split():
         assert Path(line).is_file() and Path(line).is_relative_to(env_dir), where

@@ -48,7 +48,7 @@ def test_the_tests_reference_data_is_in_the_repository():
 @pytest.mark.parametrize("message", ["transport", "conftest"])
 def test_vcan_hints_name_commands_not_folders(message):
     if message == "transport":
-        from fsw.bus.transport import vcan_hint
+        from comms.bus.transport import vcan_hint
         text = vcan_hint("vcan0")
     else:
         import conftest

@@ -58,7 +58,7 @@ def fly_under_attack(out: Path, attack: Attack, mission: Path, duration_s: float
 
 def attacker_bus(group: str, port: int) -> can.BusABC:
     """A python-can bus that sends into the run's group on loopback."""
-    from fsw.bus import open_bus
+    from comms.bus import open_bus
 
     return open_bus(f"udp_multicast:{group}:{port}")
 
@@ -98,7 +98,7 @@ def replayed(frames: list[can.Message], size: int = BATCH) -> Iterator[list[can.
 
 def flight_side_ids() -> list[int]:
     """The identifiers the flight software reads (the simulator's and its devices')."""
-    from fsw.bus import Icd
+    from comms.bus import Icd
 
     return sorted(Icd().ids_sent_by("SIM", "IMU", "STR", "RW1", "RW2", "RW3", "RW4"))
 

@@ -126,7 +126,7 @@ def test_an_earlier_runs_traffic_replayed_into_an_authenticated_run_is_refused(t
     recorded: list[can.Message] = []
     code, output, _ = _fly(tmp_path / "earlier", listener(recorded), mission)
     assert code == 0, output[-3000:]
-    from fsw.bus import Icd
+    from comms.bus import Icd
 
     auth_ids = set(Icd().authenticators.values())  # SECOC_SIM and SECOC_FSW
     assert len(recorded) > 10_000 and {m.arbitration_id for m in recorded} & auth_ids == auth_ids

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from fsw.bus.transport import UDP_GROUP_PREFIX
+from comms.bus.transport import UDP_GROUP_PREFIX
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSION = ROOT / "config" / "missions" / "demo-pointing.yaml"
@@ -30,7 +30,7 @@ def _free_port() -> int:
 
 
 def _start_fsw(bus: str, tmp_path: Path, mission: Path = MISSION) -> tuple[subprocess.Popen, Path, int]:
-    from fsw.link_security import write_key_file
+    from comms.link_security import write_key_file
 
     tc_port = _free_port()
     log = tmp_path / "fsw.log"

@@ -81,7 +81,7 @@ def test_live_run_two_monitors_open_mct_and_verified_commands(tmp_path: Path) ->
     from playwright.sync_api import sync_playwright
 
     assert CHROMIUM.exists(), "Debian's chromium is needed (apt-get install -y chromium; .ci/run installs it)"
-    from fsw.dictionary import DICTIONARY
+    from comms.dictionary import DICTIONARY
 
     opcodes = {DICTIONARY.command(name).opcode: name for name in ("NOOP", "SET_MODE")}
     processes: list[subprocess.Popen] = []

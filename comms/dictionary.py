@@ -3,7 +3,7 @@
 Following F Prime, the flight software and the ground tools read the same dictionary: the flight side
 builds packets from it (``fsw.telemetry``), decodes telecommands with it (``fsw.telecommand``), and the
 ground (the ``ground`` package) decodes and limit-checks telemetry with it. ``config/telemetry_dictionary.json``
-is generated from this module (``python -m fsw.dictionary --out config/telemetry_dictionary.json``) and a
+is generated from this module (``python -m comms.dictionary --out config/telemetry_dictionary.json``) and a
 test keeps the committed file equal to the generated one.
 
 Conventions (stable names: the flight app and ground refer to them):
@@ -503,7 +503,7 @@ TC_REASONS: tuple[tuple[str, str, str], ...] = (
     ("TARGET_IN_KEEP_OUT", "VALIDATION", "target lies inside a keep-out zone (TARGET_REJECTED event names it)"),
     ("GAINS_INADMISSIBLE", "VALIDATION", "gains refused by the law (e.g. eps outside the admissible interval)"),
     ("EXECUTION_FAILED", "EXECUTION", "the handler failed while executing an accepted command"),
-    # link security (fsw.link_security): only REPLAY and OUTSIDE_WINDOW are ever acknowledged (the packet
+    # link security (comms.link_security): only REPLAY and OUTSIDE_WINDOW are ever acknowledged (the packet
     # authenticated); the others are counted in housekeeping and not answered
     ("UNAUTHENTICATED", "SECURITY", "no security header, or another security parameter index (not answered)"),
     ("BAD_MAC", "SECURITY", "the MAC does not verify: forged or signed with another key (not answered)"),
@@ -643,7 +643,7 @@ _HK_CHANNELS: list[Channel] = [
     Channel("tc_format_errors", "U32", "", "telecommands rejected: malformed packet"),
     Channel("tc_execution_errors", "U32", "", "telecommands failed in execution: handler failed"),
     Channel("tc_last_opcode", "U16", "", "opcode of the last accepted telecommand"),
-    # link security (fsw.link_security) and uplink loss: never reset by RESET_COUNTERS
+    # link security (comms.link_security) and uplink loss: never reset by RESET_COUNTERS
     Channel("tc_sec_unauthenticated", "U32", "", "uplink datagrams without a security header / with another SPI",
             Limits(yellow=(None, 0))),
     Channel("tc_sec_bad_mac", "U32", "", "uplink datagrams whose MAC did not verify (forged)",
@@ -1025,7 +1025,7 @@ def write_json(path: str | Path, dictionary: TelemetryDictionary = DICTIONARY) -
 
 
 def _main(argv: Iterable[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m fsw.dictionary",
+    parser = argparse.ArgumentParser(prog="python -m comms.dictionary",
                                      description="Export the keepout telemetry dictionary as JSON.")
     parser.add_argument("--out", default="config/telemetry_dictionary.json", help="output path")
     args = parser.parse_args(list(argv) if argv is not None else None)

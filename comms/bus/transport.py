@@ -2,11 +2,11 @@
 
 Specs:
   ``socketcan:IFACE``               SocketCAN (``socketcan`` alone means vcan0). The real thing, opened
-                                    as :class:`fsw.bus.socketcan_batch.BatchSocketcanBus` (python-can's
+                                    as :class:`comms.bus.socketcan_batch.BatchSocketcanBus` (python-can's
                                     bus with batched reads/writes: few system calls per frame).
   ``udp_multicast[:GROUP:PORT]``     python-can's multi-process interface, for kernels without CAN,
                                     confined to the loopback interface
-                                    (:class:`fsw.bus.udp_loopback.LoopbackUdpMulticastBus`). Without
+                                    (:class:`comms.bus.udp_loopback.LoopbackUdpMulticastBus`). Without
                                     GROUP/PORT both are drawn at random (``secrets``): every run gets
                                     its own bus, which no other run shares or can predict; the
                                     resolved spec is what the other processes of the run are given.
@@ -38,8 +38,8 @@ import can
 import numpy as np
 from can.interfaces.virtual import VirtualBus, channels_lock
 
-from fsw.bus.burst import FrameBurst
-from fsw.bus.kernels import MAX_DLC
+from comms.bus.burst import FrameBurst
+from comms.bus.kernels import MAX_DLC
 
 VCAN_CREATE_COMMANDS = (
     "sudo modprobe vcan",
@@ -189,7 +189,7 @@ def open_bus(spec: str = "auto", run_id: str | int | None = None, *, info_out: l
     if info.interface == "socketcan":
         if not interface_present(info.channel):
             raise BusUnavailableError(vcan_hint(info.channel))
-        from fsw.bus.socketcan_batch import BatchSocketcanBus
+        from comms.bus.socketcan_batch import BatchSocketcanBus
 
         return BatchSocketcanBus(channel=info.channel, receive_own_messages=False, fd=False)
     if info.interface not in _OWN_FORMS:
@@ -202,7 +202,7 @@ def open_bus(spec: str = "auto", run_id: str | int | None = None, *, info_out: l
             raise BusUnavailableError(f"cannot open python-can interface {info.interface!r} channel "
                                       f"{info.channel!r}: {type(exc).__name__}: {exc}") from None
     if info.interface == "udp_multicast":
-        from fsw.bus.udp_loopback import LoopbackUdpMulticastBus
+        from comms.bus.udp_loopback import LoopbackUdpMulticastBus
 
         # fd=False: classic CAN frames only, as on the spacecraft bus.
         return LoopbackUdpMulticastBus(channel=info.channel, port=info.port, fd=False)
@@ -320,8 +320,8 @@ class LightVirtualBus(VirtualBus):
     bookkeeping; ``rx_queue_size`` is not supported); ``recv`` without filters skips BusABC's filter
     loop and logging call. bench/campaign.py measures the difference per GNC tick.
 
-    Bursts (:mod:`fsw.bus.burst`): ``send_burst`` queues a whole burst as one entry for each receiver
-    (receivers share it: nothing edits a burst once sent, see fsw.bus.burst); ``recv_burst`` returns everything queued as
+    Bursts (:mod:`comms.bus.burst`): ``send_burst`` queues a whole burst as one entry for each receiver
+    (receivers share it: nothing edits a burst once sent, see comms.bus.burst); ``recv_burst`` returns everything queued as
     one burst; ``recv`` hands out a queued burst's frames one ``can.Message`` at a time, so a plain
     python-can reader on the channel sees the same frames as if they had been sent one by one.
     """

@@ -18,15 +18,15 @@ from typing import TYPE_CHECKING, Any, Iterable, Mapping, NamedTuple
 
 import numpy as np
 
-from fsw.bus.crc import e2e_crc
-from fsw.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_FALLBACK, KIND_UNKNOWN, OLD_FRAME_WINDOW,
+from comms.bus.crc import e2e_crc
+from comms.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_FALLBACK, KIND_UNKNOWN, OLD_FRAME_WINDOW,
                              UNKNOWN_CODE, classify_rows)
 
 if TYPE_CHECKING:  # pragma: no cover
     import can
 
-    from fsw.bus.burst import FrameBurst
-    from fsw.bus.icd import Icd
+    from comms.bus.burst import FrameBurst
+    from comms.bus.icd import Icd
 
 # ---------------------------------------------------------------------------------------- classes
 OK = "ok"
@@ -115,7 +115,7 @@ class E2EReceiver:
     counted under ``_bus/own_echo`` and otherwise ignored.
     ``watch``: message names whose silence counts as a timeout (default: every message not ignored).
 
-    Frames are classified in bursts by the compiled kernel (fsw.bus.kernels.classify_rows) on this
+    Frames are classified in bursts by the compiled kernel (comms.bus.kernels.classify_rows) on this
     receiver's sequence state arrays. ``classify`` (one frame), runs of one or two frames, and frames the
     kernel cannot judge (error, remote and extended frames, messages of a DBC layout outside its table)
     take the Python path here, on the same state: the same rules, checked against one reference in
@@ -159,14 +159,14 @@ class E2EReceiver:
     @property
     def kernel_state(self) -> tuple:
         """(kind_of_id, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t): the arrays a compiled caller
-        (fsw.bus.kernels.collect_rows) classifies with, this receiver's own sequence state included."""
+        (comms.bus.kernels.collect_rows) classifies with, this receiver's own sequence state included."""
         return (self._kind_of_id,) + self._table
 
     def tally_targets(self, n_codes: int) -> list:
         """For each key ``row * n_codes + code`` of a compiled caller's tally (row: message index, or the
         number of messages for the bus-level counts; code: a kernels class code, or kernels.TIMEOUT_CODE),
         the (counts dict, class) it adds to, None where there is none."""
-        from fsw.bus.kernels import TIMEOUT_CODE
+        from comms.bus.kernels import TIMEOUT_CODE
         names = self.icd.message_names
         targets: list = [None] * ((len(names) + 1) * n_codes)
         for m, name in enumerate(names):

@@ -24,18 +24,18 @@ import cantools
 import numpy as np
 from keepout_config import config_path
 
-from fsw.bus.crc import CRC_TABLE as _CRC_TABLE
-from fsw.bus.crc import crc8_sae_j1850, e2e_crc
-from fsw.bus.burst import FrameBurst
-from fsw.bus.burst import data_frame as _data_frame
-from fsw.bus.kernels import MAX_DLC, CodecTable, encode_burst
+from comms.bus.crc import CRC_TABLE as _CRC_TABLE
+from comms.bus.crc import crc8_sae_j1850, e2e_crc
+from comms.bus.burst import FrameBurst
+from comms.bus.burst import data_frame as _data_frame
+from comms.bus.kernels import MAX_DLC, CodecTable, encode_burst
 
 DEFAULT_DBC_PATH = config_path("icd", "keepout.dbc")
 
 E2E_CRC_SIGNAL = "E2E_CRC"
 E2E_COUNTER_SIGNAL = "E2E_Counter"
 SECOC_ATTRIBUTE = "SecOCAuthenticator"
-SECOC_LAYOUT = [("frame_id", 0, 11), ("freshness_lsb", 11, 21), ("mac", 32, 32)]  # fsw.bus.secoc's frame
+SECOC_LAYOUT = [("frame_id", 0, 11), ("freshness_lsb", 11, 21), ("mac", 32, 32)]  # comms.bus.secoc's frame
 
 
 class IcdError(ValueError):
@@ -153,7 +153,7 @@ class _MessageCodec:
 
 
 def _codec_table(specs: list[MessageSpec]) -> CodecTable:
-    """The kernels' signal table (see fsw.bus.kernels) of ``specs``, message index = list position.
+    """The kernels' signal table (see comms.bus.kernels) of ``specs``, message index = list position.
     Messages the per-frame generated codec does not handle are left out of ``index_of_id``."""
     n_slots = max(len(s.db_message.signals) for s in specs)
     shape = (len(specs), n_slots)
@@ -211,7 +211,7 @@ class Icd:
         self.messages: dict[str, MessageSpec] = {}
         self.by_id: dict[int, MessageSpec] = {}
         seen_ids: dict[int, str] = {}
-        # SecOC authenticator frames (fsw.bus.secoc) belong to the layer below E2E: node -> frame id
+        # SecOC authenticator frames (comms.bus.secoc) belong to the layer below E2E: node -> frame id
         self.authenticators: dict[str, int] = {}
         for message in self.db.messages:
             if int(_attribute(message, SECOC_ATTRIBUTE, 0)):
@@ -226,7 +226,7 @@ class Icd:
             self.messages[spec.name] = spec
             self.by_id[spec.frame_id] = spec
         self.nodes: tuple[str, ...] = tuple(node.name for node in self.db.nodes)
-        # message index m of the compiled kernels (fsw.bus.kernels), in DBC order
+        # message index m of the compiled kernels (comms.bus.kernels), in DBC order
         self.message_names: tuple[str, ...] = tuple(self.messages)
         self.message_index: dict[str, int] = {name: m for m, name in enumerate(self.message_names)}
         self.table = _codec_table(list(self.messages.values()))

@@ -41,7 +41,7 @@ import can
 from can.interfaces.socketcan import constants
 from can.interfaces.socketcan.socketcan import SocketcanBus, build_can_frame, pack_filters
 
-from fsw.bus.mmsg import IoVec as _IoVec, MMsgHdr as _MMsgHdr, PollFd as _PollFd, libc, take_queued
+from comms.bus.mmsg import IoVec as _IoVec, MMsgHdr as _MMsgHdr, PollFd as _PollFd, libc, take_queued
 
 BATCH = 64  # frames per recvmmsg/sendmmsg call (a lockstep tick has ~20)
 # The doorbell's queue is emptied every this many rings (a ring is one frame queued there): edge-triggered

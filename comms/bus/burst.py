@@ -1,11 +1,11 @@
 """A burst: the frames one node puts on the bus at one time (a tick's SYNC and device frames, a cycle's
-wheel commands and CYCLE_DONE), held as arrays so that the compiled codec (fsw.bus.kernels) encodes and
+wheel commands and CYCLE_DONE), held as arrays so that the compiled codec (comms.bus.kernels) encodes and
 checks all of them in one call.
 
 On a python-can bus a burst travels as ordinary ``can.Message`` frames (``send_burst`` builds them and
 sends them in one batch; ``recv_burst`` reads everything queued), so a SIL over socketcan or udp_multicast
 carries exactly the frames it always did. The in-process bus of fast mode
-(:class:`fsw.bus.transport.LightVirtualBus`) carries the burst itself: one queue entry instead of a
+(:class:`comms.bus.transport.LightVirtualBus`) carries the burst itself: one queue entry instead of a
 ``can.Message`` built, copied, queued and read per frame; its plain ``recv`` still hands out messages.
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Any, Sequence
 import can
 import numpy as np
 
-from fsw.bus.kernels import MAX_DLC
+from comms.bus.kernels import MAX_DLC
 
 
 def data_frame(frame_id: int, data: bytearray) -> can.Message:

@@ -47,7 +47,7 @@ from can import CanProtocol
 from can.interfaces.udp_multicast.bus import GeneralPurposeUdpMulticastBus, UdpMulticastBus
 from can.interfaces.udp_multicast.utils import is_msgpack_installed, unpack_message
 
-from fsw.bus.mmsg import IoVec as _IoVec, MMsgHdr as _MMsgHdr, libc, take_queued
+from comms.bus.mmsg import IoVec as _IoVec, MMsgHdr as _MMsgHdr, libc, take_queued
 
 LOOPBACK = "127.0.0.1"
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)

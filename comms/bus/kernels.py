@@ -2,7 +2,7 @@
 
 A GNC tick moves ~22 frames; one Python codec call per frame cost a few microseconds each (bit fields,
 scaling, range checks and the CRC byte loop in Python). Here the DBC is turned into a signal table at load
-time (:class:`CodecTable`, built by :class:`fsw.bus.icd.Icd`) and two kernels walk that table for every
+time (:class:`CodecTable`, built by :class:`comms.bus.icd.Icd`) and two kernels walk that table for every
 frame of a burst in one call:
 
   * :func:`encode_rows`: application values (one row per frame) -> frame bytes with alive counter and
@@ -13,7 +13,7 @@ frame of a burst in one call:
     arrays) and the decoded values, stopping where the caller's wait ends (a tick's SYNC, its last
     announced frame, the awaited CYCLE_DONE) so that later frames are classified later, as before.
 
-:class:`fsw.bus.e2e.E2EReceiver` owns the state and keeps the counts per class (its public housekeeping
+:class:`comms.bus.e2e.E2EReceiver` owns the state and keeps the counts per class (its public housekeeping
 view) and the timeouts in Python. Messages the table cannot describe (big-endian or float signals, multiplexing)
 are marked unsupported and take the per-frame cantools path. tests/fsw/test_bus_kernels.py checks both
 kernels bit-exact against the per-frame codec, and the classification against a reference
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-# classify_rows' per-frame class codes: fsw.bus.e2e.FRAME_CLASSES in order (0 ok .. 6 out_of_range), then
+# classify_rows' per-frame class codes: comms.bus.e2e.FRAME_CLASSES in order (0 ok .. 6 out_of_range), then
 UNKNOWN_CODE, ECHO_CODE, FALLBACK_CODE = 7, 8, 9  # unknown id, own echo, judged by the Python path
 OK_CODE, OK_SOME_LOST_CODE, REPEATED_CODE, WRONG_SEQUENCE_CODE = 0, 1, 2, 3
 CRC_ERROR_CODE, BAD_LENGTH_CODE, OUT_OF_RANGE_CODE = 4, 5, 6
@@ -222,7 +222,7 @@ def unjudged_code(fid, kind_of_id):  # pragma: no cover - compiled
       "int64[::1], int64[:, ::1], float64[::1])", cache=True)
 def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_col, stop_lo, stop_hi, count_mask,
                   count_left, kind_of_id, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t):  # pragma: no cover
-    """The E2E receiver's classification of frames ``first``.. in order (fsw.bus.e2e.E2EReceiver, whose
+    """The E2E receiver's classification of frames ``first``.. in order (comms.bus.e2e.E2EReceiver, whose
     Python docstrings give the rules): ``status[i]`` its class code, ``values[i]`` the decoded signals of a
     frame that passed the length and CRC checks. Sequence state per message: ``seq[m] = (last counter or
     -1, timed out)``, ``last_ok_t[m]``; ``kind_of_id[id]``: message index or KIND_*; the table as in

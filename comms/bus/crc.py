@@ -1,5 +1,5 @@
 """The E2E CRC of every bus frame: CRC-8 SAE J1850 over the frame's data ID and payload (AUTOSAR E2E
-profile 1 style; see fsw.bus.e2e for the protection as a whole)."""
+profile 1 style; see comms.bus.e2e for the protection as a whole)."""
 from __future__ import annotations
 
 from typing import Iterable

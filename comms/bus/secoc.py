@@ -22,7 +22,7 @@ its authenticator do not void it, and whatever is not released is counted and dr
 forged by chance once in 2^32 tries (AUTOSAR SecOC profiles for classic CAN truncate to 24..28 bits).
 
 Keys: each direction has its own key, HMAC-SHA256(link key, "keepout bus SecOC " + sender node), from the
-run's link key (``fsw.link_security``): the SIL writes a fresh one for every run, so a recording of an
+run's link key (``comms.link_security``): the SIL writes a fresh one for every run, so a recording of an
 earlier run fails the MAC. A hand-started pair of processes that reuses one key file across runs can be
 fed the start of an earlier run's recording (its freshness values are the same): docs/security.md.
 
@@ -145,7 +145,7 @@ class SecOCBus(can.BusABC):
     def send_batch(self, msgs: Sequence[can.Message], timeout: float | None = None) -> int:
         """Send each of ``msgs`` followed by its authenticator; returns how many of ``msgs``, from the first,
         went out with their authenticators (the rest is unsent, as with ``transport.send_batch``)."""
-        from fsw.bus.transport import send_batch
+        from comms.bus.transport import send_batch
 
         out = []
         for msg in msgs:
@@ -169,7 +169,7 @@ class SecOCBus(can.BusABC):
 
     def _fill(self, timeout: float | None) -> None:
         """Read the inner bus until an authenticated frame is released or ``timeout`` passes."""
-        from fsw.bus.transport import recv_burst
+        from comms.bus.transport import recv_burst
 
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
