@@ -407,28 +407,65 @@ class FlightSoftware:
         return self.last
 
     def _gnc_task(self, inputs, slipped_before: bool) -> None:
+        """One GNC cycle, its stages in order: read the inputs, estimate, guide, control (wheel torques and
+        CYCLE_DONE out), FDIR, target reached, telemetry. The hot path: each stage is one call, and what
+        the stages share is passed along, not kept on ``self``."""
         t_start = self.executive.tick_start  # the executive's clock read just before this call
         dt = self.period_s
-        lockstep = type(inputs) is TickInputs  # the driver's own inputs: the array fast paths below
-        if lockstep or hasattr(inputs, "tick"):
-            tick = int(inputs.tick)
-            self.t_s = float(inputs.t)
-            realtime = False
-        else:
-            tick = self.cycle
-            if self._rt_t0 is None:
-                self._rt_t0 = float(inputs.t)
-            self.t_s = float(inputs.t) - self._rt_t0
-            realtime = True
+        lockstep = type(inputs) is TickInputs  # the driver's own inputs: the array fast paths of the readers
+        tick, realtime = self._start_cycle(inputs, lockstep)
         if self.dispatcher is not None:
             self.dispatcher.poll()
         if self.inject_overrun_s > 0.0:
-            end = self.clock() + self.inject_overrun_s
-            self.inject_overrun_s = 0.0
-            while self.clock() < end:
-                pass
+            self._overrun()
 
-        # ---- sensors
+        # ---- inputs
+        imu, samples = self._read_imu(inputs, lockstep, realtime, dt)
+        st = inputs.star_tracker
+        st_fresh, q_NS, st_latency, nq = self._read_star_tracker(inputs, st, realtime)
+        speeds, faults = self._read_wheels(inputs, lockstep, realtime, dt)
+
+        # ---- estimation (propagate across every IMU sample of the tick)
+        est = self.estimator
+        innovation_deg = est._tick(dt, samples, q_NS if st_fresh else None, st_latency, nq)
+        if st_fresh != self._st_was_valid:  # the star tracker was lost or is back
+            self._st_events(st, st_fresh)
+
+        # ---- guidance and control
+        omega = est.omega_BN_B
+        g = self.guidance.step(self.t_s, dt, est.q_NB if est.initialized else None, omega)
+        ctrl = self.control.step(dt, g.omega_cmd_BN_B, omega, speeds)
+        self._send_commands(tick, g, ctrl, realtime)
+
+        # ---- FDIR, then the target
+        self._fdir_cycle(dt, speeds, faults, ctrl, imu, st, st_fresh, innovation_deg, g, slipped_before)
+        if not self._target_reached:
+            self._watch_target(g, omega, dt)
+
+        # ---- telemetry
+        self._end_cycle(t_start, g, ctrl, speeds, imu is not None, st, st_fresh)
+
+    def _start_cycle(self, inputs, lockstep: bool) -> tuple[int, bool]:
+        """(tick, real time?) of this cycle, with onboard time ``t_s`` set: a lockstep tick's own time, or in
+        real time the driver clock since the first cycle."""
+        if lockstep or hasattr(inputs, "tick"):
+            self.t_s = float(inputs.t)
+            return int(inputs.tick), False
+        if self._rt_t0 is None:
+            self._rt_t0 = float(inputs.t)
+        self.t_s = float(inputs.t) - self._rt_t0
+        return self.cycle, True
+
+    def _overrun(self) -> None:
+        """The test hook ``inject_overrun_s``: busy-wait that long once, as a cycle that runs late."""
+        end = self.clock() + self.inject_overrun_s
+        self.inject_overrun_s = 0.0
+        while self.clock() < end:
+            pass
+
+    def _read_imu(self, inputs, lockstep: bool, realtime: bool, dt: float):
+        """(newest valid gyro sample or None, the cycle's gyro rates as the estimator's (n, 3) samples). In
+        real time a sample older than 2.5 cycles counts as none."""
         imu = inputs.imu
         if realtime:
             age = inputs.imu_age_s
@@ -444,22 +481,24 @@ class FlightSoftware:
             imu_samples = [s.omega_BN_B for s in imu_samples if getattr(s, "valid", True)] or (
                 [imu.omega_BN_B] if imu is not None else None)
             samples = _NO_SAMPLES if imu_samples is None else np.array(imu_samples, dtype=float).reshape(-1, 3)
-        st = inputs.star_tracker
-        st_latency = 0.0
-        nq = 1.0
-        st_fresh = st is not None and st.valid
-        if st_fresh:
-            if realtime:
-                st_latency = float(inputs.star_tracker_age_s or 0.0)
-            else:
-                st_latency = max(0.0, float(inputs.t) - float(st.t))
-            if st_latency > self._st_max_age_s:
-                st_fresh = False
-            q_NS = np.ascontiguousarray(st.q_NS, dtype=float)
-            nq = _norm(q_NS.tolist())
-            if not (0.9 < nq < 1.1):
-                st_fresh = False
-        # each wheel's speed (NaN) and fault flags (-1) with no status this tick
+        return imu, samples
+
+    def _read_star_tracker(self, inputs, st, realtime: bool):
+        """(fresh?, q_NS, latency [s], |q_NS|) of the star tracker sample ``st``: fresh when valid, no older
+        than star_tracker_max_age_s and of a norm the estimator can use (q_NS None when not valid)."""
+        if st is None or not st.valid:
+            return False, None, 0.0, 1.0
+        if realtime:
+            st_latency = float(inputs.star_tracker_age_s or 0.0)
+        else:
+            st_latency = max(0.0, float(inputs.t) - float(st.t))
+        q_NS = np.ascontiguousarray(st.q_NS, dtype=float)
+        nq = _norm(q_NS.tolist())
+        return not st_latency > self._st_max_age_s and 0.9 < nq < 1.1, q_NS, st_latency, nq
+
+    def _read_wheels(self, inputs, lockstep: bool, realtime: bool, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """(speeds, fault flags) of the wheels: NaN and -1 for a wheel with no status this cycle (in real time,
+        none for 3 cycles), 0 for one heard through corrupt frames (`_heard_through_corruption`)."""
         wheel_arrays = inputs.fresh_wheel_arrays() if lockstep else None
         if wheel_arrays is None:
             wheels = inputs.wheels
@@ -470,19 +509,11 @@ class FlightSoftware:
             faults = np.array([w.fault if w is not None else -1 for w in wheels], dtype=np.int64)
         else:
             speeds, faults = wheel_arrays
-        faults = self._heard_through_corruption(faults)
+        return speeds, self._heard_through_corruption(faults)
 
-        # ---- estimation (propagate across every IMU sample of the tick)
-        est = self.estimator
-        innovation_deg = est._tick(dt, samples, q_NS if st_fresh else None, st_latency, nq)
-        if st_fresh != self._st_was_valid:  # the star tracker was lost or is back
-            self._st_events(st, st_fresh)
-
-        # ---- guidance and control
-        q_est = est.q_NB if est.initialized else None
-        omega = est.omega_BN_B
-        g = self.guidance.step(self.t_s, dt, q_est, omega)
-        ctrl = self.control.step(dt, g.omega_cmd_BN_B, omega, speeds)
+    def _send_commands(self, tick: int, g, ctrl, realtime: bool) -> None:
+        """The cycle's commands on the bus: the door's, then the wheel torques with CYCLE_DONE (lockstep). A
+        transmit failure is reported (FATAL_ERROR) and the loop goes on."""
         if self.door is not None:  # DOOR_CMD before the wheel commands' CYCLE_DONE
             self._door_cycle(tick, g)
         try:
@@ -491,8 +522,10 @@ class FlightSoftware:
             self._bus_tx_errors = getattr(self, "_bus_tx_errors", 0) + 1
             self._event("FATAL_ERROR", reason=f"bus send failed: {type(exc).__name__}: {exc}"[:110])
 
-        # ---- FDIR (sensor monitors are armed once the sensor has been heard from: a flight software
-        # started before its devices must not trip on silence)
+    def _fdir_cycle(self, dt: float, speeds, faults, ctrl, imu, st, st_fresh: bool, innovation_deg: float, g,
+                    slipped_before: bool) -> None:
+        """Every FDIR monitor on this cycle, then its actions. Sensor monitors are armed once the sensor has
+        been heard from: a flight software started before its devices must not trip on silence."""
         imu_corrupt, st_corrupt = self._corrupt_deltas()
         self._imu_seen = self._imu_seen or imu is not None
         # a tracker that answers but is blind (Sun/Moon/rate) has been heard: its silence is then a fault
@@ -508,21 +541,26 @@ class FlightSoftware:
         for action in actions:
             self._execute(action)
 
-        # ---- target reached (event once per target): held, not passed through. The error and the body rate
-        # must stay within tolerance for a dwell; a slew that arrives fast and overshoots resets the count.
+    def _watch_target(self, g, omega: np.ndarray, dt: float) -> None:
+        """TARGET_REACHED, once per target: held, not passed through. The error and the body rate must stay
+        within tolerance for a dwell; a slew that arrives fast and overshoots resets the count."""
         err = g.pointing_error_deg if g.mode == "POINTING" else g.att_error_deg
-        if g.mode != "SAFE" and not self._target_reached and err == err:
+        if g.mode != "SAFE" and err == err:
             held = err < REACHED_ERROR_DEG and math.degrees(_norm(omega.tolist())) < REACHED_RATE_DEG_S
             self._held_cycles = self._held_cycles + 1 if held else 0
             if self._held_cycles * dt >= REACHED_DWELL_S:
                 self._target_reached = True
                 self._event("TARGET_REACHED", error_deg=err)
 
+    def _end_cycle(self, t_start: float, g, ctrl, speeds, imu_valid: bool, st, st_fresh: bool) -> None:
+        """The cycle's record (`last`, its execution time up to here) and, every gnc_packet_every_n_cycles, its
+        GNC packet; then the next cycle's number."""
         exec_ms = 1e3 * (self.clock() - t_start)
+        est = self.estimator
         self.last = CycleRecord(self.t_s, g.mode, est.q_NB.copy(), g.omega_cmd_BN_B, ctrl.wheel_torque_cmd_Nm,
                                 g.margins_deg, g.margin_min_deg, g.pointing_error_deg, g.att_error_deg, exec_ms)
         if self.cycle % self._gnc_tm_every == 0:
-            self._send_gnc_tm(g, ctrl, speeds, imu is not None, st, st_fresh, exec_ms)
+            self._send_gnc_tm(g, ctrl, speeds, imu_valid, st, st_fresh, exec_ms)
         self.cycle += 1
 
     def _door_cycle(self, tick: int, g) -> None:
