@@ -14,7 +14,7 @@ Scenarios, each a fresh process:
 
 Time to first tick: the run is started through ``python -c`` that wraps `hil_sim.lockstep.Simulator.run_tick`
 (and the physics check and the flight software's start, for the split) to print the wall clock of their
-calls, then calls the ``keepout`` entry point (`hil_sim.cli.main`) with the same arguments; measured from
+calls, then calls the ``keepout`` entry point (`cli.main.main`) with the same arguments; measured from
 just before the process is started.
 
     .venv/bin/python bench/first_run.py [--wheel dist/keepout-*.whl] [--duration 120] [--other-cpu]
@@ -55,7 +55,7 @@ def wrap(owner, attr, before, after=None, once=False):
 wrap(checks, "check_mission", "check_start", "check_end")
 wrap(sil, "_start_fsw", "fsw_spawn")
 wrap(lockstep.Simulator, "run_tick", "first_tick", once=True)
-from hil_sim.cli import main
+from cli.main import main
 sys.argv[0] = "keepout"
 mark("imports_done")
 sys.exit(main(sys.argv[1:]))

@@ -67,7 +67,7 @@ def _can_junk(rnd: random.Random) -> bytes:
 
 
 def _start_run(out: Path, bus: str) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "hil_sim", "sil", "run", str(ROOT / "config/missions/demo-pointing.yaml"),
+    cmd = [sys.executable, "-m", "cli", "sil", "run", str(ROOT / "config/missions/demo-pointing.yaml"),
            "--bus", bus, "--duration", "86400", "--out", str(out), "--no-progress"]
     return subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 

@@ -38,7 +38,7 @@ VCAN_VM = os.environ.get("KEEPOUT_VCAN_RUN", "vcan-vm")
 
 
 def one_run(bus: str, duration: float, out: Path) -> dict:
-    cmd = [sys.executable, "-m", "hil_sim", "sil", "run", str(ROOT / "config" / "missions" / "demo-pointing.yaml"),
+    cmd = [sys.executable, "-m", "cli", "sil", "run", str(ROOT / "config" / "missions" / "demo-pointing.yaml"),
            "--bus", bus, "--duration", str(duration), "--out", str(out), "--no-progress"]
     start = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)

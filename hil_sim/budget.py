@@ -17,19 +17,13 @@ Keplerian orbit).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import math
-import sys
-from dataclasses import asdict, dataclass
-from pathlib import Path
+from dataclasses import dataclass
 import numpy as np
 
-from hil_sim.cli import description_of
 
 DAY_S = 86_400.0
 SAMPLE_S = 10.0
-EXIT_REJECTED = 2
 
 
 @dataclass
@@ -134,43 +128,3 @@ def budget(mission) -> list[Row]:
                             float(np.linalg.norm(h_axis)), _wheel_fraction(mission, h_axis),
                             "random walk sigma sqrt(2 tau t); peak torque shown at 3 sigma"))
     return rows
-
-
-def add_cli(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("budget", help="disturbance and momentum budget per effect over an orbit and a day",
-                              description=description_of(__doc__),
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("mission", type=Path, help="mission YAML")
-    p.add_argument("--json", type=Path, default=None, metavar="FILE", help="also write the rows as JSON")
-    p.set_defaults(func=_budget)
-
-
-def _budget(args: argparse.Namespace) -> int:
-    from rich.console import Console
-    from rich.table import Table
-
-    from hil_sim.mission import load_mission_or_report
-
-    mission = load_mission_or_report(args.mission)
-    if mission is None:
-        return EXIT_REJECTED
-    rows = budget(mission)
-    table = Table(title=f"{mission.name}: disturbance and momentum budget (attitude held inertially)")
-    for col in ("effect", "span", "peak torque [N m]", "H at end, body x y z [N m s]", "peak |H| [N m s]",
-                "worst wheel [% of limit]"):
-        table.add_column(col, justify="left" if col in ("effect", "span") else "right")
-    for r in rows:
-        table.add_row(r.effect, f"{r.span} ({r.span_s:,.0f} s)", f"{r.peak_torque_Nm:.3g}",
-                      " ".join(f"{h:+.3g}" for h in r.momentum_end_B_Nms), f"{r.momentum_peak_Nms:.3g}",
-                      f"{100 * r.wheel_speed_fraction:.1f}")
-    console = Console()
-    console.print(table)
-    from hil_sim.environment import EFFECTS, environment_effects
-
-    off = [name for name in EFFECTS if name not in environment_effects(mission)]
-    if off:
-        console.print("in the truth models but off in this mission (not counted): " + ", ".join(off))
-    if args.json is not None:
-        args.json.write_text(json.dumps({"mission": mission.name, "rows": [asdict(r) for r in rows],
-                                         "off": off}, indent=1) + "\n")
-    return 0

@@ -13,8 +13,8 @@ import pytest
 
 from comms.bus import E2ESender, Icd, open_bus
 from comms.bus.transport import random_udp_endpoint
-from hil_sim import bus_cli
-from hil_sim.cli import main as keepout_main
+from cli import bus as bus_cli
+from cli.main import main as keepout_main
 
 ROOT = Path(__file__).resolve().parents[2]
 DBC = ROOT / "config" / "icd" / "keepout.dbc"
@@ -63,7 +63,7 @@ def test_log_frames_is_read_by_cantools_decode() -> None:
 def _log_via_cli(spec: str, tmp_path: Path) -> str:
     """Run `keepout bus log` as its own process on ``spec``, send frames, return the log text."""
     out = tmp_path / "bus.log"
-    proc = subprocess.Popen([sys.executable, "-m", "hil_sim", "bus", "log", "--bus", spec, "--count", "4",
+    proc = subprocess.Popen([sys.executable, "-m", "cli", "bus", "log", "--bus", spec, "--count", "4",
                              "--duration", "60", "--out", str(out)], cwd=ROOT, stderr=subprocess.PIPE,
                             text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
     try:

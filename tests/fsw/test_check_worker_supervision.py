@@ -88,7 +88,7 @@ def test_after_max_restarts_the_check_is_dropped_not_the_flight_software(supervi
 @pytest.mark.slow
 def test_sigkill_of_the_worker_in_a_live_run_is_an_event_and_the_run_passes(tmp_path: Path) -> None:
     root = Path(__file__).resolve().parents[2]
-    cmd = [sys.executable, "-m", "hil_sim", "sil", "run", str(root / "config/missions/demo-pointing.yaml"),
+    cmd = [sys.executable, "-m", "cli", "sil", "run", str(root / "config/missions/demo-pointing.yaml"),
            "--bus", "udp_multicast", "--realtime", "--duration", "25", "--out", str(tmp_path), "--no-progress"]
     proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     killed = None

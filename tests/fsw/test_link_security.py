@@ -223,7 +223,7 @@ def test_mac_is_truncated_hmac_sha256() -> None:
 def test_config_validate_refuses_a_non_loopback_uplink_and_warns_when_it_is_allowed(tmp_path, capsys) -> None:
     import yaml
 
-    from hil_sim.cli import main
+    from cli.main import main
     from keepout_config import config_path
 
     mission = yaml.safe_load(config_path("missions", "demo-pointing.yaml").read_text())

@@ -1,5 +1,5 @@
 """The arrows that must never exist (read from the source): fsw -> ground, fsw -> hil_sim, ground -> hil_sim,
-the contract (comms) -> any of its ends; and what ground and the simulator may still take from the flight
+the contract (comms) -> any of its ends, any library package -> the command line (cli); and what ground and the simulator may still take from the flight
 software besides the contract, each named with its reason."""
 from __future__ import annotations
 
@@ -27,7 +27,11 @@ def _imported_top_packages(package: str) -> dict[str, set[str]]:
     return found
 
 
-@pytest.mark.parametrize(("package", "forbidden"), [("fsw", "ground"), ("fsw", "hil_sim"), ("ground", "hil_sim")])
+@pytest.mark.parametrize(("package", "forbidden"), [
+    ("fsw", "ground"), ("fsw", "hil_sim"), ("ground", "hil_sim"),
+    # the command line sits on top: no library package holds or reaches for it
+    ("gnc", "cli"), ("comms", "cli"), ("fsw", "cli"), ("ground", "cli"), ("hil_sim", "cli"),
+])
 def test_package_never_imports_the_forbidden_one(package: str, forbidden: str) -> None:
     imports = _imported_top_packages(package)
     assert imports, f"no imports found under {package}/: the scan is broken"

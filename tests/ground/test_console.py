@@ -33,7 +33,7 @@ DEMO = ROOT / "config" / "missions" / "demo-pointing.yaml"
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                   "--disable-component-update", "--disable-sync", "--no-first-run"]
-KEEPOUT = [sys.executable, "-m", "hil_sim.cli"]
+KEEPOUT = [sys.executable, "-m", "cli"]
 
 
 def _gnc(time_s: float, **values: float) -> DecodedTm:

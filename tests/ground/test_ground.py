@@ -22,7 +22,7 @@ from ground.archive import (
     read_events,
     read_raw_archive,
 )
-from ground.cli import main
+from cli.ground import main
 from ground.display import limit_state, render_tables
 from ground.monitor import GroundMonitor, run_ground_monitor
 from comms.link_security import SPI_TM, SecurityAssociation, downlink_receiver, uplink_receiver, write_key_file

@@ -12,7 +12,7 @@ import pytest
 from comms.dictionary import DICTIONARY
 from fsw.telemetry import TelemetrySender
 from comms.telemetry import decode_tm_packet
-from ground.cli import main
+from cli.ground import main
 from ground.link import ENDPOINTS_FILE, Endpoints, LinkError, find_run, open_telemetry, random_group
 
 

@@ -17,7 +17,7 @@ from comms.dictionary import DICTIONARY
 from comms.link_security import SPI_TM, SecurityAssociation, uplink_receiver, write_key_file
 from fsw.telecommand import CommandDispatcher
 from fsw.telemetry import TelemetrySender
-from ground.cli import main
+from cli.ground import main
 
 
 def _free_port() -> int:
@@ -140,6 +140,6 @@ def test_command_to_a_port_nobody_serves_exits_non_zero(capsys) -> None:
     ("--seq", "20000", "not a TC sequence count"),
 ])
 def test_bad_options_are_one_line_errors(option: str, value: str, message: str) -> None:
-    proc = subprocess.run([sys.executable, "-m", "hil_sim", "ground", "send", "NOOP", option, value],
+    proc = subprocess.run([sys.executable, "-m", "cli", "ground", "send", "NOOP", option, value],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr

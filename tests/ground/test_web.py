@@ -34,7 +34,7 @@ def _gnc(sender: TelemetrySender, cycle: int, margin_deg: float) -> None:
 
 
 def _start_web(*args: str) -> tuple[subprocess.Popen, str]:
-    proc = subprocess.Popen([sys.executable, "-m", "hil_sim.cli", "ground", "web", "--port", "0", *args],
+    proc = subprocess.Popen([sys.executable, "-m", "cli", "ground", "web", "--port", "0", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
     line = proc.stdout.readline()
     match = re.search(r"http://127\.0\.0\.1:(\d+)/", line)
@@ -189,7 +189,7 @@ def test_live_points_reach_subscribers_and_garbage_disconnects_only_its_sender(l
 
 
 def test_bad_command_lines_are_one_line_errors(tmp_path: Path, capsys) -> None:
-    from ground.cli import main
+    from cli.ground import main
 
     assert main(["ground", "web", "--openmct", str(tmp_path), "--archive", str(tmp_path)]) == 2
     err = capsys.readouterr().err
@@ -202,7 +202,7 @@ def test_bad_command_lines_are_one_line_errors(tmp_path: Path, capsys) -> None:
 
 def test_an_archive_replay_is_named_after_its_run_not_ground(tmp_path) -> None:
     """`keepout ground web --archive RUN/ground`: the tree's root said "ground"; it is the run's name."""
-    from ground.web.cli import archive_title
+    from cli.ground_web import archive_title
 
     run = tmp_path / "demo-pointing-20261129-030421-405d1a"
     (run / "ground").mkdir(parents=True)

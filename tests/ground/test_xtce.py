@@ -23,7 +23,7 @@ from fsw.telecommand import CommandDispatcher
 from comms.telecommand import encode_command
 from fsw.telemetry import TelemetrySender
 from comms.telemetry import decode_tm_packet
-from ground.cli import main
+from cli.ground import main
 from ground.xtce import to_xtce
 
 XSD = Path(__file__).resolve().parents[1] / "data" / "xtce" / "SpaceSystemV1.2.xsd"

@@ -9,7 +9,7 @@ import numpy as np
 import yaml
 
 from hil_sim.budget import _gravity_gradient_torques, budget
-from hil_sim.cli import main
+from cli.main import main
 from hil_sim.mission import Mission, world_params
 from hil_sim.orbit import orbit_elements_array
 

@@ -11,7 +11,7 @@ import xmlschema
 
 from hil_sim.campaign import dispersions as dsp
 from hil_sim.campaign.spec import load_campaign
-from hil_sim.cli import main
+from cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 REGRESSION = ROOT / "config" / "campaigns" / "regression.yaml"
@@ -73,7 +73,7 @@ def test_ctrl_c_stops_the_campaign_and_keeps_finished_runs(tmp_path):
     out = tmp_path / "interrupted"
     # 600 s runs (about a second each here): Ctrl-C must land while runs remain (5 s runs all finished
     # before the signal once the loop got fast)
-    proc = subprocess.Popen([sys.executable, "-m", "hil_sim", "campaign", "run", str(REGRESSION), "--runs", "8",
+    proc = subprocess.Popen([sys.executable, "-m", "cli", "campaign", "run", str(REGRESSION), "--runs", "8",
                              "--workers", "1", "--duration", "600", "--out", str(out), "--no-report"],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:

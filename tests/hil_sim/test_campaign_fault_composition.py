@@ -44,7 +44,7 @@ def test_a_wheel_failure_drawn_on_a_mission_with_faults_flies_and_is_judged(tmp_
     spec = tmp_path / "compose.yaml"
     spec.write_text(CAMPAIGN.format(base=ROOT / "config" / "missions" / "fault-imu-dropout.yaml", kind=kind))
     out = tmp_path / "out"
-    result = subprocess.run([sys.executable, "-m", "hil_sim", "campaign", "run", str(spec), "--workers", "1",
+    result = subprocess.run([sys.executable, "-m", "cli", "campaign", "run", str(spec), "--workers", "1",
                              "--duration", "200", "--no-report", "--out", str(out)], cwd=ROOT,
                             capture_output=True, text=True, timeout=600)
     results = pd.read_csv(out / "results.csv")

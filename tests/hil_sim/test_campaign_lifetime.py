@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.mark.slow
 def test_sigkill_of_the_campaign_driver_leaves_no_process_behind(tmp_path: Path) -> None:
-    cmd = [sys.executable, "-m", "hil_sim", "campaign", "run", "config/campaigns/regression.yaml", "--runs", "40",
+    cmd = [sys.executable, "-m", "cli", "campaign", "run", "config/campaigns/regression.yaml", "--runs", "40",
            "--workers", "2", "--no-report", "--out", str(tmp_path / "c")]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     driver = psutil.Process(proc.pid)

@@ -23,7 +23,7 @@ def test_two_workers_run_every_sil_run_to_its_end(tmp_path):
     duration (they used to share a run id and a bus and stop after 1-3 s, recorded as "fail")."""
     out = tmp_path / "campaign"
     result = subprocess.run(
-        [sys.executable, "-m", "hil_sim", "campaign", "run", str(ROOT / "config" / "campaigns" / "regression.yaml"),
+        [sys.executable, "-m", "cli", "campaign", "run", str(ROOT / "config" / "campaigns" / "regression.yaml"),
          "--mode", "sil", "--workers", "2", "--runs", "2", "--duration", str(DURATION_S), "--out", str(out),
          "--no-report"], cwd=tmp_path, capture_output=True, text=True, timeout=1200)
     with open(out / "results.csv") as f:

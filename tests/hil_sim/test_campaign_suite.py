@@ -10,7 +10,7 @@ import numpy as np
 
 from hil_sim.campaign import dispersions as dsp
 from hil_sim.campaign.spec import Campaign
-from hil_sim.cli import main
+from cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -157,7 +157,7 @@ def test_the_budget_drag_row_is_the_formula_in_co_rotating_air() -> None:
 
 
 def test_truth_records_the_torque_the_world_applies(tmp_path) -> None:
-    from hil_sim.truth_cli import propagate, summary
+    from cli.truth import propagate, summary
 
     on = Mission.model_validate(_smallsat(solar_radiation_pressure=True, aerodynamic_drag=True))
     truth = propagate(on, 60.0, 10.0)
@@ -185,7 +185,7 @@ def test_a_residual_dipole_of_nan_is_refused_and_zero_is_off(tmp_path) -> None:
 
 def test_truth_records_the_dipole_torque_m_cross_b() -> None:
     from hil_sim import environment as env
-    from hil_sim.truth_cli import propagate
+    from cli.truth import propagate
     from hil_sim.world import WorldBatch
 
     mission = Mission.model_validate(_smallsat(residual_dipole_B_Am2=[0.02, -0.01, 0.03]))

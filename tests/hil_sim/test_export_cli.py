@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 from scipy.io import loadmat
 
-from hil_sim import cli, export_cli
+from cli import main as cli, export as export_cli
 from hil_sim.mission import load_mission, world_params
 from hil_sim.sil import TruthRecorder
 from hil_sim.summary import evaluate

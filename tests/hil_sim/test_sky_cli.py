@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil_sim import cli, sky_cli
+from cli import main as cli, sky as sky_cli
 from hil_sim.mission import load_mission
 from hil_sim.physics_checks import SkyZones, _sweep_times, check_mission, schedule
 

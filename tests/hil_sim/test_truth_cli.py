@@ -11,7 +11,7 @@ import yaml
 from scipy.integrate import trapezoid
 from scipy.spatial.transform import Rotation
 
-from hil_sim.cli import main
+from cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSION = ROOT / "config" / "missions" / "demo-pointing.yaml"

@@ -7,7 +7,7 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGES = ("gnc", "comms", "fsw", "ground", "hil_sim", "keepout_config")
+PACKAGES = ("cli", "gnc", "comms", "fsw", "ground", "hil_sim", "keepout_config")
 
 
 def _module_name(path: Path) -> str:

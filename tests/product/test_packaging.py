@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from hil_sim import cli
+from cli import main as cli
 
 ROOT = Path(__file__).resolve().parents[2]
-CODE_PACKAGES = ("gnc", "comms", "fsw", "ground", "hil_sim")
+CODE_PACKAGES = ("cli", "gnc", "comms", "fsw", "ground", "hil_sim")
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 
 

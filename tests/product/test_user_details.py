@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil_sim import cli
+from cli import main as cli
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSIONS = ROOT / "config" / "missions"
@@ -61,7 +61,7 @@ def test_sil_run_help_lists_every_bus_form_the_docs_accept(capsys):
 
 
 def test_sim_prints_each_truth_requirement_with_its_unit():
-    from hil_sim.sim_cli import result_lines
+    from cli.sim import result_lines
 
     lines = result_lines([
         {"name": "final pointing error", "value": 29.9, "unit": "deg", "limit": "< 0.05", "pass": False},
@@ -141,7 +141,7 @@ def test_the_packaged_missions_raise_no_unit_warning():
 # ---- campaigns -------------------------------------------------------------------------------------
 
 def test_baseline_defaults_beside_the_campaign_file_wherever_the_command_runs(tmp_path, monkeypatch):
-    from hil_sim.campaign_cli import _baseline_dir
+    from cli.campaign import _baseline_dir
 
     campaigns = tmp_path / "project" / "campaigns"
     campaigns.mkdir(parents=True)
@@ -189,7 +189,7 @@ def test_the_regression_campaign_does_not_state_a_run_count_its_report_may_contr
 def test_the_campaign_copy_records_the_file_baseline_save_looks_beside(tmp_path):
     """`campaign run` records the campaign file's absolute path where `baseline save` reads it."""
     from hil_sim.campaign.runner import build_plan, prepare_out_dir
-    from hil_sim.campaign_cli import campaign_source
+    from cli.campaign import campaign_source
 
     campaign = ROOT / "config" / "campaigns" / "regression.yaml"
     plan, base = build_plan(campaign, runs=1)

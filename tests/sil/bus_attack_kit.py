@@ -27,7 +27,7 @@ def fly_under_attack(out: Path, attack: Attack, mission: Path, duration_s: float
                      timeout_s: float = 600.0) -> tuple[int, str, Path]:
     """Fly ``mission`` in lockstep over udp_multicast for ``duration_s``, with ``attack(group, port, stop)``
     in a thread from the moment its bus is known; (exit code, output, run folder) when it ends."""
-    cmd = [sys.executable, "-m", "hil_sim", "sil", "run", str(mission), "--bus", "udp_multicast",
+    cmd = [sys.executable, "-m", "cli", "sil", "run", str(mission), "--bus", "udp_multicast",
            "--duration", str(duration_s), "--out", str(out), "--no-progress"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     stop = threading.Event()

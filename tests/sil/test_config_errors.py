@@ -177,7 +177,7 @@ def test_missing_file():
 
 
 def test_config_validate_cli_prints_every_problem(tmp_path, capsys):
-    from hil_sim.cli import main
+    from cli.main import main
 
     text = DEMO.read_text().replace("duration_s: 600\n", "duration_s: -1\nseedd: 3\n", 1)
     path = tmp_path / "cli.yaml"

@@ -186,7 +186,7 @@ def test_sil_run_shuts_the_door_over_the_bus(tmp_path: Path) -> None:
 
     path = tmp_path / "door-wheels-lost.yaml"
     path.write_text(yaml.safe_dump(_wheels_lost("demo-pointing-door").model_dump(mode="json")))
-    proc = subprocess.run([sys.executable, "-m", "hil_sim", "sil", "run", str(path), "--bus", "udp_multicast",
+    proc = subprocess.run([sys.executable, "-m", "cli", "sil", "run", str(path), "--bus", "udp_multicast",
                            "--out", str(tmp_path / "runs"), "--no-progress"], cwd=ROOT, capture_output=True,
                           text=True, timeout=600)
     run_dir = next((tmp_path / "runs").glob("demo-pointing-door-*"))

@@ -20,7 +20,7 @@ from comms.bus.transport import UDP_GROUP_PREFIX
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSION = ROOT / "config" / "missions" / "demo-pointing.yaml"
-KEEPOUT = [sys.executable, "-m", "hil_sim"]
+KEEPOUT = [sys.executable, "-m", "cli"]
 
 
 def _free_port() -> int:

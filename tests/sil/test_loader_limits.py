@@ -23,7 +23,7 @@ REGRESSION = ROOT / "config" / "campaigns" / "regression.yaml"
 
 
 def _keepout(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hil_sim", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "cli", *args], capture_output=True, text=True,
                           timeout=timeout, cwd=ROOT)
 
 
@@ -95,7 +95,7 @@ def test_unreadable_file_is_one_line(tmp_path, monkeypatch):
 
 
 def test_cli_exit_codes_missing_directory_invalid(tmp_path):
-    from hil_sim.cli import main
+    from cli.main import main
 
     assert main(["config", "validate", str(tmp_path / "nope.yaml")]) == 2
     assert main(["config", "validate", str(tmp_path)]) == 2

@@ -109,7 +109,7 @@ def sil_runs(tmp_path_factory):
         data["name"] = f"merged-{name}"
         path = out / f"{name}.yaml"
         path.write_text(yaml.safe_dump(data, sort_keys=False))
-        cmd = [sys.executable, "-m", "hil_sim", "sil", "run", str(path), "--bus", "udp_multicast",
+        cmd = [sys.executable, "-m", "cli", "sil", "run", str(path), "--bus", "udp_multicast",
                "--duration", str(SIL_DURATION_S), "--out", str(out / name), "--no-progress"]
         procs[name] = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     results = {}

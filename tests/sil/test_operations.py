@@ -26,7 +26,7 @@ CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                   "--disable-component-update", "--disable-sync", "--no-first-run"]
 DOCS_SCREENSHOT = ROOT / "docs" / "img" / "openmct.png"
-KEEPOUT = [sys.executable, "-m", "hil_sim.cli"]
+KEEPOUT = [sys.executable, "-m", "cli"]
 
 
 def _keepout(*args: str, **kwargs) -> subprocess.Popen:

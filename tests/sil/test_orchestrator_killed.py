@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _start(out: Path, realtime: bool = True) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "hil_sim", "sil", "run", str(ROOT / "config/missions/demo-pointing.yaml"),
+    cmd = [sys.executable, "-m", "cli", "sil", "run", str(ROOT / "config/missions/demo-pointing.yaml"),
            "--bus", "udp_multicast", "--duration", "60", "--out", str(out), "--no-progress"]
     if realtime:
         cmd.append("--realtime")
@@ -64,7 +64,7 @@ def test_the_next_sil_run_marks_earlier_orphans_in_its_runs_folder(tmp_path: Pat
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     (orphan / "summary.json").write_text(json.dumps({"status": "running", "pass": False, "run_dir": str(orphan),
                                                      "orchestrator": {"pid": int(dead.stdout), "started_s": 1.0}}))
-    result = subprocess.run([sys.executable, "-m", "hil_sim", "sil", "run", "--bus", "udp_multicast",
+    result = subprocess.run([sys.executable, "-m", "cli", "sil", "run", "--bus", "udp_multicast",
                              "--duration", "5", "--out", str(tmp_path), "--no-progress"], cwd=ROOT,
                             capture_output=True, text=True, timeout=600)
     assert result.returncode in (0, 1), result.stdout[-2000:] + result.stderr[-2000:]
@@ -84,7 +84,7 @@ def test_a_full_disk_gives_one_line_and_exit_4(tmp_path: Path) -> None:
     disk.mkdir()
     subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(disk)], check=True)
     try:
-        result = subprocess.run([sys.executable, "-m", "hil_sim", "sil", "run", "--bus", "udp_multicast",
+        result = subprocess.run([sys.executable, "-m", "cli", "sil", "run", "--bus", "udp_multicast",
                                  "--duration", "60", "--out", str(disk), "--no-progress"], cwd=ROOT,
                                 capture_output=True, text=True, timeout=600)
         assert result.returncode == 4, result.stdout[-2000:] + result.stderr[-2000:]

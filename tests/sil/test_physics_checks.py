@@ -226,7 +226,7 @@ def test_kappa_at_or_below_kappa_bar_is_reported(monkeypatch):
 
 
 def test_config_check_cli(capsys):
-    from hil_sim.cli import main
+    from cli.main import main
 
     assert main(["config", "check", str(MISSIONS / "paper-s3-cones.yaml")]) == 0
     out = capsys.readouterr().out
@@ -235,7 +235,7 @@ def test_config_check_cli(capsys):
 
 def test_validate_and_check_agree_on_a_target_inside_a_zone(tmp_path, capsys):
     """One root cause, one error, at file:line:col of the key to change, from both commands."""
-    from hil_sim.cli import main
+    from cli.main import main
 
     text = (MISSIONS / "demo-pointing.yaml").read_text()
     old = "ra_dec_deg: [95.0, 30.0]"

@@ -18,7 +18,7 @@ TIMEOUT_S = 900
 
 
 def _sil(mission, out) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "hil_sim", "sil", "run", str(mission), "--duration", str(DURATION_S),
+    return subprocess.Popen([sys.executable, "-m", "cli", "sil", "run", str(mission), "--duration", str(DURATION_S),
                              "--out", str(out), "--no-progress"], cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
 
@@ -92,7 +92,7 @@ def test_fast_campaign_flies_the_example_plugins(tmp_path, monkeypatch):
             {"name": "never_stopped", "metric": "plugin_stops", "op": "==", "limit": 0}],
         "verdict": {"confidence": 0.5, "required_success": 0.5}}, sort_keys=False))
     out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-m", "hil_sim", "campaign", "run", str(spec), "--workers", "1",
+    proc = subprocess.run([sys.executable, "-m", "cli", "campaign", "run", str(spec), "--workers", "1",
                            "--out", str(out), "--no-report"], cwd=ROOT, capture_output=True, text=True,
                           timeout=TIMEOUT_S)
     df = pd.read_parquet(out / "results.parquet")

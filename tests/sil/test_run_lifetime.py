@@ -27,7 +27,7 @@ SHORT_S = 8.0  # the default mission holds its first target: every requirement p
 
 
 def _start(cwd: Path, duration: float, *extra: str, **popen) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "hil_sim", "sil", "run", "--duration", str(duration), "--no-progress", *extra]
+    cmd = [sys.executable, "-m", "cli", "sil", "run", "--duration", str(duration), "--no-progress", *extra]
     return subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **popen)
 
 
@@ -220,7 +220,7 @@ def test_disk_full_mid_run_is_judged_crashed_with_a_summary(tmp_path):
 def test_unwritable_out_is_a_clear_error_before_anything_starts(tmp_path):
     blocker = tmp_path / "a-file"
     blocker.write_text("")
-    result = subprocess.run([sys.executable, "-m", "hil_sim", "sil", "run", "--out", str(blocker / "runs"),
+    result = subprocess.run([sys.executable, "-m", "cli", "sil", "run", "--out", str(blocker / "runs"),
                              "--no-progress"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert result.returncode == sil.EXIT_NOT_STARTED
     assert result.stderr.strip().splitlines() == [
@@ -236,7 +236,7 @@ AS_USER = (["setpriv", "--bounding-set=-dac_override,-dac_read_search",
 def test_read_only_out_is_a_clear_error(tmp_path):
     out = tmp_path / "ro"
     out.mkdir(mode=0o555)
-    result = subprocess.run([*AS_USER, sys.executable, "-m", "hil_sim", "sil", "run", "--out", str(out),
+    result = subprocess.run([*AS_USER, sys.executable, "-m", "cli", "sil", "run", "--out", str(out),
                              "--no-progress"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert result.returncode == sil.EXIT_NOT_STARTED and "Permission denied" in result.stderr
     assert "Traceback" not in result.stderr

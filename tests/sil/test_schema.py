@@ -100,7 +100,7 @@ def test_schema_rejects_what_the_models_reject():
 
 
 def test_schema_cli_check_detects_drift(tmp_path, capsys):
-    from hil_sim.cli import main
+    from cli.main import main
 
     stale = tmp_path / "schema.json"
     stale.write_text(json.dumps({"$schema": "http://json-schema.org/draft-07/schema#"}))
@@ -112,7 +112,7 @@ def test_schema_cli_check_detects_drift(tmp_path, capsys):
 def test_mission_reference_is_current_and_lists_every_key(tmp_path, capsys):
     """docs/missions.md is generated from the schema: it is up to date, and every key of
     every mapping in the schema appears in it with its unit, default and range."""
-    from hil_sim.cli import main
+    from cli.main import main
     from hil_sim.mission_docs import DOCS_PATH, mission_docs
 
     assert DOCS_PATH.read_text() == mission_docs(), "run `keepout config docs` and commit the result"

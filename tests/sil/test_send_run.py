@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-KEEPOUT = [sys.executable, "-m", "hil_sim"]
+KEEPOUT = [sys.executable, "-m", "cli"]
 
 
 def _send(run_dir: Path, *words: str) -> subprocess.CompletedProcess:

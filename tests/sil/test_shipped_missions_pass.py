@@ -23,7 +23,7 @@ def flown(tmp_path_factory) -> dict[str, tuple[int, str, Path]]:
     pending = list(MISSIONS)
     while pending:  # two at a time: the host has two cores
         batch, pending = pending[:2], pending[2:]
-        procs = {m.stem: subprocess.Popen([sys.executable, "-m", "hil_sim", "sil", "run", str(m), "--bus",
+        procs = {m.stem: subprocess.Popen([sys.executable, "-m", "cli", "sil", "run", str(m), "--bus",
                                            "udp_multicast", "--out", str(out / m.stem), "--no-progress"],
                                           cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
                  for m in batch}

@@ -35,7 +35,7 @@ RUN_TIMEOUT_S = 1500
 
 
 def _start(mission: str, duration: float, out: Path, bus: str = "udp_multicast", **popen) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "hil_sim", "sil", "run", str(MISSIONS / f"{mission}.yaml"), "--bus", bus,
+    cmd = [sys.executable, "-m", "cli", "sil", "run", str(MISSIONS / f"{mission}.yaml"), "--bus", bus,
            "--duration", str(duration), "--out", str(out), "--no-progress"]
     return subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **popen)
 
@@ -168,7 +168,7 @@ def test_rejected_mission_starts_nothing(tmp_path):
     text = (MISSIONS / "demo-pointing.yaml").read_text().replace("half_angle_deg: 15.0", "half_angle_deg: 150.0")
     bad = tmp_path / "bad.yaml"
     bad.write_text(text)
-    result = subprocess.run([sys.executable, "-m", "hil_sim", "sil", "run", str(bad), "--out", str(tmp_path / "runs"),
+    result = subprocess.run([sys.executable, "-m", "cli", "sil", "run", str(bad), "--out", str(tmp_path / "runs"),
                              "--no-progress"], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert result.returncode == 2
     assert f"{bad}:" in result.stderr and "half_angle_deg" in result.stderr

@@ -178,7 +178,7 @@ def _fly(plan, base_path: Path, campaign_file: str | Path, out: Path, args: argp
     from hil_sim.campaign.runner import finalize, prepare_out_dir
     if args.scheduler:
         # before the output folder exists: a refused campaign leaves nothing behind (the ModuleNotFoundError
-        # becomes one line with the pip command, hil_sim/cli.py)
+        # becomes one line with the pip command, cli/main.py)
         import distributed  # noqa: F401
     # the campaign file's absolute path, so `baseline save` finds its folder from anywhere
     prepare_out_dir(out, plan, Path(campaign_file).resolve(), base_path)

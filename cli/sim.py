@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from hil_sim.cli import description_of
+from cli import description_of
 
 EXIT_PASS, EXIT_FAIL, EXIT_REJECTED, EXIT_NOT_STARTED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 TRUTH_CHECK_FILE = "truth_check.json"

@@ -17,7 +17,7 @@ from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
 from ground.commanding import CommandSender, signing_sender_args
 from ground.link import LOOPBACK, Endpoints, LinkError, find_run, open_telemetry
 from ground.monitor import GroundMonitor
-from ground.web.cli import add_cli as add_web_cli
+from cli.ground_web import add_cli as add_web_cli
 
 
 def add_cli(subparsers: Any) -> None:

@@ -1,36 +1,35 @@
 """The ``keepout`` command line.
 
-Each area of the project owns its subcommands: a module listed in ``_COMMAND_MODULES`` exposes
-``add_cli(subparsers)``, which adds its parsers and sets ``func`` on them. This file only assembles
-them, so adding a command never means editing another area's code.
+Each subcommand's module exposes ``add_cli(subparsers)``, which adds its parsers and sets ``func`` on
+them; this file lists them (``_COMMAND_MODULES``) and runs the one asked for. Two still live in their
+library package: ``keepout paper`` (gnc.paper) and ``keepout fsw`` (fsw.__main__, the flight process's
+own entry point).
 """
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 
+from cli import budget, bus, campaign, config, export, ground, init, sil, sim, sky, truth
+from fsw import __main__ as fsw_main
+from gnc import paper
+
+# Each module's add_cli(subparsers) adds its subcommand, in the order `keepout --help` lists them.
 _COMMAND_MODULES = (
-    "gnc.paper",          # keepout paper
-    "hil_sim.mission_cli",  # keepout config schema|validate|check
-    "hil_sim.sil_cli",    # keepout sil run
-    "fsw.__main__",       # keepout fsw MISSION (HIL bench: the flight software alone)
-    "hil_sim.sim_cli",    # keepout sim MISSION (HIL bench: the simulator alone)
-    "hil_sim.bus_cli",    # keepout bus monitor|log
-    "ground.cli",         # keepout ground [send ...]
-    "hil_sim.campaign_cli",  # keepout campaign run|rerun|baseline|compare|shrink
-    "hil_sim.init_cli",   # keepout init DIR
-    "hil_sim.export_cli",  # keepout export RUN --format csv|mat|parquet
-    "hil_sim.sky_cli",    # keepout sky MISSION --at T | --from T0 --to T1 --step S
-    "hil_sim.budget",     # keepout budget MISSION
-    "hil_sim.truth_cli",  # keepout truth MISSION --duration D --out FILE.npz
+    paper,          # keepout paper
+    config,         # keepout config schema|validate|check
+    sil,            # keepout sil run
+    fsw_main,       # keepout fsw MISSION (HIL bench: the flight software alone)
+    sim,            # keepout sim MISSION (HIL bench: the simulator alone)
+    bus,            # keepout bus monitor|log
+    ground,         # keepout ground [send ...]
+    campaign,       # keepout campaign run|rerun|baseline|compare|shrink
+    init,           # keepout init DIR
+    export,         # keepout export RUN --format csv|mat|parquet
+    sky,            # keepout sky MISSION --at T | --from T0 --to T1 --step S
+    budget,         # keepout budget MISSION
+    truth,          # keepout truth MISSION --duration D --out FILE.npz
 )
-
-def description_of(doc: str) -> str:
-    """A subcommand module's docstring after its first paragraph, for ``--help``: reST literals (double
-    backticks) shown as plain text."""
-    return doc.split("\n\n", 1)[1].replace("``", "")
-
 
 EXIT_CANNOT_START = 3  # as `keepout sil run`: a part this command needs is missing (docs/running.md)
 # optional parts and the extra that installs them
@@ -44,13 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in _COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name != name:
-                raise
-            continue  # area not built yet in this checkout
+    for module in _COMMAND_MODULES:
         module.add_cli(sub)
     return parser
 

@@ -26,7 +26,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hil_sim.cli import description_of
+from cli import description_of
 
 FORMATS = ("csv", "mat", "parquet")
 TABLES = ("truth", "margins", "estimates", "commands", "events")

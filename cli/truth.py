@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil_sim.cli import description_of
+from cli import description_of
 
 EXIT_REJECTED = 2
 
