@@ -434,9 +434,26 @@ class Mission(_Model):
 
     # -- cross-field checks: reported with key paths, all at once, by the loader ----------------
     def semantic_problems(self) -> list[tuple[tuple[str | int, ...], str]]:
-        """Problems that involve several keys (each with the key path it concerns)."""
-        out: list[tuple[tuple[str | int, ...], str]] = []
+        """Problems that involve several keys (each with the key path it concerns), in the order of the
+        mission file: flight software against truth, spacecraft, orbit, initial state, timeline, faults."""
         n_wheels = len(self.spacecraft.wheels)
+        out = self._flight_software_problems(n_wheels) + self._spacecraft_problems() + self._orbit_problems()
+        out += self._initial_speed_problems(n_wheels)
+        for i, entry in enumerate(self.timeline):
+            out += self._timeline_entry_problems(i, entry)
+        if self.flight_software.door is not None and self.spacecraft.door is None:
+            out.append((("flight_software", "door"), "the flight software drives a door the spacecraft does not "
+                        "have: add spacecraft.door or remove flight_software.door"))
+        times = [e.t_s for e in self.timeline]
+        if times != sorted(times):
+            out.append((("timeline",), "entries must be in increasing t_s order"))
+        for i, fault in enumerate(self.faults):
+            out += self._fault_problems(i, fault, n_wheels)
+        return out
+
+    def _flight_software_problems(self, n_wheels: int) -> list[tuple[tuple[str | int, ...], str]]:
+        """Where the flight software's knowledge contradicts the truth: its epoch, its number of wheels."""
+        out: list[tuple[tuple[str | int, ...], str]] = []
         fsw = self.flight_software
         if fsw.epoch_utc != self.epoch_utc:
             out.append((("flight_software", "epoch_utc"), f"the flight software's epoch {fsw.epoch_utc.isoformat()} "
@@ -446,6 +463,11 @@ class Mission(_Model):
             out.append((("flight_software", "spacecraft", "wheels"), f"the flight software knows "
                         f"{len(fsw.spacecraft.wheels)} wheels but the spacecraft has {n_wheels} "
                         "(spacecraft.wheels); each wheel is one RWn node on the bus"))
+        return out
+
+    def _spacecraft_problems(self) -> list[tuple[tuple[str | int, ...], str]]:
+        """Wheel axes that cannot give every body torque; surface forces on a spacecraft without surfaces."""
+        out: list[tuple[tuple[str | int, ...], str]] = []
         axes = np.asarray([w.axis_B for w in self.spacecraft.wheels])
         if np.linalg.matrix_rank(axes, tol=1e-6) < 3:
             out.append((("spacecraft", "wheels"), "the wheel axes do not span 3 axes: some body torques "
@@ -456,68 +478,79 @@ class Mission(_Model):
                 out.append((("spacecraft", "disturbance", key), f"{what} acts on the spacecraft's surfaces: give "
                             "them as spacecraft.facets (area_m2, normal_B, centre_of_pressure_B_m, specular, "
                             "diffuse, drag_coefficient), or set it false"))
-        if self.orbit.semi_major_axis_km * (1 - self.orbit.eccentricity) < EARTH_RADIUS_KM + 150:
-            out.append((("orbit",), f"perigee radius {self.orbit.semi_major_axis_km * (1 - self.orbit.eccentricity):.1f} km "
-                        f"is below {EARTH_RADIUS_KM + 150:.0f} km (150 km altitude): the orbit hits the atmosphere"))
-        speeds = self.initial_state.wheel_speeds_rad_s
-        if speeds is not None:
-            if len(speeds) != n_wheels:
-                out.append((("initial_state", "wheel_speeds_rad_s"),
-                            f"{len(speeds)} speeds given for {n_wheels} wheels"))
-            else:
-                for i, (s, w) in enumerate(zip(speeds, self.spacecraft.wheels)):
-                    if abs(s) > w.max_speed_rad_s:
-                        out.append((("initial_state", "wheel_speeds_rad_s", i),
-                                    f"{s} rad/s exceeds wheel {i}'s limit {w.max_speed_rad_s} rad/s"))
-        for i, entry in enumerate(self.timeline):
-            if entry.t_s > self.duration_s:
-                out.append((("timeline", i, "t_s"), f"t_s = {entry.t_s} s is after the end of the run "
-                            f"(duration_s = {self.duration_s} s)"))
-            if isinstance(entry, SetTargetCommand):
-                given = [k for k in ("target_N", "ra_dec_deg", "q_target_NB") if getattr(entry, k) is not None]
-                if len(given) != 1:
-                    out.append((("timeline", i), "SET_TARGET needs exactly one of target_N, ra_dec_deg, "
-                                f"q_target_NB (got {', '.join(given) or 'none'})"))
-            if isinstance(entry, SetGainsCommand) and all(
-                    getattr(entry, k) is None for k in ("k1", "kappa", "eps", "rate_limit_deg_s")):
-                out.append((("timeline", i), "SET_GAINS sets nothing: give at least one of k1, kappa, eps, "
-                            "rate_limit_deg_s"))
-        if fsw.door is not None and self.spacecraft.door is None:
-            out.append((("flight_software", "door"), "the flight software drives a door the spacecraft does not "
-                        "have: add spacecraft.door or remove flight_software.door"))
-        times = [e.t_s for e in self.timeline]
-        if times != sorted(times):
-            out.append((("timeline",), "entries must be in increasing t_s order"))
-        for i, fault in enumerate(self.faults):
-            if fault.end_s <= fault.start_s:
-                out.append((("faults", i, "end_s"), f"end_s ({fault.end_s}) must be after start_s "
-                            f"({fault.start_s})"))
-            if fault.kind == "delay" and fault.delay_s is None:
-                out.append((("faults", i), "kind 'delay' needs delay_s"))
-            if fault.kind == "corrupt" and fault.bit is None:
-                out.append((("faults", i), "kind 'corrupt' needs bit"))
-            if fault.kind.startswith("door_"):
-                if self.spacecraft.door is None:
-                    out.append((("faults", i, "kind"), f"{fault.kind}: the spacecraft has no door "
-                                "(spacecraft.door)"))
-                if fault.message not in DOOR_MESSAGES:
-                    out.append((("faults", i, "message"), f"{fault.message}: a door failure names a door frame, "
-                                "DOOR_STATUS or DOOR_CMD"))
-                if fault.kind == "door_slow" and fault.delay_s is None:
-                    out.append((("faults", i), "kind 'door_slow' needs delay_s (the extra stroke time)"))
-            elif fault.message in DOOR_MESSAGES and self.spacecraft.door is None:
-                out.append((("faults", i, "message"), f"{fault.message}: the spacecraft has no door "
-                            "(spacecraft.door)"))
-            wheel_message = WHEEL_MESSAGE.fullmatch(fault.message)
-            if wheel_message:
-                wheel = int(wheel_message.group(1))
-                if wheel > n_wheels:
-                    out.append((("faults", i, "message"), f"{fault.message}: the spacecraft has only "
-                                f"{n_wheels} wheels"))
-            elif fault.kind.startswith("wheel_"):
-                out.append((("faults", i, "message"), f"kind {fault.kind!r} fails a wheel: name it by its RWn_CMD "
-                            "or RWn_STATUS message"))
         return out
+
+    def _orbit_problems(self) -> list[tuple[tuple[str | int, ...], str]]:
+        """A perigee inside the atmosphere (below 150 km altitude)."""
+        perigee_km = self.orbit.semi_major_axis_km * (1 - self.orbit.eccentricity)
+        if perigee_km < EARTH_RADIUS_KM + 150:
+            return [(("orbit",), f"perigee radius {perigee_km:.1f} km is below {EARTH_RADIUS_KM + 150:.0f} km "
+                     "(150 km altitude): the orbit hits the atmosphere")]
+        return []
+
+    def _initial_speed_problems(self, n_wheels: int) -> list[tuple[tuple[str | int, ...], str]]:
+        """Initial wheel speeds: one per wheel, each within its wheel's limit."""
+        speeds = self.initial_state.wheel_speeds_rad_s
+        if speeds is None:
+            return []
+        if len(speeds) != n_wheels:
+            return [(("initial_state", "wheel_speeds_rad_s"), f"{len(speeds)} speeds given for {n_wheels} wheels")]
+        return [(("initial_state", "wheel_speeds_rad_s", i), f"{s} rad/s exceeds wheel {i}'s limit {w.max_speed_rad_s} rad/s")
+                for i, (s, w) in enumerate(zip(speeds, self.spacecraft.wheels)) if abs(s) > w.max_speed_rad_s]
+
+    def _timeline_entry_problems(self, i: int, entry) -> list[tuple[tuple[str | int, ...], str]]:
+        """Timeline entry ``i``: within the run; a SET_TARGET with one target; a SET_GAINS that sets something."""
+        out: list[tuple[tuple[str | int, ...], str]] = []
+        if entry.t_s > self.duration_s:
+            out.append((("timeline", i, "t_s"), f"t_s = {entry.t_s} s is after the end of the run "
+                        f"(duration_s = {self.duration_s} s)"))
+        if isinstance(entry, SetTargetCommand):
+            given = [k for k in ("target_N", "ra_dec_deg", "q_target_NB") if getattr(entry, k) is not None]
+            if len(given) != 1:
+                out.append((("timeline", i), "SET_TARGET needs exactly one of target_N, ra_dec_deg, "
+                            f"q_target_NB (got {', '.join(given) or 'none'})"))
+        if isinstance(entry, SetGainsCommand) and all(
+                getattr(entry, k) is None for k in ("k1", "kappa", "eps", "rate_limit_deg_s")):
+            out.append((("timeline", i), "SET_GAINS sets nothing: give at least one of k1, kappa, eps, "
+                        "rate_limit_deg_s"))
+        return out
+
+    def _fault_problems(self, i: int, fault, n_wheels: int) -> list[tuple[tuple[str | int, ...], str]]:
+        """Fault ``i``: its window, the parameter its kind needs, then its door and its wheel."""
+        out: list[tuple[tuple[str | int, ...], str]] = []
+        if fault.end_s <= fault.start_s:
+            out.append((("faults", i, "end_s"), f"end_s ({fault.end_s}) must be after start_s ({fault.start_s})"))
+        if fault.kind == "delay" and fault.delay_s is None:
+            out.append((("faults", i), "kind 'delay' needs delay_s"))
+        if fault.kind == "corrupt" and fault.bit is None:
+            out.append((("faults", i), "kind 'corrupt' needs bit"))
+        return out + self._door_fault_problems(i, fault) + self._wheel_fault_problems(i, fault, n_wheels)
+
+    def _door_fault_problems(self, i: int, fault) -> list[tuple[tuple[str | int, ...], str]]:
+        """A door failure (door_*) needs a door and names a door frame; a door frame needs a door."""
+        out: list[tuple[tuple[str | int, ...], str]] = []
+        if fault.kind.startswith("door_"):
+            if self.spacecraft.door is None:
+                out.append((("faults", i, "kind"), f"{fault.kind}: the spacecraft has no door (spacecraft.door)"))
+            if fault.message not in DOOR_MESSAGES:
+                out.append((("faults", i, "message"), f"{fault.message}: a door failure names a door frame, "
+                            "DOOR_STATUS or DOOR_CMD"))
+            if fault.kind == "door_slow" and fault.delay_s is None:
+                out.append((("faults", i), "kind 'door_slow' needs delay_s (the extra stroke time)"))
+        elif fault.message in DOOR_MESSAGES and self.spacecraft.door is None:
+            out.append((("faults", i, "message"), f"{fault.message}: the spacecraft has no door (spacecraft.door)"))
+        return out
+
+    def _wheel_fault_problems(self, i: int, fault, n_wheels: int) -> list[tuple[tuple[str | int, ...], str]]:
+        """A wheel's frame (RWn_CMD, RWn_STATUS) names a wheel the spacecraft has; a wheel failure names one."""
+        wheel_message = WHEEL_MESSAGE.fullmatch(fault.message)
+        if wheel_message:
+            if int(wheel_message.group(1)) > n_wheels:
+                return [(("faults", i, "message"), f"{fault.message}: the spacecraft has only {n_wheels} wheels")]
+        elif fault.kind.startswith("wheel_"):
+            return [(("faults", i, "message"), f"kind {fault.kind!r} fails a wheel: name it by its RWn_CMD or "
+                     "RWn_STATUS message")]
+        return []
 
 
 # ---------------------------------------------------------------------------------------------
