@@ -181,14 +181,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
     icd = _icd()
     channel = f"virtual:campaign{os.getpid()}x{next(_channel_ids)}"
     sim_bus, fsw_bus = open_bus(channel, light=True), open_bus(channel, light=True)
-    cfg = mission.flight_software
-    if cfg.law.assumption_check != "off":
-        # The full assumption check (gnc.checks) only feeds events and telemetry, never the control (the
-        # per-cycle eps bound does not depend on it). In 'process' mode it answers after a wall-clock
-        # delay, so its events would land on different ticks from run to run (no exact rerun), and it
-        # starts a process per run; 'inline' is deterministic but costs ~1.5 s of CPU per check. The
-        # campaign judges keep-out on truth instead, so fast mode switches it off: the GNC is unchanged.
-        cfg = cfg.model_copy(update={"law": cfg.law.model_copy(update={"assumption_check": "off"})})
+    cfg = _without_assumption_check(mission.flight_software)
     fsw = None
     try:
         sim = Simulator(world, sim_bus, icd, gnc_period_s=cfg.gnc_period_s, faults=mission.faults,
@@ -198,56 +191,15 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
         # The flight software's clock is the simulation clock: a cycle's execution time on this (shared)
         # host must not change its behaviour (a slip feeds FDIR), or runs would not reproduce exactly.
         # Execution-time overruns are a real-time property, measured by `keepout sil run --realtime`.
-        # It reads sim.t_s as set below at each tick's start and at the stop: the simulator advances
+        # It reads sim.t_s as set by _run_ticks at each tick's start and at the stop: the simulator advances
         # its tick only in end_tick, so between those points sim.t_s is that value (read ~5 times a cycle).
         now_s = [sim.t_s]
         fsw = build_flight_software(cfg, fsw_bus, icd, telemetry=telemetry, dispatcher=dispatcher,
                                     clock=lambda: now_s[0])
-        driver = fsw.driver
-        sender = _InProcessSender(dispatcher)
-        timeline = Timeline(mission, sender)
+        timeline = Timeline(mission, _InProcessSender(dispatcher))
         n_ticks = int(round(mission.duration_s / cfg.gnc_period_s))
-        truth = _TruthRows(n_ticks, world)
-        truth.record()
-        door = sim.devices.door  # the aperture door's truth (its position) beside the world's, when there is one
-        door_position = np.zeros(n_ticks + 1) if door is not None else None
-        if door is not None:
-            door_position[0] = door.position
-        estimates = _EstimateRows(n_ticks + 1)
-        torques = np.zeros((n_ticks + 1, world.n_wheels))
-        next_command_s = _next_command_s(timeline)
-        for row in range(n_ticks):  # row: the truth row of this tick (recorded before it)
-            t_s = sim.t_s
-            now_s[0] = t_s
-            telemetry.now = t_s
-            if next_command_s <= t_s + 1e-9:  # Timeline.release's own test, asked only when it can pass
-                timeline.release(t_s)
-                next_command_s = _next_command_s(timeline)
-            sim.begin_tick()
-            inputs = driver.collect_tick(0.0)
-            if inputs is not None:
-                fsw.run_cycle(inputs)
-                estimates.record(row, fsw.estimator)  # the estimate of the truth row at this tick
-                torques[row] = fsw.last.wheel_torque_cmd_Nm  # held over the tick that follows
-            sim.end_tick(wait_s=0.0)
-            truth.record()
-            if door is not None:
-                door_position[row + 1] = door.position
-        record = truth.arrays()
-        record["wheel_torque_Nm"] = torques[:len(record["t_s"])]
-        if door is not None:
-            record["door_position"] = door_position[:len(record["t_s"])]
-        trips = [str(a.get("monitor", "?")) for _, name, a in telemetry.events if name == "FDIR_TRIPPED"]
-        rejected = sum(1 for _, name, _ in telemetry.events if name in ("CMD_REJECTED", "TARGET_REJECTED"))
-        from hil_sim.summary import acknowledged_rate_limits
-        acked = acknowledged_rate_limits(telemetry.events)
-        metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected, acked)
-        metrics.update(estimates.metrics(record))
-        if fsw.plugins:
-            from fsw.assembly import plugin_metrics
-            metrics.update(plugin_metrics(fsw))
-        if door is not None:  # how often the flight software shut the aperture door (DOOR_CLOSING events)
-            metrics["door_closes"] = float(sum(1 for _, name, _ in telemetry.events if name == "DOOR_CLOSING"))
+        record, estimates = _run_ticks(n_ticks, world, sim, fsw, timeline, telemetry, now_s)
+        metrics, trajectory = _judge_run(mission, record, estimates, telemetry, sim, fsw)
         used = _read_back(paths, mission, world, initial, fsw, timeline.sent, sim)
         return RunResult(metrics=metrics, used=used, trajectory=trajectory, sim_time_s=float(record["t_s"][-1]),
                          events=[f"{t:.1f} {n} {a}" for t, n, a in telemetry.events if n in _RESULT_EVENTS][:200])
@@ -257,6 +209,77 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
             fsw.shutdown()
         sim_bus.shutdown()
         fsw_bus.shutdown()
+
+
+def _without_assumption_check(cfg: Any) -> Any:
+    """The flight software's configuration with the full assumption check off.
+
+    The full assumption check (gnc.checks) only feeds events and telemetry, never the control (the per-cycle
+    eps bound does not depend on it). In 'process' mode it answers after a wall-clock delay, so its events
+    would land on different ticks from run to run (no exact rerun), and it starts a process per run;
+    'inline' is deterministic but costs ~1.5 s of CPU per check. The campaign judges keep-out on truth
+    instead, so fast mode switches it off: the GNC is unchanged."""
+    if cfg.law.assumption_check == "off":
+        return cfg
+    return cfg.model_copy(update={"law": cfg.law.model_copy(update={"assumption_check": "off"})})
+
+
+def _run_ticks(n_ticks: int, world: Any, sim: Any, fsw: Any, timeline: Any, telemetry: _EventRecorder,
+               now_s: list[float]) -> tuple[dict[str, np.ndarray], _EstimateRows]:
+    """The run's ``n_ticks`` lockstep ticks: the timeline's telecommands as they fall due, the simulator's
+    frames, the flight software's cycle, the world's step. Returns the truth record (with the wheel torque
+    commands and, with a door, its position) and the estimates at each tick."""
+    driver = fsw.driver
+    truth = _TruthRows(n_ticks, world)
+    truth.record()
+    door = sim.devices.door  # the aperture door's truth (its position) beside the world's, when there is one
+    door_position = np.zeros(n_ticks + 1) if door is not None else None
+    if door is not None:
+        door_position[0] = door.position
+    estimates = _EstimateRows(n_ticks + 1)
+    torques = np.zeros((n_ticks + 1, world.n_wheels))
+    next_command_s = _next_command_s(timeline)
+    for row in range(n_ticks):  # row: the truth row of this tick (recorded before it)
+        t_s = sim.t_s
+        now_s[0] = t_s
+        telemetry.now = t_s
+        if next_command_s <= t_s + 1e-9:  # Timeline.release's own test, asked only when it can pass
+            timeline.release(t_s)
+            next_command_s = _next_command_s(timeline)
+        sim.begin_tick()
+        inputs = driver.collect_tick(0.0)
+        if inputs is not None:
+            fsw.run_cycle(inputs)
+            estimates.record(row, fsw.estimator)  # the estimate of the truth row at this tick
+            torques[row] = fsw.last.wheel_torque_cmd_Nm  # held over the tick that follows
+        sim.end_tick(wait_s=0.0)
+        truth.record()
+        if door is not None:
+            door_position[row + 1] = door.position
+    record = truth.arrays()
+    record["wheel_torque_Nm"] = torques[:len(record["t_s"])]
+    if door is not None:
+        record["door_position"] = door_position[:len(record["t_s"])]
+    return record, estimates
+
+
+def _judge_run(mission: Any, record: dict[str, np.ndarray], estimates: _EstimateRows, telemetry: _EventRecorder,
+               sim: Any, fsw: Any) -> tuple[dict[str, float], dict[str, np.ndarray]]:
+    """(metrics, trajectory) of the run: `judge` on truth and the events, the estimation's metrics, the
+    plug-ins' and the door's."""
+    from hil_sim.summary import acknowledged_rate_limits
+
+    trips = [str(a.get("monitor", "?")) for _, name, a in telemetry.events if name == "FDIR_TRIPPED"]
+    rejected = sum(1 for _, name, _ in telemetry.events if name in ("CMD_REJECTED", "TARGET_REJECTED"))
+    acked = acknowledged_rate_limits(telemetry.events)
+    metrics, trajectory = judge(mission, record, trips, float(sim.stats.cycle_done_timeouts), rejected, acked)
+    metrics.update(estimates.metrics(record))
+    if fsw.plugins:
+        from fsw.assembly import plugin_metrics
+        metrics.update(plugin_metrics(fsw))
+    if "door_position" in record:  # how often the flight software shut the aperture door (DOOR_CLOSING events)
+        metrics["door_closes"] = float(sum(1 for _, name, _ in telemetry.events if name == "DOOR_CLOSING"))
+    return metrics, trajectory
 
 
 def _next_command_s(timeline: Any) -> float:
