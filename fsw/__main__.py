@@ -18,6 +18,7 @@ import argparse
 import signal
 import sys
 from pathlib import Path
+from typing import Any
 
 
 BENCH_FIRST_SYNC_TIMEOUT_S = 600.0  # `keepout fsw`: the simulator is started by hand, maybe on another computer
@@ -87,6 +88,14 @@ def main(argv: list[str] | None = None) -> int:
     return run(build_parser().parse_args(argv))
 
 
+class _StartFailed(Exception):
+    """The flight software cannot start: ``fsw: MESSAGE`` on stderr and exit code ``code``."""
+
+    def __init__(self, message: str, code: int = 2) -> None:
+        super().__init__(message)
+        self.code = code
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the flight software with parsed arguments (``python -m fsw`` and ``keepout fsw``)."""
     import os
@@ -98,16 +107,39 @@ def run(args: argparse.Namespace) -> int:
     from fsw.config import ConfigError, load_fsw_run_config
 
     try:
-        cfg, (mission_bus, mission_bitrate, bus_authentication) = load_fsw_run_config(args.config)
-    except ConfigError as exc:
+        try:
+            cfg, (mission_bus, mission_bitrate, bus_authentication) = load_fsw_run_config(args.config)
+        except ConfigError as exc:
+            raise _StartFailed(str(exc)) from None
+        from comms.bus import Icd
+        from fsw import assembly  # noqa: F401 - the flight software's modules (~0.3 s) load before the bus opens
+
+        bus, bus_spec = _open_bus(args, mission_bus, mission_bitrate)
+        icd = Icd(args.dbc) if args.dbc else Icd()
+        bus, uplink, downlink = _secure_link(args, cfg, bus, icd, bus_authentication)
+        telemetry, dispatcher, tm_port = _open_tmtc(args, cfg, uplink, downlink)
+        fsw = _build(args, cfg, bus, icd, telemetry, dispatcher)
+    except _StartFailed as exc:
         print(f"fsw: {exc}", file=sys.stderr)
-        return 2
-    from fsw.assembly import build_flight_software
-    from comms.bus import BusSpecError, BusUnavailableError, Icd, open_bus
-    from comms.dictionary import DICTIONARY
-    from comms.link_security import KeyFileError
-    from fsw.telecommand import CommandDispatcher
-    from fsw.telemetry import TelemetrySender
+        return exc.code
+
+    def _stop(signum, frame):  # noqa: ARG001
+        fsw.stop()
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+    realtime = args.realtime or (not args.lockstep and cfg.rates.tick_source == "clock")
+    tm_cfg = cfg.tmtc
+    print(f"fsw: ready: bus {bus_spec}{' (SecOC)' if bus_authentication else ''}, {'real time' if realtime else 'lockstep'}, telemetry to "
+          f"{tm_cfg.telemetry_host}:{tm_port}, telecommands on {dispatcher.address[0]}:{dispatcher.address[1]}",
+          flush=True)
+    return _fly(fsw, args, realtime, telemetry, dispatcher, bus)
+
+
+def _open_bus(args: argparse.Namespace, mission_bus: str, mission_bitrate: int | None) -> tuple[Any, str]:
+    """(the bus of --bus or the mission's, opened; its concrete spec), the spec written to --bus-file if asked.
+    Exit code 2 for a bad spec or an unwritable file, 3 for a bus that is not there."""
+    from comms.bus import BusSpecError, BusUnavailableError, open_bus
 
     bus_spec = args.bus if args.bus is not None else mission_bus
     opened: list = []
@@ -115,20 +147,24 @@ def run(args: argparse.Namespace) -> int:
         bus = open_bus(bus_spec, args.run_id, info_out=opened,
                        bitrate=args.bitrate if args.bitrate is not None else mission_bitrate)
     except BusSpecError as exc:
-        print(f"fsw: --bus {bus_spec!r}: {exc}", file=sys.stderr)
-        return 2
+        raise _StartFailed(f"--bus {bus_spec!r}: {exc}") from None
     except BusUnavailableError as exc:
-        print(f"fsw: bus unavailable: {exc}", file=sys.stderr)
-        return 3
+        raise _StartFailed(f"bus unavailable: {exc}", 3) from None
     bus_spec = opened[0].spec  # the concrete spec: the group and port a random udp_multicast picked
     if args.bus_file:
         try:
             Path(args.bus_file).write_text(bus_spec + "\n")
         except OSError as exc:
             bus.shutdown()
-            print(f"fsw: --bus-file {args.bus_file}: {exc.strerror or exc}", file=sys.stderr)
-            return 2
-    icd = Icd(args.dbc) if args.dbc else Icd()
+            raise _StartFailed(f"--bus-file {args.bus_file}: {exc.strerror or exc}") from None
+    return bus, bus_spec
+
+
+def _secure_link(args: argparse.Namespace, cfg, bus, icd, bus_authentication: bool) -> tuple[Any, Any, Any]:
+    """(the bus, under SecOC when the mission authenticates it; uplink receiver; downlink sender) of the
+    run's link key. No usable key (or an ICD without authenticator frames) shuts the bus: exit code 2."""
+    from comms.link_security import KeyFileError
+
     try:
         key = link_key(cfg, args.config, args.key_file)
         uplink, downlink = link_associations(cfg, key)
@@ -138,8 +174,17 @@ def run(args: argparse.Namespace) -> int:
             bus = secure(bus, icd, key, "FSW")
     except (KeyFileError, ValueError) as exc:  # (SecOCError: an ICD without authenticator frames)
         bus.shutdown()
-        print(f"fsw: {exc}", file=sys.stderr)
-        return 2
+        raise _StartFailed(str(exc)) from None
+    return bus, uplink, downlink
+
+
+def _open_tmtc(args: argparse.Namespace, cfg, uplink, downlink) -> tuple[Any, Any, int]:
+    """(telemetry sender, telecommand dispatcher, telemetry port) on the configured ports or the overrides,
+    after the TM/TC configuration's warnings. A telecommand socket that cannot be bound: exit code 2."""
+    from comms.dictionary import DICTIONARY
+    from fsw.telecommand import CommandDispatcher
+    from fsw.telemetry import TelemetrySender
+
     for warning in cfg.tmtc.warnings():
         print(f"fsw: warning: {warning}", file=sys.stderr)
     tm_cfg = cfg.tmtc
@@ -152,28 +197,26 @@ def run(args: argparse.Namespace) -> int:
         dispatcher = CommandDispatcher(DICTIONARY, telemetry, host=tm_cfg.telecommand_bind_host, port=tc_port,
                                        security=uplink, budget_s=tm_cfg.uplink_budget_ms / 1000.0)
     except OSError as exc:
-        print(f"fsw: cannot bind the telecommand socket {tm_cfg.telecommand_bind_host}:{tc_port}: {exc}", file=sys.stderr)
-        return 2
+        raise _StartFailed(f"cannot bind the telecommand socket {tm_cfg.telecommand_bind_host}:{tc_port}: {exc}") from None
+    return telemetry, dispatcher, tm_port
+
+
+def _build(args: argparse.Namespace, cfg, bus, icd, telemetry, dispatcher):
+    """The flight software on this bus and TM/TC; a plug-in that cannot be loaded closes them: exit code 2."""
+    from fsw.assembly import build_flight_software
     from fsw.plugins import PluginError
 
     try:
-        fsw = build_flight_software(cfg, bus, icd, telemetry=telemetry, dispatcher=dispatcher)
+        return build_flight_software(cfg, bus, icd, telemetry=telemetry, dispatcher=dispatcher)
     except PluginError as exc:
         dispatcher.close()
         telemetry.close()
         bus.shutdown()
-        print(f"fsw: {args.config}: flight_software.plugins: {exc}", file=sys.stderr)
-        return 2
+        raise _StartFailed(f"{args.config}: flight_software.plugins: {exc}") from None
 
-    def _stop(signum, frame):  # noqa: ARG001
-        fsw.stop()
 
-    signal.signal(signal.SIGTERM, _stop)
-    signal.signal(signal.SIGINT, _stop)
-    realtime = args.realtime or (not args.lockstep and cfg.rates.tick_source == "clock")
-    print(f"fsw: ready: bus {bus_spec}{' (SecOC)' if bus_authentication else ''}, {'real time' if realtime else 'lockstep'}, telemetry to "
-          f"{tm_cfg.telemetry_host}:{tm_port}, telecommands on {dispatcher.address[0]}:{dispatcher.address[1]}",
-          flush=True)
+def _fly(fsw, args: argparse.Namespace, realtime: bool, telemetry, dispatcher, bus) -> int:
+    """The executive's loop until its end (0) or a failure (FATAL_ERROR, 1); then everything closed."""
     code = 0
     try:
         if realtime:
