@@ -5,6 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from hil_sim.sil import DEFAULT_RT_PRIORITY
+
 
 def add_cli(subparsers: argparse._SubParsersAction) -> None:
     sil = subparsers.add_parser("sil", help="software-in-the-loop runs", description="Software-in-the-loop runs.")
@@ -31,6 +33,11 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
                      help="override the simulated duration [s]")
     run.add_argument("--out", type=Path, default=Path("runs"), help="parent folder of run folders (default: runs)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar (CI logs)")
+    run.add_argument("--rt-priority", type=int, default=None, metavar="N",
+                     help="real time: SCHED_FIFO priority of the simulator's tick loop, the flight software one "
+                          f"below unless its mission sets rates.realtime_priority (default {DEFAULT_RT_PRIORITY}; 0: "
+                          "the host's normal scheduler; needs root or CAP_SYS_NICE, else the run says so and "
+                          "goes on best effort)")
     run.add_argument("--max-missed-ticks", type=_positive_int, default=3, metavar="N",
                      help="ticks in a row the flight software may leave unanswered before the run is ended as "
                           "hung (default 3; in real time a late answer is a cycle slip, not silence)")
@@ -51,7 +58,8 @@ def _run(args: argparse.Namespace) -> int:
     options = RunOptions(mission=args.mission or DEFAULT_MISSION, bus=args.bus, duration_s=args.duration,
                          realtime=args.realtime, out_root=args.out,
                          progress=not args.no_progress and sys.stdout.isatty(), announce=True,
-                         max_consecutive_missed=args.max_missed_ticks)
+                         max_consecutive_missed=args.max_missed_ticks,
+                         rt_priority=DEFAULT_RT_PRIORITY if args.rt_priority is None else max(0, min(99, args.rt_priority)))
     try:
         result = run_sil(options)
     except MissionRejected as exc:
@@ -64,7 +72,31 @@ def _run(args: argparse.Namespace) -> int:
         print(f"{result.summary['status']} -> {result.run_dir}", file=sys.stderr)
         return result.exit_code
     print(format_summary(result.summary, total_wall_s=_since_process_start()))
+    hint = slip_hint(result.summary, args.realtime, _rt_scheduling(result.run_dir))
+    if hint:
+        print(hint)
     return result.exit_code
+
+
+def _rt_scheduling(run_dir: Path) -> str:
+    """What the run's tick loop got from the scheduler (simulator.json), or '' when it was not recorded."""
+    import json
+
+    from hil_sim.sil import SIM_STATS_FILE
+    try:
+        return str(json.loads((run_dir / SIM_STATS_FILE).read_text()).get("rt_scheduling", ""))
+    except (OSError, ValueError, AttributeError):
+        return ""
+
+
+def slip_hint(summary: dict, realtime: bool, got: str) -> str:
+    """What to do when a real-time run failed on cycle slips (docs/operations.md, real time)."""
+    slips = next((r for r in summary.get("requirements", []) if r.get("name") == "cycle slips"), None)
+    if not realtime or slips is None or slips.get("pass", True):
+        return ""
+    return (f"cycle slips: the host delayed the paced loop ({got or 'scheduling unknown'}). Give the run "
+            f"SCHED_FIFO (root or CAP_SYS_NICE; --rt-priority), an idle core (taskset), or fly it lockstep, "
+            f"where host time cannot hurt the loop; see docs/operations.md (real time)")
 
 
 def _since_process_start() -> float | None:

@@ -209,6 +209,9 @@ class Simulator:
         self._done_ticks: set[int] = set()
         self._tick_open = False
         self._awaiting: int | None = None
+        self._rt_anchor: float | None = None  # real time: clock() at tick 0's start (ticks at anchor + k T)
+        self._answer_offsets: list[float] = []  # real time: CYCLE_DONE(k) arrival - tick k's start [s]
+        self.rt_phase_shift_s: float | None = None  # real time: the delay _lock_phase applied, once
         self.devices.sample_sensors(world, self.t0_s)
 
     def _init_door(self) -> None:
@@ -579,8 +582,24 @@ class Simulator:
         self.stats.cycle_done += 1
         if tick == self._awaiting:
             self._done_ticks.add(tick)
+            if self._rt_anchor is not None and len(self._answer_offsets) < PHASE_LOCK_ANSWERS:
+                self._answer_offsets.append(self.clock() - (self._rt_anchor + tick * self.period_s))
         else:
             self.stats.stale_cycle_done += 1
+
+    def _lock_phase(self) -> None:
+        """Real time, once: delay the tick schedule so the flight software's cycle, which runs on its own
+        clock, falls ``PHASE_LOCK_TARGET`` of a period after each tick's start.
+
+        Two free-running periodic schedules keep whatever phase they started with. The flight software starts
+        first, so its cycles would sit just before the simulator's ticks, and CYCLE_DONE(k) would reach the
+        simulator a few milliseconds before tick k+1: any delay on the host then makes it late. A bench's
+        simulator aligns its frame to the flight computer's cycle the same way (a sync pulse)."""
+        offsets = sorted(self._answer_offsets)
+        median = offsets[len(offsets) // 2]
+        shift = (median - PHASE_LOCK_TARGET * self.period_s) % self.period_s
+        self._rt_anchor += shift
+        self.rt_phase_shift_s = shift
 
     def _publish_due(self, t_s: float) -> None:
         """Real time: sensor frames go out when due (between SYNCs), as on the hardware bus."""
@@ -650,7 +669,12 @@ class Simulator:
                      sleep: Callable[[float], None] = time.sleep) -> SimStats:
         """Real time: tick k starts at wall time start + k T; the world advances one dynamics step per
         dt of wall time; frames are handled when they arrive. Never waits for the flight software."""
-        start = self.clock() - self.tick * self.period_s  # resume-safe
+        if self._rt_anchor is None or self.clock() - (self._rt_anchor + self.tick * self.period_s) > self.period_s:
+            # the first tick, or a pause of more than a period (a resumed run): the schedule starts again now
+            self._rt_anchor = self.clock() - self.tick * self.period_s
+        elif len(self._answer_offsets) == PHASE_LOCK_ANSWERS and self.rt_phase_shift_s is None:
+            self._lock_phase()
+        start = self._rt_anchor
 
         def pace(j: int) -> None:
             target = start + (self.tick * self.period_s) + j * self.dt_s
@@ -685,6 +709,10 @@ class Simulator:
             if on_tick is not None:
                 on_tick(self)
         return self.stats
+
+
+PHASE_LOCK_ANSWERS = 3  # real time: answers measured before the tick schedule is aligned (once)
+PHASE_LOCK_TARGET = 0.2  # real time: where in the tick the flight software's cycle is put [fraction of T]
 
 
 # ------------------------------------------------------------------------------------------------------

@@ -59,6 +59,7 @@ DEFAULT_MISSION = config_path("missions", "demo-pointing.yaml")
 # the run folder may be anywhere: its config names the installed schema by URI
 MODELINE = f"# yaml-language-server: $schema={config_path('schema', 'mission.schema.json').as_uri()}"
 
+DEFAULT_RT_PRIORITY = 20  # real time: SCHED_FIFO priority of the simulator's tick loop (the flight software's is one below)
 LOCKSTEP_TIMEOUT_S = 60.0  # flight software: end of run when no SYNC for this long
 FSW_POLL_TICKS = 20  # the simulator checks that the flight software is alive every this many ticks
 GROUND_BATCH_S = 0.02  # the ground sleeps this long after a read, so a wake-up takes ~10 packets, not 1
@@ -108,6 +109,9 @@ class RunOptions:
     fsw_start_timeout_s: float = 600.0  # the first start on a fresh machine compiles (and caches) numba kernels
     cycle_done_timeout_s: float = 30.0  # lockstep: a tick unanswered this long counts as missed
     max_consecutive_missed: int = 3  # then the flight software is taken as hung and the run ends
+    # real time: SCHED_FIFO priority asked for the simulator's tick loop and, where the mission leaves its
+    # own at 0, the flight software's cycle thread (0: the host's normal scheduler)
+    rt_priority: int = DEFAULT_RT_PRIORITY
 
 
 @dataclass
@@ -160,11 +164,15 @@ def _free_udp_port() -> int:
 
 
 def _config_used(mission, *, bus_spec: str, tm_host: str, tm_port: int | None, tc_port: int | None,
-                 realtime: bool) -> dict:
+                 realtime: bool, rt_priority: int = 0) -> dict:
     data = mission.model_dump(mode="json")
     data["bus"] = bus_spec
     fsw = data["flight_software"]
     fsw["rates"]["tick_source"] = "clock" if realtime else "sync"
+    if realtime and fsw["rates"]["realtime_priority"] == 0:
+        # a host's other work must not stretch a paced cycle: the flight software asks for SCHED_FIFO, one
+        # below the simulator's tick loop, and reports RT_SCHEDULING_UNAVAILABLE when refused
+        fsw["rates"]["realtime_priority"] = max(0, rt_priority - 1)
     # a loaded host can stall the simulator for seconds (other runs, plotting): the flight software
     # should not take that for the end of the run
     fsw["rates"]["lockstep_timeout_s"] = max(fsw["rates"]["lockstep_timeout_s"], LOCKSTEP_TIMEOUT_S)
@@ -608,6 +616,7 @@ class _RunParts:
     timeline: Timeline | None = None
     n_ticks: int = 0
     abort_reason: str = ""
+    rt_scheduling: str = ""  # real time: what the tick loop got (SCHED_FIFO, or why not)
     started_wall: float = field(default_factory=time.monotonic)
     cpu_at_start: dict | None = None
     progress: _Progress = field(default_factory=lambda: _Progress(False, 0.0, ""))
@@ -679,7 +688,7 @@ def _start_ground(run: _RunParts) -> None:
     tmtc = mission.flight_software.tmtc
     run.tc_port = tmtc.telecommand_port if mission.tmtc_ports == "fixed" else _free_udp_port()
     data = _config_used(mission, bus_spec=run.bus_info.spec, tm_host=run.endpoints.tm_host, tm_port=tm_port,
-                        tc_port=run.tc_port, realtime=options.realtime)
+                        tc_port=run.tc_port, realtime=options.realtime, rt_priority=options.rt_priority)
     data["flight_software"]["tmtc"]["security"]["key_file"] = LINK_KEY_FILE  # beside the config used
     write_config(run_dir, data, Path(options.mission))
     run.endpoints = dataclasses.replace(run.endpoints, tm_port=tm_port, tc_port=run.tc_port,
@@ -754,6 +763,12 @@ def _simulate(run: _RunParts) -> None:
     error_of = _truth_error_function(run.mission, np.asarray(run.mission.spacecraft.instrument_boresight_B))
     run.started_wall = time.monotonic()
     run.cpu_at_start = _loop_cpu_s(run.fsw_proc, run.ground)
+    if options.realtime:
+        run.rt_scheduling = _pace_this_thread(options.rt_priority)
+        if options.announce and not run.rt_scheduling.startswith("SCHED_FIFO"):
+            print(f"real time on the host's normal scheduler ({run.rt_scheduling}): on a busy host cycles can "
+                  f"start late and count as slips; give the run SCHED_FIFO (root or CAP_SYS_NICE, "
+                  f"--rt-priority) or an idle core", file=sys.stderr, flush=True)
     silence = SilenceWatch(options.realtime)
     for _ in range(run.n_ticks):
         run.timeline.release(sim.t_s)
@@ -783,6 +798,7 @@ def _shut_down(run: _RunParts) -> None:
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     previous_term = (signal.signal(signal.SIGTERM, signal.SIG_IGN)
                      if threading.current_thread() is threading.main_thread() else None)
+    _unpace_this_thread()
     wall_s = time.monotonic() - run.started_wall
     loop_cpu_s = _loop_cpu_s(run.fsw_proc, run.ground, since=run.cpu_at_start) if run.cpu_at_start else {}
     run.progress.stop()
@@ -806,6 +822,8 @@ def _simulator_stats(run: _RunParts, wall_s: float, loop_cpu_s: dict) -> dict[st
     """simulator.json: the simulator's counters, how the run ended and what it injected and sent."""
     sim, bus, candump, timeline = run.sim, run.bus, run.candump, run.timeline
     return {**sim.stats.__dict__, "aborted": run.abort_reason, "clock": "realtime" if run.options.realtime else "lockstep",
+            **({"rt_scheduling": run.rt_scheduling, "rt_phase_shift_ms": None if sim.rt_phase_shift_s is None
+                else round(1e3 * sim.rt_phase_shift_s, 3)} if run.options.realtime else {}),
             "bus": run.bus_info.spec, "bus_note": run.bus_info.note, "wall_s": wall_s,
             "loop_cpu_s": loop_cpu_s, "sim_s": sim.t_s - sim.t0_s, "candump_frames": candump.frames if candump else 0,
             "receiver_counters": _plain(getattr(sim.receiver, "counters", {})),
@@ -996,6 +1014,26 @@ def _truth_error_function(mission, boresight_B: np.ndarray):
         return float("nan")
 
     return error
+
+
+def _pace_this_thread(priority: int) -> str:
+    """Real time: ask SCHED_FIFO ``priority`` for the calling (tick loop) thread, so the host's other work
+    cannot delay a tick; says what it got. The judge and the plots run after the loop, back on the normal
+    scheduler (``_unpace_this_thread``)."""
+    if priority <= 0:
+        return "normal scheduler (--rt-priority 0)"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as exc:
+        return f"SCHED_FIFO {priority} refused: {exc}"
+    return f"SCHED_FIFO priority {priority}"
+
+
+def _unpace_this_thread() -> None:
+    try:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except (OSError, AttributeError):
+        pass
 
 
 def _no_wakeup_preemption(pid: int) -> bool:

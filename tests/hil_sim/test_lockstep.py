@@ -161,6 +161,60 @@ def test_realtime_applies_late_commands_when_they_arrive(icd: Icd) -> None:
         _close((sim_bus, fsw_bus))
 
 
+def _free_running_flight_software(driver: FswBusDriver, now: list, first_cycle_s: float, late: set[int]):
+    """A fake sleep for the simulator that also runs a flight software on its own clock: cycle j at
+    first_cycle_s + j T, each answering the newest SYNC it has seen; cycles in ``late`` start 8 ms late (a
+    busy host)."""
+    cycle = [0]
+
+    def sleep(dt: float) -> None:
+        end = now[0] + dt
+        while True:
+            start = first_cycle_s + cycle[0] * 0.1 + (0.008 if cycle[0] in late else 0.0)
+            if start > end:
+                break
+            now[0] = max(now[0], start)
+            driver.collect_latest()
+            driver.send_wheel_torques(cycle[0], [0.0] * driver.n_wheels)
+            driver.send_cycle_done(cycle[0])  # in real time: answers the newest SYNC seen
+            cycle[0] += 1
+        now[0] = end
+
+    return sleep
+
+
+@pytest.mark.parametrize("lock", [False, True])
+def test_realtime_puts_the_flight_softwares_cycle_early_in_the_tick(icd: Icd, monkeypatch, lock: bool) -> None:
+    """Two free-running schedules keep their start phase. A flight software started just before the
+    simulator answers each tick a few ms before the next one begins, so any delay on the host makes the
+    answer late. The simulator measures where the answers fall and delays its schedule once so the flight
+    software's cycle sits PHASE_LOCK_TARGET into each tick: then the same delays cost nothing."""
+    import hil_sim.lockstep as lockstep
+
+    if not lock:
+        monkeypatch.setattr(lockstep.Simulator, "_lock_phase", lambda self: setattr(self, "rt_phase_shift_s", 0.0))
+    channel = f"virtual:rtphase{next(_channels)}"
+    sim_bus, fsw_bus = open_bus(channel), open_bus(channel)
+    try:
+        world = World(_params(), seed=1)
+        now = [0.0]
+        sim = Simulator(world, sim_bus, icd, gnc_period_s=0.1, dynamics_dt_s=0.01, clock=lambda: now[0])
+        driver = FswBusDriver(fsw_bus, icd, world.n_wheels, clock=lambda: now[0])
+        late = set(range(8, 40, 4))  # every fourth cycle after the lock, 8 ms late
+        sleep = _free_running_flight_software(driver, now, first_cycle_s=0.097, late=late)
+        for _ in range(40):
+            sim.run_realtime(1, sleep=sleep)
+        if lock:
+            # the answers came 97 ms into each tick (seen at the next dynamics step, 10 ms apart): the schedule
+            # moved once by 97 - 20 ms, to within a step
+            assert sim.rt_phase_shift_s == pytest.approx(0.077, abs=0.0101)
+            assert sim.stats.cycle_done_late == 0
+        else:
+            assert sim.stats.cycle_done_late >= len(late) - 1
+    finally:
+        _close((sim_bus, fsw_bus))
+
+
 # ------------------------------------------------------------------------------ multi-process lockstep
 def _start_responder(spec: str, n_wheels: int, ticks: int) -> subprocess.Popen:
     proc = subprocess.Popen([sys.executable, "-m", "hil_sim.lockstep", "--bus", spec, "--wheels", str(n_wheels),
