@@ -712,7 +712,8 @@ class Simulator:
 
 
 PHASE_LOCK_ANSWERS = 3  # real time: answers measured before the tick schedule is aligned (once)
-PHASE_LOCK_TARGET = 0.2  # real time: where in the tick the flight software's cycle is put [fraction of T]
+PHASE_LOCK_TARGET = 0.5  # real time: where in the tick the flight software's cycle is put [fraction of T]: as much room
+# for a late SYNC (the simulator delayed) as for a late answer (the flight software delayed)
 
 
 # ------------------------------------------------------------------------------------------------------
