@@ -249,6 +249,59 @@ def _with_gravity_gradient(tau, tau_gg, x, B, ORB, t_s, rpos, has_env):
 
 
 @njit(cache=True, error_model="numpy")
+def _hold_command(U_CMD, u_cmd):
+    """u_cmd (N, M) = U_CMD (M, N) transposed, once a step rather than every sub-step. False when a command is
+    NaN or infinite."""
+    nan_if_bad = 0.0  # x * 0 is 0 for finite x and NaN for NaN or inf: one branch-free pass checks them all
+    for i in range(u_cmd.shape[0]):
+        for m in range(u_cmd.shape[1]):
+            u_cmd[i, m] = U_CMD[m, i]
+            nan_if_bad += U_CMD[m, i] * 0.0
+    return not (nan_if_bad != 0.0 or not math.isfinite(nan_if_bad))
+
+
+@njit(cache=True, error_model="numpy")
+def _torque_kinds(GM, B):
+    """(any run with a random disturbance, any with a torque of its attitude and position: gravity gradient or
+    an environment effect, B has hil_sim.environment's rows): one choice a call, none a stage."""
+    any_random = False
+    any_gg = False
+    has_env = B.shape[0] > B_FIELDS  # only then does B have the environment's rows
+    for m in range(B.shape[1]):
+        if GM[1, m] > 0.0:
+            any_random = True
+        if B[B_GG, m] > 0.0 or (has_env and B[env.ENV_FLAGS, m] != 0.0):
+            any_gg = True
+    return any_random, any_gg, has_env
+
+
+@njit(cache=True, error_model="numpy")
+def _rk4_combine(X, k1, k2, k3, k4, c):
+    """X += c (k1 + 2 k2 + 2 k3 + k4), c = dt / 6; then each run's quaternion back to unit norm."""
+    K, M = X.shape
+    for j in range(K):
+        for m in range(M):
+            X[j, m] += c * (k1[j, m] + 2.0 * k2[j, m] + 2.0 * k3[j, m] + k4[j, m])
+    for m in range(M):
+        inv = 1.0 / math.sqrt(X[0, m] ** 2 + X[1, m] ** 2 + X[2, m] ** 2 + X[3, m] ** 2)
+        X[0, m] *= inv
+        X[1, m] *= inv
+        X[2, m] *= inv
+        X[3, m] *= inv
+
+
+@njit(cache=True, error_model="numpy")
+def _winding_temperature(TEMP, u_motor, W, DECAY):
+    """First-order winding temperature, copper loss i^2 R held over the step: T -> T_ss + (T - T_ss) e^-x,
+    x = dt / (R_th C_th) (decay = 0 when R_th = 0: T = T_ss at once)."""
+    for i in range(TEMP.shape[0]):
+        for m in range(TEMP.shape[1]):
+            cur = u_motor[i, m] / W[W_KT, i, m]
+            t_ss = W[W_TAMB, i, m] + cur * cur * W[W_RES, i, m] * W[W_RTH, i, m]
+            TEMP[i, m] = t_ss + (TEMP[i, m] - t_ss) * DECAY[i, m]
+
+
+@njit(cache=True, error_model="numpy")
 def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_APPLIED, FLAGS,
                         DECAY, GM, HAS_COULOMB, WORK, ORB, t0_s):
     """Advance every run by n_sub RK4 steps of dt_sub seconds, the torque command U_CMD[m] (M, N) held.
@@ -282,21 +335,9 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
     u_cmd = WORK[o + 2 * N:o + 3 * N]  # the command is held: transpose it once, not every sub-step
     tau_gg = WORK[o + 3 * N:o + 3 * N + 3]  # a stage's external torque with the gravity gradient
     rpos = WORK[o + 3 * N + 3:o + 3 * N + 6, 0]  # the orbit position of one run (scratch; no allocation per call)
-    nan_if_bad = 0.0  # x * 0 is 0 for finite x and NaN for NaN or inf: one branch-free pass checks them all
-    for i in range(N):
-        for m in range(M):
-            u_cmd[i, m] = U_CMD[m, i]
-            nan_if_bad += U_CMD[m, i] * 0.0
-    if nan_if_bad != 0.0 or not math.isfinite(nan_if_bad):
+    if not _hold_command(U_CMD, u_cmd):
         return False
-    any_random = False
-    any_gg = False
-    has_env = B.shape[0] > B_FIELDS  # only then does B have the environment's rows
-    for m in range(M):
-        if GM[1, m] > 0.0:
-            any_random = True
-        if B[B_GG, m] > 0.0 or (has_env and B[env.ENV_FLAGS, m] != 0.0):
-            any_gg = True
+    any_random, any_gg, has_env = _torque_kinds(GM, B)
     ext = tau_gg if any_gg else tau  # the stages' external torque (one choice a call, none a stage)
     for s in range(n_sub):
         _wheel_electronics(X, u_cmd, W, u_motor, U_APPLIED, FLAGS)
@@ -323,23 +364,8 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
         if any_gg:
             _with_gravity_gradient(tau, ext, xt, B, ORB, t_s + dt_sub, rpos, has_env)
         _derivative(xt, u_motor, ext, G, W, B, HAS_COULOMB, k4, h, r, u_net)
-        c = dt_sub / 6.0
-        for j in range(K):
-            for m in range(M):
-                X[j, m] += c * (k1[j, m] + 2.0 * k2[j, m] + 2.0 * k3[j, m] + k4[j, m])
-        for m in range(M):
-            inv = 1.0 / math.sqrt(X[0, m] ** 2 + X[1, m] ** 2 + X[2, m] ** 2 + X[3, m] ** 2)
-            X[0, m] *= inv
-            X[1, m] *= inv
-            X[2, m] *= inv
-            X[3, m] *= inv
-        # First-order winding temperature, copper loss i^2 R held over the step: T -> T_ss + (T - T_ss) e^-x,
-        # x = dt / (R_th C_th) (decay = 0 when R_th = 0: T = T_ss at once).
-        for i in range(N):
-            for m in range(M):
-                cur = u_motor[i, m] / W[W_KT, i, m]
-                t_ss = W[W_TAMB, i, m] + cur * cur * W[W_RES, i, m] * W[W_RTH, i, m]
-                TEMP[i, m] = t_ss + (TEMP[i, m] - t_ss) * DECAY[i, m]
+        _rk4_combine(X, k1, k2, k3, k4, dt_sub / 6.0)
+        _winding_temperature(TEMP, u_motor, W, DECAY)
     return True
 
 
