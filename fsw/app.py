@@ -408,8 +408,9 @@ class FlightSoftware:
 
     def _gnc_task(self, inputs, slipped_before: bool) -> None:
         """One GNC cycle, its stages in order: read the inputs, estimate, guide, control (wheel torques and
-        CYCLE_DONE out), FDIR, target reached, telemetry. The hot path: each stage is one call, and what
-        the stages share is passed along, not kept on ``self``."""
+        CYCLE_DONE out), FDIR, target reached, telemetry. The hot path: each stage is one call, or in line where
+        a call would cost more than it tells (commands out, the record), and what the stages share is passed
+        along, not kept on ``self``."""
         t_start = self.executive.tick_start  # the executive's clock read just before this call
         dt = self.period_s
         lockstep = type(inputs) is TickInputs  # the driver's own inputs: the array fast paths of the readers
@@ -435,15 +436,26 @@ class FlightSoftware:
         omega = est.omega_BN_B
         g = self.guidance.step(self.t_s, dt, est.q_NB if est.initialized else None, omega)
         ctrl = self.control.step(dt, g.omega_cmd_BN_B, omega, speeds)
-        self._send_commands(tick, g, ctrl, realtime)
+        if self.door is not None:  # DOOR_CMD before the wheel commands' CYCLE_DONE
+            self._door_cycle(tick, g)
+        try:
+            self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm, cycle_done=not realtime)
+        except Exception as exc:  # noqa: BLE001 - a transmit failure is reported, the loop goes on
+            self._bus_tx_errors = getattr(self, "_bus_tx_errors", 0) + 1
+            self._event("FATAL_ERROR", reason=f"bus send failed: {type(exc).__name__}: {exc}"[:110])
 
         # ---- FDIR, then the target
         self._fdir_cycle(dt, speeds, faults, ctrl, imu, st, st_fresh, innovation_deg, g, slipped_before)
         if not self._target_reached:
             self._watch_target(g, omega, dt)
 
-        # ---- telemetry
-        self._end_cycle(t_start, g, ctrl, speeds, imu is not None, st, st_fresh)
+        # ---- the cycle's record (its execution time up to here) and telemetry
+        exec_ms = 1e3 * (self.clock() - t_start)
+        self.last = CycleRecord(self.t_s, g.mode, est.q_NB.copy(), g.omega_cmd_BN_B, ctrl.wheel_torque_cmd_Nm,
+                                g.margins_deg, g.margin_min_deg, g.pointing_error_deg, g.att_error_deg, exec_ms)
+        if self.cycle % self._gnc_tm_every == 0:
+            self._send_gnc_tm(g, ctrl, speeds, imu is not None, st, st_fresh, exec_ms)
+        self.cycle += 1
 
     def _start_cycle(self, inputs, lockstep: bool) -> tuple[int, bool]:
         """(tick, real time?) of this cycle, with onboard time ``t_s`` set: a lockstep tick's own time, or in
@@ -511,17 +523,6 @@ class FlightSoftware:
             speeds, faults = wheel_arrays
         return speeds, self._heard_through_corruption(faults)
 
-    def _send_commands(self, tick: int, g, ctrl, realtime: bool) -> None:
-        """The cycle's commands on the bus: the door's, then the wheel torques with CYCLE_DONE (lockstep). A
-        transmit failure is reported (FATAL_ERROR) and the loop goes on."""
-        if self.door is not None:  # DOOR_CMD before the wheel commands' CYCLE_DONE
-            self._door_cycle(tick, g)
-        try:
-            self.driver.send_wheel_torques(tick, ctrl.wheel_torque_cmd_Nm, cycle_done=not realtime)
-        except Exception as exc:  # noqa: BLE001 - a transmit failure is reported, the loop goes on
-            self._bus_tx_errors = getattr(self, "_bus_tx_errors", 0) + 1
-            self._event("FATAL_ERROR", reason=f"bus send failed: {type(exc).__name__}: {exc}"[:110])
-
     def _fdir_cycle(self, dt: float, speeds, faults, ctrl, imu, st, st_fresh: bool, innovation_deg: float, g,
                     slipped_before: bool) -> None:
         """Every FDIR monitor on this cycle, then its actions. Sensor monitors are armed once the sensor has
@@ -551,17 +552,6 @@ class FlightSoftware:
             if self._held_cycles * dt >= REACHED_DWELL_S:
                 self._target_reached = True
                 self._event("TARGET_REACHED", error_deg=err)
-
-    def _end_cycle(self, t_start: float, g, ctrl, speeds, imu_valid: bool, st, st_fresh: bool) -> None:
-        """The cycle's record (`last`, its execution time up to here) and, every gnc_packet_every_n_cycles, its
-        GNC packet; then the next cycle's number."""
-        exec_ms = 1e3 * (self.clock() - t_start)
-        est = self.estimator
-        self.last = CycleRecord(self.t_s, g.mode, est.q_NB.copy(), g.omega_cmd_BN_B, ctrl.wheel_torque_cmd_Nm,
-                                g.margins_deg, g.margin_min_deg, g.pointing_error_deg, g.att_error_deg, exec_ms)
-        if self.cycle % self._gnc_tm_every == 0:
-            self._send_gnc_tm(g, ctrl, speeds, imu_valid, st, st_fresh, exec_ms)
-        self.cycle += 1
 
     def _door_cycle(self, tick: int, g) -> None:
         """The aperture door's cycle (`fsw.door`) on the boresight's physical sky margins (the guidance's in
