@@ -211,7 +211,8 @@ class Simulator:
         self._awaiting: int | None = None
         self._rt_anchor: float | None = None  # real time: clock() at tick 0's start (ticks at anchor + k T)
         self._answer_offsets: list[float] = []  # real time: CYCLE_DONE(k) arrival - tick k's start [s]
-        self.rt_phase_shift_s: float | None = None  # real time: the delay _lock_phase applied, once
+        self.rt_phase_shift_s: float | None = None  # real time: the delay _lock_phase applied last
+        self._phase_locked = False
         self.devices.sample_sensors(world, self.t0_s)
 
     def _init_door(self) -> None:
@@ -588,7 +589,7 @@ class Simulator:
             self.stats.stale_cycle_done += 1
 
     def _lock_phase(self) -> None:
-        """Real time, once: delay the tick schedule so the flight software's cycle, which runs on its own
+        """Real time, once a schedule (again after a stall): delay the tick schedule so the flight software's cycle, which runs on its own
         clock, falls ``PHASE_LOCK_TARGET`` of a period after each tick's start.
 
         Two free-running periodic schedules keep whatever phase they started with. The flight software starts
@@ -600,6 +601,7 @@ class Simulator:
         shift = (median - PHASE_LOCK_TARGET * self.period_s) % self.period_s
         self._rt_anchor += shift
         self.rt_phase_shift_s = shift
+        self._phase_locked = True
 
     def _publish_due(self, t_s: float) -> None:
         """Real time: sensor frames go out when due (between SYNCs), as on the hardware bus."""
@@ -670,9 +672,12 @@ class Simulator:
         """Real time: tick k starts at wall time start + k T; the world advances one dynamics step per
         dt of wall time; frames are handled when they arrive. Never waits for the flight software."""
         if self._rt_anchor is None or self.clock() - (self._rt_anchor + self.tick * self.period_s) > self.period_s:
-            # the first tick, or a pause of more than a period (a resumed run): the schedule starts again now
+            # the first tick, or a pause of more than a period (a resumed run, a host that stalled the
+            # loop): the schedule starts again now, and its phase is measured and locked again
             self._rt_anchor = self.clock() - self.tick * self.period_s
-        elif len(self._answer_offsets) == PHASE_LOCK_ANSWERS and self.rt_phase_shift_s is None:
+            self._answer_offsets.clear()
+            self._phase_locked = False
+        elif len(self._answer_offsets) == PHASE_LOCK_ANSWERS and not self._phase_locked:
             self._lock_phase()
         start = self._rt_anchor
 

@@ -192,7 +192,7 @@ def test_realtime_puts_the_flight_softwares_cycle_mid_tick(icd: Icd, monkeypatch
     import hil_sim.lockstep as lockstep
 
     if not lock:
-        monkeypatch.setattr(lockstep.Simulator, "_lock_phase", lambda self: setattr(self, "rt_phase_shift_s", 0.0))
+        monkeypatch.setattr(lockstep.Simulator, "_lock_phase", lambda self: setattr(self, "_phase_locked", True))
     channel = f"virtual:rtphase{next(_channels)}"
     sim_bus, fsw_bus = open_bus(channel), open_bus(channel)
     try:
