@@ -11,19 +11,26 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _imported_top_packages(package: str) -> dict[str, set[str]]:
-    """Top-level package of every import in every module of ``package`` -> the modules that import it."""
-    found: dict[str, set[str]] = {}
+def _imports(package: str):
+    """(imported module as written, importing file) of every absolute import in ``package``; ``from fsw
+    import config`` counts as ``fsw.config``."""
     for path in sorted((ROOT / package).rglob("*.py")):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
             if isinstance(node, ast.Import):
                 names = [alias.name for alias in node.names]
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-                names = [node.module]
+                names = [node.module] if "." in node.module else [f"{node.module}.{a.name}" for a in node.names]
             else:
                 continue
             for name in names:
-                found.setdefault(name.split(".")[0], set()).add(str(path.relative_to(ROOT)))
+                yield name, str(path.relative_to(ROOT))
+
+
+def _imported_top_packages(package: str) -> dict[str, set[str]]:
+    """Top-level package of every import in every module of ``package`` -> the modules that import it."""
+    found: dict[str, set[str]] = {}
+    for name, where in _imports(package):
+        found.setdefault(name.split(".")[0], set()).add(where)
     return found
 
 
@@ -41,17 +48,9 @@ def test_package_never_imports_the_forbidden_one(package: str, forbidden: str) -
 def _imported_modules(package: str, top: str) -> dict[str, set[str]]:
     """Every module of package ``top`` that ``package`` imports (as written) -> the files importing it."""
     found: dict[str, set[str]] = {}
-    for path in sorted((ROOT / package).rglob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
-            if isinstance(node, ast.Import):
-                names = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-                names = [node.module] if node.module != top else [f"{top}.{a.name}" for a in node.names]
-            else:
-                continue
-            for name in names:
-                if name.split(".")[0] == top:
-                    found.setdefault(name, set()).add(str(path.relative_to(ROOT)))
+    for name, where in _imports(package):
+        if name.split(".")[0] == top:
+            found.setdefault(name, set()).add(where)
     return found
 
 
