@@ -91,10 +91,11 @@ def _rt_scheduling(run_dir: Path) -> str:
 
 def slip_hint(summary: dict, realtime: bool, got: str) -> str:
     """What to do when a real-time run failed on cycle slips (docs/operations.md, real time)."""
-    slips = next((r for r in summary.get("requirements", []) if r.get("name") == "cycle slips"), None)
-    if not realtime or slips is None or slips.get("pass", True):
+    failed = [r for r in summary.get("requirements", [])
+              if r.get("name") in ("cycle slips", "ticks lost on the host") and r.get("pass") is False]
+    if not realtime or not failed:
         return ""
-    return (f"cycle slips: the host delayed the paced loop ({got or 'scheduling unknown'}). Give the run "
+    return (f"{failed[0]['name']}: the host delayed the paced loop ({got or 'scheduling unknown'}). Give the run "
             f"SCHED_FIFO (root or CAP_SYS_NICE; --rt-priority), an idle core (taskset), or fly it lockstep, "
             f"where host time cannot hurt the loop; see docs/operations.md (real time)")
 

@@ -17,7 +17,8 @@ Requirements (``Mission.requirements``):
 * peak wheel speed as a fraction of each wheel's limit;
 * cycle slips: lockstep: ticks the flight software never answered with CYCLE_DONE (simulated time waits
   for it, so host-time overruns, reported alongside, cannot hurt the loop); real time: the flight
-  software's GNC slip counter plus cycles whose CYCLE_DONE arrived after the next tick began;
+  software's GNC slip counter, and apart from it the ticks lost on the host (CYCLE_DONE after the next tick
+  began), at most ``HOST_LOST_TICK_FRACTION`` of the ticks;
 * FDIR: the expected FDIR trips occurred; no more unexpected ones than allowed;
 * instrument exposure (missions with a door, ``spacecraft.door``): the time the boresight spent inside a
   physical sky zone with the door not fully closed (door truth: ``door_position`` > 0), at most
@@ -680,17 +681,28 @@ def _judge_wheel_speed_and_body_rate(reqs: _Requirements, run_dir: Path, mission
                      f"true |omega| / the configured rate limit, at t = {rate_t:.1f} s", "% of max")
 
 
+# Real time on a host that is not the flight computer: ticks whose CYCLE_DONE the simulator did not get before
+# the next tick began, at most one in 500 (docs/operations.md, real time). The flight software's own overruns
+# are judged strictly (requirements.max_cycle_slips).
+HOST_LOST_TICK_FRACTION = 0.002
+
+
 def _judge_cycle_slips(reqs: _Requirements, sim_stats: dict[str, Any], hk: dict[str, Any], req) -> None:
     missed = int(sim_stats.get("cycle_done_timeouts", 0)) + int(sim_stats.get("cycle_done_late", 0))
     fsw_slips = int(hk["slips_gnc"]) if "slips_gnc" in hk else None
     if sim_stats.get("clock") == "realtime":
-        # real time: a slip is a cycle that overran its period, as the flight software counts them,
-        # plus cycles whose CYCLE_DONE came after the next tick began
-        slips = None if fsw_slips is None else fsw_slips + missed
-        reqs.requirement("cycle slips", "unknown" if slips is None else slips, f"<= {req.max_cycle_slips}",
-                         slips is not None and slips <= req.max_cycle_slips,
-                         f"flight software GNC slips {fsw_slips} + late cycles {missed}" if slips is not None
+        # real time: a slip is a cycle that overran its period, as the flight software counts them (the
+        # mission's requirement); a tick whose answer the simulator did not get in time is the SIL host's
+        # delivery, judged apart against a documented tolerance (docs/operations.md, real time)
+        reqs.requirement("cycle slips", "unknown" if fsw_slips is None else fsw_slips, f"<= {req.max_cycle_slips}",
+                         fsw_slips is not None and fsw_slips <= req.max_cycle_slips,
+                         "flight software GNC cycles that overran their period" if fsw_slips is not None
                          else "no housekeeping telemetry reached the ground: slips unknown")
+        ticks = int(sim_stats.get("ticks", 0))
+        allowed = int(HOST_LOST_TICK_FRACTION * ticks)
+        reqs.requirement("ticks lost on the host", missed, f"<= {allowed}", missed <= allowed,
+                         f"CYCLE_DONE late or missing, of {ticks} ticks (tolerance {100 * HOST_LOST_TICK_FRACTION:g} %: "
+                         f"the flight software flew those cycles on inputs one period old)")
     else:
         # lockstep: simulated time waits for the flight software, so a slow cycle on the host cannot
         # hurt the loop; what can is a tick the flight software never answered

@@ -31,3 +31,25 @@ def test_a_real_time_run_failed_on_slips_says_what_to_do() -> None:
     assert slip_hint(failed, realtime=False, got="") == ""
     passed = {"requirements": [{"name": "cycle slips", "value": 0, "pass": True}]}
     assert slip_hint(passed, realtime=True, got="SCHED_FIFO priority 20") == ""
+    lost = {"requirements": [{"name": "cycle slips", "value": 0, "pass": True},
+                             {"name": "ticks lost on the host", "value": 4, "pass": False}]}
+    assert slip_hint(lost, realtime=True, got="SCHED_FIFO priority 20").startswith("ticks lost on the host:")
+
+
+def test_real_time_judges_the_flight_softwares_slips_strictly_and_lost_ticks_against_the_tolerance() -> None:
+    from types import SimpleNamespace
+
+    from hil_sim.summary import HOST_LOST_TICK_FRACTION, _judge_cycle_slips, _Requirements
+
+    def judged(fsw_slips: int, late: int) -> dict[str, dict]:
+        reqs = _Requirements()
+        _judge_cycle_slips(reqs, {"clock": "realtime", "ticks": 1200, "cycle_done_late": late},
+                           {"slips_gnc": fsw_slips}, SimpleNamespace(max_cycle_slips=0))
+        return {r["name"]: r for r in reqs.results}
+
+    allowed = int(HOST_LOST_TICK_FRACTION * 1200)
+    assert allowed == 2  # one tick in 500
+    ok = judged(0, allowed)
+    assert ok["cycle slips"]["pass"] and ok["ticks lost on the host"]["pass"]
+    assert not judged(0, allowed + 1)["ticks lost on the host"]["pass"]
+    assert not judged(1, 0)["cycle slips"]["pass"]  # the flight software's own overrun: no tolerance
