@@ -34,10 +34,10 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--out", type=Path, default=Path("runs"), help="parent folder of run folders (default: runs)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar (CI logs)")
     run.add_argument("--rt-priority", type=int, default=None, metavar="N",
-                     help="real time: SCHED_FIFO priority of the simulator's tick loop, the flight software one "
-                          f"below unless its mission sets rates.realtime_priority (default {DEFAULT_RT_PRIORITY}; 0: "
-                          "the host's normal scheduler; needs root or CAP_SYS_NICE, else the run says so and "
-                          "goes on best effort)")
+                     help="real time: SCHED_FIFO priority of the simulator's tick loop (default "
+                          f"{DEFAULT_RT_PRIORITY}; 0: the host's normal scheduler; needs root or CAP_SYS_NICE, else "
+                          "the run says so and goes on best effort); the flight software's is its mission's "
+                          "rates.realtime_priority")
     run.add_argument("--max-missed-ticks", type=_positive_int, default=3, metavar="N",
                      help="ticks in a row the flight software may leave unanswered before the run is ended as "
                           "hung (default 3; in real time a late answer is a cycle slip, not silence)")

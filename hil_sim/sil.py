@@ -59,7 +59,7 @@ DEFAULT_MISSION = config_path("missions", "demo-pointing.yaml")
 # the run folder may be anywhere: its config names the installed schema by URI
 MODELINE = f"# yaml-language-server: $schema={config_path('schema', 'mission.schema.json').as_uri()}"
 
-DEFAULT_RT_PRIORITY = 20  # real time: SCHED_FIFO priority of the simulator's tick loop (the flight software's is one below)
+DEFAULT_RT_PRIORITY = 20  # real time: SCHED_FIFO priority of the simulator's tick loop
 LOCKSTEP_TIMEOUT_S = 60.0  # flight software: end of run when no SYNC for this long
 FSW_POLL_TICKS = 20  # the simulator checks that the flight software is alive every this many ticks
 GROUND_BATCH_S = 0.02  # the ground sleeps this long after a read, so a wake-up takes ~10 packets, not 1
@@ -109,8 +109,8 @@ class RunOptions:
     fsw_start_timeout_s: float = 600.0  # the first start on a fresh machine compiles (and caches) numba kernels
     cycle_done_timeout_s: float = 30.0  # lockstep: a tick unanswered this long counts as missed
     max_consecutive_missed: int = 3  # then the flight software is taken as hung and the run ends
-    # real time: SCHED_FIFO priority asked for the simulator's tick loop and, where the mission leaves its
-    # own at 0, the flight software's cycle thread (0: the host's normal scheduler)
+    # real time: SCHED_FIFO priority asked for the simulator's tick loop (0: the host's normal scheduler); the
+    # flight software's is the mission's rates.realtime_priority
     rt_priority: int = DEFAULT_RT_PRIORITY
 
 
@@ -164,15 +164,11 @@ def _free_udp_port() -> int:
 
 
 def _config_used(mission, *, bus_spec: str, tm_host: str, tm_port: int | None, tc_port: int | None,
-                 realtime: bool, rt_priority: int = 0) -> dict:
+                 realtime: bool) -> dict:
     data = mission.model_dump(mode="json")
     data["bus"] = bus_spec
     fsw = data["flight_software"]
     fsw["rates"]["tick_source"] = "clock" if realtime else "sync"
-    if realtime and fsw["rates"]["realtime_priority"] == 0:
-        # a host's other work must not stretch a paced cycle: the flight software asks for SCHED_FIFO, one
-        # below the simulator's tick loop, and reports RT_SCHEDULING_UNAVAILABLE when refused
-        fsw["rates"]["realtime_priority"] = max(0, rt_priority - 1)
     # a loaded host can stall the simulator for seconds (other runs, plotting): the flight software
     # should not take that for the end of the run
     fsw["rates"]["lockstep_timeout_s"] = max(fsw["rates"]["lockstep_timeout_s"], LOCKSTEP_TIMEOUT_S)
@@ -688,7 +684,7 @@ def _start_ground(run: _RunParts) -> None:
     tmtc = mission.flight_software.tmtc
     run.tc_port = tmtc.telecommand_port if mission.tmtc_ports == "fixed" else _free_udp_port()
     data = _config_used(mission, bus_spec=run.bus_info.spec, tm_host=run.endpoints.tm_host, tm_port=tm_port,
-                        tc_port=run.tc_port, realtime=options.realtime, rt_priority=options.rt_priority)
+                        tc_port=run.tc_port, realtime=options.realtime)
     data["flight_software"]["tmtc"]["security"]["key_file"] = LINK_KEY_FILE  # beside the config used
     write_config(run_dir, data, Path(options.mission))
     run.endpoints = dataclasses.replace(run.endpoints, tm_port=tm_port, tc_port=run.tc_port,
