@@ -794,7 +794,8 @@ def _shut_down(run: _RunParts) -> None:
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     previous_term = (signal.signal(signal.SIGTERM, signal.SIG_IGN)
                      if threading.current_thread() is threading.main_thread() else None)
-    _unpace_this_thread()
+    if run.rt_scheduling.startswith("SCHED_FIFO priority"):  # only what _simulate raised, never a caller's own policy
+        _unpace_this_thread()
     wall_s = time.monotonic() - run.started_wall
     loop_cpu_s = _loop_cpu_s(run.fsw_proc, run.ground, since=run.cpu_at_start) if run.cpu_at_start else {}
     run.progress.stop()
