@@ -154,9 +154,9 @@ def lockstep_rate(spec: str, ticks: int, repeats: int = 5) -> dict:
     does when the shared host leaves it alone."""
     from fsw.bus import FswBusDriver
     from comms.bus import Icd, open_bus
-    from hil_sim.lockstep import RateDampingResponder, Simulator
-    from hil_sim.params import SpacecraftParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.sil.lockstep import RateDampingResponder, Simulator
+    from hil_sim.world.params import SpacecraftParams, WorldParams
+    from hil_sim.world.world import World
 
     icd = Icd()
     params = WorldParams(spacecraft=SpacecraftParams(omega_BN_B0_rad_s=(0.02, -0.01, 0.015)))
@@ -176,7 +176,7 @@ def lockstep_rate(spec: str, ticks: int, repeats: int = 5) -> dict:
         fsw_bus.shutdown()
         return {"spec": spec, "mode": "in-process", "ticks": ticks, "cycles_per_s": ticks / elapsed,
                 "cycle_done_timeouts": sim.stats.cycle_done_timeouts}
-    proc = subprocess.Popen([sys.executable, "-m", "hil_sim.lockstep", "--bus", spec, "--wheels",
+    proc = subprocess.Popen([sys.executable, "-m", "hil_sim.sil.lockstep", "--bus", spec, "--wheels",
                              str(world.n_wheels), "--ticks", str(repeats * ticks + 10), "--idle-timeout", "30"],
                             stdout=subprocess.PIPE, text=True, cwd=ROOT)
     assert proc.stdout.readline().strip() == "READY"
@@ -210,9 +210,9 @@ def lockstep_rate_real_fsw(spec: str, ticks: int, mission_path: Path) -> dict:
     import socket
 
     from comms.bus import Icd, open_bus
-    from hil_sim.lockstep import Simulator
-    from hil_sim.mission import load_mission, world_params
-    from hil_sim.world import World
+    from hil_sim.sil.lockstep import Simulator
+    from hil_sim.mission.model import load_mission, world_params
+    from hil_sim.world.world import World
 
     mission = load_mission(mission_path)
     world = World(world_params(mission), seed=mission.seed)

@@ -38,7 +38,7 @@ GOAL_SIM_S_PER_WALL_S = 3000.0
 
 
 def _base_mission():
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
     return load_mission(_plan(1, None)[1])
 
 
@@ -95,8 +95,8 @@ def _tick_breakdown(duration: float) -> dict:
     Wall-clock times per tick (what a run costs on this host now) and the thread's CPU time (less
     sensitive to the other processes on a shared host); the timers' own cost (~1 us per timed call)
     is included in the phases."""
-    import hil_sim.devices as devices
-    import hil_sim.lockstep as lockstep
+    import hil_sim.devices.nodes as devices
+    import hil_sim.sil.lockstep as lockstep
     from fsw import control, estimation, fdir, guidance
     from fsw.app import FlightSoftware
     from fsw.bus.driver import FswBusDriver

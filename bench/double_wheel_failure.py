@@ -38,9 +38,9 @@ def _draw(rng: np.random.Generator, n_wheels: int) -> list[tuple[int, str, float
 def fly(mission, faults: list[tuple[int, str, float]], seed: int) -> dict:
     """One run with ``faults`` [(wheel index, kind, time)]; returns its row."""
     import hil_sim.campaign.fast as fast
-    from hil_sim import summary
+    from hil_sim.sil import judge as summary
     from hil_sim.campaign.fast import run_fast
-    from hil_sim.mission import BusFault
+    from hil_sim.mission.model import BusFault
 
     as_fault = {"no_torque": ("wheel_no_torque", "CMD"), "stuck": ("wheel_stuck", "CMD"),
                 "cmd_lost": ("drop", "CMD"), "status_lost": ("drop", "STATUS")}
@@ -73,7 +73,7 @@ def fly(mission, faults: list[tuple[int, str, float]], seed: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--runs", type=int, default=30)

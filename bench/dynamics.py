@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hil_sim.params import SpacecraftParams, WorldParams
-from hil_sim.world import World, WorldBatch
+from hil_sim.world.params import SpacecraftParams, WorldParams
+from hil_sim.world.world import World, WorldBatch
 
 RESULTS = Path(__file__).resolve().parent / "results" / "dynamics.json"
 GOALS = {"single": 1_000.0, "batch": 50_000.0}

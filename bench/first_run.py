@@ -12,7 +12,7 @@ Scenarios, each a fresh process:
 * ``other-cpu`` (``--other-cpu``): ``NUMBA_CPU_NAME=generic``: the shipped kernels do not match, the run
   compiles (the fallback of a machine with another CPU).
 
-Time to first tick: the run is started through ``python -c`` that wraps `hil_sim.lockstep.Simulator.run_tick`
+Time to first tick: the run is started through ``python -c`` that wraps `hil_sim.sil.lockstep.Simulator.run_tick`
 (and the physics check and the flight software's start, for the split) to print the wall clock of their
 calls, then calls the ``keepout`` entry point (`cli.main.main`) with the same arguments; measured from
 just before the process is started.
@@ -40,7 +40,7 @@ import sys, time
 def mark(name):
     print(f"PHASE {name} {time.time():.6f}", file=sys.stderr, flush=True)
 mark("python_started")
-import hil_sim.lockstep as lockstep, hil_sim.physics_checks as checks, hil_sim.sil as sil
+import hil_sim.sil.lockstep as lockstep, hil_sim.mission.physics_checks as checks, hil_sim.sil.orchestrator as sil
 def wrap(owner, attr, before, after=None, once=False):
     real = getattr(owner, attr)
     def wrapper(*args, **kwargs):

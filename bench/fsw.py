@@ -51,8 +51,8 @@ def _zones():
 
 def _world_and_cfg(margin_deg: float = 3.0, seed: int = 11, **sections):
     from closed_loop_kit import attitude_with_boresight, fsw_config_for, slew_geometry
-    from hil_sim.params import SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
+    from hil_sim.world.world import World
     from scipy.spatial.transform import Rotation
 
     y0, yd, _, _ = slew_geometry(EPOCH.replace("Z", "+00:00"))
@@ -108,7 +108,7 @@ def bench_cycle(cycles: int) -> dict:
 # --------------------------------------------------------------------------------------- 2. realtime
 def _simulator_process(bus_spec: str, ticks: int, ready, done, rt_priority: int = 0) -> None:
     from comms.bus import Icd, open_bus
-    from hil_sim.lockstep import Simulator
+    from hil_sim.sil.lockstep import Simulator
 
     if rt_priority:  # the simulator stands in for hardware, which keeps its own time whatever the host does
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))

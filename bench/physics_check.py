@@ -1,4 +1,4 @@
-"""CPU time of the load-time physics check (`hil_sim.physics_checks.check_mission`) per shipped mission.
+"""CPU time of the load-time physics check (`hil_sim.mission.physics_checks.check_mission`) per shipped mission.
 
 What a first `keepout sil run` of a mission never seen before spends before flying (the verdict is
 kept afterwards, see docs/first-run.md). Each mission is checked once untimed (imports, kernel caches
@@ -29,8 +29,8 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=2, help="timed checks per mission (default 2)")
     args = parser.parse_args()
 
-    from hil_sim.mission import load_mission
-    from hil_sim.physics_checks import check_mission
+    from hil_sim.mission.model import load_mission
+    from hil_sim.mission.physics_checks import check_mission
 
     load_before = os.getloadavg()
     rows = []

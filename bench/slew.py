@@ -176,7 +176,7 @@ def shortest_safe_path(start: np.ndarray, end: np.ndarray, zones: list, margin_d
 def what_geometry_allows(mission, t_s: float) -> dict:
     """Shortest safe path and the paper's assumptions at the slew's target (zones at time t_s)."""
     from gnc.checks import check_assumptions
-    from hil_sim.physics_checks import SkyZones
+    from hil_sim.mission.physics_checks import SkyZones
 
     fsw = mission.flight_software
     sky = SkyZones(mission)
@@ -224,7 +224,7 @@ def run_slews(base: dict, slews: list, geometry: bool = True, path_planning: boo
               jerk_limit: bool = True) -> list[dict]:
     from fsw.guidance.path_planning import path_length_deg
     from hil_sim.campaign.fast import run_fast
-    from hil_sim.mission import Mission
+    from hil_sim.mission.model import Mission
 
     rows = []
     for label, start, end in slews:
@@ -285,7 +285,7 @@ def quaternion_slew_mission(base: dict, start, end, path_planning: bool = True) 
 
 def run_quaternion_slews(base: dict, path_planning: bool) -> list[dict]:
     from hil_sim.campaign.fast import run_fast
-    from hil_sim.mission import Mission
+    from hil_sim.mission.model import Mission
 
     rows = []
     for label, start, end in QUATERNION_SLEWS:

@@ -3,7 +3,7 @@
     .venv/bin/python bench/soak.py                 # 24 simulated hours (the goal; ~30 min wall here at SCHED_FIFO)
     .venv/bin/python bench/soak.py --hours 1
 
-Everything runs in one process on a ``virtual`` CAN bus (hil_sim.lockstep.Simulator in-process mode):
+Everything runs in one process on a ``virtual`` CAN bus (hil_sim.sil.lockstep.Simulator in-process mode):
 every frame is ICD-encoded, E2E-protected and checked. Telemetry goes as real UDP datagrams to a loopback
 receiver process that checks the CCSDS sequence counts per APID, so lost packets are counted, not guessed.
 The scenario keeps the spacecraft busy: POINTING with Sun (star-shaped), Moon (cone) and Earth (polygon)
@@ -191,8 +191,8 @@ def main(argv=None) -> int:
     from fsw.telecommand import CommandDispatcher
     from comms.telecommand import encode_command
     from fsw.telemetry import TelemetrySender
-    from hil_sim.params import SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
+    from hil_sim.world.world import World
     from scipy.spatial.transform import Rotation
 
     epoch = "2030-03-29T12:00:00Z"

@@ -83,7 +83,7 @@ def _mission(duration_s: float, row: str = "wheels"):
     """demo-pointing for ``duration_s``, as written (row "wheels") or with the environment row's changes."""
     import yaml
     from gnc.ephemeris import EARTH_RADIUS_KM
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
     data = yaml.safe_load(MISSION.read_text())
     if row == "environment":
         data["orbit"] = {"semi_major_axis_km": EARTH_RADIUS_KM + ENV_ALTITUDE_KM,
@@ -111,7 +111,7 @@ def environment_inputs(mission) -> tuple:
     position [m] from keepout's ephemeris at the epoch, the Earth rotation angle at the epoch and the Earth's
     dipole (g10, g11, h11) [T] of IGRF-14 at the epoch, keepout's own."""
     from gnc.ephemeris import julian_date_tdb, sun_position_N_km
-    from hil_sim.geomagnetic import dipole_coefficients_T, earth_rotation_angle_rad
+    from hil_sim.world.geomagnetic import dipole_coefficients_T, earth_rotation_angle_rad
     sun_m = [1e3 * float(x) for x in sun_position_N_km(julian_date_tdb(mission.epoch_utc))]
     return sun_m, earth_rotation_angle_rad(mission.epoch_utc), dipole_coefficients_T(mission.epoch_utc)
 
@@ -175,8 +175,8 @@ def _basilisk_surroundings(sim, sc, disturbance, inputs) -> tuple:
     from Basilisk.architecture import messaging
     from Basilisk.simulation import eclipse, exponentialAtmosphere, magneticFieldCenteredDipole, zeroWindModel
     from gnc.ephemeris import EARTH_RADIUS_KM
-    from hil_sim.environment import EARTH_ROTATION_RAD_S
-    from hil_sim.geomagnetic import IGRF_REFERENCE_RADIUS_KM
+    from hil_sim.world.environment import EARTH_ROTATION_RAD_S
+    from hil_sim.world.geomagnetic import IGRF_REFERENCE_RADIUS_KM
 
     sun_m, era, (g10, g11, h11) = inputs
     d = disturbance
@@ -304,7 +304,7 @@ def run_basilisk(mission, environment: tuple | None = None) -> float:
 
 def _torques(mission) -> list[str]:
     """The external torques keepout's truth applies in ``mission``."""
-    from hil_sim.environment import environment_effects
+    from hil_sim.world.environment import environment_effects
     d = mission.spacecraft.disturbance
     return [name for name, on in (("constant", any(d.constant_B_Nm)), ("gravity gradient", d.gravity_gradient)) if on] \
         + environment_effects(mission)

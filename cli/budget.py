@@ -1,4 +1,4 @@
-"""``keepout budget MISSION``: the disturbance and momentum budget of ``hil_sim.budget``, as a table."""
+"""``keepout budget MISSION``: the disturbance and momentum budget of ``hil_sim.world.budget``, as a table."""
 from __future__ import annotations
 
 import argparse
@@ -6,16 +6,16 @@ import json
 from dataclasses import asdict
 from pathlib import Path
 
-import hil_sim.budget
+import hil_sim.world.budget
 from cli import description_of
-from hil_sim.budget import budget
+from hil_sim.world.budget import budget
 
 EXIT_REJECTED = 2  # the mission was refused (as `keepout config validate`)
 
 
 def add_cli(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("budget", help="disturbance and momentum budget per effect over an orbit and a day",
-                              description=description_of(hil_sim.budget.__doc__),
+                              description=description_of(hil_sim.world.budget.__doc__),
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("mission", type=Path, help="mission YAML")
     p.add_argument("--json", type=Path, default=None, metavar="FILE", help="also write the rows as JSON")
@@ -26,7 +26,7 @@ def _budget(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from hil_sim.mission import load_mission_or_report
+    from hil_sim.mission.model import load_mission_or_report
 
     mission = load_mission_or_report(args.mission)
     if mission is None:
@@ -42,7 +42,7 @@ def _budget(args: argparse.Namespace) -> int:
                       f"{100 * r.wheel_speed_fraction:.1f}")
     console = Console()
     console.print(table)
-    from hil_sim.environment import EFFECTS, environment_effects
+    from hil_sim.world.environment import EFFECTS, environment_effects
 
     off = [name for name in EFFECTS if name not in environment_effects(mission)]
     if off:

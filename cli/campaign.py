@@ -115,7 +115,7 @@ def _plan(campaign_file: str | Path, args: argparse.Namespace, runs: int | None)
 def _cmd_run(args: argparse.Namespace) -> int:
     from hil_sim.campaign.runner import default_out_dir, latest_out_dir
     from hil_sim.campaign.suite import is_suite
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission.loader import ConfigError
     console = _console()
     try:
         if is_suite(args.campaign):
@@ -270,7 +270,7 @@ def _cmd_rerun(args: argparse.Namespace) -> int:
 def _folder_and_plan(arg: str, run: int | None = None):
     """(output folder, plan) of a campaign folder or YAML; a ``ValueError`` with one clear line otherwise,
     also when ``run`` is not one of the campaign's run indices."""
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission.loader import ConfigError
     try:
         out = _results_dir(arg)
         if not (out / "plan.json").is_file():
@@ -329,7 +329,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from hil_sim.campaign.baseline import better_sides, compare, load_baseline
     from hil_sim.campaign.fast import metric_better
     from hil_sim.campaign.spec import load_campaign
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission.loader import ConfigError
     try:
         if not (args.results / "plan.json").is_file():
             raise FileNotFoundError(f"{args.results} is not a campaign output folder (no plan.json)")

@@ -48,13 +48,13 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
 def _schema(args: argparse.Namespace) -> int:
     import json
 
-    from hil_sim.mission import SCHEMA_PATH, mission_json_schema
+    from hil_sim.mission.model import SCHEMA_PATH, mission_json_schema
 
     return _generated(args, SCHEMA_PATH, lambda: json.dumps(mission_json_schema(), indent=2) + "\n", "schema")
 
 
 def _docs(args: argparse.Namespace) -> int:
-    from hil_sim.mission_docs import DOCS_PATH, mission_docs
+    from hil_sim.mission.docs import DOCS_PATH, mission_docs
 
     return _generated(args, DOCS_PATH, mission_docs, "docs")
 
@@ -83,9 +83,9 @@ def _generated(args: argparse.Namespace, default: Path, text: Callable[[], str],
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from hil_sim.mission import load_mission_marked, unit_warnings
-    from hil_sim.physics_checks import check_mission
-    from hil_sim.yaml_loader import ConfigError, ConfigFileError, format_path
+    from hil_sim.mission.model import load_mission_marked, unit_warnings
+    from hil_sim.mission.physics_checks import check_mission
+    from hil_sim.mission.loader import ConfigError, ConfigFileError, format_path
 
     status = 0
     for path in args.files:
@@ -116,15 +116,15 @@ def _validate(args: argparse.Namespace) -> int:
 
 def _status(exc: Exception) -> int:
     """Exit status for a file that failed to load: 2 when it cannot be read at all, 1 for its content."""
-    from hil_sim.yaml_loader import ConfigFileError
+    from hil_sim.mission.loader import ConfigFileError
 
     return 2 if isinstance(exc, ConfigFileError) else 1
 
 
 def _check(args: argparse.Namespace) -> int:
-    from hil_sim.mission import load_mission_marked
-    from hil_sim.physics_checks import check_mission
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission.model import load_mission_marked
+    from hil_sim.mission.physics_checks import check_mission
+    from hil_sim.mission.loader import ConfigError
 
     status = 0
     for path in args.files:

@@ -71,9 +71,9 @@ def run_tables(run_dir: Path) -> dict[str, Any]:
     import numpy as np
     import pandas as pd
 
-    from hil_sim.mission import load_mission
-    from hil_sim.sil import CONFIG_FILE, TRUTH_FILE
-    from hil_sim.summary import attitude_zone_series, boresight_N, lifted_quaternions, sky_zone_series
+    from hil_sim.mission.model import load_mission
+    from hil_sim.sil.orchestrator import CONFIG_FILE, TRUTH_FILE
+    from hil_sim.sil.judge import attitude_zone_series, boresight_N, lifted_quaternions, sky_zone_series
 
     run_dir = Path(run_dir)
     if not (run_dir / TRUTH_FILE).is_file() or not (run_dir / CONFIG_FILE).is_file():

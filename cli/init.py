@@ -64,7 +64,7 @@ def _init(args: argparse.Namespace) -> int:
 def write_project(target: Path) -> list[Path]:
     """Write the starter project into ``target`` (created); returns the files written."""
     from hil_sim.campaign.spec import write_json_schema as write_campaign_schema
-    from hil_sim.mission import write_json_schema as write_mission_schema
+    from hil_sim.mission.model import write_json_schema as write_mission_schema
     from keepout_config import config_path
 
     mission = _renamed(config_path("missions", "demo-pointing.yaml").read_text(encoding="utf-8"), MISSION_NAME)

@@ -1,11 +1,11 @@
-"""``keepout sil run [MISSION]``: run one mission in the SIL and judge it (see hil_sim.sil)."""
+"""``keepout sil run [MISSION]``: run one mission in the SIL and judge it (see hil_sim.sil.orchestrator)."""
 from __future__ import annotations
 
 import argparse
 import sys
 from pathlib import Path
 
-from hil_sim.sil import DEFAULT_RT_PRIORITY
+from hil_sim.sil.orchestrator import DEFAULT_RT_PRIORITY
 
 
 def add_cli(subparsers: argparse._SubParsersAction) -> None:
@@ -51,9 +51,9 @@ def _positive_int(text: str) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from hil_sim.sil import (DEFAULT_MISSION, EXIT_NOT_STARTED, EXIT_REJECTED, MissionRejected, RunNotStarted,
+    from hil_sim.sil.orchestrator import (DEFAULT_MISSION, EXIT_NOT_STARTED, EXIT_REJECTED, MissionRejected, RunNotStarted,
                              RunOptions, run_sil)
-    from hil_sim.summary import format_summary
+    from hil_sim.sil.judge import format_summary
 
     options = RunOptions(mission=args.mission or DEFAULT_MISSION, bus=args.bus, duration_s=args.duration,
                          realtime=args.realtime, out_root=args.out,
@@ -82,7 +82,7 @@ def _rt_scheduling(run_dir: Path) -> str:
     """What the run's tick loop got from the scheduler (simulator.json), or '' when it was not recorded."""
     import json
 
-    from hil_sim.sil import SIM_STATS_FILE
+    from hil_sim.sil.orchestrator import SIM_STATS_FILE
     try:
         return str(json.loads((run_dir / SIM_STATS_FILE).read_text()).get("rt_scheduling", ""))
     except (OSError, ValueError, AttributeError):

@@ -61,7 +61,7 @@ def add_cli(subparsers: argparse._SubParsersAction) -> None:
 
 def result_lines(results: list[dict[str, Any]]) -> list[str]:
     """One line per truth requirement: verdict, name, value and limit with the unit (as `keepout sil run`)."""
-    from hil_sim.summary import _cell
+    from hil_sim.sil.judge import _cell
 
     return [f"  {'PASS' if r['pass'] else 'FAIL'}  {r['name']}: {_cell(r['value'], r.get('unit', ''))} "
             f"(limit {_cell(r['limit'], r.get('unit', ''))})" for r in results]
@@ -114,11 +114,11 @@ def _run(args: argparse.Namespace) -> int:
     from comms.bus.icd import Icd
     from comms.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
     from ground.commanding import CommandSender
-    from hil_sim.lockstep import Simulator
-    from hil_sim.mission import door_params, world_params
-    from hil_sim.sil import (CANDUMP_FILE, SIM_STATS_FILE, TRUTH_FILE, CandumpLog, MissionRejected, RunOptions,
+    from hil_sim.sil.lockstep import Simulator
+    from hil_sim.mission.model import door_params, world_params
+    from hil_sim.sil.orchestrator import (CANDUMP_FILE, SIM_STATS_FILE, TRUTH_FILE, CandumpLog, MissionRejected, RunOptions,
                              Timeline, TruthRecorder, _plain, _run_dir, auth_stats, prepare)
-    from hil_sim.world import World
+    from hil_sim.world.world import World
 
     try:
         options = RunOptions(mission=args.mission, bus=args.bus, duration_s=args.duration)
@@ -209,7 +209,7 @@ def _truth_check(out: Path, mission, planned_duration_s: float | None = None) ->
     """The mission's requirements that truth alone decides, written to ``truth_check.json``: the SIL's
     judge, rows, limits and verdict (``planned_duration_s``: the mission file's duration when --duration
     shortened the run, so targets past the end are "not reached", as `keepout sil run` says)."""
-    from hil_sim.summary import evaluate
+    from hil_sim.sil.judge import evaluate
 
     summary, _ = evaluate(out, mission, status="completed", planned_duration_s=planned_duration_s)
     results = [r for r in summary["requirements"] if r["name"].startswith(TRUTH_REQUIREMENTS)]

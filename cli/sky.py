@@ -1,7 +1,7 @@
 """``keepout sky MISSION --at T`` (or ``--from T0 --to T1 --step S``): where the Sun, the Moon, the Earth
 limb and each keep-out zone are, and when each target is free of every zone, for picking targets.
 
-The geometry is the validator's own (`hil_sim.physics_checks`): the onboard ephemeris
+The geometry is the validator's own (`hil_sim.mission.physics_checks`): the onboard ephemeris
 (`fsw.guidance.SkyEphemeris`), the zones built by `physics_checks.SkyZones` as the flight software builds
 them (physical, and inflated by the law margin plus the rebuild tolerance), the schedule of targets
 `physics_checks.schedule` and the signed margin `physics_checks.signed_margin_deg`. A target is *free* at
@@ -23,11 +23,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hil_sim.eclipse import SUN_RADIUS_KM
+from hil_sim.world.eclipse import SUN_RADIUS_KM
 
 if TYPE_CHECKING:
-    from hil_sim.mission import Mission
-    from hil_sim.physics_checks import SkyZones
+    from hil_sim.mission.model import Mission
+    from hil_sim.mission.physics_checks import SkyZones
 
 EXIT_REJECTED = 2
 MOON_RADIUS_KM = 1_737.4
@@ -123,7 +123,7 @@ def _radius_about(zone: Any, center: np.ndarray) -> float:
 def targets(mission: "Mission") -> list[Target]:
     """The POINTING targets of the run in order, each with the interval it is commanded (the validator's
     schedule); a target commanded twice is listed once per interval."""
-    from hil_sim.physics_checks import schedule
+    from hil_sim.mission.physics_checks import schedule
 
     return [Target(s.source, np.asarray(s.target, dtype=float), s.t_start_s, s.t_end_s)
             for s in schedule(mission) if s.mode == "POINTING"]
@@ -131,7 +131,7 @@ def targets(mission: "Mission") -> list[Target]:
 
 def target_margins(sky: "SkyZones", target_N: np.ndarray, t_s: float) -> list[tuple[float, float]]:
     """(physical, inflated) signed margin [deg] of a direction to each zone at ``t_s``."""
-    from hil_sim.physics_checks import signed_margin_deg
+    from hil_sim.mission.physics_checks import signed_margin_deg
 
     return [(signed_margin_deg(p, target_N), signed_margin_deg(l, target_N))
             for p, l in zip(sky.physical(t_s), sky.law(t_s))]
@@ -162,7 +162,7 @@ def windows(times: np.ndarray, free: np.ndarray) -> list[tuple[float, float, boo
 def sample_times(sky: "SkyZones", t0: float, t1: float, step_s: float | None) -> np.ndarray:
     """Times from t0 to t1 (both included) every ``step_s``; by default the validator's step, at which no
     zone centre moves more than `physics_checks.ZONE_MOTION_PER_SAMPLE_DEG` between samples."""
-    from hil_sim.physics_checks import ZONE_MOTION_PER_SAMPLE_DEG
+    from hil_sim.mission.physics_checks import ZONE_MOTION_PER_SAMPLE_DEG
 
     if step_s is None:
         rate = sky.max_rate_deg_s(t0)
@@ -194,7 +194,7 @@ def parse_time(text: str, epoch: datetime, what: str) -> float:
 
 
 def _ra_dec(v: np.ndarray) -> tuple[float, float]:
-    from hil_sim.skyplot import ra_dec_deg
+    from hil_sim.sil.skyplot import ra_dec_deg
 
     ra, dec = ra_dec_deg(v)
     return float(ra[0]), float(dec[0])
@@ -245,13 +245,13 @@ def report(mission: "Mission", sky: "SkyZones", at_s: float, times: np.ndarray) 
 
 
 def plot(mission: "Mission", sky: "SkyZones", at_s: float, path: Path) -> Path:
-    """The sky at ``at_s`` on the full-sky map of every keepout plot (hil_sim.skyplot)."""
+    """The sky at ``at_s`` on the full-sky map of every keepout plot (hil_sim.sil.skyplot)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hil_sim import skyplot
+    from hil_sim.sil import skyplot
 
     colours = {"sun": "#dd8452", "moon": "#8172b3", "earth": "#4c72b0", "inertial": "#937860"}
     fig = plt.figure(figsize=(11, 6))
@@ -290,8 +290,8 @@ def _closed(points: np.ndarray) -> np.ndarray:
 
 
 def _sky(args: argparse.Namespace) -> int:
-    from hil_sim.mission import load_mission_or_report
-    from hil_sim.physics_checks import SkyZones, ZoneBuildError
+    from hil_sim.mission.model import load_mission_or_report
+    from hil_sim.mission.physics_checks import SkyZones, ZoneBuildError
 
     mission = load_mission_or_report(args.mission)
     if mission is None:

@@ -7,8 +7,8 @@ control loop exists. Writes the truth in the SIL run's truth.npz layout (``t_s``
 ``omega_BN_B``, ``wheel_speed_rad_s``, ``wheel_torque_Nm``, ``sun_N``, ``moon_N``, ``earth_N``,
 ``r_sc_N_km``, ``cycle_done`` all false: no flight software answered) plus ``H_N_Nms``, the total angular
 momentum in inertial axes, each environment torque the mission turns on in body axes (``srp_torque_B_Nm``:
-solar radiation pressure, hil_sim.environment), and ``sunlit_fraction``, the share of the Sun's disc seen past the Earth (0 in
-the umbra, 1 in full Sun: the conical shadow of hil_sim.eclipse), and prints a summary: the attitude drift,
+solar radiation pressure, hil_sim.world.environment), and ``sunlit_fraction``, the share of the Sun's disc seen past the Earth (0 in
+the umbra, 1 in full Sun: the conical shadow of hil_sim.world.eclipse), and prints a summary: the attitude drift,
 the largest body rate, the change of angular momentum (what the disturbances put in) and the time in the
 Earth's shadow. ``keepout export`` and the plots read the file as a
 run's truth.
@@ -29,10 +29,10 @@ EXIT_REJECTED = 2
 
 def propagate(mission, duration_s: float, step_s: float) -> dict[str, np.ndarray]:
     """The truth of ``mission`` over ``duration_s``, recorded every ``step_s``, wheels commanding zero."""
-    from hil_sim.environment import EFFECT_KEYS, EFFECTS, environment_effects
-    from hil_sim.mission import world_params
-    from hil_sim.sil import TruthRecorder
-    from hil_sim.world import World
+    from hil_sim.world.environment import EFFECT_KEYS, EFFECTS, environment_effects
+    from hil_sim.mission.model import world_params
+    from hil_sim.sil.orchestrator import TruthRecorder
+    from hil_sim.world.world import World
 
     world = World(world_params(mission), seed=mission.seed)
     n_steps = int(math.ceil(duration_s / step_s - 1e-9))
@@ -52,7 +52,7 @@ def propagate(mission, duration_s: float, step_s: float) -> dict[str, np.ndarray
         if effects:
             env_torque[k] = world.batch.environment_torques_B()[0]
     n = recorder.n
-    from hil_sim.eclipse import sunlit_fraction
+    from hil_sim.world.eclipse import sunlit_fraction
 
     sun_km, _ = world.batch.ephemeris.positions_N_km(recorder.t_s[:n])
     return {"sunlit_fraction": sunlit_fraction(recorder.r_sc_N_km[:n], sun_km), "t_s": recorder.t_s[:n], "q_NB": recorder.q_NB[:n], "omega_BN_B": recorder.omega_BN_B[:n],
@@ -69,7 +69,7 @@ def summary(truth: dict[str, np.ndarray]) -> dict[str, float]:
     drift = 2.0 * np.degrees(np.arccos(np.clip(np.abs(q @ q[0]), 0.0, 1.0)))
     lit = truth["sunlit_fraction"]
     shadow = lit < 1.0
-    from hil_sim.environment import EFFECT_KEYS
+    from hil_sim.world.environment import EFFECT_KEYS
 
     peaks = {f"{key}_peak": float(np.linalg.norm(truth[key], axis=1).max()) for key in EFFECT_KEYS if key in truth}
     return {**peaks, "umbra_fraction": float(np.mean(lit == 0.0)), "penumbra_fraction": float(np.mean(shadow & (lit > 0.0))),
@@ -104,8 +104,8 @@ def _positive(text: str) -> float:
 
 
 def _truth(args: argparse.Namespace) -> int:
-    from hil_sim.environment import EFFECT_KEYS, EFFECTS
-    from hil_sim.mission import load_mission_or_report
+    from hil_sim.world.environment import EFFECT_KEYS, EFFECTS
+    from hil_sim.mission.model import load_mission_or_report
 
     mission = load_mission_or_report(args.mission)
     if mission is None:

@@ -521,7 +521,7 @@ class ConfigError(ValueError):
 # ---------------------------------------------------------------------------------- mission files
 # Where each piece of the flight software's knowledge comes from when the mission file does not give it under
 # flight_software (`knowledge_from_truth` fills it in): knowledge key -> the truth key written once. The
-# validator reports an error in such a copy at its truth key (hil_sim.mission); docs/missions.md lists the
+# validator reports an error in such a copy at its truth key (hil_sim.mission.model); docs/missions.md lists the
 # source as the key's default.
 KNOWLEDGE_SOURCES: dict[tuple[str, ...], tuple[str, ...]] = {
     ("flight_software", "epoch_utc"): ("epoch_utc",),

@@ -25,8 +25,8 @@ import time
 def warm(missions: list[str] | None = None, seconds: float = 2.0, out=sys.stdout) -> float:
     """Run the check and a short closed loop of each mission; returns the wall time [s]."""
     from hil_sim.campaign.fast import run_fast
-    from hil_sim.mission import load_mission
-    from hil_sim.physics_checks import check_mission_cached
+    from hil_sim.mission.model import load_mission
+    from hil_sim.mission.physics_checks import check_mission_cached
     from keepout_config import config_path
 
     paths = sorted(config_path("missions").glob("*.yaml")) if not missions else list(missions)

@@ -2,7 +2,7 @@
 
 ``open_bus(spec)``, ``Icd`` and ``E2EReceiver`` are re-exported here; heavy modules (cantools, python-can,
 numba for the burst codec in ``comms.bus.kernels``) load on first use of this package only. The flight
-software's driver is ``fsw.bus``, the simulator's devices ``hil_sim.devices``: both ends use this codec.
+software's driver is ``fsw.bus``, the simulator's devices ``hil_sim.devices.nodes``: both ends use this codec.
 """
 from comms.bus.crc import crc8_sae_j1850, e2e_crc
 from comms.bus.e2e import E2EReceiver, ReceivedFrame

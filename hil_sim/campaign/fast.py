@@ -3,12 +3,12 @@
 Per GNC tick: ``Simulator.begin_tick()`` (SYNC + device frames through the ICD, E2E protected),
 ``FswBusDriver.collect_tick(0)`` and ``FlightSoftware.run_cycle`` (the flight software's own code,
 unchanged), ``Simulator.end_tick(wait_s=0)`` (wheel commands taken off the bus, world stepped). The
-ground's timeline is released by the SIL's own ``hil_sim.sil.Timeline`` as real CCSDS telecommand packets
+ground's timeline is released by the SIL's own ``hil_sim.sil.orchestrator.Timeline`` as real CCSDS telecommand packets
 into the flight software's dispatcher at the tick of their time. Nothing waits on a clock, so a run is
 deterministic and as fast as the code allows.
 
-The run is recorded (``hil_sim.sil.TruthRecorder``) and judged on truth with the SIL's functions
-(``hil_sim.summary``: keep-out margins to the physical zones around the truth Sun/Moon/Earth, S^3 zones,
+The run is recorded (``hil_sim.sil.orchestrator.TruthRecorder``) and judged on truth with the SIL's functions
+(``hil_sim.sil.judge``: keep-out margins to the physical zones around the truth Sun/Moon/Earth, S^3 zones,
 errors and settling per commanded target), so ``fast`` and ``sil`` judge alike. Every dispersed path is read back from the objects the run used
 (``WorldParams`` of the world, the flight software's config, the telecommands actually decoded, the
 fault injector's specs), so a dispersion that does not land is caught by ``execute``.
@@ -24,7 +24,7 @@ import numpy as np
 
 from hil_sim.campaign import dispersions as dsp
 from hil_sim.campaign.execute import MAX_TRAJECTORY_POINTS, RunResult
-from hil_sim.faults import WHEEL_FAULT_MODES, WHEEL_MESSAGE
+from hil_sim.devices.faults import WHEEL_FAULT_MODES, WHEEL_MESSAGE
 
 _channel_ids = itertools.count()
 # the events a run's result lists: FDIR's trips, and a plug-in stopped by keepout's guard
@@ -66,11 +66,11 @@ class _EventRecorder:
 
 
 class _TruthRows:
-    """The truth ``hil_sim.sil.TruthRecorder`` keeps, for judging only: the world's state column and its
+    """The truth ``hil_sim.sil.orchestrator.TruthRecorder`` keeps, for judging only: the world's state column and its
     Sun/Moon/Earth row copied as they are each tick (the SIL recorder builds a ``World.truth`` first)."""
 
     def __init__(self, n_ticks: int, world: Any) -> None:
-        from hil_sim.world import AUX_EARTH, AUX_MOON, AUX_R_SC, AUX_SUN
+        from hil_sim.world.world import AUX_EARTH, AUX_MOON, AUX_R_SC, AUX_SUN
 
         self.batch = world.batch
         self.n = 0
@@ -110,7 +110,7 @@ class _TruthRows:
 
 class _EstimateRows:
     """The MEKF's attitude and attitude covariance at each tick, to judge its consistency on truth
-    (`hil_sim.consistency`): only fast mode can read the flight software's full covariance."""
+    (`hil_sim.sil.consistency`): only fast mode can read the flight software's full covariance."""
 
     def __init__(self, n_rows: int) -> None:
         self._n_rows = n_rows
@@ -139,7 +139,7 @@ class _EstimateRows:
 
     def metrics(self, truth: dict[str, np.ndarray]) -> dict[str, float]:
         """``nees_mean`` and ``nees_band_fraction`` (cycles inside the 95 % chi-square band)."""
-        from hil_sim.consistency import attitude_nees, band_fraction
+        from hil_sim.sil.consistency import attitude_nees, band_fraction
 
         keep = self.rows[:self.n] < len(truth["q_NB"])
         rows = self.rows[:self.n][keep]
@@ -170,10 +170,10 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
     from fsw.assembly import build_flight_software
     from comms.bus import open_bus
     from fsw.telecommand import CommandDispatcher
-    from hil_sim.lockstep import Simulator
-    from hil_sim.mission import door_params, world_params
-    from hil_sim.sil import Timeline
-    from hil_sim.world import World
+    from hil_sim.sil.lockstep import Simulator
+    from hil_sim.mission.model import door_params, world_params
+    from hil_sim.sil.orchestrator import Timeline
+    from hil_sim.world.world import World
 
     params = world_params(mission)
     world = World(params, seed=seed)
@@ -267,7 +267,7 @@ def _judge_run(mission: Any, record: dict[str, np.ndarray], estimates: _Estimate
                sim: Any, fsw: Any) -> tuple[dict[str, float], dict[str, np.ndarray]]:
     """(metrics, trajectory) of the run: `judge` on truth and the events, the estimation's metrics, the
     plug-ins' and the door's."""
-    from hil_sim.summary import acknowledged_rate_limits
+    from hil_sim.sil.judge import acknowledged_rate_limits
 
     trips = [str(a.get("monitor", "?")) for _, name, a in telemetry.events if name == "FDIR_TRIPPED"]
     rejected = sum(1 for _, name, _ in telemetry.events if name in ("CMD_REJECTED", "TARGET_REJECTED"))
@@ -334,11 +334,11 @@ def wheels_lost(mission, end_s: float) -> set[int]:
 def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycle_slips: float,
           rejected_commands: int = 0, gains_set: Sequence[tuple[float, float]] = (),
           ) -> tuple[dict[str, float], dict[str, np.ndarray]]:
-    """A run's metrics, judged on truth with the SIL's own functions (``hil_sim.summary``), so the fast and
-    sil modes agree. ``truth``: the arrays of ``hil_sim.sil.TruthRecorder``; ``fdir_trips``: the monitor of
+    """A run's metrics, judged on truth with the SIL's own functions (``hil_sim.sil.judge``), so the fast and
+    sil modes agree. ``truth``: the arrays of ``hil_sim.sil.orchestrator.TruthRecorder``; ``fdir_trips``: the monitor of
     every FDIR_TRIPPED event; ``cycle_slips``: lockstep ticks the flight software never answered;
     ``gains_set``: the rate limits the flight software acknowledged (GAINS_SET), for the rate judge."""
-    from hil_sim import summary
+    from hil_sim.sil import judge as summary
     t = truth["t_s"]
     n = len(t)
     req = mission.requirements

@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from hil_sim import skyplot
+from hil_sim.sil import skyplot
 from hil_sim.campaign.execute import STATUS_ERROR, STATUS_FAIL, RunRecord
 from hil_sim.campaign.results import Verdict
 from hil_sim.campaign.spec import Campaign, Criterion

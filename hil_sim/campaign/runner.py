@@ -50,7 +50,7 @@ def build_plan(campaign_path: str | Path, *, mode: str | None = None, runs: int 
                campaign: Campaign | None = None) -> tuple[Plan, Path]:
     """Load the campaign and its base mission, check every dispersion path, and return the plan and the
     base mission file. ``run_function``/``model_class`` default to the mode's function and
-    ``hil_sim.mission.Mission`` (tests inject small deterministic stand-ins)."""
+    ``hil_sim.mission.model.Mission`` (tests inject small deterministic stand-ins)."""
     campaign = campaign or load_campaign(campaign_path)
     if runs is not None:
         campaign = campaign.model_copy(update={"runs": int(runs)})
@@ -58,18 +58,18 @@ def build_plan(campaign_path: str | Path, *, mode: str | None = None, runs: int 
         campaign = campaign.model_copy(update={"mode": mode})
     base_path = resolve_base_mission(campaign_path, campaign)
     if model_class is None:
-        from hil_sim.mission import Mission, load_mission
+        from hil_sim.mission.model import Mission, load_mission
         model_class = Mission
         base_model = load_mission(base_path)  # file:line:col errors for a bad base mission
     else:
-        from hil_sim.yaml_loader import load_model
+        from hil_sim.mission.loader import load_model
         base_model = load_model(base_path, model_class)
-    from hil_sim.yaml_loader import load_marked
+    from hil_sim.mission.loader import load_marked
     base_raw = load_marked(base_path).data
     if model_class.__name__ == "Mission":
         # the flight software's knowledge is fixed from the values written in the file, before any
         # dispersion: a dispersed truth value never reaches the flight software
-        from hil_sim.mission import written_once
+        from hil_sim.mission.model import written_once
         base_raw = written_once(base_raw)
     nominal = dsp.nominal_values(campaign.dispersions, base_model)
     fn = run_function or resolve_run_function(MODE_RUN_FUNCTIONS[campaign.mode])
@@ -182,8 +182,8 @@ def _init_worker() -> None:
 # What a fast-mode run imports, loaded once by the forkserver so each worker starts with it instead of
 # importing it on its own (~1.5 s per worker, which is wall time whenever workers share a core).
 # (first: the forkserver's own lifetime, see hil_sim.campaign._forkserver_lifetime)
-_FORKSERVER_PRELOAD = ("hil_sim.campaign._forkserver_lifetime", "hil_sim.campaign.fast", "hil_sim.world",
-                       "hil_sim.lockstep", "hil_sim.sil", "hil_sim.summary", "hil_sim.mission", "fsw.app", "fsw.bus",
+_FORKSERVER_PRELOAD = ("hil_sim.campaign._forkserver_lifetime", "hil_sim.campaign.fast", "hil_sim.world.world",
+                       "hil_sim.sil.lockstep", "hil_sim.sil.orchestrator", "hil_sim.sil.judge", "hil_sim.mission.model", "fsw.app", "fsw.bus",
                        "fsw.telecommand")
 
 

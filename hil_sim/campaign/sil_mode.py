@@ -1,4 +1,4 @@
-"""The ``sil`` execution mode: each run is a full three-process SIL run (``hil_sim.sil.run_sil``).
+"""The ``sil`` execution mode: each run is a full three-process SIL run (``hil_sim.sil.orchestrator.run_sil``).
 
 The dispersed mission is written to a YAML file and run like ``keepout sil run``: simulator in this
 worker process, the flight software (``python -m fsw``) and the ground monitor as their own processes,
@@ -35,9 +35,10 @@ class SilRunError(RuntimeError):
 
 
 def run_sil(mission: Any, seed: int, mode: str = "sil", paths: Sequence[str] = ()) -> RunResult:
-    from hil_sim import sil, summary as summary_mod
+    from hil_sim.sil import orchestrator as sil
+    from hil_sim.sil import judge as summary_mod
     from hil_sim.campaign.fast import judge
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
 
     data = mission.model_dump(mode="json")
     if not str(data.get("bus", "auto")).startswith("udp_multicast"):

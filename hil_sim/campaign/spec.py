@@ -1,7 +1,7 @@
 """The campaign file: a base mission, its dispersions, how many runs, the seed, the mode and the pass criteria.
 
 A campaign YAML is validated like a mission (pydantic v2, ``extra="forbid"``, every problem reported as
-``file:line:col key.path: message`` by ``hil_sim.yaml_loader``). Dispersions name key paths into the
+``file:line:col key.path: message`` by ``hil_sim.mission.loader``). Dispersions name key paths into the
 mission model, e.g. ``spacecraft.inertia_B_kgm2`` or ``timeline[1].target_N``; a path that does not exist
 in the base mission is reported at load time with the keys that do exist there.
 """
@@ -16,7 +16,7 @@ from typing import Annotated, Any, Literal, Union
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from comms.dictionary import FDIR_MONITORS
-from hil_sim.faults import FAULT_KINDS
+from hil_sim.devices.faults import FAULT_KINDS
 from keepout_config import config_path
 
 SCHEMA_VERSION = 1
@@ -330,8 +330,8 @@ class Campaign(_Model):
 
 
 def load_campaign(path: str | Path, *, text: str | None = None) -> Campaign:
-    """Load and validate a campaign file; raise ``hil_sim.yaml_loader.ConfigError`` listing every problem."""
-    from hil_sim.yaml_loader import load_model
+    """Load and validate a campaign file; raise ``hil_sim.mission.loader.ConfigError`` listing every problem."""
+    from hil_sim.mission.loader import load_model
     return load_model(path, Campaign, text=text)
 
 
@@ -349,7 +349,7 @@ SCHEMA_PATH = config_path("schema", "campaign.schema.json")
 
 def campaign_json_schema() -> dict[str, Any]:
     """Draft-07 JSON Schema of a campaign file (same rewriting as the mission schema)."""
-    from hil_sim.mission import DRAFT07, _draft07
+    from hil_sim.mission.model import DRAFT07, _draft07
     raw = Campaign.model_json_schema(ref_template="#/definitions/{model}")
     definitions = raw.pop("$defs", {})
     body = _draft07(raw)

@@ -52,7 +52,7 @@ SUITE_SCHEMA_PATH = config_path("schema", "suite.schema.json")
 
 def suite_json_schema() -> dict[str, Any]:
     """Draft-07 JSON Schema of a suite file (for editors, as the campaign schema)."""
-    from hil_sim.mission import DRAFT07, _draft07
+    from hil_sim.mission.model import DRAFT07, _draft07
     raw = Suite.model_json_schema(ref_template="#/definitions/{model}")
     definitions = raw.pop("$defs", {})
     return {"$schema": DRAFT07, **_draft07(raw), "definitions": {k: _draft07(v) for k, v in sorted(definitions.items())}}
@@ -67,13 +67,13 @@ def write_suite_schema(path: str | Path = SUITE_SCHEMA_PATH) -> Path:
 
 def is_suite(path: str | Path) -> bool:
     """Whether a campaign file is a suite (a top-level ``suite`` key)."""
-    from hil_sim.yaml_loader import load_marked
+    from hil_sim.mission.loader import load_marked
     data = load_marked(path).data
     return isinstance(data, dict) and "suite" in data
 
 
 def load_suite(path: str | Path) -> Suite:
-    from hil_sim.yaml_loader import load_model
+    from hil_sim.mission.loader import load_model
     return load_model(path, Suite)
 
 

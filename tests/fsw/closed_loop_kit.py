@@ -1,6 +1,6 @@
 """Helpers for closed-loop tests: flight software against the hil_sim truth models.
 
-`DirectLoop` runs the flight software and a `hil_sim.world.World` in lockstep without a bus (the driver
+`DirectLoop` runs the flight software and a `hil_sim.world.world.World` in lockstep without a bus (the driver
 is a recorder that hands the wheel commands straight to the world). It exercises the same
 `FlightSoftware.run_cycle` code as the bus path, at unit-test speed; the bus path itself is tested with
 the virtual CAN interface elsewhere.
@@ -136,10 +136,10 @@ def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
 
 
 class BusLoop:
-    """Flight software and `hil_sim.lockstep.Simulator` in one process on a ``virtual`` CAN bus.
+    """Flight software and `hil_sim.sil.lockstep.Simulator` in one process on a ``virtual`` CAN bus.
 
     Every frame goes through the ICD encoding, E2E protection and the flight software's bus driver, and
-    the simulator's fault injector (``faults``: hil_sim.faults.FaultSpec or dicts) can act on it.
+    the simulator's fault injector (``faults``: hil_sim.devices.faults.FaultSpec or dicts) can act on it.
     """
 
     _channel = 0
@@ -148,7 +148,7 @@ class BusLoop:
         from fsw.app import FlightSoftware
         from fsw.bus import FswBusDriver
         from comms.bus import Icd, open_bus
-        from hil_sim.lockstep import Simulator
+        from hil_sim.sil.lockstep import Simulator
 
         BusLoop._channel += 1
         name = f"virtual:closed-loop-{id(self)}-{BusLoop._channel}"

@@ -26,8 +26,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.fixture
 def loop():
-    from hil_sim.params import WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import WorldParams
+    from hil_sim.world.world import World
 
     wp = WorldParams()
     cfg = fsw_config_for(wp, initial_mode="SAFE", law={"assumption_check": "inline"},

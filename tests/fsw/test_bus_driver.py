@@ -183,8 +183,8 @@ def test_realtime_cycle_done_answers_the_newest_sync_and_a_late_cycle_still_coun
 
     from closed_loop_kit import BusLoop, fsw_config_for
 
-    from hil_sim.params import WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import WorldParams
+    from hil_sim.world.world import World
 
     wp = WorldParams()
     cfg = fsw_config_for(wp, initial_mode="SAFE", law={"assumption_check": "off"})

@@ -92,8 +92,8 @@ def test_replayed_device_frames_are_detected(icd: Icd, buses) -> None:
 def test_unknown_identifiers_reach_housekeeping() -> None:
     from closed_loop_kit import BusLoop, fsw_config_for
 
-    from hil_sim.params import WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import WorldParams
+    from hil_sim.world.world import World
 
     wp = WorldParams()
     loop = BusLoop(fsw_config_for(wp, initial_mode="SAFE", law={"assumption_check": "off"}), World(wp, seed=0))

@@ -51,8 +51,8 @@ def test_every_signal_comment_states_its_resolution(icd: Icd) -> None:
 
 
 def test_resolutions_are_below_the_default_sensor_noise(icd: Icd) -> None:
-    """Quantisation must not dominate: compare LSBs with the truth models' default noise (hil_sim.params)."""
-    from hil_sim.params import ImuParams, StarTrackerParams, WheelParams
+    """Quantisation must not dominate: compare LSBs with the truth models' default noise (hil_sim.world.params)."""
+    from hil_sim.world.params import ImuParams, StarTrackerParams, WheelParams
 
     imu = ImuParams()
     per_sample_noise = imu.angle_random_walk_rad_per_sqrt_s * math.sqrt(imu.rate_hz)

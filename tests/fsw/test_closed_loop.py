@@ -1,7 +1,7 @@
 """Closed loop: flight software against the hil_sim truth models in lockstep.
 
 * POINTING: a 120 deg slew past a star-shaped Sun zone and a Moon cone, every frame through the virtual
-  CAN bus (hil_sim.lockstep.Simulator + FswBusDriver). The requirement is judged on the PHYSICAL zones
+  CAN bus (hil_sim.sil.lockstep.Simulator + FswBusDriver). The requirement is judged on the PHYSICAL zones
   built by gnc.sky_zones from the TRUTH ephemeris (exact shapes), not on the inflated zones the law uses.
 * QUATERNION: the paper's seven-cone problem on S^3 (Simulation section) with a real spacecraft: inertia,
   four wheels with torque/speed limits, noisy gyro and star tracker, 10 Hz GNC, from random initial
@@ -41,8 +41,8 @@ def _signed_deg(zone, x) -> float:
 
 
 def test_pointing_slew_past_sun_star_zone_and_moon_cone_through_the_bus() -> None:
-    from hil_sim.params import SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
+    from hil_sim.world.world import World
     from scipy.spatial.transform import Rotation
 
     y0, yd, _, _ = slew_geometry(EPOCH.replace("Z", "+00:00"))
@@ -92,8 +92,8 @@ PHYS_CONES = [gz.ConicZone(np.array(g, dtype=float), math.pi / 12) for g in G7]
 
 
 def _seven_cone_run(seed: int, margin_deg: float = 3.0, seconds: float = 120.0):
-    from hil_sim.params import SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
+    from hil_sim.world.world import World
     from scipy.spatial.transform import Rotation
 
     rng = np.random.default_rng(1000 + seed)
@@ -163,8 +163,8 @@ def test_paper_s3_star_zone_blocking_the_shortest_rotation(tilt: float) -> None:
     with its antipodal copy so that it forbids the same physical attitudes on both sheets. The start lies
     88 deg (on S^3) from the target, nearly behind the copy at -g, so the shortest rotation is blocked:
     StarShapedLaw through the real loop goes around it safely and converges."""
-    from hil_sim.params import SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
+    from hil_sim.world.world import World
     from scipy.spatial.transform import Rotation
 
     from fsw.app import FlightSoftware

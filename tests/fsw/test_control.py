@@ -55,8 +55,8 @@ def test_isolation_refuses_to_lose_three_axis_control() -> None:
 
 
 def _world(initial_wheel_speed: float = 0.0):
-    from hil_sim.params import SpacecraftParams, WheelParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import SpacecraftParams, WheelParams, WorldParams
+    from hil_sim.world.world import World
 
     wheels = tuple(WheelParams(axis_B=tuple(G[:, i]), initial_speed_rad_s=initial_wheel_speed * (1 if i % 2 else -1))
                    for i in range(4))

@@ -9,7 +9,7 @@ import pytest
 
 from fsw.app import CORRUPT_STATUS_HEARD_S
 from hil_sim.campaign.fast import run_fast
-from hil_sim.mission import BusFault, load_mission
+from hil_sim.mission.model import BusFault, load_mission
 
 ROOT = Path(__file__).resolve().parents[2]
 

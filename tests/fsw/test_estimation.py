@@ -22,8 +22,8 @@ def _err_deg(q_a, q_b) -> float:
 
 
 def _world(bias=(0.0, 0.0, 0.0), q_BS=(1.0, 0.0, 0.0, 0.0), omega0=(0.01, -0.02, 0.015)):
-    from hil_sim.params import ImuParams, SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import ImuParams, SpacecraftParams, StarTrackerParams, WorldParams
+    from hil_sim.world.world import World
 
     wp = WorldParams(
         spacecraft=SpacecraftParams(omega_BN_B0_rad_s=omega0),

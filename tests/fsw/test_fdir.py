@@ -17,8 +17,8 @@ EPOCH = "2030-03-29T12:00:00Z"
 
 
 def _setup(faults=(), fsw_sections=None, q0=(1.0, 0.0, 0.0, 0.0)):
-    from hil_sim.params import SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
+    from hil_sim.world.world import World
 
     wp = WorldParams(epoch_utc=EPOCH, spacecraft=SpacecraftParams(q_NB0=tuple(q0)),
                      star_tracker=StarTrackerParams(sun_exclusion_deg=0.0, moon_exclusion_deg=0.0))

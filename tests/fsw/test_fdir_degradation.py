@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from hil_sim.campaign.fast import run_fast
-from hil_sim.mission import BusFault, load_mission
+from hil_sim.mission.model import BusFault, load_mission
 
 ROOT = Path(__file__).resolve().parents[2]
 # the two ways a wheel is lost here: its status frames (it still obeys), or the wheel itself

@@ -50,8 +50,8 @@ def test_rule_refuses_the_demo_commands_that_entered_the_moon_zone() -> None:
 
 
 def _bus(fsw_sections=None, q0=(1.0, 0.0, 0.0, 0.0)):
-    from hil_sim.params import SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
+    from hil_sim.world.world import World
 
     wp = WorldParams(epoch_utc=EPOCH, spacecraft=SpacecraftParams(q_NB0=tuple(q0)),
                      star_tracker=StarTrackerParams(sun_exclusion_deg=0.0, moon_exclusion_deg=0.0))
@@ -81,8 +81,8 @@ def test_set_gains_beyond_the_braking_distance_is_rejected_by_telecommand_with_i
 
 
 def test_config_check_applies_the_onboard_rule_to_every_timeline_command(tmp_path) -> None:
-    from hil_sim.mission import load_mission
-    from hil_sim.physics_checks import check_mission
+    from hil_sim.mission.model import load_mission
+    from hil_sim.mission.physics_checks import check_mission
 
     data = yaml.safe_load(DEMO.read_text())
     data["timeline"][:0] = [{"t_s": 5.0, "command": "SET_GAINS", "k1": 1.0, "rate_limit_deg_s": 20.0},

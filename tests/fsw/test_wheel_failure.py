@@ -19,8 +19,8 @@ KINDS = ("no_torque", "stuck", "silent_driver", "commands_lost")
 
 
 def _loop(kind: str, wheel: int, t_fail_s: float, start_N: np.ndarray):
-    from hil_sim.params import SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world import World
+    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
+    from hil_sim.world.world import World
 
     wp = WorldParams(epoch_utc=EPOCH, spacecraft=SpacecraftParams(q_NB0=tuple(attitude_with_boresight(start_N))),
                      star_tracker=StarTrackerParams(sun_exclusion_deg=0.0, moon_exclusion_deg=0.0))

@@ -12,7 +12,7 @@ Targets:
     tick assembly, real-time collection) reading frames from a scripted bus;
   * ``TmTarget``: the ground's telemetry path (``GroundMonitor.process``: link security, decoder,
     sequence and limit checks), with and without link security;
-  * ``MissionTarget``: the mission loader (``hil_sim.mission.load_mission``) on mission files; its
+  * ``MissionTarget``: the mission loader (``hil_sim.mission.model.load_mission``) on mission files; its
     documented refusal is ``ConfigError``.
 """
 from __future__ import annotations
@@ -368,8 +368,8 @@ class MissionTarget:
         self.outcomes: collections.Counter[str] = collections.Counter()
 
     def feed(self, text: bytes) -> None:
-        from hil_sim.mission import load_mission
-        from hil_sim.yaml_loader import ConfigError
+        from hil_sim.mission.model import load_mission
+        from hil_sim.mission.loader import ConfigError
 
         self.path.write_bytes(text)
         try:

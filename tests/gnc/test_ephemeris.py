@@ -22,7 +22,7 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def astropy_truth():
-    from hil_sim.ephemeris_truth import astropy_sun_moon_N_km
+    from hil_sim.world.ephemeris import astropy_sun_moon_N_km
 
     start = eph.julian_date_tdb("2026-01-01T00:00:00Z")
     end = eph.julian_date_tdb("2036-12-31T00:00:00Z")

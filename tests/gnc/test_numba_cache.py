@@ -114,10 +114,10 @@ def test_every_cached_kernel_of_the_packages_goes_through_the_locator():
 
 
 def test_closure_follows_imports_across_modules():
-    files = {p.relative_to(ROOT).as_posix() for p in nc.closure_files((ROOT / "hil_sim" / "world.py").resolve())}
+    files = {p.relative_to(ROOT).as_posix() for p in nc.closure_files((ROOT / "hil_sim" / "world" / "world.py").resolve())}
     # the world step compiles the dynamics, orbit and ephemeris kernels into itself
-    assert {"hil_sim/dynamics.py", "hil_sim/orbit.py", "hil_sim/ephemeris_truth.py", "gnc/attitude.py"} <= files
-    assert "hil_sim/sil.py" not in files and "fsw/app.py" not in files
+    assert {"hil_sim/world/dynamics.py", "hil_sim/world/orbit.py", "hil_sim/world/ephemeris.py", "gnc/attitude.py"} <= files
+    assert "hil_sim/sil/orchestrator.py" not in files and "fsw/app.py" not in files
 
 
 def test_relative_imports_count(tmp_path, monkeypatch):
@@ -175,7 +175,7 @@ def test_stale_files_are_the_ones_no_current_kernel_loads(tmp_path, monkeypatch)
         "laws.f-1.py311.2.nbc"}
 
 
-@pytest.mark.parametrize("name", ["hil_sim/world.py", "fsw/estimation.py"])
+@pytest.mark.parametrize("name", ["hil_sim/world/world.py", "fsw/estimation.py"])
 def test_digest_is_stable_and_content_based(name):
     a = nc.source_digest(ROOT / name)
     assert a == nc.source_digest(str(ROOT / name)) and len(a) == 64

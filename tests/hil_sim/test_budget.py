@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from hil_sim.budget import _gravity_gradient_torques, budget
+from hil_sim.world.budget import _gravity_gradient_torques, budget
 from cli.main import main
-from hil_sim.mission import Mission, world_params
-from hil_sim.orbit import orbit_elements_array
+from hil_sim.mission.model import Mission, world_params
+from hil_sim.world.orbit import orbit_elements_array
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -39,7 +39,7 @@ def test_the_constant_torque_row_is_torque_times_time_and_its_wheel_speed() -> N
 def test_the_gravity_gradient_row_integrates_the_torque_written_out_by_hand() -> None:
     """The budget's torque (the simulator's kernel) against 3 mu / r^3 (u x I u) written out here, and the
     row's momentum against the trapezoid sum of it."""
-    from hil_sim.orbit import orbit_position_N_km
+    from hil_sim.world.orbit import orbit_position_N_km
 
     mission = Mission.model_validate(_smallsat(True))
     wp = world_params(mission)

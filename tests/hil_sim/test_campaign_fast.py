@@ -203,5 +203,5 @@ def test_shrink_through_the_cli_writes_the_smallest_failing_mission(campaign_dir
                  "--max-evaluations", "4"]) == 0
     text = capsys.readouterr().out
     assert "smallest failing case" in text
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
     assert load_mission(out / "shrink-run-000000.yaml").duration_s == 25.0

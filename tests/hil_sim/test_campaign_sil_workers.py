@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from hil_sim import sil
+from hil_sim.sil import orchestrator as sil
 from hil_sim.campaign import sil_mode
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -35,7 +35,7 @@ def test_two_workers_run_every_sil_run_to_its_end(tmp_path):
 
 
 def test_a_sil_run_that_crashed_is_an_error_not_a_fail(monkeypatch, tmp_path):
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
 
     mission = load_mission(ROOT / "config" / "missions" / "demo-pointing.yaml")
 

@@ -10,7 +10,7 @@ import yaml
 
 from hil_sim.campaign.runner import build_plan
 from hil_sim.campaign.spec import SCHEMA_PATH, campaign_json_schema, load_campaign
-from hil_sim.yaml_loader import ConfigError
+from hil_sim.mission.loader import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
 CAMPAIGNS = sorted((ROOT / "config" / "campaigns").glob("*.yaml"))
@@ -48,7 +48,7 @@ def test_shipped_campaign_validates_and_builds(path):
 @pytest.mark.parametrize("path", sorted((ROOT / "config" / "campaigns" / "missions").glob("*.yaml")),
                          ids=lambda p: p.name)
 def test_campaign_base_missions_validate(path):
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
     assert path.read_text().startswith("# yaml-language-server: $schema=../../schema/mission.schema.json")
     load_mission(path)
 

@@ -13,11 +13,11 @@ import pytest
 from fsw.bus import FswBusDriver
 from comms.bus import Icd, open_bus
 from comms.bus.burst import FrameBurst
-from hil_sim.faults import FaultSpec
-from hil_sim.lockstep import RateDampingResponder, Simulator
-from hil_sim.params import SpacecraftParams, WorldParams
-from hil_sim.sil import CandumpLog
-from hil_sim.world import World
+from hil_sim.devices.faults import FaultSpec
+from hil_sim.sil.lockstep import RateDampingResponder, Simulator
+from hil_sim.world.params import SpacecraftParams, WorldParams
+from hil_sim.sil.orchestrator import CandumpLog
+from hil_sim.world.world import World
 
 _channels = itertools.count()
 

@@ -1,4 +1,4 @@
-"""The simulator's tick kernels (hil_sim.device_kernels) against the Python of the device nodes they replace."""
+"""The simulator's tick kernels (hil_sim.devices.kernels) against the Python of the device nodes they replace."""
 from __future__ import annotations
 
 import math
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from comms.bus.icd import Icd
-from hil_sim import device_kernels as dk
-from hil_sim.devices import Devices, ImuNode, StarTrackerNode, WheelNode
-from hil_sim.params import WorldParams
-from hil_sim.world import World
+from hil_sim.devices import kernels as dk
+from hil_sim.devices.nodes import Devices, ImuNode, StarTrackerNode, WheelNode
+from hil_sim.world.params import WorldParams
+from hil_sim.world.world import World
 
 
 @pytest.fixture(scope="module")
@@ -246,7 +246,7 @@ def test_receive_commands_matches_the_per_burst_path(icd: Icd, seed: int) -> Non
     from comms.bus import open_bus
     from comms.bus.burst import FrameBurst
     from comms.bus.transport import send_burst
-    from hil_sim.lockstep import Simulator
+    from hil_sim.sil.lockstep import Simulator
 
     rng = np.random.default_rng(seed)
     sims, senders = [], []
@@ -291,7 +291,7 @@ def test_pack_arrays_views_are_the_arrays_and_the_kernels_read_them() -> None:
     view1/2/3 inside a compiled call see the same memory (a write through either shows in the other)."""
     from numba import njit
 
-    from hil_sim.world import pack_arrays, view1, view2, view3
+    from hil_sim.world.world import pack_arrays, view1, view2, view3
 
     rng = np.random.default_rng(5)
     floats = [rng.normal(size=3), rng.normal(size=(2, 5)), rng.normal(size=(3, 1, 4)), np.zeros((0, 2))]

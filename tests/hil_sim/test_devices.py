@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from comms.bus.e2e import E2EReceiver
 from comms.bus.icd import Icd
-from hil_sim.devices import (FAULT_CMD_TIMEOUT, FAULT_DRIVE, FAULT_OVERSPEED, Devices, DeviceTiming, ImuNode,
+from hil_sim.devices.nodes import (FAULT_CMD_TIMEOUT, FAULT_DRIVE, FAULT_OVERSPEED, Devices, DeviceTiming, ImuNode,
                              StarTrackerNode, WheelNode)
 
 

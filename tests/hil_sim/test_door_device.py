@@ -9,12 +9,12 @@ import pytest
 
 from fsw.bus import FswBusDriver
 from comms.bus import Icd, open_bus
-from hil_sim.devices import (DOOR_CLOSED, DOOR_CLOSING, DOOR_FAULT_CMD_TIMEOUT, DOOR_FAULT_STALLED, DOOR_OPEN,
+from hil_sim.devices.nodes import (DOOR_CLOSED, DOOR_CLOSING, DOOR_FAULT_CMD_TIMEOUT, DOOR_FAULT_STALLED, DOOR_OPEN,
                              DOOR_OPENING, DoorNode, DoorParams)
-from hil_sim.faults import FaultInjector, FaultSpec
-from hil_sim.lockstep import Simulator
-from hil_sim.params import WorldParams
-from hil_sim.world import World
+from hil_sim.devices.faults import FaultInjector, FaultSpec
+from hil_sim.sil.lockstep import Simulator
+from hil_sim.world.params import WorldParams
+from hil_sim.world.world import World
 
 _channels = itertools.count()
 PERIOD = 0.1

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from gnc.attitude import attitude_error_angle
-from hil_sim import dynamics as dyn
-from hil_sim import environment as env
-from hil_sim.params import DisturbanceParams, FacetParams
+from hil_sim.world import dynamics as dyn
+from hil_sim.world import environment as env
+from hil_sim.world.params import DisturbanceParams, FacetParams
 
 from test_srp import _propagate, _spacecraft
 

@@ -11,8 +11,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from gnc.attitude import attitude_error_angle, quat_to_dcm
-from hil_sim.params import DisturbanceParams, SpacecraftParams, WheelParams, WorldParams
-from hil_sim.world import World, WorldBatch
+from hil_sim.world.params import DisturbanceParams, SpacecraftParams, WheelParams, WorldParams
+from hil_sim.world.world import World, WorldBatch
 
 REF_DIR = Path(__file__).resolve().parents[1] / "data" / "basilisk"  # provenance: its README.md
 
@@ -122,7 +122,7 @@ def test_inertial_angular_momentum_conserved(friction):
 
 
 def test_energy_conserved_without_torque_and_dissipated_by_friction():
-    from hil_sim.dynamics import rotational_energy
+    from hil_sim.world.dynamics import rotational_energy
 
     rng = np.random.default_rng(3)
     for friction in (False, True):

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
-from hil_sim import dynamics as dyn
-from hil_sim.mission import Mission, load_mission, world_params
-from hil_sim.yaml_loader import ConfigError
+from hil_sim.world import dynamics as dyn
+from hil_sim.mission.model import Mission, load_mission, world_params
+from hil_sim.mission.loader import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
 SMALLSAT = ROOT / "config" / "missions" / "smallsat-example.yaml"
@@ -89,10 +89,10 @@ def test_off_by_default_the_dynamics_get_no_rows() -> None:
 def test_the_budget_row_is_the_kernel_and_the_kernel_the_formula() -> None:
     """The budget's SRP torque at a few times against the facet formula written out here (Sun from the truth
     ephemeris, full Sun at these times), and its momentum against the trapezoid sum of the torque."""
-    from hil_sim.budget import _environment_torques, budget
-    from hil_sim.eclipse import sunlit_fraction
-    from hil_sim.orbit import orbit_elements_array, orbit_position_N_km
-    from hil_sim.world import WorldBatch
+    from hil_sim.world.budget import _environment_torques, budget
+    from hil_sim.world.eclipse import sunlit_fraction
+    from hil_sim.world.orbit import orbit_elements_array, orbit_position_N_km
+    from hil_sim.world.world import WorldBatch
 
     mission = Mission.model_validate(_smallsat(solar_radiation_pressure=True))
     wp = world_params(mission)
@@ -132,8 +132,8 @@ def test_the_budget_row_is_the_kernel_and_the_kernel_the_formula() -> None:
 
 
 def test_the_budget_drag_row_is_the_formula_in_co_rotating_air() -> None:
-    from hil_sim.budget import _environment_torques, budget
-    from hil_sim.orbit import KeplerOrbit
+    from hil_sim.world.budget import _environment_torques, budget
+    from hil_sim.world.orbit import KeplerOrbit
 
     mission = Mission.model_validate(_smallsat(aerodynamic_drag=True))
     wp = world_params(mission)
@@ -184,9 +184,9 @@ def test_a_residual_dipole_of_nan_is_refused_and_zero_is_off(tmp_path) -> None:
 
 
 def test_truth_records_the_dipole_torque_m_cross_b() -> None:
-    from hil_sim import environment as env
+    from hil_sim.world import environment as env
     from cli.truth import propagate
-    from hil_sim.world import WorldBatch
+    from hil_sim.world.world import WorldBatch
 
     mission = Mission.model_validate(_smallsat(residual_dipole_B_Am2=[0.02, -0.01, 0.03]))
     truth = propagate(mission, 20.0, 10.0)

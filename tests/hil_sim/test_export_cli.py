@@ -11,10 +11,10 @@ import pytest
 from scipy.io import loadmat
 
 from cli import main as cli, export as export_cli
-from hil_sim.mission import load_mission, world_params
-from hil_sim.sil import TruthRecorder
-from hil_sim.summary import evaluate
-from hil_sim.world import World
+from hil_sim.mission.model import load_mission, world_params
+from hil_sim.sil.orchestrator import TruthRecorder
+from hil_sim.sil.judge import evaluate
+from hil_sim.world.world import World
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -8,10 +8,10 @@ import pytest
 
 from fsw.bus import FswBusDriver
 from comms.bus import Icd, open_bus
-from hil_sim.faults import FaultInjector, FaultSpec
-from hil_sim.lockstep import RateDampingResponder, Simulator
-from hil_sim.params import SpacecraftParams, WorldParams
-from hil_sim.world import World
+from hil_sim.devices.faults import FaultInjector, FaultSpec
+from hil_sim.sil.lockstep import RateDampingResponder, Simulator
+from hil_sim.world.params import SpacecraftParams, WorldParams
+from hil_sim.world.world import World
 
 _channels = itertools.count()
 T = 0.1  # GNC period
@@ -153,7 +153,7 @@ def test_fault_specs_are_validated(icd) -> None:
 
 
 def test_mission_bus_fault_entries_are_accepted(icd) -> None:
-    from hil_sim.mission import BusFault
+    from hil_sim.mission.model import BusFault
 
     fault = BusFault(kind="corrupt", message="IMU_RATE", start_s=1.0, end_s=2.0, bit=17)
     injector = FaultInjector(icd, [fault])
@@ -212,7 +212,7 @@ def test_lost_sync_costs_one_cycle(icd, params) -> None:
 
 def test_a_wheel_fault_fails_the_mechanism_at_its_time_and_leaves_the_frames_alone(icd, params) -> None:
     """wheel_stuck / wheel_no_torque act on the wheel, not on frames: the wheel of RWn_CMD seizes at start_s
-    (its speed relative to the body drops to zero, as hil_sim.dynamics.seize_wheel does), every frame still
+    (its speed relative to the body drops to zero, as hil_sim.world.dynamics.seize_wheel does), every frame still
     goes out, the injector's log says when, and a mission may draw it in a campaign like any fault."""
     import dataclasses
 

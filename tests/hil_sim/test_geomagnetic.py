@@ -1,5 +1,5 @@
 """A residual magnetic dipole in the Earth's field (spacecraft.disturbance.residual_dipole_B_Am2): the centred
-dipole of IGRF-14 at the epoch (hil_sim.geomagnetic, ppigrf) turning with the Earth, against Basilisk 2.12.1's
+dipole of IGRF-14 at the epoch (hil_sim.world.geomagnetic, ppigrf) turning with the Earth, against Basilisk 2.12.1's
 magneticFieldCenteredDipole + MtbEffector (tests/data/basilisk/magnetic_reference.py wrote the references),
 and the dipole's distance from the full IGRF at 550 km."""
 from __future__ import annotations
@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from gnc.attitude import attitude_error_angle
-from hil_sim import dynamics as dyn
-from hil_sim import environment as env
-from hil_sim.geomagnetic import IGRF_REFERENCE_RADIUS_KM, dipole_coefficients_T, earth_rotation_angle_rad
-from hil_sim.params import DisturbanceParams
+from hil_sim.world import dynamics as dyn
+from hil_sim.world import environment as env
+from hil_sim.world.geomagnetic import IGRF_REFERENCE_RADIUS_KM, dipole_coefficients_T, earth_rotation_angle_rad
+from hil_sim.world.params import DisturbanceParams
 from test_srp import _propagate, _spacecraft
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "basilisk"

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from gnc.attitude import attitude_error_angle
-from hil_sim.params import DisturbanceParams, OrbitParams, SpacecraftParams, WheelParams, WorldParams
-from hil_sim.world import World
+from hil_sim.world.params import DisturbanceParams, OrbitParams, SpacecraftParams, WheelParams, WorldParams
+from hil_sim.world.world import World
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "basilisk"
 

@@ -15,9 +15,9 @@ import pytest
 from fsw.bus import FswBusDriver
 from comms.bus import Icd, open_bus
 from comms.bus.transport import random_udp_endpoint
-from hil_sim.lockstep import RateDampingResponder, Simulator
-from hil_sim.params import SpacecraftParams, WorldParams
-from hil_sim.world import World
+from hil_sim.sil.lockstep import RateDampingResponder, Simulator
+from hil_sim.world.params import SpacecraftParams, WorldParams
+from hil_sim.world.world import World
 
 ROOT = Path(__file__).resolve().parents[2]
 _channels = itertools.count()
@@ -189,7 +189,7 @@ def test_realtime_puts_the_flight_softwares_cycle_mid_tick(icd: Icd, monkeypatch
     simulator answers each tick a few ms before the next one begins, so any delay on the host makes the
     answer late. The simulator measures where the answers fall and delays its schedule once so the flight
     software's cycle sits PHASE_LOCK_TARGET into each tick: then the same delays cost nothing."""
-    import hil_sim.lockstep as lockstep
+    import hil_sim.sil.lockstep as lockstep
 
     if not lock:
         monkeypatch.setattr(lockstep.Simulator, "_lock_phase", lambda self: setattr(self, "_phase_locked", True))
@@ -217,7 +217,7 @@ def test_realtime_puts_the_flight_softwares_cycle_mid_tick(icd: Icd, monkeypatch
 
 # ------------------------------------------------------------------------------ multi-process lockstep
 def _start_responder(spec: str, n_wheels: int, ticks: int) -> subprocess.Popen:
-    proc = subprocess.Popen([sys.executable, "-m", "hil_sim.lockstep", "--bus", spec, "--wheels", str(n_wheels),
+    proc = subprocess.Popen([sys.executable, "-m", "hil_sim.sil.lockstep", "--bus", spec, "--wheels", str(n_wheels),
                              "--ticks", str(ticks), "--idle-timeout", "30"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
     line = proc.stdout.readline()

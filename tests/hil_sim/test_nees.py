@@ -1,5 +1,5 @@
 """MEKF consistency: the normalised estimation error squared (NEES) of the attitude, judged on truth against
-the filter's own covariance (hil_sim.consistency), over the 600 s pointing demo and over a campaign
+the filter's own covariance (hil_sim.sil.consistency), over the 600 s pointing demo and over a campaign
 (config/campaigns/nees.yaml: seeds, initial conditions, gyro bias, epoch and target dispersed, the sensor
 models known exactly), in the campaign's fast mode (the real flight software and truth models).
 
@@ -24,7 +24,7 @@ from numba import njit
 from scipy.spatial.transform import Rotation
 from scipy.stats import binom, chi2
 
-from hil_sim.consistency import (attitude_nees, band_fraction, band_fraction_interval, nees_band, thinned,
+from hil_sim.sil.consistency import (attitude_nees, band_fraction, band_fraction_interval, nees_band, thinned,
                                  time_average_interval)
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -110,7 +110,7 @@ def test_lagged_update_is_the_kalman_update_with_the_bias_seen_through_the_laten
 @pytest.mark.slow
 def test_mekf_is_consistent_over_the_demo():
     from hil_sim.campaign.fast import run_fast
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
 
     mission = load_mission(DEMO)
     with _nees_series() as series:
@@ -141,7 +141,7 @@ def test_mekf_is_consistent_over_a_campaign():
         records = [execute_run(plan, i) for i in range(runs)]
     assert all(r.status == "pass" for r in records), [(r.run, r.status, r.error) for r in records]
     from hil_sim.campaign.spec import resolve_base_mission
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
 
     period = load_mission(resolve_base_mission(CAMPAIGN, plan.campaign)).flight_software.gnc_period_s
     thin = [thinned(s, period) for s in series]

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from hil_sim.mission import load_mission
-from hil_sim.summary import acknowledged_rate_limits, peak_body_rate_fraction, rate_limit_series
+from hil_sim.mission.model import load_mission
+from hil_sim.sil.judge import acknowledged_rate_limits, peak_body_rate_fraction, rate_limit_series
 
 DEMO = Path(__file__).resolve().parents[2] / "config" / "missions" / "demo-pointing.yaml"
 

@@ -9,7 +9,7 @@ from cli.sil import slip_hint
 def test_the_tick_loop_asks_for_fifo_and_says_what_it_got(monkeypatch) -> None:
     import os
 
-    from hil_sim import sil
+    from hil_sim.sil import orchestrator as sil
 
     asked = []
     monkeypatch.setattr(os, "sched_setscheduler", lambda pid, policy, param: asked.append((policy, param.sched_priority)))
@@ -38,7 +38,7 @@ def test_a_real_time_run_failed_on_slips_says_what_to_do() -> None:
 def test_real_time_judges_the_flight_softwares_slips_strictly_and_lost_ticks_against_the_tolerance() -> None:
     from types import SimpleNamespace
 
-    from hil_sim.summary import HOST_LOST_TICK_FRACTION, _judge_cycle_slips, _Requirements
+    from hil_sim.sil.judge import HOST_LOST_TICK_FRACTION, _judge_cycle_slips, _Requirements
 
     def judged(fsw_slips: int, late: int) -> dict[str, dict]:
         reqs = _Requirements()

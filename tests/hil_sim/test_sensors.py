@@ -9,8 +9,8 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from gnc.attitude import quat_conjugate, quat_multiply, quat_rotate
-from hil_sim.params import ImuParams, SpacecraftParams, StarTrackerParams, WorldParams
-from hil_sim.world import World, WorldBatch
+from hil_sim.world.params import ImuParams, SpacecraftParams, StarTrackerParams, WorldParams
+from hil_sim.world.world import World, WorldBatch
 
 QUIET_IMU = dict(bias_turn_on_std_rad_s=0.0, bias_random_walk_rad_s_per_sqrt_s=0.0,
                  angle_random_walk_rad_per_sqrt_s=0.0, quantisation_rad_s=0.0)

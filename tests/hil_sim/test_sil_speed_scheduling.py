@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from hil_sim.sil import _no_wakeup_preemption
+from hil_sim.sil.orchestrator import _no_wakeup_preemption
 
 
 @pytest.mark.skipif(not hasattr(os, "SCHED_BATCH"), reason="no SCHED_BATCH on this platform")

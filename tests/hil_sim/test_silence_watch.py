@@ -1,7 +1,7 @@
 """When a SIL run takes its flight software for hung: ticks in a row with nothing heard from it."""
 from __future__ import annotations
 
-from hil_sim.sil import SilenceWatch
+from hil_sim.sil.orchestrator import SilenceWatch
 
 
 def test_in_real_time_late_answers_keep_the_run_going_silence_ends_it() -> None:

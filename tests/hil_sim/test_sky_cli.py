@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from cli import main as cli, sky as sky_cli
-from hil_sim.mission import load_mission
-from hil_sim.physics_checks import SkyZones, _sweep_times, check_mission, schedule
+from hil_sim.mission.model import load_mission
+from hil_sim.mission.physics_checks import SkyZones, _sweep_times, check_mission, schedule
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSIONS = ROOT / "config" / "missions"

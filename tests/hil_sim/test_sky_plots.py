@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil_sim import skyplot
+from hil_sim.sil import skyplot
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "sil"))
 
@@ -81,7 +81,7 @@ def test_a_path_over_the_pole_is_continuous_and_a_polar_zone_round_in_the_local_
 def test_sil_plots_have_units_on_every_axis_and_the_sky_convention(tmp_path, figures):
     from test_summary_table import _drifting_run
 
-    from hil_sim.plots import write_plots
+    from hil_sim.sil.plots import write_plots
     run_dir, mission = _drifting_run(tmp_path, "demo-pointing", duration_s=310.0)  # its third target near Dec 0
     written = write_plots(run_dir, mission)
     assert {p.name for p in written} >= {"sky.png", "margins.png", "wheels.png"}

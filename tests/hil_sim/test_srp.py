@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from gnc.attitude import attitude_error_angle
-from hil_sim import dynamics as dyn
-from hil_sim import environment as env
-from hil_sim.orbit import orbit_elements_array
-from hil_sim.params import DisturbanceParams, FacetParams, OrbitParams, SpacecraftParams, WheelParams
+from hil_sim.world import dynamics as dyn
+from hil_sim.world import environment as env
+from hil_sim.world.orbit import orbit_elements_array
+from hil_sim.world.params import DisturbanceParams, FacetParams, OrbitParams, SpacecraftParams, WheelParams
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "basilisk"
 
@@ -49,7 +49,7 @@ def test_the_torque_is_basilisks_on_600_geometries(inputs) -> None:
     (umbra and full Sun); in the penumbra the two differ by the Sun's and the Earth's radii alone (IAU 2015
     695,700 km and WGS-84 6378.137 km here, 695,000 and 6378.1366 km in Basilisk: test_eclipse.py bounds
     that at 1e-3), so there the torque per unit of sunlit fraction is compared."""
-    from hil_sim.eclipse import sunlit_fraction
+    from hil_sim.world.eclipse import sunlit_fraction
 
     rows = np.loadtxt(DATA / "srp_reference_torques.csv", delimiter=",", skiprows=1)
     q, r, sun, factor, theirs = rows[:, 0:4], rows[:, 4:7], rows[:, 7:10], rows[:, 10], rows[:, 11:14]

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from hil_sim.mission import Mission
-from hil_sim.summary import boresight_N, sky_zone_series
+from hil_sim.mission.model import Mission
+from hil_sim.sil.judge import boresight_N, sky_zone_series
 
 DEMO = Path(__file__).resolve().parents[2] / "config" / "missions" / "demo-pointing.yaml"
 

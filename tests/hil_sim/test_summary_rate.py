@@ -1,4 +1,4 @@
-"""peak_body_rate_fraction (hil_sim.summary): true |omega| over the configured rate limit, which a SET_GAINS the
+"""peak_body_rate_fraction (hil_sim.sil.judge): true |omega| over the configured rate limit, which a SET_GAINS the
 flight software acknowledged changes from its time on (the timeline's word alone changes nothing); a tumbling
 start is not judged until the rate is within the limit."""
 from __future__ import annotations
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from hil_sim.mission import Mission
-from hil_sim.summary import peak_body_rate_fraction
+from hil_sim.mission.model import Mission
+from hil_sim.sil.judge import peak_body_rate_fraction
 
 DEMO = Path(__file__).resolve().parents[2] / "config" / "missions" / "demo-pointing.yaml"
 

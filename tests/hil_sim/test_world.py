@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from hil_sim.params import (DisturbanceParams, ImuParams, OrbitParams, SpacecraftParams, StarTrackerParams,
+from hil_sim.world.params import (DisturbanceParams, ImuParams, OrbitParams, SpacecraftParams, StarTrackerParams,
                             WorldParams)
-from hil_sim.world import World, WorldBatch
+from hil_sim.world.world import World, WorldBatch
 
 
 def _noisy_params(imu_seed=None, st_seed=None) -> WorldParams:
@@ -64,7 +64,7 @@ def test_changing_one_models_seed_leaves_the_others_unchanged():
 
 
 def test_truth_ephemeris_interpolation_error_against_direct_astropy():
-    from hil_sim.ephemeris_truth import TruthEphemeris, astropy_sun_moon_N_km
+    from hil_sim.world.ephemeris import TruthEphemeris, astropy_sun_moon_N_km
 
     eph = TruthEphemeris(2462580.0, 3600.0)
     t = np.random.default_rng(2).uniform(0.0, 20 * 86400.0, 300)  # crosses several node blocks
@@ -81,7 +81,7 @@ def test_truth_ephemeris_interpolation_error_against_direct_astropy():
 
 def test_world_sun_moon_earth_directions_are_from_the_spacecraft():
     from gnc.ephemeris import julian_date_tdb
-    from hil_sim.ephemeris_truth import astropy_sun_moon_N_km
+    from hil_sim.world.ephemeris import astropy_sun_moon_N_km
 
     params = WorldParams(epoch_utc="2031-11-05T03:00:00Z")
     world = World(params, seed=0)
@@ -95,7 +95,7 @@ def test_world_sun_moon_earth_directions_are_from_the_spacecraft():
 
 
 def test_kepler_orbit_two_body_invariants():
-    from hil_sim.orbit import KeplerOrbit
+    from hil_sim.world.orbit import KeplerOrbit
 
     p = OrbitParams(semi_major_axis_km=12000.0, eccentricity=0.3, inclination_deg=63.4, raan_deg=40.0,
                     arg_perigee_deg=270.0, mean_anomaly_deg=10.0)
@@ -159,7 +159,7 @@ def test_truth_ephemeris_works_offline(monkeypatch):
     table (an epoch no other test uses, so nothing comes from the cache)."""
     import socket
 
-    from hil_sim.ephemeris_truth import TruthEphemeris
+    from hil_sim.world.ephemeris import TruthEphemeris
 
     def refuse(*args, **kwargs):
         raise OSError("network access attempted while computing the truth ephemeris")
@@ -175,7 +175,7 @@ def test_truth_ephemeris_works_offline(monkeypatch):
 
 def test_truth_ephemeris_values_do_not_depend_on_history():
     """Determinism across runs sharing the cached table: extending it must not change values already used."""
-    from hil_sim.ephemeris_truth import TruthEphemeris
+    from hil_sim.world.ephemeris import TruthEphemeris
 
     t = np.array([1.0, 2.5 * 86400.0, 3.99 * 86400.0])
     short = TruthEphemeris(2462001.5, 3600.0)
@@ -189,7 +189,7 @@ def test_truth_ephemeris_values_do_not_depend_on_history():
 def test_truth_ephemeris_epochs_share_one_absolute_grid():
     """Campaigns disperse the epoch by hours: a second epoch in the same blocks must reuse the fitted
     blocks (no astropy call) and give the same positions at the same absolute instant."""
-    from hil_sim.ephemeris_truth import TruthEphemeris, _astropy_nodes
+    from hil_sim.world.ephemeris import TruthEphemeris, _astropy_nodes
 
     a = TruthEphemeris(2462100.25, 3600.0)
     misses = _astropy_nodes.cache_info().misses
@@ -256,7 +256,7 @@ def test_truth_ephemeris_nodes_kept_on_disk_are_astropy_s_numbers(tmp_path, monk
     """A new process reads the node blocks an earlier one computed (no astropy), the very same numbers."""
     import pytest as _pytest
 
-    from hil_sim import ephemeris_truth as et
+    from hil_sim.world import ephemeris as et
 
     monkeypatch.setenv(et.CACHE_ENV, str(tmp_path))
     args = (3600.0, 190001, 9)  # nodes no other test asks for
@@ -281,8 +281,8 @@ import dataclasses, sys
 import numpy as np
 sys.path.insert(0, {tests!r})
 from test_world import _noisy_params
-from hil_sim.params import SpacecraftParams
-from hil_sim.world import WorldBatch, _world_period_kernel
+from hil_sim.world.params import SpacecraftParams
+from hil_sim.world.world import WorldBatch, _world_period_kernel
 
 quiet = dataclasses.replace(_noisy_params(), spacecraft=SpacecraftParams())
 worlds = [WorldBatch([p] * runs, seed=3) for runs in (1, 2) for p in (_noisy_params(), quiet)]

@@ -73,8 +73,8 @@ def test_the_default_bus_needs_no_extra():
 def test_config_files_are_found_through_the_package():
     from comms.bus.icd import DEFAULT_DBC_PATH
     from hil_sim.campaign.spec import SCHEMA_PATH as CAMPAIGN_SCHEMA
-    from hil_sim.mission import SCHEMA_PATH as MISSION_SCHEMA
-    from hil_sim.sil import DEFAULT_MISSION
+    from hil_sim.mission.model import SCHEMA_PATH as MISSION_SCHEMA
+    from hil_sim.sil.orchestrator import DEFAULT_MISSION
     from keepout_config import config_path
 
     for path in (DEFAULT_DBC_PATH, CAMPAIGN_SCHEMA, MISSION_SCHEMA, DEFAULT_MISSION,
@@ -105,7 +105,7 @@ def test_init_writes_a_project_that_validates(tmp_path):
     import yaml
 
     from hil_sim.campaign.spec import load_campaign
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
 
     project = tmp_path / "sat"
     assert cli.main(["init", str(project)]) == 0
@@ -172,7 +172,7 @@ def test_the_built_wheel_runs_from_an_empty_folder(tmp_path):
 
     version = run(keepout, "--version")
     assert version.returncode == 0 and version.stdout.strip() == "keepout 0.1.0", version
-    where = run(py, "-c", "import hil_sim.sil as s, comms.bus.icd as i; print(s.DEFAULT_MISSION); "
+    where = run(py, "-c", "import hil_sim.sil.orchestrator as s, comms.bus.icd as i; print(s.DEFAULT_MISSION); "
                           "print(i.DEFAULT_DBC_PATH)")
     for line in where.stdout.split():
         assert Path(line).is_file() and Path(line).is_relative_to(env_dir), where

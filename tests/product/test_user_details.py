@@ -75,8 +75,8 @@ def test_sim_prints_each_truth_requirement_with_its_unit():
 # ---- mission validation: units ---------------------------------------------------------------------
 
 def _problems(path: Path) -> list:
-    from hil_sim.mission import load_mission
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission.model import load_mission
+    from hil_sim.mission.loader import ConfigError
 
     with pytest.raises(ConfigError) as info:
         load_mission(path)
@@ -98,7 +98,7 @@ def test_rpm_typed_into_a_rad_s_key_is_one_message_with_the_unit_and_the_convers
 
 def test_a_copy_refused_where_the_truth_passes_is_reported_at_the_truth_key():
     """An error in a flight-software key filled from the truth is placed at the truth key the user wrote."""
-    from hil_sim.mission import _ErrorsAsWritten
+    from hil_sim.mission.model import _ErrorsAsWritten
 
     data = {"spacecraft": {"wheels": [{"max_torque_Nm": 5.0}]}, "flight_software": {"initial_mode": "SAFE"}}
     # the one error pydantic would give: the copied key refused, the truth key (as written) accepted
@@ -131,8 +131,8 @@ def test_values_whose_size_suggests_another_unit_are_warned_about(tmp_path, caps
 
 
 def test_the_packaged_missions_raise_no_unit_warning():
-    from hil_sim.mission import unit_warnings
-    from hil_sim.yaml_loader import load_marked
+    from hil_sim.mission.model import unit_warnings
+    from hil_sim.mission.loader import load_marked
 
     for path in sorted(MISSIONS.glob("*.yaml")):
         assert unit_warnings(load_marked(path)) == [], path

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from hil_sim.mission import load_mission
-from hil_sim.yaml_loader import ConfigError
+from hil_sim.mission.model import load_mission
+from hil_sim.mission.loader import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "config" / "missions" / "demo-pointing.yaml"

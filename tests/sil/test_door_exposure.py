@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import yaml
 
-from hil_sim.mission import door_params, load_mission, world_params
-from hil_sim.sil import TruthRecorder
-from hil_sim.summary import ZoneSeries, evaluate, instrument_exposure
-from hil_sim.world import World
-from hil_sim.yaml_loader import ConfigError
+from hil_sim.mission.model import door_params, load_mission, world_params
+from hil_sim.sil.orchestrator import TruthRecorder
+from hil_sim.sil.judge import ZoneSeries, evaluate, instrument_exposure
+from hil_sim.world.world import World
+from hil_sim.mission.loader import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSIONS = ROOT / "config" / "missions"

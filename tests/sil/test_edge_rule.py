@@ -18,8 +18,8 @@ import yaml
 from fsw.guidance.pointing import ZONE_REBUILD_TOL_DEG
 from gnc.ephemeris import julian_date_tdb, sun_direction_N
 from hil_sim.campaign.fast import run_fast
-from hil_sim.mission import Mission
-from hil_sim.physics_checks import check_mission
+from hil_sim.mission.model import Mission
+from hil_sim.mission.physics_checks import check_mission
 
 ROOT = Path(__file__).resolve().parents[2]
 SUN_CONE_DEG = 30.0
@@ -85,7 +85,7 @@ def test_a_target_a_moving_zone_covers_later_is_a_warning_in_the_flight_software
     flies to it, holds outside while it is covered and resumes; the check says so (a warning, not an
     error), quoting the event the flight software raises then."""
     from fsw.guidance.edge_rule import TARGET_IN_LAYER
-    from hil_sim.physics_checks import SkyZones
+    from hil_sim.mission.physics_checks import SkyZones
 
     data = yaml.safe_load((ROOT / "config" / "missions" / "demo-pointing.yaml").read_text())
     data["flight_software"]["pointing"]["zones"] = [

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from hil_sim.campaign.fast import run_fast
-from hil_sim.mission import load_mission
+from hil_sim.mission.model import load_mission
 
 MISSION = Path(__file__).resolve().parents[2] / "config" / "missions" / "fault-imu-dropout.yaml"
 

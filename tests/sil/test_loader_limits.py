@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from hil_sim.mission import load_mission
-from hil_sim.yaml_loader import MAX_FILE_BYTES, ConfigError, ConfigFileError
+from hil_sim.mission.model import load_mission
+from hil_sim.mission.loader import MAX_FILE_BYTES, ConfigError, ConfigFileError
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "config" / "missions" / "demo-pointing.yaml"
@@ -233,8 +233,8 @@ def test_an_over_limit_file_is_refused_early_whatever_its_shape(tmp_path, shape)
     path = tmp_path / "m.yaml"
     path.write_text(make())
     code = ("import resource, sys, time\n"
-            "from hil_sim.mission import load_mission\n"
-            "from hil_sim.yaml_loader import ConfigError\n"
+            "from hil_sim.mission.model import load_mission\n"
+            "from hil_sim.mission.loader import ConfigError\n"
             "base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
             "t0 = time.process_time()\n"
             "try:\n"

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hil_sim.mission import attitude_from_ra_dec, load_mission, ra_dec_to_unit
+from hil_sim.mission.model import attitude_from_ra_dec, load_mission, ra_dec_to_unit
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "config" / "missions" / "smallsat-example.yaml"
@@ -132,7 +132,7 @@ def test_initial_state_ra_dec_in_a_mission_and_its_errors(tmp_path):
     q_demo = np.asarray(yaml.safe_load(DEMO.read_text())["initial_state"]["q_NB"])
     assert min(np.linalg.norm(mission.initial_state.q_NB - q_demo), np.linalg.norm(mission.initial_state.q_NB + q_demo)) < 1e-5
     data["initial_state"]["q_NB"] = q_demo.tolist()
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission.loader import ConfigError
     with pytest.raises(ConfigError, match="initial_state: give the initial attitude once"):
         load_mission("m.yaml", text=yaml.safe_dump(data))
     del data["initial_state"]["q_NB"]
@@ -142,7 +142,7 @@ def test_initial_state_ra_dec_in_a_mission_and_its_errors(tmp_path):
 
 
 def test_the_example_passes_config_check():
-    from hil_sim.physics_checks import check_mission
+    from hil_sim.mission.physics_checks import check_mission
 
     report = check_mission(load_mission(EXAMPLE), step_s=60.0)
     assert report.ok, report.format()

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import yaml
 
-from hil_sim.mission import Mission
-from hil_sim.physics_checks import check_mission
+from hil_sim.mission.model import Mission
+from hil_sim.mission.physics_checks import check_mission
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSIONS = ROOT / "config" / "missions"

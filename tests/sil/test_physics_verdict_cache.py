@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from hil_sim import physics_checks as pc
-from hil_sim.mission import load_mission
+from hil_sim.mission import physics_checks as pc
+from hil_sim.mission.model import load_mission
 from keepout_config import config_path
 
 

@@ -92,7 +92,7 @@ def plugins(tmp_path, monkeypatch):
 
 def _fly(tmp_path, duration_s: float = 120.0, **plugins):
     from hil_sim.campaign.fast import run_fast
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
 
     mission = load_mission(short_mission(tmp_path / "mission.yaml", duration_s, **plugins))
     return run_fast(mission, seed=1)
@@ -129,7 +129,7 @@ def test_the_law_is_given_its_mode_target_zones_and_sky(plugins):
     import numpy as np
 
     from hil_sim.campaign.fast import run_fast
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
 
     for path, mode, n_zones in ((short_mission(plugins / "p.yaml", 12.0, guidance="recorder"), "POINTING", 2),
                                 (_demo_quaternion(plugins, 12.0, guidance="recorder"), "QUATERNION", 2)):
@@ -154,7 +154,7 @@ def test_the_law_is_given_its_mode_target_zones_and_sky(plugins):
 def test_a_law_stopped_in_quaternion_mode_hands_over_to_keepouts_law(plugins):
     """demo-quaternion's first slew runs straight at its radiator-Sun zone along the geodesic."""
     from hil_sim.campaign.fast import run_fast
-    from hil_sim.mission import load_mission
+    from hil_sim.mission.model import load_mission
 
     result = run_fast(load_mission(_demo_quaternion(plugins, 80.0, guidance="geodesic")), seed=1)
     stops = _stops(result)
@@ -187,8 +187,8 @@ def test_a_wrong_estimate_is_caught_by_keepouts_mekf(plugins):
 
 def test_an_unknown_plugin_name_is_refused_at_load_time(plugins):
     mission = short_mission(plugins / "typo.yaml", 30.0, guidance="geodesc")
-    from hil_sim.mission import load_mission
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission.model import load_mission
+    from hil_sim.mission.loader import ConfigError
 
     with pytest.raises(ConfigError) as err:
         load_mission(mission)

@@ -19,8 +19,8 @@ from pathlib import Path
 import psutil
 import pytest
 
-from hil_sim import sil
-from hil_sim.summary import telemetry_completeness
+from hil_sim.sil import orchestrator as sil
+from hil_sim.sil.judge import telemetry_completeness
 
 LONG_S = 3000.0  # a run that is still going when the test acts on it (lockstep flies ~x100: 30 s or more)
 SHORT_S = 8.0  # the default mission holds its first target: every requirement passes

@@ -13,7 +13,7 @@ import jsonschema
 import pytest
 import yaml
 
-from hil_sim.mission import SCHEMA_PATH, mission_json_schema
+from hil_sim.mission.model import SCHEMA_PATH, mission_json_schema
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSIONS = sorted((ROOT / "config" / "missions").glob("*.yaml"))
@@ -113,7 +113,7 @@ def test_mission_reference_is_current_and_lists_every_key(tmp_path, capsys):
     """docs/missions.md is generated from the schema: it is up to date, and every key of
     every mapping in the schema appears in it with its unit, default and range."""
     from cli.main import main
-    from hil_sim.mission_docs import DOCS_PATH, mission_docs
+    from hil_sim.mission.docs import DOCS_PATH, mission_docs
 
     assert DOCS_PATH.read_text() == mission_docs(), "run `keepout config docs` and commit the result"
     assert main(["config", "docs", "--check"]) == 0

@@ -1,13 +1,13 @@
-"""Which settling requirements a mission is judged on (hil_sim.summary.settling)."""
+"""Which settling requirements a mission is judged on (hil_sim.sil.judge.settling)."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
-from hil_sim.mission import load_mission
-from hil_sim.physics_checks import schedule
-from hil_sim.summary import settling
+from hil_sim.mission.model import load_mission
+from hil_sim.mission.physics_checks import schedule
+from hil_sim.sil.judge import settling
 
 MISSIONS = Path(__file__).resolve().parents[2] / "config" / "missions"
 
@@ -43,7 +43,7 @@ def test_a_mission_whose_only_manoeuvre_is_the_initial_target_is_judged_on_it():
 
 
 def test_torque_variation_is_summed_over_each_commanded_span():
-    from hil_sim.summary import add_torque_variation
+    from hil_sim.sil.judge import add_torque_variation
 
     t = np.arange(0.0, 10.0, 0.1)
     tau = np.zeros((len(t), 2))

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil_sim.mission import load_mission, world_params
-from hil_sim.sil import TruthRecorder
-from hil_sim.summary import _rounded, evaluate, format_summary
-from hil_sim.world import World
+from hil_sim.mission.model import load_mission, world_params
+from hil_sim.sil.orchestrator import TruthRecorder
+from hil_sim.sil.judge import _rounded, evaluate, format_summary
+from hil_sim.world.world import World
 
 ROOT = Path(__file__).resolve().parents[2]
 

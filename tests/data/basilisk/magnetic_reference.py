@@ -1,5 +1,5 @@
 """Basilisk 2.12.1 reference for a residual magnetic dipole in the Earth's field: magneticFieldCenteredDipole
-(the Gauss coefficients g10, g11, h11 of IGRF-14 at EPOCH, from hil_sim.geomagnetic, recorded in the JSON)
+(the Gauss coefficients g10, g11, h11 of IGRF-14 at EPOCH, from hil_sim.world.geomagnetic, recorded in the JSON)
 and MtbEffector (three rods along the body axes holding the dipole: torque m x B). The spacecraft and the
 orbit are srp_reference.py's (imported from beside this file). Writes
 
@@ -25,7 +25,7 @@ from Basilisk.architecture import messaging
 from Basilisk.simulation import MtbEffector, magneticFieldCenteredDipole
 from Basilisk.utilities import RigidBodyKinematics as rbk
 
-from hil_sim.geomagnetic import IGRF_REFERENCE_RADIUS_KM, dipole_coefficients_T
+from hil_sim.world.geomagnetic import IGRF_REFERENCE_RADIUS_KM, dipole_coefficients_T
 from srp_reference import N_GEOMETRIES, STEP_S, TRAJECTORY_HEADER, base_sim, fly, provenance, write_csv
 
 HERE = Path(__file__).resolve().parent
@@ -120,7 +120,7 @@ def main() -> None:
                      "magneticFieldCenteredDipole (planetPosInMsg: the Earth turned by theta), MtbEffector (three "
                      "rods along the body axes)"),
         "epoch_utc": EPOCH.isoformat(), "g10_T": coefficients[0], "g11_T": coefficients[1],
-        "h11_T": coefficients[2], "coefficients_from": "IGRF-14 via ppigrf (hil_sim.geomagnetic)",
+        "h11_T": coefficients[2], "coefficients_from": "IGRF-14 via ppigrf (hil_sim.world.geomagnetic)",
         "planet_radius_m": IGRF_REFERENCE_RADIUS_KM * 1e3, "residual_dipole_B_Am2": RESIDUAL_DIPOLE_B_AM2,
         **earth_constants,
     }, indent=1) + "\n")

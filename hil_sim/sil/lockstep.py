@@ -36,10 +36,10 @@ from comms.bus.e2e import NO_STOP, PYTHON_RUN, CheckedBurst, CheckedFrame, E2ERe
 from comms.bus.kernels import ECHO_CODE, MAX_DLC, count_timeouts
 from comms.bus.icd import Icd
 from comms.bus.transport import recv_burst, send_batch, send_burst
-from hil_sim import device_kernels as dk
-from hil_sim.device_kernels import apply_received
-from hil_sim.devices import Devices, DeviceTiming, WorldLike
-from hil_sim.faults import DOOR_FAULT_KINDS, FaultInjector, FaultSpec, WheelFailures, bus_faults
+from hil_sim.devices import kernels as dk
+from hil_sim.devices.kernels import apply_received
+from hil_sim.devices.nodes import Devices, DeviceTiming, WorldLike
+from hil_sim.devices.faults import DOOR_FAULT_KINDS, FaultInjector, FaultSpec, WheelFailures, bus_faults
 
 SIM_NODES = ("SIM", "IMU", "STR", "RW1", "RW2", "RW3", "RW4", "RW5", "RW6", "DOOR")
 
@@ -64,7 +64,7 @@ class SimStats:
 class Simulator:
     """Devices + time keeper for one world on one bus (see the module docstring).
 
-    ``world``: hil_sim.world.World (or anything with its methods); ``bus``: an open python-can bus;
+    ``world``: hil_sim.world.world.World (or anything with its methods); ``bus``: an open python-can bus;
     ``icd``: the loaded ICD; ``gnc_period_s``: T (a multiple of ``dynamics_dt_s``, itself by default the
     world's max integration step); ``faults``: FaultSpec / mission BusFault entries.
     ``on_frame(direction, t_s, msg)``: sees every frame sent ("tx") or received ("rx", own echoes left out),
@@ -216,7 +216,7 @@ class Simulator:
         self.devices.sample_sensors(world, self.t0_s)
 
     def _init_door(self) -> None:
-        """The aperture door's drive (``door``: hil_sim.devices.DoorParams; None: no door and nothing of it on
+        """The aperture door's drive (``door``: hil_sim.devices.nodes.DoorParams; None: no door and nothing of it on
         the bus): its failures from the faults, its command's id and slot."""
         self.door = self.devices.door
         failures = [f for f in self.injector.faults if f.kind in DOOR_FAULT_KINDS]
@@ -729,7 +729,7 @@ class RateDampingResponder:
 
     Wheel torques tau = gain * pinv(A) omega_meas (A: 3 x n wheel axes in body), which removes body rate
     (the wheels absorb the momentum). Uses the real ``FswBusDriver``; runs in process or in its own
-    process (``python -m hil_sim.lockstep --bus SPEC --wheels N``).
+    process (``python -m hil_sim.sil.lockstep --bus SPEC --wheels N``).
     """
 
     def __init__(self, driver: Any, wheel_axes_B: Any, gain_Nm_per_rad_s: float = 2.0) -> None:

@@ -12,7 +12,7 @@
    the flight software (``python -m fsw --config mission.yaml --bus SPEC``, its own process and
    session), and waits for the flight software's FSW_STARTED event to reach the ground, so its bus is
    open before the first SYNC;
-4. runs the simulator in this process: devices on the bus (`hil_sim.lockstep.Simulator`), lockstep by
+4. runs the simulator in this process: devices on the bus (`hil_sim.sil.lockstep.Simulator`), lockstep by
    default (each tick waits for the flight software's CYCLE_DONE) or paced to the clock; the ground's
    telecommand timeline is released at its simulated times, just before the SYNC of the tick it falls
    in (so lockstep runs stay deterministic); truth is recorded every tick and every frame goes to a
@@ -127,9 +127,9 @@ class RunResult:
 
 def prepare(options: RunOptions):
     """Load + check the mission; return (mission, physics report). Raises MissionRejected."""
-    from hil_sim.mission import load_mission_marked
-    from hil_sim.physics_checks import check_mission_cached
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission.model import load_mission_marked
+    from hil_sim.mission.physics_checks import check_mission_cached
+    from hil_sim.mission.loader import ConfigError
 
     try:
         mission, doc = load_mission_marked(options.mission)
@@ -281,7 +281,7 @@ class TruthRecorder:
     def __init__(self, n_ticks: int, n_wheels: int, door=None):
         n = n_ticks + 1
         self.n = 0
-        # the aperture door's truth (hil_sim.devices.DoorNode: its position, 0 closed .. 1 open), when there is one
+        # the aperture door's truth (hil_sim.devices.nodes.DoorNode: its position, 0 closed .. 1 open), when there is one
         self.door = door
         self.door_position = np.zeros(n) if door is not None else None
         self.t_s = np.zeros(n)
@@ -412,7 +412,7 @@ class Timeline:
                 self.errors.append(f"t = {t_s:.1f} s: {name} not sent: {exc}")
 
     def _encode(self, entry) -> tuple[str, dict[str, Any]]:
-        from hil_sim.mission import SetGainsCommand, SetModeCommand, SetTargetCommand
+        from hil_sim.mission.model import SetGainsCommand, SetModeCommand, SetTargetCommand
 
         if isinstance(entry, SetModeCommand):
             return "SET_MODE", {"mode": entry.mode}
@@ -702,9 +702,9 @@ def _build_simulator(run: _RunParts) -> None:
     from comms.bus.icd import Icd
     from comms.bus.transport import BusUnavailableError, open_bus
     from ground.commanding import CommandSender, signing_sender_args
-    from hil_sim.lockstep import Simulator
-    from hil_sim.mission import door_params, world_params
-    from hil_sim.world import World
+    from hil_sim.sil.lockstep import Simulator
+    from hil_sim.mission.model import door_params, world_params
+    from hil_sim.world.world import World
 
     mission, info = run.mission, run.bus_info
     try:
@@ -921,7 +921,7 @@ def _reserve_summary(run_dir: Path) -> None:
 
 def _write_reserved_summary(run_dir: Path, summary: dict[str, Any]) -> None:
     """Overwrite the reserved summary.json in place; on a full disk, a short summary that fits."""
-    from hil_sim.summary import summary_json
+    from hil_sim.sil.judge import summary_json
 
     path = run_dir / SUMMARY_FILE
     text = summary_json(summary).encode()
@@ -942,8 +942,8 @@ def _write_reserved_summary(run_dir: Path, summary: dict[str, Any]) -> None:
 def _judge(run_dir: Path, mission, status: str, code: int | None,
            planned_duration_s: float | None = None) -> RunResult:
     """Judge what was recorded, write summary.json and the plots; the exit code follows the status."""
-    from hil_sim.plots import write_plots
-    from hil_sim.summary import evaluate
+    from hil_sim.sil.plots import write_plots
+    from hil_sim.sil.judge import evaluate
 
     summary, series = evaluate(run_dir, mission, status=status, planned_duration_s=planned_duration_s)
     status = summary["status"]  # 'completed' becomes 'incomplete telemetry' when the ground lost some
@@ -993,7 +993,7 @@ def _own_start_time() -> float:
 def _truth_error_function(mission, boresight_B: np.ndarray):
     """Truth pointing/attitude error [deg] against the current target, for the progress bar."""
     from gnc.attitude import attitude_error_angle, quat_rotate
-    from hil_sim.physics_checks import schedule
+    from hil_sim.mission.physics_checks import schedule
 
     segments = schedule(mission)
 

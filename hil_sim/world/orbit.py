@@ -10,7 +10,7 @@ import math
 import numpy as np
 from numba import njit
 
-from hil_sim.params import OrbitParams
+from hil_sim.world.params import OrbitParams
 
 
 def perifocal_to_N(params: OrbitParams) -> np.ndarray:

@@ -39,7 +39,7 @@ from gnc.wheels import fibonacci_sphere, wheel_authority
 if TYPE_CHECKING:
     from pathlib import Path
 
-    from hil_sim.mission import Mission
+    from hil_sim.mission.model import Mission
 
 MAX_SWEEP_SAMPLES = 240
 ZONE_MOTION_PER_SAMPLE_DEG = 0.5  # sample often enough that no zone centre moves more than this between checks
@@ -61,7 +61,7 @@ class Finding:
 
     def located(self, doc: Any) -> str:
         """``file:line:col key.path: error: message`` at the key to change (``doc``: yaml_loader.Marked)."""
-        from hil_sim.yaml_loader import format_path
+        from hil_sim.mission.loader import format_path
 
         if doc is None or self.loc is None:
             return str(self)
@@ -143,7 +143,7 @@ class Segment:
 
 def schedule(mission: "Mission") -> list[Segment]:
     """Piecewise-constant (mode, target) over the run from the initial config and the timeline."""
-    from hil_sim.mission import SetModeCommand, SetTargetCommand
+    from hil_sim.mission.model import SetModeCommand, SetTargetCommand
 
     fsw = mission.flight_software
     mode = fsw.initial_mode

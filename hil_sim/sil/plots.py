@@ -1,7 +1,7 @@
 """PNG plots of a SIL run (written into the run folder by the orchestrator).
 
 * ``sky.png`` (missions with sky zones): the instrument boresight path on the celestial sphere, full sky
-  (Mollweide) and around the path (true angles, readable at the poles), RA/Dec as in ``hil_sim.skyplot``,
+  (Mollweide) and around the path (true angles, readable at the poles), RA/Dec as in ``hil_sim.sil.skyplot``,
   the physical zones drawn as they moved (outlines fade with time), the targets; ``attitude.png`` (missions with S^3 zones): the lifted attitude quaternion against time
   (as the paper plots it) and the attitude error;
 * ``margins.png``: signed margin to every physical zone against time with the requirement limit and the
@@ -24,7 +24,7 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hil_sim.summary import evaluate
+    from hil_sim.sil.judge import evaluate
 
     run_dir = Path(run_dir)
     if series is None:
@@ -128,8 +128,8 @@ def _estimation_plot(plt, run_dir: Path, mission, te: np.ndarray, err_deg: np.nd
 
 def _sky_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, sky_zones: list) -> Path:
     """Full sky (Mollweide) and a local view about the boresight's path (readable at any declination,
-    the poles included), in the one RA convention of ``hil_sim.skyplot``."""
-    from hil_sim import skyplot
+    the poles included), in the one RA convention of ``hil_sim.sil.skyplot``."""
+    from hil_sim.sil import skyplot
 
     fig = plt.figure(figsize=(15, 5.8))
     ax_sky = fig.add_subplot(1, 2, 1, projection="mollweide")

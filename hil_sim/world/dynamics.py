@@ -28,9 +28,9 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
-from hil_sim import environment as env
-from hil_sim.orbit import orbit_position_row_N_km
-from hil_sim.params import SpacecraftParams
+from hil_sim.world import environment as env
+from hil_sim.world.orbit import orbit_position_row_N_km
+from hil_sim.world.params import SpacecraftParams
 
 # Rows of the per-wheel parameter array W[field, i, m].
 W_JS, W_MAX_TQ, W_MAX_SPEED, W_VISC, W_COUL, W_SMOOTH, W_KT, W_RES, W_RTH, W_CTH, W_TAMB, W_MODE, W_INV_JS = range(13)
@@ -41,7 +41,7 @@ _MODE_CODES = {"none": MODE_HEALTHY, "stuck": MODE_STUCK, "no_torque": MODE_NO_T
 
 # Rows of the per-run body array B[field, m]: inertia (9, row major), inverse of I_s (9), constant torque (3),
 # Gauss-Markov std (1) and correlation time (1), gravity gradient on (1.0) or off (0.0). When a run of the batch
-# has an environment effect on (solar radiation pressure, ...), hil_sim.environment's rows follow.
+# has an environment effect on (solar radiation pressure, ...), hil_sim.world.environment's rows follow.
 B_I, B_IS_INV, B_TAU_CONST, B_DIST_STD, B_DIST_TAU, B_GG = 0, 9, 18, 21, 22, 23
 B_FIELDS = 24
 assert env.ENV_FLAGS == B_FIELDS
@@ -236,7 +236,7 @@ def _add_gravity_gradient(X, B, ORB, m, t_s, r, tau):
 @njit(cache=True, error_model="numpy", inline="always")
 def _with_gravity_gradient(tau, tau_gg, x, B, ORB, t_s, rpos, has_env):
     """tau_gg = ``tau`` (constant and random, held over the sub-step) plus, for the runs that have them on, the
-    gravity gradient and (``has_env``: B has hil_sim.environment's rows) the environment torques of state ``x``
+    gravity gradient and (``has_env``: B has hil_sim.world.environment's rows) the environment torques of state ``x``
     at ``t_s``: the external torque at one RK4 stage."""
     for m in range(tau.shape[1]):
         tau_gg[0, m] = tau[0, m]
@@ -263,7 +263,7 @@ def _hold_command(U_CMD, u_cmd):
 @njit(cache=True, error_model="numpy")
 def _torque_kinds(GM, B):
     """(any run with a random disturbance, any with a torque of its attitude and position: gravity gradient or
-    an environment effect, B has hil_sim.environment's rows): one choice a call, none a stage."""
+    an environment effect, B has hil_sim.world.environment's rows): one choice a call, none a stage."""
     any_random = False
     any_gg = False
     has_env = B.shape[0] > B_FIELDS  # only then does B have the environment's rows
@@ -311,10 +311,10 @@ def dynamics_step_batch(X, D, TEMP, G, W, B, U_CMD, NORMALS, dt_sub, n_sub, U_AP
     disturbance (ignored where its std is 0); U_APPLIED (N, M) out: motor torque actually applied on the last
     sub-step; FLAGS (N, M) out: fault bits (stuck, no torque, speed limit, saturated); DECAY, GM, HAS_COULOMB
     from ``step_coefficients(W, B, dt_sub)``; WORK scratch of ``work_shape(N, M)`` (kept by the caller so a
-    100 Hz step does not allocate). ORB: the runs' packed orbits (hil_sim.orbit) and t0_s the time at the
+    100 Hz step does not allocate). ORB: the runs' packed orbits (hil_sim.world.orbit) and t0_s the time at the
     start of the step, for the gravity-gradient torque of the runs that have it on (B[B_GG]): evaluated at
     every RK4 stage from the stage's attitude and orbit position (the constant and random torques are held
-    over the sub-step). The environment torques (hil_sim.environment) likewise, for the runs that have them
+    over the sub-step). The environment torques (hil_sim.world.environment) likewise, for the runs that have them
     on, with the Sun held in B over the step. Returns False,
     having changed nothing, if a command is NaN or infinite.
     """

@@ -23,12 +23,12 @@ import numpy as np
 from numba import njit
 
 from gnc.ephemeris import julian_date_tdb, parse_utc
-from hil_sim import dynamics as dyn
-from hil_sim import environment as env
-from hil_sim import sensors as sen
-from hil_sim.ephemeris_truth import TruthEphemeris, spline_eval
-from hil_sim.orbit import orbit_elements_array, orbit_position_row_N_km
-from hil_sim.params import WHEEL_FAILURE_MODES, WorldParams
+from hil_sim.world import dynamics as dyn
+from hil_sim.world import environment as env
+from hil_sim.world import sensors as sen
+from hil_sim.world.ephemeris import TruthEphemeris, spline_eval
+from hil_sim.world.orbit import orbit_elements_array, orbit_position_row_N_km
+from hil_sim.world.params import WHEEL_FAILURE_MODES, WorldParams
 
 # spawn_key of each model's generator under the world seed (fixed: adding a model never shifts the others)
 SEED_KEY_DISTURBANCE, SEED_KEY_IMU, SEED_KEY_STAR_TRACKER = 0, 1, 2
@@ -277,14 +277,14 @@ WPS_N_SUB = 0  # int scalars
 class WorldBatch:
     """M runs stepped together. All runs share the epoch and the number of wheels; any other parameter may
     differ per run (dispersions). Outputs and properties have a leading run axis (M, ...); the dynamics
-    arrays X (7+N, M), G, W, B, D, TEMP, U_APPLIED, FLAGS keep the run axis last (see hil_sim.dynamics)."""
+    arrays X (7+N, M), G, W, B, D, TEMP, U_APPLIED, FLAGS keep the run axis last (see hil_sim.world.dynamics)."""
 
     def __init__(self, params: Sequence[WorldParams], seed: int | None = 0) -> None:
         params = list(params)
         if not params:
             raise ValueError("WorldBatch: need at least one WorldParams")
         if not all(isinstance(p, WorldParams) for p in params):
-            raise ValueError("WorldBatch: every entry must be a hil_sim.params.WorldParams")
+            raise ValueError("WorldBatch: every entry must be a hil_sim.world.params.WorldParams")
         epochs = {(parse_utc(p.epoch_utc), p.ephemeris_node_spacing_s) for p in params}
         if len(epochs) != 1:
             raise ValueError("WorldBatch: all runs must share epoch_utc and ephemeris_node_spacing_s")
@@ -297,7 +297,7 @@ class WorldBatch:
         self.max_step_s = np.array([p.max_integration_step_s for p in params]).min()
 
         self.G, self.W, self.B, self.X = dyn.pack_spacecraft([p.spacecraft for p in params])
-        # Dynamics arrays have the run axis LAST (see hil_sim.dynamics): X (7+N, M), TEMP/U_APPLIED/FLAGS (N, M).
+        # Dynamics arrays have the run axis LAST (see hil_sim.world.dynamics): X (7+N, M), TEMP/U_APPLIED/FLAGS (N, M).
         self.n_wheels = N = self.G.shape[0]
         self.D = np.zeros((3, M))
         self.TEMP = self.W[dyn.W_TAMB].copy()
@@ -350,7 +350,7 @@ class WorldBatch:
         self._warm_period_kernel()
 
     def _pack_state(self) -> None:
-        """The arrays of the per-period kernel (``period_packed`` in hil_sim.device_kernels) as views of three
+        """The arrays of the per-period kernel (``period_packed`` in hil_sim.devices.kernels) as views of three
         buffers (``pack_arrays``): the same arrays, in place, for every other reader. The step coefficients
         get slots too (``_set_coef`` writes them in place)."""
         N, M = self.n_wheels, self.n_runs
@@ -611,7 +611,7 @@ class WorldBatch:
         return dyn.angular_momentum_N(self.X, self.G, self.W, self.B)
 
     def environment_torques_B(self) -> np.ndarray:
-        """Each environment effect's torque (hil_sim.environment.EFFECTS) on every run at the current state and
+        """Each environment effect's torque (hil_sim.world.environment.EFFECTS) on every run at the current state and
         time, (M, len(EFFECTS), 3) [N m] in body axes: the dynamics' own kernels; zero where an effect is off."""
         out = np.zeros((self.n_runs, len(env.EFFECTS), 3))
         if self.B.shape[0] > dyn.B_FIELDS:

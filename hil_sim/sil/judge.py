@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from gnc.ephemeris import EARTH_RADIUS_KM
-from hil_sim.physics_checks import d_s_to_deg, schedule
+from hil_sim.mission.physics_checks import d_s_to_deg, schedule
 
 ZONE_REBUILD_DEG = 0.001  # rebuild a moving star zone when its centre moved more than this (margin error bound)
 
@@ -329,7 +329,7 @@ def lifted_quaternions(mission, truth: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def attitude_zone_series(mission, q_lift: np.ndarray) -> list[ZoneSeries]:
-    from hil_sim.physics_checks import s3_zones
+    from hil_sim.mission.physics_checks import s3_zones
 
     names, phys, _ = s3_zones(mission)
     return [ZoneSeries(n, "attitude", _signed_margins(z, q_lift) if len(q_lift) else np.zeros(0), [])
@@ -525,7 +525,7 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
              planned_duration_s: float | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
     """(summary dict for JSON, series for plots).
 
-    ``status``: how the run ended (hil_sim.sil: ``completed``, ``interrupted``, ``crashed: ...``); a
+    ``status``: how the run ended (hil_sim.sil.orchestrator: ``completed``, ``interrupted``, ``crashed: ...``); a
     completed run whose ground lost telemetry becomes ``incomplete telemetry``. Only a completed run
     can pass. ``planned_duration_s``: the mission file's own duration when the run was shortened
     (``--duration``): a target whose settling deadline lies beyond the run's end is reported as not

@@ -24,12 +24,12 @@ from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field,
 from fsw.config import KNOWLEDGE_SOURCES, MAX_WHEELS, FswConfig
 from comms.dictionary import FDIR_MONITORS
 from gnc.ephemeris import EARTH_RADIUS_KM
-from hil_sim.faults import DOOR_MESSAGES, WHEEL_MESSAGE
+from hil_sim.devices.faults import DOOR_MESSAGES, WHEEL_MESSAGE
 from keepout_config import config_path
 
 if TYPE_CHECKING:
-    from hil_sim.params import WorldParams
-    from hil_sim.yaml_loader import Marked
+    from hil_sim.world.params import WorldParams
+    from hil_sim.mission.loader import Marked
 
 SCHEMA_VERSION = 1
 
@@ -84,7 +84,7 @@ def _unit_quaternion(values: list[float]) -> list[float]:
 # ---------------------------------------------------------------------------------------------
 
 class WheelTruth(_Model):
-    """One reaction wheel as built (maps onto hil_sim.params.WheelParams)."""
+    """One reaction wheel as built (maps onto hil_sim.world.params.WheelParams)."""
 
     axis_B: UnitVec3 = Field(description="spin axis in body axes (normalised on load)")
     spin_inertia_kgm2: float = Field(gt=0, le=10, validation_alias=AliasChoices("spin_inertia_kgm2", "Js_kgm2"),
@@ -99,7 +99,7 @@ class WheelTruth(_Model):
 
 
 class ImuTruth(_Model):
-    """Rate gyro as built (maps onto hil_sim.params.ImuParams; axes are body axes)."""
+    """Rate gyro as built (maps onto hil_sim.world.params.ImuParams; axes are body axes)."""
 
     rate_hz: float = Field(100.0, gt=0, le=1000, description="sample rate [Hz]")
     angle_random_walk_rad_per_sqrt_s: float = Field(
@@ -118,7 +118,7 @@ class ImuTruth(_Model):
 
 
 class StarTrackerTruth(_Model):
-    """Star tracker as built (maps onto hil_sim.params.StarTrackerParams)."""
+    """Star tracker as built (maps onto hil_sim.world.params.StarTrackerParams)."""
 
     rate_hz: float = Field(10.0, gt=0, le=100, description="output rate [Hz]")
     cross_boresight_std_arcsec: float = Field(5.0, ge=0, le=3600, description="1-sigma noise about the two axes "
@@ -142,13 +142,13 @@ class Disturbance(_Model):
     gravity_gradient: bool = Field(False, description="add the gravity-gradient torque 3 mu / r^3 (u x I u) from the "
                                    "orbit and the true inertia (u: the Earth-to-spacecraft direction in body axes)")
     solar_radiation_pressure: bool = Field(False, description="add the solar-radiation-pressure torque on "
-                                           "spacecraft.facets (hil_sim.environment), zero in the Earth's umbra and "
+                                           "spacecraft.facets (hil_sim.world.environment), zero in the Earth's umbra and "
                                            "scaled by the sunlit fraction of the Sun's disc in the penumbra")
     solar_flux_W_m2: float = Field(1361.0, ge=1300, le=1420, description="solar flux at 1 AU [W/m^2] (1361: the "
                                    "total solar irradiance at solar minimum, Kopp & Lean 2011; it varies by ~0.1 % "
                                    "over a solar cycle and ~3 % over the year with the distance, which is modelled)")
     aerodynamic_drag: bool = Field(False, description="add the aerodynamic drag torque on spacecraft.facets "
-                                   "(hil_sim.environment): an exponential atmosphere rotating with the Earth")
+                                   "(hil_sim.world.environment): an exponential atmosphere rotating with the Earth")
     atmosphere_density_kg_m3: float = Field(6.967e-13, gt=0, le=1e-6, description="the atmosphere's density at "
                                             "atmosphere_reference_altitude_km [kg/m^3] (default: 500 km, moderate "
                                             "solar activity, Vallado's table 8-4; it varies ~10x over a solar "
@@ -166,7 +166,7 @@ class Disturbance(_Model):
 
 class Facet(_Model):
     """One flat outer surface of the spacecraft, for the environment torques (maps onto
-    hil_sim.params.FacetParams). Light not reflected (1 - specular - diffuse) is absorbed."""
+    hil_sim.world.params.FacetParams). Light not reflected (1 - specular - diffuse) is absorbed."""
 
     area_m2: float = Field(gt=0, le=1000, description="area [m^2]")
     normal_B: Vec3 = Field(description="outward unit normal in body axes (its norm within 1e-6 of 1: a normal "
@@ -196,7 +196,7 @@ class Facet(_Model):
 
 
 class DoorTruth(_Model):
-    """A protective aperture door in front of the instrument, as built (maps onto hil_sim.devices.DoorParams).
+    """A protective aperture door in front of the instrument, as built (maps onto hil_sim.devices.nodes.DoorParams).
     Its drive is a CAN node: DOOR_CMD in, DOOR_STATUS out, every GNC tick."""
 
     close_time_s: float = Field(gt=0, le=600, description="full stroke, open to closed [s]")
@@ -327,7 +327,7 @@ TimelineEntry = Annotated[Union[SetModeCommand, SetTargetCommand, SetGainsComman
 
 
 # ---------------------------------------------------------------------------------------------
-# Fault injection (hil_sim.faults), requirements, run settings
+# Fault injection (hil_sim.devices.faults), requirements, run settings
 # ---------------------------------------------------------------------------------------------
 
 class BusFault(_Model):
@@ -340,7 +340,7 @@ class BusFault(_Model):
         description="a fault of the frames (drop ... silent), a failure of the aperture door's mechanism "
         "during the window (door_stuck_open: cannot close; door_stuck_closed: cannot open; door_slow: a stroke "
         "takes delay_s longer), or a wheel's mechanism failing for good (wheel_stuck: seized bearing; "
-        "wheel_no_torque: dead motor or driver), see hil_sim.faults")
+        "wheel_no_torque: dead motor or driver), see hil_sim.devices.faults")
     message: str = Field(description="DBC message name, e.g. IMU_RATE, ST_QUAT_A, RW2_STATUS (a door failure: "
                          "DOOR_STATUS or DOOR_CMD; a wheel failure: its wheel's RWn_CMD or RWn_STATUS)")
     start_s: float = Field(ge=0, le=10 * 86400, description="start of the fault window, simulated time [s]")
@@ -632,8 +632,8 @@ def attitude_from_ra_dec(ra_deg: float, dec_deg: float, roll_deg: float, boresig
 
 
 def world_params(mission: Mission) -> "WorldParams":
-    """The truth-model parameters (hil_sim.params.WorldParams) this mission describes."""
-    from hil_sim.params import (DisturbanceParams, FacetParams, ImuParams, OrbitParams, SpacecraftParams,
+    """The truth-model parameters (hil_sim.world.params.WorldParams) this mission describes."""
+    from hil_sim.world.params import (DisturbanceParams, FacetParams, ImuParams, OrbitParams, SpacecraftParams,
                                 StarTrackerParams, WheelParams, WorldParams)
 
     sc = mission.spacecraft
@@ -686,19 +686,19 @@ def world_params(mission: Mission) -> "WorldParams":
 
 def _geomagnetic(mission: Mission) -> dict[str, Any]:
     """The residual dipole and, when it is not zero, the Earth's dipole field at the epoch (IGRF, via
-    hil_sim.geomagnetic) for DisturbanceParams."""
+    hil_sim.world.geomagnetic) for DisturbanceParams."""
     dipole = tuple(mission.spacecraft.disturbance.residual_dipole_B_Am2)
     if not any(dipole):
         return {}
-    from hil_sim.geomagnetic import dipole_coefficients_T, earth_rotation_angle_rad
+    from hil_sim.world.geomagnetic import dipole_coefficients_T, earth_rotation_angle_rad
 
     return {"residual_dipole_B_Am2": dipole, "geomagnetic_dipole_T": dipole_coefficients_T(mission.epoch_utc),
             "earth_rotation_angle_rad": earth_rotation_angle_rad(mission.epoch_utc)}
 
 
 def door_params(mission: Mission) -> Any:
-    """The aperture door as built (hil_sim.devices.DoorParams), None when the mission has no door."""
-    from hil_sim.devices import DoorParams
+    """The aperture door as built (hil_sim.devices.nodes.DoorParams), None when the mission has no door."""
+    from hil_sim.devices.nodes import DoorParams
 
     door = mission.spacecraft.door
     if door is None:
@@ -720,7 +720,7 @@ def load_mission(path: str | Path, *, text: str | None = None) -> Mission:
 
 def load_mission_or_report(path: str | Path) -> Mission | None:
     """`load_mission` for a command: None when the file is refused, its problems printed to stderr."""
-    from hil_sim.yaml_loader import ConfigError
+    from hil_sim.mission.loader import ConfigError
 
     try:
         return load_mission(path)
@@ -731,7 +731,7 @@ def load_mission_or_report(path: str | Path) -> Mission | None:
 
 def load_mission_marked(path: str | Path, *, text: str | None = None) -> tuple[Mission, "Marked"]:
     """`load_mission`, plus the file's key positions (to place later findings at file:line:col)."""
-    from hil_sim.yaml_loader import ConfigError, Problem, load_marked, problems_from_validation
+    from hil_sim.mission.loader import ConfigError, Problem, load_marked, problems_from_validation
     from pydantic import ValidationError
 
     doc = load_marked(path, text)
@@ -833,7 +833,7 @@ class _ErrorsAsWritten:
         self.data, self.exc = data, exc
 
     def errors(self, include_url: bool = False) -> list[dict[str, Any]]:
-        from hil_sim.yaml_loader import format_path
+        from hil_sim.mission.loader import format_path
 
         errors = self.exc.errors(include_url=include_url)
         written = [_written(tuple(e.get("loc", ()))) for e in errors]
@@ -904,7 +904,7 @@ def unit_warnings(doc: "Marked") -> list[tuple[Loc, str]]:
 
 
 def _path(loc: tuple[str | int, ...]) -> str:
-    from hil_sim.yaml_loader import format_path
+    from hil_sim.mission.loader import format_path
     return format_path(loc)
 
 

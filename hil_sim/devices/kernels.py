@@ -1,4 +1,4 @@
-"""Compiled kernels of the simulator side of a GNC tick (``hil_sim.devices``, ``hil_sim.lockstep``).
+"""Compiled kernels of the simulator side of a GNC tick (``hil_sim.devices.nodes``, ``hil_sim.sil.lockstep``).
 
 Each kernel does, on arrays, what the Python of the device nodes does frame by frame or wheel by wheel
 (``ImuNode.frames_for``, ``StarTrackerNode.frames_for``, ``WheelNode.status_row``, ``_SampledNode.due_flags``,
@@ -20,12 +20,12 @@ from numba import njit
 
 from comms.bus.burst import MAX_DLC
 from comms.bus.kernels import FALLBACK_CODE, _tally, encode_range, judge_frame, unjudged_code
-from hil_sim import world as wd
-from hil_sim.dynamics import W_KT
-from hil_sim.world import _world_period_kernel, view1, view2, view3
+from hil_sim.world import world as wd
+from hil_sim.world.dynamics import W_KT
+from hil_sim.world.world import _world_period_kernel, view1, view2, view3
 
 _EPS_S = 1e-9
-# RWn_STATUS.fault bits and hil_sim.world.WheelStatus.fault bits (as in hil_sim.devices)
+# RWn_STATUS.fault bits and hil_sim.world.world.WheelStatus.fault bits (as in hil_sim.devices.nodes)
 _FAULT_OVERSPEED, _FAULT_CMD_TIMEOUT, _FAULT_DRIVE = 1, 2, 4
 _WORLD_STUCK, _WORLD_NO_TORQUE, _WORLD_SPEED_LIMIT = 1, 2, 4
 # WHEEL_STATE columns: held torque command, time of the last command (NaN: none yet), commands applied,
@@ -370,7 +370,7 @@ def receive_commands(ids, lengths, data, first, status, values, now, awaited, co
     return n
 
 
-# Devices' packed state (Devices._pack_state; hil_sim.world.pack_arrays): its slots, then the places of its
+# Devices' packed state (Devices._pack_state; hil_sim.world.world.pack_arrays): its slots, then the places of its
 # float / int scalars
 (DS_IMU_CLOCK, DS_ST_CLOCK, DS_WHEEL_STATE, DS_TIMEOUT, DS_STATUS_RANGES, DS_SCALARS, DS_SIG_F,
  DS_ST_MS, DS_ST_COLS, DS_ST_SEQ, DS_Q_N, DS_STATUS_MS, DS_STATUS_COLS, DS_ISCALARS, DS_MSG_I, DS_SIG_I, DS_CRC,

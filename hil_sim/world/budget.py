@@ -12,7 +12,7 @@ the spacecraft's facets, when the mission turns them on, get their rows (the Sun
 zero in the Earth's shadow; the co-rotating exponential atmosphere), and so does a residual magnetic dipole in
 the Earth's field (a centred dipole from IGRF at the epoch, turning with the Earth).
 
-The torques are the simulator's own (`hil_sim.dynamics` and `hil_sim.environment`: the same kernels, the same
+The torques are the simulator's own (`hil_sim.world.dynamics` and `hil_sim.world.environment`: the same kernels, the same
 Keplerian orbit).
 """
 from __future__ import annotations
@@ -40,10 +40,10 @@ class Row:
 
 def _gravity_gradient_torques(mission, t: np.ndarray) -> np.ndarray:
     """(len(t), 3) gravity-gradient torque [N m] in body axes at times ``t``, attitude held at the initial one:
-    the simulator's own kernel (`hil_sim.dynamics._add_gravity_gradient`) on the mission's packed spacecraft."""
-    from hil_sim import dynamics as dyn
-    from hil_sim.mission import world_params
-    from hil_sim.orbit import orbit_elements_array
+    the simulator's own kernel (`hil_sim.world.dynamics._add_gravity_gradient`) on the mission's packed spacecraft."""
+    from hil_sim.world import dynamics as dyn
+    from hil_sim.mission.model import world_params
+    from hil_sim.world.orbit import orbit_elements_array
 
     wp = world_params(mission)
     _, _, B, X = dyn.pack_spacecraft([wp.spacecraft])
@@ -61,11 +61,11 @@ def _gravity_gradient_torques(mission, t: np.ndarray) -> np.ndarray:
 
 def _environment_torques(mission, t: np.ndarray) -> np.ndarray:
     """(len(t), len(EFFECTS), 3) environment torques [N m] in body axes at times ``t``, attitude held at the
-    initial one: the simulator's own kernels (`hil_sim.environment.environment_torques_B`) on the mission's
+    initial one: the simulator's own kernels (`hil_sim.world.environment.environment_torques_B`) on the mission's
     world, the Sun from its truth ephemeris."""
-    from hil_sim import environment as env
-    from hil_sim.mission import world_params
-    from hil_sim.world import WorldBatch
+    from hil_sim.world import environment as env
+    from hil_sim.mission.model import world_params
+    from hil_sim.world.world import WorldBatch
 
     batch = WorldBatch([world_params(mission)], seed=mission.seed)
     sun_km, _ = batch.ephemeris.positions_N_km(t)
@@ -97,8 +97,8 @@ def _row(mission, effect: str, span: str, t: np.ndarray, tau: np.ndarray, note: 
 
 def budget(mission) -> list[Row]:
     """The budget rows of ``mission`` (see the module docstring)."""
-    from hil_sim.environment import EFFECTS, environment_effects
-    from hil_sim.mission import world_params
+    from hil_sim.world.environment import EFFECTS, environment_effects
+    from hil_sim.mission.model import world_params
 
     wp = world_params(mission)
     orbit_s = 2.0 * math.pi * math.sqrt(wp.orbit.semi_major_axis_km**3 / wp.orbit.mu_km3_s2)

@@ -1,6 +1,6 @@
 """Sensor models: rate gyro (IMU) and star tracker, for a batch of M runs (a single World is M = 1).
 
-Random numbers come from numpy Generators owned by the caller (one per model, see hil_sim.world); the
+Random numbers come from numpy Generators owned by the caller (one per model, see hil_sim.world.world); the
 kernels here are deterministic functions of the state, the parameters and the normals passed in.
 
 Gyro (per axis, body axes), at each sample k with period T = 1 / rate_hz and elapsed time dt since the
@@ -24,7 +24,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 from numba import njit
 
-from hil_sim.params import ImuParams, StarTrackerParams
+from hil_sim.world.params import ImuParams, StarTrackerParams
 
 # Gyro parameter layout P[m, :]
 G_SF, G_SAT, G_QUANT, G_ARW_STD, G_RRW, G_INV_QUANT = 0, 3, 4, 5, 6, 7
@@ -91,7 +91,7 @@ def sensor_frame_basis_S(boresight_S: np.ndarray) -> np.ndarray:
 
 @njit(cache=True, error_model="numpy")
 def gyro_sample_batch(X, BIAS, P, NORMALS, dt_since_s, OUT, SAT):
-    """Gyro samples for all runs. X (7+N, M) dynamics state (run axis last, see hil_sim.dynamics); OUT (M,3). BIAS (M,3) updated in place; NORMALS flat (M*6,): per run 3 bias-walk then 3 ARW normals."""
+    """Gyro samples for all runs. X (7+N, M) dynamics state (run axis last, see hil_sim.world.dynamics); OUT (M,3). BIAS (M,3) updated in place; NORMALS flat (M*6,): per run 3 bias-walk then 3 ARW normals."""
     M = X.shape[1]
     sq = math.sqrt(max(dt_since_s, 0.0))
     for m in range(M):

@@ -120,7 +120,7 @@ class DisturbanceParams:
     seed: int | None = None
     gravity_gradient: bool = False  # 3 mu / r^3 (u x I u) from the orbit and the true inertia
     # Solar radiation pressure on the spacecraft's facets (SpacecraftParams.facets), zero in the umbra and
-    # scaled by the sunlit fraction in the penumbra (hil_sim.environment).
+    # scaled by the sunlit fraction in the penumbra (hil_sim.world.environment).
     solar_radiation_pressure: bool = False
     solar_flux_W_m2: float = 1361.0  # at 1 AU (total solar irradiance, Kopp & Lean 2011)
     # Aerodynamic drag on the facets in an exponential atmosphere rotating with the Earth:
@@ -132,7 +132,7 @@ class DisturbanceParams:
     atmosphere_scale_height_km: float = 63.822
     # A residual magnetic dipole of the spacecraft (A m^2, body axes; zero: off) in the Earth's field, a centred
     # dipole of Gauss coefficients (g10, g11, h11) [T] turning with the Earth, whose rotation angle at the
-    # epoch is given (hil_sim.geomagnetic makes both from IGRF at the mission epoch).
+    # epoch is given (hil_sim.world.geomagnetic makes both from IGRF at the mission epoch).
     residual_dipole_B_Am2: tuple[float, float, float] = (0.0, 0.0, 0.0)
     geomagnetic_dipole_T: tuple[float, float, float] = (0.0, 0.0, 0.0)
     earth_rotation_angle_rad: float = 0.0
@@ -150,7 +150,7 @@ class DisturbanceParams:
             object.__setattr__(self, name, _vec(getattr(self, name), 3, f"disturbance.{name}"))
         if any(self.residual_dipole_B_Am2) and not any(self.geomagnetic_dipole_T):
             raise ValueError("disturbance.geomagnetic_dipole_T: a residual dipole needs the Earth's field "
-                             "(hil_sim.geomagnetic.dipole_coefficients_T at the epoch)")
+                             "(hil_sim.world.geomagnetic.dipole_coefficients_T at the epoch)")
         if not math.isfinite(self.earth_rotation_angle_rad):
             raise ValueError("disturbance.earth_rotation_angle_rad: must be finite")
 
@@ -325,7 +325,7 @@ class OrbitParams:
 
 @dataclass(frozen=True)
 class WorldParams:
-    """Everything a ``hil_sim.world.World`` needs. ``epoch_utc`` is ISO-8601 UTC (t = 0 of the run)."""
+    """Everything a ``hil_sim.world.world.World`` needs. ``epoch_utc`` is ISO-8601 UTC (t = 0 of the run)."""
 
     spacecraft: SpacecraftParams = field(default_factory=SpacecraftParams)
     imu: ImuParams = field(default_factory=ImuParams)

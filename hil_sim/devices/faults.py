@@ -19,7 +19,7 @@ Two kinds act on the wheel itself, not on frames (`WheelFailures`): ``wheel_stuc
 and ``wheel_no_torque`` (its motor or driver dies), for the wheel of message ``RWn_CMD`` / ``RWn_STATUS``
 from ``start_s`` on, for good (a failed mechanism does not heal at ``end_s``).
 
-Door failures act on the aperture door's mechanism (``hil_sim.devices.DoorNode``), not on frames; ``message``
+Door failures act on the aperture door's mechanism (``hil_sim.devices.nodes.DoorNode``), not on frames; ``message``
 names one of the door's frames (DOOR_CMD or DOOR_STATUS) and the window is when the mechanism is failed:
 
   door_stuck_open    the door cannot close (it stays where it is when commanded closed; the drive
@@ -28,7 +28,7 @@ names one of the door's frames (DOOR_CMD or DOOR_STATUS) and the window is when 
   door_slow          a full stroke takes ``delay_s`` longer
 
 Every injected fault is appended to ``FaultInjector.log`` (simulation time, kind, message, frame id,
-detail) and to the ``hil_sim.faults`` logger. Random choices (``probability``, babble payloads) come from
+detail) and to the ``hil_sim.devices.faults`` logger. Random choices (``probability``, babble payloads) come from
 a seeded generator, so runs stay deterministic.
 """
 from __future__ import annotations
@@ -43,11 +43,11 @@ import numpy as np
 
 from comms.bus.icd import Icd
 
-log = logging.getLogger("hil_sim.faults")
+log = logging.getLogger("hil_sim.devices.faults")
 
 FRAME_FAULT_KINDS = ("drop", "delay", "duplicate", "corrupt", "stick_counter", "babble", "silent")
 DOOR_FAULT_KINDS = ("door_stuck_open", "door_stuck_closed", "door_slow")
-# physical wheel faults -> the world's wheel failure mode (hil_sim.params.WHEEL_FAILURE_MODES)
+# physical wheel faults -> the world's wheel failure mode (hil_sim.world.params.WHEEL_FAILURE_MODES)
 WHEEL_FAULT_MODES = {"wheel_stuck": "stuck", "wheel_no_torque": "no_torque"}
 FAULT_KINDS = FRAME_FAULT_KINDS + DOOR_FAULT_KINDS + tuple(WHEEL_FAULT_MODES)
 DOOR_MESSAGES = ("DOOR_CMD", "DOOR_STATUS")
@@ -59,7 +59,7 @@ WHEEL_MESSAGE = re.compile(r"RW([1-6])_(CMD|STATUS)")
 class FaultSpec:
     """One fault: ``kind`` on frames of DBC message ``message`` during [start_s, end_s) simulated time.
 
-    Same fields as the mission file's ``faults`` entries (hil_sim.mission.BusFault), plus babble options.
+    Same fields as the mission file's ``faults`` entries (hil_sim.mission.model.BusFault), plus babble options.
     """
 
     kind: str

@@ -1,4 +1,4 @@
-"""The spacecraft's CAN devices, wrapping the truth models (``hil_sim.world.World``).
+"""The spacecraft's CAN devices, wrapping the truth models (``hil_sim.world.world.World``).
 
 Each node behaves like its hardware on the bus:
   * :class:`WheelNode`: applies the latest valid RWn_CMD; after ``cmd_timeout_s`` without one it zeroes
@@ -27,19 +27,19 @@ import numpy as np
 
 from comms.bus.burst import FrameBurst
 from comms.bus.icd import E2ESender, Icd
-from hil_sim import device_kernels as dk
-from hil_sim.device_kernels import WS_APPLIED, WS_CMD, WS_LAST_T, WS_TICK
-from hil_sim.world import pack_arrays
+from hil_sim.devices import kernels as dk
+from hil_sim.devices.kernels import WS_APPLIED, WS_CMD, WS_LAST_T, WS_TICK
+from hil_sim.world.world import pack_arrays
 
 # Fault bits of RWn_STATUS.fault (see the DBC comment).
 FAULT_OVERSPEED, FAULT_CMD_TIMEOUT, FAULT_DRIVE = 1, 2, 4
-# Fault bits of hil_sim.world.WheelStatus.fault.
+# Fault bits of hil_sim.world.world.WheelStatus.fault.
 _WORLD_STUCK, _WORLD_NO_TORQUE, _WORLD_SPEED_LIMIT = 1, 2, 4
 _EPS_S = 1e-9
 
 
 class WorldLike(Protocol):
-    """What the devices need from a world (hil_sim.world.World satisfies it)."""
+    """What the devices need from a world (hil_sim.world.world.World satisfies it)."""
 
     t: float
     n_wheels: int
@@ -101,7 +101,7 @@ class WheelNode:
     """Reaction wheel drive electronics, node RW``index`` (1-based).
 
     Its command state (held torque, time and tick of the last command, commands applied) lives in one row
-    of a float array (``state``: ``hil_sim.device_kernels`` WS_* columns; the Devices' ``wheel_state`` row
+    of a float array (``state``: ``hil_sim.devices.kernels`` WS_* columns; the Devices' ``wheel_state`` row
     of this wheel), which the compiled tick kernels read and write too."""
 
     def __init__(self, index: int, icd: Icd, cmd_timeout_s: float = 0.3, sender: E2ESender | None = None,
@@ -354,7 +354,7 @@ class DoorNode:
     It moves the door toward the end the latest valid DOOR_CMD asks for, linearly in time at its stroke's
     rate, and reports DOOR_STATUS every GNC tick. After ``close_on_silence_s`` without a valid command (once
     it has had one) it closes the door by itself: a flight software that stopped talking cannot leave the
-    instrument open. Door failures (``hil_sim.faults`` kinds door_stuck_open, door_stuck_closed, door_slow)
+    instrument open. Door failures (``hil_sim.devices.faults`` kinds door_stuck_open, door_stuck_closed, door_slow)
     act on the motion while their window is open: a door stuck open cannot close, one stuck closed cannot
     open (the drive reports the stall), a slow one takes ``delay_s`` longer for a full stroke. The motion is
     advanced once per GNC period (``advance``), the failures looked up at the period's start."""
@@ -460,8 +460,8 @@ class DeviceTiming:
 class Devices:
     """All nodes of one spacecraft: the wheels, the IMU and the star tracker.
 
-    Frames sampled but not yet due wait in an array queue (see ``hil_sim.device_kernels``). With a
-    ``hil_sim.world.World`` a GNC period (``step_world``) and a tick's frames (``tick_rows``) take a few
+    Frames sampled but not yet due wait in an array queue (see ``hil_sim.devices.kernels``). With a
+    ``hil_sim.world.world.World`` a GNC period (``step_world``) and a tick's frames (``tick_rows``) take a few
     compiled calls; any other world goes through the nodes' Python (``sample_sensors``, ``wheel_status_rows``),
     on the same state and with the same frames."""
 
@@ -502,7 +502,7 @@ class Devices:
 
     def _pack_state(self) -> None:
         """The state the per-tick kernels (``device_kernels.period_packed``, ``tick_rows_packed``) read and
-        write, as views of a few buffers (``hil_sim.world.pack_arrays``, slots DS_*): the sensors' clocks,
+        write, as views of a few buffers (``hil_sim.world.world.pack_arrays``, slots DS_*): the sensors' clocks,
         the wheels' command state, the queue's count, and the constants of the frames they make."""
         imu, st = self.imu, self.star_tracker
         lo, hi = self._imu_range
@@ -606,10 +606,10 @@ class Devices:
         self._push(self.star_tracker.poll(world, t_s))
 
     def _fast_world(self, world: Any) -> Any:
-        """The one-run batch the tick kernels read of a ``hil_sim.world.World`` (None for any other world)."""
+        """The one-run batch the tick kernels read of a ``hil_sim.world.world.World`` (None for any other world)."""
         if world is self._world_key:
             return self._world_batch
-        from hil_sim.world import World
+        from hil_sim.world.world import World
         self._world_key = world
         self._world_batch = world.batch if type(world) is World and world.batch.n_runs == 1 else None
         return self._world_batch
@@ -617,7 +617,7 @@ class Devices:
     def step_world(self, world: Any, dt_s: float, times_s: Sequence[float]) -> None:
         """``world.step(dt_s, wheel_torques(times_s[j]))`` then ``sample_sensors(world, times_s[j + 1])``
         for each step j, through the world's one-call ``advance_sampled`` (the same numbers and frames).
-        With a ``hil_sim.world.World``: one compiled call (``_step_fused``), else three (commands and due
+        With a ``hil_sim.world.world.World``: one compiled call (``_step_fused``), else three (commands and due
         flags, world, frame rows)."""
         batch = self._fast_world(world)
         if batch is None:
@@ -734,7 +734,7 @@ class Devices:
     # ------------------------------------------------------------------------------- frames out
     def _tick_kernel_args(self, world: Any, sync_m: int, sync_cols: np.ndarray) -> tuple | None:
         """``tick_rows_packed``'s arguments after (t_s, tick, period_ms), for ``world`` (None when it is not a
-        ``hil_sim.world.World``); kept while the world, the queue's arrays and the output rows' room hold."""
+        ``hil_sim.world.world.World``); kept while the world, the queue's arrays and the output rows' room hold."""
         args = self._tick_args
         if args is None or args[0] is not world or args[1] < 1 + self.q_n.item(0) + len(self.wheels):
             b = self._fast_world(world)
@@ -752,7 +752,7 @@ class Devices:
                   sync_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
         """A tick's frames as rows (one compiled call): SYNC(tick) in row 0, then ``rows_due(t_s)`` and
         ``wheel_status_rows(world, t_s)``; returns (message indices, rows, count) or None when ``world``
-        is not a ``hil_sim.world.World`` (then the caller takes the Python path). ``sync_m``/``sync_cols``:
+        is not a ``hil_sim.world.world.World`` (then the caller takes the Python path). ``sync_m``/``sync_cols``:
         SYNC's message index and its (tick, frames_following, period_ms) slots (the ICD's)."""
         args = self._tick_kernel_args(world, sync_m, sync_cols)
         if args is None:
@@ -763,7 +763,7 @@ class Devices:
     def tick_burst(self, world: Any, t_s: float, tick: int, period_ms: int, sync_m: int,
                    sync_cols: np.ndarray) -> FrameBurst | None:
         """``tick_rows`` encoded by the nodes' sender (``self.sender.burst`` of its rows: the same bytes and
-        alive counters), in the same compiled call; None when ``world`` is not a ``hil_sim.world.World``."""
+        alive counters), in the same compiled call; None when ``world`` is not a ``hil_sim.world.world.World``."""
         args = self._tick_kernel_args(world, sync_m, sync_cols)
         if args is None:
             return None

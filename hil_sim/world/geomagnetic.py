@@ -6,7 +6,7 @@ which is what the dipole needs, and its degree-limited field, which the test com
 Why a dipole: ppigrf evaluates the full degree-13 expansion in ~20 ms a call, and even compiled it is ~200
 Legendre terms at every RK4 stage of a 100 Hz dynamics step; the dipole is a handful of flops in the numba
 kernel
-(hil_sim.environment.dipole_field_N). In the Earth-fixed frame, with m = (g11, h11, g10) and a = 6371.2 km
+(hil_sim.world.environment.dipole_field_N). In the Earth-fixed frame, with m = (g11, h11, g10) and a = 6371.2 km
 (IGRF's reference radius):
 
     B(r) = (a / |r|)^3 [3 (m . r_hat) r_hat - m]

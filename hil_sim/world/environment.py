@@ -3,7 +3,7 @@ torque of a residual magnetic dipole in the Earth's field.
 
 Each effect is optional (``spacecraft.disturbance``); a run with none of them on packs no rows here and the
 dynamics step does exactly what it did without this module. A run with one on gets extra rows in the body
-array B of ``hil_sim.dynamics`` (after its ``B_FIELDS`` rows): the effects' switches, the Sun's position
+array B of ``hil_sim.world.dynamics`` (after its ``B_FIELDS`` rows): the effects' switches, the Sun's position
 (from the Earth's centre, written by the world kernels at the start of every step and held over it, as a
 simulator's input message is) and the facets. The torques are evaluated at every RK4 stage from the stage's
 attitude and orbit position, like the gravity gradient.
@@ -14,7 +14,7 @@ centre of mass), lit at cos(theta) = n . s > 0 (s: the unit vector to the Sun):
     F = -P A cos(theta) [ (1 - rho_s) s + 2 (rho_d / 3 + rho_s cos(theta)) n ],   tau = c x F
 
 with P = (flux / c_light) (1 AU / |r_sun - r|)^2 times the sunlit fraction of the Sun's disc (the conical
-shadow of hil_sim.eclipse: 0 in the umbra), rho_s and rho_d the specular and diffuse reflection
+shadow of hil_sim.world.eclipse: 0 in the umbra), rho_s and rho_d the specular and diffuse reflection
 coefficients (the rest is absorbed). This is Basilisk's facetSRPDynamicEffector model; facets shadowing one
 another are not modelled (a convex body has none).
 
@@ -28,7 +28,7 @@ less than 0.01 % of the orbital speed). Basilisk's facetDragDynamicEffector mode
 exponentialAtmosphere and zeroWindModel.
 
 A residual dipole m (body axes, A m^2) in the Earth's field feels tau = m x B_B, the field a centred dipole
-turning with the Earth (hil_sim.geomagnetic: IGRF's degree-1 part at the epoch; Basilisk's
+turning with the Earth (hil_sim.world.geomagnetic: IGRF's degree-1 part at the epoch; Basilisk's
 magneticFieldCenteredDipole, and MtbEffector's m x B).
 """
 from __future__ import annotations
@@ -40,16 +40,16 @@ import numpy as np
 from numba import njit
 
 from gnc.ephemeris import EARTH_RADIUS_KM
-from hil_sim.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
-from hil_sim.geomagnetic import IGRF_REFERENCE_RADIUS_KM
-from hil_sim.orbit import orbit_position_row_N_km, orbit_velocity_row_N_km_s
-from hil_sim.params import SpacecraftParams
+from hil_sim.world.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
+from hil_sim.world.geomagnetic import IGRF_REFERENCE_RADIUS_KM
+from hil_sim.world.orbit import orbit_position_row_N_km, orbit_velocity_row_N_km_s
+from hil_sim.world.params import SpacecraftParams
 
 SPEED_OF_LIGHT_M_S = 299_792_458.0
 AU_KM = 149_597_870.7
 EARTH_ROTATION_RAD_S = 7.292115e-5  # sidereal (IERS), as Basilisk's zeroWindModel takes it
 
-# Rows of B after hil_sim.dynamics.B_FIELDS (24): switches (bits), the Sun held over the step, the solar flux,
+# Rows of B after hil_sim.world.dynamics.B_FIELDS (24): switches (bits), the Sun held over the step, the solar flux,
 # the number of facets, the atmosphere (reference density, its altitude, scale height, the Earth's rotation),
 # the residual dipole (3), the Earth's dipole m = (g11, h11, g10) [T] and the Earth rotation angle at t = 0,
 # then FACET_FIELDS rows per facet from ENV_FACETS on.
@@ -66,14 +66,14 @@ EFFECT_KEYS = ("srp_torque_B_Nm", "drag_torque_B_Nm", "dipole_torque_B_Nm")
 
 
 def effects_on(disturbance: Any) -> tuple[bool, bool, bool]:
-    """Which of EFFECTS a disturbance (the mission's, or hil_sim.params.DisturbanceParams: the same names)
+    """Which of EFFECTS a disturbance (the mission's, or hil_sim.world.params.DisturbanceParams: the same names)
     turns on."""
     d = disturbance
     return d.solar_radiation_pressure, d.aerodynamic_drag, any(d.residual_dipole_B_Am2)
 
 
 def environment_effects(mission: Any) -> list[str]:
-    """The names (EFFECTS) of the environment effects a mission (hil_sim.mission.Mission) turns on."""
+    """The names (EFFECTS) of the environment effects a mission (hil_sim.mission.model.Mission) turns on."""
     return [name for name, on in zip(EFFECTS, effects_on(mission.spacecraft.disturbance)) if on]
 
 
