@@ -10,13 +10,16 @@ import json
 import numpy as np
 import pytest
 
+from cli.main import main as keepout
 from gnc import paper
+from hil_sim.paper_figures import write_outputs
 
 
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
     out = tmp_path_factory.mktemp("paper")
-    res = paper.run_studies(out, quick=True, figures=False)
+    res, sims = paper.run_studies(quick=True)
+    write_outputs(out, res, sims, figures=False)
     return out, res
 
 
@@ -60,7 +63,7 @@ def test_outputs_written(results):
 
 
 def test_cli_writes_figures(tmp_path):
-    code = paper.main(["--out", str(tmp_path), "--quick", "--study", "s3_cones"])
+    code = keepout(["paper", "--out", str(tmp_path), "--quick", "--study", "s3_cones"])
     assert code == 0
     png = tmp_path / "s3_cones.png"
     assert png.exists() and png.stat().st_size > 20_000
