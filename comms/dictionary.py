@@ -3,8 +3,8 @@
 Following F Prime, the flight software and the ground tools read the same dictionary: the flight side
 builds packets from it (``fsw.telemetry``), decodes telecommands with it (``fsw.telecommand``), and the
 ground (the ``ground`` package) decodes and limit-checks telemetry with it. ``config/telemetry_dictionary.json``
-is generated from this module (``python -m comms.dictionary --out config/telemetry_dictionary.json``) and a
-test keeps the committed file equal to the generated one.
+is generated from this module (``keepout config dictionary``) and a test keeps the committed file equal to
+the generated one.
 
 Conventions (stable names: the flight app and ground refer to them):
 
@@ -30,14 +30,12 @@ Wire format (all big-endian), CCSDS 133.0-B-2 space packets built with ``spacepa
 """
 from __future__ import annotations
 
-import argparse
 import enum
 import json
 import math
 import operator
 import struct
-import sys
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -1015,23 +1013,3 @@ def vector_groups(packet: PacketDef) -> dict[str, list[str]]:
         if sep and (suffix in ("x", "y", "z") or suffix.isdigit()):
             groups.setdefault(base, []).append(channel.name)
     return {base: names for base, names in groups.items() if len(names) > 1}
-
-
-def write_json(path: str | Path, dictionary: TelemetryDictionary = DICTIONARY) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(dictionary.to_json())
-    return path
-
-
-def _main(argv: Iterable[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m comms.dictionary",
-                                     description="Export the keepout telemetry dictionary as JSON.")
-    parser.add_argument("--out", default="config/telemetry_dictionary.json", help="output path")
-    args = parser.parse_args(list(argv) if argv is not None else None)
-    print(f"wrote {write_json(args.out)}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(_main())

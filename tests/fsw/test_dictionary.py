@@ -33,10 +33,22 @@ COMMITTED_JSON = REPO / "config" / "telemetry_dictionary.json"
 
 
 def test_committed_json_equals_generated() -> None:
-    assert COMMITTED_JSON.exists(), "run `python -m comms.dictionary --out config/telemetry_dictionary.json`"
+    assert COMMITTED_JSON.exists(), "run `keepout config dictionary --out config/telemetry_dictionary.json`"
     assert COMMITTED_JSON.read_text() == DICTIONARY.to_json(), (
-        "config/telemetry_dictionary.json is stale: regenerate with `python -m comms.dictionary`"
+        "config/telemetry_dictionary.json is stale: regenerate with `keepout config dictionary`"
     )
+
+
+def test_config_dictionary_writes_the_json_and_checks_a_stale_copy(tmp_path: Path, capsys) -> None:
+    from cli.main import main
+
+    out = tmp_path / "dictionary.json"
+    assert main(["config", "dictionary", "--out", str(out)]) == 0
+    assert out.read_text() == DICTIONARY.to_json()
+    assert main(["config", "dictionary", "--check"]) == 0  # the committed file
+    out.write_text(DICTIONARY.to_json().replace('"margin_min_deg"', '"margin_deg"', 1))
+    assert main(["config", "dictionary", "--check", "--out", str(out)]) == 1
+    assert "out of date with comms/dictionary.py; run `keepout config dictionary`" in capsys.readouterr().err
 
 
 def test_json_round_trip_rebuilds_an_equal_dictionary() -> None:
