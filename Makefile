@@ -10,8 +10,8 @@ $(BIN)/keepout: pyproject.toml
 	$(BIN)/pip install --progress-bar on --upgrade pip
 	@echo "installing keepout and its dependencies (a minute or two on a fresh machine; pip shows each download)"
 	$(BIN)/pip install --progress-bar on -e '.[dev,dask]'
-	@echo "compiling the numba kernels now, so the first run starts flying at once (hil_sim/warmup.py)"
-	$(BIN)/python -m hil_sim.warmup
+	@echo "compiling the numba kernels now, so the first run starts flying at once (keepout warmup)"
+	$(BIN)/keepout warmup
 	touch $(BIN)/keepout
 
 # Open MCT for `keepout ground web`, from the npm registry (pinned in ground/web/package-lock.json).
@@ -43,7 +43,7 @@ paper: setup
 # run on a machine with this CPU and Python loads them instead of compiling. build/ goes first: setuptools
 # would otherwise pack files left there by an earlier build.
 wheel: setup
-	$(BIN)/python -m hil_sim.warmup --prune
+	$(BIN)/keepout warmup --prune
 	rm -rf build dist
 	$(BIN)/python -m pip wheel --no-deps -w dist .
 

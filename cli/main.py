@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cli import budget, bus, campaign, config, export, ground, init, paper, sil, sim, sky, truth
+from cli import budget, bus, campaign, config, export, ground, init, paper, sil, sim, sky, truth, warmup
 from fsw import __main__ as fsw_main
 
 # Each module's add_cli(subparsers) adds its subcommand, in the order `keepout --help` lists them.
@@ -23,6 +23,7 @@ _COMMAND_MODULES = (
     ground,         # keepout ground [send ...]
     campaign,       # keepout campaign run|rerun|baseline|compare|shrink
     init,           # keepout init DIR
+    warmup,         # keepout warmup [--prune] (make setup, make wheel)
     export,         # keepout export RUN --format csv|mat|parquet
     sky,            # keepout sky MISSION --at T | --from T0 --to T1 --step S
     budget,         # keepout budget MISSION

@@ -202,7 +202,7 @@ def install() -> None:
 def stale_files(folders: list[Path] | None = None) -> list[Path]:
     """Cache files in the packages' ``__pycache__`` folders that no current kernel can load: index files
     whose stamp is not the current digest of their module (or for another numba), and data files no
-    current index names. `hil_sim.warmup --prune` deletes them before a wheel is built."""
+    current index names. `keepout warmup --prune` deletes them before a wheel is built."""
     import pickle
 
     import numba

@@ -1,7 +1,7 @@
 """Compile every numerical kernel once, at install, so the first run afterwards starts flying at once.
 
-    python -m hil_sim.warmup            # `make setup` runs it after `pip install`
-    python -m hil_sim.warmup --prune    # `make wheel`: then drop cache files no current kernel loads
+    keepout warmup            # `make setup` runs it after `pip install` (cli/warmup.py)
+    keepout warmup --prune    # `make wheel`: then drop cache files no current kernel loads
 
 The GNC laws, zone distances, the assumption checks, the MEKF and the world's integrator are numba kernels
 compiled with ``cache=True``: compiled once per machine and source version, then loaded from the cache
@@ -17,7 +17,6 @@ older sources, so the wheel holds only kernels its own sources compile to.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -51,21 +50,3 @@ def prune(out=sys.stdout) -> int:
         path.unlink(missing_ok=True)
     print(f"removed {len(stale)} stale kernel cache file(s)", file=out, flush=True)
     return len(stale)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("missions", nargs="*", help="mission YAMLs (default: every shipped mission)")
-    ap.add_argument("--prune", action="store_true",
-                    help="then delete cache files of older sources (before building a wheel that ships them)")
-    args = ap.parse_args(argv)
-    print("compiling the numerical kernels once (later runs load them from the kernel cache)", flush=True)
-    total = warm(args.missions)
-    print(f"kernels ready in {total:.1f} s", flush=True)
-    if args.prune:
-        prune()
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
