@@ -176,7 +176,7 @@ def lockstep_rate(spec: str, ticks: int, repeats: int = 5) -> dict:
         fsw_bus.shutdown()
         return {"spec": spec, "mode": "in-process", "ticks": ticks, "cycles_per_s": ticks / elapsed,
                 "cycle_done_timeouts": sim.stats.cycle_done_timeouts}
-    proc = subprocess.Popen([sys.executable, "-m", "hil_sim.sil.lockstep", "--bus", spec, "--wheels",
+    proc = subprocess.Popen([sys.executable, "-m", "cli", "bus", "respond", "--bus", spec, "--wheels",
                              str(world.n_wheels), "--ticks", str(repeats * ticks + 10), "--idle-timeout", "30"],
                             stdout=subprocess.PIPE, text=True, cwd=ROOT)
     assert proc.stdout.readline().strip() == "READY"

@@ -1,4 +1,5 @@
-"""``keepout bus monitor`` and ``keepout bus log``: look at the bus through the ICD.
+"""``keepout bus monitor`` and ``keepout bus log``: look at the bus through the ICD; ``keepout bus respond``:
+answer the simulator's SYNC frames as a stand-in flight software (benches and tests).
 
   keepout bus monitor [--bus SPEC] [--duration S] [--lines]
       live decoded view: one row per ICD message with its last values, rate and E2E classification
@@ -6,6 +7,10 @@
   keepout bus log --out FILE [--bus SPEC] [--duration S] [--count N]
       candump-compatible log (``candump -L`` format, as python-can's CanutilsLogWriter writes it), which
       ``cantools decode config/icd/keepout.dbc < FILE`` decodes.
+  keepout bus respond --bus SPEC [--wheels N] [--ticks N] [--idle-timeout S]
+      a minimal flight-software stand-in, NOT the flight software: answers each SYNC with rate-damping
+      wheel torques and CYCLE_DONE (hil_sim.sil.lockstep.RateDampingResponder on the flight bus driver);
+      prints READY once listening, and at the end ``cycles N cpu_s S`` (the CPU its cycles took).
 
 The same DBC works with cantools' own monitor on a real interface:
   cantools monitor config/icd/keepout.dbc -i socketcan -c vcan0
@@ -15,6 +20,7 @@ The same DBC works with cantools' own monitor on a real interface:
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from typing import Any, TextIO
@@ -44,6 +50,12 @@ def add_cli(subparsers: Any) -> None:
             p.add_argument("--channel-name", default=None,
                            help="interface name written in the log (default: the bus channel, or 'can0')")
             p.set_defaults(func=_log_command)
+    respond = sub.add_parser("respond", help="answer SYNC frames as a minimal flight-software stand-in (benches)")
+    respond.add_argument("--bus", required=True, help="bus spec, e.g. socketcan:vcan0")
+    respond.add_argument("--wheels", type=int, default=4, help="number of reaction wheels (default: 4)")
+    respond.add_argument("--ticks", type=int, default=0, help="stop after this many cycles (0: until idle)")
+    respond.add_argument("--idle-timeout", type=float, default=5.0, help="stop after this long without SYNC [s]")
+    respond.set_defaults(func=_respond_command)
     bus.set_defaults(func=lambda args: (bus.print_help(), 2)[1])
 
 
@@ -211,6 +223,32 @@ def _monitor_command(args: argparse.Namespace) -> int:
         monitor(bus, icd, sys.stdout, more, wait_s, live=sys.stdout.isatty() and not args.lines)
     except KeyboardInterrupt:
         pass
+    finally:
+        bus.shutdown()
+    return 0
+
+
+# -------------------------------------------------------------------------------------------- respond
+def _respond_command(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from comms.bus import Icd, open_bus
+    from fsw.bus import FswBusDriver
+    from hil_sim.sil.lockstep import RateDampingResponder
+
+    bus = open_bus(args.bus)
+    try:
+        driver = FswBusDriver(bus, Icd(), args.wheels)
+        axes = np.eye(3)[:, :args.wheels].T if args.wheels <= 3 else np.vstack(
+            [np.eye(3), np.ones((args.wheels - 3, 3)) / math.sqrt(3)])
+        responder = RateDampingResponder(driver, axes)
+        print("READY", flush=True)
+        cpu0 = time.process_time()
+        while responder.cycle(args.idle_timeout):
+            if args.ticks and responder.cycles >= args.ticks:
+                break
+        # CPU seconds used for all cycles (benchmarks derive the loop's capacity from it)
+        print(f"cycles {responder.cycles} cpu_s {time.process_time() - cpu0:.6f}", flush=True)
     finally:
         bus.shutdown()
     return 0

@@ -729,7 +729,7 @@ class RateDampingResponder:
 
     Wheel torques tau = gain * pinv(A) omega_meas (A: 3 x n wheel axes in body), which removes body rate
     (the wheels absorb the momentum). Uses the real ``FswBusDriver``; runs in process or in its own
-    process (``python -m hil_sim.sil.lockstep --bus SPEC --wheels N``).
+    process (``keepout bus respond --bus SPEC --wheels N``).
     """
 
     def __init__(self, driver: Any, wheel_axes_B: Any, gain_Nm_per_rad_s: float = 2.0) -> None:
@@ -756,39 +756,3 @@ class RateDampingResponder:
         if self.cycles % 10 == 0:
             self.driver.send_heartbeat(0, self.cycles)
         return True
-
-
-def _responder_main(argv: list[str] | None = None) -> int:
-    import argparse
-
-    import numpy as np
-
-    from fsw.bus import FswBusDriver
-    from comms.bus import open_bus
-
-    parser = argparse.ArgumentParser(description="minimal flight-software stand-in answering SYNC frames")
-    parser.add_argument("--bus", required=True, help="bus spec, e.g. socketcan:vcan0")
-    parser.add_argument("--wheels", type=int, default=4)
-    parser.add_argument("--ticks", type=int, default=0, help="stop after this many cycles (0: until idle)")
-    parser.add_argument("--idle-timeout", type=float, default=5.0, help="stop after this long without SYNC [s]")
-    args = parser.parse_args(argv)
-    bus = open_bus(args.bus)
-    try:
-        driver = FswBusDriver(bus, Icd(), args.wheels)
-        axes = np.eye(3)[:, :args.wheels].T if args.wheels <= 3 else np.vstack(
-            [np.eye(3), np.ones((args.wheels - 3, 3)) / math.sqrt(3)])
-        responder = RateDampingResponder(driver, axes)
-        print("READY", flush=True)
-        cpu0 = time.process_time()
-        while responder.cycle(args.idle_timeout):
-            if args.ticks and responder.cycles >= args.ticks:
-                break
-        # CPU seconds used for all cycles (benchmarks derive the loop's capacity from it)
-        print(f"cycles {responder.cycles} cpu_s {time.process_time() - cpu0:.6f}", flush=True)
-    finally:
-        bus.shutdown()
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(_responder_main())

@@ -1,6 +1,7 @@
 """The arrows that must never exist (read from the source): fsw -> ground, fsw -> hil_sim, ground -> hil_sim,
-the contract (comms) -> any of its ends, any library package -> the command line (cli); and what ground and the simulator may still take from the flight
-software besides the contract, each named with its reason."""
+the contract (comms) -> any of its ends, any library package -> the command line (cli); the library packages
+that parse no arguments (argparse lives in cli); and what ground and the simulator may still take from the
+flight software besides the contract, each named with its reason."""
 from __future__ import annotations
 
 import ast
@@ -45,6 +46,14 @@ def test_package_never_imports_the_forbidden_one(package: str, forbidden: str) -
     assert forbidden not in imports, f"{package} imports {forbidden} in {sorted(imports[forbidden])}"
 
 
+@pytest.mark.parametrize("package", ["gnc", "comms", "ground", "hil_sim"])
+def test_library_package_parses_no_arguments(package: str) -> None:
+    imports = _imported_top_packages(package)
+    assert imports, f"no imports found under {package}/: the scan is broken"
+    assert "argparse" not in imports, (
+        f"{package} imports argparse in {sorted(imports['argparse'])}: its command line belongs in cli/")
+
+
 def _imported_modules(package: str, top: str) -> dict[str, set[str]]:
     """Every module of package ``top`` that ``package`` imports (as written) -> the files importing it."""
     found: dict[str, set[str]] = {}
@@ -67,7 +76,6 @@ SIMULATOR_FROM_FSW = {
     "fsw.lifetime": "a child process dies with its parent (the same rule for every process keepout starts)",
     "fsw.safe_yaml": "one YAML reader (limits on size, depth, aliases) for every mission file",
     "fsw.telecommand": "the fast mode feeds telecommands to the in-process flight software's dispatcher",
-    "fsw.bus": "a minimal stand-in flight software answering SYNC (the lockstep bench's responder) uses the flight driver",
 }
 
 

@@ -217,7 +217,7 @@ def test_realtime_puts_the_flight_softwares_cycle_mid_tick(icd: Icd, monkeypatch
 
 # ------------------------------------------------------------------------------ multi-process lockstep
 def _start_responder(spec: str, n_wheels: int, ticks: int) -> subprocess.Popen:
-    proc = subprocess.Popen([sys.executable, "-m", "hil_sim.sil.lockstep", "--bus", spec, "--wheels", str(n_wheels),
+    proc = subprocess.Popen([sys.executable, "-m", "cli", "bus", "respond", "--bus", spec, "--wheels", str(n_wheels),
                              "--ticks", str(ticks), "--idle-timeout", "30"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
     line = proc.stdout.readline()
