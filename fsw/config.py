@@ -184,9 +184,12 @@ class SkyZoneConfig(_Strict):
     direction_N: Vec3 | None = Field(None, description="Centre direction for body='inertial' (normalised on load).")
     geometry: SkyShape = Field(description="Zone shape about the centre direction.")
     add_body_angular_radius: bool = Field(True, description="Earth only: enlarge the zone by the Earth's apparent angular radius seen from the onboard orbit.")
+    atmosphere_height_km: float | None = Field(None, ge=0.0, le=1000.0, description="Earth only, with add_body_angular_radius: the zone reaches the top of an atmosphere this high [km] instead of the solid Earth's limb: its half-angle is asin((R_E + h) / r) plus the geometry's own, r the onboard orbit radius. Unset: the solid Earth (R_E = 6378.137 km). Every Earth zone that sets it must give the same height.")
 
     @model_validator(mode="after")
     def _dir(self) -> "SkyZoneConfig":
+        if self.atmosphere_height_km is not None and not (self.body == "earth" and self.add_body_angular_radius):
+            raise ValueError(f"zone '{self.name}': atmosphere_height_km needs body='earth' and add_body_angular_radius: true")
         if self.body == "inertial":
             if self.direction_N is None:
                 raise ValueError(f"zone '{self.name}': body='inertial' requires direction_N")
@@ -269,11 +272,23 @@ class PathGuidanceConfig(_Strict):
     polygon_sides: int = Field(48, ge=8, le=360, description="Sides of the convex polygon drawn round each zone for planning (a plan costs ~3 ms with 48 sides and three zones, growing as the square).")
 
 
+class GroundTargetConfig(_Strict):
+    """A point on the rotating Earth (WGS-84): the boresight follows it every GNC cycle, its direction
+    computed from the onboard orbit (`orbit`) and the Earth's rotation (`gnc.earth`)."""
+
+    latitude_deg: float = Field(ge=-90.0, le=90.0, description="Geodetic latitude (WGS-84) [deg], north positive.")
+    longitude_deg: float = Field(ge=-180.0, le=360.0, description="Longitude [deg], east positive.")
+    altitude_m: float = Field(0.0, ge=-500.0, le=9000.0, description="Height above the WGS-84 ellipsoid [m].")
+    min_elevation_deg: float = Field(0.0, ge=0.0, lt=90.0, description="Lowest elevation of the spacecraft above the target's horizon at which it can be observed [deg]. The mission check reports a ground target commanded for a dwell in which it never rises this high; onboard the target is followed whatever its elevation.")
+
+
 class PointingConfig(_Strict):
     """POINTING mode: instrument boresight to a target direction avoiding sky zones."""
 
     boresight_B: Vec3 = Field([0.0, 0.0, 1.0], description="Instrument boresight in body frame (normalised).")
-    target_N: Vec3 = Field([1.0, 0.0, 0.0], description="Initial target direction in N (normalised); SET_TARGET changes it.")
+    target_N: Vec3 = Field([1.0, 0.0, 0.0], description="Initial target direction in N (normalised), with target_kind 'inertial'; SET_TARGET changes it.")
+    target_kind: Literal["inertial", "nadir", "ground"] = Field("inertial", description="What the initial target is: 'inertial' (target_N, fixed in N), 'nadir' (the Earth's centre seen from the onboard orbit) or 'ground' (target_ground on the rotating Earth). A nadir or ground target moves: its direction is computed again every GNC cycle and the zones are kept out as for any target; SET_TARGET replaces it.")
+    target_ground: GroundTargetConfig | None = Field(None, description="The ground point for target_kind 'ground'.")
     roll_axis_B: Vec3 = Field([1.0, 0.0, 0.0], description="Body axis (not parallel to the boresight) whose projection is steered towards roll_reference_N.")
     roll_reference_N: Vec3 = Field([0.0, 0.0, 1.0], description="Inertial reference for the roll about the boresight (falls back to another axis when nearly parallel to the boresight).")
     roll_gain_1_s: float = Field(0.05, ge=0.0, le=10.0, description="Roll law gain about the boresight [1/s]; 0 disables roll control.")
@@ -289,7 +304,17 @@ class PointingConfig(_Strict):
         names = [z.name for z in self.zones]
         if len(set(names)) != len(names):
             raise ValueError(f"pointing.zones: duplicate zone names {names}")
+        if (self.target_kind == "ground") != (self.target_ground is not None):
+            raise ValueError("pointing.target_ground is needed with target_kind 'ground', and only then")
+        heights = {z.atmosphere_height_km for z in self.zones if z.body == "earth" and z.atmosphere_height_km is not None}
+        if len(heights) > 1:
+            raise ValueError(f"pointing.zones: Earth zones give different atmosphere_height_km {sorted(heights)}; "
+                             "the onboard ephemeris carries one Earth limb")
         return self
+
+    def atmosphere_height_km(self) -> float | None:
+        """The height of the atmosphere the Earth zones reach [km], or None (the solid Earth's limb)."""
+        return next((z.atmosphere_height_km for z in self.zones if z.atmosphere_height_km is not None), None)
 
 
 class QuaternionModeConfig(_Strict):

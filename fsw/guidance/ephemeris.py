@@ -1,5 +1,6 @@
 """Onboard sky ephemeris: the Sun, Moon and Earth directions seen from the spacecraft, from the
-analytic series (`gnc.ephemeris`) and the configured circular orbit."""
+analytic series (`gnc.ephemeris`) and the configured circular orbit; and the directions of targets on the
+rotating Earth (nadir, a ground point: `gnc.earth`)."""
 from __future__ import annotations
 
 import math
@@ -7,7 +8,8 @@ import math
 import numpy as np
 
 from fsw.guidance._kernels import sky_directions_nb
-from gnc.ephemeris import EARTH_RADIUS_KM, julian_date_tdb, moon_position_N_km, sun_position_N_km
+from gnc.earth import direction_to_point_N, earth_fixed_to_inertial, geodetic_to_earth_fixed_km, nadir_N
+from gnc.ephemeris import EARTH_RADIUS_KM, julian_date, julian_date_tdb, moon_position_N_km, sun_position_N_km
 
 EPHEMERIS_NODE_S = 10.0
 EPHEMERIS_BLOCK_NODES = 32  # nodes evaluated in one batched call of the series (320 s of flight)
@@ -28,13 +30,30 @@ class SkyEphemeris:
         # in-plane axis 90 deg ahead of the ascending node
         self.p_hat = node
         self.q_hat = np.array([-math.sin(raan) * math.cos(i), math.cos(raan) * math.cos(i), math.sin(i)])
-        self.earth_angular_radius_deg = math.degrees(math.asin(EARTH_RADIUS_KM / o.radius_km))
+        self.jd0_utc = julian_date(cfg.epoch_utc)
+        atmosphere_km = cfg.pointing.atmosphere_height_km()
+        # the Earth zones' limb: the solid Earth's, or the top of the atmosphere when a zone asks for it
+        limb_km = EARTH_RADIUS_KM if atmosphere_km is None else EARTH_RADIUS_KM + atmosphere_km
+        self.earth_angular_radius_deg = math.degrees(math.asin(min(1.0, limb_km / o.radius_km)))
         self._block_first = 0  # node of the block's first row
         self._block: tuple[np.ndarray, np.ndarray] | None = None  # Sun and Moon positions [km], a row per node
 
     def position_N_km(self, t_s: float) -> np.ndarray:
         u = self.u0 + self.n_rad_s * t_s
         return self.radius_km * (math.cos(u) * self.p_hat + math.sin(u) * self.q_hat)
+
+    def target_direction_N(self, t_s: float, ground_E_km: np.ndarray | None) -> np.ndarray:
+        """Unit vector in N from the spacecraft to a target on the Earth at mission time ``t_s``: the Earth
+        fixed point ``ground_E_km`` [km] (`ground_point_E_km`), or nadir (None)."""
+        r_sc = self.position_N_km(t_s)
+        if ground_E_km is None:
+            return nadir_N(r_sc)
+        return direction_to_point_N(r_sc, earth_fixed_to_inertial(self.jd0_utc + t_s / 86400.0) @ ground_E_km)
+
+    @staticmethod
+    def ground_point_E_km(ground) -> np.ndarray:
+        """Earth-fixed position [km] of a `fsw.config.GroundTargetConfig`."""
+        return geodetic_to_earth_fixed_km(ground.latitude_deg, ground.longitude_deg, ground.altitude_m)
 
     def _geocentric(self, node: int) -> tuple[np.ndarray, np.ndarray]:
         """Geocentric Sun and Moon positions [km] at ephemeris node ``node``.

@@ -1,5 +1,9 @@
 """POINTING mode: the instrument boresight on S^2 kept out of the Sun, Moon and Earth zones.
 
+The target is a fixed direction in N, or a target on the rotating Earth (nadir, a ground point) whose
+direction is computed again every cycle from the onboard orbit (`SkyEphemeris.target_direction_N`): the
+same law and guard steer to it, the target simply moves (`PointingGuidance._track_target`).
+
 The zones are rebuilt from the onboard ephemeris as they move (physical ones for the margins, inflated ones
 for the law), merged when close (`zone_merging`), and the `gnc.laws.StarShapedLaw` steers the boresight
 to the target, or to a substitute when the target lies in a zone's eps-layer, or out of the closing gap
@@ -71,6 +75,54 @@ class _SkySlot:
 class PointingGuidance:
     """Mixin of `fsw.guidance.Guidance`: POINTING mode and the sky zones every mode reports margins on."""
 
+    # a target on the Earth: (kind, its Earth-fixed point [km] or None for nadir), or None for a fixed
+    # target; the target_N it last set; whether the configured initial target was taken up (the first
+    # POINTING cycle does it: the start-up warm-up runs one before any telecommand)
+    _track: tuple[str, np.ndarray | None] | None = None
+    _tracked_N: np.ndarray | None = None
+    _track_started = False
+
+    def set_target_on_earth(self, kind: str, ground=None) -> None:
+        """Make the POINTING target nadir (``kind`` 'nadir') or the `fsw.config.GroundTargetConfig`
+        ``ground`` ('ground'), followed every cycle from now on; a later `set_target_direction` (a fixed
+        target) ends it. The caller checks the target against the zones first, as for a fixed target."""
+        if kind not in ("nadir", "ground"):
+            raise ValueError(f"unknown target kind {kind!r}; allowed: 'nadir', 'ground'")
+        point = self.ephem.ground_point_E_km(ground) if kind == "ground" else None
+        self._track_started = True
+        self.set_target_direction(self.ephem.target_direction_N(self.last_t_s, point))
+        self._track = (kind, point)
+        self._tracked_N = self._held_target_N if self.mode == "SAFE" else self.target_N
+
+    def target_on_earth_N(self, kind: str, ground=None, t_s: float | None = None) -> np.ndarray:
+        """The direction of a nadir or ground target at ``t_s`` (default: the last cycle's time), e.g. to
+        check it against the zones before `set_target_on_earth`."""
+        point = self.ephem.ground_point_E_km(ground) if kind == "ground" else None
+        return self.ephem.target_direction_N(self.last_t_s if t_s is None else t_s, point)
+
+    def _track_target(self, t_s: float) -> None:
+        """A target on the Earth moves: its direction now, as a new target_N (replaced, never written into:
+        `_cycle_inputs` and the outputs tell a new target by identity), the law's aim unless a planned
+        path leads it, and the law rebuilt for it. A target_N this did not set came from a telecommand
+        (`set_target_direction`): a fixed target, followed no more."""
+        if not self._track_started:
+            self._track_started = True
+            p = self.cfg.pointing
+            if p.target_kind != "inertial":
+                point = self.ephem.ground_point_E_km(p.target_ground) if p.target_kind == "ground" else None
+                self._track, self._tracked_N = (p.target_kind, point), self.target_N
+        track = self._track
+        if track is None:
+            return
+        if self.target_N is not self._tracked_N:
+            self._track = None
+            return
+        direction = self.ephem.target_direction_N(t_s, track[1])
+        self.target_N = self._tracked_N = direction
+        if self._follower is None:
+            self._aim = direction
+        self._sky_law_key = None
+
     def _update_sky(self, t_s: float) -> bool:
         """Recompute zone centres; rebuild zones that moved too far. True if a law zone was rebuilt.
 
@@ -123,6 +175,8 @@ class PointingGuidance:
 
 
     def _pointing(self, t_s: float, q: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
+        if self._track_started is False or self._track is not None:
+            self._track_target(t_s)
         pack = self._sky_pack
         if pack is None or "directions" in vars(self.ephem):
             pack = self._sky_pack_now()
@@ -587,4 +641,3 @@ class PointingGuidance:
             self.events("ZONES_MERGED", zone_a=a, zone_b=b, separation_deg=sep)
         for a, b in sorted(old_pairs - new_pairs):
             self.events("ZONES_SPLIT", zone_a=a, zone_b=b)
-
