@@ -2,8 +2,8 @@
 
 No I/O, no clocks, no threads, no globals: numpy in, numpy out. The one exception is packaging, not
 maths: ``_numba_cache`` and ``_after_numba`` (design note 17) arm numba's kernel cache locator here,
-because every package with kernels imports gnc first. The paper in
-``shared/paper`` (constrained stabilization on the n-sphere) is the specification.
+because every package with kernels imports gnc first. The specification is the paper: S. Sawant and
+A. Tayebi, "Constrained stabilization on the n-sphere" (conic and star-shaped constraints), arXiv 2509.02487.
 """
 
 # Before any kernel of gnc, fsw or hil_sim is decorated: numba caches them through keepout's locator,
