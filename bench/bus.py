@@ -206,7 +206,7 @@ def lockstep_rate(spec: str, ticks: int, repeats: int = 5) -> dict:
 
 
 def lockstep_rate_real_fsw(spec: str, ticks: int, mission_path: Path) -> dict:
-    """SIL loop rate with the real flight software process (``python -m fsw --lockstep``) on the bus."""
+    """SIL loop rate with the real flight software process (``keepout fsw MISSION --lockstep``) on the bus."""
     import socket
 
     from comms.bus import Icd, open_bus
@@ -220,7 +220,7 @@ def lockstep_rate_real_fsw(spec: str, ticks: int, mission_path: Path) -> dict:
         s.bind(("127.0.0.1", 0))
         tm_port = s.getsockname()[1]
     warm = 20
-    proc = subprocess.Popen([sys.executable, "-m", "fsw", "--config", str(mission_path), "--bus", spec, "--lockstep",
+    proc = subprocess.Popen([sys.executable, "-m", "cli", "fsw", str(mission_path), "--bus", spec, "--lockstep",
                              "--max-ticks", str(100 * (warm + ticks)), "--tm-port", str(tm_port), "--tc-port", "0"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     bus = open_bus(spec)
@@ -247,7 +247,7 @@ def lockstep_rate_real_fsw(spec: str, ticks: int, mission_path: Path) -> dict:
             proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
             proc.kill()
-    return {"spec": spec, "mode": "real FSW process (python -m fsw --lockstep), " + mission_path.name,
+    return {"spec": spec, "mode": "real FSW process (keepout fsw --lockstep), " + mission_path.name,
             "ticks": ticks, "cycles_per_s": ticks / elapsed,
             "cycle_done_timeouts": sim.stats.cycle_done_timeouts - timeouts0}
 

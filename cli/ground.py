@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from fsw.config import udp_port, udp_port_or_zero
+from cli import udp_port, udp_port_or_zero
 from comms.dictionary import DEFAULT_HOST, DEFAULT_TC_PORT, DEFAULT_TM_PORT, DICTIONARY, TelemetryDictionary
 from comms.link_security import LINK_KEY_FILE, downlink_receiver, load_key_file
 from ground.archive import DECODED_ARCHIVE, RAW_ARCHIVE, read_raw_archive
@@ -126,10 +126,9 @@ def _key_file(explicit: str | None, config_path: str | None, run_dir: Path | Non
     if run_dir is not None:
         return str(run_dir / LINK_KEY_FILE)
     if config_path:
-        from fsw.config import load_fsw_config
         from comms.link_security import mission_key_path
 
-        path = mission_key_path(load_fsw_config(config_path).tmtc.security.key_file, config_path)
+        path = mission_key_path(_flight_software(config_path).tmtc.security.key_file, config_path)
         if path is not None:
             return str(path)
     raise ValueError("no link key: pass --key-file FILE, or --config MISSION naming "
@@ -170,14 +169,24 @@ def _load_dictionary(path: str | None) -> TelemetryDictionary:
     return TelemetryDictionary.load(path) if path else DICTIONARY
 
 
+def _flight_software(config_path: str) -> Any:
+    """The flight software's configuration of a mission YAML, read by the mission reader; its problems (each
+    at file:line:col) raised as one ValueError."""
+    from hil_sim.mission.flight import load_flight_config
+    from hil_sim.mission.loader import ConfigError
+
+    try:
+        return load_flight_config(config_path).flight_software
+    except ConfigError as exc:
+        raise ValueError(str(exc)) from None
+
+
 def _mission_addresses(config_path: str | None) -> dict[str, Any]:
-    """Telemetry/telecommand addresses from a mission YAML (``fsw.config``), or the defaults."""
+    """Telemetry/telecommand addresses from a mission YAML (its ``flight_software.tmtc``), or the defaults."""
     addresses = {"tm_host": DEFAULT_HOST, "tm_port": DEFAULT_TM_PORT, "tc_host": DEFAULT_HOST,
                  "tc_port": DEFAULT_TC_PORT, "tm_interface": LOOPBACK}
     if config_path:
-        from fsw.config import load_fsw_config
-
-        tmtc = load_fsw_config(config_path).tmtc  # raises ConfigError naming the file and key
+        tmtc = _flight_software(config_path).tmtc  # raises ValueError naming the file, line and key
         addresses.update(tm_host=tmtc.telemetry_host, tm_port=tmtc.telemetry_port,
                          tc_host=tmtc.telecommand_bind_host, tc_port=tmtc.telecommand_port,
                          tm_interface=tmtc.telemetry_multicast_interface)
@@ -335,7 +344,7 @@ SEND_SEQ_FILE = "ground_tc_seq.txt"  # in a run folder: consecutive sequence cou
 
 def _send_endpoints(args: argparse.Namespace, run: str | None) -> tuple[Endpoints, Path | None]:
     """Where to send (telecommand address) and hear the acknowledgements (telemetry), from ``--run`` or
-    the addresses; raises LinkError or ConfigError with the reason."""
+    the addresses; raises LinkError or ValueError with the reason."""
     if run is None:
         return _address_endpoints(args.config, args.tm_host, args.tm_port, args.tc_host, args.tc_port), None
     if args.config or args.tc_host or args.tc_port or args.tm_host or args.tm_port:

@@ -56,7 +56,8 @@ def _source(args: argparse.Namespace) -> tuple[Path, Path | None, Any]:
 def _cmd_web(args: argparse.Namespace) -> int:
     import asyncio
 
-    from fsw.config import ConfigError, load_fsw_config
+    from hil_sim.mission.flight import load_flight_config
+    from hil_sim.mission.loader import ConfigError
     from comms.dictionary import DICTIONARY, DictionaryError, TelemetryDictionary
     from ground.link import LinkError
     from ground.web.server import WebGround, WebSetupError, bind, find_openmct, serve
@@ -65,7 +66,7 @@ def _cmd_web(args: argparse.Namespace) -> int:
         openmct_dir = find_openmct(args.openmct)
         archive, config, endpoints = _source(args)
         dictionary = TelemetryDictionary.load(args.dictionary) if args.dictionary else DICTIONARY
-        cfg = load_fsw_config(config) if config is not None else None
+        cfg = load_flight_config(config).flight_software if config is not None else None
         security = None
         if endpoints is not None and endpoints.state == "running":
             from comms.link_security import LINK_KEY_FILE, downlink_receiver, load_key_file

@@ -1,8 +1,7 @@
 """The ``keepout`` command line.
 
 Each subcommand's module exposes ``add_cli(subparsers)``, which adds its parsers and sets ``func`` on
-them; this file lists them (``_COMMAND_MODULES``) and runs the one asked for. One still lives in its
-library package: ``keepout fsw`` (fsw.__main__, the flight process's own entry point).
+them; this file lists them (``_COMMAND_MODULES``) and runs the one asked for.
 """
 from __future__ import annotations
 
@@ -10,7 +9,7 @@ import argparse
 import sys
 
 from cli import budget, bus, campaign, config, export, ground, init, paper, sil, sim, sky, truth, warmup
-from fsw import __main__ as fsw_main
+from cli import fsw as fsw_main
 
 # Each module's add_cli(subparsers) adds its subcommand, in the order `keepout --help` lists them.
 _COMMAND_MODULES = (

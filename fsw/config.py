@@ -1,9 +1,10 @@
 """Flight-software configuration: everything the onboard software knows about itself and its mission.
 
 `FswConfig` is a pydantic v2 model (extra keys forbidden, units in key names). The mission YAML embeds
-it under the key ``flight_software:``; `load_fsw_config` accepts either such a mission file or a bare
-FswConfig YAML. ``FswConfig.model_json_schema()`` is the JSON Schema editors use: every field carries a
-description and a default, so the schema is the reference manual.
+it under the key ``flight_software:``, where the simulator's mission reader (hil_sim.mission) fills in the
+knowledge the file leaves to the truth; the flight software reads only its resolved configuration file
+(`FswRunConfig`, `load_fsw_run_config`). ``FswConfig.model_json_schema()`` is the JSON Schema editors
+use: every field carries a description and a default, so the schema is the reference manual.
 
 Conventions: vectors carry their frame suffix (``_B`` body, ``_N`` inertial GCRS/J2000 equatorial),
 quaternions are scalar first Hamilton ``[eta, q1, q2, q3]``; ``q_BS`` rotates star-tracker-frame vectors
@@ -14,7 +15,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 from pathlib import Path
-from typing import Annotated, Literal, NamedTuple, Union
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -539,192 +540,61 @@ class FswConfig(_Strict):
         return 1.0 / self.rates.gnc_rate_hz
 
 
-class ConfigError(ValueError):
-    """A configuration file is missing, unreadable or invalid; the message names the file and key."""
+class BusConfig(_Strict):
+    """The bus the flight software opens, as the mission resolved it (its ``bus``, ``bus_bitrate_bps`` and
+    ``bus_authentication``)."""
+
+    spec: str = Field("auto", min_length=1, description="Bus spec: auto | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL] | INTERFACE:CHANNEL[,KEY=VALUE...] (any python-can interface).")
+    bitrate_bps: int | None = Field(None, ge=10000, le=1000000, description="CAN bit rate a hardware interface is opened with [bit/s]; none: the interface's own.")
+    authentication: bool = Field(False, description="Every batch of frames carries a SecOC authenticator keyed from the link key.")
 
 
-# ---------------------------------------------------------------------------------- mission files
-# Where each piece of the flight software's knowledge comes from when the mission file does not give it under
-# flight_software (`knowledge_from_truth` fills it in): knowledge key -> the truth key written once. The
-# validator reports an error in such a copy at its truth key (hil_sim.mission.model); docs/missions.md lists the
-# source as the key's default.
-KNOWLEDGE_SOURCES: dict[tuple[str, ...], tuple[str, ...]] = {
-    ("flight_software", "epoch_utc"): ("epoch_utc",),
-    ("flight_software", "spacecraft", "inertia_B_kgm2"): ("spacecraft", "inertia_B_kgm2"),
-    ("flight_software", "spacecraft", "wheels"): ("spacecraft", "wheels"),
-    ("flight_software", "spacecraft", "star_tracker_q_BS"): ("spacecraft", "star_tracker", "q_BS"),
-    ("flight_software", "spacecraft", "star_tracker_max_rate_deg_s"): ("spacecraft", "star_tracker", "max_rate_deg_s"),
-    ("flight_software", "spacecraft", "imu_range_rad_s"): ("spacecraft", "imu", "saturation_rad_s"),
-    ("flight_software", "pointing", "boresight_B"): ("spacecraft", "instrument_boresight_B"),
-    ("flight_software", "pointing", "target_N"): ("initial_state", "ra_dec_deg"),
-    ("flight_software", "orbit", "radius_km"): ("orbit", "semi_major_axis_km"),
-    ("flight_software", "orbit", "inclination_deg"): ("orbit", "inclination_deg"),
-    ("flight_software", "orbit", "raan_deg"): ("orbit", "raan_deg"),
-    ("flight_software", "orbit", "arg_latitude_at_epoch_deg"): ("orbit", "arg_perigee_deg"),
-    ("flight_software", "door", "close_time_s"): ("spacecraft", "door", "close_time_s"),
-    ("flight_software", "door", "open_time_s"): ("spacecraft", "door", "open_time_s"),
-}
-# the sources that are not a plain copy of their truth key, as the docs say them
-_KNOWLEDGE_NOTES = {
-    ("flight_software", "spacecraft", "wheels"): "spacecraft.wheels (axis_B, max_torque_Nm, max_speed_rad_s, "
-                                                 "spin_inertia_kgm2)",
-    ("flight_software", "pointing", "target_N"): "initial_state.ra_dec_deg, when the initial attitude is given so",
-    ("flight_software", "orbit", "arg_latitude_at_epoch_deg"): "orbit.arg_perigee_deg + orbit.mean_anomaly_deg",
-}
-KNOWLEDGE_DEFAULTS = {".".join(k): _KNOWLEDGE_NOTES.get(k, ".".join(v)) for k, v in KNOWLEDGE_SOURCES.items()}
-WHEEL_KNOWLEDGE_KEYS = ("axis_B", "max_torque_Nm", "max_speed_rad_s", "spin_inertia_kgm2")
+class FswRunConfig(_Strict):
+    """The flight software's configuration file (``python -m fsw --config FILE``): its bus and its own
+    configuration, resolved by whoever starts it (the SIL writes it into the run folder, ``keepout fsw
+    MISSION`` builds it from the mission), with nothing of the truth in it."""
+
+    bus: BusConfig = Field(default_factory=BusConfig)
+    flight_software: FswConfig
 
 
-def knowledge_from_truth(mission: dict) -> dict:
-    """A copy of a mission file's data whose ``flight_software`` section holds, for every piece of
-    knowledge the file does not give there, the truth the file gives (`KNOWLEDGE_DEFAULTS`): each fact is
-    written once. The orbit knowledge is circular: radius = semi-major axis, argument of latitude =
-    argument of perigee + mean anomaly. Keys given under ``flight_software`` are kept; values of the
-    wrong kind are copied as they are, for validation to report."""
-    import copy
-
-    out = copy.deepcopy(mission)
-    fsw, sc, orbit, state = (out.get(k) for k in ("flight_software", "spacecraft", "orbit", "initial_state"))
-    if not isinstance(fsw, dict):
-        return out
-
-    def fill(target: dict | None, key: str, value) -> None:
-        if isinstance(target, dict) and key not in target and value is not None:
-            target[key] = copy.deepcopy(value)
-
-    def child(key: str) -> dict | None:
-        value = fsw.setdefault(key, {})
-        return value if isinstance(value, dict) else None
-
-    fill(fsw, "epoch_utc", out.get("epoch_utc"))
-    if isinstance(sc, dict):
-        known = child("spacecraft")
-        fill(known, "inertia_B_kgm2", sc.get("inertia_B_kgm2"))
-        wheels = sc.get("wheels")
-        if isinstance(wheels, list) and all(isinstance(w, dict) for w in wheels):
-            renamed = [{**w, "spin_inertia_kgm2": w.get("spin_inertia_kgm2", w.get("Js_kgm2"))} for w in wheels]
-            fill(known, "wheels", [{k: w[k] for k in WHEEL_KNOWLEDGE_KEYS if w.get(k) is not None} for w in renamed])
-        if isinstance(sc.get("star_tracker"), dict):
-            fill(known, "star_tracker_q_BS", sc["star_tracker"].get("q_BS"))
-            fill(known, "star_tracker_max_rate_deg_s", sc["star_tracker"].get("max_rate_deg_s"))
-        if isinstance(sc.get("imu"), dict):
-            fill(known, "imu_range_rad_s", sc["imu"].get("saturation_rad_s"))
-        fill(child("pointing"), "boresight_B", sc.get("instrument_boresight_B"))
-        door = sc.get("door")
-        if isinstance(door, dict) and fsw.get("door", {}) is not None:
-            known_door = child("door")
-            fill(known_door, "close_time_s", door.get("close_time_s"))
-            fill(known_door, "open_time_s", door.get("open_time_s"))
-    if isinstance(state, dict) and "q_NB" not in state and _is_ra_dec(state.get("ra_dec_deg")):
-        ra, dec = (math.radians(float(a)) for a in state["ra_dec_deg"])
-        # hold the initial pointing until the first SET_TARGET
-        fill(child("pointing"), "target_N", [math.cos(dec) * math.cos(ra), math.cos(dec) * math.sin(ra), math.sin(dec)])
-    if isinstance(orbit, dict):
-        known_orbit = child("orbit")
-        fill(known_orbit, "radius_km", orbit.get("semi_major_axis_km"))
-        fill(known_orbit, "inclination_deg", orbit.get("inclination_deg"))
-        fill(known_orbit, "raan_deg", orbit.get("raan_deg"))
-        omega, anomaly = orbit.get("arg_perigee_deg", 0.0), orbit.get("mean_anomaly_deg", 0.0)
-        if _finite(omega) and _finite(anomaly):
-            fill(known_orbit, "arg_latitude_at_epoch_deg", (float(omega) + float(anomaly)) % 360.0)
-    return out
+class FswConfigError(ValueError):
+    """The flight software's configuration file is missing, unreadable or invalid; the message names the
+    file and the key."""
 
 
-def _finite(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def _is_ra_dec(value) -> bool:
-    return (isinstance(value, (list, tuple)) and len(value) == 2 and all(_finite(v) for v in value)
-            and 0.0 <= value[0] <= 360.0 and -90.0 <= value[1] <= 90.0)
-
-
-def _read_yaml(p: Path):
-    """The data of a YAML file within the size, depth and alias limits of `fsw.safe_yaml`."""
+def load_fsw_run_config(path: str | Path) -> FswRunConfig:
+    """The flight software's configuration file, read once: safe YAML within `fsw.safe_yaml`'s limits, then a
+    strict validation. Nothing is filled in from anywhere else: the file was resolved before it got here."""
     import yaml
 
     from fsw.safe_yaml import UnreadableFile, load_config_file
 
-    try:
-        return load_config_file(p)
-    except UnreadableFile as exc:
-        raise ConfigError(f"{p}: cannot read: {exc}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
-
-
-def load_fsw_config(path: str | Path) -> FswConfig:
-    """Load an FswConfig from a mission YAML (key ``flight_software:``) or a bare FswConfig YAML."""
-    return load_fsw_run_config(path)[0]
-
-
-def load_fsw_run_config(path: str | Path) -> tuple[FswConfig, BusSettings]:
-    """The flight software's configuration and its bus settings from one reading of the file."""
     p = Path(path)
-    data = _read_yaml(p)
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise ConfigError(f"{p}: expected a mapping at the top level, got {type(data).__name__}")
-    return _fsw_config_of(data, p), _bus_settings_of(data, p)
-
-
-def _fsw_config_of(data: dict, p: Path) -> FswConfig:
-    prefix = ""
-    if "flight_software" in data:
-        # a mission file: what its flight_software section leaves out is the truth written in the file
-        data = knowledge_from_truth(data)["flight_software"] or {}
-        prefix = "flight_software."
-    return parse_fsw_config(data, source=str(p), prefix=prefix)
-
-
-def udp_port(text: str) -> int:
-    """argparse type: a UDP port number 1..65535 (a clear error instead of a traceback later)."""
-    import argparse
-
     try:
-        port = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a port number; allowed: 1..65535") from None
-    if not 1 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"{port} is not a UDP port; allowed: 1..65535")
-    return port
-
-
-def udp_port_or_zero(text: str) -> int:
-    """argparse type: a port to bind, 0..65535 (0: the kernel picks a free one)."""
-    return 0 if text.strip() == "0" else udp_port(text)
-
-
-class BusSettings(NamedTuple):
-    spec: str
-    bitrate: int | None
-    authentication: bool
-
-
-def _bus_settings_of(data: dict, p: Path) -> BusSettings:
-    """The bus spec, CAN bit rate [bit/s] and frame authentication a mission YAML names (top-level ``bus``,
-    ``bus_bitrate_bps`` and ``bus_authentication``; ``auto``, None and False when absent, as in a bare
-    FswConfig YAML)."""
-    bus = data.get("bus", "auto")
-    bitrate = data.get("bus_bitrate_bps")
-    if not isinstance(bus, str):
-        raise ConfigError(f"{p}: bus: expected a bus spec string such as auto or pcan:PCAN_USBBUS1, got {bus!r}")
-    if bitrate is not None and (isinstance(bitrate, bool) or not isinstance(bitrate, int)
-                                or not 10000 <= bitrate <= 1000000):
-        raise ConfigError(f"{p}: bus_bitrate_bps: expected an integer in 10000..1000000 [bit/s], got {bitrate!r}")
-    authentication = data.get("bus_authentication", False)
-    if not isinstance(authentication, bool):
-        raise ConfigError(f"{p}: bus_authentication: expected true or false, got {authentication!r}")
-    return BusSettings(bus, bitrate, authentication)
+        data = load_config_file(p)
+    except UnreadableFile as exc:
+        raise FswConfigError(f"{p}: cannot read: {exc}") from None
+    except yaml.YAMLError as exc:
+        raise FswConfigError(f"{p}: not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise FswConfigError(f"{p}: expected a mapping with the keys flight_software and bus, got "
+                             f"{type(data).__name__}")
+    hint = ""
+    if set(data) - set(FswRunConfig.model_fields):
+        # the truth's keys never reach the flight software: a mission is resolved first
+        hint = "\n(a mission file? `keepout fsw MISSION` resolves it for the flight software)"
+    return _validated(FswRunConfig, data, str(p), "", hint)
 
 
 def parse_fsw_config(data: dict, source: str = "<dict>", prefix: str = "") -> FswConfig:
+    """``data`` as an FswConfig; raises FswConfigError listing every key refused, as ``prefix`` + key path."""
+    return _validated(FswConfig, data, source, prefix)
+
+
+def _validated(model: type[_Strict], data: dict, source: str, prefix: str, hint: str = "") -> Any:
     try:
-        return FswConfig.model_validate(data)
+        return model.model_validate(data)
     except ValidationError as exc:
-        lines = []
-        for err in exc.errors():
-            key = prefix + ".".join(str(x) for x in err["loc"])
-            lines.append(f"  {key}: {err['msg']}")
-        raise ConfigError(f"{source}: invalid flight-software configuration:\n" + "\n".join(lines)) from None
+        lines = [f"  {prefix}{'.'.join(str(x) for x in err['loc'])}: {err['msg']}" for err in exc.errors()]
+        raise FswConfigError(f"{source}: invalid flight-software configuration:\n" + "\n".join(lines) + hint) from None

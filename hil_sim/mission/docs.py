@@ -187,7 +187,7 @@ def _unit(key: str, description: str) -> str:
 
 
 def _default(key: str, node: dict, required: set[str], path: str = "") -> str:
-    from fsw.config import KNOWLEDGE_DEFAULTS
+    from hil_sim.mission.knowledge import KNOWLEDGE_DEFAULTS
 
     if path in KNOWLEDGE_DEFAULTS:
         return f"from the file: {KNOWLEDGE_DEFAULTS[path]}"

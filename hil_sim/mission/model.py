@@ -4,7 +4,7 @@ A mission YAML holds the TRUTH (the spacecraft as built, its orbit, the epoch, t
 faults to inject), how to run it (bus, duration, seed, rates), the ground's timeline of telecommands,
 the requirements a run is judged against, and, under ``flight_software:``, the flight software's own
 configuration (``fsw.config.FswConfig``: what the spacecraft *believes*, its zones, laws and limits).
-The flight software reads only that key (it never imports hil_sim).
+The flight software reads only that key, resolved (`hil_sim.mission.flight`; it never imports hil_sim).
 
 Conventions: quaternions scalar first [eta, q1, q2, q3], ``q_NB`` rotates body vectors into the
 inertial frame N (GCRS/J2000 equatorial); ``omega_BN_B`` is the body rate relative to N in body
@@ -21,10 +21,11 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 import numpy as np
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from fsw.config import KNOWLEDGE_SOURCES, MAX_WHEELS, FswConfig
+from fsw.config import MAX_WHEELS, FswConfig
 from comms.dictionary import FDIR_MONITORS
 from gnc.ephemeris import EARTH_RADIUS_KM
 from hil_sim.devices.faults import DOOR_MESSAGES, WHEEL_MESSAGE
+from hil_sim.mission.knowledge import KNOWLEDGE_SOURCES, knowledge_from_truth
 from keepout_config import config_path
 
 if TYPE_CHECKING:
@@ -561,7 +562,7 @@ def written_once(data: Any) -> Any:
     """A mission's raw data with every fact the user wrote once filled in where it is needed twice.
 
     * the flight software's knowledge the file does not give separately is the truth written in it
-      (`fsw.config.knowledge_from_truth`: epoch, inertia, wheels, star-tracker mounting, boresight, orbit,
+      (`hil_sim.mission.knowledge.knowledge_from_truth`: epoch, inertia, wheels, star-tracker mounting, boresight, orbit,
       and the initial pointing as its first target when the initial attitude is given as RA/Dec);
     * ``initial_state.ra_dec_deg`` (+ ``roll_deg``) becomes ``initial_state.q_NB``.
 
@@ -570,8 +571,6 @@ def written_once(data: Any) -> Any:
     the dispersed value. Keys given under ``flight_software`` are never touched; values that are not
     valid are left for validation to report where they are written.
     """
-    from fsw.config import knowledge_from_truth
-
     if not isinstance(data, dict):
         return data
     out = knowledge_from_truth(data)

@@ -9,8 +9,9 @@
 3. starts the ground monitor (its own process: archives every telemetry packet, raw and decoded), writes
    ``endpoints.json`` (``ground.link``: the run's telemetry multicast group and port, telecommand port,
    bus, pids) so that any number of other ground clients can attach (``keepout ground --run RUN_DIR``), then
-   the flight software (``python -m fsw --config mission.yaml --bus SPEC``, its own process and
-   session), and waits for the flight software's FSW_STARTED event to reach the ground, so its bus is
+   the flight software (``python -m fsw --config fsw.yaml``: its configuration resolved from the mission,
+   bus and ports included, nothing of the truth; its own process and session), and waits for the flight
+   software's FSW_STARTED event to reach the ground, so its bus is
    open before the first SYNC;
 4. runs the simulator in this process: devices on the bus (`hil_sim.sil.lockstep.Simulator`), lockstep by
    default (each tick waits for the flight software's CYCLE_DONE) or paced to the clock; the ground's
@@ -72,6 +73,7 @@ EXIT_CRASHED, EXIT_INCOMPLETE_TELEMETRY, EXIT_TERMINATED = 4, 5, 143
 STATUS_COMPLETED, STATUS_INTERRUPTED, STATUS_INCOMPLETE = "completed", "interrupted", "incomplete telemetry"
 
 CONFIG_FILE = "mission.yaml"
+FSW_CONFIG_FILE = "fsw.yaml"  # the flight software's own configuration, resolved from CONFIG_FILE
 TRUTH_FILE = "truth.npz"
 CANDUMP_FILE = "bus.candump.log"
 SIM_STATS_FILE = "simulator.json"
@@ -190,6 +192,15 @@ def write_config(run_dir: Path, data: dict, source: Path) -> str:
     (run_dir / (CONFIG_FILE + ".sha256")).write_text(f"{digest}  {CONFIG_FILE}\n")
     shutil.copyfile(source, run_dir / "mission.source.yaml")
     return digest
+
+
+def _write_fsw_config(run_dir: Path, mission, data: dict) -> None:
+    """The flight software's file (FSW_CONFIG_FILE) from the config used: its bus and its section, resolved."""
+    from hil_sim.mission.flight import flight_config, write_flight_config
+
+    config = flight_config(mission, bus_spec=data["bus"], flight_software=data["flight_software"])
+    write_flight_config(run_dir / FSW_CONFIG_FILE, config, header=f"# the flight software's configuration, "
+                        f"resolved from {CONFIG_FILE} (the run's bus, ports and clock applied)\n")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -687,6 +698,7 @@ def _start_ground(run: _RunParts) -> None:
                         tc_port=run.tc_port, realtime=options.realtime)
     data["flight_software"]["tmtc"]["security"]["key_file"] = LINK_KEY_FILE  # beside the config used
     write_config(run_dir, data, Path(options.mission))
+    _write_fsw_config(run_dir, mission, data)
     run.endpoints = dataclasses.replace(run.endpoints, tm_port=tm_port, tc_port=run.tc_port,
                                         pids={"sil": os.getpid(), "ground": run.ground.pid})
     run.endpoints.write(run_dir)
@@ -733,7 +745,7 @@ def _build_simulator(run: _RunParts) -> None:
 def _start_flight_software(run: _RunParts) -> None:
     """Start the flight software and wait for its FSW_STARTED event to reach the ground."""
     run_dir = run.run_dir
-    run.fsw_proc = _start_fsw(run_dir, run.bus_info.spec)
+    run.fsw_proc = _start_fsw(run_dir)
     if not run.options.realtime:
         _no_wakeup_preemption(run.fsw_proc.pid)
     run.endpoints = dataclasses.replace(run.endpoints, pids={**run.endpoints.pids, "fsw": run.fsw_proc.pid})
@@ -855,12 +867,12 @@ def _loop_cpu_s(fsw_proc, ground, since: dict | None = None) -> dict[str, float 
     return {k: (None if v is None or since.get(k) is None else v - since[k]) for k, v in now.items()}
 
 
-def _start_fsw(run_dir: Path, bus_spec: str) -> subprocess.Popen:
-    """``python -m fsw`` in its own session (a terminal's Ctrl-C is the orchestrator's to handle), in the
-    run folder, with absolute paths; it dies with this process (fsw.lifetime)."""
+def _start_fsw(run_dir: Path) -> subprocess.Popen:
+    """``python -m fsw`` on the run's FSW_CONFIG_FILE in its own session (a terminal's Ctrl-C is the
+    orchestrator's to handle), in the run folder, with absolute paths; it dies with this process (fsw.lifetime)."""
     with open(run_dir / FSW_LOG, "w") as fsw_log:
         return subprocess.Popen(
-            [sys.executable, "-m", "fsw", "--config", str(run_dir / CONFIG_FILE), "--bus", bus_spec],
+            [sys.executable, "-m", "fsw", "--config", str(run_dir / FSW_CONFIG_FILE)],
             stdout=fsw_log, stderr=subprocess.STDOUT, cwd=str(run_dir), start_new_session=True,
             env={**os.environ, "PYTHONUNBUFFERED": "1", PARENT_PID_ENV: str(os.getpid())})
 

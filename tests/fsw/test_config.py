@@ -1,15 +1,14 @@
-"""FswConfig: defaults, units/ranges, clear errors naming the key, mission-file and bare loading, schema."""
+"""FswConfig: defaults, units/ranges, clear errors naming the key, the flight software's own file, schema."""
 from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
-from fsw.config import ConfigError, FswConfig, load_fsw_config, parse_fsw_config
+from fsw.config import FswConfig, FswConfigError, load_fsw_run_config, parse_fsw_config
 
 
 def test_defaults_are_complete_and_consistent() -> None:
@@ -49,7 +48,7 @@ def test_every_schema_property_is_documented_with_a_default_where_optional() -> 
     ],
 )
 def test_bad_values_name_the_key(data: dict, key: str, fragment: str) -> None:
-    with pytest.raises(ConfigError) as err:
+    with pytest.raises(FswConfigError) as err:
         parse_fsw_config(data, source="mission.yaml", prefix="flight_software.")
     text = str(err.value)
     assert "mission.yaml" in text and f"flight_software.{key}" in text and fragment in text
@@ -62,28 +61,49 @@ def test_vectors_and_quaternions_are_normalised() -> None:
     assert cfg.quaternion.target_q_NB == pytest.approx([1, 0, 0, 0])
 
 
-def test_loads_mission_file_key_and_bare_file(tmp_path) -> None:
-    body = {"initial_mode": "POINTING", "law": {"margin_deg": 4.5}}
-    mission = tmp_path / "mission.yaml"
-    mission.write_text(yaml.safe_dump({"name": "demo", "flight_software": body}))
-    bare = tmp_path / "fsw.yaml"
-    bare.write_text(yaml.safe_dump(body))
-    for path in (mission, bare):
-        cfg = load_fsw_config(path)
-        assert cfg.initial_mode == "POINTING" and cfg.law.margin_deg == 4.5
+def test_reads_its_own_file_as_written(tmp_path) -> None:
+    """The flight software's file: its section and its bus, nothing filled in from anywhere else."""
+    path = tmp_path / "fsw.yaml"
+    path.write_text(yaml.safe_dump({"bus": {"spec": "virtual:x", "bitrate_bps": 250000, "authentication": True},
+                                    "flight_software": {"initial_mode": "POINTING", "law": {"margin_deg": 4.5}}}))
+    run = load_fsw_run_config(path)
+    assert run.flight_software.initial_mode == "POINTING" and run.flight_software.law.margin_deg == 4.5
+    assert run.flight_software.spacecraft == FswConfig().spacecraft  # no truth to take knowledge from
+    assert (run.bus.spec, run.bus.bitrate_bps, run.bus.authentication) == ("virtual:x", 250000, True)
+    path.write_text(yaml.safe_dump({"flight_software": {}}))
+    assert load_fsw_run_config(path).bus.spec == "auto"
+
+
+def test_a_mission_file_is_refused_with_the_command_that_resolves_it(tmp_path) -> None:
+    """The truth's keys never reach the flight software: a mission given as its file is refused, by key."""
+    path = tmp_path / "mission.yaml"
+    path.write_text(yaml.safe_dump({"name": "demo", "orbit": {"semi_major_axis_km": 6900.0},
+                                    "flight_software": {"initial_mode": "POINTING"}}))
+    with pytest.raises(FswConfigError) as err:
+        load_fsw_run_config(path)
+    text = str(err.value)
+    assert "mission.yaml" in text and "  name: Extra inputs are not permitted" in text and "  orbit:" in text
+    assert "keepout fsw MISSION" in text
+    bare = tmp_path / "bare.yaml"
+    bare.write_text(yaml.safe_dump({"initial_mode": "POINTING"}))
+    with pytest.raises(FswConfigError, match="flight_software: Field required"):
+        load_fsw_run_config(bare)
 
 
 def test_load_errors_name_the_file(tmp_path) -> None:
-    with pytest.raises(ConfigError, match="cannot read"):
-        load_fsw_config(tmp_path / "missing.yaml")
+    with pytest.raises(FswConfigError, match="cannot read"):
+        load_fsw_run_config(tmp_path / "missing.yaml")
     bad = tmp_path / "bad.yaml"
     bad.write_text("flight_software: [1, 2")
-    with pytest.raises(ConfigError, match="bad.yaml: not valid YAML"):
-        load_fsw_config(bad)
+    with pytest.raises(FswConfigError, match="bad.yaml: not valid YAML"):
+        load_fsw_run_config(bad)
     wrong = tmp_path / "wrong.yaml"
     wrong.write_text(yaml.safe_dump({"flight_software": {"rates": {"gnc_rate_hz": 0}}}))
-    with pytest.raises(ConfigError, match=r"flight_software\.rates\.gnc_rate_hz"):
-        load_fsw_config(wrong)
+    with pytest.raises(FswConfigError, match=r"wrong.yaml: .*\n  flight_software\.rates\.gnc_rate_hz: Input should be"):
+        load_fsw_run_config(wrong)
+    wrong.write_text(yaml.safe_dump({"bus": {"bitrate_bps": 5}, "flight_software": {}}))
+    with pytest.raises(FswConfigError, match=r"bus\.bitrate_bps: Input should be greater than or equal to 10000"):
+        load_fsw_run_config(wrong)
 
 
 def test_zone_shapes_round_trip() -> None:
@@ -96,40 +116,3 @@ def test_zone_shapes_round_trip() -> None:
     again = FswConfig.model_validate(json.loads(cfg.model_dump_json()))
     assert again == cfg
     assert math.isclose(again.pointing.zones[0].geometry.exponent, 0.7)
-
-
-def test_every_knowledge_source_is_what_knowledge_from_truth_copies() -> None:
-    """KNOWLEDGE_SOURCES (the validator's and the docs' table) and knowledge_from_truth (what fills the
-    knowledge in) name the same keys: each plain copy in the table is filled from its truth key, and nothing
-    the function fills is missing from the table."""
-    import copy
-
-    import yaml
-
-    from fsw.config import KNOWLEDGE_SOURCES, knowledge_from_truth
-
-    data = yaml.safe_load((Path(__file__).resolve().parents[2] / "config" / "missions" / "demo-pointing-door.yaml").read_text())
-    data["flight_software"] = {}
-    data["initial_state"] = {"ra_dec_deg": [10.0, 20.0]}
-    data["spacecraft"].setdefault("imu", {})["saturation_rad_s"] = 0.3
-    data["spacecraft"].setdefault("star_tracker", {})["max_rate_deg_s"] = 1.7
-    filled = knowledge_from_truth(copy.deepcopy(data))
-
-    def get(node, path):
-        for part in path:
-            node = node[part]
-        return node
-
-    def leaves(node, path=()):
-        if isinstance(node, dict) and node:
-            for key, value in node.items():
-                yield from leaves(value, path + (key,))
-        else:
-            yield path
-
-    for known, truth in KNOWLEDGE_SOURCES.items():
-        value = get(filled, known)  # filled in (a KeyError names a table entry the function does not fill)
-        if known[-1] not in ("wheels", "target_N", "arg_latitude_at_epoch_deg"):  # the three derived ones
-            assert value == get(data, truth), known
-    for path in leaves(filled["flight_software"], ("flight_software",)):
-        assert any(path[:len(k)] == k for k in KNOWLEDGE_SOURCES), f"{path} is filled but not in KNOWLEDGE_SOURCES"

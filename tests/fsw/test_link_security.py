@@ -199,9 +199,9 @@ def test_a_poll_reads_until_empty_within_its_budget_and_leaves_the_rest_queued()
 
 
 def test_telecommand_socket_binds_loopback_unless_explicitly_allowed() -> None:
-    from fsw.config import ConfigError, parse_fsw_config
+    from fsw.config import FswConfigError, parse_fsw_config
 
-    with pytest.raises(ConfigError, match="telecommand_bind_host '0.0.0.0' is not a loopback address"):
+    with pytest.raises(FswConfigError, match="telecommand_bind_host '0.0.0.0' is not a loopback address"):
         parse_fsw_config({"tmtc": {"telecommand_bind_host": "0.0.0.0"}})
     cfg = parse_fsw_config({"tmtc": {"telecommand_bind_host": "0.0.0.0", "allow_non_loopback": True}})
     assert any("not loopback" in w for w in cfg.tmtc.warnings())

@@ -21,7 +21,8 @@ from pathlib import Path
 
 import pytest
 
-from fsw.config import load_fsw_config
+from fsw.config import load_fsw_run_config
+from hil_sim.mission.model import load_mission
 from comms.dictionary import DICTIONARY, Severity
 from comms.telemetry import DecodedTm
 from ground.web.alarms import ACKS_FILE, AlarmBook
@@ -46,7 +47,7 @@ def _event(time_s: float, name: str, severity: str, message: str) -> DecodedTm:
 
 
 def test_margin_series_carry_the_missions_zone_names_and_only_the_zones_in_use() -> None:
-    cfg = load_fsw_config(DEMO)
+    cfg = load_mission(DEMO).flight_software
     labels = zone_labels(cfg)
     assert labels == [z.name for z in cfg.pointing.zones] and len(labels) == 2
     objects = build_objects(DICTIONARY, "demo", cfg)
@@ -173,7 +174,7 @@ def test_replayed_run_reads_at_a_glance_in_the_browser(tmp_path: Path) -> None:
             page = browser.new_page(viewport={"width": 1600, "height": 1000})
             page.goto(url)
             # the series are named after the mission's zones, with their unit
-            cfg = load_fsw_config(run_dir / "mission.yaml")
+            cfg = load_fsw_run_config(run_dir / "fsw.yaml").flight_software
             legend = _wait(page, LEGEND_JS, None, lambda names: len(names) >= 3, "the margins legend")
             for label in zone_labels(cfg):
                 assert f"margin to {label} (estimate) deg" in legend, legend

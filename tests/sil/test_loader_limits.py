@@ -190,9 +190,9 @@ def test_campaign_numbers_are_finite(tmp_path, value):
 
 
 @pytest.mark.parametrize("kind", ["bomb", "deep", "fifo"])
-def test_the_flight_software_reading_its_mission_alone_is_bounded_too(tmp_path, kind):
-    """`keepout fsw MISSION` reads the mission itself (fsw never imports hil_sim): same limits."""
-    from fsw.config import ConfigError as FswConfigError, load_fsw_config
+def test_the_flight_software_reading_its_own_file_is_bounded_too(tmp_path, kind):
+    """`python -m fsw --config FSW_FILE` reads its file itself (fsw never imports hil_sim): same limits."""
+    from fsw.config import FswConfigError, load_fsw_run_config
 
     path = tmp_path / "m.yaml"
     if kind == "bomb":
@@ -207,7 +207,7 @@ def test_the_flight_software_reading_its_mission_alone_is_bounded_too(tmp_path, 
         os.mkfifo(path)
         expected = "is not a regular file"
     with pytest.raises(FswConfigError, match=expected):
-        load_fsw_config(path)
+        load_fsw_run_config(path)
 
 
 def _flat_flow(n_bytes: int) -> str:

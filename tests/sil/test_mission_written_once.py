@@ -148,13 +148,57 @@ def test_the_example_passes_config_check():
     assert report.ok, report.format()
 
 
-def test_the_flight_software_alone_reads_the_same_knowledge(tmp_path):
-    """`keepout fsw MISSION` (python -m fsw) reads the mission file itself: it must know the same facts."""
-    from fsw.config import load_fsw_config
+def test_the_flight_software_alone_is_given_the_same_knowledge(tmp_path):
+    """`keepout fsw MISSION` resolves the mission with the same reader and hands the flight software its
+    configuration: the same facts, and a file of it (as the SIL writes) reads back to them."""
+    from fsw.config import load_fsw_run_config
+    from hil_sim.mission.flight import flight_config, load_flight_config, write_flight_config
 
-    cfg = load_fsw_config(EXAMPLE)
+    resolved = load_flight_config(EXAMPLE)
     mission = load_mission(EXAMPLE)
-    assert cfg.model_dump() == mission.flight_software.model_dump()
+    assert resolved.flight_software.model_dump() == mission.flight_software.model_dump()
     raw = yaml.safe_load(EXAMPLE.read_text())
-    assert cfg.spacecraft.inertia_B_kgm2 == raw["spacecraft"]["inertia_B_kgm2"]
-    assert np.allclose(cfg.pointing.target_N, ra_dec_to_unit(*raw["initial_state"]["ra_dec_deg"]))
+    assert resolved.flight_software.spacecraft.inertia_B_kgm2 == raw["spacecraft"]["inertia_B_kgm2"]
+    assert np.allclose(resolved.flight_software.pointing.target_N, ra_dec_to_unit(*raw["initial_state"]["ra_dec_deg"]))
+    assert (resolved.bus.spec, resolved.bus.bitrate_bps, resolved.bus.authentication) == (
+        raw.get("bus", "auto"), raw.get("bus_bitrate_bps", 500000), raw.get("bus_authentication", False))
+    write_flight_config(tmp_path / "fsw.yaml", flight_config(mission, bus_spec="virtual:k"))
+    written = yaml.safe_load((tmp_path / "fsw.yaml").read_text())
+    assert set(written) == {"bus", "flight_software"} and written["bus"]["spec"] == "virtual:k"
+    again = load_fsw_run_config(tmp_path / "fsw.yaml")
+    assert again.flight_software.model_dump() == mission.flight_software.model_dump()
+
+
+def test_every_knowledge_source_is_what_knowledge_from_truth_copies() -> None:
+    """KNOWLEDGE_SOURCES (the validator's and the docs' table) and knowledge_from_truth (what fills the
+    knowledge in) name the same keys: each plain copy in the table is filled from its truth key, and nothing
+    the function fills is missing from the table."""
+    import copy
+
+    from hil_sim.mission.knowledge import KNOWLEDGE_SOURCES, knowledge_from_truth
+
+    data = yaml.safe_load((ROOT / "config" / "missions" / "demo-pointing-door.yaml").read_text())
+    data["flight_software"] = {}
+    data["initial_state"] = {"ra_dec_deg": [10.0, 20.0]}
+    data["spacecraft"].setdefault("imu", {})["saturation_rad_s"] = 0.3
+    data["spacecraft"].setdefault("star_tracker", {})["max_rate_deg_s"] = 1.7
+    filled = knowledge_from_truth(copy.deepcopy(data))
+
+    def get(node, path):
+        for part in path:
+            node = node[part]
+        return node
+
+    def leaves(node, path=()):
+        if isinstance(node, dict) and node:
+            for key, value in node.items():
+                yield from leaves(value, path + (key,))
+        else:
+            yield path
+
+    for known, truth in KNOWLEDGE_SOURCES.items():
+        value = get(filled, known)  # filled in (a KeyError names a table entry the function does not fill)
+        if known[-1] not in ("wheels", "target_N", "arg_latitude_at_epoch_deg"):  # the three derived ones
+            assert value == get(data, truth), known
+    for path in leaves(filled["flight_software"], ("flight_software",)):
+        assert any(path[:len(k)] == k for k in KNOWLEDGE_SOURCES), f"{path} is filled but not in KNOWLEDGE_SOURCES"

@@ -195,8 +195,9 @@ def test_an_unknown_plugin_name_is_refused_at_load_time(plugins):
     text = str(err.value)
     assert "typo.yaml" in text and "flight_software.plugins.guidance" in text
     assert "keepout.guidance" in text and "installed: fails-later, geodesic, not-a-number, recorder, sun-seeker" in text
-    # the flight software process refuses it the same way, with the configuration error's exit code
-    proc = subprocess.run([sys.executable, "-m", "fsw", "--config", str(mission)], cwd=ROOT, capture_output=True,
+    # the flight software alone (`keepout fsw MISSION`) refuses it the same way, with the configuration error's
+    # exit code
+    proc = subprocess.run([sys.executable, "-m", "cli", "fsw", str(mission)], cwd=ROOT, capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 2, proc.stderr
     assert "typo.yaml" in proc.stderr and "flight_software.plugins.guidance" in proc.stderr
