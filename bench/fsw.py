@@ -83,7 +83,7 @@ def bench_cycle(cycles: int) -> dict:
     loop = DirectLoop(fsw, world, cfg.gnc_period_s)
     loop.prime()
     wall, cpu = [], []
-    orig = fsw._gnc_task
+    orig = fsw.gnc_task
 
     def timed(inputs, slipped):
         c0 = time.thread_time()

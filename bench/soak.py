@@ -215,7 +215,7 @@ def main(argv=None) -> int:
     loop = BusLoop(cfg, World(wp, seed=21), telemetry=tm, dispatcher=tc)
     fsw = loop.fsw
 
-    from fsw.app import prepare_cycle_thread
+    from fsw.runtime import prepare_cycle_thread
 
     prepare_cycle_thread()  # as the flight software's own cycle loops do before their first cycle
     if args.rt_priority:

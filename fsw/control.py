@@ -23,18 +23,11 @@ rather than turning the wrong way).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 
-
-@dataclass
-class ControlOutput:
-    torque_cmd_B_Nm: np.ndarray
-    wheel_torque_cmd_Nm: np.ndarray
-    torque_scale: float
-    omega_cmd_shaped_BN_B: np.ndarray
+from fsw.records import ControlOutput
 
 
 def allocation_matrix(G: np.ndarray, active: np.ndarray) -> np.ndarray:

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from fsw.records import AttitudeEstimate, SensorSnapshot
 from gnc.attitude import quat_multiply_nb
 
 
@@ -52,7 +53,7 @@ def _propagate_in_place(q, bias, P, omega_meas, dt, sig_v, sig_u, PP):
     """Propagate attitude, bias and covariance over ``dt`` [s] with the gyro sample (held constant),
     overwriting ``q`` (4,) and ``P`` (6, 6), ``PP`` (6, 6) scratch: no array is allocated (ten samples a cycle
     made some hundred small allocations). The Kalman equations written plainly with numpy,
-    tests/fsw/mekf_reference.py's `mekf_propagate`, give the same results to the last bit
+    tests/reference/mekf.py's `mekf_propagate`, give the same results to the last bit
     (tests/fsw/test_estimation.py)."""
     w0 = omega_meas[0] - bias[0]
     w1 = omega_meas[1] - bias[1]
@@ -342,7 +343,8 @@ class EstimatorStatus:
 
 
 class AttitudeEstimator:
-    """MEKF for q_NB and the gyro bias. Call `step` once per GNC cycle."""
+    """MEKF for q_NB and the gyro bias. The GNC cycle calls `update` once per cycle with its
+    `SensorSnapshot`; `step` and `step_samples` take the measurements one by one (tests, studies)."""
 
     def __init__(self, cfg, q_BS: np.ndarray):
         self.cfg = cfg
@@ -390,6 +392,13 @@ class AttitudeEstimator:
     def measured_q_NB(self, q_NS: np.ndarray) -> np.ndarray:
         return quat_multiply_nb(np.ascontiguousarray(q_NS, dtype=float), self.q_SB)
 
+    def update(self, sensors: SensorSnapshot) -> AttitudeEstimate:
+        """One GNC cycle on ``sensors``: propagate through its gyro samples over the cycle, then fuse its
+        star-tracker fix when it has a fresh one. The estimate's innovation is NaN without a fix."""
+        innovation_deg = self._tick(sensors.dt_s, sensors.gyro_B, sensors.q_NS, sensors.st_latency_s,
+                                    sensors.q_NS_norm)
+        return AttitudeEstimate(self.q_NB, self.omega_BN_B, self.initialized, innovation_deg)
+
     def step(self, dt_s: float, omega_meas_B: np.ndarray | None, q_NS: np.ndarray | None, st_latency_s: float = 0.0) -> EstimatorStatus:
         """One cycle: propagate with the gyro over ``dt_s`` then fuse the star tracker if given.
 
@@ -431,10 +440,10 @@ class AttitudeEstimator:
 
     def _tick(self, dt_s: float, samples: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float,
               q_norm: float = 1.0) -> float:
-        """`_cycle` without the status: one compiled call (`_estimator_tick`) and the attribute sets. The
-        GNC cycle calls it directly with ``samples`` a C-contiguous float (n, 3) array and ``q_NS`` a
-        contiguous float quaternion (4,) or None, the tracker's sample divided by ``q_norm`` (its norm) in
-        the compiled call. Returns the innovation [deg] (NaN when none this cycle)."""
+        """`_cycle` without the status: one compiled call (`_estimator_tick`) and the attribute sets, with
+        ``samples`` a C-contiguous float (n, 3) array and ``q_NS`` a contiguous float quaternion (4,) or
+        None, the tracker's sample divided by ``q_norm`` (its norm) in the compiled call (`update` hands
+        the snapshot's arrays as they are). Returns the innovation [deg] (NaN when none this cycle)."""
         has_st = q_NS is not None
         P = self.P
         P0 = self._initial_P() if has_st and not self.initialized else P
@@ -481,6 +490,11 @@ class AttitudeEstimator:
         # (item: the element as a Python float, no numpy scalar in between)
         P = self.P
         return P.item(0, 0) + P.item(1, 1) + P.item(2, 2)
+
+    @property
+    def cov_trace_rad2(self) -> float:
+        """Trace of the attitude error covariance [rad^2]; NaN before the first fix."""
+        return self._attitude_trace() if self.initialized else math.nan
 
     @property
     def cov_trace_deg2(self) -> float:

@@ -31,11 +31,13 @@ from typing import Any, Callable
 
 import numpy as np
 
+from fsw import records
 from fsw.estimation import AttitudeEstimator
 from fsw.guidance import Guidance, GuidanceOutput
 from fsw.guidance.common import _saturate
 from fsw.guidance.slew_limits import BRAKING_RESERVE_DEG, rate_for_distance_deg_s
 from fsw.plugins import AttitudeEstimate, EstimatorInput, GuidanceInput, Plugin
+from fsw.records import SensorSnapshot
 
 _NAN3, _NAN4 = np.full(3, np.nan), np.full(4, np.nan)
 
@@ -158,8 +160,9 @@ class GuardedEstimator:
     def coasting_s(self) -> float:
         return self.reference.coasting_s
 
-    def _attitude_trace(self) -> float:
-        return self.reference._attitude_trace()
+    @property
+    def cov_trace_rad2(self) -> float:
+        return self.reference.cov_trace_rad2
 
     def reset(self) -> None:
         self.reference.reset()
@@ -170,21 +173,22 @@ class GuardedEstimator:
             except Exception as exc:  # noqa: BLE001
                 self._stop(_fault_text(exc))
 
-    def _tick(self, dt_s: float, samples: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float,
-              q_norm: float = 1.0) -> float:
-        """`AttitudeEstimator._tick`'s contract: the MEKF's innovation [deg] is returned for FDIR."""
+    def update(self, sensors: SensorSnapshot) -> records.AttitudeEstimate:
+        """`AttitudeEstimator.update`'s contract: the plug-in's attitude and rate (the MEKF's once it is
+        stopped), with the MEKF's innovation [deg] for FDIR."""
         ref = self.reference
-        innovation_deg = ref._tick(dt_s, samples, q_NS, st_latency_s, q_norm)
+        innovation_deg = ref.update(sensors).innovation_deg
         if not self.stopped:
-            self._plugin_tick(dt_s, samples, q_NS, st_latency_s, q_norm)
+            self._plugin_update(sensors)
         if self.stopped:
             self.q_NB, self.omega_BN_B, self.initialized = ref.q_NB, ref.omega_BN_B, ref.initialized
-        return innovation_deg
+        return records.AttitudeEstimate(self.q_NB, self.omega_BN_B, self.initialized, innovation_deg)
 
-    def _plugin_tick(self, dt_s, samples, q_NS, st_latency_s, q_norm) -> None:
-        sample = EstimatorInput(dt_s=dt_s, gyro_B=np.array(samples, dtype=float).reshape(-1, 3),
-                                q_NS=None if q_NS is None else np.asarray(q_NS, dtype=float) / q_norm,
-                                star_tracker_latency_s=st_latency_s, q_BS=self._q_BS.copy())
+    def _plugin_update(self, sensors: SensorSnapshot) -> None:
+        q_NS = sensors.q_NS
+        sample = EstimatorInput(dt_s=sensors.dt_s, gyro_B=np.array(sensors.gyro_B, dtype=float).reshape(-1, 3),
+                                q_NS=None if q_NS is None else np.asarray(q_NS, dtype=float) / sensors.q_NS_norm,
+                                star_tracker_latency_s=sensors.st_latency_s, q_BS=self._q_BS.copy())
         try:
             est = self.plugin.impl.update(sample)
         except Exception as exc:  # noqa: BLE001 - a user's estimator that fails is stopped, not the flight software

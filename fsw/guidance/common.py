@@ -1,5 +1,5 @@
-"""What every guidance mode shares: the per-cycle output record, the rate-command scaling, the law
-constructors and small vector helpers.
+"""What every guidance mode shares: the per-cycle output record (`fsw.records.GuidanceOutput`), the
+rate-command scaling, the law constructors and small vector helpers.
 
 Rate command scaling. ``omega_law`` is multiplied by ``min(1, omega_max / |omega_law|)``: a positive,
 state-dependent time scaling. It changes the speed along the kinematic closed-loop path but not the path
@@ -8,9 +8,10 @@ itself, so the paper's safety and convergence results carry over to the scaled c
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
+
+from fsw.records import NAN3 as _NAN3, NAN4 as _NAN4, GuidanceOutput  # noqa: F401 - the guidance modes import them from here
 
 _BODY_CODES = {"sun": "SUN", "moon": "MOON", "earth": "EARTH", "inertial": "INERTIAL"}
 
@@ -37,40 +38,6 @@ def d_s_to_deg(d_s: float) -> float:
 def signed_margin_deg(zone, x: np.ndarray) -> float:
     """Signed angular distance [deg] from the zone boundary (negative inside)."""
     return d_s_to_deg(float(zone.signed_separation(x)))
-
-
-
-def _nan_constant(n: int) -> np.ndarray:
-    a = np.full(n, np.nan)
-    a.flags.writeable = False  # shared by every output that has no such vector: nobody may write into it
-    return a
-
-
-_NAN3, _NAN4 = _nan_constant(3), _nan_constant(4)
-
-
-@dataclass
-class GuidanceOutput:
-    omega_cmd_BN_B: np.ndarray
-    mode: str
-    safe_phase: str = "NONE"
-    active_zone: int = -1
-    eps: float = float("nan")
-    eps_max: float = float("nan")
-    margins_deg: list[float] = field(default_factory=list)
-    margin_min_deg: float = float("nan")
-    pointing_error_deg: float = float("nan")
-    att_error_deg: float = float("nan")
-    roll_error_deg: float = float("nan")
-    boresight_N: np.ndarray = field(default_factory=lambda: _NAN3)
-    target_N: np.ndarray = field(default_factory=lambda: _NAN3)
-    q_target_NB: np.ndarray = field(default_factory=lambda: _NAN4)
-    zones_merged: bool = False
-    assumptions_ok: bool = True
-    sun_N: np.ndarray = field(default_factory=lambda: _NAN3)
-    moon_N: np.ndarray = field(default_factory=lambda: _NAN3)
-    zone_count: int = 0
-    zone_bodies: list[str] = field(default_factory=list)
 
 
 def _saturate(omega: np.ndarray, max_rate_rad_s: float) -> np.ndarray:

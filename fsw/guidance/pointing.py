@@ -173,6 +173,13 @@ class PointingGuidance:
         margins = [signed_margin_deg(s.phys, y_N) - s.phys_drift_deg for s in self.slots]
         return margins, (min(margins) if margins else float("nan"))
 
+    def sky_margins_at(self, t_s: float, y_N: np.ndarray) -> tuple[list[float], list[str]]:
+        """The boresight ``y_N``'s signed physical margins [deg] from the sky zones at onboard time ``t_s``
+        (conservative, as `_sky_margins`) and each zone's body code: what the aperture door judges in every
+        mode, whatever zones the mode's law steers round."""
+        self._update_sky(t_s)
+        return self._sky_margins(y_N)[0], self._slot_body_codes()
+
 
     def _pointing(self, t_s: float, q: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
         if self._track_started is False or self._track is not None:

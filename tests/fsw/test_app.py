@@ -103,16 +103,16 @@ def test_resident_size_is_what_psutil_reports_also_in_a_forked_child() -> None:
 
     import psutil
 
-    from fsw.app import _resident_bytes
+    from fsw.runtime import resident_bytes
 
-    assert abs(_resident_bytes() - psutil.Process().memory_info().rss) < 4 << 20
+    assert abs(resident_bytes() - psutil.Process().memory_info().rss) < 4 << 20
     read, write = os.pipe()
     pid = os.fork()
     if pid == 0:  # the child must read its own /proc entry, not the descriptor its parent opened
         try:
             block = bytearray(64 << 20)
             block[::4096] = b"1" * len(block[::4096])
-            ok = abs(_resident_bytes() - psutil.Process().memory_info().rss) < 4 << 20
+            ok = abs(resident_bytes() - psutil.Process().memory_info().rss) < 4 << 20
             os.write(write, b"1" if ok else b"0")
         finally:
             os._exit(0)
@@ -221,7 +221,7 @@ def test_periodic_assumption_check_keeps_to_its_cpu_budget(loop, monkeypatch) ->
 def test_enter_realtime_gets_sched_fifo_or_says_why_not() -> None:
     """In its own process (SCHED_FIFO must not leak into the test run): the policy is FIFO when the host
     grants it, and otherwise the flight software reports that it runs best effort."""
-    code = ("import os, gc; from fsw.app import enter_realtime; ev = enter_realtime(7); "
+    code = ("import os, gc; from fsw.runtime import enter_realtime; ev = enter_realtime(7); "
             "print(repr(ev)); print(os.sched_getscheduler(0) == os.SCHED_FIFO, gc.get_freeze_count() > 0)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert out.returncode == 0, out.stderr
@@ -237,7 +237,7 @@ def test_enter_realtime_gets_sched_fifo_or_says_why_not() -> None:
 
 
 def test_enter_realtime_without_priority_only_prepares_the_thread() -> None:
-    code = ("import os, gc; from fsw.app import enter_realtime; "
+    code = ("import os, gc; from fsw.runtime import enter_realtime; "
             "print(enter_realtime(0), os.sched_getscheduler(0) == os.SCHED_OTHER, gc.get_freeze_count() > 0)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert out.returncode == 0, out.stderr
@@ -249,7 +249,7 @@ def test_a_cycle_loop_keeps_blas_on_its_own_thread() -> None:
     one the host has preempted. Checked in a fresh interpreter: the limit is process-wide."""
     code = ("import numpy, scipy.linalg, threadpoolctl\n"
             "before = [i['num_threads'] for i in threadpoolctl.threadpool_info()]\n"
-            "from fsw.app import prepare_cycle_thread\n"
+            "from fsw.runtime import prepare_cycle_thread\n"
             "prepare_cycle_thread()\n"
             "print(before)\n"
             "print([i['num_threads'] for i in threadpoolctl.threadpool_info()])")
@@ -264,13 +264,13 @@ def test_a_cycle_loop_keeps_blas_on_its_own_thread() -> None:
 def test_cycle_loops_freeze_the_start_up_heap_before_the_first_cycle(loop, monkeypatch) -> None:
     """A full GC pass over the start-up heap takes 0.1-0.2 s: it must not land inside a cycle."""
     calls = []
-    monkeypatch.setattr("fsw.app.freeze_heap", lambda: calls.append("freeze"))
+    monkeypatch.setattr("fsw.runtime.freeze_heap", lambda: calls.append("freeze"))
     monkeypatch.setattr(loop.fsw.executive, "run_lockstep", lambda *a, **k: calls.append("cycles") or 0)
     monkeypatch.setattr(loop.fsw.executive, "run_realtime", lambda *a, **k: calls.append("cycles") or 0)
     loop.fsw.run_lockstep(max_ticks=1)
     assert calls == ["freeze", "cycles"]
     calls.clear()
-    monkeypatch.setattr("fsw.app.enter_realtime", lambda priority: calls.append("freeze") or [])
+    monkeypatch.setattr("fsw.runtime.enter_realtime", lambda priority: calls.append("freeze") or [])
     loop.fsw.run_realtime(0.1)
     assert calls == ["freeze", "cycles"]
 
@@ -279,7 +279,7 @@ def test_the_warm_up_freezes_the_start_up_heap_before_fsw_started(loop, monkeypa
     """The SIL's simulator starts ticking when FSW_STARTED reaches the ground: a full collection after it
     (0.1-0.2 s, more in the vcan-vm guest) landed inside the lockstep loop's first cycle."""
     calls = []
-    monkeypatch.setattr("fsw.app.freeze_heap", lambda: calls.append("freeze"))
+    monkeypatch.setattr("fsw.runtime.freeze_heap", lambda: calls.append("freeze"))
     monkeypatch.setattr(loop.fsw.checker, "start", lambda: calls.append("worker"))
     loop.fsw._warm_up()
     assert calls == ["freeze", "worker"]

@@ -57,8 +57,8 @@ def test_pointing_slew_past_sun_star_zone_and_moon_cone_through_the_bus() -> Non
         pointing={"boresight_B": list(B_B), "target_N": list(yd), "zones": [
             {"name": "sun", "body": "sun", "geometry": SUN_STAR}, {"name": "moon", "body": "moon", "geometry": MOON_CONE}]})
     # Execution time on this thread's CPU clock: a cycle's own work, not the time other processes on a
-    # shared test host held the CPU; the start-up heap is frozen as the flight loops do (fsw.app.prepare_cycle_thread).
-    from fsw.app import prepare_cycle_thread
+    # shared test host held the CPU; the start-up heap is frozen as the flight loops do (fsw.runtime.prepare_cycle_thread).
+    from fsw.runtime import prepare_cycle_thread
 
     prepare_cycle_thread()
     loop = BusLoop(cfg, world, clock=time.thread_time)

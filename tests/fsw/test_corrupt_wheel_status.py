@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from fsw.app import CORRUPT_STATUS_HEARD_S
+from fsw.intake import CORRUPT_STATUS_HEARD_S
 from hil_sim.campaign.fast import run_fast
 from hil_sim.mission.model import BusFault, load_mission
 

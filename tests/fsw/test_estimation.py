@@ -8,7 +8,7 @@ import pytest
 from numba import njit
 from scipy.spatial.transform import Rotation
 
-from mekf_reference import mekf_propagate
+from reference.mekf import mekf_propagate
 
 from fsw.config import EstimatorConfig
 from fsw.estimation import AttitudeEstimator, _mekf_fuse
