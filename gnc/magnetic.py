@@ -1,0 +1,76 @@
+"""Magnetic attitude control and coarse Sun sensing: the laws a small satellite flies on magnetorquers,
+a magnetometer and cosine-law sun sensors.
+
+* B-dot (detumbling): ``m = -k dB/dt`` in body axes. The field seen from a tumbling body turns at about the
+  body rate, so the dipole opposes the rotation; torque ``m x B`` removes rotational energy (the torque is
+  always perpendicular to B, so the rate about the field line is left alone for a part of an orbit, and the
+  orbit's turning of B brings it back into reach).
+* Cross-product momentum unloading: the wheels' momentum excess ``dh`` (stored minus bias) is dumped by
+  asking the field for the torque ``-k dh``; the part of a torque a dipole can give is the part normal to
+  B, reached with ``m = (B x tau) / |B|^2`` (then ``m x B = tau - (tau . b) b``). The wheels keep the
+  attitude, so the external torque leaves through their momentum.
+* Rods saturate each on its own axis; a command is scaled down as a whole (its direction, and so the torque's,
+  is kept) until every rod is within its limit.
+* Coarse Sun sensors: a cell with unit normal n gives ``I = I_max max(0, n . s)`` (cosine law). With three or
+  more lit cells spanning the sky the Sun direction is the least-squares solution of ``N s = I / I_max``.
+
+Pure functions of numpy arrays, no state: the flight software owns the filters and the duty cycle.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def saturate_dipole(m_Am2: np.ndarray, max_Am2: np.ndarray) -> np.ndarray:
+    """``m`` scaled down as a whole so that every rod is within its limit (``max_Am2`` per axis, > 0)."""
+    m = np.asarray(m_Am2, dtype=float)
+    ratio = float(np.max(np.abs(m) / np.asarray(max_Am2, dtype=float)))
+    return m / ratio if ratio > 1.0 else m
+
+
+def bdot_dipole(b_dot_B_T_s: np.ndarray, gain_Am2_s_T: float, max_Am2: np.ndarray) -> np.ndarray:
+    """B-dot detumbling dipole [A m^2] from the body-frame field rate [T/s]: ``-k dB/dt``, saturated."""
+    return saturate_dipole(-gain_Am2_s_T * np.asarray(b_dot_B_T_s, dtype=float), max_Am2)
+
+
+def dipole_for_torque(tau_B_Nm: np.ndarray, b_B_T: np.ndarray) -> np.ndarray:
+    """The dipole whose torque ``m x B`` is the part of ``tau`` normal to the field: ``(B x tau) / |B|^2``."""
+    b = np.asarray(b_B_T, dtype=float)
+    b2 = float(b @ b)
+    if b2 <= 0.0:
+        return np.zeros(3)
+    return np.cross(b, np.asarray(tau_B_Nm, dtype=float)) / b2
+
+
+def unloading_dipole(h_excess_B_Nms: np.ndarray, b_B_T: np.ndarray, gain_1_s: float,
+                     max_Am2: np.ndarray) -> np.ndarray:
+    """Cross-product unloading: the saturated dipole [A m^2] that asks the field for ``-k dh``."""
+    return saturate_dipole(dipole_for_torque(-gain_1_s * np.asarray(h_excess_B_Nms, dtype=float), b_B_T), max_Am2)
+
+
+def magnetic_torque(m_B_Am2: np.ndarray, b_B_T: np.ndarray) -> np.ndarray:
+    """Torque [N m] on a dipole ``m`` in the field ``B`` (both in body axes): ``m x B``."""
+    return np.cross(np.asarray(m_B_Am2, dtype=float), np.asarray(b_B_T, dtype=float))
+
+
+def css_currents(normals_B: np.ndarray, sun_B: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """Cosine-law cell outputs for a unit Sun direction in body axes (no albedo, no noise)."""
+    return scale * np.maximum(0.0, np.asarray(normals_B, dtype=float) @ np.asarray(sun_B, dtype=float))
+
+
+def css_sun_direction(normals_B: np.ndarray, currents: np.ndarray, scale: float = 1.0,
+                      lit_fraction: float = 0.05) -> np.ndarray | None:
+    """Sun direction in body axes from cosine-law cells, or None when the lit cells cannot fix it.
+
+    A cell counts as lit above ``lit_fraction`` of full scale (below it, noise and the cosine law's knee
+    give no direction). The lit cells' normals must span three dimensions (rank 3); otherwise the Sun is
+    only known to lie on a cone or a circle and None is returned, never a guess.
+    """
+    n = np.asarray(normals_B, dtype=float)
+    y = np.asarray(currents, dtype=float) / scale
+    lit = y > lit_fraction
+    if int(lit.sum()) < 3 or np.linalg.matrix_rank(n[lit], tol=1e-6) < 3:
+        return None
+    s, *_ = np.linalg.lstsq(n[lit], y[lit], rcond=None)
+    norm = float(np.linalg.norm(s))
+    return s / norm if norm > 0.0 else None
