@@ -14,11 +14,11 @@ from cli import fsw as fsw_main
 # Each module's add_cli(subparsers) adds its subcommand, in the order `keepout --help` lists them.
 _COMMAND_MODULES = (
     paper,          # keepout paper
-    config,         # keepout config schema|validate|check
+    config,         # keepout config schema|docs|dictionary|validate|check
     sil,            # keepout sil run
     fsw_main,       # keepout fsw MISSION (HIL bench: the flight software alone)
     sim,            # keepout sim MISSION (HIL bench: the simulator alone)
-    bus,            # keepout bus monitor|log
+    bus,            # keepout bus monitor|log|respond
     ground,         # keepout ground [send ...]
     campaign,       # keepout campaign run|rerun|baseline|compare|shrink
     init,           # keepout init DIR
