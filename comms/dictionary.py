@@ -59,7 +59,7 @@ CRC_LEN = 2
 MAX_TC_PACKET_LEN = 256  # bytes; larger telecommand packets are rejected as format errors
 MAX_STRING_LEN = 120  # bytes of UTF-8 in a string argument
 
-N_WHEELS_MAX = 6
+MAX_WHEELS = 6  # RW1..RW6: the wheels the bus ICD has frames for (tests/fsw/test_bus_icd.py checks it)
 N_ZONES_MAX = 6
 
 
@@ -581,9 +581,9 @@ _GNC_CHANNELS: list[Channel] = [
     *_vec3("torque_cmd_B_Nm", "N*m", "commanded body torque in B"),
     Channel("torque_scale", "F32", "", "scale applied to fit wheel torque limits (1: none)",
             Limits(yellow=(0.999, None), red=(None, None))),
-    *_indexed("wheel_speed_rad_s", N_WHEELS_MAX, "F32", "rad/s", "reaction wheel speed",
+    *_indexed("wheel_speed_rad_s", MAX_WHEELS, "F32", "rad/s", "reaction wheel speed",
               _WHEEL_SPEED_LIMITS),
-    *_indexed("wheel_torque_cmd_Nm", N_WHEELS_MAX, "F32", "N*m", "reaction wheel torque command"),
+    *_indexed("wheel_torque_cmd_Nm", MAX_WHEELS, "F32", "N*m", "reaction wheel torque command"),
     *_vec3("sun_N", "", "onboard Sun direction in N"),
     *_vec3("moon_N", "", "onboard Moon direction in N"),
     Channel("st_valid", "BOOL", "", "star-tracker sample valid this cycle"),
@@ -664,10 +664,10 @@ _HK_CHANNELS: list[Channel] = [
     Channel("events_throttled", "U32", "", "events suppressed by throttling"),
     *_fdir_channels(),
     Channel("fdir_trips", "U32", "", "FDIR monitors tripped since reset"),
-    *_indexed("wheel_fault", N_WHEELS_MAX, "U8", "", "wheel fault flags reported by the wheel"),
-    *_indexed("wheel_temp_C", N_WHEELS_MAX, "F32", "degC", "wheel temperature",
+    *_indexed("wheel_fault", MAX_WHEELS, "U8", "", "wheel fault flags reported by the wheel"),
+    *_indexed("wheel_temp_C", MAX_WHEELS, "F32", "degC", "wheel temperature",
               Limits(yellow=(-10.0, 50.0), red=(-20.0, 70.0))),
-    *_indexed("wheel_current_A", N_WHEELS_MAX, "F32", "A", "wheel motor current"),
+    *_indexed("wheel_current_A", MAX_WHEELS, "F32", "A", "wheel motor current"),
     Channel("wheels_isolated", "U8", "", "bit mask of wheels removed from allocation"),
     Channel("rss_mb", "F32", "MB", "resident memory of the flight software process"),
 ]

@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING, Any, Iterable, Mapping, NamedTuple
 import numpy as np
 
 from comms.bus.crc import e2e_crc
-from comms.bus.kernels import (ECHO_CODE, FALLBACK_CODE, KIND_ECHO, KIND_FALLBACK, KIND_UNKNOWN, OLD_FRAME_WINDOW,
-                             UNKNOWN_CODE, classify_rows)
+from comms.bus.kernels import (CLASS_OF_CODE, ECHO_CODE, FALLBACK_CODE, FRAME_CLASSES, KIND_ECHO, KIND_FALLBACK,
+                               KIND_UNKNOWN, OLD_FRAME_WINDOW, TIMEOUT_CODE, UNKNOWN_CODE, classify_rows)
 
 if TYPE_CHECKING:  # pragma: no cover
     import can
@@ -29,18 +29,16 @@ if TYPE_CHECKING:  # pragma: no cover
     from comms.bus.icd import Icd
 
 # ---------------------------------------------------------------------------------------- classes
-OK = "ok"
-OK_SOME_LOST = "ok_some_lost"      # counter jumped by 2..max_delta: data good, some frames lost
-REPEATED = "repeated"              # same counter as the last accepted frame (duplicate / stuck counter)
-WRONG_SEQUENCE = "wrong_sequence"  # counter jumped forward by more than max_delta, or went backwards
-CRC_ERROR = "crc_error"
-TIMEOUT = "timeout"                # no valid frame within the message's E2ETimeoutMs
-BAD_LENGTH = "bad_length"          # DLC differs from the ICD
-OUT_OF_RANGE = "out_of_range"      # CRC good but a signal outside its ICD range: sender bug
-UNKNOWN_ID = "unknown_id"          # identifier not in the ICD (or extended/remote/error frame)
+# The names are the kernels' table (comms.bus.kernels.CLASS_OF_CODE: a class's position there is its code).
+# OK_SOME_LOST: counter jumped by 2..max_delta: data good, some frames lost. REPEATED: same counter as the last
+# accepted frame (duplicate / stuck counter). WRONG_SEQUENCE: counter jumped forward by more than max_delta, or
+# went backwards. BAD_LENGTH: DLC differs from the ICD. OUT_OF_RANGE: CRC good but a signal outside its ICD
+# range: sender bug. UNKNOWN_ID: identifier not in the ICD (or extended/remote/error frame). OWN_ECHO: a frame
+# this node sent itself. TIMEOUT: no valid frame within the message's E2ETimeoutMs.
+(OK, OK_SOME_LOST, REPEATED, WRONG_SEQUENCE, CRC_ERROR, BAD_LENGTH, OUT_OF_RANGE, UNKNOWN_ID, OWN_ECHO, _PYTHON_PATH,
+ TIMEOUT) = CLASS_OF_CODE
 
 DELIVERED = frozenset({OK, OK_SOME_LOST})
-FRAME_CLASSES = (OK, OK_SOME_LOST, REPEATED, WRONG_SEQUENCE, CRC_ERROR, BAD_LENGTH, OUT_OF_RANGE)
 ALL_CLASSES = FRAME_CLASSES + (TIMEOUT,)
 BUS_KEY = "_bus"  # counters for frames that cannot be attributed to an ICD message
 
@@ -100,7 +98,7 @@ class CheckedBurst:
         return self.rows[i] if i in self.rows else self.values[i].tolist()
 
 
-CODE_CLASS = FRAME_CLASSES + (UNKNOWN_ID, "own_echo")  # class of each kernels class code
+CODE_CLASS = CLASS_OF_CODE[:ECHO_CODE + 1]  # the class of each code a classified frame can have
 _NO_MASK = np.zeros(2048, dtype=np.bool_)
 NO_STOP = (-1, 0, 0.0, -1.0, _NO_MASK, 0)  # classify_until: classify everything
 PYTHON_RUN = 2  # classify_until judges this few frames frame by frame in Python (a compiled call costs more)
@@ -134,7 +132,7 @@ class E2EReceiver:
         names = [m.name for m in self.icd.messages.values() if m.frame_id not in self.ignore_ids]
         self.watch = tuple(self.watch) if self.watch is not None else tuple(names)
         self.counters = {name: {c: 0 for c in ALL_CLASSES} for name in names}
-        self.counters[BUS_KEY] = {UNKNOWN_ID: 0, "own_echo": 0, "error_frame": 0}
+        self.counters[BUS_KEY] = {UNKNOWN_ID: 0, OWN_ECHO: 0, "error_frame": 0}
         table = self.icd.table
         n_messages = len(self.icd.message_names)
         # sequence state per message index: (last counter or -1, timed out), time of the last valid frame
@@ -166,7 +164,6 @@ class E2EReceiver:
         """For each key ``row * n_codes + code`` of a compiled caller's tally (row: message index, or the
         number of messages for the bus-level counts; code: a kernels class code, or kernels.TIMEOUT_CODE),
         the (counts dict, class) it adds to, None where there is none."""
-        from comms.bus.kernels import TIMEOUT_CODE
         names = self.icd.message_names
         targets: list = [None] * ((len(names) + 1) * n_codes)
         for m, name in enumerate(names):
@@ -178,7 +175,7 @@ class E2EReceiver:
             targets[m * n_codes + TIMEOUT_CODE] = (counts, TIMEOUT)
         bus = self.counters[BUS_KEY]
         targets[len(names) * n_codes + UNKNOWN_CODE] = (bus, UNKNOWN_ID)
-        targets[len(names) * n_codes + ECHO_CODE] = (bus, "own_echo")
+        targets[len(names) * n_codes + ECHO_CODE] = (bus, OWN_ECHO)
         return targets
 
     def watched_timeouts(self) -> tuple[np.ndarray, np.ndarray]:
@@ -247,12 +244,12 @@ class E2EReceiver:
         checked.codes[first:end] = codes
         by_id, bus, ids, classes = self._by_id, self.counters[BUS_KEY], checked.ids, FRAME_CLASSES
         for j, code in enumerate(codes, first):
-            if code <= 6:
+            if code < UNKNOWN_CODE:
                 by_id[ids[j]][1][classes[code]] += 1
             elif code == UNKNOWN_CODE:
                 bus[UNKNOWN_ID] += 1
             else:
-                bus["own_echo"] += 1
+                bus[OWN_ECHO] += 1
 
     def take(self, checked: CheckedBurst, now_s: float) -> CheckedFrame | None:
         """Classify the next frame of ``checked`` (received at ``now_s``): the same outcome and counts as
@@ -303,7 +300,7 @@ class E2EReceiver:
             return ReceivedFrame(None, frame_id, UNKNOWN_ID, now_s)
         extended = bool(getattr(msg, "is_extended_id", False))
         if frame_id in self.ignore_ids and not extended:
-            self.counters[BUS_KEY]["own_echo"] += 1
+            self.counters[BUS_KEY][OWN_ECHO] += 1
             return None
         spec = None if (extended or getattr(msg, "is_remote_frame", False)) else self.icd.by_id.get(frame_id)
         if spec is None or spec.name not in self.counters:

@@ -36,6 +36,8 @@ E2E_CRC_SIGNAL = "E2E_CRC"
 E2E_COUNTER_SIGNAL = "E2E_Counter"
 SECOC_ATTRIBUTE = "SecOCAuthenticator"
 SECOC_LAYOUT = [("frame_id", 0, 11), ("freshness_lsb", 11, 21), ("mac", 32, 32)]  # comms.bus.secoc's frame
+# RWn_STATUS.fault's bits (the DBC's comment on the signal; tests/fsw/test_bus_icd.py reads it)
+WHEEL_FAULT_OVERSPEED, WHEEL_FAULT_CMD_TIMEOUT, WHEEL_FAULT_DRIVE = 1, 2, 4
 
 
 class IcdError(ValueError):
@@ -393,7 +395,7 @@ class E2ESender:
         self._ids = np.array([icd.messages[n].frame_id for n in icd.message_names], dtype=np.int64)
         self._dlc = icd.table.dlc
         t = icd.table
-        # kernels.encode_rows with this sender's counters and the table bound (a burst passes its rows only)
+        # kernels.encode_burst with this sender's counters and the table bound (a burst passes its rows only)
         self._encode = partial(encode_burst, self._cs, t.packed_i, t.sig_f)
 
     @property
@@ -430,7 +432,7 @@ class E2ESender:
         if done == 0 and n:  # the whole burst, without slicing (the usual call: every row encodes)
             done = self._encode(idx, values, out)
         while done < n:
-            done += self.icd.table.encode(idx[done:], values[done:], self._counter, self._sent, out[done:])
+            done += self._encode(idx[done:], values[done:], out[done:])
             if done < n:
                 name = self.icd.message_names[idx[done]]
                 spec = self.icd.messages[name]

@@ -5,7 +5,7 @@ scaling, range checks and the CRC byte loop in Python). Here the DBC is turned i
 time (:class:`CodecTable`, built by :class:`comms.bus.icd.Icd`) and two kernels walk that table for every
 frame of a burst in one call:
 
-  * :func:`encode_rows`: application values (one row per frame) -> frame bytes with alive counter and
+  * :func:`encode_burst`: application values (one row per frame) -> frame bytes with alive counter and
     E2E CRC in byte 0, the same bytes as ``Icd.encode`` (cantools' arithmetic: ``round((v - offset) /
     scale)`` with round-half-even, two's complement fields, little-endian layout);
   * :func:`classify_rows`: frame bytes -> the receiver's classification (length, CRC, decode with
@@ -26,10 +26,17 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-# classify_rows' per-frame class codes: comms.bus.e2e.FRAME_CLASSES in order (0 ok .. 6 out_of_range), then
-UNKNOWN_CODE, ECHO_CODE, FALLBACK_CODE = 7, 8, 9  # unknown id, own echo, judged by the Python path
-OK_CODE, OK_SOME_LOST_CODE, REPEATED_CODE, WRONG_SEQUENCE_CODE = 0, 1, 2, 3
-CRC_ERROR_CODE, BAD_LENGTH_CODE, OUT_OF_RANGE_CODE = 4, 5, 6
+from comms.dictionary import MAX_WHEELS
+
+# The receiver's classes, one table: a class's code (the kernels' status and tally codes) is its position here
+# and comms.bus.e2e takes the names from it. Codes 0..6 are the classes of a frame of an ICD message
+# (FRAME_CLASSES), then an unknown id, the node's own echo, a frame left to the Python path, and a timeout.
+CLASS_OF_CODE = ("ok", "ok_some_lost", "repeated", "wrong_sequence", "crc_error", "bad_length", "out_of_range",
+                 "unknown_id", "own_echo", "python_path", "timeout")
+(OK_CODE, OK_SOME_LOST_CODE, REPEATED_CODE, WRONG_SEQUENCE_CODE, CRC_ERROR_CODE, BAD_LENGTH_CODE, OUT_OF_RANGE_CODE,
+ UNKNOWN_CODE, ECHO_CODE, FALLBACK_CODE, TIMEOUT_CODE) = range(len(CLASS_OF_CODE))
+FRAME_CLASSES = CLASS_OF_CODE[:OUT_OF_RANGE_CODE + 1]
+N_CODES = len(CLASS_OF_CODE)  # a tally key is row * N_CODES + code
 # kind_of_id entries below 0 (>= 0: the message index)
 KIND_UNKNOWN, KIND_ECHO, KIND_FALLBACK = -1, -2, -3
 # A counter this many steps behind the reference is taken for a delayed old frame (see E2EReceiver._sequence);
@@ -76,11 +83,6 @@ class CodecTable:
         object.__setattr__(self, "packed_i", np.ascontiguousarray(np.concatenate(
             [head, self.msg_i.ravel(), self.sig_i.ravel(), self.crc_table.astype(np.int64)])))
 
-    def encode(self, idx: np.ndarray, values: np.ndarray, counters: np.ndarray, sent: np.ndarray,
-               out: np.ndarray) -> int:
-        """:func:`encode_rows` over this table."""
-        return encode_rows(counters, sent, self.msg_i, self.sig_i, self.sig_f, self.crc_table, idx, values, out)
-
 
 _I = "int64[::1]"
 (T_M, T_S, T_OFF_MSG, T_OFF_SIG, T_OFF_CRC) = range(5)  # CodecTable.packed_i's header
@@ -91,7 +93,14 @@ _F2 = "float64[:, ::1]"
 
 @njit(cache=True)
 def encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table, n):  # pragma: no cover - compiled
-    """:func:`encode_rows` over its first ``n`` rows (the one implementation, also for :func:`command_rows`)."""
+    """Encode row i < ``n`` of ``values`` (slots 2.. of message ``idx[i]``) into ``out[i, :dlc]`` with the message's
+    alive counter ``counters[m]`` (then advanced mod 16, and ``sent[m]`` counted) and its E2E CRC. Stops at
+    the first row it cannot encode (a value outside its DBC range or NaN, a raw value not fitting its
+    bits, an unsupported message): returns how many rows were encoded; the caller takes the checked
+    per-frame path for that row. Table: ``msg_i[m] = (dlc, crc seed, signals, max delta)``,
+    ``sig_i[m, k] = (start bit, bits, signed)``, ``sig_f[m, k] = (scale, offset, min, max, accept low,
+    accept high)``. The one encoder of both ends of the bus (:func:`encode_burst`, :func:`command_rows`,
+    the simulator's tick)."""
     for i in range(n):
         m = idx[i]
         if m < 0:
@@ -123,25 +132,12 @@ def encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_tabl
     return n
 
 
-@njit(f"int64({_I}, {_I}, {_I2}, int64[:, :, ::1], float64[:, :, ::1], {_I}, {_I}, {_F2}, uint8[:, ::1])",
-      cache=True)
-def encode_rows(counters, sent, msg_i, sig_i, sig_f, crc_table, idx, values, out):  # pragma: no cover - compiled
-    """Encode row i of ``values`` (slots 2.. of message ``idx[i]``) into ``out[i, :dlc]`` with the message's
-    alive counter ``counters[m]`` (then advanced mod 16, and ``sent[m]`` counted) and its E2E CRC. Stops at
-    the first row it cannot encode (a value outside its DBC range or NaN, a raw value not fitting its
-    bits, an unsupported message): returns how many rows were encoded; the caller takes the checked
-    per-frame path for that row. Table: ``msg_i[m] = (dlc, crc seed, signals, max delta)``,
-    ``sig_i[m, k] = (start bit, bits, signed)``, ``sig_f[m, k] = (scale, offset, min, max, accept low,
-    accept high)``. (The sender's and the table's arrays come first: a sender binds them once,
-    functools.partial.)"""
-    return encode_range(idx, values, counters, sent, out, msg_i, sig_i, sig_f, crc_table, idx.shape[0])
-
-
 @njit(f"int64({_I2}, {_I}, float64[:, :, ::1], {_I}, {_F2}, uint8[:, ::1])", cache=True)
 def encode_burst(cs, ti, sig_f, idx, values, out):  # pragma: no cover - compiled
-    """:func:`encode_rows` with fewer arguments (a compiled call's cost grows with them, ~0.15 us per array):
-    the sender's alive counters and sent counts as the rows of ``cs``, the table's msg_i, sig_i and CRC table
-    packed in ``ti`` (``CodecTable.packed_i``)."""
+    """:func:`encode_range` over all rows of ``idx`` with few arguments (a compiled call's cost grows with them,
+    ~0.15 us per array): the sender's alive counters and sent counts as the rows of ``cs``, the table's msg_i,
+    sig_i and CRC table packed in ``ti`` (``CodecTable.packed_i``). (The sender's and the table's arrays come
+    first: a sender binds them once, functools.partial.)"""
     m, s = ti[T_M], ti[T_S]
     msg_i = ti[ti[T_OFF_MSG]:ti[T_OFF_MSG] + 4 * m].reshape((m, 4))
     sig_i = ti[ti[T_OFF_SIG]:ti[T_OFF_SIG] + 3 * m * s].reshape((m, s, 3))
@@ -154,7 +150,7 @@ def judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table
     """The class code of frame ``i`` of message index ``m`` (a plain data frame of a table message), received at
     ``now``: length, CRC, decode into ``values[i]`` with the accept bounds, then the alive-counter rules on
     ``seq[m]``; a delivered frame sets ``last_ok_t[m]`` and re-arms the timeout. The one implementation of the
-    rules for :func:`classify_rows` and :func:`collect_rows`."""
+    rules (through :func:`classify_frame`)."""
     size = msg_i[m, 0]
     if lengths[i] != size:
         return BAD_LENGTH_CODE
@@ -217,6 +213,49 @@ def unjudged_code(fid, kind_of_id):  # pragma: no cover - compiled
     return FALLBACK_CODE
 
 
+@njit(cache=True)
+def classify_frame(i, ids, lengths, data, values, now, kind_of_id, msg_i, sig_i, sig_f, crc_table, seq,
+                   last_ok_t):  # pragma: no cover - compiled
+    """The class code of frame ``i`` of a burst received at ``now``: :func:`unjudged_code`, else
+    :func:`judge_frame` (decoded values into ``values[i]``, the sequence state updated). The one
+    classification of both ends of the bus (:func:`classify_rows`, :func:`collect_rows`, the simulator's
+    receive of the flight software's commands)."""
+    fid = ids[i]
+    code = unjudged_code(fid, kind_of_id)
+    if code >= 0:
+        return code
+    return judge_frame(i, kind_of_id[fid], now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t)
+
+
+@njit(cache=True)
+def tally_add(tally, st, key):  # pragma: no cover - compiled
+    """One more of ``key`` (message row * N_CODES + code) in the (key, count) pairs of ``tally``, of which
+    ``st[S_NTALLY]`` are in use (a pair is added for a new key)."""
+    k = st[S_NTALLY]
+    for j in range(k):
+        if tally[j, 0] == key:
+            tally[j, 1] += 1
+            return
+    tally[k, 0] = key
+    tally[k, 1] = 1
+    st[S_NTALLY] = k + 1
+
+
+@njit(cache=True)
+def classify_counted(i, ids, lengths, data, values, now, kind_of_id, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t,
+                     tally, st, bus_row, n_codes):  # pragma: no cover - compiled
+    """:func:`classify_frame`, the class counted in ``tally`` (:func:`tally_add`, key row * ``n_codes`` + code)
+    on its message's row, or on ``bus_row`` for an unknown id or an own echo; a frame for the Python path is
+    not counted here."""
+    code = classify_frame(i, ids, lengths, data, values, now, kind_of_id, msg_i, sig_i, sig_f, crc_table, seq,
+                          last_ok_t)
+    if code < UNKNOWN_CODE:
+        tally_add(tally, st, kind_of_id[ids[i]] * n_codes + code)
+    elif code != FALLBACK_CODE:
+        tally_add(tally, st, bus_row * n_codes + code)
+    return code
+
+
 @njit("int64(int64[::1], int64[::1], uint8[:, ::1], int64[::1], float64[:, ::1], int64, float64, int64, int64, "
       "float64, float64, boolean[::1], int64, int64[::1], int64[:, ::1], int64[:, :, ::1], float64[:, :, ::1], "
       "int64[::1], int64[:, ::1], float64[::1])", cache=True)
@@ -226,7 +265,7 @@ def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_
     Python docstrings give the rules): ``status[i]`` its class code, ``values[i]`` the decoded signals of a
     frame that passed the length and CRC checks. Sequence state per message: ``seq[m] = (last counter or
     -1, timed out)``, ``last_ok_t[m]``; ``kind_of_id[id]``: message index or KIND_*; the table as in
-    :func:`encode_rows`.
+    :func:`encode_range`.
 
     Returns the index after the last frame classified: all of them, or it stops before a frame for the
     Python path (FALLBACK_CODE: not a plain data frame, or a message outside the table), or after a
@@ -234,17 +273,13 @@ def classify_rows(ids, lengths, data, status, values, first, now, stop_id, stop_
     stop_hi], or the ``count_left``-th delivered frame whose id is in ``count_mask``."""
     n = ids.shape[0]
     for i in range(first, n):
-        fid = ids[i]
-        code = unjudged_code(fid, kind_of_id)
-        if code >= 0:
-            status[i] = code
-            if code == FALLBACK_CODE:
-                return i
-            continue
-        m = kind_of_id[fid]
-        code = judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t)
+        code = classify_frame(i, ids, lengths, data, values, now, kind_of_id, msg_i, sig_i, sig_f, crc_table, seq,
+                              last_ok_t)
         status[i] = code
+        if code == FALLBACK_CODE:
+            return i
         if code <= OK_SOME_LOST_CODE:
+            fid = ids[i]
             if fid == stop_id and stop_lo <= values[i, stop_col] <= stop_hi:
                 return i + 1
             if count_mask[fid]:
@@ -264,11 +299,11 @@ ROLE_WHEEL = 10  # + wheel index (0-based)
 (S_PHASE, S_NTALLY, S_UNEXPECTED, S_STALE, S_INCOMPLETE, S_GROW, S_HAS_LAST, S_LAST, S_TICK, S_EXPECTED,
  S_RECEIVED, S_FAILED, S_PENDING, S_P_TICK, S_P_FOLLOWING, S_SUPERVISED, S_IMU_N, S_ST_HAVE_A, S_ST_HAVE_B,
  S_ST_SEQ_A, S_ST_SEQ_B, S_ST_NEW, S_ST_VALID, S_ST_BLIND, S_WHEEL_NEW) = range(25)
-S_IMU_SAT = S_WHEEL_NEW + 6  # the tick's gyro samples flagged saturated
+S_IMU_SAT = S_WHEEL_NEW + MAX_WHEELS  # the tick's gyro samples flagged saturated
 S_WHEEL_FAULT = S_IMU_SAT + 1  # + wheel index: the fault flags of its status this tick, -1 when none came
 NO_FID = -(1 << 40)  # collect_rows' first_fid when frame ``first`` is not judged yet
 # a run of SYNCs too far ahead of the last tick: the newest one's tick and how many came one tick apart
-S_CHAIN_TICK = S_WHEEL_FAULT + 6
+S_CHAIN_TICK = S_WHEEL_FAULT + MAX_WHEELS
 S_CHAIN_N = S_CHAIN_TICK + 1
 S_SIZE = S_CHAIN_N + 1
 # A SYNC is plausible when its tick follows the reference tick by 1..MAX_SYNC_STEP and it keeps the period.
@@ -293,24 +328,10 @@ C_SIZE = C_N_TALLY + 1
 # ... and its float state (ft) slots
 F_T_TICK, F_PERIOD, F_P_PERIOD_MS, F_ST_T, F_ST_Q = 0, 1, 2, 3, 4  # F_ST_Q..F_ST_Q+3: q_NS
 F_WHEEL_T = 8  # + wheel index: the time of each wheel's newest status
-F_WHEEL_SPEED = F_WHEEL_T + 6  # + wheel index: the speed of its status this tick, NaN when none came
-F_WHEEL_ROWS = F_WHEEL_SPEED + 6  # + 5 * wheel index: its newest status (speed, torque, current, temp, fault)
-F_SIZE = F_WHEEL_ROWS + 5 * 6
+F_WHEEL_SPEED = F_WHEEL_T + MAX_WHEELS  # + wheel index: the speed of its status this tick, NaN when none came
+F_WHEEL_ROWS = F_WHEEL_SPEED + MAX_WHEELS  # + 5 * wheel index: its newest status (speed, torque, current, temp, fault)
+F_SIZE = F_WHEEL_ROWS + 5 * MAX_WHEELS
 PHASE_SYNC, PHASE_TICK, PHASE_DONE = 0, 1, 2  # waiting for SYNC(k) / for tick k's frames / tick closed
-TIMEOUT_CODE = 10  # tally code of a timeout (the tally's other codes are the class codes above)
-
-
-@njit(cache=True)
-def _tally(tally, st, key):  # pragma: no cover - compiled
-    # one more of ``key`` (message row * n_codes + code) in the (key, count) pairs of this tick
-    k = st[S_NTALLY]
-    for j in range(k):
-        if tally[j, 0] == key:
-            tally[j, 1] += 1
-            return
-    tally[k, 0] = key
-    tally[k, 1] = 1
-    st[S_NTALLY] = k + 1
 
 
 @njit(cache=True)
@@ -360,7 +381,7 @@ def _start_tick(st, ft, cfg, values, i, seq, last_ok_t):  # pragma: no cover - c
     st[S_IMU_N] = 0
     st[S_IMU_SAT] = 0
     st[S_ST_NEW] = 0
-    for w in range(6):
+    for w in range(MAX_WHEELS):
         st[S_WHEEL_NEW + w] = 0
         st[S_WHEEL_FAULT + w] = -1
         ft[F_WHEEL_SPEED + w] = np.nan
@@ -377,7 +398,7 @@ def count_timeouts(now, watch, watch_limit, seq, last_ok_t, tally, st, n_codes):
         if now - last_ok_t[m] > watch_limit[j]:
             if seq[m, 1] == 0:
                 seq[m, 1] = 1
-                _tally(tally, st, m * n_codes + TIMEOUT_CODE)
+                tally_add(tally, st, m * n_codes + TIMEOUT_CODE)
 
 
 @njit("void(int64[::1], float64[::1], int64[::1], float64[::1], int64[:, ::1], float64[::1], int64[:, ::1], int64)",
@@ -502,9 +523,9 @@ def _receive_wheel_status(st, ft, cfg, values, j, w, now):  # pragma: no cover -
 def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, lengths, data, first,
                  first_fid):  # pragma: no cover - compiled
     """FswBusDriver.collect_tick's work on frames ``first``.. of a burst (``ids``, ``lengths``, ``data``), in one
-    call (the driver's arrays come first, bound once: functools.partial), each frame classified as
-    :func:`classify_rows` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``) and counted
-    in ``tally`` ((message row * n_codes + code, count) pairs, ``st[S_NTALLY]`` of them), then what the
+    call (the driver's arrays come first, bound once: functools.partial), each frame classified and counted
+    by :func:`classify_counted` (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``) in
+    ``tally`` ((message row * n_codes + code, count) pairs, ``st[S_NTALLY]`` of them), then what the
     driver does with it, by phase (``st[S_PHASE]``):
 
       * waiting for SYNC(k) (:func:`_between_ticks`): a delivered SYNC after the last tick starts tick k
@@ -531,25 +552,16 @@ def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, l
             role = role_of_id[first_fid] if 0 <= first_fid < role_of_id.shape[0] else ROLE_NONE
         else:
             fid = ids[i]
-            if fid < 0 or fid >= kind_of_id.shape[0]:
-                status[i] = FALLBACK_CODE
+            if (st[S_PHASE] == PHASE_TICK and st[S_IMU_N] >= imu.shape[0] and 0 <= fid < kind_of_id.shape[0]
+                    and kind_of_id[fid] >= 0 and role_of_id[fid] == ROLE_IMU):
+                st[S_GROW] = 1  # a gyro frame with ``imu`` full: the caller grows it, then calls again
                 return i
-            m = kind_of_id[fid]
+            code = classify_counted(i, ids, lengths, data, values, now, kind_of_id, msg_i, sig_i, sig_f, crc_table,
+                                    seq, last_ok_t, tally, st, cfg[C_BUS_ROW], n_codes)
+            status[i] = code
+            if code == FALLBACK_CODE:
+                return i
             role = role_of_id[fid]
-            if m == KIND_FALLBACK:
-                status[i] = FALLBACK_CODE
-                return i
-            if m < 0:
-                code = UNKNOWN_CODE if m == KIND_UNKNOWN else ECHO_CODE
-                status[i] = code
-                _tally(tally, st, cfg[C_BUS_ROW] * n_codes + code)
-            else:
-                if role == ROLE_IMU and st[S_PHASE] == PHASE_TICK and st[S_IMU_N] >= imu.shape[0]:
-                    st[S_GROW] = 1
-                    return i
-                code = judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t)
-                status[i] = code
-                _tally(tally, st, m * n_codes + code)
         i += 1
         j = i - 1
         if code > OK_SOME_LOST_CODE:
@@ -613,8 +625,8 @@ def command_rows(ic, fc, cs, torques, tick_lsb, done_tick, with_done, out):  # p
     bound once: functools.partial): wheel i's command row (``torques[i]`` limited to
     ``limits[i]`` = (low, high), NaN or infinite sent as 0, and ``tick_lsb``) and, ``with_done`` (0 / 1), the
     CYCLE_DONE row (``done_tick``) into ``values`` (slots ``cols`` = torque, tick_lsb, CYCLE_DONE's tick),
-    then encoded as :func:`encode_rows` does (messages ``idx``). Returns the rows encoded (as
-    encode_rows: fewer when one cannot be)."""
+    then encoded by :func:`encode_range` (messages ``idx``). Returns the rows encoded (fewer when one
+    cannot be)."""
     nw, m, s, width = ic[CMD_NW], ic[CMD_M], ic[CMD_S], ic[CMD_WIDTH]
     idx = ic[ic[CMD_OFF_IDX]:ic[CMD_OFF_IDX] + nw + 1]
     cols = ic[ic[CMD_OFF_COLS]:ic[CMD_OFF_COLS] + 3]

@@ -41,7 +41,7 @@ from comms.bus.e2e import CODE_CLASS, CheckedBurst, CheckedFrame, E2EReceiver
 from comms.bus.icd import E2ESender, Icd
 from comms.bus.kernels import MAX_DLC
 from comms.bus.transport import recv_burst, send_batch
-from fsw.config import MAX_WHEELS
+from comms.dictionary import MAX_WHEELS
 
 FSW_NODE = "FSW"
 _F8 = np.dtype(np.float64)
@@ -338,7 +338,7 @@ class FswBusDriver:
         """The arrays of the compiled lockstep tick (kernels.collect_rows): its state, what it does with each
         frame id, the signals' slots, and the tick's decoded samples; then the compiled command encoder's."""
         # kernels.S_*: phase, counts, pending SYNC, samples; then the tally (key, count pairs)
-        self._n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE
+        self._n_codes = K.N_CODES  # tally codes: the kernels' class codes
         n_tally = (len(icd.message_names) + 1) * self._n_codes
         self._st_all = np.zeros(K.S_SIZE + 2 * n_tally, dtype=np.int64)
         self._st_i = self._st_all[:K.S_SIZE]

@@ -19,15 +19,13 @@ import numpy as np
 from numba import njit
 
 from comms.bus.burst import MAX_DLC
-from comms.bus.kernels import FALLBACK_CODE, _tally, encode_range, judge_frame, unjudged_code
+from comms.bus.icd import WHEEL_FAULT_CMD_TIMEOUT, WHEEL_FAULT_DRIVE, WHEEL_FAULT_OVERSPEED
+from comms.bus.kernels import FALLBACK_CODE, OK_SOME_LOST_CODE, S_NTALLY, classify_counted, encode_range
 from hil_sim.world import world as wd
-from hil_sim.world.dynamics import W_KT
+from hil_sim.world.dynamics import FAULT_NO_TORQUE, FAULT_SPEED_LIMIT, FAULT_STUCK, W_KT
 from hil_sim.world.world import _world_period_kernel, view1, view2, view3
 
 _EPS_S = 1e-9
-# RWn_STATUS.fault bits and hil_sim.world.world.WheelStatus.fault bits (as in hil_sim.devices.nodes)
-_FAULT_OVERSPEED, _FAULT_CMD_TIMEOUT, _FAULT_DRIVE = 1, 2, 4
-_WORLD_STUCK, _WORLD_NO_TORQUE, _WORLD_SPEED_LIMIT = 1, 2, 4
 # WHEEL_STATE columns: held torque command, time of the last command (NaN: none yet), commands applied,
 # tick_lsb of the last command (NaN: none yet)
 WS_CMD, WS_LAST_T, WS_APPLIED, WS_TICK = 0, 1, 2, 3
@@ -219,20 +217,20 @@ def wheel_status_rows(t_s, X, U_APPLIED, W_KT, TEMP, FLAGS, wheel_state, timeout
         temp = TEMP[i, 0]
         flags = FLAGS[i, 0]
         fault = 0
-        if flags & _WORLD_SPEED_LIMIT:
-            fault |= _FAULT_OVERSPEED
-        if flags & (_WORLD_STUCK | _WORLD_NO_TORQUE):
-            fault |= _FAULT_DRIVE
+        if flags & FAULT_SPEED_LIMIT:
+            fault |= WHEEL_FAULT_OVERSPEED
+        if flags & (FAULT_STUCK | FAULT_NO_TORQUE):
+            fault |= WHEEL_FAULT_DRIVE
         last = wheel_state[i, WS_LAST_T]
         if not math.isnan(last) and t_s - last > timeout_s[i] + _EPS_S:
-            fault |= _FAULT_CMD_TIMEOUT
+            fault |= WHEEL_FAULT_CMD_TIMEOUT
         # _clamp: lo if value < lo, hi if value > hi (a NaN passes through)
         if speed < ranges[0, 0]:
             speed = ranges[0, 0]
-            fault |= _FAULT_OVERSPEED
+            fault |= WHEEL_FAULT_OVERSPEED
         elif speed > ranges[0, 1]:
             speed = ranges[0, 1]
-            fault |= _FAULT_OVERSPEED
+            fault |= WHEEL_FAULT_OVERSPEED
         if applied < ranges[1, 0]:
             applied = ranges[1, 0]
         elif applied > ranges[1, 1]:
@@ -257,21 +255,12 @@ def wheel_status_rows(t_s, X, U_APPLIED, W_KT, TEMP, FLAGS, wheel_state, timeout
 
 
 @njit(cache=True)
-def tick_rows(t_s, sync, sync_m, sync_cols, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N, age_col, X, U_APPLIED, W_KT, TEMP, FLAGS,
-              wheel_state, timeout_s, status_ms, status_cols, ranges, OUT_IDX, OUT_ROWS):
-    """The frames of ``Simulator.begin_tick`` as rows: from row 1 the sensor rows due by t_s (``take_due``)
-    then the wheel statuses (``wheel_status_rows``), in row 0 SYNC with sync = (tick, period_ms) and
-    frames_following = min(rows after it, 255). Returns the number of rows (SYNC included)."""
-    n = 1 + take_due(t_s, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N, age_col, OUT_IDX, OUT_ROWS, 1)
-    n += wheel_status_rows(t_s, X, U_APPLIED, W_KT, TEMP, FLAGS, wheel_state, timeout_s, status_ms, status_cols,
-                           ranges, OUT_IDX, OUT_ROWS, n)
-    for c in range(OUT_ROWS.shape[1]):
-        OUT_ROWS[0, c] = 0.0
-    OUT_IDX[0] = sync_m
-    OUT_ROWS[0, sync_cols[0]] = sync[0]
-    OUT_ROWS[0, sync_cols[1]] = float(min(n - 1, 255))
-    OUT_ROWS[0, sync_cols[2]] = sync[1]
-    return n
+def take_wheel_command(wheel_state, w, values, i, torque_col, tick_lsb_col, t_s):
+    """``WheelNode.on_command`` of wheel ``w`` for the delivered command in value row ``i``, received at ``t_s``."""
+    wheel_state[w, WS_CMD] = values[i, torque_col]
+    wheel_state[w, WS_TICK] = values[i, tick_lsb_col]
+    wheel_state[w, WS_LAST_T] = t_s
+    wheel_state[w, WS_APPLIED] += 1.0
 
 
 @njit(cache=True)
@@ -288,10 +277,7 @@ def apply_received(status, ids, values, first, end, cmd_wheel_of_id, torque_col,
         fid = ids[i]
         w = cmd_wheel_of_id[fid] if 0 <= fid < cmd_wheel_of_id.shape[0] else -1
         if w >= 0:
-            wheel_state[w, WS_CMD] = values[i, torque_col]
-            wheel_state[w, WS_TICK] = values[i, tick_lsb_col]
-            wheel_state[w, WS_LAST_T] = t_s
-            wheel_state[w, WS_APPLIED] += 1.0
+            take_wheel_command(wheel_state, w, values, i, torque_col, tick_lsb_col, t_s)
             counts[0] += 1
         elif fid == cycle_done_id:
             counts[2] = 1
@@ -302,72 +288,14 @@ def apply_received(status, ids, values, first, end, cmd_wheel_of_id, torque_col,
     return end
 
 
-# receive_commands' integer state (rs) slots; RS_NTALLY is kernels.S_NTALLY (its _tally counts there)
-RS_WHEEL_CMDS, RS_NTALLY, RS_HEARTBEATS, RS_CYCLE_DONE, RS_STALE, RS_DONE = 0, 1, 2, 3, 4, 5
+# receive_commands' integer state (rs) slots (its tally's pair count where comms.bus.kernels.tally_add keeps it)
+RS_WHEEL_CMDS, RS_HEARTBEATS, RS_CYCLE_DONE, RS_STALE, RS_DONE = 0, 2, 3, 4, 5
+RS_NTALLY = S_NTALLY
 RS_SIZE = 6
 # its constants (``consts``: these slots, then kind_of_id and cmd_wheel_of_id, n_ids each, then the CRC table)
 (RC_N_CODES, RC_BUS_ROW, RC_TORQUE_COL, RC_TICK_LSB_COL, RC_DONE_ID, RC_DONE_TICK_COL, RC_HEARTBEAT_ID,
  RC_N_IDS) = range(8)
 RC_SIZE = 8
-
-
-@njit(cache=True)
-def receive_commands(ids, lengths, data, first, status, values, now, awaited, consts, msg_i, sig_i, sig_f, seq,
-                     last_ok_t, wheel_state, tally, rs):
-    """``Simulator``'s receive of frames ``first``.. of a burst in one call: each frame classified as
-    ``comms.bus.kernels.classify_rows`` does (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``)
-    and counted in ``tally`` as ``collect_rows`` counts (``rs[RS_NTALLY]`` pairs), then a delivered one
-    applied as :func:`apply_received` applies it (wheel commands into ``wheel_state``; heartbeats, CYCLE_DONEs
-    and stale ones, i.e. for another tick than ``awaited``, counted in ``rs``; ``rs[RS_DONE]`` set by
-    CYCLE_DONE(awaited)). Returns the index after the last frame handled: after CYCLE_DONE(awaited) (later
-    frames stay for later, as classify_until's stop leaves them), the burst's end, or before a frame for
-    the Python path (``status`` FALLBACK_CODE)."""
-    n_codes = consts[RC_N_CODES]
-    bus_key = consts[RC_BUS_ROW] * n_codes
-    torque_col = consts[RC_TORQUE_COL]
-    tick_lsb_col = consts[RC_TICK_LSB_COL]
-    done_id = consts[RC_DONE_ID]
-    done_col = consts[RC_DONE_TICK_COL]
-    heartbeat_id = consts[RC_HEARTBEAT_ID]
-    n_ids = consts[RC_N_IDS]
-    kind_of_id = consts[RC_SIZE:RC_SIZE + n_ids]
-    cmd_wheel_of_id = consts[RC_SIZE + n_ids:RC_SIZE + 2 * n_ids]
-    crc_table = consts[RC_SIZE + 2 * n_ids:]
-    stop = float(awaited)
-    n = ids.shape[0]
-    for i in range(first, n):
-        fid = ids[i]
-        code = unjudged_code(fid, kind_of_id)
-        if code >= 0:
-            status[i] = code
-            if code == FALLBACK_CODE:
-                return i
-            _tally(tally, rs, bus_key + code)  # unknown ids and own echoes are counted on the bus row
-            continue
-        m = kind_of_id[fid]
-        code = judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t)
-        status[i] = code
-        _tally(tally, rs, m * n_codes + code)
-        if code > 1:
-            continue
-        w = cmd_wheel_of_id[fid]
-        if w >= 0:
-            wheel_state[w, WS_CMD] = values[i, torque_col]
-            wheel_state[w, WS_TICK] = values[i, tick_lsb_col]
-            wheel_state[w, WS_LAST_T] = now
-            wheel_state[w, WS_APPLIED] += 1.0
-            rs[RS_WHEEL_CMDS] += 1
-        elif fid == done_id:
-            rs[RS_CYCLE_DONE] += 1
-            if np.int64(values[i, done_col]) == awaited:
-                rs[RS_DONE] = 1
-            else:
-                rs[RS_STALE] += 1
-            if stop <= values[i, done_col] <= stop:
-                return i + 1
-        elif fid == heartbeat_id:
-            rs[RS_HEARTBEATS] += 1
-    return n
 
 
 # Devices' packed state (Devices._pack_state; hil_sim.world.world.pack_arrays): its slots, then the places of its
@@ -385,25 +313,34 @@ DPS_DIST_N, DPS_DIST_POS, DPS_IMU_POS, DPS_ST_POS, DPS_N_RUNS = range(5)
 
 
 @njit(cache=True)
-def tick_rows_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS):
-    """``tick_rows`` on the devices' (SF, SI) and the world's (WF, WI) packed state; sync = (tick,
-    period_ms). Returns the number of rows (SYNC included)."""
+def tick_rows(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS):
+    """The frames of ``Simulator.begin_tick`` as rows, on the devices' (SF, SI) and the world's (WF, WI) packed
+    state: from row 1 the sensor rows due by t_s (``take_due``) then the wheel statuses
+    (``wheel_status_rows``), in row 0 SYNC (tick, frames_following = min(rows after it, 255), period_ms).
+    Returns the number of rows (SYNC included)."""
     isc = view1(SI, SI, DS_ISCALARS)
-    return tick_rows(t_s, (tick, period_ms), isc[DSS_SYNC_M], isc[DSS_SYNC_COLS:DSS_SYNC_COLS + 3], Q_DUE, Q_M,
-                     Q_ROWS, Q_TS, view1(SI, SI, DS_Q_N), isc[DSS_AGE_COL], view2(WF, WI, wd.WP_X),
-                     view2(WF, WI, wd.WP_U_APPLIED), view3(WF, WI, wd.WP_W)[W_KT], view2(WF, WI, wd.WP_TEMP),
-                     view2(WI, WI, wd.WP_FLAGS), view2(SF, SI, DS_WHEEL_STATE), view1(SF, SI, DS_TIMEOUT),
-                     view1(SI, SI, DS_STATUS_MS), view1(SI, SI, DS_STATUS_COLS), view2(SF, SI, DS_STATUS_RANGES),
-                     OUT_IDX, OUT_ROWS)
+    n = 1 + take_due(t_s, Q_DUE, Q_M, Q_ROWS, Q_TS, view1(SI, SI, DS_Q_N), isc[DSS_AGE_COL], OUT_IDX, OUT_ROWS, 1)
+    n += wheel_status_rows(t_s, view2(WF, WI, wd.WP_X), view2(WF, WI, wd.WP_U_APPLIED),
+                           view3(WF, WI, wd.WP_W)[W_KT], view2(WF, WI, wd.WP_TEMP), view2(WI, WI, wd.WP_FLAGS),
+                           view2(SF, SI, DS_WHEEL_STATE), view1(SF, SI, DS_TIMEOUT), view1(SI, SI, DS_STATUS_MS),
+                           view1(SI, SI, DS_STATUS_COLS), view2(SF, SI, DS_STATUS_RANGES), OUT_IDX, OUT_ROWS, n)
+    sync_cols = isc[DSS_SYNC_COLS:DSS_SYNC_COLS + 3]
+    for c in range(OUT_ROWS.shape[1]):
+        OUT_ROWS[0, c] = 0.0
+    OUT_IDX[0] = isc[DSS_SYNC_M]
+    OUT_ROWS[0, sync_cols[0]] = tick
+    OUT_ROWS[0, sync_cols[1]] = float(min(n - 1, 255))
+    OUT_ROWS[0, sync_cols[2]] = period_ms
+    return n
 
 
 @njit(cache=True)
 def tick_burst_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS, counters,
                       sent):
-    """``tick_rows_packed``, then its n rows encoded as ``E2ESender.burst`` encodes them (``encode_range``
+    """``tick_rows``, then its n rows encoded as ``E2ESender.burst`` encodes them (``encode_range``
     with the sender's alive ``counters`` and ``sent`` counts) into new arrays. Returns (n, rows encoded,
     frame ids, data (n, 8), lengths): a FrameBurst's arrays when all n are encoded."""
-    n = tick_rows_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS)
+    n = tick_rows(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, Q_TS, OUT_IDX, OUT_ROWS)
     data = np.zeros((n, MAX_DLC), dtype=np.uint8)
     done = encode_range(OUT_IDX, OUT_ROWS, counters, sent, data, view2(SI, SI, DS_MSG_I), view3(SI, SI, DS_SIG_I),
                         view3(SF, SI, DS_SIG_F), view1(SI, SI, DS_CRC), n)
@@ -418,13 +355,55 @@ def tick_burst_packed(t_s, tick, period_ms, SF, SI, WF, WI, Q_DUE, Q_M, Q_ROWS, 
 
 
 @njit(cache=True)
-def receive_commands_packed(ids, lengths, data, now, awaited, status, values, consts, SF, SI, seq, last_ok_t, tally,
-                            rs):
-    """``receive_commands`` of a whole burst (from frame 0) with the ICD codec table and the wheels' command
-    state read from the devices' packed state (SF, SI: ``Devices._pack_state``)."""
-    return receive_commands(ids, lengths, data, 0, status, values, now, awaited, consts, view2(SI, SI, DS_MSG_I),
-                            view3(SI, SI, DS_SIG_I), view3(SF, SI, DS_SIG_F), seq, last_ok_t,
-                            view2(SF, SI, DS_WHEEL_STATE), tally, rs)
+def receive_commands(ids, lengths, data, now, awaited, status, values, consts, SF, SI, seq, last_ok_t, tally, rs):
+    """``Simulator``'s receive of a burst in one call, on the ICD codec table and the wheels' command state in
+    the devices' packed state (SF, SI: ``Devices._pack_state``): each frame classified and counted by
+    ``comms.bus.kernels.classify_counted`` (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``,
+    ``tally`` with ``rs[RS_NTALLY]`` pairs), as the flight side's collect_rows does, then a delivered one
+    applied as :func:`apply_received` applies it (wheel commands into the wheel state; heartbeats,
+    CYCLE_DONEs and stale ones, i.e. for another tick than ``awaited``, counted in ``rs``; ``rs[RS_DONE]``
+    set by CYCLE_DONE(awaited)). Returns the index after the last frame handled: after CYCLE_DONE(awaited)
+    (later frames stay for later, as classify_until's stop leaves them), the burst's end, or before a frame
+    for the Python path (``status`` FALLBACK_CODE)."""
+    n_codes = consts[RC_N_CODES]
+    bus_row = consts[RC_BUS_ROW]
+    torque_col = consts[RC_TORQUE_COL]
+    tick_lsb_col = consts[RC_TICK_LSB_COL]
+    done_id = consts[RC_DONE_ID]
+    done_col = consts[RC_DONE_TICK_COL]
+    heartbeat_id = consts[RC_HEARTBEAT_ID]
+    n_ids = consts[RC_N_IDS]
+    kind_of_id = consts[RC_SIZE:RC_SIZE + n_ids]
+    cmd_wheel_of_id = consts[RC_SIZE + n_ids:RC_SIZE + 2 * n_ids]
+    crc_table = consts[RC_SIZE + 2 * n_ids:]
+    msg_i, sig_i, sig_f = view2(SI, SI, DS_MSG_I), view3(SI, SI, DS_SIG_I), view3(SF, SI, DS_SIG_F)
+    wheel_state = view2(SF, SI, DS_WHEEL_STATE)
+    stop = float(awaited)
+    n = ids.shape[0]
+    for i in range(n):
+        code = classify_counted(i, ids, lengths, data, values, now, kind_of_id, msg_i, sig_i, sig_f, crc_table, seq,
+                                last_ok_t, tally, rs, bus_row, n_codes)
+        status[i] = code
+        if code == FALLBACK_CODE:
+            return i
+        if code > OK_SOME_LOST_CODE:
+            continue
+        fid = ids[i]
+        w = cmd_wheel_of_id[fid]
+        if w >= 0:
+            take_wheel_command(wheel_state, w, values, i, torque_col, tick_lsb_col, now)
+            rs[RS_WHEEL_CMDS] += 1
+        elif fid == done_id:
+            rs[RS_CYCLE_DONE] += 1
+            if np.int64(values[i, done_col]) == awaited:
+                rs[RS_DONE] = 1
+            else:
+                rs[RS_STALE] += 1
+            if stop <= values[i, done_col] <= stop:
+                return i + 1
+        elif fid == heartbeat_id:
+            rs[RS_HEARTBEATS] += 1
+    return n
 
 
 @njit(cache=True)

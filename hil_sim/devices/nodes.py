@@ -26,15 +26,18 @@ import can
 import numpy as np
 
 from comms.bus.burst import FrameBurst
+from comms.bus.icd import WHEEL_FAULT_CMD_TIMEOUT as FAULT_CMD_TIMEOUT
+from comms.bus.icd import WHEEL_FAULT_DRIVE as FAULT_DRIVE
+from comms.bus.icd import WHEEL_FAULT_OVERSPEED as FAULT_OVERSPEED
 from comms.bus.icd import E2ESender, Icd
+from comms.dictionary import MAX_WHEELS
 from hil_sim.devices import kernels as dk
 from hil_sim.devices.kernels import WS_APPLIED, WS_CMD, WS_LAST_T, WS_TICK
+from hil_sim.world.dynamics import FAULT_NO_TORQUE as _WORLD_NO_TORQUE
+from hil_sim.world.dynamics import FAULT_SPEED_LIMIT as _WORLD_SPEED_LIMIT
+from hil_sim.world.dynamics import FAULT_STUCK as _WORLD_STUCK
 from hil_sim.world.world import pack_arrays
 
-# Fault bits of RWn_STATUS.fault (see the DBC comment).
-FAULT_OVERSPEED, FAULT_CMD_TIMEOUT, FAULT_DRIVE = 1, 2, 4
-# Fault bits of hil_sim.world.world.WheelStatus.fault.
-_WORLD_STUCK, _WORLD_NO_TORQUE, _WORLD_SPEED_LIMIT = 1, 2, 4
 _EPS_S = 1e-9
 
 
@@ -501,7 +504,7 @@ class Devices:
         self._warm_kernels()
 
     def _pack_state(self) -> None:
-        """The state the per-tick kernels (``device_kernels.period_packed``, ``tick_rows_packed``) read and
+        """The state the per-tick kernels (``device_kernels.period_packed``, ``tick_rows``) read and
         write, as views of a few buffers (``hil_sim.world.world.pack_arrays``, slots DS_*): the sensors' clocks,
         the wheels' command state, the queue's count, and the constants of the frames they make."""
         imu, st = self.imu, self.star_tracker
@@ -549,8 +552,8 @@ class Devices:
                   door: DoorParams | None = None) -> "Devices":
         timing = timing or DeviceTiming()
         n = int(world.n_wheels)
-        if not 1 <= n <= 6:
-            raise ValueError(f"the ICD has nodes RW1..RW6; this spacecraft has {n} wheels")
+        if not 1 <= n <= MAX_WHEELS:
+            raise ValueError(f"the ICD has nodes RW1..RW{MAX_WHEELS}; this spacecraft has {n} wheels")
         imu_rate = 1.0 / float(getattr(world, "imu_period_s", 0.01))
         st_rate = 1.0 / float(getattr(world, "star_tracker_period_s", 0.1))
         sender = E2ESender(icd)
@@ -733,7 +736,7 @@ class Devices:
 
     # ------------------------------------------------------------------------------- frames out
     def _tick_kernel_args(self, world: Any, sync_m: int, sync_cols: np.ndarray) -> tuple | None:
-        """``tick_rows_packed``'s arguments after (t_s, tick, period_ms), for ``world`` (None when it is not a
+        """``tick_rows``'s arguments after (t_s, tick, period_ms), for ``world`` (None when it is not a
         ``hil_sim.world.world.World``); kept while the world, the queue's arrays and the output rows' room hold."""
         args = self._tick_args
         if args is None or args[0] is not world or args[1] < 1 + self.q_n.item(0) + len(self.wheels):
@@ -757,7 +760,7 @@ class Devices:
         args = self._tick_kernel_args(world, sync_m, sync_cols)
         if args is None:
             return None
-        n = dk.tick_rows_packed(t_s, float(tick), float(period_ms), *args)
+        n = dk.tick_rows(t_s, float(tick), float(period_ms), *args)
         return args[-2], args[-1], n
 
     def tick_burst(self, world: Any, t_s: float, tick: int, period_ms: int, sync_m: int,

@@ -21,7 +21,8 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 import numpy as np
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from fsw.config import MAX_WHEELS, FswConfig
+from comms.dictionary import MAX_WHEELS
+from fsw.config import FswConfig
 from comms.dictionary import FDIR_MONITORS
 from gnc.ephemeris import EARTH_RADIUS_KM
 from hil_sim.devices.faults import DOOR_MESSAGES, WHEEL_MESSAGE

@@ -33,7 +33,7 @@ import numpy as np
 
 from comms.bus.burst import FrameBurst
 from comms.bus.e2e import NO_STOP, PYTHON_RUN, CheckedBurst, CheckedFrame, E2EReceiver
-from comms.bus.kernels import ECHO_CODE, MAX_DLC, count_timeouts
+from comms.bus.kernels import ECHO_CODE, MAX_DLC, N_CODES, count_timeouts
 from comms.bus.icd import Icd
 from comms.bus.transport import recv_burst, send_batch, send_burst
 from hil_sim.devices import kernels as dk
@@ -163,7 +163,7 @@ class Simulator:
         """The arrays of receive_commands (a tick's commands classified, counted and applied in one compiled
         call)."""
         # the constants packed once, the tally of (counter key, count) pairs and its targets, the state
-        n_codes = 11  # tally codes: kernels' class codes 0..9, TIMEOUT_CODE (as the flight-side driver)
+        n_codes = N_CODES  # tally codes: the kernels' class codes (as the flight-side driver)
         n_messages = len(self.icd.message_names)
         kind_of_id = self.receiver.kernel_state[0]
         cfg = np.zeros(dk.RC_SIZE, dtype=np.int64)
@@ -181,7 +181,7 @@ class Simulator:
         self._rc_watch = self.receiver.watched_timeouts()  # (message indices, limits) as check_timeouts has them
         self._rc_status = np.zeros(0, dtype=np.int64)
         self._rc_args: tuple | None = None  # (see _take_burst)
-        # receive_commands_packed reads the codec table from the devices' packed copy of it
+        # receive_commands reads the codec table from the devices' packed copy of it
         if not all(np.array_equal(a, b) for a, b in zip(self._rc_table[:3], (self.icd.table.msg_i,
                                                                               self.icd.table.sig_i,
                                                                               self.icd.table.sig_f))):
@@ -194,10 +194,10 @@ class Simulator:
         # software runs its first cycle (on the vcan-vm guest's one CPU): load (or compile) it here, with no
         # frame, as apply_received above
         d = self.devices
-        dk.receive_commands_packed(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
-                                   np.zeros((0, MAX_DLC), dtype=np.uint8), 0.0, 0, self._rc_status, self._rc_values,
-                                   self._rc_consts, d.packed_f, d.packed_i, self._rc_table[3], self._rc_table[4],
-                                   self._rc_tally, self._rc_state)
+        dk.receive_commands(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
+                            np.zeros((0, MAX_DLC), dtype=np.uint8), 0.0, 0, self._rc_status, self._rc_values,
+                            self._rc_consts, d.packed_f, d.packed_i, self._rc_table[3], self._rc_table[4],
+                            self._rc_tally, self._rc_state)
 
     def _init_clock(self, world: WorldLike) -> None:
         """Tick 0 at the world's time, no tick open; the sensors sample the initial state (t = t0) before the
@@ -446,12 +446,12 @@ class Simulator:
             self._rc_args = None
         args = self._rc_args
         if args is None:
-            # receive_commands_packed's arguments after the time and tick, bound while the scratch holds
+            # receive_commands' arguments after the time and tick, bound while the scratch holds
             d = self.devices
             args = self._rc_args = (self._rc_status, self._rc_values, self._rc_consts, d.packed_f, d.packed_i,
                                     self._rc_table[3], self._rc_table[4], self._rc_tally, self._rc_state)
         rs = self._rc_state
-        end = dk.receive_commands_packed(burst.ids, burst.lengths, burst.data, t_s, k, *args)
+        end = dk.receive_commands(burst.ids, burst.lengths, burst.data, t_s, k, *args)
         if self.door is not None:
             self._door_commands(burst.ids, self._rc_status, self._rc_values, 0, end, t_s)
         if self.on_burst is not None and end:

@@ -16,7 +16,7 @@ from comms.bus import E2ESender, Icd
 from fsw.bus import FswBusDriver, TickInputs
 from comms.bus.burst import FrameBurst
 from fsw.bus.driver import ImuSample, StarTrackerSample, WheelStatus
-from comms.bus.e2e import E2EReceiver
+from reference.bus import ReferenceDriver
 
 
 @pytest.fixture(scope="module")
@@ -40,92 +40,6 @@ class _BurstBus:
 
     def send(self, msg, timeout=None) -> None:
         self.sent.append(([msg.arbitration_id], [bytes(msg.data)]))
-
-
-class _ReferenceDriver:
-    """FswBusDriver.collect_tick(0) frame by frame, on E2EReceiver.classify (the Python path)."""
-
-    def __init__(self, icd: Icd, n_wheels: int) -> None:
-        own = icd.ids_sent_by("FSW")
-        watch = icd.names_sent_by("SIM", "IMU", "STR", *[f"RW{i}" for i in range(1, n_wheels + 1)])
-        self.rx = E2EReceiver(icd, ignore_ids=own, watch=watch)
-        self.icd, self.n = icd, n_wheels
-        self.device = frozenset(icd.by_id) - own - {icd.spec("SYNC").frame_id}
-        self.sync, self.imu = icd.spec("SYNC").frame_id, icd.spec("IMU_RATE").frame_id
-        self.st = {icd.spec(n).frame_id: n for n in ("ST_QUAT_A", "ST_QUAT_B")}
-        self.wheel = {icd.spec(f"RW{i}_STATUS").frame_id: i - 1 for i in range(1, n_wheels + 1)}
-        self.queue: list = []
-        self.last_tick = None
-        self.t_tick = self.period_s = 0.0
-        self.pending = None
-        self.halves: dict = {}
-        self.supervised = False
-        self.stale = self.unexpected = self.incomplete = 0
-
-    def _next(self):
-        return self.queue.pop(0) if self.queue else None
-
-    def collect_tick(self):
-        sync, self.pending = self.pending, None
-        while sync is None:
-            msg = self._next()
-            if msg is None:
-                return None
-            f = self.rx.classify(msg, self.t_tick)
-            if f is None or not f.delivered:
-                continue
-            if f.frame_id == self.sync:
-                if self.last_tick is not None and int(f.signals["tick"]) <= self.last_tick:
-                    self.stale += 1
-                else:
-                    sync = f.signals
-            elif f.frame_id in self.device:
-                self.unexpected += 1
-        tick = int(sync["tick"])
-        self.period_s = float(sync["period_ms"]) / 1000.0
-        t = self.t_tick = tick * self.period_s
-        if not self.supervised:
-            self.rx.reset_clock(t)
-            self.supervised = True
-        expected = int(sync["frames_following"])
-        received = 0
-        imu, st, wheels = [], None, [None] * self.n
-        while received < expected:
-            msg = self._next()
-            if msg is None:
-                break
-            f = self.rx.classify(msg, t)
-            fid = -1 if f is None else f.frame_id
-            if f is not None and f.delivered:
-                s = f.signals
-                if fid == self.sync:
-                    if int(s["tick"]) <= tick:
-                        self.stale += 1
-                    else:
-                        self.pending = s
-                        break
-                    continue
-                if fid not in self.device:
-                    continue
-                received += 1
-                if fid == self.imu:
-                    imu.append(([s["omega_x"], s["omega_y"], s["omega_z"]], bool(s["saturated"])))
-                elif fid in self.st:
-                    self.halves[self.st[fid]] = s
-                    a, b = self.halves.get("ST_QUAT_A"), self.halves.get("ST_QUAT_B")
-                    if a is not None and b is not None and int(a["sample_seq"]) == int(b["sample_seq"]):
-                        st = ([a["q_w"], a["q_x"], b["q_y"], b["q_z"]], bool(a["valid"]), int(a["blind_source"]),
-                              t - float(b["age_ms"]) / 1000.0)
-                        self.halves.clear()
-                elif fid in self.wheel:
-                    wheels[self.wheel[fid]] = (s["speed"], s["torque"], s["current"], s["temp"], int(s["fault"]), t)
-        if received < expected:
-            self.incomplete += 1
-        self.rx.check_timeouts(t)
-        self.last_tick = tick
-        n = len(imu)
-        samples = [(w, sat, t - (n - 1 - i) * self.period_s / n) for i, (w, sat) in enumerate(imu)]
-        return (tick, t, self.period_s, samples, st, wheels, expected, received)
 
 
 def _view(inputs: TickInputs | None):
@@ -207,7 +121,7 @@ def test_collect_tick_matches_the_frame_by_frame_reference(icd: Icd, seed: int) 
     ticks = _stream(icd, seed, 80, n_wheels)
     bus = _BurstBus()
     driver = FswBusDriver(bus, icd, n_wheels)
-    ref = _ReferenceDriver(icd, n_wheels)
+    ref = ReferenceDriver(icd, n_wheels)
     k = 0
     while k < len(ticks):
         frames = list(ticks[k])
@@ -250,19 +164,6 @@ def test_collect_tick_grows_its_gyro_rows(icd: Icd) -> None:
     assert inputs.complete and len(inputs.imu_samples) == 150
     np.testing.assert_allclose(inputs.imu_omega_BN_B[:, 0], omegas, atol=1e-5)
     assert [s.omega_BN_B[0] for s in inputs.imu_samples] == inputs.imu_omega_BN_B[:, 0].tolist()
-
-
-def _reference_commands(icd: Icd, torques, tick: int, done: bool) -> list[bytes]:
-    tx = E2ESender(icd)
-    out = []
-    for i, tau in enumerate(torques, 1):
-        lo, hi = icd.signal_range(f"RW{i}_CMD", "torque_cmd")
-        tau = float(tau)
-        tau = 0.0 if not math.isfinite(tau) else min(max(tau, lo), hi)
-        out.append(bytes(tx.frame(f"RW{i}_CMD", {"torque_cmd": tau, "tick_lsb": tick & 0xFFFF}).data))
-    if done:
-        out.append(bytes(tx.frame("CYCLE_DONE", {"tick": tick & 0xFFFFFFFF}).data))
-    return out
 
 
 @pytest.mark.parametrize("seed", range(4))

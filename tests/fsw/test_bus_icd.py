@@ -190,11 +190,25 @@ def test_encoded_frames_are_plain_classic_data_frames(icd: Icd) -> None:
 
 
 def test_the_wheel_count_limit_is_the_icds() -> None:
-    """MAX_WHEELS (fsw.config, used by the mission schema and the bus driver) is the number of wheels the
-    ICD has frames for: RWn_CMD and RWn_STATUS for n = 1..MAX_WHEELS, and no more."""
-    from fsw.config import MAX_WHEELS
+    """MAX_WHEELS (comms.dictionary: the mission schema, the bus driver, the kernels' wheel slots, the telemetry)
+    is the number of wheels the ICD has frames for: RWn_CMD and RWn_STATUS for n = 1..MAX_WHEELS, and no more."""
+    from comms.dictionary import MAX_WHEELS
 
     icd = Icd()
     for kind in ("CMD", "STATUS"):
         wheels = sorted(int(name[2:].split("_")[0]) for name in icd.messages if name.startswith("RW") and name.endswith(kind))
         assert wheels == list(range(1, MAX_WHEELS + 1)), (kind, wheels)
+
+
+def test_the_wheel_fault_bits_are_the_dbcs() -> None:
+    """comms.bus.icd's RWn_STATUS.fault bits are the ones the DBC's comment on the signal names, for every wheel."""
+    from comms.bus.icd import WHEEL_FAULT_CMD_TIMEOUT, WHEEL_FAULT_DRIVE, WHEEL_FAULT_OVERSPEED
+
+    icd = Icd()
+    names = [n for n in icd.messages if n.startswith("RW") and n.endswith("_STATUS")]
+    assert names
+    for name in names:
+        comment = icd.spec(name).db_message.get_signal_by_name("fault").comment
+        assert f"{WHEEL_FAULT_OVERSPEED} overspeed" in comment, comment
+        assert f"{WHEEL_FAULT_CMD_TIMEOUT} command timeout" in comment, comment
+        assert f"{WHEEL_FAULT_DRIVE} drive fault" in comment, comment

@@ -5,9 +5,10 @@ import can
 import numpy as np
 import pytest
 
-from comms.bus import E2EReceiver, E2ESender, Icd, e2e_crc
+from comms.bus import E2EReceiver, E2ESender, Icd
 from comms.bus.burst import FrameBurst
 from comms.bus.transport import open_bus, recv_burst, send_burst
+from reference.bus import ReferenceReceiver, encode_frame
 
 
 @pytest.fixture(scope="module")
@@ -76,72 +77,10 @@ def _damaged_frames(icd: Icd, rng: np.random.Generator, sender: E2ESender) -> li
     return msgs
 
 
-class _Reference:
-    """The receiver's rules written out plainly in Python (comms.bus.e2e's docstrings), frame by frame, with
-    cantools decoding: what the compiled classification must reproduce."""
-
-    def __init__(self, icd: Icd, ignore: frozenset[int]) -> None:
-        self.icd, self.ignore = icd, ignore
-        self.last: dict[str, int | None] = {n: None for n in icd.messages}
-        self.last_ok = {n: 0.0 for n in icd.messages}
-        self.timed_out = {n: False for n in icd.messages}
-        self.counts: dict[tuple[str | None, str], int] = {}
-
-    def _count(self, name: str | None, cls: str) -> str:
-        self.counts[name, cls] = self.counts.get((name, cls), 0) + 1
-        return cls
-
-    def classify(self, msg: can.Message, t: float) -> tuple | None:
-        fid = msg.arbitration_id
-        if fid in self.ignore and not msg.is_extended_id:
-            self._count(None, "own_echo")
-            return None
-        spec = None if msg.is_extended_id else self.icd.by_id.get(fid)
-        if spec is None:
-            return (None, self._count(None, "unknown_id"), None, None)
-        data = bytes(msg.data)
-        if len(data) != spec.dlc:
-            return (spec.name, self._count(spec.name, "bad_length"), None, None)
-        if e2e_crc(spec.data_id, data[1:]) != data[0]:
-            return (spec.name, self._count(spec.name, "crc_error"), None, None)
-        values = spec.db_message.decode(data, decode_choices=False)
-        if any(not lo <= values[k] <= hi for k, (lo, hi) in spec.accept_bounds.items()):
-            return (spec.name, self._count(spec.name, "out_of_range"), None, None)
-        counter, last = values["E2E_Counter"], self.last[spec.name]
-        if last is None or self.timed_out[spec.name]:
-            self.last[spec.name], cls = counter, "ok"
-        else:
-            delta = (counter - last) % 16
-            if delta == 0:
-                cls = "repeated"
-            elif delta >= 13:
-                cls = "wrong_sequence"
-            else:
-                self.last[spec.name] = counter
-                cls = "ok" if delta == 1 else "ok_some_lost" if delta <= spec.max_delta_counter else "wrong_sequence"
-        self._count(spec.name, cls)
-        if cls in ("ok", "ok_some_lost"):
-            self.last_ok[spec.name], self.timed_out[spec.name] = t, False
-            return (spec.name, cls, counter, values)
-        return (spec.name, cls, counter, None)
-
-    def check_timeouts(self, t: float) -> list[str]:
-        stale = []
-        for name in self.icd.messages:
-            if self.icd.spec(name).frame_id in self.ignore:
-                continue
-            if t - self.last_ok[name] > self.icd.spec(name).timeout_s + 1e-9:
-                if not self.timed_out[name]:
-                    self.timed_out[name] = True
-                    self._count(name, "timeout")
-                stale.append(name)
-        return stale
-
-
 def test_burst_classification_follows_the_rules_frame_by_frame(icd: Icd) -> None:
     rng = np.random.default_rng(2)
     sender, own = E2ESender(icd), icd.ids_sent_by("FSW")
-    burst_rx, one_rx, ref = E2EReceiver(icd, ignore_ids=own), E2EReceiver(icd, ignore_ids=own), _Reference(icd, own)
+    burst_rx, one_rx, ref = E2EReceiver(icd, ignore_ids=own), E2EReceiver(icd, ignore_ids=own), ReferenceReceiver(icd, own)
     for tick in range(1500):
         t = 0.05 * tick
         if tick % 7 == 0:
@@ -196,24 +135,38 @@ def test_light_virtual_bus_carries_bursts_and_plain_readers_see_the_same_frames(
             bus.shutdown()
 
 
-def test_encode_burst_matches_encode_rows_on_the_packed_table(icd: Icd) -> None:
-    """kernels.encode_burst (E2ESender's: counters/sent as one array, the table packed) gives encode_rows'
-    bytes, counters and stopping row, also where a row is refused."""
+def test_encode_burst_matches_cantools_frame_by_frame(icd: Icd) -> None:
+    """kernels.encode_burst (E2ESender's: counters/sent as one array, the table packed) gives the bytes
+    cantools packs frame by frame (tests/reference), the counters and sent counts of the rows it encoded,
+    and stops at the first row cantools refuses (out of range or NaN)."""
     from comms.bus.kernels import encode_burst
 
     rng = np.random.default_rng(7)
     table, m = icd.table, len(icd.message_names)
     cs = np.zeros((2, m), dtype=np.int64)
-    counters, sent = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
+    counters, sent = [0] * m, [0] * m
+    refused = 0
     for trial in range(200):
-        names, _, values = _random_rows(icd, rng, 5)
+        names, dicts, values = _random_rows(icd, rng, 5)
         idx = np.array([icd.message_index[n] for n in names], dtype=np.int64)
         if trial % 5 == 0:  # a refused row: out of range or NaN
-            values[int(rng.integers(5)), 2 + int(rng.integers(max(1, table.nsig[idx].min() - 2)))] = \
-                [np.nan, 1e12, -1e12][trial % 3]
-        a, b = np.zeros((5, 8), dtype=np.uint8), np.zeros((5, 8), dtype=np.uint8)
-        got = encode_burst(cs, table.packed_i, table.sig_f, idx, values, a)
-        want = table.encode(idx, values, counters, sent, b)
-        assert got == want
-        np.testing.assert_array_equal(a, b)
-        np.testing.assert_array_equal(cs, np.stack([counters, sent]))
+            i = int(rng.integers(5))
+            spec = icd.spec(names[i])
+            if spec.signals:
+                sig = spec.signals[int(rng.integers(len(spec.signals)))]
+                dicts[i][sig] = values[i, icd.column(names[i], sig)] = [np.nan, 1e12, -1e12][trial % 3]
+        out = np.zeros((5, 8), dtype=np.uint8)
+        got = encode_burst(cs, table.packed_i, table.sig_f, idx, values, out)
+        want = []
+        for name, d in zip(names, dicts):
+            frame = encode_frame(icd, name, d, counters[icd.message_index[name]])
+            if frame is None:
+                break
+            want.append(frame)
+            counters[icd.message_index[name]] = (counters[icd.message_index[name]] + 1) & 15
+            sent[icd.message_index[name]] += 1
+        refused += got < 5
+        assert got == len(want)
+        assert [bytes(out[i, :len(w)]) for i, w in enumerate(want)] == want
+        assert cs.tolist() == [counters, sent]
+    assert refused >= 30

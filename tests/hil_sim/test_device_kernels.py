@@ -13,20 +13,12 @@ from hil_sim.devices import kernels as dk
 from hil_sim.devices.nodes import Devices, ImuNode, StarTrackerNode, WheelNode
 from hil_sim.world.params import WorldParams
 from hil_sim.world.world import World
+from reference.bus import reference_rows_due
 
 
 @pytest.fixture(scope="module")
 def icd() -> Icd:
     return Icd()
-
-
-def _reference_rows_due(pending: list, t_s: float) -> tuple[list, list, list]:
-    """The list-based ``Devices.rows_due`` of before the array queue (sorted by due time, stable)."""
-    cut = t_s + 1e-9
-    due = [p for p in pending if p.due_s <= cut]
-    rest = [p for p in pending if p.due_s > cut]
-    due.sort(key=lambda p: p.due_s)
-    return [p.m for p in due], [p.values(t_s) for p in due], rest
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -92,7 +84,7 @@ def test_queue_and_take_due_match_the_nodes_frames(icd: Icd) -> None:
                 pending += ref_st.frames_for(q[j, 0], bool(valid[j, 0]), int(blind[j, 0]), float(times[j + 1]))
         t_tx = float(times[-1]) + (0.004 if k % 3 == 0 else 0.0)
         idx, rows = devices.rows_due(t_tx)
-        ref_idx, ref_rows, pending = _reference_rows_due(pending, t_tx)
+        ref_idx, ref_rows, pending = reference_rows_due(pending, t_tx)
         assert idx == ref_idx
         np.testing.assert_array_equal(np.array(rows).reshape(len(idx), -1), np.array(ref_rows).reshape(len(idx), -1))
         assert devices.pending_count == len(pending)
