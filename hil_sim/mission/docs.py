@@ -16,7 +16,7 @@ from keepout_config import config_path
 
 from hil_sim.mission.model import SUFFIX_UNITS, mission_json_schema
 
-DOCS_PATH = Path(__file__).resolve().parent.parent / "docs" / "missions.md"  # in a checkout (docs/ is not installed)
+DOCS_PATH = Path(__file__).resolve().parents[2] / "docs" / "missions.md"  # in a checkout (docs/ is not installed)
 EXAMPLE_PATH = config_path("missions", "smallsat-example.yaml")
 
 EXAMPLE_TEXT = """## Worked example: a small satellite
