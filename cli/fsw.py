@@ -81,12 +81,15 @@ def add_arguments(p: argparse.ArgumentParser, first_sync_default: float | None =
 
 
 def _bitrate(text: str) -> int:
+    from comms.bus.transport import CAN_BITRATE_RANGE_BPS, is_can_bitrate
+
     try:
         value = int(text)
     except ValueError:
         value = 0
-    if not 10000 <= value <= 1000000:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a CAN bit rate; allowed: 10000..1000000 [bit/s]")
+    if not is_can_bitrate(value):
+        lo, hi = CAN_BITRATE_RANGE_BPS
+        raise argparse.ArgumentTypeError(f"{text!r} is not a CAN bit rate; allowed: {lo}..{hi} [bit/s]")
     return value
 
 

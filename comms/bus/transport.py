@@ -41,6 +41,18 @@ from can.interfaces.virtual import VirtualBus, channels_lock
 from comms.bus.burst import FrameBurst
 from comms.bus.kernels import MAX_DLC
 
+# The classic CAN bit rates [bit/s] a hardware interface may be opened at (``keepout fsw --bitrate`` checks
+# against it; the mission's bus_bitrate_bps and the flight run's bitrate_bps bound theirs the same, a test
+# keeps them equal).
+CAN_BITRATE_RANGE_BPS = (10_000, 1_000_000)
+
+
+def is_can_bitrate(value: object) -> bool:
+    """Whether ``value`` is an integer (a bool is not) in CAN_BITRATE_RANGE_BPS."""
+    lo, hi = CAN_BITRATE_RANGE_BPS
+    return isinstance(value, int) and not isinstance(value, bool) and lo <= value <= hi
+
+
 VCAN_CREATE_COMMANDS = (
     "sudo modprobe vcan",
     "sudo ip link add dev {iface} type vcan",

@@ -453,3 +453,27 @@ def test_socketcan_doorbell_wakes_only_for_watched_ids_and_loses_nothing() -> No
     finally:
         sim.shutdown()
         fsw.shutdown()
+
+
+def test_one_can_bitrate_range_for_every_check() -> None:
+    """comms.bus.transport.CAN_BITRATE_RANGE_BPS: is_can_bitrate's bounds, keepout fsw --bitrate's, and the
+    bounds the mission schema and the flight run's configuration give their bit rate."""
+    import argparse
+
+    from annotated_types import Ge, Le
+
+    from cli.fsw import _bitrate
+    from comms.bus.transport import CAN_BITRATE_RANGE_BPS, is_can_bitrate
+    from fsw.config import BusConfig
+    from hil_sim.mission.model import Mission
+
+    lo, hi = CAN_BITRATE_RANGE_BPS
+    assert is_can_bitrate(lo) and is_can_bitrate(hi) and is_can_bitrate(500_000)
+    assert not any(is_can_bitrate(v) for v in (lo - 1, hi + 1, True, 500_000.0, "500000", None))
+    assert _bitrate(str(lo)) == lo and _bitrate(str(hi)) == hi
+    for text in (str(lo - 1), str(hi + 1), "fast"):
+        with pytest.raises(argparse.ArgumentTypeError, match=f"allowed: {lo}..{hi}"):
+            _bitrate(text)
+    for field in (Mission.model_fields["bus_bitrate_bps"], BusConfig.model_fields["bitrate_bps"]):
+        bounds = {type(m): m for m in field.metadata}
+        assert (bounds[Ge].ge, bounds[Le].le) == CAN_BITRATE_RANGE_BPS
