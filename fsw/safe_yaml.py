@@ -1,7 +1,8 @@
 """Reading a YAML config file so that no file can hang or exhaust the reader.
 
-Shared by the flight software (``keepout fsw MISSION`` reads its mission file itself) and by
-`hil_sim.mission.loader` (``config validate``, ``sil run``, campaigns), which adds the positions of every key.
+Shared by the flight software (``python -m fsw`` reads its own configuration file with it) and by
+`hil_sim.mission.loader`, the one mission reader (``config validate``, ``sil run``, ``keepout fsw MISSION``,
+campaigns), which adds the positions of every key.
 A file is refused when it is not a regular file (a FIFO would block the open forever), when it is larger
 than MAX_FILE_BYTES or has more than MAX_LINES lines (both before parsing), holds more than
 MAX_COMPOSED_NODES values, is nested deeper than MAX_DEPTH or uses more than MAX_ALIASES aliases (these three
