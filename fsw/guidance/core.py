@@ -122,6 +122,7 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self.safe_phase = "RATE_DAMPING"
         self._damped_s = 0.0
         self._safe_sun: np.ndarray | None = None  # the Sun direction the Sun-safe aim was chosen for
+        self._safe_q = self.q_target  # the Sun-safe attitude SAFE aims at in a mission with attitude zones
         self._held_target_N = self.target_N  # the POINTING target while SAFE aims elsewhere
         # assumption-check cache (refreshed by the housekeeping task and on changes)
         self.eps_max_checked = float("inf")

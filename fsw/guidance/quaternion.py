@@ -62,8 +62,13 @@ class QuaternionGuidance:
 
     def set_target_quaternion(self, q_NB: np.ndarray) -> None:
         self.q_target = _unit(np.asarray(q_NB, dtype=float))
-        self._q_lift = None
         self._drop_s3_path()
+        if self.mode != "SAFE":
+            self._q_lift = None
+        elif self.s3_law_zones:
+            # SAFE keeps its lift (the zones' sheet must not jump) and chooses its Sun-safe aim again,
+            # the new target having dropped the path SAFE was following
+            self._safe_sun = None
         self._checks_dirty = True
 
     def _drop_s3_path(self) -> None:
@@ -98,13 +103,24 @@ class QuaternionGuidance:
         return moved
 
 
+    def _lift(self, q: np.ndarray) -> np.ndarray:
+        """``q`` on the sheet the law sees (see 'Double cover'): the target's hemisphere on entry, then
+        continuous; kept for the next cycle."""
+        ref = self.q_target if self._q_lift is None else self._q_lift
+        x = q if float(q @ ref) >= 0.0 else -q
+        self._q_lift = x
+        return x
+
+    def _attitude_margins(self, out: GuidanceOutput, x: np.ndarray) -> None:
+        """The attitude zones' margins [deg] of the lifted ``x`` into ``out`` (telemetry, FDIR)."""
+        out.margins_deg = [signed_margin_deg(z, x) for z in self.s3_phys]
+        out.margin_min_deg = min(out.margins_deg)
+        out.zone_count = len(self.s3_phys)
+        out.zone_bodies = ["ATTITUDE"] * len(self.s3_phys)
+
     def _quaternion(self, t_s: float, q: np.ndarray) -> GuidanceOutput:
         xd = self.q_target
-        if self._q_lift is None:
-            x = q if float(q @ xd) >= 0.0 else -q
-        else:
-            x = q if float(q @ self._q_lift) >= 0.0 else -q
-        self._q_lift = x
+        x = self._lift(q)
         out = GuidanceOutput(np.zeros(3), "QUATERNION", q_target_NB=xd.copy())
         if self.s3_law_zones:
             if self._s3_plan_due:
@@ -125,10 +141,7 @@ class QuaternionGuidance:
             u = self.k1 * np.asarray(u_law, dtype=float)
             out.eps, out.eps_max = self._s3_eps, self._s3_eps_max
             out.active_zone = -1 if zone is None else int(zone)
-            margins = [signed_margin_deg(z, x) for z in self.s3_phys]
-            out.margins_deg, out.margin_min_deg = margins, min(margins)
-            out.zone_count = len(self.s3_phys)
-            out.zone_bodies = ["ATTITUDE"] * len(self.s3_phys)
+            self._attitude_margins(out, x)
         else:
             u = self.k1 * xd
         out.assumptions_ok = self.assumptions_ok

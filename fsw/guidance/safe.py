@@ -21,7 +21,8 @@ import numpy as np
 
 from fsw.guidance.common import GuidanceOutput, _angle_deg, _norm, _saturate
 from fsw.guidance.zone_merging import ZoneGeometry
-from gnc.attitude import pointing_rate_command_nb, quat_to_dcm_nb
+from gnc.attitude import pointing_rate_command_nb, quat_from_axis_angle, quat_multiply, quat_to_dcm_nb
+from gnc.zones import _fibonacci_directions, default_tangent_basis
 
 
 def _acquisition_rate_B(cfg, boresight_B: np.ndarray) -> np.ndarray:
@@ -40,6 +41,23 @@ def _acquisition_rate_B(cfg, boresight_B: np.ndarray) -> np.ndarray:
     return math.radians(cfg.estimator.acquisition_rate_deg_s) * axis / _norm(axis)
 
 
+def _nearest_clear_attitude(center: np.ndarray, zones: list, d_free: float, near: np.ndarray) -> np.ndarray:
+    """The attitude nearest ``center`` whose separation from every zone exceeds ``d_free``: shells of 1 deg
+    around it on S^3, on the first with a clear point the one nearest ``near``; ``center`` if none is."""
+    basis = default_tangent_basis(center)
+    dirs = _fibonacci_directions(SHELL_DIRECTIONS, 3) @ basis.T
+    for r in np.radians(np.arange(1.0, 180.0, 1.0)):
+        shell = math.cos(r) * center + math.sin(r) * dirs
+        free = np.min([z.separation_batch(shell) for z in zones], axis=0) > d_free
+        if free.any():
+            cand = shell[free]
+            return cand[int(np.argmax(cand @ near))]
+    return center
+
+
+SHELL_DIRECTIONS = 64
+
+
 class SafeGuidance:
     """Mixin of `fsw.guidance.Guidance`: SAFE mode."""
 
@@ -56,6 +74,8 @@ class SafeGuidance:
             out.margins_deg, out.margin_min_deg = self._sky_margins(out.boresight_N)
             out.zone_count = len(self.slots)
             out.zone_bodies = self._slot_body_codes()
+        elif self.s3_law_zones:
+            self._attitude_margins(out, self._lift(q))
         if self.safe_phase == "RATE_DAMPING":
             self._damped_s = self._damped_s + dt_s if rate < math.radians(sc.damping_exit_rate_deg_s) else 0.0
             if self._damped_s >= 1.0:
@@ -70,6 +90,8 @@ class SafeGuidance:
             self._set_safe_phase("SUN_ACQUISITION")
         if self.slots:
             out = self._sun_safe_keepout(t_s, q, omega, sun, out.boresight_N)
+        elif self.s3_law_zones:
+            out = self._sun_safe_attitude_keepout(t_s, q, sun)
         else:
             u = sc.sun_gain_1_s * sun
             omega_cmd = np.asarray(pointing_rate_command_nb(q, self.sun_axis_B, np.ascontiguousarray(u)))
@@ -124,6 +146,52 @@ class SafeGuidance:
             return cand[int(np.argmax(cand @ y_N))]
         aim, _ = ZoneGeometry.retreat_target(ring[0], zones, eps, standoff, near=y_N, force=True)
         return aim
+
+    def _sun_safe_attitude_keepout(self, t_s: float, q: np.ndarray, sun_N: np.ndarray) -> GuidanceOutput:
+        """Sun acquisition through QUATERNION: the paper's law on S^3 with the attitude zones, the plan and
+        the governor, aimed at a Sun-safe attitude, at SAFE's rate; the QUATERNION target is kept."""
+        kept = self.q_target, self.max_rate_rad_s
+        if self._safe_sun is None or _angle_deg(sun_N, self._safe_sun) > self.SAFE_AIM_REFRESH_DEG:
+            self._safe_sun = sun_N
+            self._safe_q = self._sun_safe_attitude(sun_N, self._lift(q))
+            self.q_target = self._safe_q
+            self._drop_s3_path()
+        self.q_target = self._safe_q
+        self.max_rate_rad_s = min(self.max_rate_rad_s, math.radians(self.cfg.safe.max_rate_deg_s))
+        try:
+            out = self._quaternion(t_s, q)
+        finally:
+            self.q_target, self.max_rate_rad_s = kept
+        out.mode = "SAFE"
+        out.sun_N, out.moon_N = sun_N, self._dirs["moon"]
+        out.target_N = sun_N
+        return out
+
+    SAFE_ROLL_STEP_DEG = 5.0  # spacing of the Sun-safe attitudes searched about the Sun line
+
+    def _sun_safe_attitude(self, sun_N: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Attitude q_NB (on the sheet of the lifted ``x``) with ``sun_axis_B`` on the Sun, the rotation about
+        the Sun line chosen nearest ``x`` among those clear of every attitude zone by the retreat standoff;
+        when none is, the clear attitude nearest the least blocked of them (`_nearest_clear_attitude`)."""
+        s_N = quat_to_dcm_nb(x) @ self.sun_axis_B
+        axis = np.cross(s_N, sun_N)
+        if _norm(axis) < 1e-9:  # on the Sun (any axis) or opposite it (any perpendicular axis)
+            axis = np.cross(s_N, np.eye(3)[int(np.argmin(np.abs(s_N)))])
+        angle = math.acos(max(-1.0, min(1.0, float(s_N @ sun_N))))
+        q0 = quat_multiply(quat_from_axis_angle(axis / _norm(axis), angle), x)  # shortest turn: nearest x
+        about_sun = quat_multiply(np.concatenate(([0.0], sun_N)), q0)
+        half = np.radians(np.arange(0.0, 360.0, self.SAFE_ROLL_STEP_DEG)) / 2.0
+        ring = np.cos(half)[:, None] * q0 + np.sin(half)[:, None] * about_sun
+        ring *= np.where(ring @ x < 0.0, -1.0, 1.0)[:, None]  # same attitude, on x's sheet
+        # the standoff alone: the law's eps is chosen for the aim it is built on (`law_eps`), so an aim clear of
+        # the zones is outside its eps-layer whatever the standoff
+        d_free = 1.0 - math.cos(math.radians(self.cfg.law.retreat_standoff_deg))
+        seps = np.min([z.separation_batch(ring) for z in self.s3_law_zones], axis=0)
+        free = seps > d_free
+        if free.any():
+            cand = ring[free]
+            return cand[int(np.argmax(cand @ x))]
+        return _nearest_clear_attitude(ring[int(np.argmax(seps))], self.s3_law_zones, d_free, x)
 
     def _set_safe_phase(self, phase: str) -> None:
         self.safe_phase = phase
