@@ -9,6 +9,7 @@ The ground encodes with it and the flight software's dispatcher (``fsw.telecomma
 """
 from __future__ import annotations
 
+import math
 import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -204,3 +205,28 @@ def decode_command(dictionary: TelemetryDictionary, data: bytes) -> tuple[Comman
     except ArgError as exc:
         raise CommandValidationError(f"{definition.name}: {exc}", "ARG_OUT_OF_RANGE") from None
     return definition, args, header.seq_count
+
+
+# ------------------------------------------------------------------ SET_TARGET on the Earth
+GROUND_HEIGHT_UNIT_M = 10000.0
+"""SET_TARGET GROUND carries the height above the WGS-84 ellipsoid in c3 in units of 10 km, so that every
+component stays within the command's +-1 range (-500 m .. 9 km: -0.05 .. 0.9)."""
+
+
+def ground_target_args(latitude_deg: float, longitude_deg: float, altitude_m: float = 0.0) -> dict[str, Any]:
+    """SET_TARGET's arguments for a WGS-84 ground point: kind GROUND, c0..c2 its geodetic vertical (the
+    unit normal to the ellipsoid) in the Earth-fixed frame, c3 its height / GROUND_HEIGHT_UNIT_M."""
+    lat, lon = math.radians(latitude_deg), math.radians(longitude_deg)
+    return {"kind": "GROUND", "c0": math.cos(lat) * math.cos(lon), "c1": math.cos(lat) * math.sin(lon),
+            "c2": math.sin(lat), "c3": altitude_m / GROUND_HEIGHT_UNIT_M}
+
+
+def ground_target_of(c0: float, c1: float, c2: float, c3: float) -> tuple[float, float, float]:
+    """(latitude [deg], longitude [deg], height [m]) of SET_TARGET GROUND's arguments (`ground_target_args`);
+    raises ``CommandValidationError`` (TARGET_NOT_UNIT) when c0..c2 is not a unit vector."""
+    n = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    if not math.isfinite(n) or abs(n - 1.0) > 1e-3:
+        raise CommandValidationError(f"SET_TARGET: GROUND vertical must be a unit vector (norm {n:.6f})",
+                                     "TARGET_NOT_UNIT")
+    lat = math.degrees(math.asin(max(-1.0, min(1.0, c2 / n))))
+    return lat, math.degrees(math.atan2(c1, c0)), c3 * GROUND_HEIGHT_UNIT_M

@@ -16,13 +16,13 @@ import math
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, Union
 
 import numpy as np
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from comms.dictionary import MAX_WHEELS
-from fsw.config import FswConfig
+from fsw.config import FswConfig, GroundTargetConfig
 from comms.dictionary import FDIR_MONITORS
 from gnc.ephemeris import EARTH_RADIUS_KM
 from hil_sim.devices.faults import DOOR_MESSAGES, WHEEL_MESSAGE
@@ -294,7 +294,8 @@ class SetModeCommand(_Timed):
 
 
 class SetTargetCommand(_Timed):
-    """A new target: a pointing direction (POINTING) or an attitude (QUATERNION)."""
+    """A new target: a pointing direction (POINTING), fixed in N or on the rotating Earth (nadir, a ground
+    point, followed every cycle), or an attitude (QUATERNION)."""
 
     command: Literal["SET_TARGET"]
     target_N: bounded_vec3(1e6) | None = Field(None, description="boresight target direction in N (POINTING), "
@@ -302,7 +303,17 @@ class SetTargetCommand(_Timed):
     ra_dec_deg: RaDec | None = Field(
         None, description="target as [right ascension, declination] [deg] (POINTING): RA in [0, 360], "
         "Dec in [-90, 90]")
+    nadir: Literal[True] | None = Field(None, description="true: the boresight to nadir (POINTING), the Earth's "
+                                        "centre seen from the onboard orbit, followed every cycle. Checked, but "
+                                        "not flown yet: the SET_TARGET telecommand does not carry it, so a run "
+                                        "refuses it (the initial target can be nadir)")
+    ground: GroundTargetConfig | None = Field(None, description="a point on the rotating Earth (POINTING), "
+                                              "followed every cycle: WGS-84 latitude_deg, longitude_deg, "
+                                              "altitude_m, and the min_elevation_deg the mission check wants it "
+                                              "seen at during its dwell. Checked, but not flown yet, as nadir")
     q_target_NB: UnitQuat | None = Field(None, description="target attitude (QUATERNION)")
+
+    TARGET_KEYS: ClassVar[tuple[str, ...]] = ("target_N", "ra_dec_deg", "nadir", "ground", "q_target_NB")
 
     def target_direction_N(self) -> np.ndarray | None:
         if self.target_N is not None:
@@ -507,10 +518,10 @@ class Mission(_Model):
             out.append((("timeline", i, "t_s"), f"t_s = {entry.t_s} s is after the end of the run "
                         f"(duration_s = {self.duration_s} s)"))
         if isinstance(entry, SetTargetCommand):
-            given = [k for k in ("target_N", "ra_dec_deg", "q_target_NB") if getattr(entry, k) is not None]
+            given = [k for k in entry.TARGET_KEYS if getattr(entry, k) is not None]
             if len(given) != 1:
-                out.append((("timeline", i), "SET_TARGET needs exactly one of target_N, ra_dec_deg, "
-                            f"q_target_NB (got {', '.join(given) or 'none'})"))
+                out.append((("timeline", i), "SET_TARGET needs exactly one of target_N, ra_dec_deg, nadir, "
+                            f"ground, q_target_NB (got {', '.join(given) or 'none'})"))
         if isinstance(entry, SetGainsCommand) and all(
                 getattr(entry, k) is None for k in ("k1", "kappa", "eps", "rate_limit_deg_s")):
             out.append((("timeline", i), "SET_GAINS sets nothing: give at least one of k1, kappa, eps, "

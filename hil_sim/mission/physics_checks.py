@@ -3,7 +3,9 @@
 A schema-valid mission can still be impossible or outside the paper's guarantees. These checks run on
 the whole run, because the Sun, Moon and Earth zones move:
 
-* a target (initial or telecommanded) inside a keep-out zone (physical or as inflated for the law);
+* a target (initial or telecommanded) inside a keep-out zone (physical or as inflated for the law); a
+  target on the rotating Earth (nadir, a ground point) is checked where it is at each sampled time;
+* a ground target below its horizon (or under its ``min_elevation_deg``) for its whole dwell;
 * the initial attitude already inside a zone;
 * a zone whose kernel g_i is not strictly inside it (the law pushes away from g_i);
 * the paper's Assumption 1 (zones pairwise at least 2 delta apart) and the admissible eps interval
@@ -27,13 +29,14 @@ seconds of numerical search and gets the very report the search would give.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from fsw.guidance.edge_rule import TARGET_IN_LAYER, clearance_needed_deg, target_layer
 from fsw.guidance.pointing import ZONE_REBUILD_TOL_DEG
+from gnc.ephemeris import EARTH_RADIUS_KM
 from gnc.wheels import fibonacci_sphere, wheel_authority
 
 if TYPE_CHECKING:
@@ -139,11 +142,42 @@ class Segment:
     target: np.ndarray  # unit 3-vector (POINTING) or quaternion (QUATERNION)
     source: str  # where the target comes from, for messages
     loc: Loc = ()  # key path of the target in the mission file
+    earth: tuple | None = None  # a target on the Earth: ("nadir", None) or ("ground", GroundTargetConfig)
+
+
+def _earth_target(earth: tuple | None, ephemeris) -> np.ndarray | None:
+    """The Earth-fixed point [km] of a ground target (None for nadir)."""
+    return None if earth[0] == "nadir" else ephemeris.ground_point_E_km(earth[1])
+
+
+def target_at(seg: Segment, ephemeris, t_s: float) -> np.ndarray:
+    """The segment's target direction at ``t_s``: fixed, or where its target on the Earth is then, seen
+    from the onboard orbit (as the flight software follows it)."""
+    if seg.earth is None:
+        return seg.target
+    return ephemeris.target_direction_N(t_s, _earth_target(seg.earth, ephemeris))
+
+
+def earth_target_truth_N(seg: Segment, epoch_utc, t_s: np.ndarray, r_sc_N_km: np.ndarray) -> np.ndarray:
+    """(n, 3) unit vectors from the spacecraft's true positions ``r_sc_N_km`` [km] at mission times ``t_s``
+    to the segment's target on the Earth (the judge's truth, not the onboard orbit)."""
+    from gnc.earth import direction_to_point_N, earth_fixed_to_inertial, geodetic_to_earth_fixed_km, nadir_N
+    from gnc.ephemeris import julian_date
+
+    jd0 = julian_date(epoch_utc)
+    if seg.earth[0] == "nadir":
+        return np.array([nadir_N(r) for r in r_sc_N_km]).reshape(-1, 3)
+    g = seg.earth[1]
+    point = geodetic_to_earth_fixed_km(g.latitude_deg, g.longitude_deg, g.altitude_m)
+    return np.array([direction_to_point_N(r, earth_fixed_to_inertial(jd0 + t / 86400.0) @ point)
+                     for t, r in zip(t_s, r_sc_N_km)]).reshape(-1, 3)
 
 
 def schedule(mission: "Mission") -> list[Segment]:
     """Piecewise-constant (mode, target) over the run from the initial config and the timeline."""
     from hil_sim.mission.model import SetModeCommand, SetTargetCommand
+
+    from fsw.guidance import SkyEphemeris
 
     fsw = mission.flight_software
     mode = fsw.initial_mode
@@ -152,13 +186,22 @@ def schedule(mission: "Mission") -> list[Segment]:
     src_dir, src_q = "flight_software.pointing.target_N", "flight_software.quaternion.target_q_NB"
     loc_dir: Loc = ("flight_software", "pointing", "target_N")
     loc_q: Loc = ("flight_software", "quaternion", "target_q_NB")
+    earth: tuple | None = None
+    if fsw.pointing.target_kind != "inertial":
+        earth = (fsw.pointing.target_kind, fsw.pointing.target_ground)
+        key = "target_ground" if earth[0] == "ground" else "target_kind"
+        src_dir, loc_dir = f"flight_software.pointing.{key}", ("flight_software", "pointing", key)
+    ephemeris = SkyEphemeris(fsw)
     segments: list[Segment] = []
     t = 0.0
 
     def close(until: float) -> None:
         if until > t or not segments:
-            tgt, src, loc = (target_q, src_q, loc_q) if mode == "QUATERNION" else (target_dir, src_dir, loc_dir)
-            segments.append(Segment(t, until, mode, tgt.copy(), src, loc))
+            if mode == "QUATERNION":
+                segments.append(Segment(t, until, mode, target_q.copy(), src_q, loc_q))
+                return
+            seg = Segment(t, until, mode, target_dir.copy(), src_dir, loc_dir, earth)
+            segments.append(replace(seg, target=target_at(seg, ephemeris, t)) if earth else seg)
 
     for i, entry in enumerate(mission.timeline):
         if isinstance(entry, SetModeCommand):
@@ -169,8 +212,11 @@ def schedule(mission: "Mission") -> list[Segment]:
             t = entry.t_s
             direction = entry.target_direction_N()
             if direction is not None:
-                target_dir, src_dir = direction, f"timeline[{i}]"
+                target_dir, src_dir, earth = direction, f"timeline[{i}]", None
                 loc_dir = ("timeline", i, "target_N" if entry.target_N is not None else "ra_dec_deg")
+            elif entry.nadir or entry.ground is not None:
+                earth = ("nadir", None) if entry.nadir else ("ground", entry.ground)
+                src_dir, loc_dir = f"timeline[{i}]", ("timeline", i, earth[0])
             elif entry.q_target_NB is not None:
                 target_q, src_q = np.asarray(entry.q_target_NB, dtype=float), f"timeline[{i}]"
                 loc_q = ("timeline", i, "q_target_NB")
@@ -336,6 +382,9 @@ def check_mission(mission: "Mission", step_s: float | None = None, *, quick: boo
             _check_quaternion(mission, segments, report, quick)
         except ZoneBuildError as exc:
             report.add("error", "kernel", str(exc), exc.loc)
+    if "POINTING" in modes:
+        _check_ground_visibility(mission, segments, report)
+    _check_earth_commands(mission, report)
     _check_wheels(mission, report)
     if not report.findings:
         report.add("info", "summary", "no problems found")
@@ -557,6 +606,9 @@ def _sweep_times(segment: Segment, sky: SkyZones, step_s: float | None) -> np.nd
     span = segment.t_end_s - segment.t_start_s
     if step_s is None:
         rate = sky.max_rate_deg_s(segment.t_start_s)
+        if segment.earth is not None:  # the target moves too, at most as fast as a point straight below
+            r_km = sky.ephemeris.radius_km
+            rate = max(rate, math.degrees(sky.ephemeris.n_rad_s * r_km / (r_km - EARTH_RADIUS_KM)))
         step_s = ZONE_MOTION_PER_SAMPLE_DEG / rate if rate > 0 else span
     count = int(min(MAX_SWEEP_SAMPLES, max(1, math.ceil(span / max(step_s, 1e-3))))) + 1
     return np.linspace(segment.t_start_s, segment.t_end_s, count)
@@ -605,7 +657,8 @@ def _check_pointing(mission, segments, report, step_s, quick: bool = False) -> N
         report.samples += len(times)
         held: dict[str, list[float]] = {}  # zone -> [from, to] while it covers a target already commanded
         for i, t in enumerate(times):
-            eps_max = _check_pointing_at(mission, sky, seg, i, float(t), held, report, seen, quick)
+            now = replace(seg, target=target_at(seg, sky.ephemeris, float(t))) if seg.earth else seg
+            eps_max = _check_pointing_at(mission, sky, now, i, float(t), held, report, seen, quick)
             if math.isfinite(eps_max):
                 worst_eps_max = min(worst_eps_max, eps_max)
         _report_held_targets(seg, held, report, seen)
@@ -715,6 +768,85 @@ def _report_held_targets(seg, held: dict[str, list[float]], report, seen: set) -
                    f"{seg.t_start_s:.0f} s: the flight software then holds outside it (ASSUMPTION_VIOLATED "
                    f"\"{TARGET_IN_LAYER.format(zone=name)}\") and resumes the slew when the zone has moved "
                    "off; the target is not reached in that window", seg.loc, t_s=t_from)
+
+
+VISIBILITY_STEP_S = 5.0  # a pass over a ground target from low orbit lasts minutes; its elevation peak, seconds
+VISIBILITY_LOOKAHEAD_S = 86400.0  # how far past a dwell to look for the target's next pass
+
+
+def _check_ground_visibility(mission, segments: list[Segment], report) -> None:
+    """A ground target must rise above its ``min_elevation_deg`` (0: its horizon) at some time of its dwell
+    in POINTING, seen from the onboard orbit; otherwise the instrument would stare into the Earth's limb or
+    beyond. An error at the target's key, with the time it next rises that high."""
+    from fsw.guidance import SkyEphemeris
+
+    ephemeris = SkyEphemeris(mission.flight_software)
+    dwells: dict[str, list[Segment]] = {}
+    for seg in segments:
+        if seg.mode == "POINTING" and seg.earth is not None and seg.earth[0] == "ground":
+            dwells.setdefault(seg.source, []).append(seg)
+    for source, segs in dwells.items():
+        ground = segs[0].earth[1]
+        times = np.concatenate([_dwell_times(s.t_start_s, s.t_end_s) for s in segs])
+        elevations = _elevations_deg(ephemeris, ground, times)
+        best = int(np.argmax(elevations))
+        if elevations[best] >= ground.min_elevation_deg:
+            seen = times[elevations >= ground.min_elevation_deg]
+            report.add("info", "visibility", f"the ground target from {source} is above {ground.min_elevation_deg:g} "
+                       f"deg elevation from t = {seen[0]:.0f} s to {seen[-1]:.0f} s of its dwell (highest "
+                       f"{elevations[best]:.1f} deg at t = {times[best]:.0f} s)", segs[0].loc,
+                       max_elevation_deg=float(elevations[best]), t_s=float(times[best]))
+            continue
+        report.add("error", "visibility", _below_horizon(ephemeris, ground, source, segs, elevations[best]),
+                   segs[0].loc, max_elevation_deg=float(elevations[best]), t_s=segs[0].t_start_s)
+
+
+def _check_earth_commands(mission, report) -> None:
+    """The flight software's SET_TARGET telecommand takes a direction or an attitude only, so far: a target
+    on the Earth in the timeline cannot be sent (the initial target can be one, `pointing.target_kind`)."""
+    from hil_sim.mission.model import SetTargetCommand
+
+    for i, entry in enumerate(mission.timeline):
+        if isinstance(entry, SetTargetCommand) and (entry.nadir or entry.ground is not None):
+            key = "nadir" if entry.nadir else "ground"
+            report.add("error", "command", f"timeline[{i}] commands a target on the Earth ({key}), which the flight "
+                       "software's SET_TARGET telecommand does not take yet (DIRECTION or QUATERNION only): make it "
+                       "the initial target (flight_software.pointing.target_kind) or command a direction",
+                       ("timeline", i, key), t_s=entry.t_s)
+
+
+def _dwell_times(t0: float, t1: float) -> np.ndarray:
+    return np.linspace(t0, t1, max(2, int(math.ceil((t1 - t0) / VISIBILITY_STEP_S)) + 1))
+
+
+def _elevations_deg(ephemeris, ground, times: np.ndarray) -> np.ndarray:
+    """The spacecraft's elevation above the ground target's horizon [deg] at ``times``, onboard orbit."""
+    from gnc.earth import earth_fixed_to_inertial, elevation_deg
+
+    out = np.empty(len(times))
+    for k, t in enumerate(times):
+        r_E = earth_fixed_to_inertial(ephemeris.jd0_utc + t / 86400.0).T @ ephemeris.position_N_km(float(t))
+        out[k] = elevation_deg(ground.latitude_deg, ground.longitude_deg, ground.altitude_m, r_E)
+    return out
+
+
+def _below_horizon(ephemeris, ground, source: str, segs: list[Segment], best_deg: float) -> str:
+    """The message of a ground target never seen high enough in its dwell, with its next pass as the fix."""
+    t0, t1 = segs[0].t_start_s, segs[-1].t_end_s
+    where = f"({ground.latitude_deg:g}, {ground.longitude_deg:g})"
+    text = (f"the ground target from {source} at latitude, longitude {where} deg stays below "
+            f"{ground.min_elevation_deg:g} deg elevation for its whole dwell from t = {t0:.0f} s to {t1:.0f} s "
+            f"(highest {best_deg:.1f} deg): the spacecraft is below its horizon, the boresight would look "
+            "through the Earth; ")
+    later = _dwell_times(t1, t1 + VISIBILITY_LOOKAHEAD_S)
+    above = np.nonzero(_elevations_deg(ephemeris, ground, later) >= ground.min_elevation_deg)[0]
+    if len(above):
+        rise = float(later[above[0]])
+        return text + (f"it next rises above {ground.min_elevation_deg:g} deg at t = {rise:.0f} s: command it at "
+                       f"t_s >= {rise:.0f} (and keep it until its pass is over), choose a target under the "
+                       "orbit's ground track, or lower min_elevation_deg")
+    return text + ("it does not rise that high in the day after it either: choose a target under the orbit's "
+                   "ground track or lower min_elevation_deg")
 
 
 def _cap_gap_deg(zone_a, zone_b) -> float:

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from gnc.ephemeris import EARTH_RADIUS_KM
-from hil_sim.mission.physics_checks import d_s_to_deg, schedule
+from hil_sim.mission.physics_checks import d_s_to_deg, earth_target_truth_N, schedule
 
 ZONE_REBUILD_DEG = 0.001  # rebuild a moving star zone when its centre moved more than this (margin error bound)
 
@@ -152,7 +152,7 @@ def _zone_centers(z, truth: dict[str, np.ndarray], t: np.ndarray) -> tuple[np.nd
     extra = 0.0
     if z.body == "earth" and z.add_body_angular_radius and len(t):
         r = float(np.linalg.norm(truth["r_sc_N_km"][0]))
-        extra = math.degrees(math.asin(min(1.0, EARTH_RADIUS_KM / r)))
+        extra = math.degrees(math.asin(min(1.0, (EARTH_RADIUS_KM + (z.atmosphere_height_km or 0.0)) / r)))
     return centers, extra
 
 
@@ -345,7 +345,10 @@ def error_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> tupl
     segments = schedule(mission)
     for s in segments:
         sel = (t >= s.t_start_s - 1e-6) & (t < s.t_end_s - 1e-6) if s is not segments[-1] else (t >= s.t_start_s - 1e-6)
-        if s.mode == "POINTING":
+        if s.mode == "POINTING" and s.earth is not None:  # where the target on the Earth truly is
+            target = earth_target_truth_N(s, mission.epoch_utc, t[sel], truth["r_sc_N_km"][sel])
+            err[sel] = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", y_N[sel], target), -1.0, 1.0)))
+        elif s.mode == "POINTING":
             err[sel] = np.degrees(np.arccos(np.clip(y_N[sel] @ s.target, -1.0, 1.0)))
         elif s.mode == "QUATERNION":
             err[sel] = [math.degrees(attitude_error_angle(q, s.target)) for q in truth["q_NB"][sel]]
