@@ -148,3 +148,36 @@ def test_judge_measures_the_error_to_where_the_ground_target_truly_is():
     assert np.max(err) < 0.01
     frozen = np.degrees(np.arccos(np.clip(y @ y[0], -1.0, 1.0)))
     assert frozen[-1] > 5.0
+
+
+@pytest.mark.parametrize("height_km", [None, 100.0])
+def test_earth_zone_with_its_atmosphere_in_the_judge_and_the_check(height_km):
+    """The judge (truth) and the mission check (onboard orbit) both widen an Earth zone to the top of the
+    atmosphere: asin((6378.137 + h) / r) more than its own half-angle."""
+    import math
+
+    from fsw.config import SkyZoneConfig
+    from hil_sim.mission.physics_checks import SkyZones
+    from hil_sim.sil.judge import _zone_centers
+
+    zone = {"name": "earth", "body": "earth", "geometry": {"shape": "cone", "half_angle_deg": 5.0}}
+    if height_km is not None:
+        zone["atmosphere_height_km"] = height_km
+    want = math.degrees(math.asin((6378.137 + (height_km or 0.0)) / 6978.0))
+    truth = {"earth_N": np.array([[1.0, 0.0, 0.0]]), "r_sc_N_km": np.array([[-6978.0, 0.0, 0.0]])}
+    _, extra = _zone_centers(SkyZoneConfig(**zone), truth, np.array([0.0]))
+    assert extra == pytest.approx(want, abs=1e-12)
+    data = _data()
+    data["flight_software"]["pointing"]["zones"] = [zone]
+    data["flight_software"]["pointing"]["target_kind"] = "inertial"
+    data["flight_software"]["pointing"].pop("target_ground")
+    sky = SkyZones(Mission.model_validate(data))
+    centre = sky.centers(0.0)[0]
+    side = np.cross(centre, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+
+    def off(angle_deg: float) -> np.ndarray:
+        return np.cos(np.radians(angle_deg)) * centre + np.sin(np.radians(angle_deg)) * side
+
+    phys = sky.physical(0.0)[0]
+    assert phys.contains(off(want + 5.0 - 0.01)) and not phys.contains(off(want + 5.0 + 0.01))
