@@ -9,6 +9,8 @@
 * ``wheels.png``: wheel speeds (with limits) and applied wheel torques;
 * ``estimation.png``: flight-software attitude estimate against truth (error angle) with the
   estimator's own 3-sigma from its covariance trace.
+
+Every plot against time shades the stretches the spacecraft spent in the Earth's shadow (darker in umbra).
 """
 from __future__ import annotations
 
@@ -16,6 +18,8 @@ import math
 from pathlib import Path
 
 import numpy as np
+
+from hil_sim.world.eclipse import eclipse_spans
 
 
 def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path]:
@@ -37,21 +41,33 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
     sky_zones = [z for z in series["zones"] if z.kind == "sky"]
     att_zones = [z for z in series["zones"] if z.kind == "attitude"]
 
+    eclipses = eclipse_spans(t, truth["r_sc_N_km"], truth["sun_N"]) if "r_sc_N_km" in truth else []
     if sky_zones or mission.flight_software.pointing.zones or any(s.mode == "POINTING" for s in series["segments"]):
         written.append(_sky_plot(plt, run_dir, mission, series, t, sky_zones))
     if att_zones or any(s.mode == "QUATERNION" for s in series["segments"]):
-        written.append(_attitude_plot(plt, run_dir, mission, series, t))
-    written.append(_margins_plot(plt, run_dir, mission, series, t))
-    written.append(_wheels_plot(plt, run_dir, mission, truth, t))
+        written.append(_attitude_plot(plt, run_dir, mission, series, t, eclipses))
+    written.append(_margins_plot(plt, run_dir, mission, series, t, eclipses))
+    written.append(_wheels_plot(plt, run_dir, mission, truth, t, eclipses))
     est = _estimation_error(run_dir, truth)
     if est is not None:
-        written.append(_estimation_plot(plt, run_dir, mission, *est))
+        written.append(_estimation_plot(plt, run_dir, mission, *est, eclipses))
     return written
 
 
-def _attitude_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray) -> Path:
+def shade_eclipses(axes, eclipses: list[tuple[float, float, float]]) -> int:
+    """Grey bands over each stretch in the Earth's shadow (umbra darker than penumbra only); the first
+    axes' legend names them once. Returns the number of bands drawn per axes."""
+    for k, ax in enumerate(axes):
+        for i, (t0, t1, least_lit) in enumerate(eclipses):
+            ax.axvspan(t0, t1, color="0.35" if least_lit == 0.0 else "0.7", alpha=0.25, lw=0,
+                       label="Earth's shadow" if k == 0 and i == 0 else None)
+    return len(eclipses)
+
+
+def _attitude_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, eclipses: list) -> Path:
     """The lifted attitude quaternion against time with the QUATERNION targets, and the attitude error."""
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    shade_eclipses((ax1, ax2), eclipses)
     q = series["q_lift"]
     for i, name in enumerate(("eta", "q1", "q2", "q3")):
         ax1.plot(t, q[:, i], label=name)
@@ -70,9 +86,10 @@ def _attitude_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray) -> 
     return _save(fig, run_dir / "attitude.png")
 
 
-def _margins_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray) -> Path:
+def _margins_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, eclipses: list) -> Path:
     """Signed margin to every physical zone with the requirement and the law's inflation, and the error."""
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    shade_eclipses((ax1, ax2), eclipses)
     for z in series["zones"]:
         ax1.plot(t, z.margin_deg, label=f"{z.name} ({z.kind})")
     ax1.axhline(mission.requirements.min_keepout_margin_deg, color="r", lw=1.5, label="requirement")
@@ -94,9 +111,10 @@ def _margins_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray) -> P
     return _save(fig, run_dir / "margins.png")
 
 
-def _wheels_plot(plt, run_dir: Path, mission, truth: dict, t: np.ndarray) -> Path:
+def _wheels_plot(plt, run_dir: Path, mission, truth: dict, t: np.ndarray, eclipses: list) -> Path:
     """Wheel speeds (with the requirement's limit) and the torques the wheel nodes applied."""
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    shade_eclipses((ax1, ax2), eclipses)
     for i, w in enumerate(mission.spacecraft.wheels):
         ax1.plot(t, truth["wheel_speed_rad_s"][:, i], label=f"RW{i + 1}")
         ax2.plot(t, truth["wheel_torque_Nm"][:, i] * 1000.0, label=f"RW{i + 1}")
@@ -113,9 +131,11 @@ def _wheels_plot(plt, run_dir: Path, mission, truth: dict, t: np.ndarray) -> Pat
     return _save(fig, run_dir / "wheels.png")
 
 
-def _estimation_plot(plt, run_dir: Path, mission, te: np.ndarray, err_deg: np.ndarray, sigma3_deg: np.ndarray) -> Path:
+def _estimation_plot(plt, run_dir: Path, mission, te: np.ndarray, err_deg: np.ndarray, sigma3_deg: np.ndarray,
+                     eclipses: list) -> Path:
     """The flight software's attitude estimation error against truth, with its own 3-sigma."""
     fig, ax = plt.subplots(figsize=(10, 4))
+    shade_eclipses((ax,), eclipses)
     ax.semilogy(te, np.maximum(err_deg, 1e-5), label="|estimate - truth| (attitude angle)")
     ax.semilogy(te, np.maximum(sigma3_deg, 1e-5), ls="--", label="3-sigma from cov_trace")
     ax.set_xlabel("time [s]")

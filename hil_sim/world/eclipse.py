@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-from gnc.ephemeris import EARTH_RADIUS_KM
+from gnc.ephemeris import AU_KM, EARTH_RADIUS_KM
 
 SUN_RADIUS_KM = 695_700.0  # IAU 2015 nominal solar radius
 
@@ -59,3 +59,20 @@ def sunlit_fraction_at(rx, ry, rz, sx, sy, sz, earth_radius_km, sun_radius_km):
     overlap = (a * a * math.acos(min(max(x / a, -1.0), 1.0)) + b * b * math.acos(min(max((c - x) / b, -1.0), 1.0))
                - c * y)
     return 1.0 - overlap / (math.pi * a * a)
+
+
+def eclipse_spans(t_s: np.ndarray, r_sc_N_km: np.ndarray, sun_N: np.ndarray) -> list[tuple[float, float, float]]:
+    """Each stretch of a recorded run in the Earth's shadow: (start [s], end [s], least sunlit fraction).
+
+    From what a run records (spacecraft position, unit Sun direction): the Sun is placed 1 AU along that
+    direction, which moves the shadow's edge by far less than a recording interval. A run without an
+    orbit (positions at the Earth's centre) has no eclipses."""
+    t = np.asarray(t_s, dtype=float)
+    r = np.asarray(r_sc_N_km, dtype=float)
+    if len(t) == 0 or r.ndim != 2 or float(np.min(np.linalg.norm(r, axis=1))) <= EARTH_RADIUS_KM:
+        return []
+    lit = sunlit_fraction(r, r + AU_KM * np.asarray(sun_N, dtype=float))
+    shaded = np.concatenate([[False], lit < 1.0, [False]])
+    starts = np.flatnonzero(~shaded[:-1] & shaded[1:])
+    ends = np.flatnonzero(shaded[:-1] & ~shaded[1:]) - 1
+    return [(float(t[a]), float(t[b]), float(np.min(lit[a:b + 1]))) for a, b in zip(starts, ends)]

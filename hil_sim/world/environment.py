@@ -39,14 +39,13 @@ from typing import Any, Sequence
 import numpy as np
 from numba import njit
 
-from gnc.ephemeris import EARTH_RADIUS_KM
+from gnc.ephemeris import AU_KM, EARTH_RADIUS_KM
 from hil_sim.world.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
 from hil_sim.world.geomagnetic import IGRF_REFERENCE_RADIUS_KM
 from hil_sim.world.orbit import orbit_position_row_N_km, orbit_velocity_row_N_km_s
 from hil_sim.world.params import SpacecraftParams
 
 SPEED_OF_LIGHT_M_S = 299_792_458.0
-AU_KM = 149_597_870.7
 EARTH_ROTATION_RAD_S = 7.292115e-5  # sidereal (IERS), as Basilisk's zeroWindModel takes it
 
 # Rows of B after hil_sim.world.dynamics.B_FIELDS (24): switches (bits), the Sun held over the step, the solar flux,
