@@ -18,8 +18,9 @@ measured in tests/hil_sim/test_geomagnetic.py.
 """
 from __future__ import annotations
 
-import math
 from datetime import datetime, timezone
+
+from gnc import earth as gnc_earth
 
 IGRF_REFERENCE_RADIUS_KM = 6371.2
 
@@ -42,8 +43,5 @@ def dipole_coefficients_T(epoch_utc: datetime) -> tuple[float, float, float]:
 
 
 def earth_rotation_angle_rad(epoch_utc: datetime) -> float:
-    """The Earth rotation angle at ``epoch_utc`` (IERS 2010, eq. 5.15), UT1 taken as UTC (|UT1 - UTC| < 0.9 s:
-    < 7e-5 rad)."""
-    jd = epoch_utc.astimezone(timezone.utc).timestamp() / 86400.0 + 2440587.5
-    turns = 0.7790572732640 + 1.00273781191135448 * (jd - 2451545.0)
-    return 2.0 * math.pi * (turns - math.floor(turns))
+    """The Earth rotation angle at ``epoch_utc`` (gnc.earth's IERS 2010 formula, UT1 taken as UTC)."""
+    return gnc_earth.earth_rotation_angle_rad(epoch_utc.astimezone(timezone.utc).timestamp() / 86400.0 + 2440587.5)
