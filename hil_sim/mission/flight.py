@@ -13,20 +13,20 @@ from typing import Any
 
 import yaml
 
-from fsw.config import BusConfig, FswConfig, FswRunConfig
+from fsw.config import BusConfig, FswRunConfig
 from hil_sim.mission.model import Mission, load_mission
 
 
-def flight_config(mission: Mission, *, bus_spec: str | None = None,
-                  flight_software: dict[str, Any] | None = None) -> FswRunConfig:
-    """The flight software's resolved configuration for ``mission``: its bus (``bus_spec``: the concrete
-    spec the run opened, default the mission's) and its ``flight_software`` section (``flight_software``:
-    that section as the caller adjusted it, e.g. the SIL's ports and clock, default the mission's)."""
-    bus = BusConfig(spec=bus_spec if bus_spec is not None else mission.bus, bitrate_bps=mission.bus_bitrate_bps,
-                    authentication=mission.bus_authentication)
-    known = (mission.flight_software if flight_software is None
-             else FswConfig.model_validate(flight_software))
-    return FswRunConfig(bus=bus, flight_software=known)
+def bus_config(mission: Mission, bus_spec: str | None = None) -> BusConfig:
+    """The bus the flight software opens: ``bus_spec`` (the concrete spec a run opened) or the mission's,
+    at the mission's bit rate and authentication."""
+    return BusConfig(spec=bus_spec if bus_spec is not None else mission.bus, bitrate_bps=mission.bus_bitrate_bps,
+                     authentication=mission.bus_authentication)
+
+
+def flight_config(mission: Mission, bus_spec: str | None = None) -> FswRunConfig:
+    """The flight software's resolved configuration for ``mission`` (its bus: `bus_config`)."""
+    return FswRunConfig(bus=bus_config(mission, bus_spec), flight_software=mission.flight_software)
 
 
 def load_flight_config(path: str | Path) -> FswRunConfig:
@@ -35,7 +35,12 @@ def load_flight_config(path: str | Path) -> FswRunConfig:
     return flight_config(load_mission(path))
 
 
-def write_flight_config(path: Path, config: FswRunConfig, header: str = "") -> None:
-    """Write ``config`` as the YAML file `fsw.config.load_fsw_run_config` reads (``header``: comment lines)."""
-    text = yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False, default_flow_style=None, width=110)
-    path.write_text(header + text, encoding="utf-8")
+def write_flight_config(path: Path, bus: BusConfig, flight_software: dict[str, Any], header: str = "") -> None:
+    """Write the YAML file `fsw.config.load_fsw_run_config` reads (``header``: comment lines).
+
+    ``flight_software`` is a validated section as plain data (``model_dump(mode="json")``, adjusted as the
+    caller needs), written as it is: validating it again here would normalise its unit vectors a second
+    time, and the flight software must read exactly the numbers of the config used."""
+    data = {"bus": bus.model_dump(mode="json"), "flight_software": flight_software}
+    path.write_text(header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=110),
+                    encoding="utf-8")

@@ -196,11 +196,11 @@ def write_config(run_dir: Path, data: dict, source: Path) -> str:
 
 def _write_fsw_config(run_dir: Path, mission, data: dict) -> None:
     """The flight software's file (FSW_CONFIG_FILE) from the config used: its bus and its section, resolved."""
-    from hil_sim.mission.flight import flight_config, write_flight_config
+    from hil_sim.mission.flight import bus_config, write_flight_config
 
-    config = flight_config(mission, bus_spec=data["bus"], flight_software=data["flight_software"])
-    write_flight_config(run_dir / FSW_CONFIG_FILE, config, header=f"# the flight software's configuration, "
-                        f"resolved from {CONFIG_FILE} (the run's bus, ports and clock applied)\n")
+    write_flight_config(run_dir / FSW_CONFIG_FILE, bus_config(mission, data["bus"]), data["flight_software"],
+                        header=f"# the flight software's configuration, resolved from {CONFIG_FILE} (the run's "
+                        "bus, ports and clock applied)\n")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -152,7 +152,7 @@ def test_the_flight_software_alone_is_given_the_same_knowledge(tmp_path):
     """`keepout fsw MISSION` resolves the mission with the same reader and hands the flight software its
     configuration: the same facts, and a file of it (as the SIL writes) reads back to them."""
     from fsw.config import load_fsw_run_config
-    from hil_sim.mission.flight import flight_config, load_flight_config, write_flight_config
+    from hil_sim.mission.flight import bus_config, load_flight_config, write_flight_config
 
     resolved = load_flight_config(EXAMPLE)
     mission = load_mission(EXAMPLE)
@@ -162,7 +162,8 @@ def test_the_flight_software_alone_is_given_the_same_knowledge(tmp_path):
     assert np.allclose(resolved.flight_software.pointing.target_N, ra_dec_to_unit(*raw["initial_state"]["ra_dec_deg"]))
     assert (resolved.bus.spec, resolved.bus.bitrate_bps, resolved.bus.authentication) == (
         raw.get("bus", "auto"), raw.get("bus_bitrate_bps", 500000), raw.get("bus_authentication", False))
-    write_flight_config(tmp_path / "fsw.yaml", flight_config(mission, bus_spec="virtual:k"))
+    write_flight_config(tmp_path / "fsw.yaml", bus_config(mission, "virtual:k"),
+                        mission.flight_software.model_dump(mode="json"))
     written = yaml.safe_load((tmp_path / "fsw.yaml").read_text())
     assert set(written) == {"bus", "flight_software"} and written["bus"]["spec"] == "virtual:k"
     again = load_fsw_run_config(tmp_path / "fsw.yaml")

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSIONS = ROOT / "config" / "missions"
@@ -110,6 +111,12 @@ def test_demo_run_folder_is_consistent_with_independent_readers(runs):
     # the config hash is the sha256 of the config file as written
     digest = hashlib.sha256((run_dir / "mission.yaml").read_bytes()).hexdigest()
     assert (run_dir / "mission.yaml.sha256").read_text().split()[0] == digest == summary["config_sha256"]
+    # the flight software read its own file: the config used's flight_software section, number for number,
+    # and the run's bus, with none of the truth's keys
+    used, flown = (yaml.safe_load((run_dir / name).read_text()) for name in ("mission.yaml", "fsw.yaml"))
+    assert set(flown) == {"bus", "flight_software"} and flown["flight_software"] == used["flight_software"]
+    assert flown["bus"] == {"spec": used["bus"], "bitrate_bps": used["bus_bitrate_bps"],
+                            "authentication": used["bus_authentication"]}
     # the candump log decodes with cantools and our DBC: one SYNC per tick, ticks in order
     db = cantools.database.load_file(ROOT / "config" / "icd" / "keepout.dbc")
     parser = cantools.logreader.Parser(open(run_dir / "bus.candump.log"))
