@@ -54,6 +54,19 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
     return written
 
 
+def _two_time_axes(plt, eclipses: list):
+    """A figure of two time plots, one above the other, the Earth's shadow shaded on both."""
+    fig, axes = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    shade_eclipses(axes, eclipses)
+    return fig, axes
+
+
+def _save_gridded(fig, axes, path: Path) -> Path:
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
 def shade_eclipses(axes, eclipses: list[tuple[float, float, float]]) -> int:
     """Grey bands over each stretch in the Earth's shadow (umbra darker than penumbra only); the first
     axes' legend names them once. Returns the number of bands drawn per axes."""
@@ -66,8 +79,7 @@ def shade_eclipses(axes, eclipses: list[tuple[float, float, float]]) -> int:
 
 def _attitude_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, eclipses: list) -> Path:
     """The lifted attitude quaternion against time with the QUATERNION targets, and the attitude error."""
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
-    shade_eclipses((ax1, ax2), eclipses)
+    fig, (ax1, ax2) = _two_time_axes(plt, eclipses)
     q = series["q_lift"]
     for i, name in enumerate(("eta", "q1", "q2", "q3")):
         ax1.plot(t, q[:, i], label=name)
@@ -81,15 +93,12 @@ def _attitude_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, ecl
     ax2.semilogy(t, np.maximum(series["error_deg"], 1e-4))
     ax2.set_ylabel("attitude error [deg]")
     ax2.set_xlabel("time [s]")
-    for ax in (ax1, ax2):
-        ax.grid(alpha=0.3)
-    return _save(fig, run_dir / "attitude.png")
+    return _save_gridded(fig, (ax1, ax2), run_dir / "attitude.png")
 
 
 def _margins_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, eclipses: list) -> Path:
     """Signed margin to every physical zone with the requirement and the law's inflation, and the error."""
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
-    shade_eclipses((ax1, ax2), eclipses)
+    fig, (ax1, ax2) = _two_time_axes(plt, eclipses)
     for z in series["zones"]:
         ax1.plot(t, z.margin_deg, label=f"{z.name} ({z.kind})")
     ax1.axhline(mission.requirements.min_keepout_margin_deg, color="r", lw=1.5, label="requirement")
@@ -106,15 +115,12 @@ def _margins_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, ecli
     ax2.set_ylabel("truth error to target [deg]")
     ax2.set_xlabel("time [s]")
     ax2.legend(fontsize=8)
-    for ax in (ax1, ax2):
-        ax.grid(alpha=0.3)
-    return _save(fig, run_dir / "margins.png")
+    return _save_gridded(fig, (ax1, ax2), run_dir / "margins.png")
 
 
 def _wheels_plot(plt, run_dir: Path, mission, truth: dict, t: np.ndarray, eclipses: list) -> Path:
     """Wheel speeds (with the requirement's limit) and the torques the wheel nodes applied."""
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
-    shade_eclipses((ax1, ax2), eclipses)
+    fig, (ax1, ax2) = _two_time_axes(plt, eclipses)
     for i, w in enumerate(mission.spacecraft.wheels):
         ax1.plot(t, truth["wheel_speed_rad_s"][:, i], label=f"RW{i + 1}")
         ax2.plot(t, truth["wheel_torque_Nm"][:, i] * 1000.0, label=f"RW{i + 1}")
@@ -126,9 +132,7 @@ def _wheels_plot(plt, run_dir: Path, mission, truth: dict, t: np.ndarray, eclips
     ax1.set_title(f"{mission.name}: reaction wheels (truth speeds, torques applied by the wheel nodes)")
     ax2.set_ylabel("wheel torque [mN m]")
     ax2.set_xlabel("time [s]")
-    for ax in (ax1, ax2):
-        ax.grid(alpha=0.3)
-    return _save(fig, run_dir / "wheels.png")
+    return _save_gridded(fig, (ax1, ax2), run_dir / "wheels.png")
 
 
 def _estimation_plot(plt, run_dir: Path, mission, te: np.ndarray, err_deg: np.ndarray, sigma3_deg: np.ndarray,
