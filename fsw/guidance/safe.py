@@ -8,7 +8,12 @@ attitude, with the roll law turning the Sun axis onto the Sun. That direction li
 boresights for which ``sun_axis_B`` can face the Sun (half-angle = angle between the two body axes), the
 point of it nearest the boresight and clear of every zone by the retreat standoff; if the whole cone is
 blocked, the nearest clear direction (`ZoneGeometry.retreat_target`), and the Sun axis gets as near the
-Sun as that allows. Without zones, the Sun axis is turned straight to the Sun (S^2 map, no law).
+Sun as that allows. With forbidden-attitude zones instead (a QUATERNION mission), the Sun-safe attitude is
+reached by the QUATERNION machinery (the paper's law on S^3 with the zones, the attitude path planner, the
+governor) at SAFE's rate: the attitude that puts ``sun_axis_B`` on the Sun, turned about the Sun line to
+the one nearest the attitude that is clear of every zone by the retreat standoff; if every such attitude is
+blocked, the nearest clear attitude (`_nearest_clear_attitude`). Without zones, the Sun axis is turned
+straight to the Sun (S^2 map, no law).
 
 Without an attitude fix the guidance damps the rate, then turns about the instrument boresight so the
 star tracker sweeps out of its exclusion cones without moving the instrument.
