@@ -181,10 +181,15 @@ class E2EReceiver:
     def watched_timeouts(self) -> tuple[np.ndarray, np.ndarray]:
         """The watched messages with a timeout (message indices) and their limits [s], as check_timeouts
         judges them."""
-        watched = [(self.icd.message_index[name], self.icd.messages[name].timeout_s + 1e-9) for name in self.watch
-                   if self.icd.messages[name].timeout_s > 0]
-        return (np.array([m for m, _ in watched], dtype=np.int64),
-                np.array([lim for _, lim in watched], dtype=np.float64))
+        watched = self._timeout_limits()
+        return (np.array([m for _, m, _ in watched], dtype=np.int64),
+                np.array([lim for _, _, lim in watched], dtype=np.float64))
+
+    def _timeout_limits(self) -> list[tuple[str, int, float]]:
+        """(name, message index, limit [s]) of each watched message with a timeout: its E2ETimeoutMs, and a
+        nanosecond more against the round-off of times built from ticks."""
+        return [(name, self.icd.message_index[name], self.icd.messages[name].timeout_s + 1e-9) for name in self.watch
+                if self.icd.messages[name].timeout_s > 0]
 
     def slots(self, name: str) -> tuple[str, ...]:
         """The value-row slots of message ``name`` (E2E_CRC, E2E_Counter, its signals)."""
@@ -367,9 +372,8 @@ class E2EReceiver:
         stale = []
         watched = self._watched
         if watched is None:  # called every tick: the lookups are done once
-            watched = self._watched = [(name, self.icd.message_index[name], self.icd.messages[name].timeout_s + 1e-9,
-                                        self.counters[name]) for name in self.watch
-                                       if self.icd.messages[name].timeout_s > 0]
+            watched = self._watched = [(name, m, limit, self.counters[name])
+                                       for name, m, limit in self._timeout_limits()]
         last_ok = self._last_ok_t.tolist()
         for name, m, limit, counts in watched:
             if now_s - last_ok[m] > limit:

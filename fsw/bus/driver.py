@@ -276,6 +276,21 @@ _COLLECT_SIGNALS = ((K.C_TICK, ("SYNC", "tick")), (K.C_FOLLOWING, ("SYNC", "fram
                     (K.C_FAULT, ("RW1_STATUS", "fault")))
 
 
+class _TickCount:
+    """A count of the driver's kept in the compiled tick's integer state (``_st_i[slot]``), read and set as
+    an int attribute."""
+
+    def __init__(self, slot: int, doc: str) -> None:
+        self.slot = slot
+        self.__doc__ = doc
+
+    def __get__(self, driver: "FswBusDriver | None", owner: type) -> "int | _TickCount":
+        return self if driver is None else int(driver._st_i[self.slot])
+
+    def __set__(self, driver: "FswBusDriver", n: int) -> None:
+        driver._st_i[self.slot] = n
+
+
 class FswBusDriver:
     """The flight software's bus driver (see module docstring).
 
@@ -449,32 +464,10 @@ class FswBusDriver:
         return bool(self._st_i[K.S_SUPERVISED])
 
     # the driver's counts live in the compiled tick's state (kernels.S_*), which counts them as it goes
-    @property
-    def incomplete_ticks(self) -> int:
-        """Lockstep ticks closed with fewer than their announced frames."""
-        return int(self._st_i[K.S_INCOMPLETE])
-
-    @incomplete_ticks.setter
-    def incomplete_ticks(self, n: int) -> None:
-        self._st_i[K.S_INCOMPLETE] = n
-
-    @property
-    def stale_syncs(self) -> int:
-        """SYNC frames for a tick at or before the current (or last) one."""
-        return int(self._st_i[K.S_STALE])
-
-    @stale_syncs.setter
-    def stale_syncs(self, n: int) -> None:
-        self._st_i[K.S_STALE] = n
-
-    @property
-    def unexpected_frames(self) -> int:
-        """Delivered device frames outside every announced tick (lockstep)."""
-        return int(self._st_i[K.S_UNEXPECTED])
-
-    @unexpected_frames.setter
-    def unexpected_frames(self, n: int) -> None:
-        self._st_i[K.S_UNEXPECTED] = n
+    incomplete_ticks = _TickCount(K.S_INCOMPLETE, "Lockstep ticks closed with fewer than their announced frames.")
+    stale_syncs = _TickCount(K.S_STALE, "SYNC frames for a tick at or before the current (or last) one.")
+    unexpected_frames = _TickCount(K.S_UNEXPECTED,
+                                   "Delivered device frames outside every announced tick (lockstep).")
 
     # ------------------------------------------------------------------------------------ counters
     @property

@@ -25,7 +25,8 @@ from hil_sim.world import world as wd
 from hil_sim.world.dynamics import FAULT_NO_TORQUE, FAULT_SPEED_LIMIT, FAULT_STUCK, W_KT
 from hil_sim.world.world import _world_period_kernel, view1, view2, view3
 
-_EPS_S = 1e-9
+# A time within this of a due time counts as reached (the nodes' Python rules use the same)
+DUE_EPS_S = 1e-9
 # WHEEL_STATE columns: held torque command, time of the last command (NaN: none yet), commands applied,
 # tick_lsb of the last command (NaN: none yet)
 WS_CMD, WS_LAST_T, WS_APPLIED, WS_TICK = 0, 1, 2, 3
@@ -37,10 +38,10 @@ def due_flags_kernel(times_s, next_due, period, out, offset):
     nxt = next_due
     for j in range(times_s.shape[0]):
         t_s = times_s[j]
-        if t_s + _EPS_S < nxt:
+        if t_s + DUE_EPS_S < nxt:
             out[offset + j] = False
         else:
-            k = math.floor((t_s - nxt + _EPS_S) / period) + 1
+            k = math.floor((t_s - nxt + DUE_EPS_S) / period) + 1
             if k < 1:
                 k = 1
             nxt += period * k
@@ -61,7 +62,7 @@ def plan_period(times_s, imu_clock, st_clock, imu_due, st_due, wheel_state, time
         t = times_s[j]
         for i in range(wheel_state.shape[0]):
             last = wheel_state[i, WS_LAST_T]
-            if math.isnan(last) or t - last > timeout_s[i] + _EPS_S:
+            if math.isnan(last) or t - last > timeout_s[i] + DUE_EPS_S:
                 u_seq[j, 0, i] = 0.0
             else:
                 u_seq[j, 0, i] = wheel_state[i, WS_CMD]
@@ -161,7 +162,7 @@ def take_due(t_s, Q_DUE, Q_M, Q_ROWS, Q_TS, Q_N, age_col, OUT_IDX, OUT_ROWS, sta
     due times), written to OUT_IDX/OUT_ROWS from ``start`` with a transmission-time row's age_ms (slot
     ``age_col``) set for t_s; the rest stay queued in order. Returns how many were written."""
     n = Q_N[0]
-    cut = t_s + _EPS_S
+    cut = t_s + DUE_EPS_S
     width = Q_ROWS.shape[1]
     order = np.empty(n, np.int64)
     k = 0
@@ -222,7 +223,7 @@ def wheel_status_rows(t_s, X, U_APPLIED, W_KT, TEMP, FLAGS, wheel_state, timeout
         if flags & (FAULT_STUCK | FAULT_NO_TORQUE):
             fault |= WHEEL_FAULT_DRIVE
         last = wheel_state[i, WS_LAST_T]
-        if not math.isnan(last) and t_s - last > timeout_s[i] + _EPS_S:
+        if not math.isnan(last) and t_s - last > timeout_s[i] + DUE_EPS_S:
             fault |= WHEEL_FAULT_CMD_TIMEOUT
         # _clamp: lo if value < lo, hi if value > hi (a NaN passes through)
         if speed < ranges[0, 0]:

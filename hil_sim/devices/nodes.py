@@ -32,13 +32,13 @@ from comms.bus.icd import WHEEL_FAULT_OVERSPEED as FAULT_OVERSPEED
 from comms.bus.icd import E2ESender, Icd
 from comms.dictionary import MAX_WHEELS
 from hil_sim.devices import kernels as dk
+from hil_sim.devices.kernels import DUE_EPS_S as _EPS_S
 from hil_sim.devices.kernels import WS_APPLIED, WS_CMD, WS_LAST_T, WS_TICK
 from hil_sim.world.dynamics import FAULT_NO_TORQUE as _WORLD_NO_TORQUE
 from hil_sim.world.dynamics import FAULT_SPEED_LIMIT as _WORLD_SPEED_LIMIT
 from hil_sim.world.dynamics import FAULT_STUCK as _WORLD_STUCK
 from hil_sim.world.world import pack_arrays
 
-_EPS_S = 1e-9
 
 
 class WorldLike(Protocol):
@@ -219,17 +219,12 @@ class _SampledNode:
         return True
 
     def due_flags(self, times_s: Sequence[float]) -> list[bool]:
-        """``[self._sample_due(t) for t in times_s]`` (the same state changes), in one call per period."""
-        out = []
-        nxt, period = self.next_due_s, self.period_s
-        for t_s in times_s:
-            if t_s + _EPS_S < nxt:
-                out.append(False)
-            else:
-                nxt += period * max(1, math.floor((t_s - nxt + _EPS_S) / period) + 1)
-                out.append(True)
-        self.next_due_s = nxt
-        return out
+        """``[self._sample_due(t) for t in times_s]`` (the same state changes), in one compiled call per
+        period (``device_kernels.due_flags_kernel``, the rule of ``_sample_due``)."""
+        times = np.asarray(times_s, dtype=np.float64)
+        out = np.zeros(len(times), dtype=np.bool_)
+        self.clock[0] = dk.due_flags_kernel(times, self.clock[0], self.clock[1], out, 0)
+        return out.tolist()
 
 
 @dataclass
