@@ -4,10 +4,11 @@
 
 * ``run_cycle(inputs)``: one GNC cycle (telecommands, estimate, guide, control, wheel torques and
   CYCLE_DONE on the bus, FDIR, GNC telemetry); ``inputs`` is a lockstep `TickInputs` or a real-time
-  `LatestInputs`;
-* ``run_lockstep()`` / ``run_realtime()``: the executive's loops (see `fsw.executive`);
-* telecommand handlers for NOOP, RESET_COUNTERS, SET_MODE, SET_TARGET, SET_GAINS are registered on the
-  dispatcher.
+  `LatestInputs`, made a `fsw.records.SensorSnapshot` by `fsw.intake` before any stage reads it;
+* ``run_lockstep()`` / ``run_realtime()``: the executive's loops (see `fsw.executive`), on a thread prepared
+  by `fsw.runtime`;
+* the housekeeping rate group (`fsw.housekeeping`) and the telecommand handlers (`fsw.command_handlers`)
+  act on it through its public parts.
 
 The flight software learns about the world only through the bus driver and telecommands.
 """
@@ -15,36 +16,28 @@ from __future__ import annotations
 
 import math
 import time
-from itertools import repeat
 from typing import Any
 
 import numpy as np
 
-from comms.dictionary import MODES
 from fsw import runtime
 from fsw.assumption_check import MAX_RESTARTS, AssumptionChecker
+from fsw.command_handlers import CommandHandlers
 from fsw.control import RateController
 from fsw.door import DoorController
 from fsw.estimation import AttitudeEstimator
 from fsw.executive import Executive
 from fsw.fdir import STATUS_LOST, Fdir, WheelSpeedResidual
 from fsw.guidance import Guidance
+from fsw.housekeeping import Housekeeping
 from fsw.intake import SensorIntake, vector_norm
 from fsw.records import NAN3, AttitudeEstimate, ControlOutput, CycleRecord, GuidanceOutput, SensorSnapshot
 
-# A housekeeping period in which at least BUS_BURST_FRAMES frames fail their CRC or do not decode is a burst:
-# a bus fault (BUS_CORRUPT, one a minute at most, and the bus_corrupt_bursts counter), not a sensor's or a
-# wheel's (those monitors judge their own frames' absence, with their own persistence).
-BUS_BURST_FRAMES = 5
-BUS_EVENT_PERIOD_S = 60.0
 # TARGET_REACHED: the error below REACHED_ERROR_DEG and the estimated body rate below REACHED_RATE_DEG_S for
 # REACHED_DWELL_S in a row (a slew passing through its target at speed is not "reached")
 REACHED_ERROR_DEG = 0.05
 REACHED_RATE_DEG_S = 0.01
 REACHED_DWELL_S = 5.0
-# the E2E classes that housekeeping totals over the received messages
-_HK_CLASSES = ("ok", "ok_some_lost", "crc_error", "wrong_sequence", "repeated", "bad_length", "out_of_range", "timeout")
-_FDIR_HK_KEYS: dict[str, str] = {}  # FDIR monitor name -> its HK channel (fdir_<monitor>), filled as met
 _NAN6, _ZERO6 = [math.nan] * 6, [0.0] * 6  # fillers of the GNC packet's six zone and wheel slots
 _BLIND_SOURCES = ("NONE", "SUN", "MOON", "RATE")  # the star tracker's blind_source codes 0-3
 # RWn_STATUS fault bits (config/icd/keepout.dbc): 1 overspeed, 2 command timeout, 4 drive fault.
@@ -78,16 +71,6 @@ def _warm_up_snapshot(dt_s: float, gyro_B: np.ndarray, q_NS: np.ndarray | None) 
                           vector_norm(q_NS.tolist()) if fresh else 1.0, 0.0, NAN3, np.full(3, -1), 0, 0)
 
 
-def _budget_free_at(duration_s: float, max_cpu_fraction: float) -> float:
-    """Host time from which the next periodic assumption check may start, so the background check uses at
-    most ``max_cpu_fraction`` of a core. In real time a 0.5 s check every 10 s is 5 %; in lockstep, where
-    onboard time runs 20-50x faster than the host clock, the onboard period alone would keep the worker
-    busy all the time, stealing the CPU that the simulator and the flight software need."""
-    if not math.isfinite(duration_s) or duration_s <= 0.0:
-        return -math.inf
-    return time.monotonic() + duration_s * (1.0 / max_cpu_fraction - 1.0)
-
-
 class FlightSoftware:
     """``plugins``: `fsw.plugins.Plugin`s (at most one guidance, one estimator) flown under keepout's guard
     (`fsw.plugin_guard`); without them the cycle runs keepout's own code only. `fsw.assembly` builds it."""
@@ -107,33 +90,25 @@ class FlightSoftware:
         self.cycle = 0
         self.plugins = {p.kind: p for p in plugins}
         self.estimator = AttitudeEstimator(config.estimator, np.asarray(config.spacecraft.star_tracker_q_BS))
-        self.guidance = Guidance(config, events=self._event)
+        self.guidance = Guidance(config, events=self.event)
         if self.plugins:
             self._install_plugins()
         self.control = RateController(config)
-        self.fdir = Fdir(config, self.n_wheels, event=self._event)
+        self.fdir = Fdir(config, self.n_wheels, event=self.event)
         self.wheel_residual = WheelSpeedResidual(self.control.Js)
         # the protective aperture door (fsw.door), when the spacecraft has one
-        self.door = DoorController(config.door, self.period_s, driver, self._event) if config.door is not None else None
+        self.door = DoorController(config.door, self.period_s, driver, self.event) if config.door is not None else None
         self.executive = Executive(
             config.rates.gnc_rate_hz, config.rates.housekeeping_rate_hz, config.rates.slip_event_throttle_s,
             gnc_task=self.gnc_task, hk_task=self.housekeeping, on_slip=self._on_slip, clock=clock,
         )
         self.checker = AssumptionChecker(config.law.assumption_check, on_worker_lost=self._check_worker_lost)
-        self._last_check_t = -math.inf
-        self._check_budget_free_at = -math.inf  # host monotonic time from which a periodic check may start
         # the one place the cycle's inputs, whatever their shape, become a SensorSnapshot
         self.intake = SensorIntake(driver, self.n_wheels, self.period_s, config.estimator.star_tracker_max_age_s)
-        self._hk_src: dict | None = None  # the driver's counters that _hk_dicts lists
-        self._hk_src_len = 0
-        self._hk_dicts: list[dict] = []
         self._max_speed = np.ascontiguousarray(self.control.max_speed, dtype=float)  # fixed at start-up
         # configuration the cycle reads every tick, fixed at start-up (no telecommand changes it)
         self._gnc_tm_every = config.tmtc.gnc_packet_every_n_cycles
-        # bus-fault bursts (see _bus_fault_check): frames failing E2E or decoding seen so far, bursts counted,
-        # the frames of the bursts not yet reported and when BUS_CORRUPT was last raised
-        self._bus_failed_seen, self._bus_bursts, self._bus_burst_frames = 0, 0, 0
-        self._bus_event_t = -math.inf
+        self.bus_tx_errors = 0  # wheel commands and heartbeats the bus refused
         self._st_was_valid = True
         self._st_outage_start = 0.0
         self._target_reached = False
@@ -145,11 +120,11 @@ class FlightSoftware:
         self.inject_overrun_s = 0.0  # test hook: busy-wait this long in the next GNC cycle
         self.last: CycleRecord | None = None
         self.mode_reason = "INIT"
-        self._start_wall = time.monotonic()
+        self.hk = Housekeeping(self)
         if dispatcher is not None:
-            self._register_commands(dispatcher)
+            CommandHandlers(self).register(dispatcher)
         self._warm_up()
-        self._event("FSW_STARTED", gnc_rate_hz=config.rates.gnc_rate_hz)
+        self.event("FSW_STARTED", gnc_rate_hz=config.rates.gnc_rate_hz)
         if self.plugins:
             self._start_plugins()
 
@@ -160,16 +135,16 @@ class FlightSoftware:
         cfg = self.cfg
         if "estimator" in self.plugins:
             self.estimator = GuardedEstimator(cfg.estimator, np.asarray(cfg.spacecraft.star_tracker_q_BS),
-                                              self.plugins["estimator"], self._event)
+                                              self.plugins["estimator"], self.event)
         if "guidance" in self.plugins:
             self.guidance = GuardedGuidance(cfg, self.plugins["guidance"], lambda: self.set_mode("SAFE", "FDIR"),
-                                            events=self._event)
+                                            events=self.event)
 
     def _start_plugins(self) -> None:
         if "guidance" in self.plugins:
             self.guidance.arm()  # after the warm-up: the plug-in sees flight states only
         for kind, plugin in self.plugins.items():
-            self._event("PLUGIN_STARTED", kind=kind.upper(), name=plugin.name[:40])
+            self.event("PLUGIN_STARTED", kind=kind.upper(), name=plugin.name[:40])
 
     def _warm_up(self) -> None:
         """Load the compiled kernels, freeze the heap and start the check worker now, so the first cycle is
@@ -200,14 +175,15 @@ class FlightSoftware:
         self.checker.start()
 
     # ------------------------------------------------------------------------------------ events
-    def _event(self, name: str, /, **args) -> None:
+    def event(self, name: str, /, **args) -> None:
+        """Raise event ``name`` with ``args`` at onboard time."""
         try:
             self.telemetry.event(name, time_s=self.t_s, **args)
         except TypeError:
             self.telemetry.event(name, **args)
 
     def _on_slip(self, group: str, exec_ms: float, total: int, late_ms: float = 0.0) -> None:
-        self._event("CYCLE_SLIP", rate_group=group, exec_time_ms=exec_ms, count=total, late_ms=late_ms)
+        self.event("CYCLE_SLIP", rate_group=group, exec_time_ms=exec_ms, count=total, late_ms=late_ms)
 
     @property
     def mode(self) -> str:
@@ -217,81 +193,14 @@ class FlightSoftware:
         old = self.guidance.mode
         self.guidance.set_mode(mode)
         self.mode_reason = cause
-        self._target_reached = False
-        self._held_cycles = 0
+        self.restart_target_watch()
         if old != mode or mode == "SAFE":
-            self._event("MODE_CHANGED", from_mode=old, to_mode=mode, cause=cause)
+            self.event("MODE_CHANGED", from_mode=old, to_mode=mode, cause=cause)
 
-    # ---------------------------------------------------------------------------------- commands
-    def _register_commands(self, d) -> None:
-        d.register("NOOP", self._cmd_noop)
-        d.register("RESET_COUNTERS", self._cmd_reset_counters)
-        d.register("SET_MODE", self._cmd_set_mode)
-        d.register("SET_TARGET", self._cmd_set_target)
-        d.register("SET_GAINS", self._cmd_set_gains)
-
-    def _cmd_noop(self) -> None:
-        return None
-
-    def _cmd_reset_counters(self) -> None:
-        self.executive.reset_counters()
-        self.fdir.reset_counters()
-        if hasattr(self.telemetry, "reset_counters"):
-            self.telemetry.reset_counters()
-        if self.dispatcher is not None:
-            self.dispatcher.reset_counters()
-        self._event("COUNTERS_RESET")
-
-    def _cmd_set_mode(self, mode) -> None:
-        mode = str(mode)
-        if mode not in MODES:
-            from comms.telecommand import CommandValidationError
-
-            raise CommandValidationError(f"SET_MODE: unknown mode {mode!r}")
-        self.set_mode(mode, "TELECOMMAND")
-
-    def _cmd_set_target(self, kind, c0, c1, c2, c3=0.0) -> None:
-        from comms.telecommand import CommandValidationError
-
-        kind = str(kind)
-        if kind == "DIRECTION":
-            v = np.array([c0, c1, c2], dtype=float)
-        else:
-            v = np.array([c0, c1, c2, c3], dtype=float)
-        n = float(np.linalg.norm(v))
-        if not math.isfinite(n) or abs(n - 1.0) > 1e-3:
-            raise CommandValidationError(f"SET_TARGET: {kind} must be a unit vector (norm {n:.6f})",
-                                         "TARGET_NOT_UNIT")
-        v = v / n
-        hit = self.guidance.target_violation(kind, v)
-        if hit is not None:
-            zone, margin = hit
-            bodies = self._zone_bodies(kind)
-            self._event("TARGET_REJECTED", zone=zone, body=bodies[zone] if zone < len(bodies) else "INERTIAL", margin_deg=margin)
-            raise CommandValidationError(f"SET_TARGET: target inside keep-out zone {zone} (margin {margin:.3f} deg)",
-                                         "TARGET_IN_KEEP_OUT")
-        if kind == "DIRECTION":
-            self.guidance.set_target_direction(v)
-        else:
-            self.guidance.set_target_quaternion(v)
+    def restart_target_watch(self) -> None:
+        """A new mode or target: TARGET_REACHED is owed again, after a full dwell on it."""
         self._target_reached = False
         self._held_cycles = 0
-        c = list(v) + [0.0] * (4 - len(v))
-        self._event("TARGET_SET", kind=kind, c0=c[0], c1=c[1], c2=c[2], c3=c[3])
-
-    def _zone_bodies(self, kind: str) -> list[str]:
-        if kind == "DIRECTION":
-            return [{"sun": "SUN", "moon": "MOON", "earth": "EARTH", "inertial": "INERTIAL"}[s.body] for s in self.guidance.slots]
-        return ["ATTITUDE"] * len(self.guidance.s3_law_zones)
-
-    def _cmd_set_gains(self, k1, kappa, eps, rate_limit_deg_s) -> None:
-        from comms.telecommand import CommandValidationError
-
-        try:
-            self.guidance.set_gains(k1, kappa, "auto" if eps == 0 else eps, rate_limit_deg_s)
-        except ValueError as exc:  # GainsRefused says why in its code; anything else is inadmissible gains
-            raise CommandValidationError(f"SET_GAINS: {exc}", getattr(exc, "code", "GAINS_INADMISSIBLE")) from None
-        self._event("GAINS_SET", k1=k1, kappa=kappa, eps=eps, rate_limit_deg_s=rate_limit_deg_s)
 
     # ------------------------------------------------------------------------------------ cycles
     def run_cycle(self, inputs: Any) -> CycleRecord:
@@ -324,8 +233,8 @@ class FlightSoftware:
         try:
             self.driver.send_wheel_torques(s.tick, ctrl.wheel_torque_cmd_Nm, cycle_done=not s.realtime)
         except Exception as exc:  # noqa: BLE001 - a transmit failure is reported, the loop goes on
-            self._bus_tx_errors = getattr(self, "_bus_tx_errors", 0) + 1
-            self._event("FATAL_ERROR", reason=f"bus send failed: {type(exc).__name__}: {exc}"[:110])
+            self.bus_tx_errors += 1
+            self.event("FATAL_ERROR", reason=f"bus send failed: {type(exc).__name__}: {exc}"[:110])
 
         self._fdir_cycle(s, est, g, ctrl, slipped_before)
         if not self._target_reached:
@@ -375,7 +284,7 @@ class FlightSoftware:
             self._held_cycles = self._held_cycles + 1 if held else 0
             if self._held_cycles * dt >= REACHED_DWELL_S:
                 self._target_reached = True
-                self._event("TARGET_REACHED", error_deg=err)
+                self.event("TARGET_REACHED", error_deg=err)
 
     def _door_cycle(self, tick: int, est: AttitudeEstimate, g: GuidanceOutput) -> None:
         """The aperture door's cycle (`fsw.door`) on the boresight's physical sky margins (the guidance's in
@@ -401,9 +310,9 @@ class FlightSoftware:
         if not s.st_fresh and self._st_was_valid:
             self._st_outage_start = self.t_s
             if s.st_blind_source:
-                self._event("ST_BLINDED", source=_BLIND_SOURCES[min(int(s.st_blind_source), 3)])
+                self.event("ST_BLINDED", source=_BLIND_SOURCES[min(int(s.st_blind_source), 3)])
         elif s.st_fresh and not self._st_was_valid:
-            self._event("ST_RECOVERED", outage_s=self.t_s - self._st_outage_start)
+            self.event("ST_RECOVERED", outage_s=self.t_s - self._st_outage_start)
         self._st_was_valid = s.st_fresh
 
     def _execute(self, action) -> None:
@@ -413,7 +322,7 @@ class FlightSoftware:
                 a = "safe"  # the others cannot control three axes, or a wheel was already lost
         if a == "reset_estimator":
             self.estimator.reset()
-            self._event("ESTIMATOR_RESET", reason=f"FDIR {action.monitor}")
+            self.event("ESTIMATOR_RESET", reason=f"FDIR {action.monitor}")
         if a in ("safe", "isolate_wheel_safe") and self.guidance.mode != "SAFE":
             self.set_mode("SAFE", "FDIR")
 
@@ -429,7 +338,7 @@ class FlightSoftware:
         if not ctl.isolate(wheel):
             if self.fdir.wheel_fault_reasons[wheel] == STATUS_LOST:
                 # only its status is lost and the rest cannot control three axes: keep flying it, open loop
-                self._event("WHEEL_RESTORED", wheel=wheel + 1, reason=f"{STATUS_LOST}; the other wheels cannot "
+                self.event("WHEEL_RESTORED", wheel=wheel + 1, reason=f"{STATUS_LOST}; the other wheels cannot "
                             "control three axes")
                 return True
             if not self._restore_silent_wheel(wheel):
@@ -438,15 +347,15 @@ class FlightSoftware:
                 # wheel; the caller enters SAFE
                 ctl.restore(wheel, active=False)
                 self.wheel_residual.forget()
-                self._event("WHEEL_ISOLATED", wheel=wheel + 1)
+                self.event("WHEEL_ISOLATED", wheel=wheel + 1)
                 return False
             second = False  # three usable wheels again: fly on
         self.wheel_residual.forget()
-        self._event("WHEEL_ISOLATED", wheel=wheel + 1)
+        self.event("WHEEL_ISOLATED", wheel=wheel + 1)
         accel_deg_s2, rate_deg_s = ctl.slew_authority()
         ctl.max_accel = min(ctl.max_accel, math.radians(accel_deg_s2))
         rate, accel = self.guidance.reduce_slew_authority(math.degrees(ctl.max_accel), rate_deg_s)
-        self._event("SLEW_LIMITS_REDUCED", rate_limit_deg_s=rate, accel_deg_s2=accel,
+        self.event("SLEW_LIMITS_REDUCED", rate_limit_deg_s=rate, accel_deg_s2=accel,
                     wheels=int(ctl.active.sum()))
         return not second
 
@@ -462,7 +371,7 @@ class FlightSoftware:
                 continue
             ctl.restore(spare)
             if ctl.isolate(failing):
-                self._event("WHEEL_RESTORED", wheel=spare + 1, reason=f"{STATUS_LOST}; wheel {failing + 1} "
+                self.event("WHEEL_RESTORED", wheel=spare + 1, reason=f"{STATUS_LOST}; wheel {failing + 1} "
                             f"{reasons[failing] or 'failed'}")
                 return True
             ctl.restore(spare, active=False)  # no better: keep the allocation as it was
@@ -520,109 +429,17 @@ class FlightSoftware:
 
     def _check_worker_lost(self, reason: str, restarts: int, dropped: bool) -> None:
         if dropped:
-            self._event("CHECK_WORKER_DROPPED", restarts=min(restarts - 1, 255))
+            self.event("CHECK_WORKER_DROPPED", restarts=min(restarts - 1, 255))
         else:
-            self._event("CHECK_WORKER_LOST", reason=reason, restarts=restarts, max_restarts=MAX_RESTARTS)
+            self.event("CHECK_WORKER_LOST", reason=reason, restarts=restarts, max_restarts=MAX_RESTARTS)
 
     def housekeeping(self) -> None:
-        """Housekeeping rate group: assumption checks (throttled), heartbeat, HK telemetry."""
-        gd = self.guidance
-        result = self.checker.poll()
-        if result is not None:
-            gd.apply_check_result(result)
-            self._check_budget_free_at = _budget_free_at(result.duration_s, self.cfg.law.check_max_cpu_fraction)
-        if gd.mode in ("POINTING", "QUATERNION"):
-            due = (self.t_s - self._last_check_t >= self.cfg.law.check_period_s
-                   and (self.checker.mode != "process" or time.monotonic() >= self._check_budget_free_at))
-            if (gd.checks_dirty or due) and not self.checker.busy:
-                if self.checker.submit(gd.assumption_snapshot()):
-                    gd.mark_checked()
-                    self._last_check_t = self.t_s
-                    if self.checker.mode == "inline":
-                        gd.apply_check_result(self.checker.poll())
-        try:
-            self.driver.send_heartbeat(MODES.index(gd.mode), self.cycle)
-        except Exception:  # noqa: BLE001
-            self._bus_tx_errors = getattr(self, "_bus_tx_errors", 0) + 1
-        self._send_hk_tm()
+        """The housekeeping rate group (`fsw.housekeeping`): assumption checks, heartbeat, HK telemetry."""
+        self.hk.run()
 
     def hk_values(self) -> dict:
-        ex = self.executive
-        counters = self.driver.counters
-        if counters is not self._hk_src or len(counters) != self._hk_src_len:
-            # the per-message counter dicts live as long as the receiver: list the messages' ones once
-            self._hk_src, self._hk_src_len = counters, len(counters)
-            self._hk_dicts = [c for name, c in counters.items() if not name.startswith("_")]
-        dicts = self._hk_dicts
-        # each E2E class summed over the messages in C (map over dict.get): the same integers as a loop
-        n = {k: sum(map(dict.get, dicts, repeat(k), repeat(0))) for k in _HK_CLASSES}
-        bus = counters.get("_bus", {})
-        tm = self.telemetry.counters
-        values = {
-            "uptime_s": time.monotonic() - self._start_wall,
-            "hk_mode": self.guidance.mode,
-            "cycles": self.cycle,
-            "slips_gnc": ex.gnc.slips,
-            "slips_hk": ex.hk.slips,
-            "exec_max_ms_gnc": ex.gnc.exec_max_ms,
-            "exec_mean_ms_gnc": ex.gnc.exec_mean_ms,
-            "exec_max_ms_hk": ex.hk.exec_max_ms,
-            "exec_mean_ms_hk": ex.hk.exec_mean_ms,
-            "jitter_max_ms": 1e3 * ex.jitter.max_s,
-            "bus_rx_ok": n["ok"] + n["ok_some_lost"],
-            "bus_crc_errors": n["crc_error"],
-            "bus_alive_errors": n["wrong_sequence"] + n["ok_some_lost"],
-            "bus_repeated": n["repeated"],
-            "bus_decode_errors": n["bad_length"] + n["out_of_range"] + getattr(getattr(self.driver, "bus", None), "decode_errors", 0),
-            "bus_auth_failures": getattr(getattr(self.driver, "bus", None), "auth_failures", 0),
-            "bus_timeouts": n["timeout"],
-            "bus_tx_errors": getattr(self, "_bus_tx_errors", 0),
-            "bus_unknown_ids": bus.get("unknown_id", 0) + bus.get("error_frame", 0),
-            "bus_stale_syncs": getattr(self.driver, "stale_syncs", 0),
-            "bus_unexpected_frames": getattr(self.driver, "unexpected_frames", 0),
-            "imu_stale_cycles": self.fdir.stale_counts["IMU"],
-            "st_stale_cycles": self.fdir.stale_counts["STAR_TRACKER"],
-            "tm_packets_sent": tm.get("packets_sent", 0),
-            "tm_send_errors": tm.get("send_errors", 0),
-            "events_sent": tm.get("events_sent", 0),
-            "events_throttled": tm.get("events_throttled", 0),
-            "fdir_trips": self.fdir.trips,
-            "wheels_isolated": self.control.isolated_mask,
-        }
-        keys = _FDIR_HK_KEYS
-        for mon, state in self.fdir.states().items():
-            key = keys.get(mon)
-            if key is None:
-                key = keys[mon] = f"fdir_{mon.lower()}"
-            values[key] = state
-        if self.dispatcher is not None:
-            values.update(self.dispatcher.hk_values())
-        return values
-
-    def _bus_fault_check(self, values: dict) -> None:
-        """Count a burst of corrupt frames as a bus fault: `bus_corrupt_bursts`, and BUS_CORRUPT at most every
-        BUS_EVENT_PERIOD_S of onboard time with the frames of the bursts since the last one."""
-        failed = int(values["bus_crc_errors"]) + int(values["bus_decode_errors"])
-        new = failed - self._bus_failed_seen if failed >= self._bus_failed_seen else failed  # (RESET_COUNTERS)
-        self._bus_failed_seen = failed
-        if new >= BUS_BURST_FRAMES:
-            self._bus_bursts += 1
-            self._bus_burst_frames += new
-        if self._bus_burst_frames and self.t_s - self._bus_event_t >= BUS_EVENT_PERIOD_S:
-            self._event("BUS_CORRUPT", count=self._bus_burst_frames, bursts=self._bus_bursts)
-            self._bus_burst_frames, self._bus_event_t = 0, self.t_s
-        values["bus_corrupt_bursts"] = self._bus_bursts
-
-    def _send_hk_tm(self) -> None:
-        values = self.hk_values()
-        self._bus_fault_check(values)
-        rss = runtime.resident_bytes()
-        if rss is not None:
-            values["rss_mb"] = rss / 1e6
-        try:
-            self.telemetry.send_channels("HK", values, time_s=self.t_s)
-        except TypeError:
-            self.telemetry.send_channels("HK", values)
+        """The HK packet's channels now (`fsw.housekeeping.Housekeeping.values`)."""
+        return self.hk.values()
 
     # -------------------------------------------------------------------------------------- loops
     def run_lockstep(self, max_ticks: int | None = None, timeout_s: float | None = None,
@@ -644,12 +461,12 @@ class FlightSoftware:
     def run_realtime(self, duration_s: float | None = None) -> int:
         """Run on the monotonic clock for ``duration_s`` (None: until stop())."""
         for severity_event, reason in runtime.enter_realtime(self.cfg.rates.realtime_priority):
-            self._event(severity_event, reason=reason)
+            self.event(severity_event, reason=reason)
         return self.executive.run_realtime(self.driver.collect_latest, duration_s)
 
     def stop(self) -> None:
         self.executive.stop()
 
     def shutdown(self) -> None:
-        self._event("FSW_STOPPED", cycles=self.cycle)
+        self.event("FSW_STOPPED", cycles=self.cycle)
         self.checker.close()

@@ -207,7 +207,7 @@ def test_periodic_assumption_check_keeps_to_its_cpu_budget(loop, monkeypatch) ->
     fsw.cfg = fsw.cfg.model_copy(update={"law": fsw.cfg.law.model_copy(update={"check_period_s": 1.0,
                                                                                   "check_max_cpu_fraction": 0.5})})
     now = [1000.0]
-    monkeypatch.setattr("fsw.app.time.monotonic", lambda: now[0])
+    monkeypatch.setattr("fsw.housekeeping.time.monotonic", lambda: now[0])
     loop.run(30)  # 3 onboard seconds: the first check goes, its 1 s result arrives, the budget then binds
     assert fsw.checker.submitted == 1
     now[0] += 0.9  # budget after a 1 s check at 50 %: 1 s of host time
@@ -312,7 +312,7 @@ def test_a_burst_of_corrupt_frames_is_a_bus_fault_counted_and_reported_once_a_mi
     for second, (crc, dec) in enumerate([(2, 0), (3, 0), (40, 5), (80, 5), (81, 5), (200, 9), (0, 0), (30, 0)]):
         fsw.t_s = 30.0 * second  # housekeeping periods 30 s apart: events may come every other one
         v = values(crc, dec)
-        fsw._bus_fault_check(v)
+        fsw.hk.bus_fault_check(v)
         seen.append(v["bus_corrupt_bursts"])
     # bursts: +42 (t 60), +40 (t 90), +123 (t 150), +30 after a counter reset (t 210); +2, +1, +1 are not.
     # Events: at once (t 60), then at t 120 and t 180 with what came since; the last burst waits its minute.
