@@ -145,12 +145,12 @@ def encode_burst(cs, ti, sig_f, idx, values, out):  # pragma: no cover - compile
     return encode_range(idx, values, cs[0], cs[1], out, msg_i, sig_i, sig_f, crc_table, idx.shape[0])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t):  # pragma: no cover
     """The class code of frame ``i`` of message index ``m`` (a plain data frame of a table message), received at
     ``now``: length, CRC, decode into ``values[i]`` with the accept bounds, then the alive-counter rules on
     ``seq[m]``; a delivered frame sets ``last_ok_t[m]`` and re-arms the timeout. The one implementation of the
-    rules (through :func:`classify_frame`)."""
+    rules (:func:`classify_frame`, :func:`collect_rows`)."""
     size = msg_i[m, 0]
     if lengths[i] != size:
         return BAD_LENGTH_CODE
@@ -196,7 +196,7 @@ def judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table
     return code
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def unjudged_code(fid, kind_of_id):  # pragma: no cover - compiled
     """The class code of a frame id that is not judged as a table message: UNKNOWN_CODE, ECHO_CODE, or
     FALLBACK_CODE (an id outside the table, or a message for the Python path); -1 for a message to judge
@@ -213,13 +213,13 @@ def unjudged_code(fid, kind_of_id):  # pragma: no cover - compiled
     return FALLBACK_CODE
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (a call with this many arrays costs ~0.1 us a frame)
 def classify_frame(i, ids, lengths, data, values, now, kind_of_id, msg_i, sig_i, sig_f, crc_table, seq,
                    last_ok_t):  # pragma: no cover - compiled
     """The class code of frame ``i`` of a burst received at ``now``: :func:`unjudged_code`, else
-    :func:`judge_frame` (decoded values into ``values[i]``, the sequence state updated). The one
-    classification of both ends of the bus (:func:`classify_rows`, :func:`collect_rows`, the simulator's
-    receive of the flight software's commands)."""
+    :func:`judge_frame` (decoded values into ``values[i]``, the sequence state updated): the classification
+    of both ends of the bus (:func:`classify_rows`, the simulator's receive of the flight software's
+    commands; :func:`collect_rows` decodes the id itself, see there)."""
     fid = ids[i]
     code = unjudged_code(fid, kind_of_id)
     if code >= 0:
@@ -241,7 +241,7 @@ def tally_add(tally, st, key):  # pragma: no cover - compiled
     st[S_NTALLY] = k + 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (a call with this many arrays costs ~0.1 us a frame)
 def classify_counted(i, ids, lengths, data, values, now, kind_of_id, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t,
                      tally, st, bus_row, n_codes):  # pragma: no cover - compiled
     """:func:`classify_frame`, the class counted in ``tally`` (:func:`tally_add`, key row * ``n_codes`` + code)
@@ -523,10 +523,11 @@ def _receive_wheel_status(st, ft, cfg, values, j, w, now):  # pragma: no cover -
 def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, lengths, data, first,
                  first_fid):  # pragma: no cover - compiled
     """FswBusDriver.collect_tick's work on frames ``first``.. of a burst (``ids``, ``lengths``, ``data``), in one
-    call (the driver's arrays come first, bound once: functools.partial), each frame classified and counted
-    by :func:`classify_counted` (``status``, ``values``, the receiver's ``seq`` / ``last_ok_t``) in
-    ``tally`` ((message row * n_codes + code, count) pairs, ``st[S_NTALLY]`` of them), then what the
-    driver does with it, by phase (``st[S_PHASE]``):
+    call (the driver's arrays come first, bound once: functools.partial), each frame classified by
+    :func:`judge_frame` as :func:`classify_frame` does (``status``, ``values``, the receiver's ``seq`` /
+    ``last_ok_t``) and counted as :func:`classify_counted` counts, in ``tally`` ((message row * n_codes +
+    code, count) pairs, ``st[S_NTALLY]`` of them), then what the driver does with it, by phase
+    (``st[S_PHASE]``):
 
       * waiting for SYNC(k) (:func:`_between_ticks`): a delivered SYNC after the last tick starts tick k
         (t_k = k * period, the timeout supervision on the first tick); one at or before it is stale
@@ -550,18 +551,28 @@ def collect_rows(status, values, st_all, ft, consts, seq, last_ok_t, imu, ids, l
         if i == first and first_fid != NO_FID:  # judged by the Python path: status[i], values[i] and counts set
             code = status[i]
             role = role_of_id[first_fid] if 0 <= first_fid < role_of_id.shape[0] else ROLE_NONE
-        else:
+        else:  # unjudged_code's decode, written out: the gyro-row check must come between the id and the
+            # judgement, and classify_counted here cost 1.4 us a tick (17 frames) even inlined
             fid = ids[i]
-            if (st[S_PHASE] == PHASE_TICK and st[S_IMU_N] >= imu.shape[0] and 0 <= fid < kind_of_id.shape[0]
-                    and kind_of_id[fid] >= 0 and role_of_id[fid] == ROLE_IMU):
-                st[S_GROW] = 1  # a gyro frame with ``imu`` full: the caller grows it, then calls again
+            if fid < 0 or fid >= kind_of_id.shape[0]:
+                status[i] = FALLBACK_CODE
                 return i
-            code = classify_counted(i, ids, lengths, data, values, now, kind_of_id, msg_i, sig_i, sig_f, crc_table,
-                                    seq, last_ok_t, tally, st, cfg[C_BUS_ROW], n_codes)
-            status[i] = code
-            if code == FALLBACK_CODE:
-                return i
+            m = kind_of_id[fid]
             role = role_of_id[fid]
+            if m == KIND_FALLBACK:
+                status[i] = FALLBACK_CODE
+                return i
+            if m < 0:
+                code = UNKNOWN_CODE if m == KIND_UNKNOWN else ECHO_CODE
+                status[i] = code
+                tally_add(tally, st, cfg[C_BUS_ROW] * n_codes + code)
+            else:
+                if role == ROLE_IMU and st[S_PHASE] == PHASE_TICK and st[S_IMU_N] >= imu.shape[0]:
+                    st[S_GROW] = 1
+                    return i
+                code = judge_frame(i, m, now, lengths, data, values, msg_i, sig_i, sig_f, crc_table, seq, last_ok_t)
+                status[i] = code
+                tally_add(tally, st, m * n_codes + code)
         i += 1
         j = i - 1
         if code > OK_SOME_LOST_CODE:

@@ -255,7 +255,7 @@ def wheel_status_rows(t_s, X, U_APPLIED, W_KT, TEMP, FLAGS, wheel_state, timeout
     return N
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def take_wheel_command(wheel_state, w, values, i, torque_col, tick_lsb_col, t_s):
     """``WheelNode.on_command`` of wheel ``w`` for the delivered command in value row ``i``, received at ``t_s``."""
     wheel_state[w, WS_CMD] = values[i, torque_col]
