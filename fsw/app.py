@@ -31,7 +31,7 @@ from fsw.fdir import STATUS_LOST, Fdir, WheelSpeedResidual
 from fsw.guidance import Guidance
 from fsw.housekeeping import Housekeeping
 from fsw.intake import SensorIntake, vector_norm
-from fsw.records import NAN3, AttitudeEstimate, ControlOutput, CycleRecord, GuidanceOutput, SensorSnapshot
+from fsw.records import AttitudeEstimate, ControlOutput, CycleRecord, GuidanceOutput, SensorSnapshot
 
 # TARGET_REACHED: the error below REACHED_ERROR_DEG and the estimated body rate below REACHED_RATE_DEG_S for
 # REACHED_DWELL_S in a row (a slew passing through its target at speed is not "reached")
@@ -62,13 +62,6 @@ class _NullTelemetry:
     def reset_counters(self):
         for k in self.counters:
             self.counters[k] = 0
-
-
-def _warm_up_snapshot(dt_s: float, gyro_B: np.ndarray, q_NS: np.ndarray | None) -> SensorSnapshot:
-    """A cycle's sensors for the warm-up's scratch estimator: gyro rows and a fresh fix (or none)."""
-    fresh = q_NS is not None
-    return SensorSnapshot(0, 0.0, dt_s, False, gyro_B, gyro_B.shape[0] > 0, fresh, 0, fresh, q_NS,
-                          vector_norm(q_NS.tolist()) if fresh else 1.0, 0.0, NAN3, np.full(3, -1), 0, 0)
 
 
 class FlightSoftware:
@@ -158,7 +151,8 @@ class FlightSoftware:
         scratch = AttitudeEstimator(self.cfg.estimator, np.asarray(self.cfg.spacecraft.star_tracker_q_BS))
         for gyro_B, q_NS in ((np.zeros((1, 3)), q), (np.zeros((2, 3)), np.array([0.99, 0.1, 0.0, 0.0])),
                              (np.zeros((0, 3)), None)):
-            scratch.update(_warm_up_snapshot(self.period_s, gyro_B, q_NS))
+            nq = vector_norm(q_NS.tolist()) if q_NS is not None else 1.0
+            scratch.update(SensorSnapshot.of_measurements(self.period_s, gyro_B, q_NS, 0.0, nq))
         g = self.guidance
         events, g.events = g.events, (lambda name, **args: None)
         try:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from fsw.records import AttitudeEstimate, SensorSnapshot
+from fsw.records import AttitudeEstimate, SensorSnapshot, new_record
 from gnc.attitude import quat_multiply_nb
 
 
@@ -282,7 +282,7 @@ def _estimator_cycle(q, bias, P, omega, samples, prev_sample, has_prev, dt_s, si
       " f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8, f8, f8, b1, b1, b1)", cache=True)
 def _estimator_tick(q, bias, P, omega, prev_sample, samples, q_NS, q_SB, R_st, P0, consts, dt_s, st_latency, q_norm,
                     has_prev, initialized, has_st):
-    """`_estimator_cycle` with fewer arguments and results, for `AttitudeEstimator._tick`: handing five new
+    """`_estimator_cycle` with fewer arguments and results, for `AttitudeEstimator.update`: handing five new
     arrays back to Python cost more than the dispatch of the call (~0.5 us each). ``consts``: (sig_v, sig_u,
     star tracker max age, innovation gate [deg]). ``bias`` (3,), ``P`` (6, 6) and ``prev_sample`` (3,) are
     overwritten with the new ones (NaN: this cycle had no gyro sample); they are the estimator's own, which
@@ -394,10 +394,29 @@ class AttitudeEstimator:
 
     def update(self, sensors: SensorSnapshot) -> AttitudeEstimate:
         """One GNC cycle on ``sensors``: propagate through its gyro samples over the cycle, then fuse its
-        star-tracker fix when it has a fresh one. The estimate's innovation is NaN without a fix."""
-        innovation_deg = self._tick(sensors.dt_s, sensors.gyro_B, sensors.q_NS, sensors.st_latency_s,
-                                    sensors.q_NS_norm)
-        return AttitudeEstimate(self.q_NB, self.omega_BN_B, self.initialized, innovation_deg)
+        star-tracker fix when it has a fresh one. The estimate's innovation is NaN without a fix.
+
+        One compiled call (`_estimator_tick`) and the attribute sets: the snapshot's gyro rows are a
+        C-contiguous float (n, 3) array and its fix a contiguous float quaternion (4,), divided by its norm
+        in the compiled call."""
+        dt_s, samples, q_NS = sensors.dt_s, sensors.gyro_B, sensors.q_NS
+        has_st = q_NS is not None
+        P = self.P
+        P0 = self._initial_P() if has_st and not self.initialized else P
+        # bias_B, P and the previous sample are updated in place (`_estimator_tick`)
+        self.q_NB, self.omega_BN_B, self.initialized, used, self.innovation_rejected, innov_deg = _estimator_tick(
+            self.q_NB, self.bias_B, P, self.omega_BN_B, self._prev_buf, samples, q_NS if has_st else _NO_QUATERNION,
+            self.q_SB, self.R_st_B, P0, self._consts, dt_s, sensors.st_latency_s, sensors.q_NS_norm, self._has_prev,
+            self.initialized, has_st)
+        self._has_prev = samples.shape[0] > 0
+        self.star_tracker_used = used
+        if samples.shape[0] == 0:
+            self._gyroless_rate(dt_s, used)
+        else:
+            self._fix_prev = None
+        self.coasting_s = 0.0 if used else self.coasting_s + dt_s
+        self.last_innovation_deg = innov_deg
+        return new_record(AttitudeEstimate, (self.q_NB, self.omega_BN_B, self.initialized, innov_deg))
 
     def step(self, dt_s: float, omega_meas_B: np.ndarray | None, q_NS: np.ndarray | None, st_latency_s: float = 0.0) -> EstimatorStatus:
         """One cycle: propagate with the gyro over ``dt_s`` then fuse the star tracker if given.
@@ -427,8 +446,9 @@ class AttitudeEstimator:
         random walk over the cycle, and the process noise, are unchanged. The star tracker's latency is
         bridged the same way, with the mean rate over the latency.
         """
-        self._tick(float(dt_s), np.ascontiguousarray(samples, dtype=float),
-                   None if q_NS is None else np.ascontiguousarray(q_NS, dtype=float), float(st_latency_s))
+        self.update(SensorSnapshot.of_measurements(float(dt_s), np.ascontiguousarray(samples, dtype=float),
+                                                   None if q_NS is None else np.ascontiguousarray(q_NS, dtype=float),
+                                                   float(st_latency_s)))
         return EstimatorStatus(
             initialized=self.initialized,
             star_tracker_used=self.star_tracker_used,
@@ -437,29 +457,6 @@ class AttitudeEstimator:
             coasting_s=self.coasting_s,
             cov_trace_deg2=self.cov_trace_deg2,
         )
-
-    def _tick(self, dt_s: float, samples: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float,
-              q_norm: float = 1.0) -> float:
-        """`_cycle` without the status: one compiled call (`_estimator_tick`) and the attribute sets, with
-        ``samples`` a C-contiguous float (n, 3) array and ``q_NS`` a contiguous float quaternion (4,) or
-        None, the tracker's sample divided by ``q_norm`` (its norm) in the compiled call (`update` hands
-        the snapshot's arrays as they are). Returns the innovation [deg] (NaN when none this cycle)."""
-        has_st = q_NS is not None
-        P = self.P
-        P0 = self._initial_P() if has_st and not self.initialized else P
-        # bias_B, P and the previous sample are updated in place (`_estimator_tick`)
-        self.q_NB, self.omega_BN_B, self.initialized, used, self.innovation_rejected, innov_deg = _estimator_tick(
-            self.q_NB, self.bias_B, P, self.omega_BN_B, self._prev_buf, samples, q_NS if has_st else _NO_QUATERNION,
-            self.q_SB, self.R_st_B, P0, self._consts, dt_s, st_latency_s, q_norm, self._has_prev, self.initialized, has_st)
-        self._has_prev = samples.shape[0] > 0
-        self.star_tracker_used = used
-        if samples.shape[0] == 0:
-            self._gyroless_rate(dt_s, used)
-        else:
-            self._fix_prev = None
-        self.coasting_s = 0.0 if used else self.coasting_s + dt_s
-        self.last_innovation_deg = innov_deg
-        return innov_deg
 
     def _gyroless_rate(self, dt_s: float, used: bool) -> None:
         """A cycle without a gyro sample: the rate estimate follows the change of the attitude between two

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from fsw.bus.driver import TickInputs
-from fsw.records import SensorSnapshot
+from fsw.records import SensorSnapshot, new_record
 
 # the E2E classes that count as a rejected (corrupt) frame
 CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
@@ -96,9 +96,10 @@ class SensorIntake:
         fresh, q_NS, latency, nq = self._star_tracker(inputs, st, realtime)
         speeds, faults = self._wheels(inputs, driver_tick, realtime, dt)
         imu_corrupt, st_corrupt = self._corrupt_deltas()
-        return SensorSnapshot(tick, t_s, dt, realtime, samples, imu is not None, st is not None,
-                              st.blind_source if st is not None else 0, fresh, q_NS if fresh else None, nq, latency,
-                              speeds, self._heard_through_corruption(faults, t_s), imu_corrupt, st_corrupt)
+        return new_record(SensorSnapshot, (
+            tick, t_s, dt, realtime, samples, imu is not None, st is not None, st.blind_source if st is not None else 0,
+            fresh, q_NS if fresh else None, nq, latency, speeds, self._heard_through_corruption(faults, t_s),
+            imu_corrupt, st_corrupt))
 
     @staticmethod
     def _gyro_rows(inputs: Any, imu: Any) -> np.ndarray:

@@ -66,6 +66,7 @@ def test_real_time_inputs_are_judged_by_their_age() -> None:
     than 2.5 cycles, a wheel report older than 3 and a fix older than star_tracker_max_age_s are not used."""
     intake = SensorIntake(SimpleNamespace(counters={}), 4, 0.1, 0.5)
     s = intake.snapshot(_latest(1000.0, 0.01, 0.05, [1.0, 0.0, 0.0, 0.0], [0.01, 0.31, None, 0.29]), cycle=7)
+    assert len(s) == len(SensorSnapshot._fields)  # (built field by field, in their declared order)
     assert (s.t_s, s.tick, s.realtime, s.imu_valid, s.st_fresh, s.st_latency_s) == (0.0, 7, True, True, True, 0.05)
     assert np.array_equal(s.wheel_speed_rad_s, [10.0, math.nan, math.nan, 40.0], equal_nan=True)
     assert s.wheel_fault.tolist() == [0, -1, -1, 0]
@@ -79,8 +80,7 @@ def test_real_time_inputs_are_judged_by_their_age() -> None:
 
 def _snapshot(dt: float, gyro_B: np.ndarray, q_NS: np.ndarray | None, latency: float) -> SensorSnapshot:
     nq = math.sqrt(sum(float(x) * float(x) for x in q_NS)) if q_NS is not None else 1.0
-    return SensorSnapshot(0, 0.0, dt, False, gyro_B, gyro_B.shape[0] > 0, q_NS is not None, 0, q_NS is not None, q_NS,
-                          nq, latency, np.zeros(0), np.zeros(0, dtype=np.int64), 0, 0)
+    return SensorSnapshot.of_measurements(dt, gyro_B, q_NS, latency, nq)
 
 
 def test_the_estimators_update_is_its_step_on_the_snapshots_samples() -> None:
