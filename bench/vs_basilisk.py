@@ -79,7 +79,7 @@ ENV_DISTURBANCE = {"gravity_gradient": True, "solar_radiation_pressure": True, "
                    "aerodynamic_drag": True, "residual_dipole_B_Am2": [0.5, -0.3, 0.8]}
 
 
-def _mission(duration_s: float, row: str = "wheels"):
+def demo_mission(duration_s: float, row: str = "wheels"):
     """demo-pointing for ``duration_s``, as written (row "wheels") or with the environment row's changes."""
     import yaml
     from gnc.ephemeris import EARTH_RADIUS_KM
@@ -336,12 +336,12 @@ def main(argv: list[str] | None = None) -> int:
     from gnc.ephemeris import EARTH_RADIUS_KM
     cpu = args.cpu if args.cpu is not None else min(os.sched_getaffinity(0))
     os.sched_setaffinity(0, {cpu})  # one core for both loops
-    missions = {row: _mission(args.duration, row) for row in args.rows}
+    missions = {row: demo_mission(args.duration, row) for row in args.rows}
     inputs = {row: environment_inputs(m) if row == "environment" else None for row, m in missions.items()}
     load_before = os.getloadavg()[0]
     for row in args.rows:  # warm-up: imports, numba caches, the ICD, Basilisk's libraries (not timed)
-        run_keepout(_mission(5.0, row))
-        run_basilisk(_mission(5.0, row), inputs[row])
+        run_keepout(demo_mission(5.0, row))
+        run_basilisk(demo_mission(5.0, row), inputs[row])
     walls = {row: {"keepout": [], "basilisk": []} for row in args.rows}
     for _ in range(args.repeat):  # every loop of every row in turn: all see the same host load
         for row, mission in missions.items():
