@@ -519,7 +519,7 @@ TC_COMMON_FAILURE_CODES = ("PACKET_TOO_SHORT", "PACKET_TOO_LONG", "BAD_HEADER", 
                            "CRC_MISMATCH", "UNKNOWN_OPCODE", "NO_HANDLER", "ARGS_TRUNCATED", "TRAILING_BYTES",
                            "BAD_ENUM", "ARG_OUT_OF_RANGE", "REPLAY", "OUTSIDE_WINDOW")
 TC_COMPLETION_FAILURE_CODES = ("EXECUTION_FAILED",)
-TARGET_KINDS = ("DIRECTION", "QUATERNION")
+TARGET_KINDS = ("DIRECTION", "QUATERNION", "NADIR", "GROUND")
 MODE_REASONS = ("INIT", "TELECOMMAND", "FDIR", "AUTONOMOUS")
 PLUGIN_KINDS = ("GUIDANCE", "ESTIMATOR")  # fsw.plugins: which part of the GNC a plug-in replaces
 
@@ -834,8 +834,11 @@ COMMANDS: tuple[CommandDef, ...] = (
     CommandDef("SET_MODE", 0x03, "change flight mode", (_MODE_ARG,)),
     CommandDef(
         "SET_TARGET", 0x04,
-        "set the target: DIRECTION (c0..c2 = unit vector in N, c3 unused) or QUATERNION (c0..c3 = q_NB, "
-        "scalar first). Rejected with TARGET_REJECTED if inside a keep-out zone.",
+        "set the target: DIRECTION (c0..c2 = unit vector in N, c3 unused), QUATERNION (c0..c3 = q_NB, "
+        "scalar first), NADIR (c0..c3 unused) or GROUND (c0..c2 = the point's WGS-84 vertical, a unit vector "
+        "in the Earth-fixed frame; c3 = its height above the ellipsoid / 10 km: "
+        "comms.telecommand.ground_target_args); NADIR and GROUND are followed every GNC cycle. Rejected with "
+        "TARGET_REJECTED if inside a keep-out zone.",
         (Arg("kind", "ENUM", enum=TARGET_KINDS),
          Arg("c0", description="component 0", **_UNIT_COMPONENT),
          Arg("c1", description="component 1", **_UNIT_COMPONENT),

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from comms.dictionary import MODES
-from comms.telecommand import CommandValidationError
+from comms.telecommand import CommandValidationError, ground_target_of
 
 _BODY_CODES = {"sun": "SUN", "moon": "MOON", "earth": "EARTH", "inertial": "INERTIAL"}
 
@@ -55,6 +55,9 @@ class CommandHandlers:
         fsw = self.fsw
         guidance = fsw.guidance
         kind = str(kind)
+        if kind in ("NADIR", "GROUND"):
+            self._set_target_on_earth(kind, c0, c1, c2, c3)
+            return
         if kind == "DIRECTION":
             v = np.array([c0, c1, c2], dtype=float)
         else:
@@ -64,14 +67,7 @@ class CommandHandlers:
             raise CommandValidationError(f"SET_TARGET: {kind} must be a unit vector (norm {n:.6f})",
                                          "TARGET_NOT_UNIT")
         v = v / n
-        hit = guidance.target_violation(kind, v)
-        if hit is not None:
-            zone, margin = hit
-            bodies = self._zone_bodies(kind)
-            fsw.event("TARGET_REJECTED", zone=zone, body=bodies[zone] if zone < len(bodies) else "INERTIAL",
-                      margin_deg=margin)
-            raise CommandValidationError(f"SET_TARGET: target inside keep-out zone {zone} (margin {margin:.3f} deg)",
-                                         "TARGET_IN_KEEP_OUT")
+        self._refuse_in_zone(kind, v)
         if kind == "DIRECTION":
             guidance.set_target_direction(v)
         else:
@@ -79,6 +75,35 @@ class CommandHandlers:
         fsw.restart_target_watch()
         c = list(v) + [0.0] * (4 - len(v))
         fsw.event("TARGET_SET", kind=kind, c0=c[0], c1=c[1], c2=c[2], c3=c[3])
+
+    def _refuse_in_zone(self, kind: str, v: np.ndarray) -> None:
+        """TARGET_REJECTED and a refusal when the target ``v`` lies inside a keep-out zone."""
+        hit = self.fsw.guidance.target_violation(kind, v)
+        if hit is not None:
+            zone, margin = hit
+            bodies = self._zone_bodies(kind)
+            self.fsw.event("TARGET_REJECTED", zone=zone, body=bodies[zone] if zone < len(bodies) else "INERTIAL",
+                           margin_deg=margin)
+            raise CommandValidationError(f"SET_TARGET: target inside keep-out zone {zone} (margin {margin:.3f} deg)",
+                                         "TARGET_IN_KEEP_OUT")
+
+    def _set_target_on_earth(self, kind: str, c0: float, c1: float, c2: float, c3: float) -> None:
+        """NADIR, or a GROUND point (`comms.telecommand.ground_target_args`): followed every GNC cycle
+        (`PointingGuidance.set_target_on_earth`); refused as a direction is when it lies in a zone now."""
+        from fsw.config import GroundTargetConfig
+
+        fsw, guidance = self.fsw, self.fsw.guidance
+        ground = None
+        if kind == "GROUND":
+            lat, lon, alt = ground_target_of(c0, c1, c2, c3)
+            if not -500.0 <= alt <= 9000.0:
+                raise CommandValidationError(f"SET_TARGET: GROUND height {alt:.0f} m outside -500..9000 m",
+                                             "ARG_OUT_OF_RANGE")
+            ground = GroundTargetConfig(latitude_deg=lat, longitude_deg=lon, altitude_m=alt)
+        self._refuse_in_zone("DIRECTION", guidance.target_on_earth_N(kind.lower(), ground))
+        guidance.set_target_on_earth(kind.lower(), ground)
+        fsw.restart_target_watch()
+        fsw.event("TARGET_SET", kind=kind, c0=c0, c1=c1, c2=c2, c3=c3)
 
     def _zone_bodies(self, kind: str) -> list[str]:
         guidance = self.fsw.guidance

@@ -304,13 +304,11 @@ class SetTargetCommand(_Timed):
         None, description="target as [right ascension, declination] [deg] (POINTING): RA in [0, 360], "
         "Dec in [-90, 90]")
     nadir: Literal[True] | None = Field(None, description="true: the boresight to nadir (POINTING), the Earth's "
-                                        "centre seen from the onboard orbit, followed every cycle. Checked, but "
-                                        "not flown yet: the SET_TARGET telecommand does not carry it, so a run "
-                                        "refuses it (the initial target can be nadir)")
+                                        "centre seen from the onboard orbit, followed every cycle")
     ground: GroundTargetConfig | None = Field(None, description="a point on the rotating Earth (POINTING), "
                                               "followed every cycle: WGS-84 latitude_deg, longitude_deg, "
                                               "altitude_m, and the min_elevation_deg the mission check wants it "
-                                              "seen at during its dwell. Checked, but not flown yet, as nadir")
+                                              "seen at during its dwell")
     q_target_NB: UnitQuat | None = Field(None, description="target attitude (QUATERNION)")
 
     TARGET_KEYS: ClassVar[tuple[str, ...]] = ("target_N", "ra_dec_deg", "nadir", "ground", "q_target_NB")

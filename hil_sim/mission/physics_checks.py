@@ -384,7 +384,6 @@ def check_mission(mission: "Mission", step_s: float | None = None, *, quick: boo
             report.add("error", "kernel", str(exc), exc.loc)
     if "POINTING" in modes:
         _check_ground_visibility(mission, segments, report)
-    _check_earth_commands(mission, report)
     _check_wheels(mission, report)
     if not report.findings:
         report.add("info", "summary", "no problems found")
@@ -799,20 +798,6 @@ def _check_ground_visibility(mission, segments: list[Segment], report) -> None:
             continue
         report.add("error", "visibility", _below_horizon(ephemeris, ground, source, segs, elevations[best]),
                    segs[0].loc, max_elevation_deg=float(elevations[best]), t_s=segs[0].t_start_s)
-
-
-def _check_earth_commands(mission, report) -> None:
-    """The flight software's SET_TARGET telecommand takes a direction or an attitude only, so far: a target
-    on the Earth in the timeline cannot be sent (the initial target can be one, `pointing.target_kind`)."""
-    from hil_sim.mission.model import SetTargetCommand
-
-    for i, entry in enumerate(mission.timeline):
-        if isinstance(entry, SetTargetCommand) and (entry.nadir or entry.ground is not None):
-            key = "nadir" if entry.nadir else "ground"
-            report.add("error", "command", f"timeline[{i}] commands a target on the Earth ({key}), which the flight "
-                       "software's SET_TARGET telecommand does not take yet (DIRECTION or QUATERNION only): make it "
-                       "the initial target (flight_software.pointing.target_kind) or command a direction",
-                       ("timeline", i, key), t_s=entry.t_s)
 
 
 def _dwell_times(t0: float, t1: float) -> np.ndarray:

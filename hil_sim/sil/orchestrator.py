@@ -428,6 +428,13 @@ class Timeline:
         if isinstance(entry, SetModeCommand):
             return "SET_MODE", {"mode": entry.mode}
         if isinstance(entry, SetTargetCommand):
+            if entry.nadir:
+                return "SET_TARGET", {"kind": "NADIR", "c0": 0.0, "c1": 0.0, "c2": 0.0, "c3": 0.0}
+            if entry.ground is not None:
+                from comms.telecommand import ground_target_args
+
+                g = entry.ground
+                return "SET_TARGET", ground_target_args(g.latitude_deg, g.longitude_deg, g.altitude_m)
             direction = entry.target_direction_N()
             if direction is not None:
                 c = [float(v) for v in direction]

@@ -131,7 +131,7 @@ def test_required_commands_and_typed_args() -> None:
     assert [a.name for a in gains.args] == ["k1", "kappa", "eps", "rate_limit_deg_s"]
     assert all(a.type == "F64" and a.min is not None and a.max is not None for a in gains.args)
     target = DICTIONARY.command("SET_TARGET")
-    assert target.args[0].enum == ("DIRECTION", "QUATERNION")
+    assert target.args[0].enum == ("DIRECTION", "QUATERNION", "NADIR", "GROUND")  # appended: old codes kept
     assert len(target.args) == 5 and target.args[-1].default == 0.0
     assert DICTIONARY.command(target.opcode) is target
 

@@ -113,16 +113,6 @@ def test_set_target_takes_exactly_one_target(keys):
     assert problems and "exactly one of target_N, ra_dec_deg, nadir, ground, q_target_NB" in problems[0][1]
 
 
-def test_a_timeline_target_on_the_earth_is_refused_until_the_telecommand_takes_it():
-    """SET_TARGET on the link carries DIRECTION or QUATERNION only: a run with a nadir or ground target in
-    its timeline would send nothing the flight software can follow, so the check refuses it at its key."""
-    data = _data()
-    data["timeline"] = [{"t_s": 100.0, "command": "SET_TARGET", "nadir": True}]
-    report = check_mission(Mission.model_validate(data), quick=True)
-    (error,) = _findings(report, "command", "error")
-    assert error.loc == ("timeline", 0, "nadir") and "does not take yet" in error.message
-
-
 def test_judge_measures_the_error_to_where_the_ground_target_truly_is():
     """Truth with a boresight exactly on the ground point (astropy's GCRS position, from a true spacecraft
     orbit that is not the onboard one): the judge's error is ~0; against the target frozen at its first
