@@ -40,9 +40,10 @@ def _elevation_deg(mission: Mission, ground: dict, t_s: float) -> float:
 def test_example_passes_with_its_visibility_window():
     report = check_mission(Mission.model_validate(_data()), quick=True)
     assert report.ok, report.format()
-    (window,) = _findings(report, "visibility", "info")
-    assert window.loc == ("flight_software", "pointing", "target_ground")
-    assert 27.0 < window.numbers["max_elevation_deg"] < 29.0
+    first, second = _findings(report, "visibility", "info")
+    assert first.loc == ("flight_software", "pointing", "target_ground") and second.loc == ("timeline", 0, "ground")
+    assert 24.0 < first.numbers["max_elevation_deg"] < 26.0  # at t = 150 s, when Karachi takes over
+    assert 32.0 < second.numbers["max_elevation_deg"] < 34.0
 
 
 def test_ground_target_below_the_horizon_for_its_dwell_is_an_error_with_its_next_rise():
@@ -67,11 +68,14 @@ def test_ground_target_below_the_horizon_for_its_dwell_is_an_error_with_its_next
 def test_visibility_error_is_reported_at_the_key(tmp_path, capsys):
     from cli.main import main
 
-    text = EXAMPLE.read_text() + (
+    example = EXAMPLE.read_text()
+    start, end = example.index("timeline:\n"), example.index("requirements:")
+    text = example[:start] + (
         "timeline:\n"
         "  - t_s: 0.0\n"
         "    command: SET_TARGET\n"
-        "    ground: {latitude_deg: -33.87, longitude_deg: 151.21}   # Sydney: the other side of the Earth\n")
+        "    ground: {latitude_deg: -33.87, longitude_deg: 151.21}   # Sydney: the other side of the Earth\n\n"
+    ) + example[end:]
     path = tmp_path / "sydney.yaml"
     path.write_text(text)
     line = text[:text.index("    ground: {latitude_deg: -33.87")].count("\n") + 1
@@ -127,7 +131,7 @@ def test_judge_measures_the_error_to_where_the_ground_target_truly_is():
     iers.conf.auto_download = False
     mission = Mission.model_validate(_data())
     g = mission.flight_software.pointing.target_ground
-    t = np.linspace(0.0, 300.0, 7)
+    t = np.linspace(0.0, 140.0, 7)  # the initial target's dwell
     r_sc = np.array([[7000.0 * np.cos(0.001 * s), 7000.0 * np.sin(0.001 * s), 500.0] for s in t])
     loc = EarthLocation.from_geodetic(g.longitude_deg * u.deg, g.latitude_deg * u.deg, g.altitude_m * u.m)
     when = Time("2026-06-25T10:00:00", format="isot", scale="utc") + t * u.s
@@ -137,7 +141,7 @@ def test_judge_measures_the_error_to_where_the_ground_target_truly_is():
     err, _ = error_series(mission, {"t_s": t, "r_sc_N_km": r_sc, "q_NB": np.zeros((len(t), 4))}, y)
     assert np.max(err) < 0.01
     frozen = np.degrees(np.arccos(np.clip(y @ y[0], -1.0, 1.0)))
-    assert frozen[-1] > 5.0
+    assert frozen[-1] > 2.0
 
 
 @pytest.mark.parametrize("height_km", [None, 100.0])
