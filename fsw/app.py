@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from comms.bus.icd import WHEEL_FAULT_CMD_TIMEOUT, WHEEL_FAULT_DRIVE, WHEEL_FAULT_OVERSPEED
 from fsw import runtime
 from fsw.assumption_check import MAX_RESTARTS, AssumptionChecker
 from fsw.command_handlers import CommandHandlers
@@ -40,9 +41,9 @@ REACHED_RATE_DEG_S = 0.01
 REACHED_DWELL_S = 5.0
 _NAN6, _ZERO6 = [math.nan] * 6, [0.0] * 6  # fillers of the GNC packet's six zone and wheel slots
 _BLIND_SOURCES = ("NONE", "SUN", "MOON", "RATE")  # the star tracker's blind_source codes 0-3
-# RWn_STATUS fault bits (config/icd/keepout.dbc): 1 overspeed, 2 command timeout, 4 drive fault.
-WHEEL_OVERSPEED = 0x01
-WHEEL_FAULT_MASK = 0x02 | 0x04
+# RWn_STATUS fault bits (the ICD's): overspeed is a monitor's business; a command timeout or drive fault isolates
+WHEEL_OVERSPEED = WHEEL_FAULT_OVERSPEED
+WHEEL_FAULT_MASK = WHEEL_FAULT_CMD_TIMEOUT | WHEEL_FAULT_DRIVE
 
 
 class _NullTelemetry:

@@ -460,10 +460,7 @@ class WorldBatch:
         """What ``advance_sampled`` does before drawing the period's normals and calling the kernel (the
         ephemeris table's reach, the step coefficients, the outputs, the clock), with the kernel's arguments
         (``_period_kernel_args``, dt and sub-steps set) returned."""
-        eph = self.ephemeris
-        t_last = self._t + J * dt_s  # the ephemeris table's reach: a bound, the kernel accumulates exactly
-        if t_last + dt_s >= eph.t_end_s or self._t < eph.t_start_s:
-            eph.ensure(self._t, t_last + dt_s)
+        self._reach(dt_s, J)
         M = self.n_runs
         dt_sub = dt_s / n_sub if n_sub else 0.0
         if dt_sub != self._coef_dt:
@@ -473,25 +470,31 @@ class WorldBatch:
             self._period_out = (np.zeros((J, M, 3)), np.zeros((J, M), dtype=np.bool_), np.zeros((J, M, 4)),
                                 np.zeros((J, M), dtype=np.bool_), np.zeros((J, M), np.int64))
             self._t_end = np.zeros(J)
-        table = eph.table  # one read: consistent even if another thread extends the table
+        table = self.ephemeris.table  # one read: consistent even if another thread extends the table
         args = self._kernel_args
         if (args is None or args[_A_TABLE] is not table or args[_A_TABLE + 1] is not self._coef
                 or args[16] is not self._t_end):
             args = self._kernel_args = self._period_kernel_args(table)
         args[8], args[9] = dt_sub, n_sub
+        self._start_clock(dt_s)
+        return args
+
+    def _reach(self, dt_s: float, J: int) -> None:
+        """The ephemeris table reaches past the period's J steps (a bound: the kernels accumulate exactly)."""
+        eph = self.ephemeris
+        t_last = self._t + J * dt_s
+        if t_last + dt_s >= eph.t_end_s or self._t < eph.t_start_s:
+            eph.ensure(self._t, t_last + dt_s)
+
+    def _start_clock(self, dt_s: float) -> None:
         clock = self._clock
         clock[0], clock[1] = self._t, dt_s
         clock[3] = math.nan if self._t_last_imu is None else self._t_last_imu
-        return args
 
     def prepare_packed(self, dt_s: float, n_sub: int, J: int) -> tuple:
         """``prepare_period`` for ``period_packed`` (the state in its slots, not an argument list): the
         ephemeris table's reach, the step coefficients, dt_sub / n_sub and the clock. Returns the table."""
-        eph = self.ephemeris
-        t = self._t
-        t_last = t + J * dt_s  # the ephemeris table's reach: a bound, the kernel accumulates exactly
-        if t_last + dt_s >= eph.t_end_s or t < eph.t_start_s:
-            eph.ensure(t, t_last + dt_s)
+        self._reach(dt_s, J)
         if dt_s != self._packed_dt or n_sub != self._packed_n_sub:
             self._dt_sub = dt_s / n_sub if n_sub else 0.0
             self._scalars[WPS_DT_SUB] = self._dt_sub
@@ -499,15 +502,12 @@ class WorldBatch:
             self._packed_dt, self._packed_n_sub = dt_s, n_sub
         if self._dt_sub != self._coef_dt:
             self._set_coef(self._dt_sub)
-        table = eph.table  # one read: consistent even if another thread extends the table
+        table = self.ephemeris.table  # one read: consistent even if another thread extends the table
         if table is not self._packed_table:
             self._scalars[WPS_EPH_T0] = table[0]
-            self._scalars[WPS_EPH_H] = eph.node_spacing_s
+            self._scalars[WPS_EPH_H] = self.ephemeris.node_spacing_s
             self._packed_table = table
-        clock = self._clock
-        clock[0] = t
-        clock[1] = dt_s
-        clock[3] = math.nan if self._t_last_imu is None else self._t_last_imu
+        self._start_clock(dt_s)
         return table
 
     def finish_packed(self, done: int, J: int, u_seq: np.ndarray) -> None:
