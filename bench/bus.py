@@ -40,7 +40,7 @@ def frame_bits_nominal(dlc: int) -> int:
 
 
 def bus_load(n_wheels: int, gnc_hz: float = 10.0, imu_hz: float = 100.0, st_hz: float = 10.0,
-             door: bool = False) -> dict:
+             door: bool = False, magnetic: bool = False) -> dict:
     from comms.bus import Icd
 
     icd = Icd()
@@ -51,6 +51,9 @@ def bus_load(n_wheels: int, gnc_hz: float = 10.0, imu_hz: float = 100.0, st_hz: 
         per_cycle[f"RW{i}_STATUS"] = 1.0
     if door:  # an aperture door: its command and its status, once per GNC cycle each
         per_cycle["DOOR_CMD"] = per_cycle["DOOR_STATUS"] = 1.0
+    if magnetic:  # magnetometer, sun sensors and rods: one sample each, the rods' command and status per cycle
+        for name in ("MAG_FIELD", "CSS_CURRENTS", "MTQ_COMMAND", "MTQ_STATUS"):
+            per_cycle[name] = 1.0
     per_cycle["FSW_HEARTBEAT"] = (1.0 / icd.spec("FSW_HEARTBEAT").cycle_time_s) / gnc_hz
     rows = []
     total_worst = total_nominal = 0.0
@@ -61,7 +64,7 @@ def bus_load(n_wheels: int, gnc_hz: float = 10.0, imu_hz: float = 100.0, st_hz: 
         total_nominal += count * frame_bits_nominal(dlc)
         rows.append({"message": name, "id": f"0x{icd.spec(name).frame_id:03X}", "dlc": dlc, "per_cycle": count,
                      "bits_per_frame_worst": frame_bits_worst(dlc), "bits_per_cycle_worst": worst})
-    return {"n_wheels": n_wheels, "door": door, "gnc_hz": gnc_hz, "imu_hz": imu_hz, "st_hz": st_hz, "rows": rows,
+    return {"n_wheels": n_wheels, "door": door, "magnetic": magnetic, "gnc_hz": gnc_hz, "imu_hz": imu_hz, "st_hz": st_hz, "rows": rows,
             "bits_per_cycle_worst": total_worst, "bits_per_cycle_nominal": total_nominal,
             "load_worst_pct": 100.0 * total_worst * gnc_hz / BITRATE,
             "load_nominal_pct": 100.0 * total_nominal * gnc_hz / BITRATE}
@@ -334,7 +337,8 @@ def main() -> int:
 
     n_lat, n_thr, ticks, n_fuzz = (500, 5000, 100, 100_000) if args.quick else (2000, 20000, 300, 200_000)
     results: dict = {"date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "host": os.uname().nodename}
-    results["bus_load"] = [bus_load(6), bus_load(4), bus_load(6, door=True), bus_load(4, door=True)]
+    results["bus_load"] = [bus_load(6), bus_load(4), bus_load(6, door=True), bus_load(4, door=True),
+                           bus_load(6, door=True, magnetic=True), bus_load(4, door=True, magnetic=True)]
     from comms.bus.transport import random_udp_endpoint
 
     group, port = random_udp_endpoint()
@@ -364,7 +368,8 @@ def main() -> int:
 def print_report(r: dict) -> None:
     for load in r["bus_load"]:
         print(f"\nBus load, one GNC cycle ({load['gnc_hz']:g} Hz GNC, {load['imu_hz']:g} Hz IMU, "
-              f"{load['st_hz']:g} Hz star tracker, {load['n_wheels']} wheels{', door' if load.get('door') else ''}), "
+              f"{load['st_hz']:g} Hz star tracker, {load['n_wheels']} wheels{', door' if load.get('door') else ''}"
+              f"{', magnetometer, sun sensors, rods' if load.get('magnetic') else ''}), "
               "classic CAN 1 Mbit/s, "
               "worst-case stuffing")
         print(f"  {'message':<14}{'id':>6}{'dlc':>5}{'per cycle':>11}{'bits/frame':>12}{'bits/cycle':>12}")

@@ -12,7 +12,8 @@ import pytest
 from comms.bus.icd import DEFAULT_DBC_PATH, E2ESender, Icd, IcdError
 
 CONTRACT_MESSAGES = {"SYNC", "IMU_RATE", "ST_QUAT_A", "ST_QUAT_B", "FSW_HEARTBEAT", "CYCLE_DONE"} | {
-    f"RW{i}_{kind}" for i in range(1, 7) for kind in ("CMD", "STATUS")} | {"DOOR_CMD", "DOOR_STATUS"}
+    f"RW{i}_{kind}" for i in range(1, 7) for kind in ("CMD", "STATUS")} | {"DOOR_CMD", "DOOR_STATUS"} | {
+    "MAG_FIELD", "CSS_CURRENTS", "MTQ_COMMAND", "MTQ_STATUS"}
 
 
 @pytest.fixture(scope="module")
@@ -36,6 +37,28 @@ def test_sync_has_highest_priority_and_commands_beat_sensors(icd: Icd) -> None:
     ids = {n: s.frame_id for n, s in icd.messages.items()}
     assert ids["SYNC"] == min(ids.values())
     assert max(ids[f"RW{i}_CMD"] for i in range(1, 7)) < ids["IMU_RATE"]
+
+
+def test_magnetic_and_sun_sensor_frames_cover_their_devices(icd: Icd) -> None:
+    """The magnetometer frame holds the +-100 uT full scale at a resolution below its truth model's
+    typical noise; the rods' frames hold the default saturation; six cells fit the sun sensor frame;
+    the new devices' frames rank among their kind (commands before sensors, sensors before statuses)."""
+    from hil_sim.world.magnetic_devices import MagnetometerParams, MagnetorquerParams
+    from hil_sim.world.sun_sensors import SunSensorParams
+
+    full_scale_uT = 1e6 * MagnetometerParams().full_scale_T
+    assert icd.signal_range("MAG_FIELD", "b_x")[1] >= full_scale_uT
+    assert icd.resolution("MAG_FIELD", "b_x") * 1e-6 < 20e-9  # below 20 nT, the low end of magnetometer noise
+    assert icd.signal_range("MTQ_COMMAND", "dipole_1")[1] >= max(MagnetorquerParams().max_dipole_Am2)
+    assert len([s for s in icd.spec("CSS_CURRENTS").signals if s.startswith("cell_")]) == len(
+        SunSensorParams().normals_B)
+    assert icd.signal_range("CSS_CURRENTS", "cell_1")[1] >= SunSensorParams().full_scale
+    ids = {n: s.frame_id for n, s in icd.messages.items()}
+    assert ids["MTQ_COMMAND"] < ids["IMU_RATE"] < ids["MAG_FIELD"] < ids["RW1_STATUS"] < ids["MTQ_STATUS"]
+    sender = E2ESender(icd)
+    row = {"b_x": -100.0, "b_y": 12.345, "b_z": 100.0, "valid": 1}
+    name, back = icd.decode(sender.frame("MAG_FIELD", row))
+    assert name == "MAG_FIELD" and back["b_y"] == pytest.approx(12.345, abs=0.0025)
 
 
 def test_every_signal_comment_states_its_resolution(icd: Icd) -> None:
