@@ -2,7 +2,7 @@
 limb and each keep-out zone are, and when each target is free of every zone, for picking targets.
 
 The geometry is the validator's own (`hil_sim.mission.physics_checks`): the onboard ephemeris
-(`fsw.guidance.SkyEphemeris`), the zones built by `physics_checks.SkyZones` as the flight software builds
+(`gnc.sky_ephemeris.SkyEphemeris`), the zones built by `physics_checks.SkyZones` as the flight software builds
 them (physical, and inflated by the law margin plus the rebuild tolerance), the schedule of targets
 `physics_checks.schedule` and the signed margin `physics_checks.signed_margin_deg`. A target is *free* at
 a time when it lies outside every inflated zone: exactly the test by which `keepout config check` rejects

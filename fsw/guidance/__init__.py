@@ -19,7 +19,7 @@ Where each behaviour lives (one module per concern):
 
 * `fsw.guidance.core`: `Guidance`, the mode switch, telecommanded targets and gains, the assumption-check
   hand-over; `step` runs once per GNC cycle and calls the active mode;
-* `fsw.guidance.ephemeris`: `SkyEphemeris`, the onboard Sun, Moon and Earth directions;
+* `gnc.sky_ephemeris`: `SkyEphemeris`, the onboard Sun, Moon and Earth directions (re-exported here);
 * `fsw.guidance.zone_merging`: `ZoneGeometry` and `merge_zones`, close zones merged into one for the law,
   the admissible eps, the substitute (retreat) target;
 * `fsw.guidance.pointing`: POINTING on S^2, the sky zones rebuilt as they move, margins, roll;
@@ -73,7 +73,7 @@ from __future__ import annotations
 
 from fsw.guidance.common import GuidanceOutput, d_s_to_deg, signed_margin_deg
 from fsw.guidance.core import Guidance
-from fsw.guidance.ephemeris import EPHEMERIS_NODE_S, SkyEphemeris
+from gnc.sky_ephemeris import EPHEMERIS_NODE_S, SkyEphemeris
 from fsw.guidance.pointing import LAW_REBUILD_TRIGGER_DEG, PHYS_REBUILD_TOL_DEG, ZONE_REBUILD_TOL_DEG
 from fsw.guidance.zone_merging import ZoneGeometry, merge_zones
 

@@ -13,7 +13,7 @@ from fsw.assumption_check import CheckResult
 from fsw.guidance._kernels import FP_WIDTH
 from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _saturate, _unit, signed_margin_deg
 from fsw.guidance.edge_rule import law_eps
-from fsw.guidance.ephemeris import SkyEphemeris
+from gnc.sky_ephemeris import SkyEphemeris
 from fsw.guidance.path_following import PathFollowing
 from fsw.guidance.path_planning import PathFollower
 from fsw.guidance.pointing import ZONE_REBUILD_TOL_DEG, PointingGuidance, _SkySlot, _warm_batch_kernels

@@ -30,7 +30,7 @@ from fsw.guidance.common import (
     _NAN3, _NAN4, GuidanceOutput, _angle_deg, _make_star_law, signed_margin_deg,
 )
 from fsw.guidance.edge_rule import TARGET_IN_LAYER
-from fsw.guidance.ephemeris import EPHEMERIS_NODE_S
+from gnc.sky_ephemeris import EPHEMERIS_NODE_S
 from fsw.guidance.watchdog import MIN_ERROR_DEG, RATE_FRACTION
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones

@@ -48,7 +48,7 @@ class SkyModel:
     """Zone outlines around the moving Sun/Moon/Earth directions, from the run's flight-software config.
 
     The Sun and Moon come from telemetry (the flight software's own ephemeris); the Earth direction is the
-    same onboard orbit model the flight software uses (``fsw.guidance.SkyEphemeris``), evaluated at the
+    same onboard orbit model the flight software uses (``gnc.sky_ephemeris.SkyEphemeris``), evaluated at the
     packet's onboard time.
     """
 
@@ -59,7 +59,7 @@ class SkyModel:
         self.ephemeris = None
         if cfg is None:
             return
-        from fsw.guidance import SkyEphemeris
+        from gnc.sky_ephemeris import SkyEphemeris
 
         self.ephemeris = SkyEphemeris(cfg)
         phi = np.linspace(0.0, 2.0 * math.pi, ZONE_OUTLINE_POINTS, endpoint=False)

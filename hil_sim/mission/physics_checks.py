@@ -11,7 +11,7 @@ the whole run, because the Sun, Moon and Earth zones move:
 * the paper's Assumption 1 (zones pairwise at least 2 delta apart) and the admissible eps interval
   (0, min(eps_bar, 1 - cos delta)) at every sampled time, for the zones as the flight software flies
   them: inflated by ``law.margin_deg`` and merged by its own `fsw.guidance.ZoneGeometry.merge` when
-  closer than ``law.merge_gap_deg``, with the onboard ephemeris (`fsw.guidance.SkyEphemeris`); a close
+  closer than ``law.merge_gap_deg``, with the onboard ephemeris (`gnc.sky_ephemeris.SkyEphemeris`); a close
   pair it cannot merge (the target between them) is an error;
 * kappa <= kappa_bar (StarShapedLaw: an undesired stable equilibrium may exist);
 * wheels too weak for the commanded rate limit: the angular acceleration they can give about the worst
@@ -177,7 +177,7 @@ def schedule(mission: "Mission") -> list[Segment]:
     """Piecewise-constant (mode, target) over the run from the initial config and the timeline."""
     from hil_sim.mission.model import SetModeCommand, SetTargetCommand
 
-    from fsw.guidance import SkyEphemeris
+    from gnc.sky_ephemeris import SkyEphemeris
 
     fsw = mission.flight_software
     mode = fsw.initial_mode
@@ -265,7 +265,8 @@ class SkyZones:
     """
 
     def __init__(self, mission: "Mission"):
-        from fsw.guidance import ZONE_REBUILD_TOL_DEG, SkyEphemeris
+        from fsw.guidance import ZONE_REBUILD_TOL_DEG
+        from gnc.sky_ephemeris import SkyEphemeris
         from gnc import sky_zones
 
         fsw = mission.flight_software
@@ -777,7 +778,7 @@ def _check_ground_visibility(mission, segments: list[Segment], report) -> None:
     """A ground target must rise above its ``min_elevation_deg`` (0: its horizon) at some time of its dwell
     in POINTING, seen from the onboard orbit; otherwise the instrument would stare into the Earth's limb or
     beyond. An error at the target's key, with the time it next rises that high."""
-    from fsw.guidance import SkyEphemeris
+    from gnc.sky_ephemeris import SkyEphemeris
 
     ephemeris = SkyEphemeris(mission.flight_software)
     dwells: dict[str, list[Segment]] = {}

@@ -612,7 +612,7 @@ def test_safe_aims_back_at_the_commanded_target_when_pointing_resumes() -> None:
 def test_ephemeris_nodes_evaluated_in_blocks_are_each_node_s_own_numbers() -> None:
     """`SkyEphemeris._geocentric` evaluates the series for a block of nodes at once: every node, in any
     order of access (forwards as a run goes, backwards, jumps), is bit for bit the single evaluation."""
-    from fsw.guidance.ephemeris import EPHEMERIS_BLOCK_NODES, EPHEMERIS_NODE_S, SkyEphemeris
+    from gnc.sky_ephemeris import EPHEMERIS_BLOCK_NODES, EPHEMERIS_NODE_S, SkyEphemeris
     from gnc.ephemeris import moon_position_N_km, sun_position_N_km
 
     rng = np.random.default_rng(17)

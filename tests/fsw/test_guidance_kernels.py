@@ -7,7 +7,8 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from fsw.guidance._kernels import aim_index_nb, boresight_nb, pointing_command_nb, sky_directions_nb
+from fsw.guidance._kernels import aim_index_nb, boresight_nb, pointing_command_nb
+from gnc._sky_ephemeris_nb import sky_directions_nb
 from fsw.guidance.common import _saturate
 from gnc.attitude import pointing_rate_command_nb
 

@@ -86,8 +86,8 @@ def _imported_modules(package: str, top: str) -> dict[str, set[str]]:
 # What ground and the simulator may still take from the flight software, each for one reason. The contract
 # they share (bus ICD and codec, TM/TC codecs, dictionary, link security) is comms; nothing else of fsw.
 GROUND_FROM_FSW = {
-    "fsw.config": "the run's flight configuration: zones and wheels to name the console's series, ports",
-    "fsw.guidance": "the onboard sky ephemeris, so the console draws the zones where the flight software sees them",
+    "fsw.config": "type annotations only (TYPE_CHECKING): the command line hands the console the run's flight "
+                  "configuration, whose zones and wheels name its series",
 }
 SIMULATOR_FROM_FSW = {
     "fsw.config": "the mission's flight-software section is validated by the flight's own models",
@@ -113,3 +113,25 @@ def test_ground_and_simulator_take_only_the_contract_and_named_parts_of_fsw(pack
              if not any(m == a or m.startswith(a + ".") for a in allowed)}
     assert not stray, f"{package} reaches into flight internals: {stray}"
     assert _imported_modules(package, "comms"), f"{package} takes nothing from comms: the scan is broken"
+
+
+def _runtime_imports_of(package: str, prefix: str) -> list[str]:
+    """Files of ``package`` that import ``prefix`` when they run (imports under ``if TYPE_CHECKING:`` left out)."""
+    found = []
+    for path in sorted((ROOT / package).rglob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        typing_only = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
+                       and "TYPE_CHECKING" in ast.unparse(node.test) for n in ast.walk(node)}
+        for node in ast.walk(tree):
+            if id(node) in typing_only:
+                continue
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module else [])
+            if any(n == prefix or n.startswith(prefix + ".") for n in names):
+                found.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    return found
+
+
+def test_the_ground_runs_without_the_flight_software() -> None:
+    assert not _runtime_imports_of("ground", "fsw"), _runtime_imports_of("ground", "fsw")
+    assert _runtime_imports_of("hil_sim", "fsw"), "the simulator builds the flight software: the scan is broken"

@@ -9,8 +9,10 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 from rich.console import Console
 
+from keepout_config import config_path
 from comms.dictionary import DICTIONARY, GNC_APID, HK_APID, LimitState
 from ground.archive import (
     DECODED_ARCHIVE,
@@ -218,9 +220,11 @@ def test_send_takes_the_telecommand_address_and_key_from_the_mission_config(tmp_
     dispatcher = CommandDispatcher(DICTIONARY, None, "127.0.0.1", 0, security=uplink_receiver(key))
     calls: list[str] = []
     dispatcher.register("NOOP", lambda: calls.append("NOOP"))
-    mission = tmp_path / "mission.yaml"
-    mission.write_text("flight_software:\n  tmtc:\n    telecommand_bind_host: 127.0.0.1\n"
-                       f"    telecommand_port: {dispatcher.address[1]}\n    security: {{key_file: link.key}}\n")
+    mission = tmp_path / "mission.yaml"  # a whole mission: the ground reads it with the one mission reader
+    data = yaml.safe_load(config_path("missions/demo-pointing.yaml").read_text())
+    data["flight_software"]["tmtc"] = {"telecommand_bind_host": "127.0.0.1", "telecommand_port": dispatcher.address[1],
+                                       "security": {"key_file": "link.key"}}
+    mission.write_text(yaml.safe_dump(data))
     assert main(["ground", "--config", str(mission), "send", "NOOP", "--no-wait"]) == 0
     deadline = time.monotonic() + 3.0
     while not calls and time.monotonic() < deadline:

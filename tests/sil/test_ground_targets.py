@@ -29,7 +29,7 @@ def _findings(report, check: str, level: str):
 
 def _elevation_deg(mission: Mission, ground: dict, t_s: float) -> float:
     """Elevation from the truth orbit (circular here), by gnc.earth (itself checked against astropy)."""
-    from fsw.guidance import SkyEphemeris
+    from gnc.sky_ephemeris import SkyEphemeris
     from gnc.earth import earth_fixed_to_inertial, elevation_deg
 
     eph = SkyEphemeris(mission.flight_software)
@@ -93,7 +93,7 @@ def test_schedule_and_zone_checks_follow_the_moving_target():
     mission = Mission.model_validate(data)
     segments = schedule(mission)
     assert [s.earth[0] for s in segments] == ["ground", "nadir"]
-    from fsw.guidance import SkyEphemeris
+    from gnc.sky_ephemeris import SkyEphemeris
 
     eph = SkyEphemeris(mission.flight_software)
     r0 = eph.position_N_km(200.0)

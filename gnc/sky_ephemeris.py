@@ -1,13 +1,17 @@
 """Onboard sky ephemeris: the Sun, Moon and Earth directions seen from the spacecraft, from the
 analytic series (`gnc.ephemeris`) and the configured circular orbit; and the directions of targets on the
-rotating Earth (nadir, a ground point: `gnc.earth`)."""
+rotating Earth (nadir, a ground point: `gnc.earth`).
+
+The flight software's guidance steers with it; the ground console and the mission check evaluate the same
+model, so that all three see the zones where the flight software sees them. ``cfg`` is the flight software's
+configuration (`fsw.config.FswConfig`: its epoch, orbit knowledge and pointing zones)."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
-from fsw.guidance._kernels import sky_directions_nb
+from gnc._sky_ephemeris_nb import sky_directions_nb
 from gnc.earth import direction_to_point_N, earth_fixed_to_inertial, geodetic_to_earth_fixed_km, nadir_N
 from gnc.ephemeris import EARTH_RADIUS_KM, julian_date, julian_date_tdb, moon_position_N_km, sun_position_N_km
 
