@@ -20,10 +20,12 @@ from typing import Annotated, Any, Literal, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from comms.bus.transport import CAN_BITRATE_RANGE_BPS
+from comms.dictionary import MAX_WHEELS
+
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Quat = Annotated[list[float], Field(min_length=4, max_length=4)]
 
-MAX_WHEELS = 6  # RW1..RW6: the wheel frames of the ICD (config/icd/keepout.dbc; a test checks it)
 
 
 class _Strict(BaseModel):
@@ -545,7 +547,7 @@ class BusConfig(_Strict):
     ``bus_authentication``)."""
 
     spec: str = Field("auto", min_length=1, description="Bus spec: auto | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL] | INTERFACE:CHANNEL[,KEY=VALUE...] (any python-can interface).")
-    bitrate_bps: int | None = Field(None, ge=10000, le=1000000, description="CAN bit rate a hardware interface is opened with [bit/s]; none: the interface's own.")
+    bitrate_bps: int | None = Field(None, ge=CAN_BITRATE_RANGE_BPS[0], le=CAN_BITRATE_RANGE_BPS[1], description="CAN bit rate a hardware interface is opened with [bit/s]; none: the interface's own.")
     authentication: bool = Field(False, description="Every batch of frames carries a SecOC authenticator keyed from the link key.")
 
 

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, Union
 import numpy as np
 from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from comms.bus.transport import CAN_BITRATE_RANGE_BPS
 from comms.dictionary import MAX_WHEELS
 from fsw.config import FswConfig, GroundTargetConfig
 from comms.dictionary import FDIR_MONITORS
@@ -402,7 +403,7 @@ class Mission(_Model):
                      "udp_multicast) | socketcan[:IFACE] | udp_multicast[:GROUP:PORT] | virtual[:CHANNEL] | "
                      "INTERFACE:CHANNEL[,KEY=VALUE...] for a python-can hardware interface (pcan:PCAN_USBBUS1, "
                      "kvaser:0, slcan:/dev/ttyACM0, ...)")
-    bus_bitrate_bps: int = Field(500000, ge=10000, le=1000000, description="CAN bit rate [bit/s] a hardware "
+    bus_bitrate_bps: int = Field(500000, ge=CAN_BITRATE_RANGE_BPS[0], le=CAN_BITRATE_RANGE_BPS[1], description="CAN bit rate [bit/s] a hardware "
                                  "interface (pcan, kvaser, vector, slcan, ...) is opened with; SocketCAN takes the "
                                  "kernel's setting, the loopback transports have none")
     bus_authentication: bool = Field(
