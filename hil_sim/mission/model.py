@@ -28,6 +28,7 @@ from comms.dictionary import FDIR_MONITORS
 from gnc.ephemeris import EARTH_RADIUS_KM
 from hil_sim.devices.faults import DOOR_MESSAGES, WHEEL_MESSAGE
 from hil_sim.mission.knowledge import KNOWLEDGE_SOURCES, knowledge_from_truth
+from hil_sim.world.sun_sensors import CUBE_FACES_B
 from keepout_config import config_path
 
 if TYPE_CHECKING:
@@ -210,6 +211,74 @@ class DoorTruth(_Model):
                                       "its position)")
 
 
+def _unit_normals(values: list[list[float]], what: str) -> list[list[float]]:
+    """Each row a unit vector within 1e-6 (a vector that is not one is a typing mistake, not a direction to
+    normalise), normalised exactly."""
+    out = []
+    for i, v in enumerate(values):
+        norm = math.sqrt(sum(x * x for x in v))
+        if abs(norm - 1.0) > 1e-6:
+            raise ValueError(f"{what} {i + 1} has norm {norm:.9g}; give a unit vector (norm within 1e-6 of 1), "
+                             "e.g. [1.0, 0.0, 0.0]")
+        out.append([x / norm for x in v])
+    return out
+
+
+class MagnetometerTruth(_Model):
+    """A three-axis magnetometer as built (maps onto hil_sim.world.magnetic_devices.MagnetometerParams). Node MAG:
+    MAG_FIELD every GNC tick."""
+
+    q_BS: UnitQuat = Field([1.0, 0.0, 0.0, 0.0], description="mounting: rotates sensor-frame vectors into body")
+    noise_std_T: float = Field(5e-8, ge=0, le=1e-5, description="1-sigma white noise per axis and sample [T] "
+                               "(small-satellite magnetometers: 20-100 nT)")
+    bias_S_T: bounded_vec3(1e-4) = Field([0.0, 0.0, 0.0], description="bias in sensor axes [T]")
+    resolution_T: float = Field(0.0, ge=0, le=1e-6, description="the sensor's own quantisation [T] (0: none; "
+                                "the bus carries 5 nT steps)")
+    full_scale_T: float = Field(1e-4, gt=0, le=1.6e-4, description="clipping range +-full_scale_T [T] "
+                                "(at most the bus's +-163.8 uT)")
+
+
+class SunSensorsTruth(_Model):
+    """Coarse sun sensor cells as built (maps onto hil_sim.world.sun_sensors.SunSensorParams). Node CSS:
+    CSS_CURRENTS every GNC tick."""
+
+    normals_B: list[Vec3] = Field([list(v) for v in CUBE_FACES_B], min_length=1, max_length=6, description="each cell's outward unit normal in "
+                                  "body axes (norm within 1e-6 of 1), 1 to 6 cells (default: one on each face "
+                                  "of a cube)")
+    field_of_view_half_angle_deg: float = Field(90.0, gt=0, le=90, description="a cell sees the Sun within "
+                                                "this angle of its normal [deg]")
+    full_scale_mA: float = Field(1.0, gt=0, le=2.5, description="a cell's output at normal incidence in full "
+                                 "Sun [mA] (the bus carries 0..2.55 mA)")
+    noise_std_mA: float = Field(0.005, ge=0, le=0.5, description="1-sigma white noise per cell and sample [mA]")
+
+    @field_validator("normals_B")
+    @classmethod
+    def _unit(cls, value: list[list[float]]) -> list[list[float]]:
+        return _unit_normals(value, "cell normal")
+
+
+class MagnetorquersTruth(_Model):
+    """Three magnetorquer rods as built (maps onto hil_sim.world.magnetic_devices.MagnetorquerParams). Node MTQ:
+    MTQ_COMMAND in, MTQ_STATUS out, every GNC tick; their torque m x B acts on the truth in the Earth's dipole
+    field (IGRF at the epoch)."""
+
+    axes_B: list[Vec3] = Field([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], min_length=3, max_length=3,
+                               description="each rod's unit axis in body axes (norm within 1e-6 of 1)")
+    max_dipole_Am2: list[Annotated[float, Field(gt=0, le=32)]] = Field(
+        [0.2, 0.2, 0.2], min_length=3, max_length=3, description="each rod's saturation [A m^2], > 0 (a CubeSat "
+        "rod ~0.2, a small satellite's ~10-30; the bus carries +-32.8 A m^2)")
+    magnetometer_coupling_T_per_Am2: list[bounded_vec3(1e-3)] = Field(
+        [[0.0] * 3] * 3, min_length=3, max_length=3, description="the rods' field at the magnetometer in body axes "
+        "[T per A m^2], column j for rod j (as measured on the built spacecraft; zero: none)")
+    cmd_timeout_s: float = Field(0.3, gt=0, le=60, description="the drive zeroes the rods after this long without "
+                                 "a valid MTQ_COMMAND [s]")
+
+    @field_validator("axes_B")
+    @classmethod
+    def _unit(cls, value: list[list[float]]) -> list[list[float]]:
+        return _unit_normals(value, "rod axis")
+
+
 class SpacecraftTruth(_Model):
     """The spacecraft as built (the flight software has its own, possibly imperfect, knowledge)."""
 
@@ -223,6 +292,12 @@ class SpacecraftTruth(_Model):
     disturbance: Disturbance = Field(default_factory=Disturbance)
     door: DoorTruth | None = Field(None, description="a protective aperture door in front of the instrument "
                                    "(absent: no door, nothing of it on the bus)")
+    magnetometer: MagnetometerTruth | None = Field(None, description="a three-axis magnetometer (absent: none, "
+                                                   "nothing of it on the bus)")
+    sun_sensors: SunSensorsTruth | None = Field(None, description="coarse sun sensor cells (absent: none, "
+                                                "nothing of them on the bus)")
+    magnetorquers: MagnetorquersTruth | None = Field(None, description="three magnetorquer rods (absent: none, "
+                                                     "nothing of them on the bus)")
     facets: list[Facet] = Field([], max_length=64, description="the outer surfaces, for the environment torques "
                                 "(disturbance.solar_radiation_pressure, aerodynamic_drag); none: no such torque can "
                                 "be computed")
@@ -700,9 +775,14 @@ def _geomagnetic(mission: Mission) -> dict[str, Any]:
     dipole = tuple(mission.spacecraft.disturbance.residual_dipole_B_Am2)
     if not any(dipole):
         return {}
+    return {"residual_dipole_B_Am2": dipole, **_field_coefficients(mission)}
+
+
+def _field_coefficients(mission: Mission) -> dict[str, Any]:
+    """The Earth's dipole at the epoch (IGRF, via hil_sim.world.geomagnetic) and its rotation angle at t = 0."""
     from hil_sim.world.geomagnetic import dipole_coefficients_T, earth_rotation_angle_rad
 
-    return {"residual_dipole_B_Am2": dipole, "geomagnetic_dipole_T": dipole_coefficients_T(mission.epoch_utc),
+    return {"geomagnetic_dipole_T": dipole_coefficients_T(mission.epoch_utc),
             "earth_rotation_angle_rad": earth_rotation_angle_rad(mission.epoch_utc)}
 
 
@@ -715,6 +795,36 @@ def door_params(mission: Mission) -> Any:
         return None
     return DoorParams(close_time_s=door.close_time_s, open_time_s=door.open_time_s,
                       initially_open=door.initially_open, close_on_silence_s=door.close_on_silence_s)
+
+
+def magnetic_device_params(mission: Mission) -> Any:
+    """The magnetometer, sun sensors and magnetorquers as built (hil_sim.devices.magnetic.MagneticParams), None
+    when the mission has none of them."""
+    from hil_sim.devices.magnetic import MagneticParams
+    from hil_sim.world.magnetic_devices import MagnetometerParams, MagnetorquerParams
+    from hil_sim.world.sun_sensors import SunSensorParams
+
+    sc = mission.spacecraft
+    if sc.magnetometer is None and sc.sun_sensors is None and sc.magnetorquers is None:
+        return None
+    mag = css = mtq = None
+    if sc.magnetometer is not None:
+        g = sc.magnetometer
+        mag = MagnetometerParams(q_BS=tuple(g.q_BS), noise_std_T=g.noise_std_T, bias_S_T=tuple(g.bias_S_T),
+                                 resolution_T=g.resolution_T, full_scale_T=g.full_scale_T)
+    if sc.sun_sensors is not None:
+        c = sc.sun_sensors
+        css = SunSensorParams(normals_B=tuple(tuple(n) for n in c.normals_B),
+                              field_of_view_half_angle_deg=c.field_of_view_half_angle_deg,
+                              full_scale=c.full_scale_mA, noise_std=c.noise_std_mA)
+    if sc.magnetorquers is not None:
+        r = sc.magnetorquers
+        mtq = MagnetorquerParams(axes_B=tuple(tuple(a) for a in r.axes_B), max_dipole_Am2=tuple(r.max_dipole_Am2),
+                                 magnetometer_coupling_T_per_Am2=tuple(
+                                     tuple(row) for row in r.magnetometer_coupling_T_per_Am2))
+    return MagneticParams(magnetometer=mag, sun_sensors=css, magnetorquers=mtq,
+                          mtq_cmd_timeout_s=sc.magnetorquers.cmd_timeout_s if mtq is not None else 0.3,
+                          **_field_coefficients(mission))
 
 
 def ra_dec_to_unit(ra_deg: float, dec_deg: float) -> np.ndarray:
