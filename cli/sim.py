@@ -115,7 +115,7 @@ def _run(args: argparse.Namespace) -> int:
     from comms.bus.transport import BusSpecError, BusUnavailableError, open_bus, resolve_spec
     from ground.commanding import CommandSender
     from hil_sim.sil.lockstep import Simulator
-    from hil_sim.mission.model import door_params, world_params
+    from hil_sim.mission.model import door_params, magnetic_device_params, world_params
     from hil_sim.sil.orchestrator import (CANDUMP_FILE, SIM_STATS_FILE, TRUTH_FILE, CandumpLog, MissionRejected, RunOptions,
                              Timeline, TruthRecorder, _plain, _run_dir, auth_stats, prepare)
     from hil_sim.world.world import World
@@ -147,7 +147,8 @@ def _run(args: argparse.Namespace) -> int:
     candump = CandumpLog(out / CANDUMP_FILE, info.channel if info.interface == "socketcan" else "can0")
     sim = Simulator(world, bus, Icd(), gnc_period_s=gnc_period, dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz,
                     faults=mission.faults, fault_seed=mission.seed, on_frame=candump,
-                    on_burst=candump.log_burst, door=door_params(mission))
+                    on_burst=candump.log_burst, door=door_params(mission),
+                    magnetic=magnetic_device_params(mission))
     n_ticks = int(round(mission.duration_s / gnc_period))
     recorder = TruthRecorder(n_ticks, len(mission.spacecraft.wheels), door=sim.devices.door)
     recorder.record(world, np.zeros(len(mission.spacecraft.wheels)), True)

@@ -171,7 +171,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
     from comms.bus import open_bus
     from fsw.telecommand import CommandDispatcher
     from hil_sim.sil.lockstep import Simulator
-    from hil_sim.mission.model import door_params, world_params
+    from hil_sim.mission.model import door_params, magnetic_device_params, world_params
     from hil_sim.sil.orchestrator import Timeline
     from hil_sim.world.world import World
 
@@ -185,7 +185,7 @@ def run_fast(mission: Any, seed: int, mode: str = "fast", paths: Sequence[str] =
     fsw = None
     try:
         sim = Simulator(world, sim_bus, icd, gnc_period_s=cfg.gnc_period_s, faults=mission.faults,
-                        fault_seed=seed, door=door_params(mission))
+                        fault_seed=seed, door=door_params(mission), magnetic=magnetic_device_params(mission))
         telemetry = _EventRecorder()
         dispatcher = CommandDispatcher(telemetry=None, port=None)
         # The flight software's clock is the simulation clock: a cycle's execution time on this (shared)

@@ -770,12 +770,13 @@ def world_params(mission: Mission) -> "WorldParams":
 
 
 def _geomagnetic(mission: Mission) -> dict[str, Any]:
-    """The residual dipole and, when it is not zero, the Earth's dipole field at the epoch (IGRF, via
-    hil_sim.world.geomagnetic) for DisturbanceParams."""
+    """The residual dipole and, when it is not zero or rods are fitted, the Earth's dipole field at the epoch
+    (IGRF, via hil_sim.world.geomagnetic) for DisturbanceParams."""
     dipole = tuple(mission.spacecraft.disturbance.residual_dipole_B_Am2)
-    if not any(dipole):
+    rods = mission.spacecraft.magnetorquers is not None  # their torque goes through the dipole's row
+    if not any(dipole) and not rods:
         return {}
-    return {"residual_dipole_B_Am2": dipole, **_field_coefficients(mission)}
+    return {"residual_dipole_B_Am2": dipole, "dipole_torque": rods, **_field_coefficients(mission)}
 
 
 def _field_coefficients(mission: Mission) -> dict[str, Any]:

@@ -39,9 +39,11 @@ from comms.bus.transport import recv_burst, send_batch, send_burst
 from hil_sim.devices import kernels as dk
 from hil_sim.devices.kernels import apply_received
 from hil_sim.devices.nodes import Devices, DeviceTiming, WorldLike
+from hil_sim.devices.magnetic import MagneticNodes
+from hil_sim.world import environment as env
 from hil_sim.devices.faults import DOOR_FAULT_KINDS, FaultInjector, FaultSpec, WheelFailures, bus_faults
 
-SIM_NODES = ("SIM", "IMU", "STR", "RW1", "RW2", "RW3", "RW4", "RW5", "RW6", "DOOR")
+SIM_NODES = ("SIM", "IMU", "STR", "RW1", "RW2", "RW3", "RW4", "RW5", "RW6", "DOOR", "MAG", "CSS", "MTQ")
 
 
 @dataclass
@@ -80,7 +82,7 @@ class Simulator:
                  cycle_done_timeout_s: float = 2.0, clock: Callable[[], float] = time.monotonic,
                  on_frame: Callable[[str, float, can.Message], None] | None = None,
                  on_burst: Callable[[str, float, FrameBurst, Iterable[int] | None], None] | None = None,
-                 door: Any = None) -> None:
+                 door: Any = None, magnetic: Any = None) -> None:
         self.world = world
         self.bus = bus
         self.icd = icd or Icd()
@@ -92,6 +94,7 @@ class Simulator:
         self.wheel_failures = WheelFailures(self.fault_specs)  # on the mechanism, at their time
         self.injector = FaultInjector(self.icd, bus_faults(self.fault_specs), seed=fault_seed)
         self._init_door()
+        self._init_magnetic(magnetic, fault_seed)
         self._faults = self.injector.faults  # (empty: the injector never acts, ``bool(injector)`` is False)
         self.cycle_done_timeout_s = cycle_done_timeout_s
         self.clock = clock
@@ -228,22 +231,55 @@ class Simulator:
             self._door_cmd_id = self.icd.spec("DOOR_CMD").frame_id
             self._door_open_col = self.icd.column("DOOR_CMD", "open")
 
-    def _door_rows(self, out: Any, idx: list, rows: list, t: float) -> Any:
-        """DOOR_STATUS appended to the tick's rows (``out`` of ``Devices.tick_rows`` with SYNC's
+    def _init_magnetic(self, magnetic: Any, seed: int) -> None:
+        """The magnetometer, sun sensors and rods (``magnetic``: hil_sim.devices.magnetic.MagneticParams; None:
+        none of them, nothing of them on the bus), and the residual dipole the rods' dipole adds to."""
+        self.magnetic = MagneticNodes(self.icd, magnetic, seed=seed) if magnetic is not None else None
+        self._residual_dipole_B = None
+        if self.magnetic is not None and magnetic.magnetorquers is not None:
+            b = self.world.batch
+            if b.B.shape[0] <= env.ENV_DIPOLE or not int(b.B[env.ENV_FLAGS, 0]) & 4:
+                raise ValueError("magnetorquers: the world's dipole torque is off (DisturbanceParams.dipole_torque)")
+            self._residual_dipole_B = b.B[env.ENV_DIPOLE:env.ENV_DIPOLE + 3, 0].copy()
+
+    def _apply_rods(self, t_s: float) -> None:
+        """The rods' dipole held from ``t_s`` on, added to the residual's row the dynamics' dipole torque reads."""
+        if self._residual_dipole_B is not None:
+            self.world.batch.B[env.ENV_DIPOLE:env.ENV_DIPOLE + 3, 0] = (self._residual_dipole_B
+                                                                        + self.magnetic.rods_dipole_B(t_s))
+
+    def _extra_rows(self, t: float) -> list[tuple[int, list]]:
+        """The optional devices' frames of the tick (the door's status, then the magnetic devices')."""
+        extra = [(self.door.status_m, self.door.status_row(t))] if self.door is not None else []
+        return extra + (self.magnetic.rows(self.world, t) if self.magnetic is not None else [])
+
+    def _append_device_rows(self, out: Any, idx: list, rows: list, t: float) -> Any:
+        """The optional devices' frames appended to the tick's rows (``out`` of ``Devices.tick_rows`` with SYNC's
         frames_following counted again, or the lists ``idx``/``rows``); returns ``out``."""
-        row = self.door.status_row(t)
+        extra = self._extra_rows(t)
         if out is None:
-            idx.append(self.door.status_m)
-            rows.append(row)
+            for m, row in extra:
+                idx.append(m)
+                rows.append(row)
             return None
         out_idx, out_rows, n = out
-        if n >= out_idx.shape[0]:
+        if n + len(extra) > out_idx.shape[0]:
             out_idx = np.concatenate([out_idx, np.zeros(8, dtype=out_idx.dtype)])
             out_rows = np.concatenate([out_rows, np.zeros((8, out_rows.shape[1]))])
-        out_idx[n] = self.door.status_m
-        out_rows[n] = row
-        out_rows[0, self._sync_cols[1]] = float(min(n, 255))
-        return out_idx, out_rows, n + 1
+        for m, row in extra:
+            out_idx[n] = m
+            out_rows[n] = row
+            n += 1
+        out_rows[0, self._sync_cols[1]] = float(min(n - 1, 255))
+        return out_idx, out_rows, n
+
+    def _magnetic_commands(self, ids: np.ndarray, status: np.ndarray, values: np.ndarray, first: int, end: int,
+                           t_s: float) -> None:
+        """The delivered MTQ_COMMAND frames among frames first..end-1 of a classified burst, in order."""
+        cols = self.magnetic.command_cols
+        for i in np.flatnonzero(ids[first:end] == self.magnetic.command_id).tolist():
+            if status[first + i] <= 1:
+                self.magnetic.on_command([values[first + i, c] for c in cols], t_s)
 
     def _door_commands(self, ids: np.ndarray, status: np.ndarray, values: np.ndarray, first: int, end: int,
                        t_s: float) -> None:
@@ -281,7 +317,7 @@ class Simulator:
         tick = self.tick & 0xFFFFFFFF
         if self.wheel_failures:
             self._fail_wheels(t)
-        if not self._faults and self.door is None:
+        if not self._faults and self.door is None and self.magnetic is None:
             # no fault to inject: SYNC first, then the device frames, made and encoded in one compiled call
             # where the world allows (alive counters are per message, so encoding SYNC with the others gives
             # the bytes it always had), one burst
@@ -300,8 +336,8 @@ class Simulator:
             idx, rows = self.devices.rows_due(t)
             status_idx, status_rows = self.devices.wheel_status_rows(self.world, t)
             idx, rows = idx + status_idx, rows + status_rows
-        if self.door is not None:
-            out = self._door_rows(out, idx if out is None else [], rows if out is None else [], t)
+        if self.door is not None or self.magnetic is not None:
+            out = self._append_device_rows(out, idx if out is None else [], rows if out is None else [], t)
         if self.injector and not self.injector.passes_through(t):
             # faults active now: the frames one by one through the injector (it edits, drops and adds)
             if out is None:
@@ -355,6 +391,7 @@ class Simulator:
             # not paced: the whole period in one compiled call (same numbers as the loop below)
             # _sub_t(j) for j = 0..n_sub: (t0 + k T) + j dt, the same sums (made in the compiled call)
             t_k = self.t_s
+            self._apply_rods(t_k)
             self.devices.step_period(self.world, self.dt_s, self.n_sub, t_k)
             if self.door is not None:
                 self.door.advance(t_k, t_k + self._j_dt_end)
@@ -365,6 +402,7 @@ class Simulator:
             if n_tally:
                 self._settle_tally(n_tally)
         else:
+            self._apply_rods(self._sub_t(0))
             for j in range(self.n_sub):
                 if paced is not None:
                     paced(j)
@@ -454,6 +492,8 @@ class Simulator:
         end = dk.receive_commands(burst.ids, burst.lengths, burst.data, t_s, k, *args)
         if self.door is not None:
             self._door_commands(burst.ids, self._rc_status, self._rc_values, 0, end, t_s)
+        if self.magnetic is not None:
+            self._magnetic_commands(burst.ids, self._rc_status, self._rc_values, 0, end, t_s)
         if self.on_burst is not None and end:
             self._log_rx(burst, self._rc_status[:end].tolist(), 0, end, t_s)
         wheel_cmds, n_tally, heartbeats, cycle_done, stale, done = rs.tolist()
@@ -516,6 +556,8 @@ class Simulator:
             # (a CYCLE_DONE returns to here, in order, for its tick)
             if self.door is not None:
                 self._door_commands(rx.burst.ids, rx.status, rx.values, first, end, t_s)
+            if self.magnetic is not None:
+                self._magnetic_commands(rx.burst.ids, rx.status, rx.values, first, end, t_s)
             counts = self._rx_counts
             i = first
             while i < end:
@@ -578,6 +620,8 @@ class Simulator:
             self.stats.heartbeats += 1
         elif self.door is not None and fid == self._door_cmd_id:
             self.door.on_command(row[self._door_open_col] >= 0.5, t_s)
+        elif self.magnetic is not None and fid == self.magnetic.command_id:
+            self.magnetic.on_command([row[c] for c in self.magnetic.command_cols], t_s)
 
     def _on_cycle_done(self, tick: int) -> None:
         self.stats.cycle_done += 1

@@ -722,7 +722,7 @@ def _build_simulator(run: _RunParts) -> None:
     from comms.bus.transport import BusUnavailableError, open_bus
     from ground.commanding import CommandSender, signing_sender_args
     from hil_sim.sil.lockstep import Simulator
-    from hil_sim.mission.model import door_params, world_params
+    from hil_sim.mission.model import door_params, magnetic_device_params, world_params
     from hil_sim.world.world import World
 
     mission, info = run.mission, run.bus_info
@@ -743,7 +743,8 @@ def _build_simulator(run: _RunParts) -> None:
     run.sim = Simulator(run.world, run.bus, Icd(), gnc_period_s=gnc_period,
                         dynamics_dt_s=1.0 / mission.simulation.dynamics_rate_hz, faults=mission.faults,
                         fault_seed=mission.seed, cycle_done_timeout_s=run.options.cycle_done_timeout_s,
-                        on_frame=run.candump, on_burst=run.candump.log_burst, door=door_params(mission))
+                        on_frame=run.candump, on_burst=run.candump.log_burst, door=door_params(mission),
+                        magnetic=magnetic_device_params(mission))
     run.n_ticks = int(round(mission.duration_s / gnc_period))
     run.recorder = TruthRecorder(run.n_ticks, len(mission.spacecraft.wheels), door=run.sim.devices.door)
     run.recorder.record(run.world, np.zeros(len(mission.spacecraft.wheels)), True)

@@ -68,7 +68,8 @@ def effects_on(disturbance: Any) -> tuple[bool, bool, bool]:
     """Which of EFFECTS a disturbance (the mission's, or hil_sim.world.params.DisturbanceParams: the same names)
     turns on."""
     d = disturbance
-    return d.solar_radiation_pressure, d.aerodynamic_drag, any(d.residual_dipole_B_Am2)
+    return (d.solar_radiation_pressure, d.aerodynamic_drag,
+            any(d.residual_dipole_B_Am2) or bool(getattr(d, "dipole_torque", False)))
 
 
 def environment_effects(mission: Any) -> list[str]:

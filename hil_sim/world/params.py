@@ -136,6 +136,9 @@ class DisturbanceParams:
     residual_dipole_B_Am2: tuple[float, float, float] = (0.0, 0.0, 0.0)
     geomagnetic_dipole_T: tuple[float, float, float] = (0.0, 0.0, 0.0)
     earth_rotation_angle_rad: float = 0.0
+    # The dipole torque on even with a zero residual: magnetorquer rods are fitted, and the simulator adds their
+    # dipole to the residual's row each GNC period (hil_sim.devices.magnetic).
+    dipole_torque: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "constant_B_Nm", _vec(self.constant_B_Nm, 3, "disturbance.constant_B_Nm"))
@@ -148,7 +151,7 @@ class DisturbanceParams:
         object.__setattr__(self, name, _nonneg(getattr(self, name), f"disturbance.{name}"))
         for name in ("residual_dipole_B_Am2", "geomagnetic_dipole_T"):
             object.__setattr__(self, name, _vec(getattr(self, name), 3, f"disturbance.{name}"))
-        if any(self.residual_dipole_B_Am2) and not any(self.geomagnetic_dipole_T):
+        if (any(self.residual_dipole_B_Am2) or self.dipole_torque) and not any(self.geomagnetic_dipole_T):
             raise ValueError("disturbance.geomagnetic_dipole_T: a residual dipole needs the Earth's field "
                              "(hil_sim.world.geomagnetic.dipole_coefficients_T at the epoch)")
         if not math.isfinite(self.earth_rotation_angle_rad):
