@@ -441,42 +441,41 @@ class StarZone(Zone):
         return self._radial.nearest(arr)
 
     def signed_separation(self, x: ArrayLike) -> float:
-        arr = self._check_x(x)
-        if self.shape == "superellipsoid":
-            return _se.signed_separation_one(arr, *self._se_args, False)
-        if self.shape == "polygon":
-            return _poly.signed_separation_one(arr, *self._poly_args, False)
-        d = self._nearest_and_distance(arr)[0]
-        return -d if self.contains(arr) else d
+        return self._separation_one(self._check_x(x), clamp=False)
 
     def separation(self, x: ArrayLike) -> float:
-        arr = self._check_x(x)
+        return self._separation_one(self._check_x(x), clamp=True)
+
+    def _separation_one(self, arr: NDArray[np.float64], clamp: bool) -> float:
+        """Signed separation of one checked x (negative inside); clamp=True gives 0 inside, the d_s the
+        law uses. Inside a zone the boundary search is skipped when clamped, since its answer is unused."""
         if self.shape == "superellipsoid":
-            return _se.signed_separation_one(arr, *self._se_args, True)
+            return _se.signed_separation_one(arr, *self._se_args, clamp)
         if self.shape == "polygon":
-            return _poly.signed_separation_one(arr, *self._poly_args, True)
-        if self.contains(arr):
+            return _poly.signed_separation_one(arr, *self._poly_args, clamp)
+        inside = self.contains(arr)
+        if inside and clamp:
             return 0.0
-        return self._nearest_and_distance(arr)[0]
+        d = self._nearest_and_distance(arr)[0]
+        return -d if inside else d
 
     def nearest(self, x: ArrayLike) -> NDArray[np.float64]:
         return self._nearest_and_distance(self._check_x(x))[1]
 
     def signed_separation_batch(self, X: ArrayLike) -> NDArray[np.float64]:
-        arr = self._check_batch(X)
-        if self.shape == "superellipsoid":
-            return _se.signed_separation_batch(arr, *self._se_args, False)
-        if self.shape == "polygon":
-            return _poly.signed_separation_batch(arr, *self._poly_args, False)
-        return np.array([self.signed_separation(row) for row in arr])
+        return self._separation_batch(self._check_batch(X), clamp=False)
 
     def separation_batch(self, X: ArrayLike) -> NDArray[np.float64]:
-        arr = self._check_batch(X)
+        return self._separation_batch(self._check_batch(X), clamp=True)
+
+    def _separation_batch(self, arr: NDArray[np.float64], clamp: bool) -> NDArray[np.float64]:
         if self.shape == "superellipsoid":
-            return _se.signed_separation_batch(arr, *self._se_args, True)
+            return _se.signed_separation_batch(arr, *self._se_args, clamp)
         if self.shape == "polygon":
-            return _poly.signed_separation_batch(arr, *self._poly_args, True)
-        return np.maximum(0.0, self.signed_separation_batch(arr))
+            return _poly.signed_separation_batch(arr, *self._poly_args, clamp)
+        # radial zones have no compiled batch: one row at a time, clamped afterwards
+        signed = np.array([self.signed_separation(row) for row in arr])
+        return np.maximum(0.0, signed) if clamp else signed
 
     def boundary(self, num: int) -> NDArray[np.float64]:
         num = int(num)
