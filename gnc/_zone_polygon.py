@@ -191,26 +191,28 @@ def contains_point_boxed(x, vertices, box, c, B, plane_normal, plane_offset):
     return _crossing_number_odd(vertices, px, py)
 
 
-@njit(cache=True)
-def signed_separation_one_boxed(x, edges, mids, reach, vertices, box, c, B, plane_normal, plane_offset, clamp):
-    """`signed_separation_one` with `contains_point_boxed` (the same number)."""
-    inside = contains_point_boxed(x, vertices, box, c, B, plane_normal, plane_offset)
+@njit(cache=True, inline="always")
+def _signed_from_inside(x, inside, edges, mids, reach, clamp):
+    # both containment tests give the same answer; only the boundary search is shared
     if inside and clamp:
         return 0.0
     b = np.empty(3)
     d = nearest_on_boundary(x, edges, mids, reach, b)
     return -d if inside else d
+
+
+@njit(cache=True)
+def signed_separation_one_boxed(x, edges, mids, reach, vertices, box, c, B, plane_normal, plane_offset, clamp):
+    """`signed_separation_one` with `contains_point_boxed` (the same number)."""
+    inside = contains_point_boxed(x, vertices, box, c, B, plane_normal, plane_offset)
+    return _signed_from_inside(x, inside, edges, mids, reach, clamp)
 
 
 @njit(cache=True)
 def signed_separation_one(x, edges, mids, reach, vertices, c, B, plane_normal, plane_offset, clamp):
     """Signed separation of one x (negative inside); clamp=True gives 0 inside."""
     inside = contains_point(x, vertices, c, B, plane_normal, plane_offset)
-    if inside and clamp:
-        return 0.0
-    b = np.empty(3)
-    d = nearest_on_boundary(x, edges, mids, reach, b)
-    return -d if inside else d
+    return _signed_from_inside(x, inside, edges, mids, reach, clamp)
 
 
 @njit(cache=True)
