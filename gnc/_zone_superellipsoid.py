@@ -513,6 +513,23 @@ def _beaten(idx, v, vals, evaluated, cell_of):
 
 
 @njit(cache=True, inline="always")
+def _no_face_neighbour_beats(j, i, jj, v, vals, evaluated, cell_of, G):
+    """True when no scored neighbour of sample j (row i, column jj on its cube face) in the
+    8-neighbourhood beats v; off-face neighbours are unknown and count as lower."""
+    for di in range(-1, 2):
+        ii = i + di
+        if ii < 0 or ii >= G:
+            continue
+        for dj in range(-1, 2):
+            jn = jj + dj
+            if jn < 0 or jn >= G or (di == 0 and dj == 0):
+                continue
+            if _beaten(j + di * G + dj, v, vals, evaluated, cell_of):
+                return False
+    return True
+
+
+@njit(cache=True, inline="always")
 def _is_local_max_face(j, i, jj, v, vals, evaluated, cell_of, G, i0, j0, k):
     """_is_local_max for n = 3, with the sample's row i and column jj on its face and its cell's first
     row i0 and column j0 (cell size k) known."""
@@ -546,17 +563,7 @@ def _is_local_max_face(j, i, jj, v, vals, evaluated, cell_of, G, i0, j0, k):
             return False
         if evaluated[cell_of[j + di * G + dj]]:
             return False
-    for di in range(-1, 2):
-        ii = i + di
-        if ii < 0 or ii >= G:
-            continue
-        for dj in range(-1, 2):
-            jn = jj + dj
-            if jn < 0 or jn >= G or (di == 0 and dj == 0):
-                continue
-            if _beaten(j + di * G + dj, v, vals, evaluated, cell_of):
-                return False
-    return True
+    return _no_face_neighbour_beats(j, i, jj, v, vals, evaluated, cell_of, G)
 
 
 @njit(cache=True)
@@ -577,18 +584,7 @@ def _is_local_max(j, v, vals, evaluated, cell_of, n, G):
     r = j - face * G2
     i = r // G
     jj = r - i * G
-    for di in range(-1, 2):
-        ii = i + di
-        if ii < 0 or ii >= G:
-            continue
-        for dj in range(-1, 2):
-            jn = jj + dj
-            if jn < 0 or jn >= G or (di == 0 and dj == 0):
-                continue
-            idx = j + di * G + dj
-            if vals[idx] > v and evaluated[cell_of[idx]]:
-                return False
-    return True
+    return _no_face_neighbour_beats(j, i, jj, v, vals, evaluated, cell_of, G)
 
 
 @njit(cache=True, inline="always")
