@@ -34,18 +34,23 @@ class _Model(BaseModel):
 # Scalar distributions (also used inside compound dispersions)
 # ---------------------------------------------------------------------------------------------
 
-class Uniform(_Model):
+class _Bounded(_Model):
+    """A distribution with bounds ``low`` and ``high``, declared by the subclass (so its field order,
+    hence its schema, stays its own); an empty or reversed interval is rejected."""
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "_Bounded":
+        if not self.high > self.low:  # type: ignore[attr-defined]
+            raise ValueError(f"high ({self.high}) must be greater than low ({self.low})")  # type: ignore[attr-defined]
+        return self
+
+
+class Uniform(_Bounded):
     """Uniform on [low, high]."""
 
     dist: Literal["uniform"]
     low: float
     high: float
-
-    @model_validator(mode="after")
-    def _ordered(self) -> "Uniform":
-        if not self.high > self.low:
-            raise ValueError(f"high ({self.high}) must be greater than low ({self.low})")
-        return self
 
 
 class Normal(_Model):
@@ -56,7 +61,7 @@ class Normal(_Model):
     sigma: float = Field(gt=0)
 
 
-class ClippedNormal(_Model):
+class ClippedNormal(_Bounded):
     """Gaussian N(mean, sigma^2) clipped to [low, high] (draws beyond a bound land on the bound)."""
 
     dist: Literal["clipped_normal"]
@@ -64,12 +69,6 @@ class ClippedNormal(_Model):
     sigma: float = Field(gt=0)
     low: float
     high: float
-
-    @model_validator(mode="after")
-    def _ordered(self) -> "ClippedNormal":
-        if not self.high > self.low:
-            raise ValueError(f"high ({self.high}) must be greater than low ({self.low})")
-        return self
 
 
 ScalarDistribution = Annotated[Union[Uniform, Normal, ClippedNormal], Field(discriminator="dist")]
