@@ -23,6 +23,7 @@ import argparse
 import math
 import sys
 import time
+from collections.abc import Callable
 from typing import Any, TextIO
 
 DEFAULT_SPEC = "auto"
@@ -74,6 +75,22 @@ def _open(args: argparse.Namespace):
     return icd, bus, info[0]
 
 
+def _on_bus(args: argparse.Namespace, work: Callable[[Any, Any, Any], None]) -> int:
+    """Open the ICD and the bus, run ``work(icd, bus, info)`` until it returns or Ctrl-C (a normal way to
+    stop monitor and log), and always shut the bus down; 2 when the bus cannot be opened."""
+    opened = _open(args)
+    if opened is None:
+        return 2
+    icd, bus, info = opened
+    try:
+        work(icd, bus, info)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        bus.shutdown()
+    return 0
+
+
 def _until(args: argparse.Namespace):
     deadline = time.monotonic() + args.duration if args.duration > 0 else None
 
@@ -110,24 +127,19 @@ def log_frames(bus: Any, out: TextIO, channel: str, more, wait_s) -> int:
 
 
 def _log_command(args: argparse.Namespace) -> int:
-    opened = _open(args)
-    if opened is None:
-        return 2
-    _, bus, info = opened
-    channel = args.channel_name or (info.channel if info.interface == "socketcan" else "can0")
-    more, wait_s = _until(args)
-    out = sys.stdout if args.out == "-" else open(args.out, "w", encoding="ascii")
-    try:
-        n = log_frames(bus, out, channel, more, wait_s)
-    except KeyboardInterrupt:
-        n = -1
-    finally:
-        if out is not sys.stdout:
-            out.close()
-        bus.shutdown()
-    if n >= 0:
+    def log(_icd: Any, bus: Any, info: Any) -> None:
+        channel = args.channel_name or (info.channel if info.interface == "socketcan" else "can0")
+        more, wait_s = _until(args)
+        out = sys.stdout if args.out == "-" else open(args.out, "w", encoding="ascii")
+        try:
+            n = log_frames(bus, out, channel, more, wait_s)
+        finally:
+            if out is not sys.stdout:
+                out.close()
+        # not reached on Ctrl-C: an interrupted log does not claim a count
         print(f"keepout bus: logged {n} frames", file=sys.stderr)
-    return 0
+
+    return _on_bus(args, log)
 
 
 # -------------------------------------------------------------------------------------------- monitor
@@ -214,18 +226,11 @@ def monitor(bus: Any, icd: Any, out: TextIO, more, wait_s, live: bool) -> Monito
 
 
 def _monitor_command(args: argparse.Namespace) -> int:
-    opened = _open(args)
-    if opened is None:
-        return 2
-    icd, bus, _ = opened
-    more, wait_s = _until(args)
-    try:
+    def watch(icd: Any, bus: Any, _info: Any) -> None:
+        more, wait_s = _until(args)
         monitor(bus, icd, sys.stdout, more, wait_s, live=sys.stdout.isatty() and not args.lines)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        bus.shutdown()
-    return 0
+
+    return _on_bus(args, watch)
 
 
 # -------------------------------------------------------------------------------------------- respond
