@@ -18,7 +18,6 @@ Python cycle; the world (RK4 at 100 Hz) and the sensors take one compiled call p
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
@@ -26,6 +25,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from _results import write_result  # bench/_results.py: this script's folder is on sys.path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -327,9 +328,7 @@ def main(argv: list[str] | None = None) -> int:
               "best_sim_s_per_wall_s": max(r["sim_s_per_wall_s"] for r in rows),
               "dask_efficiency_1_to_2_workers": efficiency, "goal_dask_efficiency": 0.9}
     dest = ROOT / "bench" / "results" / "campaign.json"
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    dest.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"\nwrote {dest}")
+    print(f"\nwrote {write_result(dest, result)}")
     return 0
 
 

@@ -14,13 +14,14 @@ Prints a table and writes bench/results/day_fast.json (with the host's load befo
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
 import sys
 import time
 from pathlib import Path
+
+from _results import write_result  # bench/_results.py: this script's folder is on sys.path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "bench"))
@@ -54,9 +55,7 @@ def main(argv: list[str] | None = None) -> int:
               "meets_goal": per_day <= GOAL_WALL_S_PER_DAY, "load_avg_1min_before": load_before,
               "load_avg_1min_after": load_after, "python": platform.python_version()}
     dest = ROOT / "bench" / "results" / "day_fast.json"
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    dest.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {dest.relative_to(ROOT)}")
+    print(f"wrote {write_result(dest, result).relative_to(ROOT)}")
     return 0
 
 

@@ -34,6 +34,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from _results import write_result  # bench/_results.py: this script's folder is on sys.path
+
 ROOT = Path(__file__).resolve().parents[1]
 PROBE = """\
 import sys, time
@@ -147,9 +149,7 @@ def main() -> int:
               "wheel_bytes": wheel.stat().st_size, "install_s": install_s, "host_load_before": load_before,
               "host_load_after": load_after, "cpus": os.cpu_count(), "scenarios": rows}
     out = ROOT / "bench" / "results" / "first_run.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=1) + "\n")
-    print(f"wrote {out.relative_to(ROOT)}")
+    print(f"wrote {write_result(out, result, indent=1).relative_to(ROOT)}")
     return 0
 
 

@@ -30,13 +30,14 @@ Writes bench/results/vs_basilisk.json with the host load. Without Basilisk it sa
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
 import sys
 import time
 from pathlib import Path
+
+from _results import write_result  # bench/_results.py: this script's folder is on sys.path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -367,9 +368,7 @@ def main(argv: list[str] | None = None) -> int:
               "python": platform.python_version(), "basilisk": getattr(Basilisk, "__version__", "?"),
               "rows": rows, "goal_ratio": 1.0}
     dest = ROOT / "bench" / "results" / "vs_basilisk.json"
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    dest.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {dest.relative_to(ROOT)}")
+    print(f"wrote {write_result(dest, result).relative_to(ROOT)}")
     return 0
 
 
