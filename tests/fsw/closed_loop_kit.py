@@ -180,6 +180,24 @@ class BusLoop:
         self.fsw_bus.shutdown()
 
 
+def blind_free_bus_loop(epoch_utc: str, sections: dict, seed: int, faults=(), q0=(1.0, 0.0, 0.0, 0.0)):
+    """A `BusLoop` from the flight-software config ``sections``, in a world whose star tracker has no Sun
+    or Moon exclusion (so only the faults a test injects make it stale) and with telemetry and commanding
+    in process (no sockets); returns (loop, telemetry sender, command dispatcher)."""
+    from comms.dictionary import DICTIONARY
+    from fsw.telecommand import CommandDispatcher
+    from fsw.telemetry import TelemetrySender
+    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
+    from hil_sim.world.world import World
+
+    wp = WorldParams(epoch_utc=epoch_utc, spacecraft=SpacecraftParams(q_NB0=tuple(q0)),
+                     star_tracker=StarTrackerParams(sun_exclusion_deg=0.0, moon_exclusion_deg=0.0))
+    cfg = fsw_config_for(wp, **sections)
+    tm = TelemetrySender(DICTIONARY, port=None)
+    tc = CommandDispatcher(DICTIONARY, tm, port=None)
+    return BusLoop(cfg, World(wp, seed=seed), faults=faults, telemetry=tm, dispatcher=tc), tm, tc
+
+
 def slew_geometry(epoch_utc: str, beta_deg: float = 32.0, offset_deg: float = 3.0, half_span_deg: float = 60.0):
     """Start and target boresight directions for a 2*half_span slew whose straight path passes
     ``offset_deg`` from the Sun centre, on the side of the Moon, heading at ``beta_deg`` from the

@@ -7,29 +7,18 @@ import math
 import numpy as np
 import pytest
 
-from closed_loop_kit import BusLoop, attitude_with_boresight, fsw_config_for
+from closed_loop_kit import attitude_with_boresight, blind_free_bus_loop
 from comms.dictionary import DICTIONARY
-from fsw.telecommand import CommandDispatcher
 from comms.telecommand import encode_command
-from fsw.telemetry import TelemetrySender
 
 EPOCH = "2030-03-29T12:00:00Z"
 
 
 def _setup(faults=(), fsw_sections=None, q0=(1.0, 0.0, 0.0, 0.0)):
-    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world.world import World
-
-    wp = WorldParams(epoch_utc=EPOCH, spacecraft=SpacecraftParams(q_NB0=tuple(q0)),
-                     star_tracker=StarTrackerParams(sun_exclusion_deg=0.0, moon_exclusion_deg=0.0))
     sections = {"initial_mode": "POINTING", "law": {"assumption_check": "inline"},
                 "pointing": {"target_N": [0.0, 0.6, 0.8], "zones": []}}
     sections.update(fsw_sections or {})
-    cfg = fsw_config_for(wp, **sections)
-    tm = TelemetrySender(DICTIONARY, port=None)
-    tc = CommandDispatcher(DICTIONARY, tm, port=None)
-    loop = BusLoop(cfg, World(wp, seed=2), faults=faults, telemetry=tm, dispatcher=tc)
-    return loop, tm, tc
+    return blind_free_bus_loop(EPOCH, sections, seed=2, faults=faults, q0=q0)
 
 
 def _events(tm, name=None):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from closed_loop_kit import BusLoop, attitude_with_boresight, fsw_config_for
+from closed_loop_kit import attitude_with_boresight, blind_free_bus_loop
 from fsw.config import FswConfig
 from comms.dictionary import DICTIONARY
 from fsw.guidance import Guidance
@@ -18,9 +18,7 @@ from fsw.guidance.slew_limits import (
     allowed_braking_deg,
     BRAKING_RESERVE_DEG, braking_distance_deg, braking_problem, layer_angle_deg, rate_for_distance_deg_s,
 )
-from fsw.telecommand import CommandDispatcher
 from comms.telecommand import encode_command
-from fsw.telemetry import TelemetrySender
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "config" / "missions" / "demo-pointing.yaml"
@@ -50,18 +48,10 @@ def test_rule_refuses_the_demo_commands_that_entered_the_moon_zone() -> None:
 
 
 def _bus(fsw_sections=None, q0=(1.0, 0.0, 0.0, 0.0)):
-    from hil_sim.world.params import SpacecraftParams, StarTrackerParams, WorldParams
-    from hil_sim.world.world import World
-
-    wp = WorldParams(epoch_utc=EPOCH, spacecraft=SpacecraftParams(q_NB0=tuple(q0)),
-                     star_tracker=StarTrackerParams(sun_exclusion_deg=0.0, moon_exclusion_deg=0.0))
     sections = {"initial_mode": "POINTING", "law": {"assumption_check": "off"},
                 "pointing": {"target_N": [0.0, 0.0, 1.0], "zones": []}}
     sections.update(fsw_sections or {})
-    cfg = fsw_config_for(wp, **sections)
-    tm = TelemetrySender(DICTIONARY, port=None)
-    tc = CommandDispatcher(DICTIONARY, tm, port=None)
-    return BusLoop(cfg, World(wp, seed=4), telemetry=tm, dispatcher=tc), tm, tc
+    return blind_free_bus_loop(EPOCH, sections, seed=4, q0=q0)
 
 
 def test_set_gains_beyond_the_braking_distance_is_rejected_by_telecommand_with_its_reason() -> None:
