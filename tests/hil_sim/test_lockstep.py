@@ -7,6 +7,7 @@ import subprocess
 import sys
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +48,23 @@ def _in_process_pair(icd: Icd, seed: int = 3, **sim_kwargs):
 def _close(buses) -> None:
     for bus in buses:
         bus.shutdown()
+
+
+@contextmanager
+def _fake_clock_sim(icd: Icd, tag: str, **sim_kwargs):
+    """A real-time Simulator (10 Hz GNC, 100 Hz dynamics) on a fresh virtual channel whose clock reads
+    ``now[0]``, which the test's fake sleep moves on; yields (sim, world, the channel's other bus, now) and
+    shuts both buses down."""
+    channel = f"virtual:{tag}{next(_channels)}"
+    sim_bus, peer_bus = open_bus(channel), open_bus(channel)
+    try:
+        world = World(_params(), seed=1)
+        now = [0.0]
+        sim = Simulator(world, sim_bus, icd, gnc_period_s=0.1, dynamics_dt_s=0.01, clock=lambda: now[0],
+                        **sim_kwargs)
+        yield sim, world, peer_bus, now
+    finally:
+        _close((sim_bus, peer_bus))
 
 
 def test_in_process_closed_loop_damps_the_rate(icd: Icd) -> None:
@@ -132,12 +150,7 @@ def test_realtime_never_waits_for_the_flight_software(icd: Icd) -> None:
 
 def test_realtime_applies_late_commands_when_they_arrive(icd: Icd) -> None:
     """Fake clock: a command that arrives mid-period is applied from the dynamics step it arrived in."""
-    channel = f"virtual:rt{next(_channels)}"
-    sim_bus, fsw_bus = open_bus(channel), open_bus(channel)
-    try:
-        world = World(_params(), seed=1)
-        now = [0.0]
-        sim = Simulator(world, sim_bus, icd, gnc_period_s=0.1, dynamics_dt_s=0.01, clock=lambda: now[0])
+    with _fake_clock_sim(icd, "rt") as (sim, world, fsw_bus, now):
         driver = FswBusDriver(fsw_bus, icd, world.n_wheels)
         sent = []
 
@@ -157,8 +170,6 @@ def test_realtime_applies_late_commands_when_they_arrive(icd: Icd) -> None:
         first_nonzero = next(j for j, u in enumerate(applied) if np.any(u != 0))
         assert first_nonzero == 5  # steps 0..4 ran before the command arrived (at 45-50 ms)
         assert sim.stats.cycle_done_late == 0
-    finally:
-        _close((sim_bus, fsw_bus))
 
 
 def _free_running_flight_software(driver: FswBusDriver, now: list, first_cycle_s: float, late: set[int]):
@@ -193,12 +204,7 @@ def test_realtime_puts_the_flight_softwares_cycle_mid_tick(icd: Icd, monkeypatch
 
     if not lock:
         monkeypatch.setattr(lockstep.Simulator, "_lock_phase", lambda self: setattr(self, "_phase_locked", True))
-    channel = f"virtual:rtphase{next(_channels)}"
-    sim_bus, fsw_bus = open_bus(channel), open_bus(channel)
-    try:
-        world = World(_params(), seed=1)
-        now = [0.0]
-        sim = Simulator(world, sim_bus, icd, gnc_period_s=0.1, dynamics_dt_s=0.01, clock=lambda: now[0])
+    with _fake_clock_sim(icd, "rtphase") as (sim, world, fsw_bus, now):
         driver = FswBusDriver(fsw_bus, icd, world.n_wheels, clock=lambda: now[0])
         late = set(range(8, 40, 4))  # every fourth cycle after the lock, 8 ms late
         sleep = _free_running_flight_software(driver, now, first_cycle_s=0.097, late=late)
@@ -211,8 +217,6 @@ def test_realtime_puts_the_flight_softwares_cycle_mid_tick(icd: Icd, monkeypatch
             assert sim.stats.cycle_done_late == 0
         else:
             assert sim.stats.cycle_done_late >= len(late) - 1
-    finally:
-        _close((sim_bus, fsw_bus))
 
 
 # ------------------------------------------------------------------------------ multi-process lockstep
@@ -321,14 +325,13 @@ def test_in_process_ticks_over_socketcan_read_what_is_queued(socketcan_pair) -> 
 
 def test_realtime_sensor_frames_go_out_at_their_own_rate(icd: Icd) -> None:
     """Between SYNCs the IMU frames are spread over the period (fake clock), not sent in a burst."""
-    channel = f"virtual:rtimu{next(_channels)}"
-    sim_bus, rx_bus = open_bus(channel), open_bus(channel)
-    try:
-        world = World(_params(), seed=1)
-        now = [0.0]
-        log: list = []
-        sim = Simulator(world, sim_bus, icd, gnc_period_s=0.1, dynamics_dt_s=0.01, clock=lambda: now[0],
-                        on_frame=lambda d, t, m: log.append((t, m.arbitration_id)) if d == "tx" else None)
+    log: list = []
+
+    def on_frame(direction: str, t: float, msg) -> None:
+        if direction == "tx":
+            log.append((t, msg.arbitration_id))
+
+    with _fake_clock_sim(icd, "rtimu", on_frame=on_frame) as (sim, _world, _rx_bus, now):
         sim.run_realtime(3, sleep=lambda dt: now.__setitem__(0, now[0] + dt))
         imu_id = icd.spec("IMU_RATE").frame_id
         imu_times = sorted({round(t, 6) for t, fid in log if fid == imu_id})
@@ -336,8 +339,6 @@ def test_realtime_sensor_frames_go_out_at_their_own_rate(icd: Icd) -> None:
         assert imu_times[:25] == pytest.approx([0.01 * k for k in range(25)])
         sync_times = [t for t, fid in log if fid == icd.spec("SYNC").frame_id]
         assert sync_times == pytest.approx([0.0, 0.1, 0.2])
-    finally:
-        _close((sim_bus, rx_bus))
 
 
 def test_simulator_rejects_inconsistent_periods_and_phase_misuse(icd: Icd) -> None:
