@@ -76,6 +76,12 @@ def add_cli(subparsers: Any) -> None:
     send.add_argument("--no-check", action="store_true",
                       help="skip the dictionary range checks (test the flight-side validation)")
     send.add_argument("--key-file", dest="send_key_file", default=None, help=_KEY_HELP)
+    send.add_argument("--latitude-deg", type=float, default=None,
+                      help="SET_TARGET GROUND: the point's geodetic latitude (WGS-84) [deg], -90..90, north positive")
+    send.add_argument("--longitude-deg", type=float, default=None,
+                      help="SET_TARGET GROUND: its longitude [deg], -180..360, east positive")
+    send.add_argument("--altitude-m", type=float, default=None,
+                      help="SET_TARGET GROUND: its height above the ellipsoid [m], -500..9000 (default 0)")
     send.set_defaults(func=_cmd_send)
     keygen = sub.add_parser("keygen", help="write a new link key file (32 random bytes as hex, mode 0600)")
     keygen.add_argument("key_path", help="where to write it (never overwrites); name it in the mission as "
@@ -289,6 +295,7 @@ def _cmd_send(args: argparse.Namespace) -> int:
         dictionary = _load_dictionary(args.dictionary)
         command: str | int = int(args.opcode, 0) if args.opcode[:1].isdigit() else args.opcode.upper()
         definition = dictionary.command(command)  # unknown command: fail before touching the sequence file
+        values = _command_values(definition.name, args)
         endpoints, run_dir = _send_endpoints(args, run)
         key_file = _key_file(args.send_key_file, args.config, run_dir)
         signing = signing_sender_args(key_file)
@@ -309,11 +316,11 @@ def _cmd_send(args: argparse.Namespace) -> int:
             seq = CcsdsFileSeqCountProvider(Path(seq_file)).get_and_increment()
         with CommandSender(dictionary, tc_host, tc_port, seq, **signing) as sender:
             if telemetry is None:
-                packet = sender.send(command, *args.args, check_range=not args.no_check)
+                packet = sender.send(command, *values, check_range=not args.no_check)
                 print(f"sent {definition.name} ({len(packet)} bytes) to {tc_host}:{tc_port}: {packet.hex()} "
                       "(not waiting for the acknowledgement)")
                 return verify.EXIT_COMPLETED
-            packet, result = verify.send_verified(sender, telemetry, command, args.args, timeout_s=args.timeout,
+            packet, result = verify.send_verified(sender, telemetry, command, values, timeout_s=args.timeout,
                                                   check_range=not args.no_check, downlink=downlink)
     except (ArgError, DictionaryError) as exc:
         print(f"keepout ground send: {exc}", file=sys.stderr)
@@ -337,6 +344,39 @@ def _cmd_send(args: argparse.Namespace) -> int:
     else:
         print(f"keepout ground send: {definition.name} {result.outcome}: {result.detail}", file=sys.stderr)
     return result.exit_code
+
+
+# SET_TARGET GROUND's point as the flight software accepts it (fsw.config.GroundTargetConfig, whose
+# height range the onboard handler applies to a telecommand too)
+_GROUND_RANGES = (("--latitude-deg", -90.0, 90.0), ("--longitude-deg", -180.0, 360.0), ("--altitude-m", -500.0, 9000.0))
+
+
+def _command_values(name: str, args: argparse.Namespace) -> list[Any]:
+    """The command's arguments in dictionary order: as typed, or for ``SET_TARGET GROUND --latitude-deg L
+    --longitude-deg L [--altitude-m H]`` the point's vertical and height (`ground_target_args`), for
+    ``SET_TARGET NADIR`` alone its unused components. Raises ``ArgError`` for a point out of range or the
+    point's options anywhere else."""
+    from comms.dictionary import ArgError
+    from comms.telecommand import ground_target_args
+
+    point = (args.latitude_deg, args.longitude_deg, args.altitude_m)
+    kind = args.args[0].upper() if name == "SET_TARGET" and len(args.args) == 1 else None
+    if any(v is not None for v in point) and kind != "GROUND":
+        raise ArgError("--latitude-deg, --longitude-deg and --altitude-m go with SET_TARGET GROUND and no other "
+                       "argument (e.g. SET_TARGET GROUND --latitude-deg 12.97 --longitude-deg 77.59)")
+    if kind == "NADIR":
+        return ["NADIR", 0.0, 0.0, 0.0]
+    if kind != "GROUND":
+        return list(args.args)
+    if point[0] is None or point[1] is None:
+        raise ArgError("SET_TARGET GROUND needs --latitude-deg and --longitude-deg (and optionally --altitude-m), "
+                       "or its four components c0 c1 c2 c3")
+    point = (point[0], point[1], 0.0 if point[2] is None else point[2])
+    for value, (option, low, high) in zip(point, _GROUND_RANGES):
+        if not low <= value <= high:  # also refuses nan
+            raise ArgError(f"{option} {value:g} outside {low:g}..{high:g}")
+    target = ground_target_args(*point)
+    return [target[k] for k in ("kind", "c0", "c1", "c2", "c3")]
 
 
 SEND_SEQ_FILE = "ground_tc_seq.txt"  # in a run folder: consecutive sequence counts across `send --run` calls
