@@ -24,6 +24,7 @@ import os
 import platform
 import statistics
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -55,41 +56,37 @@ def _time_it(fn) -> tuple[float, float]:
     return time.perf_counter() - w0, time.process_time() - c0
 
 
+def _timed_loop(step: Callable, imu_sample: Callable, star_tracker_sample: Callable, cmds: np.ndarray,
+                dt: float, repeats: int) -> list[tuple[float, float]]:
+    """(wall, CPU) seconds of ``repeats`` runs of the lockstep pattern: ``step(dt, cmds[k])`` and an IMU
+    sample every step, a star-tracker sample every 100 ms. One untimed run first: compilation is cached,
+    but the first call still loads it."""
+    st_every = max(1, int(round(0.1 / dt)))
+
+    def run() -> None:
+        for k in range(len(cmds)):
+            step(dt, cmds[k])
+            imu_sample()
+            if k % st_every == 0:
+                star_tracker_sample()
+
+    run()
+    return [_time_it(run) for _ in range(repeats)]
+
+
 def bench_single(sim_s: float, gnc_hz: float, repeats: int) -> dict:
     world = World(WorldParams(), seed=1)
     dt = 1.0 / gnc_hz
-    steps = int(round(sim_s / dt))
-    st_every = max(1, int(round(0.1 / dt)))
-    cmds = np.random.default_rng(0).uniform(-0.02, 0.02, (steps, world.n_wheels))
-
-    def run() -> None:
-        for k in range(steps):
-            world.step(dt, cmds[k])
-            world.imu_sample()
-            if k % st_every == 0:
-                world.star_tracker_sample()
-
-    run()  # warm-up (compilation is cached, but the first call still loads it)
-    samples = [_time_it(run) for _ in range(repeats)]
+    cmds = np.random.default_rng(0).uniform(-0.02, 0.02, (int(round(sim_s / dt)), world.n_wheels))
+    samples = _timed_loop(world.step, world.imu_sample, world.star_tracker_sample, cmds, dt, repeats)
     return _summary(samples, sim_s, runs=1)
 
 
 def bench_batch(runs: int, sim_s: float, gnc_hz: float, repeats: int) -> dict:
     batch = WorldBatch(_dispersed_params(runs, np.random.default_rng(2)), seed=1)
     dt = 1.0 / gnc_hz
-    steps = int(round(sim_s / dt))
-    st_every = max(1, int(round(0.1 / dt)))
-    cmds = np.random.default_rng(0).uniform(-0.02, 0.02, (steps, runs, batch.n_wheels))
-
-    def run() -> None:
-        for k in range(steps):
-            batch.step(dt, cmds[k])
-            batch.imu_sample_arrays()
-            if k % st_every == 0:
-                batch.star_tracker_sample_arrays()
-
-    run()
-    samples = [_time_it(run) for _ in range(repeats)]
+    cmds = np.random.default_rng(0).uniform(-0.02, 0.02, (int(round(sim_s / dt)), runs, batch.n_wheels))
+    samples = _timed_loop(batch.step, batch.imu_sample_arrays, batch.star_tracker_sample_arrays, cmds, dt, repeats)
     return _summary(samples, sim_s, runs=runs)
 
 
