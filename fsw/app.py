@@ -98,7 +98,11 @@ class FlightSoftware:
         )
         self.checker = AssumptionChecker(config.law.assumption_check, on_worker_lost=self._check_worker_lost)
         # the one place the cycle's inputs, whatever their shape, become a SensorSnapshot
-        self.intake = SensorIntake(driver, self.n_wheels, self.period_s, config.estimator.star_tracker_max_age_s)
+        self.intake = SensorIntake(driver, self.n_wheels, self.period_s, config.estimator.star_tracker_max_age_s,
+                                   magnetic=config.magnetic_devices)
+        # the rods' dipole command [A m^2] sent every cycle when the spacecraft has rods (zero unless a law sets it)
+        self.mtq_command_Am2 = np.zeros(3)
+        self._mtq = config.magnetic_devices is not None and config.magnetic_devices.magnetorquers
         self._max_speed = np.ascontiguousarray(self.control.max_speed, dtype=float)  # fixed at start-up
         # configuration the cycle reads every tick, fixed at start-up (no telecommand changes it)
         self._gnc_tm_every = config.tmtc.gnc_packet_every_n_cycles
@@ -225,6 +229,10 @@ class FlightSoftware:
         ctrl = self.control.step(s.dt_s, g.omega_cmd_BN_B, est.omega_BN_B, s.wheel_speed_rad_s)
         if self.door is not None:  # DOOR_CMD before the wheel commands' CYCLE_DONE
             self._door_cycle(s.tick, est, g)
+        if self._mtq:  # MTQ_COMMAND, as DOOR_CMD, in the wheel commands' burst before CYCLE_DONE
+            d1, d2, d3 = self.mtq_command_Am2.tolist()
+            self.driver.send_frame("MTQ_COMMAND", {"dipole_1": d1, "dipole_2": d2, "dipole_3": d3},
+                                   with_commands=True)
         try:
             self.driver.send_wheel_torques(s.tick, ctrl.wheel_torque_cmd_Nm, cycle_done=not s.realtime)
         except Exception as exc:  # noqa: BLE001 - a transmit failure is reported, the loop goes on

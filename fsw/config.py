@@ -363,6 +363,17 @@ class ControlConfig(_Strict):
         return v
 
 
+# ------------------------------------------------------------------------------------ magnetic devices
+class MagneticDevicesConfig(_Strict):
+    """The magnetometer, coarse sun sensors and magnetorquer rods the flight software reads and drives: each
+    fitted one's frames reach the `SensorSnapshot` (MAG_FIELD as `mag_S_T`, CSS_CURRENTS as `css_mA`), and with
+    rods MTQ_COMMAND goes out every GNC cycle (zero unless a law asks). Without this section none of them."""
+
+    magnetometer: bool = Field(False, description="MAG_FIELD is read (default: true when spacecraft.magnetometer is given).")
+    sun_sensors: bool = Field(False, description="CSS_CURRENTS is read (default: true when spacecraft.sun_sensors is given).")
+    magnetorquers: bool = Field(False, description="MTQ_COMMAND is sent every GNC cycle (default: true when spacecraft.magnetorquers is given).")
+
+
 # --------------------------------------------------------------------------------------------- door
 class DoorConfig(_Strict):
     """The protective aperture door as the flight software knows and drives it (`fsw.door`): DOOR_CMD every
@@ -531,6 +542,7 @@ class FswConfig(_Strict):
     tmtc: TmTcConfig = Field(default_factory=TmTcConfig)
     plugins: PluginsConfig = Field(default_factory=PluginsConfig)
     door: DoorConfig | None = Field(None, description="The protective aperture door the flight software drives (default: present, with the spacecraft's stroke times, when spacecraft.door is given; absent otherwise).")
+    magnetic_devices: MagneticDevicesConfig | None = Field(None, description="The magnetometer, sun sensors and magnetorquers the flight software reads and drives (default: present, naming those the spacecraft has, when it has any; absent otherwise).")
 
     @field_validator("epoch_utc")
     @classmethod

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from fsw.bus.driver import TickInputs
-from fsw.records import SensorSnapshot, new_record
+from fsw.records import NAN3, NO_CELLS, SensorSnapshot, new_record
 
 # the E2E classes that count as a rejected (corrupt) frame
 CORRUPT_CLASSES = ("crc_error", "bad_length", "out_of_range", "wrong_sequence")
@@ -45,8 +45,17 @@ class SensorIntake:
     ``driver``: the bus driver, whose ``counters`` (E2E classes per message) are read; ``n_wheels``;
     ``period_s``: the GNC period; ``st_max_age_s``: the oldest star-tracker fix the estimator may use."""
 
-    def __init__(self, driver: Any, n_wheels: int, period_s: float, st_max_age_s: float) -> None:
+    def __init__(self, driver: Any, n_wheels: int, period_s: float, st_max_age_s: float,
+                 magnetic: Any = None) -> None:
         self.driver = driver
+        # the magnetometer's and sun sensors' frames this flight software reads (fsw.config.MagneticDevicesConfig)
+        self._mag = magnetic is not None and magnetic.magnetometer
+        self._css = magnetic is not None and magnetic.sun_sensors
+        self._cols: dict[str, list[int]] = {}  # the value rows' slots of their signals, in DBC order
+        for on, name in ((self._mag, "MAG_FIELD"), (self._css, "CSS_CURRENTS")):
+            if on:
+                driver.keep_latest(name)
+                self._cols[name] = [driver.icd.column(name, s) for s in driver.icd.spec(name).signals]
         self.period_s = period_s
         self.st_max_age_s = st_max_age_s
         self._rt_t0: float | None = None  # driver clock of the first real-time cycle
@@ -99,7 +108,29 @@ class SensorIntake:
         return new_record(SensorSnapshot, (
             tick, t_s, dt, realtime, samples, imu is not None, st is not None, st.blind_source if st is not None else 0,
             fresh, q_NS if fresh else None, nq, latency, speeds, self._heard_through_corruption(faults, t_s),
-            imu_corrupt, st_corrupt))
+            imu_corrupt, st_corrupt, self._field(inputs) if self._mag else NAN3,
+            self._cells(inputs) if self._css else NO_CELLS))
+
+    def _fresh_row(self, name: str, inputs: Any) -> list | None:
+        """The newest delivered ``name`` frame's application values (DBC order), when it came this cycle (in
+        lockstep: with this tick; in real time: within 1.5 periods)."""
+        kept = self.driver.latest(name)
+        if kept is None or float(inputs.t) - kept[1] > 1.5 * self.period_s:
+            return None
+        row = kept[0]
+        return [row[c] for c in self._cols[name]]
+
+    def _field(self, inputs: Any) -> np.ndarray:
+        """MAG_FIELD of this cycle as the field in sensor axes [T], NaN without a valid one."""
+        row = self._fresh_row("MAG_FIELD", inputs)
+        if row is None or row[3] < 0.5:
+            return NAN3
+        return 1e-6 * np.array(row[:3])
+
+    def _cells(self, inputs: Any) -> np.ndarray:
+        """CSS_CURRENTS of this cycle as the fitted cells' outputs [mA], no cells without one."""
+        row = self._fresh_row("CSS_CURRENTS", inputs)
+        return NO_CELLS if row is None else np.array(row[:int(row[6])])
 
     @staticmethod
     def _gyro_rows(inputs: Any, imu: Any) -> np.ndarray:

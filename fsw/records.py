@@ -33,7 +33,7 @@ def _nan_constant(n: int) -> np.ndarray:
 
 
 # a vector a record does not have this cycle: shared and read-only
-NAN3, NAN4 = _nan_constant(3), _nan_constant(4)
+NAN3, NAN4, NO_CELLS = _nan_constant(3), _nan_constant(4), _nan_constant(0)
 # builds a NamedTuple record from the tuple of its fields in their declared order, without the generated
 # constructor's argument handling: half its cost, for the records the cycle makes every tick
 new_record = tuple.__new__
@@ -47,7 +47,10 @@ class SensorSnapshot(NamedTuple):
     (valid, no older than star_tracker_max_age_s, a norm within 10 % of one), else None; ``q_NS_norm`` its
     norm (1.0 when there is no valid fix), ``st_latency_s`` its age at ``t_s``. Wheels: speed [rad/s] and
     fault flags (RWn_STATUS bits), NaN and -1 for a wheel that reported nothing this cycle, flags 0 for one
-    heard only through corrupt frames (a bus fault, not the wheel's)."""
+    heard only through corrupt frames (a bus fault, not the wheel's). Magnetometer (``flight_software.
+    magnetic_devices``): ``mag_S_T`` the field in sensor axes [T] of this cycle's valid MAG_FIELD, NaN without
+    one; sun sensors: ``css_mA`` the fitted cells' outputs [mA] of this cycle's CSS_CURRENTS, no cells without
+    one."""
 
     tick: int
     t_s: float
@@ -65,6 +68,8 @@ class SensorSnapshot(NamedTuple):
     wheel_fault: np.ndarray       # int64 flags per wheel
     imu_corrupt: int              # IMU frames rejected by E2E since the last cycle
     st_corrupt: int               # star tracker frames rejected by E2E since the last cycle
+    mag_S_T: np.ndarray = NAN3    # magnetometer field in sensor axes [T] (NaN: none this cycle)
+    css_mA: np.ndarray = NO_CELLS  # sun sensor cell outputs [mA] (no cells: none this cycle)
 
     @classmethod
     def of_measurements(cls, dt_s: float, gyro_B: np.ndarray, q_NS: np.ndarray | None, st_latency_s: float = 0.0,

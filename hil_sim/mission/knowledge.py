@@ -79,6 +79,11 @@ def knowledge_from_truth(mission: dict) -> dict:
             known_door = child("door")
             fill(known_door, "close_time_s", door.get("close_time_s"))
             fill(known_door, "open_time_s", door.get("open_time_s"))
+        fitted = [k for k in ("magnetometer", "sun_sensors", "magnetorquers") if isinstance(sc.get(k), dict)]
+        if fitted and fsw.get("magnetic_devices", {}) is not None:
+            known_devices = child("magnetic_devices")
+            for key in fitted:
+                fill(known_devices, key, True)
     if isinstance(state, dict) and "q_NB" not in state and _is_ra_dec(state.get("ra_dec_deg")):
         ra, dec = (math.radians(float(a)) for a in state["ra_dec_deg"])
         # hold the initial pointing until the first SET_TARGET

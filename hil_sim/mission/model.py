@@ -531,6 +531,11 @@ class Mission(_Model):
         if self.flight_software.door is not None and self.spacecraft.door is None:
             out.append((("flight_software", "door"), "the flight software drives a door the spacecraft does not "
                         "have: add spacecraft.door or remove flight_software.door"))
+        known = self.flight_software.magnetic_devices
+        for key in ("magnetometer", "sun_sensors", "magnetorquers"):
+            if known is not None and getattr(known, key) and getattr(self.spacecraft, key) is None:
+                out.append((("flight_software", "magnetic_devices", key), f"the flight software uses {key} the "
+                            f"spacecraft does not have: add spacecraft.{key} or set this false"))
         times = [e.t_s for e in self.timeline]
         if times != sorted(times):
             out.append((("timeline",), "entries must be in increasing t_s order"))

@@ -64,3 +64,16 @@ def test_an_unphysical_device_is_refused_at_its_key(tmp_path, device, key, value
     (line,) = str(info.value).splitlines()
     assert line.startswith(f"{path}:") and says in line and f"spacecraft.{device}" in line, line
     assert line.split(":")[1].isdigit() and line.split(":")[2].split()[0].isdigit()  # file:line:col
+
+
+def test_the_flight_software_knows_the_devices_from_the_truth_and_cannot_claim_others(tmp_path) -> None:
+    path, text = _mission(tmp_path, magnetometer={}, magnetorquers={})
+    known = load_mission(path, text=text).flight_software.magnetic_devices
+    assert (known.magnetometer, known.sun_sensors, known.magnetorquers) == (True, False, True)
+    assert load_mission(SMALLSAT).flight_software.magnetic_devices is None
+    data = yaml.safe_load(text)
+    data["flight_software"]["magnetic_devices"] = {"sun_sensors": True}
+    with pytest.raises(ConfigError) as info:
+        load_mission(path, text=yaml.safe_dump(data, sort_keys=False))
+    (line,) = str(info.value).splitlines()
+    assert "flight_software.magnetic_devices.sun_sensors" in line and "add spacecraft.sun_sensors" in line, line
