@@ -103,8 +103,8 @@ class PointingGuidance:
     def _track_target(self, t_s: float) -> None:
         """A target on the Earth moves: its direction now, as a new target_N (replaced, never written into:
         `_cycle_inputs` and the outputs tell a new target by identity), the law's aim unless a planned
-        path leads it, and the law rebuilt for it. A target_N this did not set came from a telecommand
-        (`set_target_direction`): a fixed target, followed no more."""
+        path leads it, and the law given it as its target (`_retarget_law`) or rebuilt for it. A target_N
+        this did not set came from a telecommand (`set_target_direction`): a fixed target, followed no more."""
         if not self._track_started:
             self._track_started = True
             p = self.cfg.pointing
@@ -121,7 +121,40 @@ class PointingGuidance:
         self.target_N = self._tracked_N = direction
         if self._follower is None:
             self._aim = direction
-        self._sky_law_key = None
+        if not self._retarget_law(self._aim):
+            self._sky_law_key = None
+
+    def _retarget_law(self, aim: np.ndarray) -> bool:
+        """Give the current law the moved ``aim`` as its target, as `_rebuild_sky_law` would, without the
+        rest of the rebuild when nothing else changed: the law's zones the same objects and none close to
+        another (the merge would return them as they are), no plan due, no substitute or escape in force.
+        Then the steady compiled cycle goes on (`pointing_step_nb` takes the law's target and eps from
+        ``fp``). The eps comes again from the aim's separations (near a zone they bound eps_max), and the
+        zone table with it only when it changed. False when the law must be rebuilt: the aim inside an
+        eps-layer needs a substitute target, found round where the aim is, so it is searched again each
+        cycle while the aim moves there, as for any new target."""
+        law = self._law_pack
+        kept = self._law_zones_kept
+        if (self._sky_law_key is None or law is None or kept is None or kept[1] is None or kept[1][1] is not law[1]
+                or self._merge_kept is None or self._escaping or self._occulted != -1 or self._plan_due):
+            return False
+        geometry = self.sky_geometry
+        if geometry.pending or geometry.unmerged:
+            return False
+        seps = zone_separations_nb(aim, *kept[1]).tolist()
+        eps_max = self._fast_eps_max(aim, self._sky_law_zones, geometry.unmerged, seps)
+        eps = self._eps_for(eps_max)
+        if ZoneGeometry.occulting_from(seps, aim, eps) >= 0:
+            return False
+        self._sky_target = aim
+        self._sky_eps, self._sky_eps_max = eps, eps_max
+        self._current_eps = eps
+        if eps == law[3]:
+            self._sky_law = None  # the law object, when a cycle needs it, is made again from _sky_target
+            self._law_pack = (law[0], law[1], _unit_vector(aim, "target"), eps)
+        else:
+            self._set_sky_law(aim, self._sky_law_zones, eps, kept[1])
+        return True
 
     def _update_sky(self, t_s: float) -> bool:
         """Recompute zone centres; rebuild zones that moved too far. True if a law zone was rebuilt.
