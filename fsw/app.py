@@ -32,6 +32,7 @@ from fsw.fdir import STATUS_LOST, Fdir, WheelSpeedResidual
 from fsw.guidance import Guidance
 from fsw.housekeeping import Housekeeping
 from fsw.intake import SensorIntake, vector_norm
+from fsw.momentum import MomentumManager
 from fsw.records import AttitudeEstimate, ControlOutput, CycleRecord, GuidanceOutput, SensorSnapshot
 
 # TARGET_REACHED: the error below REACHED_ERROR_DEG and the estimated body rate below REACHED_RATE_DEG_S for
@@ -103,6 +104,9 @@ class FlightSoftware:
         # the rods' dipole command [A m^2] sent every cycle when the spacecraft has rods (zero unless a law sets it)
         self.mtq_command_Am2 = np.zeros(3)
         self._mtq = config.magnetic_devices is not None and config.magnetic_devices.magnetorquers
+        # the wheels' momentum unloaded through the rods (fsw.momentum), when enabled
+        self.momentum = (MomentumManager(config.momentum_management, self.control.G, self.control.Js)
+                         if config.momentum_management.enabled else None)
         self._max_speed = np.ascontiguousarray(self.control.max_speed, dtype=float)  # fixed at start-up
         # configuration the cycle reads every tick, fixed at start-up (no telecommand changes it)
         self._gnc_tm_every = config.tmtc.gnc_packet_every_n_cycles
@@ -229,6 +233,8 @@ class FlightSoftware:
         ctrl = self.control.step(s.dt_s, g.omega_cmd_BN_B, est.omega_BN_B, s.wheel_speed_rad_s)
         if self.door is not None:  # DOOR_CMD before the wheel commands' CYCLE_DONE
             self._door_cycle(s.tick, est, g)
+        if self.momentum is not None:
+            self.mtq_command_Am2 = self.momentum.step(s.mag_S_T, self.control.wheel_speed)
         if self._mtq:  # MTQ_COMMAND, as DOOR_CMD, in the wheel commands' burst before CYCLE_DONE
             d1, d2, d3 = self.mtq_command_Am2.tolist()
             self.driver.send_frame("MTQ_COMMAND", {"dipole_1": d1, "dipole_2": d2, "dipole_3": d3},

@@ -374,6 +374,31 @@ class MagneticDevicesConfig(_Strict):
     magnetorquers: bool = Field(False, description="MTQ_COMMAND is sent every GNC cycle (default: true when spacecraft.magnetorquers is given).")
 
 
+class MomentumManagementConfig(_Strict):
+    """Magnetic momentum management (`fsw.momentum`): every GNC cycle, after the rate loop, the wheels' stored
+    momentum above `wheel_momentum_bias_Nms` is dumped through the rods with the cross-product law while the
+    attitude loop keeps pointing (the field's torque only drains the wheels). Needs magnetic_devices with the
+    magnetometer and the magnetorquers. Off by default."""
+
+    enabled: bool = Field(False, description="Command the rods to unload the wheels (false: the rods get zero, as without this section).")
+    gain_1_s: float = Field(1e-3, gt=0.0, le=1.0, description="Cross-product law gain k: the field is asked for the torque -k (h_w - bias) [1/s].")
+    wheel_momentum_bias_Nms: Vec3 = Field([0.0, 0.0, 0.0], description="Stored wheel momentum the law keeps, in body axes [N m s].")
+    max_dipole_Am2: Annotated[list[Annotated[float, Field(gt=0.0, le=32.0)]], Field(min_length=3, max_length=3)] = Field(
+        [0.2, 0.2, 0.2], description="Each rod's command limit [A m^2]; a command is scaled down as a whole (its direction kept) until every rod is within it.")
+    magnetometer_q_BS: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Magnetometer mounting as the flight software knows it: rotates sensor-frame vectors into body, scalar first (normalised on load).")
+    rod_axes_B: list[Vec3] = Field([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], min_length=3, max_length=3, description="Each rod's unit axis in body axes as the flight software knows it (normalised on load; they must span 3-D).")
+
+    _qn = field_validator("magnetometer_q_BS")(lambda v: _unit(v, "magnetometer_q_BS"))
+
+    @field_validator("rod_axes_B")
+    @classmethod
+    def _rods(cls, v: list[list[float]]) -> list[list[float]]:
+        axes = [_unit(a, "rod axis") for a in v]
+        if np.linalg.matrix_rank(np.array(axes), tol=1e-6) < 3:
+            raise ValueError("momentum_management.rod_axes_B: the rod axes must span 3-D")
+        return axes
+
+
 # --------------------------------------------------------------------------------------------- door
 class DoorConfig(_Strict):
     """The protective aperture door as the flight software knows and drives it (`fsw.door`): DOOR_CMD every
@@ -543,6 +568,14 @@ class FswConfig(_Strict):
     plugins: PluginsConfig = Field(default_factory=PluginsConfig)
     door: DoorConfig | None = Field(None, description="The protective aperture door the flight software drives (default: present, with the spacecraft's stroke times, when spacecraft.door is given; absent otherwise).")
     magnetic_devices: MagneticDevicesConfig | None = Field(None, description="The magnetometer, sun sensors and magnetorquers the flight software reads and drives (default: present, naming those the spacecraft has, when it has any; absent otherwise).")
+    momentum_management: MomentumManagementConfig = Field(default_factory=MomentumManagementConfig, description="Magnetic unloading of the wheels' momentum through the rods (off by default).")
+
+    @model_validator(mode="after")
+    def _momentum_devices(self) -> "FswConfig":
+        d = self.magnetic_devices
+        if self.momentum_management.enabled and not (d is not None and d.magnetometer and d.magnetorquers):
+            raise ValueError("momentum_management.enabled needs magnetic_devices with magnetometer and magnetorquers")
+        return self
 
     @field_validator("epoch_utc")
     @classmethod
