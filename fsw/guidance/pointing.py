@@ -141,10 +141,15 @@ class PointingGuidance:
         geometry = self.sky_geometry
         if geometry.pending or geometry.unmerged:
             return False
-        seps = zone_separations_nb(aim, *kept[1]).tolist()
-        eps_max = self._fast_eps_max(aim, self._sky_law_zones, geometry.unmerged, seps)
+        # `_fast_eps_max` and `ZoneGeometry.occulting_from` with no pair set aside and nothing pending: the
+        # pairwise bound and the aim's nearest zone (a minimum is exact, in any order)
+        nearest = min(zone_separations_nb(aim, *kept[1]).tolist(), default=math.inf)  # (numpy's min: 1.7 us more)
+        bound = kept[2].get(())
+        if bound is None:
+            bound = kept[2][()] = ZoneGeometry.pair_bound(self._sky_law_zones, [])
+        eps_max = min(bound, nearest)
         eps = self._eps_for(eps_max)
-        if ZoneGeometry.occulting_from(seps, aim, eps) >= 0:
+        if nearest <= eps:
             return False
         self._sky_target = aim
         self._sky_eps, self._sky_eps_max = eps, eps_max
