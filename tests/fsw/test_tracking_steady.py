@@ -22,29 +22,27 @@ def _zone_ahead(seconds: float, half_angle_deg: float) -> dict:
 
 def _fly_counting(g: Guidance, seconds: float, dt: float = 0.1) -> tuple[list, int]:
     """Closed kinematic loop; the outputs and how many times the law was rebuilt."""
-    rebuilds = [0]
+    rebuilds: list[int] = []
     rebuild = g._rebuild_sky_law
-
-    def counted(*a):
-        rebuilds[0] += 1
-        return rebuild(*a)
-
-    g._rebuild_sky_law = counted
+    g._rebuild_sky_law = lambda *a: (rebuilds.append(1), rebuild(*a))[1]
     q = _q_with_boresight(-g.ephem.position_N_km(0.0))
     outs = []
     for k in range(int(round(seconds / dt))):
         out = g.step(k * dt, dt, q, np.zeros(3))
         outs.append({f: np.copy(getattr(out, f)) for f in FIELDS})
         q = _step(q, out.omega_cmd_BN_B, dt)
-    return outs, rebuilds[0]
+    return outs, len(rebuilds)
 
 
-@pytest.mark.parametrize("zone_s, half_angle_deg", [(400.0, 5.0), (60.0, 1.5)])
-def test_tracking_gives_the_commands_of_a_rebuild_every_cycle(monkeypatch, zone_s, half_angle_deg) -> None:
-    """(400 s, 5 deg): a zone far from nadir for the 120 s flown; (60 s, 1.5 deg): one nadir sweeps
-    through at 60 s, its eps set by the target's separation on the way in and a substitute inside."""
+@pytest.mark.parametrize("zone_s, half_angle_deg, eps_max_used", [(400.0, 5.0, 0.5), (400.0, 5.0, 0.005),
+                                                                   (60.0, 1.5, 0.5)])
+def test_tracking_gives_the_commands_of_a_rebuild_every_cycle(monkeypatch, zone_s, half_angle_deg,
+                                                              eps_max_used) -> None:
+    """(400 s, 5 deg): a zone far from nadir for the 120 s flown, eps set by the target's separation, or
+    capped by eps_max_used (the law's table kept); (60 s, 1.5 deg): one nadir sweeps through at 60 s, its
+    eps set by the target's separation on the way in and a substitute inside."""
     cfg = _cfg({"target_kind": "nadir", "zones": [_zone_ahead(zone_s, half_angle_deg)]},
-               law={"k1": 0.2, "margin_deg": 1.0})
+               law={"k1": 0.2, "margin_deg": 1.0, "eps_max_used": eps_max_used})
     fast, fast_rebuilds = _fly_counting(Guidance(cfg), 120.0)
     monkeypatch.setattr(PointingGuidance, "_retarget_law", lambda self, aim: False)
     slow, slow_rebuilds = _fly_counting(Guidance(cfg), 120.0)
