@@ -85,6 +85,27 @@ STORED_START_RAD_S = [70.0, 10.0, 70.0, 10.0]
 SPAN_S = 2500.0
 
 
+def test_the_devices_knowledge_comes_from_the_truth_when_the_mission_does_not_give_it(tmp_path) -> None:
+    import yaml
+
+    from hil_sim.mission.model import load_mission
+
+    data = yaml.safe_load((ROOT / "config" / "missions" / "smallsat-example.yaml").read_text())
+    q_BS = [0.0, 0.0, 1.0, 0.0]
+    data["spacecraft"].update(magnetometer={"q_BS": q_BS}, magnetorquers={
+        "axes_B": [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], "max_dipole_Am2": [1.0, 2.0, 3.0]})
+    data["flight_software"]["momentum_management"] = {"enabled": True}
+    path = tmp_path / "m.yaml"
+    path.write_text(yaml.safe_dump(data))
+    known = load_mission(path).flight_software.momentum_management
+    assert known.magnetometer_q_BS == q_BS and known.max_dipole_Am2 == [1.0, 2.0, 3.0]
+    assert known.rod_axes_B[0] == [0.0, 1.0, 0.0]
+    # a mission with the devices and without the section: the section's defaults, unloading off
+    del data["flight_software"]["momentum_management"]
+    path.write_text(yaml.safe_dump(data))
+    assert load_mission(path).flight_software.momentum_management.enabled is False
+
+
 @pytest.fixture(scope="module")
 def runs() -> dict:
     sys.path.append(str(ROOT / "bench"))  # after the packages: bench/fsw.py must not shadow fsw
