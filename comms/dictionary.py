@@ -669,6 +669,9 @@ _HK_CHANNELS: list[Channel] = [
               Limits(yellow=(-10.0, 50.0), red=(-20.0, 70.0))),
     *_indexed("wheel_current_A", MAX_WHEELS, "F32", "A", "wheel motor current"),
     Channel("wheels_isolated", "U8", "", "bit mask of wheels removed from allocation"),
+    *_indexed("mtq_dipole_cmd_Am2", 3, "F32", "A*m^2", "magnetorquer rod dipole commanded (zero unless a law "
+              "sets it)"),
+    Channel("h_excess_Nms", "F32", "N*m*s", "momentum management: |wheel momentum - bias| (NaN when off)"),
     Channel("rss_mb", "F32", "MB", "resident memory of the flight software process"),
 ]
 

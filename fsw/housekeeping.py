@@ -134,6 +134,8 @@ class Housekeeping:
             "events_throttled": tm.get("events_throttled", 0),
             "fdir_trips": fdir.trips,
             "wheels_isolated": fsw.control.isolated_mask,
+            "mtq_dipole_cmd_Am2": fsw.mtq_command_Am2,
+            "h_excess_Nms": fsw.momentum.h_excess_norm_Nms if fsw.momentum is not None else None,
         }
         keys = _FDIR_HK_KEYS
         for mon, state in fdir.states().items():

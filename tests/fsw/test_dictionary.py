@@ -107,6 +107,8 @@ def test_units_follow_the_names() -> None:
             assert unit == "deg", name
         elif "_rad_s" in name:
             assert unit == "rad/s", name
+        elif "_Nms" in name:
+            assert unit == "N*m*s", name
         elif "_Nm" in name:
             assert unit == "N*m", name
         elif name.endswith("_ms") or "_ms_" in name:

@@ -77,6 +77,39 @@ def test_enabled_needs_the_magnetometer_and_the_rods() -> None:
         parse_fsw_config({"momentum_management": {"rod_axes_B": [[1, 0, 0], [1, 0, 0], [0, 0, 1]]}})
 
 
+def test_housekeeping_carries_the_command_and_the_excess(tmp_path) -> None:
+    import yaml
+
+    from comms.bus import Icd, open_bus
+    from fsw.assembly import build_flight_software
+    from hil_sim.mission.model import load_mission
+
+    data = yaml.safe_load((ROOT / "config" / "missions" / "smallsat-example.yaml").read_text())
+    data["spacecraft"].update(magnetometer={}, magnetorquers={"max_dipole_Am2": [0.2, 0.2, 0.2]})
+    path = tmp_path / "m.yaml"
+    for enabled in (False, True):
+        data["flight_software"]["momentum_management"] = {"enabled": enabled}
+        path.write_text(yaml.safe_dump(data))
+        cfg = load_mission(path).flight_software
+        cfg = cfg.model_copy(update={"law": cfg.law.model_copy(update={"assumption_check": "off"})})
+        bus = open_bus(f"virtual:momentumhk{int(enabled)}", light=True)
+        fsw = build_flight_software(cfg, bus, Icd())
+        try:
+            if enabled:
+                fsw.mtq_command_Am2 = fsw.momentum.step(np.array([2e-5, 0.0, 1e-5]), np.array([30.0, 0.0, 0.0, 0.0]))
+            hk = fsw.hk_values()
+        finally:
+            fsw.shutdown()
+            bus.shutdown()
+        assert hk["mtq_dipole_cmd_Am2"] is fsw.mtq_command_Am2
+        if enabled:
+            h = fsw.momentum.wheel_momentum_B(np.array([30.0, 0.0, 0.0, 0.0]))
+            assert hk["h_excess_Nms"] == pytest.approx(np.linalg.norm(h)) and np.linalg.norm(h) > 0
+            assert np.any(fsw.mtq_command_Am2 != 0.0)
+        else:
+            assert hk["h_excess_Nms"] is None and np.all(hk["mtq_dipole_cmd_Am2"] == 0.0)
+
+
 # ------------------------------------------------------------------------------------------ closed loop
 # demo-pointing's telescope on a 550 km SSO (bench/vs_basilisk.py's environment row) with a magnetometer and
 # 15 A m^2 rods, starting with 0.32 N m s stored along body z (its null-space spin [30, -30, 30, -30] plus
