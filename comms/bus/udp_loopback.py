@@ -36,7 +36,6 @@ import math
 import select
 import socket
 import struct
-import sys
 import time
 from collections import deque
 from typing import Any, Sequence
