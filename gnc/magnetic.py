@@ -53,11 +53,6 @@ def magnetic_torque(m_B_Am2: np.ndarray, b_B_T: np.ndarray) -> np.ndarray:
     return np.cross(np.asarray(m_B_Am2, dtype=float), np.asarray(b_B_T, dtype=float))
 
 
-def css_currents(normals_B: np.ndarray, sun_B: np.ndarray, scale: float = 1.0) -> np.ndarray:
-    """Cosine-law cell outputs for a unit Sun direction in body axes (no albedo, no noise)."""
-    return scale * np.maximum(0.0, np.asarray(normals_B, dtype=float) @ np.asarray(sun_B, dtype=float))
-
-
 def css_sun_direction(normals_B: np.ndarray, currents: np.ndarray, scale: float = 1.0,
                       lit_fraction: float = 0.05) -> np.ndarray | None:
     """Sun direction in body axes from cosine-law cells, or None when the lit cells cannot fix it.

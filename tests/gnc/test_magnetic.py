@@ -5,12 +5,20 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gnc.magnetic import (bdot_dipole, css_currents, css_sun_direction, dipole_for_torque, magnetic_torque,
+from hil_sim.world.sun_sensors import SunSensorParams, sun_sensor_outputs
+
+from gnc.magnetic import (bdot_dipole, css_sun_direction, dipole_for_torque, magnetic_torque,
                           saturate_dipole, unloading_dipole)
 
 MU_EARTH = 3.986004418e14  # m^3/s^2
 R_ORBIT = 6_921e3  # m, a 550 km circular orbit
 B0 = 3.12e-5 * (6_371.2e3 / R_ORBIT) ** 3  # T, the dipole's equatorial field at the orbit's radius
+
+
+def css_currents(normals_B: np.ndarray, sun_B: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """The truth model's cosine-law cells (no noise, full Sun, a 90 deg field of view): what the flight law reads."""
+    cells = SunSensorParams(normals_B=tuple(map(tuple, np.asarray(normals_B, dtype=float))), full_scale=scale)
+    return sun_sensor_outputs(cells, np.asarray(sun_B, dtype=float), 1.0, np.random.default_rng(0))
 
 
 def _field_N(t_s: float, inclination_deg: float = 97.6) -> np.ndarray:
