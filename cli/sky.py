@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hil_sim.world.eclipse import SUN_RADIUS_KM
+from gnc.eclipse import SUN_RADIUS_KM
 
 if TYPE_CHECKING:
     from hil_sim.mission.model import Mission

@@ -8,7 +8,7 @@ control loop exists. Writes the truth in the SIL run's truth.npz layout (``t_s``
 ``r_sc_N_km``, ``cycle_done`` all false: no flight software answered) plus ``H_N_Nms``, the total angular
 momentum in inertial axes, each environment torque the mission turns on in body axes (``srp_torque_B_Nm``:
 solar radiation pressure, hil_sim.world.environment), and ``sunlit_fraction``, the share of the Sun's disc seen past the Earth (0 in
-the umbra, 1 in full Sun: the conical shadow of hil_sim.world.eclipse), and prints a summary: the attitude drift,
+the umbra, 1 in full Sun: the conical shadow of gnc.eclipse), and prints a summary: the attitude drift,
 the largest body rate, the change of angular momentum (what the disturbances put in) and the time in the
 Earth's shadow. ``keepout export`` and the plots read the file as a
 run's truth.
@@ -52,7 +52,7 @@ def propagate(mission, duration_s: float, step_s: float) -> dict[str, np.ndarray
         if effects:
             env_torque[k] = world.batch.environment_torques_B()[0]
     n = recorder.n
-    from hil_sim.world.eclipse import sunlit_fraction
+    from gnc.eclipse import sunlit_fraction
 
     sun_km, _ = world.batch.ephemeris.positions_N_km(recorder.t_s[:n])
     return {"sunlit_fraction": sunlit_fraction(recorder.r_sc_N_km[:n], sun_km), "t_s": recorder.t_s[:n], "q_NB": recorder.q_NB[:n], "omega_BN_B": recorder.omega_BN_B[:n],

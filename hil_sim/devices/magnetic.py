@@ -14,9 +14,9 @@ import numpy as np
 
 from comms.bus.icd import Icd
 from gnc.attitude import quat_to_dcm
+from gnc.eclipse import sunlit_fraction
 from hil_sim.devices.nodes import _row_maker
 from hil_sim.world import environment as env
-from hil_sim.world.eclipse import sunlit_fraction
 from hil_sim.world.ephemeris import spline_eval
 from hil_sim.world.magnetic_devices import MagnetometerParams, MagnetorquerParams, magnetometer_sample, rod_dipoles
 from hil_sim.world.sun_sensors import SunSensorParams, sun_sensor_outputs

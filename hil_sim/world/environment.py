@@ -14,7 +14,7 @@ centre of mass), lit at cos(theta) = n . s > 0 (s: the unit vector to the Sun):
     F = -P A cos(theta) [ (1 - rho_s) s + 2 (rho_d / 3 + rho_s cos(theta)) n ],   tau = c x F
 
 with P = (flux / c_light) (1 AU / |r_sun - r|)^2 times the sunlit fraction of the Sun's disc (the conical
-shadow of hil_sim.world.eclipse: 0 in the umbra), rho_s and rho_d the specular and diffuse reflection
+shadow of gnc.eclipse: 0 in the umbra), rho_s and rho_d the specular and diffuse reflection
 coefficients (the rest is absorbed). This is Basilisk's facetSRPDynamicEffector model; facets shadowing one
 another are not modelled (a convex body has none).
 
@@ -39,8 +39,8 @@ from typing import Any, Sequence
 import numpy as np
 from numba import njit
 
+from gnc.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
 from gnc.ephemeris import AU_KM, EARTH_RADIUS_KM
-from hil_sim.world.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
 from hil_sim.world.geomagnetic import IGRF_REFERENCE_RADIUS_KM
 from hil_sim.world.orbit import orbit_position_row_N_km, orbit_velocity_row_N_km_s
 from hil_sim.world.params import SpacecraftParams

@@ -6,7 +6,7 @@ Cell i with unit normal n_i (body axes) in a Sun of unit direction s (body axes,
     I_i = noise                                   otherwise,
 
 clipped at 0 (a cell's current does not go negative) and f the sunlit fraction of the Sun's disc
-(hil_sim.world.eclipse: 0 in umbra, between in penumbra), so every cell is dark in eclipse.
+(gnc.eclipse: 0 in umbra, between in penumbra), so every cell is dark in eclipse.
 """
 from __future__ import annotations
 

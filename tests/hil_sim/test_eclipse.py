@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil_sim.world.eclipse import sunlit_fraction
+from gnc.eclipse import sunlit_fraction
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "basilisk"
 

@@ -90,7 +90,7 @@ def test_the_budget_row_is_the_kernel_and_the_kernel_the_formula() -> None:
     """The budget's SRP torque at a few times against the facet formula written out here (Sun from the truth
     ephemeris, full Sun at these times), and its momentum against the trapezoid sum of the torque."""
     from hil_sim.world.budget import _environment_torques, budget
-    from hil_sim.world.eclipse import sunlit_fraction
+    from gnc.eclipse import sunlit_fraction
     from hil_sim.world.orbit import orbit_elements_array, orbit_position_N_km
     from hil_sim.world.world import WorldBatch
 

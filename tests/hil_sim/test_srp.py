@@ -49,7 +49,7 @@ def test_the_torque_is_basilisks_on_600_geometries(inputs) -> None:
     (umbra and full Sun); in the penumbra the two differ by the Sun's and the Earth's radii alone (IAU 2015
     695,700 km and WGS-84 6378.137 km here, 695,000 and 6378.1366 km in Basilisk: test_eclipse.py bounds
     that at 1e-3), so there the torque per unit of sunlit fraction is compared."""
-    from hil_sim.world.eclipse import sunlit_fraction
+    from gnc.eclipse import sunlit_fraction
 
     rows = np.loadtxt(DATA / "srp_reference_torques.csv", delimiter=",", skiprows=1)
     q, r, sun, factor, theirs = rows[:, 0:4], rows[:, 4:7], rows[:, 7:10], rows[:, 10], rows[:, 11:14]
