@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import signal
+import socket
 import sys
 from pathlib import Path
 from typing import Any
@@ -75,6 +76,9 @@ def add_arguments(p: argparse.ArgumentParser, first_sync_default: float | None =
     p.add_argument("--tm-port", type=udp_port, default=None, help="override tmtc.telemetry_port")
     p.add_argument("--tc-port", type=udp_port_or_zero, default=None,
                    help="override tmtc.telecommand_port (0: ephemeral)")
+    p.add_argument("--tc-fd", type=int, default=None, metavar="FD",
+                   help="take telecommands on the bound UDP socket inherited as file descriptor FD (a parent "
+                        "that reserved the port, as `keepout sil run` does); overrides --tc-port")
     p.add_argument("--dbc", default=None, help="ICD DBC file (default config/icd/keepout.dbc)")
     p.add_argument("--key-file", default=None,
                    help="link key file (overrides tmtc.security.key_file; relative paths from the current folder)")
@@ -220,11 +224,22 @@ def _open_tmtc(args: argparse.Namespace, cfg, uplink, downlink) -> tuple[Any, An
                                 multicast_interface=tm_cfg.telemetry_multicast_interface,
                                 multicast_ttl=tm_cfg.telemetry_multicast_ttl)
     try:
+        sock = None if args.tc_fd is None else _inherited_udp_socket(args.tc_fd)
         dispatcher = CommandDispatcher(DICTIONARY, telemetry, host=tm_cfg.telecommand_bind_host, port=tc_port,
-                                       security=uplink, budget_s=tm_cfg.uplink_budget_ms / 1000.0)
+                                       security=uplink, budget_s=tm_cfg.uplink_budget_ms / 1000.0, sock=sock)
     except OSError as exc:
-        raise _StartFailed(f"cannot bind the telecommand socket {tm_cfg.telecommand_bind_host}:{tc_port}: {exc}") from None
+        where = f"--tc-fd {args.tc_fd}" if args.tc_fd is not None else f"{tm_cfg.telecommand_bind_host}:{tc_port}"
+        raise _StartFailed(f"cannot bind the telecommand socket {where}: {exc}") from None
     return telemetry, dispatcher, tm_port
+
+
+def _inherited_udp_socket(fd: int) -> socket.socket:
+    """The bound UDP socket a parent handed over as ``fd``; OSError when ``fd`` is not one."""
+    sock = socket.socket(fileno=fd)
+    if sock.family != socket.AF_INET or sock.type != socket.SOCK_DGRAM or sock.getsockname()[1] == 0:
+        sock.detach()
+        raise OSError(f"file descriptor {fd} is not a bound UDP socket")
+    return sock
 
 
 def _build(args: argparse.Namespace, cfg, bus, icd, telemetry, dispatcher):

@@ -107,7 +107,9 @@ class CommandDispatcher:
     """Receives, checks and dispatches telecommands; counts every outcome.
 
     ``port=None`` creates no socket (``handle_datagram`` only); ``port=0`` binds an ephemeral port
-    (read it from ``address``). ``telemetry`` (optional) receives the COMMAND and rejection events.
+    (read it from ``address``); ``sock``: a UDP socket already bound (one a parent process reserved and
+    handed over), used in place of binding ``host``:``port``. ``telemetry`` (optional) receives the COMMAND
+    and rejection events.
     ``security``: the uplink association every datagram must pass (None: plain packets, unit tests).
     ``budget_s``: host time one ``poll`` may spend draining the socket (the rest waits for the next).
     """
@@ -120,7 +122,7 @@ class CommandDispatcher:
     def __init__(self, dictionary: TelemetryDictionary = DICTIONARY, telemetry: TelemetrySender | None = None,
                  host: str = DEFAULT_HOST, port: int | None = DEFAULT_TC_PORT, *,
                  security: SecurityAssociation | None = None, budget_s: float = 0.005,
-                 rcvbuf_bytes: int | None = None) -> None:
+                 rcvbuf_bytes: int | None = None, sock: socket.socket | None = None) -> None:
         self.dictionary = dictionary
         self.telemetry = telemetry
         self.security = security
@@ -141,15 +143,16 @@ class CommandDispatcher:
         self._sock: socket.socket | None = None
         self._maybe_readable = True  # read at the first poll, whatever arrived before the socket was armed
         self._armed = False
-        if port is not None:
-            self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        if sock is not None or port is not None:
+            self._sock = sock if sock is not None else socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             if rcvbuf_bytes is not None:
                 self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
             try:
                 self._sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
             except OSError:
                 pass  # not Linux: drops cannot be counted (hk shows 0)
-            self._sock.bind((host, port))
+            if sock is None:
+                self._sock.bind((host, port))
             self._sock.setblocking(False)
             self._arm()
         if security is not None and security.resync_opcode is not None:

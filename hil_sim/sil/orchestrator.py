@@ -159,10 +159,19 @@ def prepare(options: RunOptions):
     return mission, report
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+def _reserve_tc_socket(host: str, port: int) -> socket.socket:
+    """The flight software's telecommand socket, bound here on ``host``:``port`` (0: any free port) and handed
+    to it (`python -m fsw --tc-fd`). Its port is then known before the flight software starts and stays
+    taken until it does: a port probed free and bound only later could be taken in between by any process
+    on the host binding an ephemeral port (another run's ground, a bus socket), and the run would not start.
+    Raises RunNotStarted when the address cannot be bound."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise RunNotStarted(f"the telecommand port {host}:{port} cannot be bound: {exc.strerror or exc}") from None
+    return sock
 
 
 def _config_used(mission, *, bus_spec: str, tm_host: str, tm_port: int | None, tc_port: int | None,
@@ -621,6 +630,7 @@ class _RunParts:
     key_path: Path | None = None
     link_key: bytes | None = None
     tc_port: int | None = None
+    tc_sock: socket.socket | None = None  # reserved for the flight software until it has taken it over
     fsw_proc: subprocess.Popen | None = None
     bus: Any = None
     candump: CandumpLog | None = None
@@ -700,7 +710,9 @@ def _start_ground(run: _RunParts) -> None:
     if isinstance(tm_port, str):
         raise RunNotStarted(f"the ground monitor could not start: {tm_port}")
     tmtc = mission.flight_software.tmtc
-    run.tc_port = tmtc.telecommand_port if mission.tmtc_ports == "fixed" else _free_udp_port()
+    run.tc_sock = _reserve_tc_socket(tmtc.telecommand_bind_host,
+                                     tmtc.telecommand_port if mission.tmtc_ports == "fixed" else 0)
+    run.tc_port = int(run.tc_sock.getsockname()[1])
     data = _config_used(mission, bus_spec=run.bus_info.spec, tm_host=run.endpoints.tm_host, tm_port=tm_port,
                         tc_port=run.tc_port, realtime=options.realtime)
     data["flight_software"]["tmtc"]["security"]["key_file"] = LINK_KEY_FILE  # beside the config used
@@ -753,7 +765,8 @@ def _build_simulator(run: _RunParts) -> None:
 def _start_flight_software(run: _RunParts) -> None:
     """Start the flight software and wait for its FSW_STARTED event to reach the ground."""
     run_dir = run.run_dir
-    run.fsw_proc = _start_fsw(run_dir)
+    run.fsw_proc = _start_fsw(run_dir, run.tc_sock)
+    run.tc_sock.close()  # the flight software holds its own copy now
     if not run.options.realtime:
         _no_wakeup_preemption(run.fsw_proc.pid)
     run.endpoints = dataclasses.replace(run.endpoints, pids={**run.endpoints.pids, "fsw": run.fsw_proc.pid})
@@ -823,7 +836,8 @@ def _shut_down(run: _RunParts) -> None:
     if (run.run_dir / ENDPOINTS_FILE).exists():
         _quietly(lambda: dataclasses.replace(run.endpoints, state="finished").write(run.run_dir))
     for close in (run.bus.shutdown if run.bus is not None else None,
-                  run.candump.close if run.candump is not None else None):
+                  run.candump.close if run.candump is not None else None,
+                  run.tc_sock.close if run.tc_sock is not None else None):
         _quietly(close)
     if run.recorder is not None:
         _quietly(lambda: run.recorder.save(run.run_dir / TRUTH_FILE))
@@ -875,13 +889,15 @@ def _loop_cpu_s(fsw_proc, ground, since: dict | None = None) -> dict[str, float 
     return {k: (None if v is None or since.get(k) is None else v - since[k]) for k, v in now.items()}
 
 
-def _start_fsw(run_dir: Path) -> subprocess.Popen:
+def _start_fsw(run_dir: Path, tc_sock: socket.socket) -> subprocess.Popen:
     """``python -m fsw`` on the run's FSW_CONFIG_FILE in its own session (a terminal's Ctrl-C is the
-    orchestrator's to handle), in the run folder, with absolute paths; it dies with this process (fsw.lifetime)."""
+    orchestrator's to handle), in the run folder, with absolute paths, taking telecommands on ``tc_sock``
+    (inherited); it dies with this process (fsw.lifetime)."""
+    fd = tc_sock.fileno()
     with open(run_dir / FSW_LOG, "w") as fsw_log:
         return subprocess.Popen(
-            [sys.executable, "-m", "fsw", "--config", str(run_dir / FSW_CONFIG_FILE)],
-            stdout=fsw_log, stderr=subprocess.STDOUT, cwd=str(run_dir), start_new_session=True,
+            [sys.executable, "-m", "fsw", "--config", str(run_dir / FSW_CONFIG_FILE), "--tc-fd", str(fd)],
+            pass_fds=(fd,), stdout=fsw_log, stderr=subprocess.STDOUT, cwd=str(run_dir), start_new_session=True,
             env={**os.environ, "PYTHONUNBUFFERED": "1", PARENT_PID_ENV: str(os.getpid())})
 
 

@@ -422,3 +422,37 @@ def test_random_packets_only_change_counters(data: st.DataObject) -> None:
     assert c["acks_sent"] == c["received"] + c["accepted"]  # an acceptance report each, a completion report each accepted
     assert len(recorder.calls) == c["accepted"]  # only accepted commands reached a handler
     assert c["execution"] == 0  # the recording handlers never fail
+
+
+def test_a_handed_over_socket_takes_the_telecommands_on_the_port_its_parent_reserved() -> None:
+    reserved = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    reserved.bind(("127.0.0.1", 0))
+    port = reserved.getsockname()[1]
+    telemetry = TelemetrySender(DICTIONARY, port=None, clock=lambda: 0.0)
+    dispatcher = CommandDispatcher(DICTIONARY, telemetry, port=None, sock=reserved)
+    calls: list[dict] = []
+    dispatcher.register("NOOP", lambda **kw: calls.append(kw))
+    try:
+        assert dispatcher.address[1] == port
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            tx.sendto(encode_command(DICTIONARY, "NOOP", seq_count=0), ("127.0.0.1", port))
+        deadline = time.monotonic() + 5.0
+        while not calls and time.monotonic() < deadline:
+            dispatcher.poll(0.1)
+        assert calls == [{}] and dispatcher.counters["accepted"] == 1
+    finally:
+        dispatcher.close()
+
+
+def test_the_flight_software_refuses_a_handed_over_descriptor_that_is_not_a_bound_udp_socket(tmp_path) -> None:
+    from cli.fsw import _inherited_udp_socket
+
+    with open(tmp_path / "not-a-socket", "w") as f, pytest.raises(OSError):
+        _inherited_udp_socket(f.fileno())
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as unbound, pytest.raises(OSError, match="not a bound UDP"):
+        _inherited_udp_socket(unbound.fileno())
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as tcp:
+        tcp.bind(("127.0.0.1", 0))
+        with pytest.raises(OSError, match="not a bound UDP"):
+            _inherited_udp_socket(tcp.fileno())
+        assert tcp.getsockname()[1] > 0  # refused, not taken: the caller's socket is still open
