@@ -61,6 +61,7 @@ DEFAULT_MISSION = config_path("missions", "demo-pointing.yaml")
 MODELINE = f"# yaml-language-server: $schema={config_path('schema', 'mission.schema.json').as_uri()}"
 
 DEFAULT_RT_PRIORITY = 20  # real time: SCHED_FIFO priority of the simulator's tick loop
+BUS_DRAWS = 8  # udp_multicast endpoints drawn at random before a run gives up (see _open_simulator_bus)
 LOCKSTEP_TIMEOUT_S = 60.0  # flight software: end of run when no SYNC for this long
 FSW_POLL_TICKS = 20  # the simulator checks that the flight software is alive every this many ticks
 GROUND_BATCH_S = 0.02  # the ground sleeps this long after a read, so a wake-up takes ~10 packets, not 1
@@ -657,7 +658,12 @@ def _run(options: RunOptions, mission, run_dir: Path) -> tuple[str, int | None]:
     except BusSpecError as exc:
         raise MissionRejected(f"bus {mission.bus!r}: {exc}") from None
     run = _RunParts(options, mission, run_dir, info, _endpoints(mission, run_dir.name, info.spec, options.realtime))
-    _prepare_ground(run)
+    _open_simulator_bus(run)
+    try:
+        _prepare_ground(run)
+    except BaseException:
+        run.bus.shutdown()
+        raise
     status, code = STATUS_COMPLETED, None
     try:
         _start_ground(run)
@@ -700,6 +706,30 @@ def _prepare_ground(run: _RunParts) -> None:
                              kwargs={"key_file": str(run.key_path)})
 
 
+def _open_simulator_bus(run: _RunParts) -> None:
+    """Open the simulator's end of the run's bus, first of all (the ground and the flight software are told
+    its spec). A udp_multicast endpoint drawn at random is drawn again when it cannot be opened: its port
+    lies among the host's ephemeral ports, and a socket that took the same port on every address (any client
+    socket that sent without binding) blocks the group's bind. Once the simulator holds the port, no
+    ephemeral bind can take it. Raises RunNotStarted when the bus cannot be opened."""
+    import can
+
+    from comms.bus.transport import BusUnavailableError, open_bus, resolve_spec
+
+    asked = (run.mission.bus or "auto").strip()
+    for draw in range(1, BUS_DRAWS + 1):
+        info = run.bus_info
+        try:
+            run.bus = open_bus(info.spec, run_id=run.run_dir.name, bitrate=run.mission.bus_bitrate_bps)
+            return
+        except (BusUnavailableError, OSError, can.CanError) as exc:
+            drawn = info.interface == "udp_multicast" and info.spec != asked
+            if not drawn or draw == BUS_DRAWS:
+                raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
+        run.bus_info = resolve_spec(asked, run_id=run.run_dir.name)
+        run.endpoints = dataclasses.replace(run.endpoints, bus=run.bus_info.spec)
+
+
 def _start_ground(run: _RunParts) -> None:
     """Start the ground monitor, then write the config used and the endpoints with the ports it took."""
     options, mission, run_dir = run.options, run.mission, run.run_dir
@@ -727,21 +757,15 @@ def _start_ground(run: _RunParts) -> None:
 
 
 def _build_simulator(run: _RunParts) -> None:
-    """Open the simulator's end of the bus and build the world, the simulator, the telecommand timeline and
-    the recorders. Done before the flight software starts (astropy ephemeris nodes take a few seconds): it
+    """Build the world, the simulator on its end of the bus, the telecommand timeline and the recorders. Done before the flight software starts (astropy ephemeris nodes take a few seconds): it
     waits only lockstep_timeout_s for SYNC(0)."""
     from comms.bus.icd import Icd
-    from comms.bus.transport import BusUnavailableError, open_bus
     from ground.commanding import CommandSender, signing_sender_args
     from hil_sim.sil.lockstep import Simulator
     from hil_sim.mission.model import door_params, magnetic_device_params, world_params
     from hil_sim.world.world import World
 
     mission, info = run.mission, run.bus_info
-    try:
-        run.bus = open_bus(info.spec, run_id=run.run_dir.name, bitrate=mission.bus_bitrate_bps)
-    except (BusUnavailableError, OSError) as exc:
-        raise RunNotStarted(f"bus {info.spec} cannot be opened: {exc}") from None
     if mission.bus_authentication:
         from comms.bus.secoc import secure
 
