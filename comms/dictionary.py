@@ -468,6 +468,8 @@ TC_ERRORS = ("INVALID_OPCODE", "VALIDATION", "FORMAT", "EXECUTION", "SECURITY")
 DOOR_REASONS = ("NONE", "PREDICTED_ENTRY", "KEEP_OUT_VIOLATION", "NO_ATTITUDE")
 DOOR_FAULTS = ("STALLED", "COMMAND_TIMEOUT", "NO_STATUS", "NOT_CLOSED", "NOT_OPEN")
 DOOR_STATES = ("CLOSED", "OPEN", "CLOSING", "OPENING", "STOPPED")
+# the Earth's shadow as the flight software knows it (fsw.eclipse); UNKNOWN without onboard orbit knowledge
+ECLIPSE_STATES = ("UNKNOWN", "SUNLIT", "PENUMBRA", "UMBRA")
 
 # Telecommand verification, after PUS service 1 (ECSS-E-ST-70-41C ch. 6.1): every telecommand gets an
 # acceptance report (success or failure with a reason code) and, once accepted, a completion report. They
@@ -672,6 +674,10 @@ _HK_CHANNELS: list[Channel] = [
     *_indexed("mtq_dipole_cmd_Am2", 3, "F32", "A*m^2", "magnetorquer rod dipole commanded (zero unless a law "
               "sets it)"),
     Channel("h_excess_Nms", "F32", "N*m*s", "momentum management: |wheel momentum - bias| (NaN when off)"),
+    Channel("eclipse_state", "ENUM", "", "the Earth's shadow from the onboard ephemeris and orbit (UNKNOWN: no "
+            "orbit known)", enum=ECLIPSE_STATES),
+    Channel("sunlit_fraction", "F32", "", "share of the Sun's disc seen past the Earth from the onboard ephemeris "
+            "and orbit: 1 full Sun, 0 umbra (NaN: no orbit known)"),
     Channel("rss_mb", "F32", "MB", "resident memory of the flight software process"),
 ]
 
@@ -804,6 +810,13 @@ EVENTS: tuple[EventDef, ...] = (
     EventDef("DOOR_FAULT", 83, Severity.WARNING_HI, "aperture door fault: {fault} (door {position_pct:.1f} % open)",
              (Arg("fault", "ENUM", enum=DOOR_FAULTS), Arg("position_pct", "F32", "%")),
              throttle=5, throttle_window_s=10.0),
+    EventDef("ECLIPSE_ENTRY", 100, Severity.ACTIVITY_LO,
+             "entering the Earth's shadow (sunlit fraction {sunlit_fraction:.3f})",
+             (Arg("sunlit_fraction", "F32"),)),
+    EventDef("ECLIPSE_EXIT", 101, Severity.ACTIVITY_LO,
+             "in full Sun again after {duration_s:.0f} s in the Earth's shadow (least sunlit fraction "
+             "{least_sunlit_fraction:.3f})",
+             (Arg("duration_s", "F32", "s"), Arg("least_sunlit_fraction", "F32"))),
     EventDef("PLUGIN_STARTED", 90, Severity.ACTIVITY_HI, "{kind} plug-in {name} flying under keepout's guard",
              (Arg("kind", "ENUM", enum=PLUGIN_KINDS), Arg("name", "STRING", description="its entry-point name"))),
     EventDef("PLUGIN_STOPPED", 91, Severity.WARNING_HI, "{kind} plug-in {name} stopped: {reason}",

@@ -26,6 +26,7 @@ from fsw.assumption_check import MAX_RESTARTS, AssumptionChecker
 from fsw.command_handlers import CommandHandlers
 from fsw.control import RateController
 from fsw.door import DoorController
+from fsw.eclipse import EclipseMonitor
 from fsw.estimation import AttitudeEstimator
 from fsw.executive import Executive
 from fsw.fdir import STATUS_LOST, Fdir, WheelSpeedResidual
@@ -122,6 +123,7 @@ class FlightSoftware:
         self.inject_overrun_s = 0.0  # test hook: busy-wait this long in the next GNC cycle
         self.last: CycleRecord | None = None
         self.mode_reason = "INIT"
+        self.eclipse = EclipseMonitor(config, self.event)  # the Earth's shadow, updated by housekeeping
         self.hk = Housekeeping(self)
         if dispatcher is not None:
             CommandHandlers(self).register(dispatcher)

@@ -54,6 +54,7 @@ class Housekeeping:
         """Assumption checks (throttled), heartbeat, HK telemetry."""
         fsw = self.fsw
         self._assumption_checks(fsw)
+        fsw.eclipse.update(fsw.t_s)
         try:
             fsw.driver.send_heartbeat(MODES.index(fsw.guidance.mode), fsw.cycle)
         except Exception:  # noqa: BLE001
@@ -143,6 +144,7 @@ class Housekeeping:
             if key is None:
                 key = keys[mon] = f"fdir_{mon.lower()}"
             values[key] = state
+        values.update(fsw.eclipse.values())
         if fsw.dispatcher is not None:
             values.update(fsw.dispatcher.hk_values())
         return values

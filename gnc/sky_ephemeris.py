@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from gnc._sky_ephemeris_nb import sky_directions_nb
+from gnc.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
 from gnc.earth import direction_to_point_N, earth_fixed_to_inertial, geodetic_to_earth_fixed_km, nadir_N
 from gnc.ephemeris import EARTH_RADIUS_KM, julian_date, julian_date_tdb, moon_position_N_km, sun_position_N_km
 
@@ -45,6 +46,31 @@ class SkyEphemeris:
     def position_N_km(self, t_s: float) -> np.ndarray:
         u = self.u0 + self.n_rad_s * t_s
         return self.radius_km * (math.cos(u) * self.p_hat + math.sin(u) * self.q_hat)
+
+    def velocity_direction_N(self, t_s: float) -> np.ndarray:
+        """Unit vector of the spacecraft's velocity in N at mission time ``t_s`` (the circular orbit's)."""
+        u = self.u0 + self.n_rad_s * t_s
+        return -math.sin(u) * self.p_hat + math.cos(u) * self.q_hat
+
+    def orbit_normal_N(self) -> np.ndarray:
+        """Unit normal of the orbit plane in N (along the orbital angular momentum)."""
+        return np.cross(self.p_hat, self.q_hat)
+
+    def sunlit_fraction(self, t_s: float) -> float:
+        """Share of the Sun's disc seen past the Earth at mission time ``t_s``: 1 in full Sun, 0 in the umbra,
+        between in the penumbra (`gnc.eclipse`, the truth's conical shadow, on the onboard Sun and orbit).
+
+        The geocentric Sun is interpolated between ephemeris nodes as in `directions`; the Earth is the
+        sphere of radius EARTH_RADIUS_KM, as the truth's shadow."""
+        k = math.floor(t_s / EPHEMERIS_NODE_S)
+        f = t_s / EPHEMERIS_NODE_S - k
+        s0 = self._geocentric(k)[0]
+        s1 = self._geocentric(k + 1)[0]
+        sun = s0 + f * (s1 - s0)
+        r = self.position_N_km(t_s)
+        s = sun - r
+        return float(sunlit_fraction_at(float(r[0]), float(r[1]), float(r[2]), float(s[0]), float(s[1]),
+                                        float(s[2]), EARTH_RADIUS_KM, SUN_RADIUS_KM))
 
     def target_direction_N(self, t_s: float, ground_E_km: np.ndarray | None) -> np.ndarray:
         """Unit vector in N from the spacecraft to a target on the Earth at mission time ``t_s``: the Earth
