@@ -6,8 +6,9 @@ Each GNC cycle the active mode turns the attitude estimate into a body-rate comm
   are rebuilt from the onboard ephemeris (`gnc.sky_zones`), inflated by ``law.margin_deg``; the
   `gnc.laws.StarShapedLaw` gives ``u`` and `gnc.attitude.pointing_rate_command` gives
   ``omega = b^x R^T u`` (no component about the boresight). A separate proportional roll law turns
-  about the boresight so that ``roll_axis_B`` lines up with ``roll_reference_N`` in the plane normal to
-  the boresight (it cannot move the boresight, so it cannot affect keep-out).
+  about the boresight so that ``roll_axis_B`` lines up with the roll reference in the plane normal to
+  the boresight: ``roll_reference_N``, or the Sun, the orbit's velocity or normal by the rule
+  ``pointing.roll_reference`` (it cannot move the boresight, so it cannot affect keep-out).
 * QUATERNION: the state is the attitude quaternion on S^3, zones are forbidden-attitude sets on S^3.
   `GradientLaw` when every zone is a cone (and law is 'auto' or 'gradient'), else `StarShapedLaw`;
   ``omega = 2 A(q)^T u``.

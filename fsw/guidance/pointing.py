@@ -9,7 +9,8 @@ for the law), merged when close (`zone_merging`), and the `gnc.laws.StarShapedLa
 to the target, or to a substitute when the target lies in a zone's eps-layer, or out of the closing gap
 between two zones that cannot merge; `gnc.attitude.pointing_rate_command_nb` maps the law's ``u`` to a
 body rate with no component about the boresight. A separate proportional roll law turns about the
-boresight (it cannot move the boresight, so it cannot affect keep-out).
+boresight (it cannot move the boresight, so it cannot affect keep-out). Its reference is fixed in N, or
+chosen by a rule (`pointing.roll_reference`: the Sun, the orbit's velocity or normal; `_follow_roll_rule`).
 """
 from __future__ import annotations
 
@@ -39,6 +40,9 @@ from gnc.laws import _positive, _unit_vector, _zone_list
 ZONE_REBUILD_TOL_DEG = 0.1  # extra inflation of the law's zones covering their motion between rebuilds
 LAW_REBUILD_TRIGGER_DEG = 0.08
 PHYS_REBUILD_TOL_DEG = 0.5
+# a roll rule's reference within this of the target's line (either way) is not taken: the last one is held
+ROLL_RULE_HOLD_DEG = 25.0
+_ROLL_RULE_HOLD_COS = math.cos(math.radians(ROLL_RULE_HOLD_DEG))
 _BODY_INDEX = {"sun": 0, "moon": 1, "earth": 2, "inertial": 3}  # rows of `sky_directions_nb`; 3: a fixed centre
 _NO_PATH = np.zeros((1, 3))
 _NO_LAW = (np.zeros((0, ZT_WIDTH)), np.zeros((0, ARC_WIDTH)))
@@ -81,6 +85,9 @@ class PointingGuidance:
     _track: tuple[str, np.ndarray | None] | None = None
     _tracked_N: np.ndarray | None = None
     _track_started = False
+    # the roll rule's reference (`_follow_roll_rule`) and what it was computed for (an ephemeris node, or 0)
+    _roll_rule_ref: np.ndarray | None = None
+    _roll_rule_key: int | None = None
 
     def set_target_on_earth(self, kind: str, ground=None) -> None:
         """Make the POINTING target nadir (``kind`` 'nadir') or the `fsw.config.GroundTargetConfig`
@@ -219,7 +226,34 @@ class PointingGuidance:
         return self._sky_margins(y_N)[0], self._slot_body_codes()
 
 
+    def _follow_roll_rule(self, t_s: float, rule: str) -> None:
+        """The roll reference of the rule ``rule`` (`pointing.roll_reference`) at ``t_s`` as ``roll_ref_N``.
+
+        'sun': the Sun seen from the spacecraft, once per ephemeris node (it moves ~0.0004 deg in one);
+        'velocity': the onboard orbit's velocity direction, every cycle (0.06 deg/s in low orbit);
+        'orbit_normal': the orbit's normal, fixed. The roll law turns about the boresight only (its rate is
+        along b: the boresight's own rate R (omega x b) gets nothing from it), so no rule can move the
+        boresight or touch the keep-out guarantee. A reference within ROLL_RULE_HOLD_DEG of the target's line
+        (the Sun near nadir or zenith for a nadir target) fixes no roll well and flips it as it passes: the
+        last reference is held instead (the configured roll_reference_N until one was taken)."""
+        e = self.ephem
+        if rule == "velocity":
+            ref = e.velocity_direction_N(t_s)
+        else:
+            key = math.floor(t_s / EPHEMERIS_NODE_S) if rule == "sun" else 0
+            if key != self._roll_rule_key:
+                self._roll_rule_key = key
+                self._roll_rule_ref = (e.directions(key * EPHEMERIS_NODE_S)["sun"] if rule == "sun"
+                                       else e.orbit_normal_N())
+            ref = self._roll_rule_ref
+        target = self.target_N
+        if abs(ref[0] * target[0] + ref[1] * target[1] + ref[2] * target[2]) < _ROLL_RULE_HOLD_COS:
+            self.roll_ref_N = ref
+
     def _pointing(self, t_s: float, q: np.ndarray, omega: np.ndarray) -> GuidanceOutput:
+        rule = self.cfg.pointing.roll_reference
+        if rule != "inertial" and self.mode == "POINTING":  # SAFE steers the roll to its own reference
+            self._follow_roll_rule(t_s, rule)
         if self._track_started is False or self._track is not None:
             self._track_target(t_s)
         pack = self._sky_pack
