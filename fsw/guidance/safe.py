@@ -112,7 +112,8 @@ class SafeGuidance:
                           y_N: np.ndarray) -> GuidanceOutput:
         """Sun acquisition through POINTING: the law, the plan and the governor on the zones, aimed at the
         boresight of a Sun-safe attitude, the roll law turning ``sun_axis_B`` to the Sun, at SAFE's rate."""
-        if self._safe_sun is None or _angle_deg(sun_N, self._safe_sun) > self.SAFE_AIM_REFRESH_DEG:
+        if (self._safe_sun is None or _angle_deg(sun_N, self._safe_sun) > self.SAFE_AIM_REFRESH_DEG
+                or self._safe_aim_covered()):
             self._safe_sun = sun_N
             self.target_N = self._sun_safe_boresight(sun_N, y_N)
             self._drop_path()
@@ -127,6 +128,12 @@ class SafeGuidance:
         out.mode = "SAFE"
         out.target_N = sun_N
         return out
+
+    def _safe_aim_covered(self) -> bool:
+        """Whether a zone (as the law sees it) has moved over the Sun-safe aim: in low orbit the Earth's zone
+        sweeps round the sky once an orbit, and an aim it covers would leave the boresight pressed against
+        the moving zone's edge; a new aim is then chosen on the ring, clear of it."""
+        return any(s.law is not None and float(s.law.signed_separation(self.target_N)) <= 0.0 for s in self.slots)
 
     def _sun_safe_boresight(self, sun_N: np.ndarray, y_N: np.ndarray) -> np.ndarray:
         """Boresight direction [N] of the Sun-safe attitude nearest ``y_N`` that is clear of every zone."""
