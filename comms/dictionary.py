@@ -453,7 +453,7 @@ def _arg_from_dict(data: Mapping[str, Any]) -> Arg:
 # ---------------------------------------------------------------------------------------------
 # The keepout dictionary
 # ---------------------------------------------------------------------------------------------
-MODES = ("SAFE", "POINTING", "QUATERNION")
+MODES = ("SAFE", "POINTING", "QUATERNION", "DETUMBLE")  # codes 0-3: append, never reorder
 SAFE_PHASES = ("NONE", "RATE_DAMPING", "SUN_ACQUISITION", "SUN_POINTING")
 BLIND_SOURCES = ("NONE", "SUN", "MOON", "RATE")  # matches the bus ST_QUAT blind_source coding
 FDIR_STATES = ("NOMINAL", "PERSISTING", "TRIPPED", "DISABLED")
@@ -465,7 +465,7 @@ RATE_GROUPS = ("GNC", "HK")
 SENSORS = ("IMU", "STAR_TRACKER", "WHEEL")
 TC_ERRORS = ("INVALID_OPCODE", "VALIDATION", "FORMAT", "EXECUTION", "SECURITY")
 # the aperture door (fsw.door): why it closes, what its drive or the flight software found wrong, its ends
-DOOR_REASONS = ("NONE", "PREDICTED_ENTRY", "KEEP_OUT_VIOLATION", "NO_ATTITUDE")
+DOOR_REASONS = ("NONE", "PREDICTED_ENTRY", "KEEP_OUT_VIOLATION", "NO_ATTITUDE", "DETUMBLE")
 DOOR_FAULTS = ("STALLED", "COMMAND_TIMEOUT", "NO_STATUS", "NOT_CLOSED", "NOT_OPEN")
 DOOR_STATES = ("CLOSED", "OPEN", "CLOSING", "OPENING", "STOPPED")
 # the Earth's shadow as the flight software knows it (fsw.eclipse); UNKNOWN without onboard orbit knowledge
@@ -725,6 +725,11 @@ EVENTS: tuple[EventDef, ...] = (
               Arg("cause", "ENUM", enum=MODE_REASONS))),
     EventDef("SAFE_PHASE_CHANGED", 11, Severity.ACTIVITY_LO, "SAFE phase -> {phase}",
              (Arg("phase", "ENUM", enum=SAFE_PHASES),)),
+    EventDef("DETUMBLE_STARTED", 17, Severity.ACTIVITY_HI, "detumbling with B-dot from {rate_deg_s:.3f} deg/s",
+             (Arg("rate_deg_s", "F32", "deg/s", "the gyro's |omega| (NaN: no sample yet)"),)),
+    EventDef("DETUMBLE_COMPLETE", 18, Severity.ACTIVITY_HI,
+             "detumbled at t = {t_s:.1f} s, {rate_deg_s:.3f} deg/s: SAFE",
+             (Arg("t_s", "F64", "s", "onboard time"), Arg("rate_deg_s", "F32", "deg/s", "the gyro's |omega|"))),
     EventDef("TARGET_SET", 12, Severity.ACTIVITY_HI,
              "target {kind} [{c0:.6f}, {c1:.6f}, {c2:.6f}, {c3:.6f}]",
              (Arg("kind", "ENUM", enum=TARGET_KINDS), Arg("c0", "F64"), Arg("c1", "F64"),

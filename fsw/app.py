@@ -25,6 +25,7 @@ from fsw import runtime
 from fsw.assumption_check import MAX_RESTARTS, AssumptionChecker
 from fsw.command_handlers import CommandHandlers
 from fsw.control import RateController
+from fsw.detumble import Detumbler
 from fsw.door import DoorController
 from fsw.eclipse import EclipseMonitor
 from fsw.estimation import AttitudeEstimator
@@ -108,6 +109,8 @@ class FlightSoftware:
         # the wheels' momentum unloaded through the rods (fsw.momentum), when enabled
         self.momentum = (MomentumManager(config.momentum_management, self.control.G, self.control.Js)
                          if config.momentum_management.enabled else None)
+        # B-dot detumbling (fsw.detumble), when the mission configures the DETUMBLE mode
+        self.detumble = Detumbler(config.detumble, self.period_s) if config.detumble is not None else None
         self._max_speed = np.ascontiguousarray(self.control.max_speed, dtype=float)  # fixed at start-up
         # configuration the cycle reads every tick, fixed at start-up (no telecommand changes it)
         self._gnc_tm_every = config.tmtc.gnc_packet_every_n_cycles
@@ -129,6 +132,8 @@ class FlightSoftware:
             CommandHandlers(self).register(dispatcher)
         self._warm_up()
         self.event("FSW_STARTED", gnc_rate_hz=config.rates.gnc_rate_hz)
+        if self.guidance.mode == "DETUMBLE":
+            self.event("DETUMBLE_STARTED", rate_deg_s=math.nan)  # no gyro sample yet
         if self.plugins:
             self._start_plugins()
 
@@ -196,7 +201,16 @@ class FlightSoftware:
 
     def set_mode(self, mode: str, cause: str = "TELECOMMAND") -> None:
         old = self.guidance.mode
+        if mode == "DETUMBLE" and self.detumble is None:
+            raise ValueError("DETUMBLE is not configured (flight_software.detumble)")
         self.guidance.set_mode(mode)
+        if mode == "DETUMBLE":
+            self.detumble.reset()
+            w = getattr(self.estimator, "omega_BN_B", None) if self.last is not None else None
+            self.event("DETUMBLE_STARTED", rate_deg_s=math.degrees(vector_norm(np.asarray(w).tolist()))
+                       if w is not None else math.nan)
+        elif old == "DETUMBLE":
+            self.mtq_command_Am2 = np.zeros(3)  # B-dot's last dipole must not outlive the mode
         self.mode_reason = cause
         self.restart_target_watch()
         if old != mode or mode == "SAFE":
@@ -232,10 +246,15 @@ class FlightSoftware:
         if s.st_fresh != self._st_was_valid:  # the star tracker was lost or is back
             self._st_events(s)
         g = self.guidance.step(s.t_s, s.dt_s, est.q_NB if est.initialized else None, est.omega_BN_B)
-        ctrl = self.control.step(s.dt_s, g.omega_cmd_BN_B, est.omega_BN_B, s.wheel_speed_rad_s)
+        detumbling = g.mode == "DETUMBLE"
+        if detumbling:  # B-dot on the rods, the wheels at zero torque
+            ctrl = self.control.hold(s.wheel_speed_rad_s)
+            self.mtq_command_Am2 = self.detumble.step(s.mag_S_T, est.omega_BN_B, s.dt_s)
+        else:
+            ctrl = self.control.step(s.dt_s, g.omega_cmd_BN_B, est.omega_BN_B, s.wheel_speed_rad_s)
         if self.door is not None:  # DOOR_CMD before the wheel commands' CYCLE_DONE
             self._door_cycle(s.tick, est, g)
-        if self.momentum is not None:
+        if self.momentum is not None and not detumbling:
             self.mtq_command_Am2 = self.momentum.step(s.mag_S_T, self.control.wheel_speed)
         if self._mtq:  # MTQ_COMMAND, as DOOR_CMD, in the wheel commands' burst before CYCLE_DONE
             d1, d2, d3 = self.mtq_command_Am2.tolist()
@@ -248,6 +267,8 @@ class FlightSoftware:
             self.event("FATAL_ERROR", reason=f"bus send failed: {type(exc).__name__}: {exc}"[:110])
 
         self._fdir_cycle(s, est, g, ctrl, slipped_before)
+        if detumbling and self.detumble.complete and self.guidance.mode == "DETUMBLE":
+            self._detumble_complete(est.omega_BN_B)
         if not self._target_reached:
             self._watch_target(g, est.omega_BN_B, s.dt_s)
 
@@ -259,6 +280,12 @@ class FlightSoftware:
         if self.cycle % self._gnc_tm_every == 0:
             self._send_gnc_tm(s, g, ctrl, exec_ms)
         self.cycle += 1
+
+    def _detumble_complete(self, omega_BN_B: np.ndarray) -> None:
+        """The rate has stayed below the threshold for the dwell: DETUMBLE_COMPLETE, then SAFE (rate damping
+        on the wheels, then Sun acquisition); the next cycle's rods get zero (or momentum management's)."""
+        self.event("DETUMBLE_COMPLETE", t_s=self.t_s, rate_deg_s=math.degrees(vector_norm(omega_BN_B.tolist())))
+        self.set_mode("SAFE", "AUTONOMOUS")
 
     def _overrun(self) -> None:
         """The test hook ``inject_overrun_s``: busy-wait that long once, as a cycle that runs late."""
@@ -315,7 +342,8 @@ class FlightSoftware:
         usable = sum(1 for i, active in enumerate(ctl.active.tolist()) if active and not faulty[i])
         brake_deg_s2 = math.degrees(ctl.max_accel) if usable >= 3 else 0.0
         violation = self.fdir.keepout_red.state == "TRIPPED"
-        self.door.cycle(self.t_s, tick, margins, bodies, known, brake_deg_s2, violation)
+        hold = "DETUMBLE" if g.mode == "DETUMBLE" else None  # a tumbling body cannot steer clear: shut throughout
+        self.door.cycle(self.t_s, tick, margins, bodies, known, brake_deg_s2, violation, hold=hold)
 
     def _st_events(self, s: SensorSnapshot) -> None:
         if not s.st_fresh and self._st_was_valid:

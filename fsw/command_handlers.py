@@ -47,6 +47,8 @@ class CommandHandlers:
         mode = str(mode)
         if mode not in MODES:
             raise CommandValidationError(f"SET_MODE: unknown mode {mode!r}")
+        if mode == "DETUMBLE" and self.fsw.detumble is None:
+            raise CommandValidationError("SET_MODE: DETUMBLE is not configured on board (flight_software.detumble)")
         self.fsw.set_mode(mode, "TELECOMMAND")
 
     def set_target(self, kind: Any, c0: float, c1: float, c2: float, c3: float = 0.0) -> None:

@@ -375,15 +375,10 @@ class MagneticDevicesConfig(_Strict):
     magnetorquers: bool = Field(False, description="MTQ_COMMAND is sent every GNC cycle (default: true when spacecraft.magnetorquers is given).")
 
 
-class MomentumManagementConfig(_Strict):
-    """Magnetic momentum management (`fsw.momentum`): every GNC cycle, after the rate loop, the wheels' stored
-    momentum above `wheel_momentum_bias_Nms` is dumped through the rods with the cross-product law while the
-    attitude loop keeps pointing (the field's torque only drains the wheels). Needs magnetic_devices with the
-    magnetometer and the magnetorquers. Off by default."""
+class _RodsKnowledge(_Strict):
+    """What a law driving the rods knows of them and of the magnetometer: each rod's limit and axis, the
+    magnetometer's mounting (defaults: the spacecraft's, `hil_sim.mission.knowledge`)."""
 
-    enabled: bool = Field(False, description="Command the rods to unload the wheels (false: the rods get zero, as without this section).")
-    gain_1_s: float = Field(1e-3, gt=0.0, le=1.0, description="Cross-product law gain k: the field is asked for the torque -k (h_w - bias) [1/s].")
-    wheel_momentum_bias_Nms: Vec3 = Field([0.0, 0.0, 0.0], description="Stored wheel momentum the law keeps, in body axes [N m s].")
     max_dipole_Am2: Annotated[list[Annotated[float, Field(gt=0.0, le=32.0)]], Field(min_length=3, max_length=3)] = Field(
         [0.2, 0.2, 0.2], description="Each rod's command limit [A m^2]; a command is scaled down as a whole (its direction kept) until every rod is within it.")
     magnetometer_q_BS: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Magnetometer mounting as the flight software knows it: rotates sensor-frame vectors into body, scalar first (normalised on load).")
@@ -396,8 +391,33 @@ class MomentumManagementConfig(_Strict):
     def _rods(cls, v: list[list[float]]) -> list[list[float]]:
         axes = [_unit(a, "rod axis") for a in v]
         if np.linalg.matrix_rank(np.array(axes), tol=1e-6) < 3:
-            raise ValueError("momentum_management.rod_axes_B: the rod axes must span 3-D")
+            raise ValueError("rod_axes_B: the rod axes must span 3-D")
         return axes
+
+
+class MomentumManagementConfig(_RodsKnowledge):
+    """Magnetic momentum management (`fsw.momentum`): every GNC cycle, after the rate loop, the wheels' stored
+    momentum above `wheel_momentum_bias_Nms` is dumped through the rods with the cross-product law while the
+    attitude loop keeps pointing (the field's torque only drains the wheels). Needs magnetic_devices with the
+    magnetometer and the magnetorquers. Off by default."""
+
+    enabled: bool = Field(False, description="Command the rods to unload the wheels (false: the rods get zero, as without this section).")
+    gain_1_s: float = Field(1e-3, gt=0.0, le=1.0, description="Cross-product law gain k: the field is asked for the torque -k (h_w - bias) [1/s].")
+    wheel_momentum_bias_Nms: Vec3 = Field([0.0, 0.0, 0.0], description="Stored wheel momentum the law keeps, in body axes [N m s].")
+
+
+class DetumbleConfig(_RodsKnowledge):
+    """DETUMBLE mode (`fsw.detumble`): B-dot on the magnetometer, m = -k dB/dt with dB/dt the measured field's
+    rate of change in body axes through a first-order low-pass filter, mapped onto the rods and saturated; the
+    wheels get zero torque; once the gyro's body rate has stayed below `rate_threshold_deg_s` for `dwell_s`,
+    DETUMBLE_COMPLETE and SAFE. Needs magnetic_devices with the magnetometer and the magnetorquers, and a door
+    (flight_software.door) when there are sky zones: a tumbling body cannot steer its boresight, the door is
+    held closed throughout. Absent (the default): no DETUMBLE mode."""
+
+    gain_Am2_s_T: float = Field(2.0e5, gt=0.0, le=1.0e9, description="B-dot gain k: dipole per field rate [A m^2 per T/s] (large: the rods saturate until the rate is low).")
+    filter_time_constant_s: float = Field(1.0, ge=0.0, le=100.0, description="Time constant of the low-pass filter on the field rate [s] (0: the raw difference of two samples).")
+    rate_threshold_deg_s: float = Field(0.5, gt=0.0, le=10.0, description="Detumbled when the gyro's |omega| stays below this [deg/s].")
+    dwell_s: float = Field(30.0, ge=0.0, le=3600.0, description="How long |omega| must stay below rate_threshold_deg_s before SAFE [s].")
 
 
 # --------------------------------------------------------------------------------------------- door
@@ -554,7 +574,7 @@ class FswConfig(_Strict):
     """Complete flight-software configuration (embedded in the mission YAML under ``flight_software:``)."""
 
     epoch_utc: _dt.datetime = Field(_dt.datetime(2026, 3, 20, 12, 0, tzinfo=_dt.timezone.utc), description="UTC epoch of tick 0 (ISO 8601).")
-    initial_mode: Literal["SAFE", "POINTING", "QUATERNION"] = Field("SAFE", description="Mode at start.")
+    initial_mode: Literal["SAFE", "POINTING", "QUATERNION", "DETUMBLE"] = Field("SAFE", description="Mode at start (DETUMBLE needs the detumble section).")
     rates: RatesConfig = Field(default_factory=RatesConfig)
     spacecraft: SpacecraftConfig = Field(default_factory=SpacecraftConfig)
     orbit: OrbitKnowledge = Field(default_factory=OrbitKnowledge)
@@ -570,12 +590,23 @@ class FswConfig(_Strict):
     door: DoorConfig | None = Field(None, description="The protective aperture door the flight software drives (default: present, with the spacecraft's stroke times, when spacecraft.door is given; absent otherwise).")
     magnetic_devices: MagneticDevicesConfig | None = Field(None, description="The magnetometer, sun sensors and magnetorquers the flight software reads and drives (default: present, naming those the spacecraft has, when it has any; absent otherwise).")
     momentum_management: MomentumManagementConfig = Field(default_factory=MomentumManagementConfig, description="Magnetic unloading of the wheels' momentum through the rods (off by default).")
+    detumble: DetumbleConfig | None = Field(None, description="B-dot detumbling, the DETUMBLE mode (absent: no DETUMBLE mode; initial_mode DETUMBLE and SET_MODE DETUMBLE need it).")
 
     @model_validator(mode="after")
     def _momentum_devices(self) -> "FswConfig":
         d = self.magnetic_devices
-        if self.momentum_management.enabled and not (d is not None and d.magnetometer and d.magnetorquers):
+        rods = d is not None and d.magnetometer and d.magnetorquers
+        if self.momentum_management.enabled and not rods:
             raise ValueError("momentum_management.enabled needs magnetic_devices with magnetometer and magnetorquers")
+        if self.initial_mode == "DETUMBLE" and self.detumble is None:
+            raise ValueError("initial_mode DETUMBLE needs the detumble section (flight_software.detumble)")
+        if self.detumble is not None and not rods:
+            raise ValueError("detumble: DETUMBLE needs magnetic_devices with magnetometer and magnetorquers "
+                             "(spacecraft.magnetometer and spacecraft.magnetorquers)")
+        if self.detumble is not None and (self.pointing.zones or self.quaternion.zones) and self.door is None:
+            raise ValueError("detumble: a tumbling spacecraft cannot steer its boresight out of the keep-out zones "
+                             "(pointing.zones, quaternion.zones); DETUMBLE keeps the instrument behind the aperture door: add "
+                             "spacecraft.door (or flight_software.door)")
         return self
 
     @field_validator("epoch_utc")

@@ -187,3 +187,15 @@ class RateController:
             bool(self.ff), self.J, self.G, self.Js, ws, self.wheel_speed, self.max_torque, self.M, self._any_active)
         self._omega_cmd_prev = shaped
         return ControlOutput(torque, tau_w, scale, shaped)
+
+    def hold(self, wheel_speed_rad_s: np.ndarray | None = None) -> ControlOutput:
+        """A cycle without the rate loop (DETUMBLE): zero torque to every wheel, the speeds they report kept
+        as `step` keeps them; the next `step` shapes its command from the measured rate again."""
+        if wheel_speed_rad_s is not None:
+            ws = np.asarray(wheel_speed_rad_s, dtype=float)
+            known = np.isfinite(ws)
+            self.wheel_speed[known] = ws[known]
+        self._omega_cmd_prev = None
+        self._accel_prev = np.zeros(3)
+        zero = np.zeros(3)
+        return ControlOutput(zero, np.zeros(self.n), 1.0, zero)

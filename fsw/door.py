@@ -13,7 +13,8 @@ view and sends DOOR_CMD (before CYCLE_DONE, so the drive takes it in the same ti
 
   and the door closes when margin - guard_deg <= reach (T the GNC period: the command's own delay; the
   door's closing time counts as reaction time, so the door is shut before a boresight that starts braking
-  only then arrives); also when KEEP_OUT_VIOLATION is raised, and while there is no attitude estimate;
+  only then arrives); also when KEEP_OUT_VIOLATION is raised, while there is no attitude estimate, and
+  while the mode holds it shut (``hold``: DETUMBLE, whose tumbling body cannot steer its boresight);
 * **open** again only when every physical margin has been at least ``reopen_margin_deg`` (above
   ``guard_deg``: hysteresis), with no closing prediction, for ``reopen_dwell_s`` (the dwell).
 
@@ -99,18 +100,21 @@ class DoorController:
         return worst_k, worst_m, worst_reach
 
     def cycle(self, t_s: float, tick: int, margins_deg: Sequence[float], zone_bodies: Sequence[str],
-              attitude_known: bool, brake_deg_s2: float, violation: bool) -> bool:
+              attitude_known: bool, brake_deg_s2: float, violation: bool, hold: str | None = None) -> bool:
         """One GNC cycle: read the status, decide, send DOOR_CMD. ``margins_deg``: the boresight's signed
         physical margins to the sky zones [deg] (NaN: unknown); ``brake_deg_s2``: the braking acceleration
         the control can give (0 with fewer than three usable wheels); ``violation``: KEEP_OUT_VIOLATION is
-        raised. Returns the command sent (True: open)."""
+        raised; ``hold``: a reason to keep the door shut whatever the margins (the mode's: DETUMBLE). Returns
+        the command sent (True: open)."""
         if self._first_t is None:
             self._first_t = t_s
         self._read_status(t_s)
         if self.command_open is None:  # no status yet: the door is taken as closed
             self._command(False, t_s, "NONE")
         zone, margin, reach = self.predicted_entry(margins_deg, brake_deg_s2)
-        if not attitude_known:
+        if hold is not None:
+            reason = hold
+        elif not attitude_known:
             reason = "NO_ATTITUDE"
         elif violation:
             reason = "KEEP_OUT_VIOLATION"

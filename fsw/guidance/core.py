@@ -25,12 +25,13 @@ from fsw.guidance.safe import SafeGuidance, _acquisition_rate_B
 from fsw.guidance.watchdog import ProgressWatchdog, StallRecovery
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc import sky_zones
+from gnc.attitude import quat_to_dcm_nb
 
 
 class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidance, SafeGuidance):
     """Mode logic and guidance laws; `step` runs once per GNC cycle."""
 
-    MODES = ("SAFE", "POINTING", "QUATERNION")
+    MODES = ("SAFE", "POINTING", "QUATERNION", "DETUMBLE")
 
     def __init__(self, cfg, events=None) -> None:
         self.cfg = cfg
@@ -295,6 +296,8 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
     # ------------------------------------------------------------------------------------- modes
     def step(self, t_s: float, dt_s: float, q_NB: np.ndarray | None, omega_BN_B: np.ndarray) -> GuidanceOutput:
         self.last_t_s = t_s
+        if self.mode == "DETUMBLE":
+            return self._detumble(q_NB)
         if q_NB is None:
             # No attitude knowledge: rate damping, then (if the star tracker stays silent or blind) the
             # acquisition rotation, which never moves the instrument boresight.
@@ -312,3 +315,13 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         if self.mode == "QUATERNION":
             return self._quaternion(t_s, q)
         return self._safe(t_s, dt_s, q, omega_BN_B)
+
+    def _detumble(self, q_NB: np.ndarray | None) -> GuidanceOutput:
+        """DETUMBLE: no rate command (the rods' B-dot and the wheels' zero torque are the flight software's,
+        `fsw.detumble`) and no margins: a tumbling body cannot steer its boresight, the door is what keeps
+        the instrument out of the zones, so the keep-out monitor has nothing it could act on. The boresight
+        when the attitude is known (telemetry, the door's own margins)."""
+        out = GuidanceOutput(np.zeros(3), "DETUMBLE")
+        if q_NB is not None:
+            out.boresight_N = quat_to_dcm_nb(np.ascontiguousarray(q_NB, dtype=float)) @ self.b_B
+        return out

@@ -277,6 +277,9 @@ def _judge_run(mission: Any, record: dict[str, np.ndarray], estimates: _Estimate
     if fsw.plugins:
         from fsw.assembly import plugin_metrics
         metrics.update(plugin_metrics(fsw))
+    if mission.flight_software.detumble is not None:  # onboard time of DETUMBLE_COMPLETE (inf: never)
+        done = [float(a.get("t_s", math.nan)) for _, name, a in telemetry.events if name == "DETUMBLE_COMPLETE"]
+        metrics["detumble_time_s"] = done[0] if done else math.inf
     if "door_position" in record:  # how often the flight software shut the aperture door (DOOR_CLOSING events)
         metrics["door_closes"] = float(sum(1 for _, name, _ in telemetry.events if name == "DOOR_CLOSING"))
     return metrics, trajectory
@@ -300,7 +303,7 @@ def _icd():
 
 # Which side of each metric ``judge`` writes is better, for ``keepout campaign compare`` when no criterion
 # of the campaign names the metric (the criteria's own sense comes first).
-_METRIC_BETTER = {"min_margin_deg": "higher", "settling_time_s": "lower", "final_error_deg": "lower",
+_METRIC_BETTER = {"detumble_time_s": "lower", "min_margin_deg": "higher", "settling_time_s": "lower", "final_error_deg": "lower",
                   "peak_wheel_speed_fraction": "lower", "peak_body_rate_fraction": "lower", "cycle_slips": "lower",
                   "unexpected_fdir_events": "lower", "missing_expected_fdir_events": "lower",
                   "rejected_commands": "lower", "instrument_exposure_s": "lower",

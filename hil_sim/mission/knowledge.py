@@ -32,6 +32,9 @@ KNOWLEDGE_SOURCES: dict[tuple[str, ...], tuple[str, ...]] = {
     ("flight_software", "momentum_management", "magnetometer_q_BS"): ("spacecraft", "magnetometer", "q_BS"),
     ("flight_software", "momentum_management", "rod_axes_B"): ("spacecraft", "magnetorquers", "axes_B"),
     ("flight_software", "momentum_management", "max_dipole_Am2"): ("spacecraft", "magnetorquers", "max_dipole_Am2"),
+    ("flight_software", "detumble", "magnetometer_q_BS"): ("spacecraft", "magnetometer", "q_BS"),
+    ("flight_software", "detumble", "rod_axes_B"): ("spacecraft", "magnetorquers", "axes_B"),
+    ("flight_software", "detumble", "max_dipole_Am2"): ("spacecraft", "magnetorquers", "max_dipole_Am2"),
 }
 # the sources that are not a plain copy of their truth key, as the docs say them
 _KNOWLEDGE_NOTES = {
@@ -88,10 +91,13 @@ def knowledge_from_truth(mission: dict) -> dict:
             for key in fitted:
                 fill(known_devices, key, True)
         if isinstance(sc.get("magnetometer"), dict) and isinstance(sc.get("magnetorquers"), dict):
-            known_mm = child("momentum_management")  # what unloading needs of the devices, when both are fitted
-            fill(known_mm, "magnetometer_q_BS", sc["magnetometer"].get("q_BS"))
-            fill(known_mm, "rod_axes_B", sc["magnetorquers"].get("axes_B"))
-            fill(known_mm, "max_dipole_Am2", sc["magnetorquers"].get("max_dipole_Am2"))
+            # what the laws on the rods need of the devices, when both are fitted (detumble only when configured)
+            laws = ["momentum_management"] + (["detumble"] if isinstance(fsw.get("detumble"), dict) else [])
+            for law in laws:
+                known_rods = child(law)
+                fill(known_rods, "magnetometer_q_BS", sc["magnetometer"].get("q_BS"))
+                fill(known_rods, "rod_axes_B", sc["magnetorquers"].get("axes_B"))
+                fill(known_rods, "max_dipole_Am2", sc["magnetorquers"].get("max_dipole_Am2"))
     if isinstance(state, dict) and "q_NB" not in state and _is_ra_dec(state.get("ra_dec_deg")):
         ra, dec = (math.radians(float(a)) for a in state["ra_dec_deg"])
         # hold the initial pointing until the first SET_TARGET

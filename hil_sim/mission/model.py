@@ -366,7 +366,7 @@ class _Timed(_Model):
 
 class SetModeCommand(_Timed):
     command: Literal["SET_MODE"]
-    mode: Literal["SAFE", "POINTING", "QUATERNION"]
+    mode: Literal["SAFE", "POINTING", "QUATERNION", "DETUMBLE"]
 
 
 class SetTargetCommand(_Timed):
@@ -459,6 +459,9 @@ class Requirements(_Model):
     max_instrument_exposure_s: float = Field(0.0, ge=0, le=10 * 86400, description="with a door (spacecraft.door): "
                                              "time the instrument may look into a physical sky zone with the door "
                                              "not fully closed, judged on truth [s]")
+    max_detumble_time_s: float | None = Field(None, gt=0, le=10 * 86400, description="with initial_mode DETUMBLE: "
+                                              "DETUMBLE_COMPLETE must be raised by this onboard time [s] "
+                                              "(absent: not judged)")
 
 
 class Simulation(_Model):
@@ -601,6 +604,10 @@ class Mission(_Model):
             if len(given) != 1:
                 out.append((("timeline", i), "SET_TARGET needs exactly one of target_N, ra_dec_deg, nadir, "
                             f"ground, q_target_NB (got {', '.join(given) or 'none'})"))
+        if isinstance(entry, SetModeCommand) and entry.mode == "DETUMBLE" and self.flight_software.detumble is None:
+            out.append((("timeline", i, "mode"), "SET_MODE DETUMBLE needs the DETUMBLE mode configured: add "
+                        "flight_software.detumble (with spacecraft.magnetometer, spacecraft.magnetorquers and, "
+                        "with keep-out zones, spacecraft.door)"))
         if isinstance(entry, SetGainsCommand) and all(
                 getattr(entry, k) is None for k in ("k1", "kappa", "eps", "rate_limit_deg_s")):
             out.append((("timeline", i), "SET_GAINS sets nothing: give at least one of k1, kappa, eps, "

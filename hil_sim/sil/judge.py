@@ -557,6 +557,8 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
     _judge_cycle_slips(reqs, sim_stats, hk, req)
     events = _ground_events(run_dir)
     trips = _judge_fdir_events(reqs, events, req)
+    if req.max_detumble_time_s is not None:
+        _judge_detumble(reqs, events, req.max_detumble_time_s)
     exposure = instrument_exposure(t, [z for z in zones if z.kind == "sky"], truth.get("door_position"))
     if mission.spacecraft.door is not None:
         _judge_exposure(reqs, exposure, t, truth, req)
@@ -726,6 +728,16 @@ def _judge_fdir_events(reqs: _Requirements, events: list[dict[str, Any]], req) -
     reqs.requirement("unexpected FDIR events", len(unexpected), f"<= {req.max_unexpected_fdir_events}",
                      len(unexpected) <= req.max_unexpected_fdir_events, ", ".join(unexpected) or "none")
     return trips
+
+
+def _judge_detumble(reqs: _Requirements, events: list[dict[str, Any]], limit_s: float) -> None:
+    """DETUMBLE_COMPLETE raised by ``limit_s`` (onboard time, as the flight software reports it)."""
+    done = [float(_event_args(e).get("t_s", math.nan)) for e in events if _event_name(e) == "DETUMBLE_COMPLETE"]
+    at = done[0] if done else None
+    reqs.requirement("detumble complete", at if at is not None else "never", f"<= {_num(limit_s)}",
+                     at is not None and at <= limit_s,
+                     "DETUMBLE_COMPLETE: the gyro's rate below the threshold for the dwell" if at is not None
+                     else "no DETUMBLE_COMPLETE event reached the ground", "s")
 
 
 def _judge_exposure(reqs: _Requirements, exposure: dict[str, Any], t: np.ndarray, truth: dict[str, np.ndarray],

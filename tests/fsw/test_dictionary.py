@@ -128,7 +128,7 @@ def test_required_commands_and_typed_args() -> None:
     assert {"NOOP", "RESET_COUNTERS", "SET_MODE", "SET_TARGET", "SET_GAINS"} <= names
     set_mode = DICTIONARY.command("SET_MODE")
     assert [(a.name, a.type) for a in set_mode.args] == [("mode", "ENUM")]
-    assert set(set_mode.args[0].enum or ()) == {"SAFE", "POINTING", "QUATERNION"}
+    assert set(set_mode.args[0].enum or ()) == {"SAFE", "POINTING", "QUATERNION", "DETUMBLE"}
     gains = DICTIONARY.command("SET_GAINS")
     assert [a.name for a in gains.args] == ["k1", "kappa", "eps", "rate_limit_deg_s"]
     assert all(a.type == "F64" and a.min is not None and a.max is not None for a in gains.args)

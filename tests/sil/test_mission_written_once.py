@@ -179,7 +179,7 @@ def test_every_knowledge_source_is_what_knowledge_from_truth_copies() -> None:
     from hil_sim.mission.knowledge import KNOWLEDGE_SOURCES, knowledge_from_truth
 
     data = yaml.safe_load((ROOT / "config" / "missions" / "demo-pointing-door.yaml").read_text())
-    data["flight_software"] = {}
+    data["flight_software"] = {"detumble": {}}  # its rods' knowledge is filled only when it is configured
     data["initial_state"] = {"ra_dec_deg": [10.0, 20.0]}
     data["spacecraft"].setdefault("imu", {})["saturation_rad_s"] = 0.3
     data["spacecraft"].setdefault("star_tracker", {})["max_rate_deg_s"] = 1.7
