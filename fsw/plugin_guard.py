@@ -67,7 +67,7 @@ class GuardedGuidance(Guidance):
 
     def step(self, t_s: float, dt_s: float, q_NB: np.ndarray | None, omega_BN_B: np.ndarray) -> GuidanceOutput:
         out = super().step(t_s, dt_s, q_NB, omega_BN_B)
-        if not self.armed or self.stopped or q_NB is None or self.mode == "SAFE":
+        if not self.armed or self.stopped or q_NB is None or self.mode in ("SAFE", "DETUMBLE"):
             self._last_margins = []
             return out
         nearest = self._nearest_closing_deg(out.margins_deg)
