@@ -106,3 +106,27 @@ def test_the_first_day_side_pass_flies_clean_in_fast_mode(mission):
     assert m["peak_wheel_speed_fraction"] < short.requirements.max_wheel_speed_fraction
     assert m["peak_body_rate_fraction"] <= short.requirements.max_body_rate_fraction
     assert m["unexpected_fdir_events"] == 0 and m["cycle_slips"] == 0 and m["rejected_commands"] == 0
+
+
+def test_its_campaign_disperses_the_surfaces_the_dipole_and_the_day_flown(mission):
+    """config/campaigns/leo-day.yaml: each dispersed truth value reaches the mission the run flies; the flight
+    software keeps the nominal inertia, but flies the dispersed epoch (the day itself moved)."""
+    from datetime import timedelta
+
+    from hil_sim.campaign.runner import build_plan
+
+    plan, _ = build_plan(ROOT / "config" / "campaigns" / "leo-day.yaml")
+    runs = [plan.mission(plan.draw(i), 0)[1] for i in range(plan.campaign.runs)]
+    nominal = mission.spacecraft
+    for m in runs:
+        panel = m.spacecraft.facets[6].area_m2
+        assert panel == m.spacecraft.facets[7].area_m2 != nominal.facets[6].area_m2  # both sides of one panel
+        assert 0.9 * nominal.facets[6].area_m2 <= panel <= 1.1 * nominal.facets[6].area_m2
+        assert m.spacecraft.disturbance.residual_dipole_B_Am2 != nominal.disturbance.residual_dipole_B_Am2
+        assert m.spacecraft.disturbance.atmosphere_density_kg_m3 != nominal.disturbance.atmosphere_density_kg_m3
+        assert m.flight_software.epoch_utc == m.epoch_utc != mission.epoch_utc
+        assert abs(m.epoch_utc - mission.epoch_utc) <= timedelta(minutes=5)
+        assert m.spacecraft.inertia_B_kgm2 != nominal.inertia_B_kgm2
+        assert m.flight_software.spacecraft.inertia_B_kgm2 == mission.flight_software.spacecraft.inertia_B_kgm2
+    failed = sum(1 for m in runs if m.faults)
+    assert 0 < failed < len(runs)  # some days lose a wheel, some do not
