@@ -51,7 +51,49 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
     est = _estimation_error(run_dir, truth)
     if est is not None:
         written.append(_estimation_plot(plt, run_dir, mission, *est, eclipses))
+    if mission.spacecraft.magnetorquers is not None:
+        written.append(_momentum_plot(plt, run_dir, mission, truth, t, eclipses, _housekeeping(run_dir)))
     return written
+
+
+def wheel_momentum_B(wheels, wheel_speed_rad_s: np.ndarray) -> np.ndarray:
+    """The wheels' stored momentum in body axes [N m s] at each sample: sum of J_i w_i a_i."""
+    axes = np.array([w.axis_B for w in wheels], dtype=float)
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    spin = np.array([w.spin_inertia_kgm2 for w in wheels], dtype=float)
+    return (np.asarray(wheel_speed_rad_s, dtype=float) * spin) @ axes
+
+
+def _housekeeping(run_dir: Path) -> dict:
+    """The HK packet's channels from the run's ground archive ({} when there is none)."""
+    from ground.archive import read_channels
+
+    archive = run_dir / "ground"
+    return read_channels(archive, "HK") if (archive / "tm_raw.bin").exists() else {}
+
+
+def _momentum_plot(plt, run_dir: Path, mission, truth: dict, t: np.ndarray, eclipses: list, hk: dict) -> Path:
+    """Momentum management at work: the wheels' momentum in body axes (truth; the onboard |h - bias| the law
+    unloads, from housekeeping) above the dipole the flight software commanded on each rod."""
+    fig, (ax1, ax2) = _two_time_axes(plt, eclipses)
+    h = wheel_momentum_B(mission.spacecraft.wheels, truth["wheel_speed_rad_s"])
+    for i, axis in enumerate("xyz"):
+        ax1.plot(t, h[:, i], lw=1, label=f"h_{axis} (truth)")
+    ax1.plot(t, np.linalg.norm(h, axis=1), "k", lw=1.2, label="|h| (truth)")
+    th = np.asarray(hk.get("time_s", []), dtype=float)
+    if "h_excess_Nms" in hk and np.isfinite(np.asarray(hk["h_excess_Nms"], dtype=float)).any():
+        ax1.plot(th, hk["h_excess_Nms"], "k--", lw=1, label="|h - bias| (onboard)")
+    for i in range(3):
+        if f"mtq_dipole_cmd_Am2_{i}" in hk:
+            ax2.plot(th, hk[f"mtq_dipole_cmd_Am2_{i}"], lw=1, label=f"rod {i + 1}")
+    ax1.set_ylabel("wheel momentum [N m s]")
+    ax1.legend(ncol=5, fontsize=8)
+    ax1.set_title(f"{mission.name}: momentum management (wheel momentum, rod dipoles commanded)")
+    ax2.set_ylabel("rod dipole commanded [A m^2]")
+    ax2.set_xlabel("time [s]")
+    if ax2.lines:
+        ax2.legend(ncol=3, fontsize=8)
+    return _save_gridded(fig, (ax1, ax2), run_dir / "momentum.png")
 
 
 def _two_time_axes(plt, eclipses: list):
