@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import struct
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator
+from typing import TYPE_CHECKING, Any, Iterator, Sequence
 
 from comms.dictionary import DICTIONARY, TelemetryDictionary
 
@@ -69,20 +69,29 @@ def read_channels(archive_dir: str | Path, packet_name: str = "GNC",
     Also holds ``time_s`` (onboard), ``rx_time_s`` (ground) and ``seq``. Enum channels are arrays of
     names. For plots and summaries in the SIL run folder.
     """
+    return read_packets(archive_dir, (packet_name,), dictionary)[packet_name]
+
+
+def read_packets(archive_dir: str | Path, packet_names: Sequence[str],
+                 dictionary: TelemetryDictionary = DICTIONARY) -> dict[str, dict[str, Any]]:
+    """Several packets' time series (each as `read_channels` gives it) from one pass over the raw archive:
+    a day's archive is gigabytes, and every packet in it is decoded whichever are kept."""
     import numpy as np
 
-    packet = dictionary.packet(packet_name)
-    columns: dict[str, list[Any]] = {name: [] for name in ("time_s", "rx_time_s", "seq")}
-    columns.update({c.name: [] for c in packet.channels})
+    columns: dict[str, dict[str, list[Any]]] = {}
+    for name in packet_names:
+        columns[name] = {key: [] for key in ("time_s", "rx_time_s", "seq")}
+        columns[name].update({c.name: [] for c in dictionary.packet(name).channels})
     for rx_time_s, decoded, _ in decode_archive(archive_dir, dictionary):
-        if decoded is None or decoded.packet != packet_name:
+        kept = columns.get(decoded.packet) if decoded is not None else None
+        if kept is None:
             continue
-        columns["time_s"].append(decoded.time_s)
-        columns["rx_time_s"].append(rx_time_s)
-        columns["seq"].append(decoded.seq_count)
+        kept["time_s"].append(decoded.time_s)
+        kept["rx_time_s"].append(rx_time_s)
+        kept["seq"].append(decoded.seq_count)
         for name, value in decoded.values.items():
-            columns[name].append(value)
-    return {name: np.asarray(values) for name, values in columns.items()}
+            kept[name].append(value)
+    return {packet: {name: np.asarray(values) for name, values in cols.items()} for packet, cols in columns.items()}
 
 
 def read_events(archive_dir: str | Path, dictionary: TelemetryDictionary = DICTIONARY) -> list[dict[str, Any]]:

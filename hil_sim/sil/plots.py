@@ -48,11 +48,13 @@ def write_plots(run_dir: Path, mission, series: dict | None = None) -> list[Path
         written.append(_attitude_plot(plt, run_dir, mission, series, t, eclipses))
     written.append(_margins_plot(plt, run_dir, mission, series, t, eclipses))
     written.append(_wheels_plot(plt, run_dir, mission, truth, t, eclipses))
-    est = _estimation_error(run_dir, truth)
+    rods = mission.spacecraft.magnetorquers is not None
+    telemetry = _telemetry(run_dir, ("GNC", "HK") if rods else ("GNC",))
+    est = _estimation_error(telemetry.get("GNC", {}), truth)
     if est is not None:
         written.append(_estimation_plot(plt, run_dir, mission, *est, eclipses))
-    if mission.spacecraft.magnetorquers is not None:
-        written.append(_momentum_plot(plt, run_dir, mission, truth, t, eclipses, _housekeeping(run_dir)))
+    if rods:
+        written.append(_momentum_plot(plt, run_dir, mission, truth, t, eclipses, telemetry.get("HK", {})))
     return written
 
 
@@ -64,12 +66,12 @@ def wheel_momentum_B(wheels, wheel_speed_rad_s: np.ndarray) -> np.ndarray:
     return (np.asarray(wheel_speed_rad_s, dtype=float) * spin) @ axes
 
 
-def _housekeeping(run_dir: Path) -> dict:
-    """The HK packet's channels from the run's ground archive ({} when there is none)."""
-    from ground.archive import read_channels
+def _telemetry(run_dir: Path, packets: tuple[str, ...]) -> dict[str, dict]:
+    """The packets' channels from the run's ground archive, read in one pass ({} when there is none)."""
+    from ground.archive import read_packets
 
     archive = run_dir / "ground"
-    return read_channels(archive, "HK") if (archive / "tm_raw.bin").exists() else {}
+    return read_packets(archive, packets) if (archive / "tm_raw.bin").exists() else {}
 
 
 def _momentum_plot(plt, run_dir: Path, mission, truth: dict, t: np.ndarray, eclipses: list, hk: dict) -> Path:
@@ -239,15 +241,11 @@ def _sky_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, sky_zone
     return _save(fig, run_dir / "sky.png")
 
 
-def _estimation_error(run_dir: Path, truth: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Estimation error at each GNC telemetry sample: onboard time = simulated time in the SIL."""
-    from ground.archive import read_channels
+def _estimation_error(gnc: dict, truth: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Estimation error at each GNC telemetry sample (``gnc``: the GNC packet's channels, {} without an
+    archive): onboard time = simulated time in the SIL."""
     from gnc.attitude import attitude_error_angle
 
-    archive = run_dir / "ground"
-    if not (archive / "tm_raw.bin").exists():
-        return None
-    gnc = read_channels(archive, "GNC")
     if "q_est_NB_0" not in gnc or not len(gnc["time_s"]):
         return None
     te = np.asarray(gnc["time_s"], dtype=float)

@@ -26,7 +26,8 @@ def test_wheel_momentum_is_the_sum_of_each_wheels_spin_momentum_along_its_axis()
 
 
 @pytest.mark.slow
-def test_a_run_with_rods_plots_its_wheel_momentum_and_the_commanded_dipoles(tmp_path, figures):  # noqa: F811
+def test_a_run_with_rods_plots_its_wheel_momentum_and_the_commanded_dipoles(tmp_path, figures,  # noqa: F811
+                                                                             monkeypatch):
     from hil_sim.mission.model import load_mission
     from hil_sim.sil.plots import write_plots
 
@@ -36,7 +37,18 @@ def test_a_run_with_rods_plots_its_wheel_momentum_and_the_commanded_dipoles(tmp_
     run_dir = next((tmp_path / "runs").glob("detumble-*"))
     assert (run_dir / "momentum.png").exists(), flown.stdout[-2000:] + flown.stderr[-2000:]
     figures.clear()
+    import ground.archive as archive
+
+    passes = []
+    real = archive.decode_archive
+    monkeypatch.setattr(archive, "decode_archive", lambda *a, **k: passes.append(1) or real(*a, **k))
     written = write_plots(run_dir, load_mission(ROOT / "config" / "missions" / "detumble.yaml"))
+    assert len(passes) == 1  # GNC (estimation) and HK (rods) from one pass over the archive
+    both = archive.read_packets(run_dir / "ground", ("GNC", "HK"))
+    for packet in ("GNC", "HK"):
+        alone = archive.read_channels(run_dir / "ground", packet)
+        assert alone.keys() == both[packet].keys() and len(alone["time_s"]) > 10
+        assert all(np.array_equal(alone[k], both[packet][k], equal_nan=alone[k].dtype.kind == "f") for k in alone)
     assert run_dir / "momentum.png" in written
     fig = next(fig for name, fig in figures if name.endswith("momentum.png"))
     wheels, rods = fig.axes[:2]
