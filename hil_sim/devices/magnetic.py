@@ -101,7 +101,9 @@ class MagneticNodes:
         """The Earth's field [T] in body axes at the world's time, position and attitude."""
         b = world.batch
         r = b.r_sc_N_km[0]
-        n = env.dipole_field_N(self._field_rows, 0, float(r[0]), float(r[1]), float(r[2]), float(world.t))
+        rows = env.field_model_rows(b.B)  # IGRF, where the mission asks for it: the dynamics' own rows
+        kernel, rows = (env.dipole_field_N, self._field_rows) if rows is None else (env.earth_field_N, rows)
+        n = kernel(rows, 0, float(r[0]), float(r[1]), float(r[2]), float(world.t))
         return quat_to_dcm(b.q_NB[0]).T @ np.array(n)
 
     def _sun_B(self, world: Any) -> tuple[np.ndarray, float]:

@@ -79,7 +79,10 @@ facetDragDynamicEffector with exponentialAtmosphere and zeroWindModel to roundin
 budget. With `residual_dipole_B_Am2` not zero, the torque m x B of the spacecraft's residual dipole in the
 Earth's field, a centred dipole from IGRF-14 at the epoch (ppigrf) turning with the Earth (Basilisk's
 magneticFieldCenteredDipole and MtbEffector to rounding: `tests/hil_sim/test_geomagnetic.py`, which also
-bounds its distance from the full IGRF at 550 km).
+bounds its distance from the full IGRF at 550 km). `magnetic_field: {model: igrf, degree: 13}` replaces that
+dipole with IGRF-14 to the degree given, for the residual dipole, the magnetorquer rods and the magnetometer
+alike (within 20 nT of Basilisk's magneticFieldWMM from 400 to 1200 km, where the dipole is up to 15,000 nT
+off: `tests/hil_sim/test_igrf.py`).
 
 `keepout truth FILE --duration S --out truth.npz` propagates the truth models alone (no flight software,
 wheel motors commanding zero) and writes the SIL's truth.npz layout plus the inertial angular momentum

@@ -135,6 +135,30 @@ class StarTrackerTruth(_Model):
     max_rate_deg_s: float = Field(2.0, gt=0, le=90, description="no solution above this body rate [deg/s]")
 
 
+class MagneticField(_Model):
+    """The Earth's main field the truth models use: for the residual dipole's torque, the magnetorquer rods'
+    torque and the magnetometer (hil_sim.world.geomagnetic; docs/environment.md)."""
+
+    model: Literal["dipole", "igrf"] = Field("dipole", description="dipole: IGRF-14's centred dipole (its "
+                                             "degree-1 part) at the epoch, up to ~16,500 nT and 35 deg from the "
+                                             "full field at 550 km; igrf: IGRF-14 to `degree` at the epoch "
+                                             "(ppigrf's coefficients), for magnetometer and magnetorquer work")
+    degree: int | None = Field(None, ge=1, le=13, description="highest degree of the igrf expansion (default 13: "
+                               "all of IGRF-14's main field); only with model: igrf")
+
+    @model_validator(mode="after")
+    def _degree_is_igrfs(self) -> "MagneticField":
+        if self.model == "dipole" and self.degree is not None:
+            raise ValueError("degree applies to model: igrf (the dipole is IGRF's degree 1): set model: igrf "
+                             "or remove degree")
+        return self
+
+    @property
+    def igrf_degree(self) -> int:
+        """The degree of the igrf expansion (13 unless given)."""
+        return 13 if self.degree is None else self.degree
+
+
 class Disturbance(_Model):
     """External torque on the spacecraft: constant plus first-order Gauss-Markov per body axis."""
 
@@ -165,7 +189,9 @@ class Disturbance(_Model):
                                                        "magnetic dipole in body axes [A m^2] (a CubeSat ~0.01-0.1, "
                                                        "a small satellite ~1); it feels m x B in the Earth's field, "
                                                        "a centred dipole from IGRF-14 at the epoch (ppigrf) turning "
-                                                       "with the Earth. Zero: off")
+                                                       "with the Earth (magnetic_field chooses). Zero: off")
+    magnetic_field: MagneticField = Field(default_factory=MagneticField, description="the Earth's field for the "
+                                          "dipole torques and the magnetometer (default: the centred dipole)")
 
 
 class Facet(_Model):
@@ -783,12 +809,22 @@ def world_params(mission: Mission) -> "WorldParams":
 
 def _geomagnetic(mission: Mission) -> dict[str, Any]:
     """The residual dipole and, when it is not zero or rods are fitted, the Earth's dipole field at the epoch
-    (IGRF, via hil_sim.world.geomagnetic) for DisturbanceParams."""
-    dipole = tuple(mission.spacecraft.disturbance.residual_dipole_B_Am2)
-    rods = mission.spacecraft.magnetorquers is not None  # their torque goes through the dipole's row
-    if not any(dipole) and not rods:
+    (IGRF, via hil_sim.world.geomagnetic) for DisturbanceParams; with ``magnetic_field.model: igrf`` and
+    something that feels or reads the field (a residual dipole, rods, a magnetometer), IGRF's coefficients to
+    the degree asked for."""
+    sc = mission.spacecraft
+    dipole = tuple(sc.disturbance.residual_dipole_B_Am2)
+    rods = sc.magnetorquers is not None  # their torque goes through the dipole's row
+    field = sc.disturbance.magnetic_field
+    igrf = field.model == "igrf" and (any(dipole) or rods or sc.magnetometer is not None)
+    if not any(dipole) and not rods and not igrf:
         return {}
-    return {"residual_dipole_B_Am2": dipole, "dipole_torque": rods, **_field_coefficients(mission)}
+    out = {"residual_dipole_B_Am2": dipole, "dipole_torque": rods, **_field_coefficients(mission)}
+    if igrf:
+        from hil_sim.world.geomagnetic import gauss_coefficients_T
+
+        out["geomagnetic_gauss_T"] = gauss_coefficients_T(mission.epoch_utc, field.igrf_degree)
+    return out
 
 
 def _field_coefficients(mission: Mission) -> dict[str, Any]:

@@ -29,7 +29,8 @@ exponentialAtmosphere and zeroWindModel.
 
 A residual dipole m (body axes, A m^2) in the Earth's field feels tau = m x B_B, the field a centred dipole
 turning with the Earth (hil_sim.world.geomagnetic: IGRF's degree-1 part at the epoch; Basilisk's
-magneticFieldCenteredDipole, and MtbEffector's m x B).
+magneticFieldCenteredDipole, and MtbEffector's m x B), or, where the mission asks for it, IGRF to degree N
+(`earth_field_N`: the same Earth-fixed frame, its Gauss coefficients in rows after the facets).
 """
 from __future__ import annotations
 
@@ -41,7 +42,8 @@ from numba import njit
 
 from gnc.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
 from gnc.ephemeris import AU_KM, EARTH_RADIUS_KM
-from hil_sim.world.geomagnetic import IGRF_REFERENCE_RADIUS_KM
+from hil_sim.world import _geomagnetic_nb
+from hil_sim.world.geomagnetic import IGRF_REFERENCE_RADIUS_KM, degree_of, unnormalised_rows
 from hil_sim.world.orbit import orbit_position_row_N_km, orbit_velocity_row_N_km_s
 from hil_sim.world.params import SpacecraftParams
 
@@ -51,10 +53,12 @@ EARTH_ROTATION_RAD_S = 7.292115e-5  # sidereal (IERS), as Basilisk's zeroWindMod
 # Rows of B after hil_sim.world.dynamics.B_FIELDS (24): switches (bits), the Sun held over the step, the solar flux,
 # the number of facets, the atmosphere (reference density, its altitude, scale height, the Earth's rotation),
 # the residual dipole (3), the Earth's dipole m = (g11, h11, g10) [T] and the Earth rotation angle at t = 0,
-# then FACET_FIELDS rows per facet from ENV_FACETS on.
+# the Earth's field model (its degree N; 0: the centred dipole) and the first row of its 2 x N (N + 3) / 2
+# coefficients (after the facets), then FACET_FIELDS rows per facet from ENV_FACETS on.
 ENV_FLAGS, ENV_SUN, ENV_FLUX, ENV_N_FACETS = 24, 25, 28, 29
 ENV_RHO, ENV_H_REF, ENV_SCALE_H, ENV_OMEGA_E = 30, 31, 32, 33
 ENV_DIPOLE, ENV_EARTH_DIPOLE, ENV_ERA0 = 34, 37, 40
+ENV_FIELD_DEGREE, ENV_FIELD_FIRST = 41, 42
 ENV_FACETS = 46
 FACET_AREA, FACET_NORMAL, FACET_COP, FACET_SPECULAR, FACET_DIFFUSE, FACET_CD = 0, 1, 4, 7, 8, 9
 FACET_FIELDS = 10
@@ -78,14 +82,23 @@ def environment_effects(mission: Any) -> list[str]:
 
 
 def environment_rows(params: Sequence[SpacecraftParams]) -> np.ndarray | None:
-    """The rows to append to the dynamics' B (ENV_FACETS + FACET_FIELDS * facets, M) for a batch, or None when
-    no run has an environment effect on (B is then exactly as without this module)."""
+    """The rows to append to the dynamics' B (ENV_FACETS + FACET_FIELDS * facets + the field's coefficients, M)
+    for a batch, or None when no run has an environment effect on or a field model other than the dipole
+    (B is then exactly as without this module). A run whose field is IGRF carries it even with no effect on:
+    its magnetometer reads it (`field_rows`)."""
     flags = [sum(1 << k for k, on in enumerate(effects_on(p.disturbance)) if on) for p in params]
-    if not any(flags):
+    fields = [unnormalised_rows(p.disturbance.geomagnetic_gauss_T) if p.disturbance.geomagnetic_gauss_T else None
+              for p in params]
+    if not any(flags) and not any(f is not None for f in fields):
         return None
     n_facets = max(len(p.facets) for p in params)
-    rows = np.zeros((ENV_FACETS + FACET_FIELDS * n_facets, len(params)))
+    first = ENV_FACETS + FACET_FIELDS * n_facets
+    rows = np.zeros((first + max(f.size if f is not None else 0 for f in fields), len(params)))
     for m, p in enumerate(params):
+        if fields[m] is not None:
+            rows[ENV_FIELD_DEGREE, m] = degree_of(len(p.disturbance.geomagnetic_gauss_T))
+            rows[ENV_FIELD_FIRST, m] = first
+            rows[first:first + fields[m].size, m] = fields[m]
         rows[ENV_FLAGS, m] = flags[m]
         rows[ENV_FLUX, m] = p.disturbance.solar_flux_W_m2
         rows[ENV_N_FACETS, m] = len(p.facets)
@@ -198,9 +211,31 @@ def dipole_field_N(B, m, rx, ry, rz, t_s):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def earth_field_N(B, m, rx, ry, rz, t_s):
+    """The Earth's field [T] in N at position r [km] and time t_s for run m: its centred dipole
+    (`dipole_field_N`) or, when ENV_FIELD_DEGREE is N > 0, IGRF to degree N
+    (hil_sim.world._geomagnetic_nb.field_E) in the same Earth-fixed frame."""
+    degree = int(B[ENV_FIELD_DEGREE, m])
+    if degree == 0:
+        return dipole_field_N(B, m, rx, ry, rz, t_s)
+    th = B[ENV_ERA0, m] + B[ENV_OMEGA_E, m] * t_s
+    c, s = math.cos(th), math.sin(th)
+    bx, by, bz = _geomagnetic_nb.field_E(B, m, int(B[ENV_FIELD_FIRST, m]), degree, c * rx + s * ry,
+                                         c * ry - s * rx, rz)
+    return c * bx - s * by, s * bx + c * by, bz
+
+
+def field_model_rows(B: np.ndarray) -> np.ndarray | None:
+    """The world's B when its run 0 flies a field model other than the centred dipole (for `earth_field_N`),
+    else None (the dipole: a magnetometer keeps its own rows for `dipole_field_N`)."""
+    return B if B.shape[0] > ENV_FIELD_DEGREE and B[ENV_FIELD_DEGREE, 0] > 0.0 else None
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def dipole_torque(B, m, q0, q1, q2, q3, rx, ry, rz, t_s):
-    """The residual dipole's torque m x B [N m] in body axes on run m at attitude q, position r [km], t_s."""
-    nx, ny, nz = dipole_field_N(B, m, rx, ry, rz, t_s)
+    """The residual dipole's torque m x B [N m] in body axes on run m at attitude q, position r [km], t_s (B:
+    the Earth's field, `earth_field_N`)."""
+    nx, ny, nz = earth_field_N(B, m, rx, ry, rz, t_s)
     bx, by, bz = to_body(q0, q1, q2, q3, nx, ny, nz)
     mx, my, mz = B[ENV_DIPOLE, m], B[ENV_DIPOLE + 1, m], B[ENV_DIPOLE + 2, m]
     return my * bz - mz * by, mz * bx - mx * bz, mx * by - my * bx

@@ -15,20 +15,32 @@ kernel
 turned about its z axis by the Earth rotation angle (precession, nutation and polar motion neglected: a
 fraction of a degree, far below the dipole's own error). How far the dipole is from the full IGRF at 550 km is
 measured in tests/hil_sim/test_geomagnetic.py.
+
+The full field, on request (``spacecraft.disturbance.magnetic_field: {model: igrf, degree: N}``): IGRF-14's
+Gauss coefficients to degree N at the mission epoch (`gauss_coefficients_T`), synthesised in the numba kernel
+hil_sim.world._geomagnetic_nb.field_E at every stage, because ppigrf's own evaluation costs milliseconds a
+call. The coefficients are taken once, at the epoch: their secular variation (at most ~0.1 nT a day per
+coefficient) is not applied during a run, a few nT over a ten-day mission, far below the model's own error
+(~100 nT at the surface against WMM).
 """
 from __future__ import annotations
 
+import math
 from datetime import datetime, timezone
+from typing import Any, Sequence
+
+import numpy as np
 
 from gnc import earth as gnc_earth
+from hil_sim.world._geomagnetic_nb import IGRF_REFERENCE_RADIUS_KM  # noqa: F401  (one definition, the kernel's)
 
-IGRF_REFERENCE_RADIUS_KM = 6371.2
+IGRF_MAX_DEGREE = 13  # IGRF-14's main field
 
 
-def dipole_coefficients_T(epoch_utc: datetime) -> tuple[float, float, float]:
-    """IGRF-14's (g10, g11, h11) at ``epoch_utc`` [T], interpolated in time as ppigrf does for the full
-    field (linearly between the 5-yearly models, the secular variation after the last). ValueError outside
-    the model's years."""
+def _igrf_at(epoch_utc: datetime) -> tuple[Any, Any]:
+    """IGRF-14's Gauss coefficients g, h [nT] at ``epoch_utc`` (pandas Series keyed by (n, m)), interpolated in
+    time as ppigrf does for the full field (linearly between the 5-yearly models, the secular variation after
+    the last). ValueError outside the model's years."""
     import pandas as pd
     from ppigrf.ppigrf import read_shc  # the coefficient reader ppigrf's own igrf_gc uses
 
@@ -39,7 +51,46 @@ def dipole_coefficients_T(epoch_utc: datetime) -> tuple[float, float, float]:
                          f"({g.index[0].year}-{g.index[-1].year})")
     index = g.index.union([date])
     at = [c.reindex(index).groupby(index).first().interpolate(method="time").loc[date] for c in (g, h)]
-    return (1e-9 * float(at[0][(1, 0)]), 1e-9 * float(at[0][(1, 1)]), 1e-9 * float(at[1][(1, 1)]))
+    return at[0], at[1]
+
+
+def dipole_coefficients_T(epoch_utc: datetime) -> tuple[float, float, float]:
+    """IGRF-14's (g10, g11, h11) at ``epoch_utc`` [T] (`_igrf_at`)."""
+    g, h = _igrf_at(epoch_utc)
+    return (1e-9 * float(g[(1, 0)]), 1e-9 * float(g[(1, 1)]), 1e-9 * float(h[(1, 1)]))
+
+
+def gauss_coefficients_T(epoch_utc: datetime, degree: int = IGRF_MAX_DEGREE) -> tuple[tuple[float, float], ...]:
+    """IGRF-14's Schmidt semi-normalised (g_n^m, h_n^m) [T] at ``epoch_utc`` (`_igrf_at`) for n = 1..degree,
+    m = 0..n, in that order (degree (degree + 3) / 2 pairs; h_n^0 = 0)."""
+    if not 1 <= degree <= IGRF_MAX_DEGREE:
+        raise ValueError(f"degree: IGRF-14 goes from 1 to {IGRF_MAX_DEGREE}, got {degree}")
+    g, h = _igrf_at(epoch_utc)
+    return tuple((1e-9 * float(g[(n, m)]), 1e-9 * float(h[(n, m)]))
+                 for n in range(1, degree + 1) for m in range(n + 1))
+
+
+def degree_of(pairs: int) -> int:
+    """The degree N of an expansion of ``pairs`` (g, h) pairs (N (N + 3) / 2), ValueError if none fits."""
+    for n in range(1, IGRF_MAX_DEGREE + 1):
+        if n * (n + 3) // 2 == pairs:
+            return n
+    raise ValueError(f"{pairs} (g, h) pairs are no expansion of degree 1 to {IGRF_MAX_DEGREE} (N (N + 3) / 2)")
+
+
+def unnormalised_rows(gauss_T: Sequence[tuple[float, float]]) -> np.ndarray:
+    """The (C_nm, S_nm) rows hil_sim.world._geomagnetic_nb.field_E reads, from Schmidt semi-normalised pairs in
+    `gauss_coefficients_T`'s order: times sqrt(2 (n - m)! / (n + m)!) for m > 0 (the Schmidt functions are
+    that multiple of the unnormalised ones, neither with the Condon-Shortley phase)."""
+    degree = degree_of(len(gauss_T))
+    out = np.empty(2 * len(gauss_T))
+    k = 0
+    for n in range(1, degree + 1):
+        for m in range(n + 1):
+            s = 1.0 if m == 0 else math.sqrt(2.0 * math.factorial(n - m) / math.factorial(n + m))
+            out[2 * k], out[2 * k + 1] = s * gauss_T[k][0], s * gauss_T[k][1]
+            k += 1
+    return out
 
 
 def earth_rotation_angle_rad(epoch_utc: datetime) -> float:

@@ -139,6 +139,9 @@ class DisturbanceParams:
     # The dipole torque on even with a zero residual: magnetorquer rods are fitted, and the simulator adds their
     # dipole to the residual's row each GNC period (hil_sim.devices.magnetic).
     dipole_torque: bool = False
+    # The Earth's field as IGRF instead of the centred dipole: Schmidt semi-normalised (g_n^m, h_n^m) [T] for
+    # n = 1..N, m = 0..n (hil_sim.world.geomagnetic.gauss_coefficients_T at the epoch); empty: the dipole.
+    geomagnetic_gauss_T: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "constant_B_Nm", _vec(self.constant_B_Nm, 3, "disturbance.constant_B_Nm"))
@@ -156,6 +159,12 @@ class DisturbanceParams:
                              "(hil_sim.world.geomagnetic.dipole_coefficients_T at the epoch)")
         if not math.isfinite(self.earth_rotation_angle_rad):
             raise ValueError("disturbance.earth_rotation_angle_rad: must be finite")
+        if self.geomagnetic_gauss_T:
+            from hil_sim.world.geomagnetic import degree_of
+
+            pairs = tuple(_vec(gh, 2, "disturbance.geomagnetic_gauss_T[k]") for gh in self.geomagnetic_gauss_T)
+            degree_of(len(pairs))
+            object.__setattr__(self, "geomagnetic_gauss_T", pairs)
 
 
 @dataclass(frozen=True)
