@@ -27,9 +27,10 @@ def _solid_harmonics(x, y, z, top):
     r2 = x * x + y * y + z * z
     rho = a * a / r2
     x0, y0, z0 = a * x / r2, a * y / r2, a * z / r2
-    V = np.zeros((top + 1, top + 1))
-    W = np.zeros((top + 1, top + 1))
+    VW = np.empty((2, top + 1, top + 1))  # only 0 <= m <= n is written, and read
+    V, W = VW[0], VW[1]
     V[0, 0] = a / math.sqrt(r2)
+    W[0, 0] = 0.0
     for m in range(top + 1):
         if m > 0:  # the diagonal from the one before
             V[m, m] = (2 * m - 1) * (x0 * V[m - 1, m - 1] - y0 * W[m - 1, m - 1])
