@@ -47,7 +47,10 @@ def _budget(args: argparse.Namespace) -> int:
     off = [name for name in EFFECTS if name not in environment_effects(mission)]
     if off:
         console.print("in the truth models but off in this mission (not counted): " + ", ".join(off))
+    field = mission.spacecraft.disturbance.magnetic_field.summary()
+    if "residual magnetic dipole" not in off:
+        console.print(f"the Earth's magnetic field: {field} (spacecraft.disturbance.magnetic_field)")
     if args.json is not None:
         args.json.write_text(json.dumps({"mission": mission.name, "rows": [asdict(r) for r in rows],
-                                         "off": off}, indent=1) + "\n")
+                                         "off": off, "magnetic_field": field}, indent=1) + "\n")
     return 0

@@ -129,7 +129,9 @@ def _truth(args: argparse.Namespace) -> int:
           f"{s['momentum_change_Nms']:.3e} N m s\n"
           f"  in the Earth's shadow {100 * s['umbra_fraction']:.1f} % of the time (umbra) + "
           f"{100 * s['penumbra_fraction']:.2f} % (penumbra), {s['eclipses']} eclipse(s) begun")
+    field = mission.spacecraft.disturbance.magnetic_field.summary()
     for key, name in zip(EFFECT_KEYS, EFFECTS):
         if f"{key}_peak" in s:
-            print(f"  {name}: torque up to {s[f'{key}_peak']:.3e} N m ({key} in the file)")
+            where = f" in {field}" if name == "residual magnetic dipole" else ""
+            print(f"  {name}{where}: torque up to {s[f'{key}_peak']:.3e} N m ({key} in the file)")
     return 0

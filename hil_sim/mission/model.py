@@ -158,6 +158,12 @@ class MagneticField(_Model):
         """The degree of the igrf expansion (13 unless given)."""
         return 13 if self.degree is None else self.degree
 
+    def summary(self) -> str:
+        """The field in words, for the commands that report what they used."""
+        if self.model == "dipole":
+            return "IGRF-14's centred dipole at the epoch"
+        return f"IGRF-14 to degree {self.igrf_degree} at the epoch"
+
 
 class Disturbance(_Model):
     """External torque on the spacecraft: constant plus first-order Gauss-Markov per body axis."""

@@ -230,6 +230,16 @@ def test_the_budget_counts_the_residual_dipole_in_igrf(tmp_path) -> None:
     assert row.peak_torque_Nm == pytest.approx(np.linalg.norm(tau, axis=1).max(), rel=1e-9)
 
 
+def test_budget_and_truth_say_which_field_they_used(tmp_path, capsys) -> None:
+    from cli.main import main
+
+    _mission(tmp_path, {"model": "igrf", "degree": 10})
+    assert main(["budget", str(tmp_path / "m.yaml"), "--json", str(tmp_path / "b.json")]) == 0
+    assert json.loads((tmp_path / "b.json").read_text())["magnetic_field"] == "IGRF-14 to degree 10 at the epoch"
+    assert main(["truth", str(tmp_path / "m.yaml"), "--duration", "10", "--out", str(tmp_path / "t.npz")]) == 0
+    assert "residual magnetic dipole in IGRF-14 to degree 10 at the epoch: torque up to" in capsys.readouterr().out
+
+
 def test_the_magnetometer_reads_igrf_and_flies_without_a_torque(tmp_path) -> None:
     """A magnetometer and no residual dipole nor rods: the world carries the field (no effect on: the dynamics
     as with the dipole, bit for bit) and the magnetometer reads IGRF there."""
