@@ -10,7 +10,8 @@ wheel's limit. The random torque (first-order Gauss-Markov, std sigma, correlati
 1-sigma momentum of its random walk, sigma sqrt(2 tau t) for t >> tau. Solar radiation pressure and drag on
 the spacecraft's facets, when the mission turns them on, get their rows (the Sun from the truth ephemeris,
 zero in the Earth's shadow; the co-rotating exponential atmosphere), and so does a residual magnetic dipole in
-the Earth's field (a centred dipole from IGRF at the epoch, turning with the Earth).
+the Earth's field (a centred dipole from IGRF at the epoch, turning with the Earth, or IGRF to degree N:
+``spacecraft.disturbance.magnetic_field``).
 
 The torques are the simulator's own (`hil_sim.world.dynamics` and `hil_sim.world.environment`: the same kernels, the same
 Keplerian orbit).
