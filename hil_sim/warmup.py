@@ -38,6 +38,9 @@ def warm(missions: list[str] | None = None, seconds: float = 2.0, out=sys.stdout
         print(" closed loop ...", end="", file=out, flush=True)
         run_fast(mission.model_copy(update={"duration_s": seconds}), 0)
         print(f" ready ({time.perf_counter() - t0:.1f} s)", file=out, flush=True)
+    from hil_sim.world.environment import compile_field_kernels
+
+    compile_field_kernels()  # IGRF's field for a magnetometer, which no shipped mission flies
     return time.perf_counter() - start
 
 

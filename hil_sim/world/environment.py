@@ -225,6 +225,15 @@ def earth_field_N(B, m, rx, ry, rz, t_s):
     return c * bx - s * by, s * bx + c * by, bz
 
 
+def compile_field_kernels() -> None:
+    """Compile (or load) `earth_field_N` as the magnetometer calls it from Python on an IGRF mission: no shipped
+    mission flies IGRF, so `keepout warmup`'s closed loops alone would leave it to such a run's first tick."""
+    rows = np.zeros((ENV_FIELD_FIRST + 5, 1))
+    rows[ENV_FIELD_DEGREE, 0], rows[ENV_FIELD_FIRST, 0] = 1.0, ENV_FIELD_FIRST + 1.0
+    rows[ENV_FIELD_FIRST + 1, 0] = -3e-5  # g10 of a degree-1 field
+    earth_field_N(rows, 0, 7000.0, 0.0, 0.0, 0.0)
+
+
 def field_model_rows(B: np.ndarray) -> np.ndarray | None:
     """The world's B when its run 0 flies a field model other than the centred dipole (for `earth_field_N`),
     else None (the dipole: a magnetometer keeps its own rows for `dipole_field_N`)."""

@@ -3,11 +3,9 @@ are IGRF-14's at the mission epoch, from ppigrf (a maintained, pure-Python IGRF:
 IAGA coefficient file shipped with it, MIT licence; chosen over pyIGRF for its reader of the coefficients,
 which is what the dipole needs, and its degree-limited field, which the test compares with).
 
-Why a dipole: ppigrf evaluates the full degree-13 expansion in ~20 ms a call, and even compiled it is ~200
-Legendre terms at every RK4 stage of a 100 Hz dynamics step; the dipole is a handful of flops in the numba
-kernel
-(hil_sim.world.environment.dipole_field_N). In the Earth-fixed frame, with m = (g11, h11, g10) and a = 6371.2 km
-(IGRF's reference radius):
+The dipole is the default: a handful of flops in the numba kernel (hil_sim.world.environment.dipole_field_N),
+and what every mission flew before the full field existed. In the Earth-fixed frame, with m = (g11, h11, g10)
+and a = 6371.2 km (IGRF's reference radius):
 
     B(r) = (a / |r|)^3 [3 (m . r_hat) r_hat - m]
 
@@ -18,10 +16,10 @@ measured in tests/hil_sim/test_geomagnetic.py.
 
 The full field, on request (``spacecraft.disturbance.magnetic_field: {model: igrf, degree: N}``): IGRF-14's
 Gauss coefficients to degree N at the mission epoch (`gauss_coefficients_T`), synthesised in the numba kernel
-hil_sim.world._geomagnetic_nb.field_E at every stage, because ppigrf's own evaluation costs milliseconds a
-call. The coefficients are taken once, at the epoch: their secular variation (at most ~0.1 nT a day per
-coefficient) is not applied during a run, a few nT over a ten-day mission, far below the model's own error
-(~100 nT at the surface against WMM).
+hil_sim.world._geomagnetic_nb.field_E at every stage (~0.7 us at degree 13), because ppigrf's own evaluation
+costs ~10 ms a call. The coefficients are taken once, at the epoch: their secular variation is not applied
+during a run (at most 0.4 nT a day at 550 km, 4 nT over a ten-day mission; IGRF-14 and WMM2025 differ by up to
+17.5 nT from 400 km up: tests/hil_sim/test_igrf.py).
 """
 from __future__ import annotations
 
