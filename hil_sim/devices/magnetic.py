@@ -13,13 +13,13 @@ from typing import Any, Sequence
 import numpy as np
 
 from comms.bus.icd import Icd
-from gnc.attitude import quat_to_dcm
 from gnc.eclipse import sunlit_fraction
 from hil_sim.devices.nodes import _row_maker
 from hil_sim.world import environment as env
 from hil_sim.world.ephemeris import spline_eval
-from hil_sim.world.magnetic_devices import MagnetometerParams, MagnetorquerParams, magnetometer_sample, rod_dipoles
-from hil_sim.world.sun_sensors import SunSensorParams, sun_sensor_outputs
+from hil_sim.world._magnetic_devices_nb import held_rods_nb, to_body_nb
+from hil_sim.world.magnetic_devices import MagnetometerModel, MagnetometerParams, MagnetorquerParams
+from hil_sim.world.sun_sensors import SunSensorModel, SunSensorParams
 
 
 @dataclass(frozen=True)
@@ -73,6 +73,15 @@ class MagneticNodes:
         self.command_cols = [icd.column("MTQ_COMMAND", f"dipole_{i}") for i in (1, 2, 3)]
         self._mag_hi = icd.signal_range("MAG_FIELD", "b_x")[1]
         self._css_hi = icd.signal_range("CSS_CURRENTS", "cell_1")[1]
+        # the truth models' parameters as arrays, made once (sampled every tick)
+        self._magnetometer = (MagnetometerModel(params.magnetometer, params.magnetorquers)
+                              if params.magnetometer is not None else None)
+        self._sun_sensors = SunSensorModel(params.sun_sensors) if params.sun_sensors is not None else None
+        rods = params.magnetorquers
+        self._rod_limit = np.asarray(rods.max_dipole_Am2 if rods is not None else (0.0,) * 3, dtype=float)
+        self._rod_limits = tuple(float(m) for m in self._rod_limit)
+        self._rod_axes_T = np.ascontiguousarray(np.asarray(rods.axes_B if rods is not None else np.zeros((3, 3)),
+                                                           dtype=float).T)
 
     # --------------------------------------------------------------------------------------- rods
     def on_command(self, dipoles_Am2: Sequence[float], t_s: float) -> None:
@@ -81,20 +90,24 @@ class MagneticNodes:
         self.last_command_s = t_s
         self.commands += 1
 
+    def _live(self, t_s: float) -> bool:
+        """A valid command within the timeout at ``t_s`` (and rods to take it)."""
+        return self.params.magnetorquers is not None and t_s - self.last_command_s <= self.params.mtq_cmd_timeout_s
+
+    def _held(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """(each rod's dipole, the rods' dipole in body axes) [A m^2] at ``t_s``, new arrays."""
+        held, body = np.empty(3), np.empty(3)
+        held_rods_nb(self._live(t_s), self.command_Am2, self._rod_limit, self._rod_axes_T, held, body)
+        return held, body
+
     def held_Am2(self, t_s: float) -> np.ndarray:
         """Each rod's dipole [A m^2] at ``t_s``: the command clipped to its saturation, zero without a valid
         command within the timeout (or without rods)."""
-        rods = self.params.magnetorquers
-        if rods is None or not t_s - self.last_command_s <= self.params.mtq_cmd_timeout_s:
-            return np.zeros(3)
-        return rod_dipoles(rods, self.command_Am2)
+        return self._held(t_s)[0]
 
     def rods_dipole_B(self, t_s: float) -> np.ndarray:
         """The rods' dipole in body axes [A m^2] held from ``t_s`` on."""
-        rods = self.params.magnetorquers
-        if rods is None:
-            return np.zeros(3)
-        return np.asarray(rods.axes_B, dtype=float).T @ self.held_Am2(t_s)
+        return self._held(t_s)[1]
 
     # ------------------------------------------------------------------------------------ sensing
     def field_B_T(self, world: Any) -> np.ndarray:
@@ -104,7 +117,7 @@ class MagneticNodes:
         rows = env.field_model_rows(b.B)  # IGRF, where the mission asks for it: the dynamics' own rows
         kernel, rows = (env.dipole_field_N, self._field_rows) if rows is None else (env.earth_field_N, rows)
         n = kernel(rows, 0, float(r[0]), float(r[1]), float(r[2]), float(world.t))
-        return quat_to_dcm(b.q_NB[0]).T @ np.array(n)
+        return to_body_nb(b.q_NB[0], *n)
 
     def _sun_B(self, world: Any) -> tuple[np.ndarray, float]:
         """The Sun's unit direction in body axes and the sunlit fraction of its disc at the world's time."""
@@ -113,28 +126,29 @@ class MagneticNodes:
         sun_km = np.empty(3)
         spline_eval(sun_c, eph_t0, b.ephemeris.node_spacing_s, float(world.t), sun_km)
         frac = float(sunlit_fraction(b.r_sc_N_km[0], sun_km))
-        return quat_to_dcm(b.q_NB[0]).T @ b.sun_N[0], frac
+        sun_N = b.sun_N[0]
+        return to_body_nb(b.q_NB[0], sun_N[0], sun_N[1], sun_N[2]), frac
 
     def rows(self, world: Any, t_s: float) -> list[tuple[int, list]]:
         """The tick's frames (message index, value row), in the order they go out: MAG_FIELD, CSS_CURRENTS,
         MTQ_STATUS (each only when its device is fitted)."""
         p = self.params
         out = []
-        if p.magnetometer is not None:
-            reading = magnetometer_sample(p.magnetometer, self.field_B_T(world), p.magnetorquers,
-                                          self.held_Am2(t_s), self.mag_rng)
-            bx, by, bz = np.clip(1e6 * reading, -self._mag_hi, self._mag_hi).tolist()
+        held = self._held(t_s)[0]
+        if self._magnetometer is not None:
+            reading = self._magnetometer.sample(self.field_B_T(world), held, self.mag_rng)
+            hi = self._mag_hi
+            bx, by, bz = (min(max(1e6 * v, -hi), hi) for v in reading.tolist())
             out.append((self.mag_m, self._mag_row(b_x=bx, b_y=by, b_z=bz, valid=1.0)))
-        if p.sun_sensors is not None:
+        if self._sun_sensors is not None:
             sun_B, frac = self._sun_B(world)
-            cells = np.minimum(sun_sensor_outputs(p.sun_sensors, sun_B, frac, self.css_rng), self._css_hi).tolist()
+            cells = [min(v, self._css_hi) for v in self._sun_sensors.outputs(sun_B, frac, self.css_rng).tolist()]
             values = {f"cell_{i + 1}": v for i, v in enumerate(cells)}
             out.append((self.css_m, self._css_row(n_cells=float(len(cells)), **values)))
         if p.magnetorquers is not None:
-            held = self.held_Am2(t_s)
-            live = t_s - self.last_command_s <= p.mtq_cmd_timeout_s
-            clipped = np.abs(self.command_Am2) > np.asarray(p.magnetorquers.max_dipole_Am2) if live else ()
-            bits = sum(1 << i for i, c in enumerate(clipped) if c)
+            live = self._live(t_s)
+            bits = sum(1 << i for i, (c, m) in enumerate(zip(self.command_Am2.tolist(), self._rod_limits))
+                       if live and abs(c) > m)
             d1, d2, d3 = held.tolist()
             out.append((self.status_m, self._status_row(dipole_1=d1, dipole_2=d2, dipole_3=d3, saturated=float(bits))))
         return out

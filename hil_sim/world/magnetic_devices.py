@@ -9,7 +9,9 @@ window with the rods off (duty cycling).
 Magnetometer (as Basilisk's magnetometer module, plus the rods' field): the field in sensor axes
 B_S = R_SB (B_B + C m_cmd) + bias + noise, quantised to the resolution and clipped at the full-scale range.
 
-Random numbers come from numpy Generators owned by the caller, as for the other sensor models.
+Random numbers come from numpy Generators owned by the caller, as for the other sensor models. The sums are
+compiled kernels (hil_sim.world._magnetic_devices_nb): sampled every GNC tick, numpy's per-call overhead on
+3-vectors cost more than the arithmetic.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gnc.attitude import quat_to_dcm
+from hil_sim.world._magnetic_devices_nb import clip_rods_nb, magnetometer_nb
 
 
 @dataclass(frozen=True)
@@ -48,9 +51,8 @@ class MagnetometerParams:
 
 def rod_dipoles(params: MagnetorquerParams, command_Am2: np.ndarray) -> np.ndarray:
     """Each rod's dipole [A m^2]: the command clipped to that rod's saturation (NaN commands give 0)."""
-    cmd = np.nan_to_num(np.asarray(command_Am2, dtype=float), nan=0.0)
-    limit = np.asarray(params.max_dipole_Am2, dtype=float)
-    return np.clip(cmd, -limit, limit)
+    cmd = np.asarray(command_Am2, dtype=float)
+    return clip_rods_nb(cmd, np.asarray(params.max_dipole_Am2, dtype=float), np.empty(cmd.shape))
 
 
 def body_dipole(params: MagnetorquerParams, command_Am2: np.ndarray) -> np.ndarray:
@@ -66,13 +68,31 @@ def magnetorquer_torque_B(params: MagnetorquerParams, command_Am2: np.ndarray, b
 def magnetometer_sample(params: MagnetometerParams, b_B_T: np.ndarray, rods: MagnetorquerParams | None,
                         command_Am2: np.ndarray | None, rng: np.random.Generator) -> np.ndarray:
     """The magnetometer's reading [T] in sensor axes, with the rods' own field while they are on."""
-    b = np.asarray(b_B_T, dtype=float)
-    if rods is not None and command_Am2 is not None:
-        b = b + np.asarray(rods.magnetometer_coupling_T_per_Am2, dtype=float) @ rod_dipoles(rods, command_Am2)
-    R_BS = quat_to_dcm(np.asarray(params.q_BS, dtype=float))
-    reading = R_BS.T @ b + np.asarray(params.bias_S_T, dtype=float)
-    if params.noise_std_T > 0.0:
-        reading = reading + rng.normal(0.0, params.noise_std_T, 3)
-    if params.resolution_T > 0.0:
-        reading = np.round(reading / params.resolution_T) * params.resolution_T
-    return np.clip(reading, -params.full_scale_T, params.full_scale_T)
+    held = rod_dipoles(rods, command_Am2) if rods is not None and command_Am2 is not None else _EMPTY
+    return MagnetometerModel(params, rods).sample(b_B_T, held, rng)
+
+
+_EMPTY = np.zeros(0)  # no rods' field, no noise
+
+
+class MagnetometerModel:
+    """`magnetometer_sample` with its parameters as arrays, made once: what a node samples every tick."""
+
+    def __init__(self, params: MagnetometerParams, rods: MagnetorquerParams | None) -> None:
+        self.params = params
+        self.coupled = rods is not None
+        self.coupling = (np.asarray(rods.magnetometer_coupling_T_per_Am2, dtype=float) if rods is not None
+                         else np.zeros((3, 0)))
+        self.R_BS = quat_to_dcm(np.asarray(params.q_BS, dtype=float))
+        self.bias_S_T = np.asarray(params.bias_S_T, dtype=float)
+
+    def sample(self, b_B_T: np.ndarray, rods_Am2: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The reading [T] in sensor axes for the body field ``b_B_T`` and the rods' held dipoles
+        ``rods_Am2`` (length 0, or no rods fitted: their field left out); the noise drawn from ``rng`` when
+        there is any."""
+        p = self.params
+        if not self.coupled:
+            rods_Am2 = _EMPTY
+        noise = rng.normal(0.0, p.noise_std_T, 3) if p.noise_std_T > 0.0 else _EMPTY
+        return magnetometer_nb(np.asarray(b_B_T, dtype=float), self.coupling, rods_Am2, self.R_BS, self.bias_S_T,
+                               noise, float(p.resolution_T), float(p.full_scale_T), np.empty(3))

@@ -6,7 +6,8 @@ Cell i with unit normal n_i (body axes) in a Sun of unit direction s (body axes,
     I_i = noise                                   otherwise,
 
 clipped at 0 (a cell's current does not go negative) and f the sunlit fraction of the Sun's disc
-(gnc.eclipse: 0 in umbra, between in penumbra), so every cell is dark in eclipse.
+(gnc.eclipse: 0 in umbra, between in penumbra), so every cell is dark in eclipse. The cells are computed by a
+compiled kernel (hil_sim.world._magnetic_devices_nb), sampled every GNC tick.
 """
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from hil_sim.world._magnetic_devices_nb import sun_cells_nb
 
 CUBE_FACES_B = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, 1.0),
                 (0.0, 0.0, -1.0))
@@ -41,9 +44,24 @@ class SunSensorParams:
 def sun_sensor_outputs(params: SunSensorParams, sun_B: np.ndarray, sunlit_fraction: float,
                        rng: np.random.Generator) -> np.ndarray:
     """Every cell's output for the unit Sun direction ``sun_B`` (body axes) at ``sunlit_fraction``."""
-    cos_theta = np.asarray(params.normals_B, dtype=float) @ np.asarray(sun_B, dtype=float)
-    seen = cos_theta >= math.cos(math.radians(params.field_of_view_half_angle_deg))
-    out = params.full_scale * float(sunlit_fraction) * np.where(seen, cos_theta, 0.0)
-    if params.noise_std > 0.0:
-        out = out + rng.normal(0.0, params.noise_std, out.shape)
-    return np.maximum(out, 0.0)
+    return SunSensorModel(params).outputs(sun_B, sunlit_fraction, rng)
+
+
+_EMPTY = np.zeros(0)  # no noise
+
+
+class SunSensorModel:
+    """`sun_sensor_outputs` with its parameters as arrays, made once: what a node samples every tick."""
+
+    def __init__(self, params: SunSensorParams) -> None:
+        self.params = params
+        self.normals_B = np.asarray(params.normals_B, dtype=float)
+        self.cos_fov = math.cos(math.radians(params.field_of_view_half_angle_deg))
+
+    def outputs(self, sun_B: np.ndarray, sunlit_fraction: float, rng: np.random.Generator) -> np.ndarray:
+        """Every cell's output (as `sun_sensor_outputs`)."""
+        p = self.params
+        n = self.normals_B.shape[0]
+        noise = rng.normal(0.0, p.noise_std, (n,)) if p.noise_std > 0.0 else _EMPTY
+        return sun_cells_nb(self.normals_B, np.asarray(sun_B, dtype=float), self.cos_fov,
+                            p.full_scale * float(sunlit_fraction), noise, np.empty(n))
