@@ -6,7 +6,8 @@
   (the rate loop's, which keep a wheel's last report when it misses one);
 * ``h_excess = h_w - bias``; the field in body axes from the magnetometer, ``b_B = R(q_BS) b_S``;
 * the body dipole of the cross-product law (`gnc.magnetic.unloading_dipole`), mapped onto the rods by least
-  squares over their axes and scaled down as a whole until every rod is within its limit.
+  squares over their axes and scaled down as a whole until every rod is within its limit (one compiled
+  kernel, fsw._momentum_nb: numpy's per-call overhead on 3-vectors cost more than the law).
 
 The attitude loop is left alone: it keeps pointing, so the field's torque ``m x B`` shows in the body as a
 disturbance the rate loop rejects, and the wheels' momentum drains. No feed-forward of ``m x B`` to the wheels
@@ -20,10 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from fsw._momentum_nb import unloading_step_nb
 from gnc.attitude import quat_to_dcm
-from gnc.magnetic import saturate_dipole, unloading_dipole
-
-_NO_BODY_LIMIT = np.full(3, np.inf)  # the rods' limits apply after the mapping onto them
 
 
 class MomentumManager:
@@ -50,16 +49,20 @@ class MomentumManager:
         return self.G @ (self.Js * np.asarray(wheel_speed_rad_s, dtype=float))
 
     def step(self, mag_S_T: np.ndarray, wheel_speed_rad_s: np.ndarray) -> np.ndarray:
-        """This cycle's rod dipoles [A m^2] (rod order), also kept in ``command_Am2``."""
-        h_excess = self.wheel_momentum_B(wheel_speed_rad_s) - self.bias_B_Nms
-        self.h_excess_norm_Nms = float(np.linalg.norm(h_excess))
-        b_S = np.asarray(mag_S_T, dtype=float)
-        if not (np.all(np.isfinite(b_S)) and np.all(np.isfinite(h_excess))):
+        """This cycle's rod dipoles [A m^2] (rod order), also kept in ``command_Am2``.
+
+        `gnc.magnetic.unloading_dipole` (no body limit) then `saturate_dipole` of its least-squares mapping
+        onto the rods, compiled as one kernel (fsw._momentum_nb)."""
+        command = np.empty(self.rods_pinv.shape[0])
+        norm, finite = unloading_step_nb(self.G, self.Js, np.asarray(wheel_speed_rad_s, dtype=float),
+                                         self.bias_B_Nms, self.R_BS, np.asarray(mag_S_T, dtype=float),
+                                         self.gain_1_s, self.rods_pinv, self.max_Am2, command)
+        self.h_excess_norm_Nms = norm
+        if not finite:
             self._missed += 1
             if self._missed > self.HOLD_CYCLES:
                 self.command_Am2 = np.zeros(3)
             return self.command_Am2
         self._missed = 0
-        m_B = unloading_dipole(h_excess, self.R_BS @ b_S, self.gain_1_s, _NO_BODY_LIMIT)
-        self.command_Am2 = saturate_dipole(self.rods_pinv @ m_B, self.max_Am2)
-        return self.command_Am2
+        self.command_Am2 = command
+        return command

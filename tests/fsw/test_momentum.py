@@ -160,3 +160,35 @@ def test_unloading_drains_the_wheels_while_keeping_out(runs) -> None:
     for run in (off, on):
         assert run["margins_deg"]["min_margin_deg"] > 0.0
         assert run["unexpected_fdir_events"] == 0.0
+
+
+def test_the_compiled_cycle_is_the_numpy_law() -> None:
+    """fsw._momentum_nb.unloading_step_nb against gnc.magnetic's unloading_dipole and saturate_dipole onto the
+    rods (tests/reference/magnetic.py), random wheels, mountings and fields, saturated or not, and fields or
+    speeds that are not finite."""
+    from reference.magnetic import unloading_step
+
+    from fsw._momentum_nb import unloading_step_nb
+    from gnc.attitude import quat_to_dcm
+
+    rng = np.random.default_rng(7)
+    saturated = 0
+    for k in range(3000):
+        G, Js, w = rng.normal(size=(3, 4)), rng.uniform(1e-3, 3e-3, 4), rng.normal(size=4) * 10.0 ** rng.uniform(-1.0, 3.0)
+        bias, q = rng.normal(size=3) * 0.01, rng.normal(size=4)
+        R_BS, b_S = quat_to_dcm(q / np.linalg.norm(q)), rng.normal(size=3) * 3e-5
+        pinv, max_Am2 = np.linalg.pinv(rng.normal(size=(3, 3)).T), rng.uniform(1.0, 10.0, 3)
+        if k % 10 == 0:
+            (b_S if k % 20 else w)[rng.integers(0, 3)] = np.nan
+        out = np.full(3, -1.0)
+        norm, finite = unloading_step_nb(G, Js, w, bias, R_BS, b_S, 0.01, pinv, max_Am2, out)
+        norm_ref, finite_ref, rods_ref = unloading_step(G, Js, w, bias, R_BS, b_S, 0.01, pinv, max_Am2)
+        assert finite == finite_ref
+        assert norm == pytest.approx(norm_ref, rel=1e-14, nan_ok=True)
+        if not finite:
+            np.testing.assert_array_equal(out, -1.0)  # left as it was
+            continue
+        saturated += np.max(np.abs(rods_ref) / max_Am2) >= 1.0 - 1e-12
+        # the cross product cancels where B and h line up: equal to the vector's size, not each element's
+        assert np.max(np.abs(out - rods_ref)) <= 1e-12 * np.max(np.abs(rods_ref))
+    assert 300 < saturated < 2400, saturated  # both branches of the saturation taken
