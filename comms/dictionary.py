@@ -818,6 +818,12 @@ EVENTS: tuple[EventDef, ...] = (
     EventDef("ECLIPSE_ENTRY", 100, Severity.ACTIVITY_LO,
              "entering the Earth's shadow (sunlit fraction {sunlit_fraction:.3f})",
              (Arg("sunlit_fraction", "F32"),)),
+    EventDef("SUN_SENSOR_FIX_ON", 102, Severity.WARNING_LO,
+             "no star-tracker fix for {coasting_s:.1f} s: the attitude is held on the coarse sun sensors",
+             (Arg("coasting_s", "F32", "s", "time since the last fused star-tracker fix"),)),
+    EventDef("SUN_SENSOR_FIX_OFF", 103, Severity.ACTIVITY_HI,
+             "the star tracker's fix is back: {fused:d} Sun directions fused, {rejected:d} gated out meanwhile",
+             (Arg("fused", "U32"), Arg("rejected", "U32"))),
     EventDef("ECLIPSE_EXIT", 101, Severity.ACTIVITY_LO,
              "in full Sun again after {duration_s:.0f} s in the Earth's shadow (least sunlit fraction "
              "{least_sunlit_fraction:.3f})",

@@ -375,6 +375,34 @@ class MagneticDevicesConfig(_Strict):
     magnetorquers: bool = Field(False, description="MTQ_COMMAND is sent every GNC cycle (default: true when spacecraft.magnetorquers is given).")
 
 
+class SunSensorFixConfig(_Strict):
+    """The attitude held on the coarse sun sensors while the star tracker is lost (`fsw.sun_fix`): once no
+    star-tracker fix has been fused for ``after_s``, the estimator fuses the Sun direction the cells measure
+    (two axes across the Sun line; the gyro carries the third, and all three in the Earth's shadow). What
+    it knows of the cells (defaults: the spacecraft's, `hil_sim.mission.knowledge`); cells with a field of
+    view under 90 deg give no fix (the dark cells' bound needs the whole hemisphere)."""
+
+    after_s: float = Field(10.0, gt=0.0, le=3600.0, description="The star tracker silent (no fused fix) this long before the Sun sensors are fused [s].")
+    sigma_deg: float = Field(2.0, gt=0.0, le=30.0, description="1-sigma error of one measured Sun direction per axis [deg] (the cells' noise and the dark cells' bound, asin(lit_fraction)).")
+    gate_deg: float = Field(10.0, gt=0.0, le=90.0, description="A Sun direction further than this (and four predicted sigmas) from the estimate's is not fused [deg].")
+    lit_fraction: float = Field(0.05, gt=0.0, lt=0.5, description="A cell counts as lit above this fraction of its full scale.")
+    normals_B: list[Vec3] = Field([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]], min_length=3, max_length=6, description="Each cell's unit normal in body axes as the flight software knows them, in CSS_CURRENTS order (normalised on load).")
+    full_scale_mA: float = Field(1.0, gt=0.0, le=2.5, description="A cell's output at normal incidence in full Sun [mA].")
+    field_of_view_half_angle_deg: float = Field(90.0, gt=0.0, le=90.0, description="The cells' field of view [deg]; the fix needs 90.")
+
+    @field_validator("normals_B")
+    @classmethod
+    def _normals(cls, v: list[list[float]]) -> list[list[float]]:
+        return [_unit(n, "normals_B") for n in v]
+
+    @model_validator(mode="after")
+    def _hemisphere(self) -> "SunSensorFixConfig":
+        if self.field_of_view_half_angle_deg < 90.0:
+            raise ValueError("sun_sensor_fix: the Sun fix reads the dark cells as a bound, which needs cells that see "
+                             f"the whole hemisphere (field_of_view_half_angle_deg 90), got {self.field_of_view_half_angle_deg}")
+        return self
+
+
 class _RodsKnowledge(_Strict):
     """What a law driving the rods knows of them and of the magnetometer: each rod's limit and axis, the
     magnetometer's mounting (defaults: the spacecraft's, `hil_sim.mission.knowledge`)."""
@@ -591,6 +619,7 @@ class FswConfig(_Strict):
     magnetic_devices: MagneticDevicesConfig | None = Field(None, description="The magnetometer, sun sensors and magnetorquers the flight software reads and drives (default: present, naming those the spacecraft has, when it has any; absent otherwise).")
     momentum_management: MomentumManagementConfig = Field(default_factory=MomentumManagementConfig, description="Magnetic unloading of the wheels' momentum through the rods (off by default).")
     detumble: DetumbleConfig | None = Field(None, description="B-dot detumbling, the DETUMBLE mode (absent: no DETUMBLE mode; initial_mode DETUMBLE and SET_MODE DETUMBLE need it).")
+    sun_sensor_fix: SunSensorFixConfig | None = Field(None, description="The attitude held on the coarse sun sensors while the star tracker is lost (absent: the gyro alone carries it).")
 
     @model_validator(mode="after")
     def _momentum_devices(self) -> "FswConfig":
@@ -607,6 +636,8 @@ class FswConfig(_Strict):
             raise ValueError("detumble: a tumbling spacecraft cannot steer its boresight out of the keep-out zones "
                              "(pointing.zones, quaternion.zones); DETUMBLE keeps the instrument behind the aperture door: add "
                              "spacecraft.door (or flight_software.door)")
+        if self.sun_sensor_fix is not None and (d is None or not d.sun_sensors):
+            raise ValueError("sun_sensor_fix needs magnetic_devices with sun_sensors (spacecraft.sun_sensors)")
         return self
 
     @field_validator("epoch_utc")

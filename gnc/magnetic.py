@@ -69,3 +69,32 @@ def css_sun_direction(normals_B: np.ndarray, currents: np.ndarray, scale: float 
     s, *_ = np.linalg.lstsq(n[lit], y[lit], rcond=None)
     norm = float(np.linalg.norm(s))
     return s / norm if norm > 0.0 else None
+
+
+def css_sun_fix(normals_B: np.ndarray, currents: np.ndarray, scale: float = 1.0,
+                lit_fraction: float = 0.05, min_brightness: float = 0.9) -> np.ndarray | None:
+    """Sun direction in body axes from cosine-law cells that see the whole hemisphere (90 deg field of
+    view), using the dark cells too; None in eclipse or when the cells cannot fix it.
+
+    A Sun-pointed spacecraft lights one or two cells, never three, so `css_sun_direction` cannot fix the Sun
+    just when SAFE needs it. A dark cell says ``n . s <= lit_fraction``: a dark cell whose normal is within
+    ``asin(lit_fraction)`` of the lit cells' solution's horizon bounds the Sun's component along it to
+    about zero. The lit cells (``N s = I / scale``) and those near-horizon dark cells (``n . s = 0``) are
+    solved together by least squares when they span three dimensions; the error is then at most about
+    ``asin(lit_fraction)`` (2.9 deg at 0.05) plus the cells' noise. In the penumbra the whole Sun is dimmed
+    and a cell's dark reading no longer bounds its angle: a solution dimmer than ``min_brightness`` of full
+    Sun gives None (it came out of the shadow 17 deg off, before this test).
+    """
+    n = np.asarray(normals_B, dtype=float)
+    y = np.asarray(currents, dtype=float) / scale
+    lit = y > lit_fraction
+    if not lit.any():
+        return None
+    s0, *_ = np.linalg.lstsq(n[lit], y[lit], rcond=None)
+    bound = ~lit & (n @ s0 > -lit_fraction)
+    rows = lit | bound
+    if np.linalg.matrix_rank(n[rows], tol=1e-6) < 3:
+        return None
+    s, *_ = np.linalg.lstsq(n[rows], np.where(lit, y, 0.0)[rows], rcond=None)
+    norm = float(np.linalg.norm(s))
+    return s / norm if norm >= min_brightness else None

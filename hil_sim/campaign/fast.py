@@ -28,7 +28,7 @@ from hil_sim.devices.faults import WHEEL_FAULT_MODES, WHEEL_MESSAGE
 
 _channel_ids = itertools.count()
 # the events a run's result lists: FDIR's trips, and a plug-in stopped by keepout's guard
-_RESULT_EVENTS = ("FDIR_TRIPPED", "PLUGIN_STOPPED")
+_RESULT_EVENTS = ("FDIR_TRIPPED", "PLUGIN_STOPPED", "SUN_SENSOR_FIX_ON", "SUN_SENSOR_FIX_OFF")
 
 # Mission paths whose value lands in WorldParams under another name (read back from the world).
 _WORLD_FIELDS = {
@@ -144,7 +144,11 @@ class _EstimateRows:
         keep = self.rows[:self.n] < len(truth["q_NB"])
         rows = self.rows[:self.n][keep]
         nees = attitude_nees(truth["q_NB"][rows], self.q[:self.n][keep], self.P[:self.n][keep])
-        return {"nees_mean": float(np.mean(nees)) if nees.size else math.nan, "nees_band_fraction": band_fraction(nees)}
+        # the largest angle between the estimated and the true attitude (after the first fix)
+        dots = np.abs(np.einsum("ij,ij->i", truth["q_NB"][rows], self.q[:self.n][keep]))
+        error_deg = np.degrees(2.0 * np.arccos(np.clip(dots, 0.0, 1.0)))
+        return {"nees_mean": float(np.mean(nees)) if nees.size else math.nan, "nees_band_fraction": band_fraction(nees),
+                "max_attitude_error_deg": float(np.max(error_deg)) if error_deg.size else math.nan}
 
 
 class _InProcessSender:

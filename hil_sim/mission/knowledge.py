@@ -98,6 +98,12 @@ def knowledge_from_truth(mission: dict) -> dict:
                 fill(known_rods, "magnetometer_q_BS", sc["magnetometer"].get("q_BS"))
                 fill(known_rods, "rod_axes_B", sc["magnetorquers"].get("axes_B"))
                 fill(known_rods, "max_dipole_Am2", sc["magnetorquers"].get("max_dipole_Am2"))
+        css = sc.get("sun_sensors")
+        if isinstance(css, dict) and isinstance(fsw.get("sun_sensor_fix"), dict):
+            # what the Sun fix knows of the cells: the spacecraft's as built
+            known_css = child("sun_sensor_fix")
+            for key in ("normals_B", "full_scale_mA", "field_of_view_half_angle_deg"):
+                fill(known_css, key, css.get(key))
     if isinstance(state, dict) and "q_NB" not in state and _is_ra_dec(state.get("ra_dec_deg")):
         ra, dec = (math.radians(float(a)) for a in state["ra_dec_deg"])
         # hold the initial pointing until the first SET_TARGET

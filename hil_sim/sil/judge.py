@@ -663,6 +663,10 @@ def _judge_final_error(reqs: _Requirements, err: np.ndarray, t: np.ndarray, req,
         # the error at the end is still what a person flying a shortened run wants to see
         reqs.not_judged("final pointing error", "the run was shortened before the last target's settling deadline",
                         f"not reached ({_rounded(final)} deg at the end)" if math.isfinite(final) else "not reached")
+    elif len(t) and not np.isfinite(err).any():
+        # a run held in SAFE from start to end (the star tracker lost for good, say) has no target to judge
+        reqs.not_judged("final pointing error", "no pointing target was active at any time (SAFE throughout)",
+                        "no target")
     elif len(t):
         final = float(err[-1])
         reqs.requirement("final pointing error", final, f"< {_num(req.max_final_pointing_error_deg)}",

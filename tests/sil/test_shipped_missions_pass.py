@@ -18,7 +18,7 @@ SHIPPED = sorted((ROOT / "config" / "missions").glob("*.yaml"))
 # A day in orbit flies ~20 min in lockstep on this host: too long for the suite. Its first pass flies in fast
 # mode in tests/sil/test_leo_day.py, the whole day in its campaign (config/campaigns/leo-day.yaml).
 LONGEST_IN_SUITE_S = 7200.0
-FLOWN_ELSEWHERE = {"leo-day": "tests/sil/test_leo_day.py"}
+FLOWN_ELSEWHERE = {"leo-day": "tests/sil/test_leo_day.py", "star-tracker-lost": "tests/sil/test_star_tracker_lost.py"}
 
 
 def _duration_s(path: Path) -> float:
