@@ -28,7 +28,7 @@ from fsw.control import RateController
 from fsw.detumble import Detumbler
 from fsw.door import DoorController
 from fsw.eclipse import EclipseMonitor
-from fsw.sun_fix import SunSensorFix
+from fsw.coarse_attitude import CoarseAttitude
 from fsw.estimation import AttitudeEstimator
 from fsw.executive import Executive
 from fsw.fdir import STATUS_LOST, Fdir, WheelSpeedResidual
@@ -112,9 +112,10 @@ class FlightSoftware:
                          if config.momentum_management.enabled else None)
         # B-dot detumbling (fsw.detumble), when the mission configures the DETUMBLE mode
         self.detumble = Detumbler(config.detumble, self.period_s) if config.detumble is not None else None
-        # the attitude held on the coarse sun sensors while the star tracker is lost (fsw.sun_fix), when configured
-        self.sun_fix = (SunSensorFix(config.sun_sensor_fix, self.event)
-                        if config.sun_sensor_fix is not None and not self.plugins.get("estimator") else None)
+        # the attitude held (or found) on the Sun sensors and the magnetometer while the star tracker is lost
+        # (fsw.coarse_attitude), when configured
+        self.coarse = (CoarseAttitude(config.coarse_attitude, self.event, self.guidance.ephem.jd0_utc)
+                       if config.coarse_attitude is not None and not self.plugins.get("estimator") else None)
         self._max_speed = np.ascontiguousarray(self.control.max_speed, dtype=float)  # fixed at start-up
         # configuration the cycle reads every tick, fixed at start-up (no telecommand changes it)
         self._gnc_tm_every = config.tmtc.gnc_packet_every_n_cycles
@@ -247,9 +248,9 @@ class FlightSoftware:
             self._overrun()
 
         est = self.estimator.update(s)
-        if self.sun_fix is not None and self.sun_fix.cycle(self.estimator, s.css_mA,
-                                                           lambda: self.guidance.ephem.directions(s.t_s)["sun"]):
-            est = est._replace(q_NB=self.estimator.q_NB)
+        if self.coarse is not None and self.coarse.cycle(self.estimator, s.css_mA, s.mag_S_T,
+                                                         not self.mtq_command_Am2.any(), s.t_s, self.guidance.ephem):
+            est = est._replace(q_NB=self.estimator.q_NB, initialized=self.estimator.initialized)
         if s.st_fresh != self._st_was_valid:  # the star tracker was lost or is back
             self._st_events(s)
         g = self.guidance.step(s.t_s, s.dt_s, est.q_NB if est.initialized else None, est.omega_BN_B)

@@ -375,20 +375,24 @@ class MagneticDevicesConfig(_Strict):
     magnetorquers: bool = Field(False, description="MTQ_COMMAND is sent every GNC cycle (default: true when spacecraft.magnetorquers is given).")
 
 
-class SunSensorFixConfig(_Strict):
-    """The attitude held on the coarse sun sensors while the star tracker is lost (`fsw.sun_fix`): once no
-    star-tracker fix has been fused for ``after_s``, the estimator fuses the Sun direction the cells measure
-    (two axes across the Sun line; the gyro carries the third, and all three in the Earth's shadow). What
-    it knows of the cells (defaults: the spacecraft's, `hil_sim.mission.knowledge`); cells with a field of
-    view under 90 deg give no fix (the dark cells' bound needs the whole hemisphere)."""
+class CoarseAttitudeConfig(_Strict):
+    """The coarse attitude (`fsw.coarse_attitude`): once no star-tracker fix has been fused for ``after_s``,
+    the estimator fuses the Sun direction the cells measure (two axes across the Sun line) and, with
+    ``field_sigma_deg``, the magnetometer's field against the onboard dipole (two axes across the field
+    line); never initialised, it takes the TRIAD attitude of the two. What it knows of the cells, the
+    magnetometer and the field (defaults: the spacecraft's and the epoch's, `hil_sim.mission.knowledge`);
+    cells with a field of view under 90 deg give no fix (the dark cells' bound needs the whole hemisphere)."""
 
-    after_s: float = Field(10.0, gt=0.0, le=3600.0, description="The star tracker silent (no fused fix) this long before the Sun sensors are fused [s].")
-    sigma_deg: float = Field(2.0, gt=0.0, le=30.0, description="1-sigma error of one measured Sun direction per axis [deg] (the cells' noise and the dark cells' bound, asin(lit_fraction)).")
-    gate_deg: float = Field(10.0, gt=0.0, le=90.0, description="A Sun direction further than this (and four predicted sigmas) from the estimate's is not fused [deg].")
+    after_s: float = Field(10.0, gt=0.0, le=3600.0, description="The star tracker silent (no fused fix) this long before the coarse sensors are fused [s].")
+    sun_sigma_deg: float = Field(2.0, gt=0.0, le=30.0, description="1-sigma error of one measured Sun direction per axis [deg] (the cells' noise and the dark cells' bound, asin(lit_fraction)).")
+    field_sigma_deg: float | None = Field(None, gt=0.0, le=30.0, description="1-sigma error of the measured field's direction against the onboard dipole per axis [deg] (the magnetometer's noise, and the dipole's error where the truth is IGRF to a higher degree: up to ~15 deg in low orbit); absent: the magnetometer is not used.")
+    gate_deg: float = Field(10.0, gt=0.0, le=90.0, description="A direction further than this (and four predicted sigmas) from the estimate's is not fused [deg].")
     lit_fraction: float = Field(0.05, gt=0.0, lt=0.5, description="A cell counts as lit above this fraction of its full scale.")
     normals_B: list[Vec3] = Field([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]], min_length=3, max_length=6, description="Each cell's unit normal in body axes as the flight software knows them, in CSS_CURRENTS order (normalised on load).")
     full_scale_mA: float = Field(1.0, gt=0.0, le=2.5, description="A cell's output at normal incidence in full Sun [mA].")
     field_of_view_half_angle_deg: float = Field(90.0, gt=0.0, le=90.0, description="The cells' field of view [deg]; the fix needs 90.")
+    magnetometer_q_BS: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Magnetometer mounting as the flight software knows it: rotates sensor-frame vectors into body, scalar first (normalised on load).")
+    geomagnetic_dipole_T: Vec3 | None = Field(None, description="The onboard field model, IGRF's dipole (g10, g11, h11) [T] at the epoch (default with field_sigma_deg: IGRF-14's at epoch_utc).")
 
     @field_validator("normals_B")
     @classmethod
@@ -396,10 +400,13 @@ class SunSensorFixConfig(_Strict):
         return [_unit(n, "normals_B") for n in v]
 
     @model_validator(mode="after")
-    def _hemisphere(self) -> "SunSensorFixConfig":
+    def _consistent(self) -> "CoarseAttitudeConfig":
         if self.field_of_view_half_angle_deg < 90.0:
-            raise ValueError("sun_sensor_fix: the Sun fix reads the dark cells as a bound, which needs cells that see "
+            raise ValueError("coarse_attitude: the Sun fix reads the dark cells as a bound, which needs cells that see "
                              f"the whole hemisphere (field_of_view_half_angle_deg 90), got {self.field_of_view_half_angle_deg}")
+        if self.field_sigma_deg is not None and not (self.geomagnetic_dipole_T and any(self.geomagnetic_dipole_T)):
+            raise ValueError("coarse_attitude: field_sigma_deg needs the onboard field model geomagnetic_dipole_T "
+                             "(g10, g11, h11) [T]")
         return self
 
 
@@ -619,7 +626,7 @@ class FswConfig(_Strict):
     magnetic_devices: MagneticDevicesConfig | None = Field(None, description="The magnetometer, sun sensors and magnetorquers the flight software reads and drives (default: present, naming those the spacecraft has, when it has any; absent otherwise).")
     momentum_management: MomentumManagementConfig = Field(default_factory=MomentumManagementConfig, description="Magnetic unloading of the wheels' momentum through the rods (off by default).")
     detumble: DetumbleConfig | None = Field(None, description="B-dot detumbling, the DETUMBLE mode (absent: no DETUMBLE mode; initial_mode DETUMBLE and SET_MODE DETUMBLE need it).")
-    sun_sensor_fix: SunSensorFixConfig | None = Field(None, description="The attitude held on the coarse sun sensors while the star tracker is lost (absent: the gyro alone carries it).")
+    coarse_attitude: CoarseAttitudeConfig | None = Field(None, description="The attitude held (or found) on the coarse sun sensors and the magnetometer while the star tracker is lost (absent: the gyro alone carries it).")
 
     @model_validator(mode="after")
     def _momentum_devices(self) -> "FswConfig":
@@ -636,8 +643,12 @@ class FswConfig(_Strict):
             raise ValueError("detumble: a tumbling spacecraft cannot steer its boresight out of the keep-out zones "
                              "(pointing.zones, quaternion.zones); DETUMBLE keeps the instrument behind the aperture door: add "
                              "spacecraft.door (or flight_software.door)")
-        if self.sun_sensor_fix is not None and (d is None or not d.sun_sensors):
-            raise ValueError("sun_sensor_fix needs magnetic_devices with sun_sensors (spacecraft.sun_sensors)")
+        coarse = self.coarse_attitude
+        if coarse is not None and (d is None or not d.sun_sensors):
+            raise ValueError("coarse_attitude needs magnetic_devices with sun_sensors (spacecraft.sun_sensors)")
+        if coarse is not None and coarse.field_sigma_deg is not None and not d.magnetometer:
+            raise ValueError("coarse_attitude.field_sigma_deg needs magnetic_devices with magnetometer "
+                             "(spacecraft.magnetometer)")
         return self
 
     @field_validator("epoch_utc")

@@ -28,7 +28,8 @@ from hil_sim.devices.faults import WHEEL_FAULT_MODES, WHEEL_MESSAGE
 
 _channel_ids = itertools.count()
 # the events a run's result lists: FDIR's trips, and a plug-in stopped by keepout's guard
-_RESULT_EVENTS = ("FDIR_TRIPPED", "PLUGIN_STOPPED", "SUN_SENSOR_FIX_ON", "SUN_SENSOR_FIX_OFF")
+_RESULT_EVENTS = ("FDIR_TRIPPED", "PLUGIN_STOPPED", "COARSE_ATTITUDE_ON", "COARSE_ATTITUDE_OFF",
+                  "COARSE_ATTITUDE_FOUND")
 
 # Mission paths whose value lands in WorldParams under another name (read back from the world).
 _WORLD_FIELDS = {

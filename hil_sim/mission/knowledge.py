@@ -8,7 +8,10 @@ itself never reads them: it gets its configuration resolved (`hil_sim.mission.fl
 from __future__ import annotations
 
 import copy
+import datetime as _dt
 import math
+from collections.abc import Callable
+from typing import Any
 
 # Where each piece of the flight software's knowledge comes from when the mission file does not give it under
 # flight_software (`knowledge_from_truth` fills it in): knowledge key -> the truth key written once. The
@@ -35,6 +38,12 @@ KNOWLEDGE_SOURCES: dict[tuple[str, ...], tuple[str, ...]] = {
     ("flight_software", "detumble", "magnetometer_q_BS"): ("spacecraft", "magnetometer", "q_BS"),
     ("flight_software", "detumble", "rod_axes_B"): ("spacecraft", "magnetorquers", "axes_B"),
     ("flight_software", "detumble", "max_dipole_Am2"): ("spacecraft", "magnetorquers", "max_dipole_Am2"),
+    ("flight_software", "coarse_attitude", "normals_B"): ("spacecraft", "sun_sensors", "normals_B"),
+    ("flight_software", "coarse_attitude", "full_scale_mA"): ("spacecraft", "sun_sensors", "full_scale_mA"),
+    ("flight_software", "coarse_attitude", "field_of_view_half_angle_deg"): ("spacecraft", "sun_sensors",
+                                                                            "field_of_view_half_angle_deg"),
+    ("flight_software", "coarse_attitude", "magnetometer_q_BS"): ("spacecraft", "magnetometer", "q_BS"),
+    ("flight_software", "coarse_attitude", "geomagnetic_dipole_T"): ("epoch_utc",),
 }
 # the sources that are not a plain copy of their truth key, as the docs say them
 _KNOWLEDGE_NOTES = {
@@ -42,6 +51,8 @@ _KNOWLEDGE_NOTES = {
                                                  "spin_inertia_kgm2)",
     ("flight_software", "pointing", "target_N"): "initial_state.ra_dec_deg, when the initial attitude is given so",
     ("flight_software", "orbit", "arg_latitude_at_epoch_deg"): "orbit.arg_perigee_deg + orbit.mean_anomaly_deg",
+    ("flight_software", "coarse_attitude", "geomagnetic_dipole_T"): "IGRF-14's dipole at epoch_utc, when "
+                                                                    "field_sigma_deg is given",
 }
 KNOWLEDGE_DEFAULTS = {".".join(k): _KNOWLEDGE_NOTES.get(k, ".".join(v)) for k, v in KNOWLEDGE_SOURCES.items()}
 WHEEL_KNOWLEDGE_KEYS = ("axis_B", "max_torque_Nm", "max_speed_rad_s", "spin_inertia_kgm2")
@@ -98,12 +109,8 @@ def knowledge_from_truth(mission: dict) -> dict:
                 fill(known_rods, "magnetometer_q_BS", sc["magnetometer"].get("q_BS"))
                 fill(known_rods, "rod_axes_B", sc["magnetorquers"].get("axes_B"))
                 fill(known_rods, "max_dipole_Am2", sc["magnetorquers"].get("max_dipole_Am2"))
-        css = sc.get("sun_sensors")
-        if isinstance(css, dict) and isinstance(fsw.get("sun_sensor_fix"), dict):
-            # what the Sun fix knows of the cells: the spacecraft's as built
-            known_css = child("sun_sensor_fix")
-            for key in ("normals_B", "full_scale_mA", "field_of_view_half_angle_deg"):
-                fill(known_css, key, css.get(key))
+        if isinstance(fsw.get("coarse_attitude"), dict):
+            _coarse_attitude_knowledge(child("coarse_attitude"), sc, out.get("epoch_utc"), fill)
     if isinstance(state, dict) and "q_NB" not in state and _is_ra_dec(state.get("ra_dec_deg")):
         ra, dec = (math.radians(float(a)) for a in state["ra_dec_deg"])
         # hold the initial pointing until the first SET_TARGET
@@ -117,6 +124,35 @@ def knowledge_from_truth(mission: dict) -> dict:
         if _finite(omega) and _finite(anomaly):
             fill(known_orbit, "arg_latitude_at_epoch_deg", (float(omega) + float(anomaly)) % 360.0)
     return out
+
+
+def _coarse_attitude_knowledge(known: dict, sc: dict, epoch: Any, fill: Callable[..., None]) -> None:
+    """What the coarse attitude knows of the cells and the magnetometer (the spacecraft's as built) and of the
+    field (IGRF-14's dipole at the epoch, when it uses the magnetometer)."""
+    css = sc.get("sun_sensors")
+    if isinstance(css, dict):
+        for key in ("normals_B", "full_scale_mA", "field_of_view_half_angle_deg"):
+            fill(known, key, css.get(key))
+    mag = sc.get("magnetometer")
+    if isinstance(mag, dict):
+        fill(known, "magnetometer_q_BS", mag.get("q_BS"))
+    if known.get("field_sigma_deg") is not None and "geomagnetic_dipole_T" not in known:
+        when = _epoch(epoch)
+        if when is not None:
+            from hil_sim.world.geomagnetic import dipole_coefficients_T
+
+            fill(known, "geomagnetic_dipole_T", list(dipole_coefficients_T(when)))
+
+
+def _epoch(value: Any) -> _dt.datetime | None:
+    """The mission's epoch as a UTC datetime (None when it is not one: the schema reports it)."""
+    if isinstance(value, _dt.datetime):
+        return value if value.tzinfo else value.replace(tzinfo=_dt.timezone.utc)
+    try:
+        parsed = _dt.datetime.fromisoformat(str(value).replace("Z", "+00:00"))
+    except ValueError:
+        return None
+    return parsed if parsed.tzinfo else parsed.replace(tzinfo=_dt.timezone.utc)
 
 
 def _finite(value) -> bool:
