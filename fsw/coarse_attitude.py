@@ -8,8 +8,8 @@ estimator fuses, once the star tracker has given no fused fix for ``after_s``:
 
 * the Sun direction the cells measure (`gnc.magnetic.css_sun_fix`) against the onboard Sun, which holds
   the two axes across the Sun line; in the Earth's shadow every cell is dark;
-* with ``field_sigma_deg`` set, the magnetometer's field direction against the onboard dipole
-  (`gnc.field_model`), which holds the two axes across the field line, the rotation about the Sun line
+* with ``field_sigma_deg`` set, the magnetometer's field direction against the onboard IGRF model
+  (`gnc.field_model`, to the truth's degree unless told otherwise), which holds the two axes across the field line, the rotation about the Sun line
   among them, in the shadow too. Samples taken while the rods drive are left out (the rods' own field
   on the magnetometer).
 
@@ -20,8 +20,8 @@ sight floored at the measurement's (`_floor_across`). Innovations larger than ``
 predicted sigmas are not fused and counted.
 
 A flight software that has never had a star-tracker fix (blind from separation) has no attitude to hold:
-after ``after_s`` with both a Sun direction and a field it takes the TRIAD attitude of the two (the Sun
-first, the more accurate), and the guidance's SAFE turns the Sun axis to the Sun through the keep-out law
+after ``after_s`` with both a Sun direction and a field it takes the TRIAD attitude of the two (the more
+accurate first), and the guidance's SAFE turns the Sun axis to the Sun through the keep-out law
 as it does on the star tracker. The star tracker's first accepted fix takes over again.
 """
 from __future__ import annotations
@@ -33,7 +33,7 @@ import numpy as np
 
 from fsw.estimation import _rotvec_quat
 from gnc.attitude import dcm_to_quat, quat_multiply_nb, quat_to_dcm, quat_to_dcm_nb
-from gnc.field_model import dipole_field_N
+from gnc.field_model import FieldModel
 from gnc.magnetic import css_sun_fix
 
 _SECONDS_PER_DAY = 86400.0
@@ -75,7 +75,7 @@ def _floor_across(P: np.ndarray, P_prior: np.ndarray, b: np.ndarray, sigma_rad: 
     prior's where that was smaller (in place).
 
     The cells' error is mostly not white: the dark cells' bound and the cells' mounting give the same error
-    for as long as the Sun stays where it is on the body, which in SAFE is hours; the dipole's error in the
+    for as long as the Sun stays where it is on the body, which in SAFE is hours; the field model's error in the
     field's direction changes only along the orbit. Fused at 10 Hz as if independent, the filter's variance
     fell to a hundredth of the true error (NEES mean 21 over a 3 h loss). The floor keeps the filter's
     claim at the measurement's own accuracy (Schmidt's consider idea in its simplest form): a coarse
@@ -112,7 +112,7 @@ class CoarseAttitude:
         self.normals_B = np.asarray(cfg.normals_B, dtype=float)
         self.uses_field = cfg.field_sigma_deg is not None
         self.R_BS = quat_to_dcm(np.asarray(cfg.magnetometer_q_BS, dtype=float))
-        self.dipole_T = np.asarray(cfg.geomagnetic_dipole_T or (0.0, 0.0, 0.0), dtype=float)
+        self.field = FieldModel(cfg.geomagnetic_gauss_T) if self.uses_field else None
         self.active = False
         self.fused = 0  # directions fused since the star tracker was lost
         self.rejected = 0  # ... gated out
@@ -154,16 +154,17 @@ class CoarseAttitude:
         if sun_B is not None:
             out.append((sun_B, np.asarray(ephem.directions(t_s)["sun"], dtype=float), cfg.sun_sigma_deg))
         if self.uses_field and rods_quiet and np.all(np.isfinite(mag_S_T)) and np.any(mag_S_T):
-            ref = dipole_field_N(ephem.position_N_km(t_s), self.dipole_T, self.jd0 + t_s / _SECONDS_PER_DAY)
+            ref = self.field.field_N(ephem.position_N_km(t_s), self.jd0 + t_s / _SECONDS_PER_DAY)
             out.append((_unit(self.R_BS @ mag_S_T), _unit(ref), cfg.field_sigma_deg))
         return out
 
     def _initialise(self, estimator: Any, pairs: list[tuple[np.ndarray, np.ndarray, float]]) -> bool:
-        """Never a star-tracker fix: the TRIAD attitude of the Sun and the field, when both are seen and far
-        enough apart, with a covariance of their accuracy."""
+        """Never a star-tracker fix: the TRIAD attitude of the Sun and the field (the more accurate of the two
+        exact, the other in its plane), when both are seen and far enough apart, with a covariance of their
+        accuracy."""
         if len(pairs) < 2:
             return False
-        (s_B, s_N, s_sig), (b_B, b_N, b_sig) = pairs[0], pairs[1]
+        (s_B, s_N, s_sig), (b_B, b_N, b_sig) = sorted(pairs, key=lambda p: p[2])  # the more accurate first
         if min(_angle_deg(s_B, b_B), _angle_deg(s_N, b_N)) < MIN_TRIAD_ANGLE_DEG:
             return False
         estimator.q_NB = triad_q_NB(s_B, s_N, b_B, b_N)
@@ -172,7 +173,7 @@ class CoarseAttitude:
         estimator.P[:, :] = np.diag([att * att] * 3 + [bias * bias] * 3)
         estimator.bias_B[:] = 0.0
         estimator.initialized = True
-        self.event("COARSE_ATTITUDE_FOUND", sun_field_angle_deg=_angle_deg(s_B, b_B))
+        self.event("COARSE_ATTITUDE_FOUND", sun_field_angle_deg=_angle_deg(pairs[0][0], pairs[1][0]))
         return True
 
     def _switch(self, lost: bool, coasting_s: float) -> None:

@@ -392,7 +392,8 @@ class CoarseAttitudeConfig(_Strict):
     full_scale_mA: float = Field(1.0, gt=0.0, le=2.5, description="A cell's output at normal incidence in full Sun [mA].")
     field_of_view_half_angle_deg: float = Field(90.0, gt=0.0, le=90.0, description="The cells' field of view [deg]; the fix needs 90.")
     magnetometer_q_BS: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Magnetometer mounting as the flight software knows it: rotates sensor-frame vectors into body, scalar first (normalised on load).")
-    geomagnetic_dipole_T: Vec3 | None = Field(None, description="The onboard field model, IGRF's dipole (g10, g11, h11) [T] at the epoch (default with field_sigma_deg: IGRF-14's at epoch_utc).")
+    field_degree: int = Field(1, ge=1, le=13, description="Degree of the onboard IGRF field model (1: the centred dipole; default: the truth's, spacecraft.disturbance.magnetic_field).")
+    geomagnetic_gauss_T: list[Annotated[list[float], Field(min_length=2, max_length=2)]] | None = Field(None, description="The onboard field model's Schmidt semi-normalised Gauss coefficients (g, h) [T], n = 1..field_degree, m = 0..n (default with field_sigma_deg: IGRF-14's at epoch_utc).")
 
     @field_validator("normals_B")
     @classmethod
@@ -404,9 +405,14 @@ class CoarseAttitudeConfig(_Strict):
         if self.field_of_view_half_angle_deg < 90.0:
             raise ValueError("coarse_attitude: the Sun fix reads the dark cells as a bound, which needs cells that see "
                              f"the whole hemisphere (field_of_view_half_angle_deg 90), got {self.field_of_view_half_angle_deg}")
-        if self.field_sigma_deg is not None and not (self.geomagnetic_dipole_T and any(self.geomagnetic_dipole_T)):
-            raise ValueError("coarse_attitude: field_sigma_deg needs the onboard field model geomagnetic_dipole_T "
-                             "(g10, g11, h11) [T]")
+        gauss = self.geomagnetic_gauss_T
+        if self.field_sigma_deg is not None and not gauss:
+            raise ValueError("coarse_attitude: field_sigma_deg needs the onboard field model geomagnetic_gauss_T "
+                             "(IGRF's (g, h) pairs [T] to field_degree)")
+        wanted = self.field_degree * (self.field_degree + 3) // 2
+        if gauss and len(gauss) != wanted:
+            raise ValueError(f"coarse_attitude: geomagnetic_gauss_T has {len(gauss)} (g, h) pairs; degree "
+                             f"{self.field_degree} takes {wanted}")
         return self
 
 

@@ -43,7 +43,8 @@ KNOWLEDGE_SOURCES: dict[tuple[str, ...], tuple[str, ...]] = {
     ("flight_software", "coarse_attitude", "field_of_view_half_angle_deg"): ("spacecraft", "sun_sensors",
                                                                             "field_of_view_half_angle_deg"),
     ("flight_software", "coarse_attitude", "magnetometer_q_BS"): ("spacecraft", "magnetometer", "q_BS"),
-    ("flight_software", "coarse_attitude", "geomagnetic_dipole_T"): ("epoch_utc",),
+    ("flight_software", "coarse_attitude", "field_degree"): ("spacecraft", "disturbance", "magnetic_field"),
+    ("flight_software", "coarse_attitude", "geomagnetic_gauss_T"): ("epoch_utc",),
 }
 # the sources that are not a plain copy of their truth key, as the docs say them
 _KNOWLEDGE_NOTES = {
@@ -51,8 +52,10 @@ _KNOWLEDGE_NOTES = {
                                                  "spin_inertia_kgm2)",
     ("flight_software", "pointing", "target_N"): "initial_state.ra_dec_deg, when the initial attitude is given so",
     ("flight_software", "orbit", "arg_latitude_at_epoch_deg"): "orbit.arg_perigee_deg + orbit.mean_anomaly_deg",
-    ("flight_software", "coarse_attitude", "geomagnetic_dipole_T"): "IGRF-14's dipole at epoch_utc, when "
-                                                                    "field_sigma_deg is given",
+    ("flight_software", "coarse_attitude", "field_degree"): "the truth's: 1 for spacecraft.disturbance."
+                                                            "magnetic_field.model dipole, else its degree",
+    ("flight_software", "coarse_attitude", "geomagnetic_gauss_T"): "IGRF-14's at epoch_utc to field_degree, when "
+                                                                   "field_sigma_deg is given",
 }
 KNOWLEDGE_DEFAULTS = {".".join(k): _KNOWLEDGE_NOTES.get(k, ".".join(v)) for k, v in KNOWLEDGE_SOURCES.items()}
 WHEEL_KNOWLEDGE_KEYS = ("axis_B", "max_torque_Nm", "max_speed_rad_s", "spin_inertia_kgm2")
@@ -128,7 +131,7 @@ def knowledge_from_truth(mission: dict) -> dict:
 
 def _coarse_attitude_knowledge(known: dict, sc: dict, epoch: Any, fill: Callable[..., None]) -> None:
     """What the coarse attitude knows of the cells and the magnetometer (the spacecraft's as built) and of the
-    field (IGRF-14's dipole at the epoch, when it uses the magnetometer)."""
+    field (IGRF-14's at the epoch to the truth's degree, when it uses the magnetometer)."""
     css = sc.get("sun_sensors")
     if isinstance(css, dict):
         for key in ("normals_B", "full_scale_mA", "field_of_view_half_angle_deg"):
@@ -136,12 +139,16 @@ def _coarse_attitude_knowledge(known: dict, sc: dict, epoch: Any, fill: Callable
     mag = sc.get("magnetometer")
     if isinstance(mag, dict):
         fill(known, "magnetometer_q_BS", mag.get("q_BS"))
-    if known.get("field_sigma_deg") is not None and "geomagnetic_dipole_T" not in known:
+    field = (sc.get("disturbance") or {}).get("magnetic_field") if isinstance(sc.get("disturbance"), dict) else None
+    if isinstance(field, dict):
+        fill(known, "field_degree", 1 if field.get("model", "dipole") == "dipole" else field.get("degree", 13))
+    degree = known.get("field_degree", 1)
+    if known.get("field_sigma_deg") is not None and "geomagnetic_gauss_T" not in known and isinstance(degree, int):
         when = _epoch(epoch)
-        if when is not None:
-            from hil_sim.world.geomagnetic import dipole_coefficients_T
+        if when is not None and 1 <= degree <= 13:
+            from hil_sim.world.geomagnetic import gauss_coefficients_T
 
-            fill(known, "geomagnetic_dipole_T", list(dipole_coefficients_T(when)))
+            fill(known, "geomagnetic_gauss_T", [list(pair) for pair in gauss_coefficients_T(when, degree)])
 
 
 def _epoch(value: Any) -> _dt.datetime | None:

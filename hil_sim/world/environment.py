@@ -42,7 +42,7 @@ from numba import njit
 
 from gnc.eclipse import SUN_RADIUS_KM, sunlit_fraction_at
 from gnc.ephemeris import AU_KM, EARTH_RADIUS_KM
-from hil_sim.world import _geomagnetic_nb
+from gnc import _geomagnetic_nb
 from hil_sim.world.geomagnetic import IGRF_REFERENCE_RADIUS_KM, degree_of, unnormalised_rows
 from hil_sim.world.orbit import orbit_position_row_N_km, orbit_velocity_row_N_km_s
 from hil_sim.world.params import SpacecraftParams
@@ -214,7 +214,7 @@ def dipole_field_N(B, m, rx, ry, rz, t_s):
 def earth_field_N(B, m, rx, ry, rz, t_s):
     """The Earth's field [T] in N at position r [km] and time t_s for run m: its centred dipole
     (`dipole_field_N`) or, when ENV_FIELD_DEGREE is N > 0, IGRF to degree N
-    (hil_sim.world._geomagnetic_nb.field_E) in the same Earth-fixed frame."""
+    (gnc._geomagnetic_nb.field_E) in the same Earth-fixed frame."""
     degree = int(B[ENV_FIELD_DEGREE, m])
     if degree == 0:
         return dipole_field_N(B, m, rx, ry, rz, t_s)

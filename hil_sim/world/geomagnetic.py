@@ -16,23 +16,21 @@ measured in tests/hil_sim/test_geomagnetic.py.
 
 The full field, on request (``spacecraft.disturbance.magnetic_field: {model: igrf, degree: N}``): IGRF-14's
 Gauss coefficients to degree N at the mission epoch (`gauss_coefficients_T`), synthesised in the numba kernel
-hil_sim.world._geomagnetic_nb.field_E at every stage (~0.7 us at degree 13), because ppigrf's own evaluation
+gnc._geomagnetic_nb.field_E at every stage (~0.7 us at degree 13), because ppigrf's own evaluation
 costs ~10 ms a call. The coefficients are taken once, at the epoch: their secular variation is not applied
 during a run (at most 0.4 nT a day at 550 km, 4 nT over a ten-day mission; IGRF-14 and WMM2025 differ by up to
 17.5 nT from 400 km up: tests/hil_sim/test_igrf.py).
 """
 from __future__ import annotations
 
-import math
 from datetime import datetime, timezone
-from typing import Any, Sequence
+from typing import Any
 
-import numpy as np
 
 from gnc import earth as gnc_earth
-from hil_sim.world._geomagnetic_nb import IGRF_REFERENCE_RADIUS_KM  # noqa: F401  (one definition, the kernel's)
+from gnc._geomagnetic_nb import IGRF_REFERENCE_RADIUS_KM  # noqa: F401  (one definition, the kernel's)
+from gnc.field_model import IGRF_MAX_DEGREE, degree_of, unnormalised_rows  # noqa: F401  (shared with the flight software)
 
-IGRF_MAX_DEGREE = 13  # IGRF-14's main field
 
 
 def _igrf_at(epoch_utc: datetime) -> tuple[Any, Any]:
@@ -66,29 +64,6 @@ def gauss_coefficients_T(epoch_utc: datetime, degree: int = IGRF_MAX_DEGREE) -> 
     g, h = _igrf_at(epoch_utc)
     return tuple((1e-9 * float(g[(n, m)]), 1e-9 * float(h[(n, m)]))
                  for n in range(1, degree + 1) for m in range(n + 1))
-
-
-def degree_of(pairs: int) -> int:
-    """The degree N of an expansion of ``pairs`` (g, h) pairs (N (N + 3) / 2), ValueError if none fits."""
-    for n in range(1, IGRF_MAX_DEGREE + 1):
-        if n * (n + 3) // 2 == pairs:
-            return n
-    raise ValueError(f"{pairs} (g, h) pairs are no expansion of degree 1 to {IGRF_MAX_DEGREE} (N (N + 3) / 2)")
-
-
-def unnormalised_rows(gauss_T: Sequence[tuple[float, float]]) -> np.ndarray:
-    """The (C_nm, S_nm) rows hil_sim.world._geomagnetic_nb.field_E reads, from Schmidt semi-normalised pairs in
-    `gauss_coefficients_T`'s order: times sqrt(2 (n - m)! / (n + m)!) for m > 0 (the Schmidt functions are
-    that multiple of the unnormalised ones, neither with the Condon-Shortley phase)."""
-    degree = degree_of(len(gauss_T))
-    out = np.empty(2 * len(gauss_T))
-    k = 0
-    for n in range(1, degree + 1):
-        for m in range(n + 1):
-            s = 1.0 if m == 0 else math.sqrt(2.0 * math.factorial(n - m) / math.factorial(n + m))
-            out[2 * k], out[2 * k + 1] = s * gauss_T[k][0], s * gauss_T[k][1]
-            k += 1
-    return out
 
 
 def earth_rotation_angle_rad(epoch_utc: datetime) -> float:

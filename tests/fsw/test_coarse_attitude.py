@@ -10,6 +10,7 @@ import pytest
 from fsw.config import CoarseAttitudeConfig, FswConfig
 from fsw.estimation import AttitudeEstimator
 from fsw.coarse_attitude import CoarseAttitude, triad_q_NB, vector_update
+from gnc.field_model import FieldModel
 from gnc.attitude import quat_from_axis_angle, quat_multiply, quat_to_dcm
 from gnc.magnetic import css_sun_direction, css_sun_fix
 
@@ -95,7 +96,7 @@ class _Sky:
         return self.r_N_km
 
 
-DIPOLE_T = (-29.35e-6, -1.41e-6, 4.55e-6)  # IGRF-14 (g10, g11, h11) about 2026
+GAUSS_T = [[-29.35e-6, 0.0], [-1.41e-6, 4.55e-6]]  # IGRF-14's dipole (g10; g11, h11) about 2026
 JD0 = 2461156.0
 
 
@@ -159,16 +160,14 @@ def test_a_direction_far_from_the_estimate_is_gated_out():
 
 
 def _field_cfg(**kw):
-    return CoarseAttitudeConfig(after_s=1.0, field_sigma_deg=1.0, geomagnetic_dipole_T=list(DIPOLE_T), **kw)
+    return CoarseAttitudeConfig(after_s=1.0, field_sigma_deg=1.0, geomagnetic_gauss_T=GAUSS_T, **kw)
 
 
 def test_never_a_star_tracker_fix_the_sun_and_the_field_find_the_attitude():
-    from gnc.field_model import dipole_field_N
-
     q_true = _rotated(_rotated(np.array([1.0, 0.0, 0.0, 0.0]), [0.0, 1.0, 0.0], 70.0), [1.0, 0.0, 0.0], -35.0)
     R = quat_to_dcm(q_true)
     sky = _Sky(np.array([0.6, 0.7, 0.2]) / np.linalg.norm([0.6, 0.7, 0.2]), r_N_km=(3000.0, -5500.0, 3000.0))
-    field_N = dipole_field_N(sky.r_N_km, np.array(DIPOLE_T), JD0 + 20.0 / 86400.0)
+    field_N = FieldModel(GAUSS_T).field_N(sky.r_N_km, JD0 + 20.0 / 86400.0)
     events = _Events()
     fix = _coarse(_field_cfg(), events)
     est = _estimator(initialized=False)
@@ -183,10 +182,8 @@ def test_never_a_star_tracker_fix_the_sun_and_the_field_find_the_attitude():
 
 
 def test_the_field_fixes_the_rotation_about_the_sun_line():
-    from gnc.field_model import dipole_field_N
-
     sky = _Sky([1.0, 0.0, 0.0], r_N_km=(0.0, 6928.0, 0.0))
-    field_N = dipole_field_N(sky.r_N_km, np.array(DIPOLE_T), JD0)
+    field_N = FieldModel(GAUSS_T).field_N(sky.r_N_km, JD0)
     est = _estimator()
     q_true = np.array([1.0, 0.0, 0.0, 0.0])
     est.q_NB = _rotated(q_true, [1.0, 0.0, 0.0], 5.0)  # 5 deg about the Sun line: the cells cannot see it
@@ -208,21 +205,33 @@ def test_triad_puts_the_first_vector_exactly_and_the_second_in_its_plane():
     assert abs(abs(float(got @ q)) - 1.0) < 1e-12
 
 
-def test_the_onboard_dipole_is_the_truths_dipole():
-    """gnc.field_model against the simulator's kernel (hil_sim.world.environment.dipole_field_N) with the same
-    coefficients and rotation angle."""
-    from gnc.earth import earth_rotation_angle_rad
-    from gnc.field_model import dipole_field_N
-    from hil_sim.world import environment as env
+@pytest.mark.parametrize("degree", [1, 13])
+def test_the_onboard_field_is_the_truths_field(degree):
+    """gnc.field_model against the simulator's kernel (hil_sim.world.environment.earth_field_N: its own dipole at
+    degree 1, IGRF at 13) with IGRF-14's coefficients at one epoch and the same rotation angle."""
+    import datetime as dt
 
-    B = np.zeros((env.ENV_FACETS, 1))
-    B[env.ENV_EARTH_DIPOLE:env.ENV_EARTH_DIPOLE + 3, 0] = (DIPOLE_T[1], DIPOLE_T[2], DIPOLE_T[0])
-    B[env.ENV_ERA0, 0] = earth_rotation_angle_rad(JD0)
-    B[env.ENV_OMEGA_E, 0] = 7.292115146706979e-5
+    from hil_sim.world import environment as env
+    from hil_sim.world.geomagnetic import dipole_coefficients_T, earth_rotation_angle_rad, gauss_coefficients_T
+
+    epoch = dt.datetime(2026, 4, 25, 12, tzinfo=dt.timezone.utc)
+    gauss = gauss_coefficients_T(epoch, degree)
+    jd0 = epoch.timestamp() / 86400.0 + 2440587.5
+    rows = np.zeros((env.ENV_FIELD_FIRST + 1 + 2 * len(gauss), 1))
+    g10, g11, h11 = dipole_coefficients_T(epoch)
+    rows[env.ENV_EARTH_DIPOLE:env.ENV_EARTH_DIPOLE + 3, 0] = (g11, h11, g10)
+    rows[env.ENV_ERA0, 0] = earth_rotation_angle_rad(epoch)
+    rows[env.ENV_OMEGA_E, 0] = 7.292115146706979e-5
+    if degree > 1:
+        rows[env.ENV_FIELD_DEGREE, 0], rows[env.ENV_FIELD_FIRST, 0] = degree, env.ENV_FIELD_FIRST + 1
+        rows[env.ENV_FIELD_FIRST + 1:, 0] = FieldModel(gauss)._rows[:, 0]
+    onboard = FieldModel(gauss)
+    assert onboard.degree == degree
     for r, t in (((6928.0, 0.0, 0.0), 0.0), ((1000.0, -4000.0, 5500.0), 1234.5), ((-300.0, 200.0, -6900.0), 5000.0)):
-        truth = np.array(env.dipole_field_N(B, 0, *r, t))
-        onboard = dipole_field_N(np.array(r), np.array(DIPOLE_T), JD0 + t / 86400.0)
-        assert np.linalg.norm(onboard - truth) < 1e-3 * np.linalg.norm(truth)
+        truth = np.array(env.earth_field_N(rows, 0, *r, t))
+        got = onboard.field_N(np.array(r), jd0 + t / 86400.0)
+        # the Earth's turning over t as a rate (truth) or a Julian date (onboard): 1e-9 of the field
+        assert np.linalg.norm(got - truth) < 1e-7 * np.linalg.norm(truth)
 
 
 def test_the_coarse_attitude_needs_its_sensors_and_cells_that_see_the_hemisphere():
@@ -233,5 +242,7 @@ def test_the_coarse_attitude_needs_its_sensors_and_cells_that_see_the_hemisphere
         FswConfig(coarse_attitude=_field_cfg().model_dump(), magnetic_devices={"sun_sensors": True})
     with pytest.raises(ValueError, match="whole hemisphere"):
         CoarseAttitudeConfig(field_of_view_half_angle_deg=60.0)
-    with pytest.raises(ValueError, match="geomagnetic_dipole_T"):
+    with pytest.raises(ValueError, match="geomagnetic_gauss_T"):
         CoarseAttitudeConfig(field_sigma_deg=2.0)
+    with pytest.raises(ValueError, match="degree 2 takes 5"):
+        CoarseAttitudeConfig(field_sigma_deg=2.0, field_degree=2, geomagnetic_gauss_T=GAUSS_T)

@@ -183,6 +183,7 @@ def test_every_knowledge_source_is_what_knowledge_from_truth_copies() -> None:
     data["flight_software"] = {"detumble": {}, "coarse_attitude": {"field_sigma_deg": 3.0}}
     data["spacecraft"]["sun_sensors"] = {"normals_B": [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
                                          "full_scale_mA": 2.0, "field_of_view_half_angle_deg": 90.0}
+    data["spacecraft"].setdefault("disturbance", {})["magnetic_field"] = {"model": "igrf", "degree": 4}
     data["initial_state"] = {"ra_dec_deg": [10.0, 20.0]}
     data["spacecraft"].setdefault("imu", {})["saturation_rad_s"] = 0.3
     data["spacecraft"].setdefault("star_tracker", {})["max_rate_deg_s"] = 1.7
@@ -190,6 +191,8 @@ def test_every_knowledge_source_is_what_knowledge_from_truth_copies() -> None:
     data["spacecraft"]["magnetorquers"] = {"axes_B": [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
                                            "max_dipole_Am2": [1.0, 2.0, 3.0]}
     filled = knowledge_from_truth(copy.deepcopy(data))
+    coarse = filled["flight_software"]["coarse_attitude"]
+    assert coarse["field_degree"] == 4 and len(coarse["geomagnetic_gauss_T"]) == 4 * 7 // 2  # the truth's degree
 
     def get(node, path):
         for part in path:
@@ -205,7 +208,8 @@ def test_every_knowledge_source_is_what_knowledge_from_truth_copies() -> None:
 
     for known, truth in KNOWLEDGE_SOURCES.items():
         value = get(filled, known)  # filled in (a KeyError names a table entry the function does not fill)
-        if known[-1] not in ("wheels", "target_N", "arg_latitude_at_epoch_deg", "geomagnetic_dipole_T"):  # derived
+        if known[-1] not in ("wheels", "target_N", "arg_latitude_at_epoch_deg", "field_degree",
+                             "geomagnetic_gauss_T"):  # the derived ones
             assert value == get(data, truth), known
     for path in leaves(filled["flight_software"], ("flight_software",)):
         if path[:2] == ("flight_software", "magnetic_devices"):

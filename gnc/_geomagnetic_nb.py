@@ -1,5 +1,6 @@
-"""Compiled backend of `hil_sim.world.geomagnetic`: the spherical-harmonic synthesis of the Earth's main field
-(IGRF to degree N) at one Earth-fixed position, for the truth's kernels at every integration stage.
+"""The spherical-harmonic synthesis of the Earth's main field (IGRF to degree N) at one Earth-fixed position:
+the truth's kernels call it at every integration stage (`hil_sim.world.environment`), the flight software's
+field model once a cycle (`gnc.field_model`), so both evaluate one formula.
 
 The field is B = -grad V, V = a sum_n sum_m (C_nm V_nm + S_nm W_nm) with the solid harmonics
 V_nm + i W_nm = (a / r)^(n+1) P_nm(cos theta) exp(i m phi) (P_nm unnormalised, without the Condon-Shortley
@@ -8,7 +9,7 @@ V_(n+1), W_(n+1) (Montenbruck & Gill, Satellite Orbits, 3.2.4-3.2.5, eqs. 3.29-3
 -> a, the potential a sum ... of the magnetic field instead of GM / R sum ... of gravity). Cartesian all
 through: no colatitude, no division by sin(theta), so the poles need no special case, unlike the
 (r, theta, phi) form ppigrf evaluates. (C_nm, S_nm) are IGRF's Schmidt semi-normalised (g, h) times
-sqrt(2 (n - m)! / (n + m)!) for m > 0 (`geomagnetic.unnormalised_rows`).
+sqrt(2 (n - m)! / (n + m)!) for m > 0 (`gnc.field_model.unnormalised_rows`).
 """
 from __future__ import annotations
 
