@@ -827,6 +827,9 @@ EVENTS: tuple[EventDef, ...] = (
     EventDef("COARSE_ATTITUDE_FOUND", 104, Severity.ACTIVITY_HI,
              "attitude found without the star tracker: TRIAD of the Sun and the field, {sun_field_angle_deg:.1f} deg "
              "apart", (Arg("sun_field_angle_deg", "F32", "deg"),)),
+    EventDef("FDIR_SAFE_DEFERRED", 105, Severity.WARNING_LO,
+             "FDIR {monitor} asked for SAFE during DETUMBLE: deferred (DETUMBLE ends in SAFE)",
+             (Arg("monitor", "ENUM", enum=FDIR_MONITORS),)),
     EventDef("ECLIPSE_EXIT", 101, Severity.ACTIVITY_LO,
              "in full Sun again after {duration_s:.0f} s in the Earth's shadow (least sunlit fraction "
              "{least_sunlit_fraction:.3f})",

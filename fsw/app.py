@@ -370,7 +370,11 @@ class FlightSoftware:
         if a == "reset_estimator":
             self.estimator.reset()
             self.event("ESTIMATOR_RESET", reason=f"FDIR {action.monitor}")
-        if a in ("safe", "isolate_wheel_safe") and self.guidance.mode != "SAFE":
+        if a in ("safe", "isolate_wheel_safe") and self.guidance.mode == "DETUMBLE":
+            # DETUMBLE ends in SAFE by itself; SAFE now would ask the wheels to stop a tumble they cannot hold
+            # (the star tracker is blind and the gyro's monitors may trip at separation rates)
+            self.event("FDIR_SAFE_DEFERRED", monitor=action.monitor)
+        elif a in ("safe", "isolate_wheel_safe") and self.guidance.mode != "SAFE":
             self.set_mode("SAFE", "FDIR")
 
     def _isolate_wheel(self, wheel: int) -> bool:

@@ -125,3 +125,27 @@ def test_set_mode_detumble_is_refused_where_it_is_not_configured() -> None:
     handlers = CommandHandlers(SimpleNamespace(detumble=None))
     with pytest.raises(CommandValidationError, match="flight_software.detumble"):
         handlers.set_mode("DETUMBLE")
+
+
+def test_fdir_does_not_end_detumble_early() -> None:
+    """An FDIR action that asks for SAFE while DETUMBLE runs (the star tracker blind at separation rates, say)
+    is deferred with an event: SAFE would ask the wheels to stop a tumble they cannot hold, and DETUMBLE
+    ends in SAFE by itself. In any other mode it enters SAFE as before."""
+    from types import SimpleNamespace
+
+    from fsw.app import FlightSoftware
+    from fsw.fdir import FdirAction
+
+    def app(mode):
+        calls = []
+        fake = SimpleNamespace(guidance=SimpleNamespace(mode=mode), events=calls,
+                               event=lambda name, **a: calls.append((name, a)),
+                               set_mode=lambda m, why: calls.append(("set_mode", m, why)))
+        return fake
+
+    detumbling = app("DETUMBLE")
+    FlightSoftware._execute(detumbling, FdirAction("safe", "ST_STALE"))
+    assert detumbling.events == [("FDIR_SAFE_DEFERRED", {"monitor": "ST_STALE"})]
+    pointing = app("POINTING")
+    FlightSoftware._execute(pointing, FdirAction("safe", "ST_STALE"))
+    assert pointing.events == [("set_mode", "SAFE", "FDIR")]
