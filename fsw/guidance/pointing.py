@@ -208,7 +208,14 @@ class PointingGuidance:
                 worst_slot.phys = worst_slot.builder_phys.build(c)
                 worst_slot.built_center = c.copy()
                 worst_slot.phys_drift_deg = _angle_deg(c, worst_slot.built_center)
-        return first or worst_kind == "law"
+        rebuilt_law = first or worst_kind == "law"
+        if rebuilt_law:
+            # whoever asked (SAFE, the door's margins, a telecommand's check), the law must fly the new zone:
+            # the pointing cycle's own sky check then sees no drift left and would keep the old one. Before
+            # (found 2026-11-29 by the star-tracker-lost campaign), SAFE's call took the rebuilds and its law
+            # flew a frozen Earth zone while the real one swept over the parked boresight, 35 deg deep.
+            self._sky_law_key = None
+        return rebuilt_law
 
 
     def _sky_margins(self, y_N: np.ndarray) -> tuple[list[float], float]:

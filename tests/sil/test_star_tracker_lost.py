@@ -86,3 +86,45 @@ def test_a_run_held_in_safe_throughout_has_no_final_pointing_error_to_judge():
     assert "judged" not in pointed and not pointed["pass"]
     lost_at_end = final([0.01, 0.01, 0.01, 0.01, np.nan])  # a target, then no error at the end: still failed
     assert not lost_at_end["pass"]
+
+
+# run 2 of the campaign's first flight (2026-11-29), star tracker working: what it drew, and its noise seed
+RUN_2 = {"orbit.mean_anomaly_deg": 160.85849473429016,
+         "flight_software.orbit.arg_latitude_at_epoch_deg": 160.85849473429016,
+         "spacecraft.inertia_B_kgm2": [[0.29997887066533824, -2.5774387748533356e-05, 0.0010242715626506797],
+                                       [-2.5774387748533356e-05, 0.2999132068655034, 0.0029634917177186536],
+                                       [0.0010242715626506797, 0.0029634917177186536, 0.1822189178919656]],
+         "spacecraft.imu.bias_B_rad_s": [2.993606447347147e-07, -8.458245185656186e-06, 7.079202237718728e-06],
+         "spacecraft.imu.bias_random_walk_rad_s_per_sqrt_s": 1.8570562143315757e-07,
+         "spacecraft.sun_sensors.noise_std_mA": 0.0063172085762990635,
+         "spacecraft.magnetometer.noise_std_T": 5.5581608929926935e-08}
+RUN_2_SEED = 1019970349
+
+
+def test_safe_in_low_orbit_flies_the_moving_earth_zone_not_a_frozen_one():
+    """SAFE's own sky update took the law's zone rebuilds, so the pointing law kept flying the Earth zone as it
+    was while the real one swept over the parked boresight: 35 deg deep in the campaign's run 2 (found
+    2026-11-29), with the star tracker working. Every rebuild now reaches the law."""
+    import yaml
+
+    from hil_sim.campaign.dispersions import apply_values
+    from hil_sim.campaign.fast import run_fast
+
+    raw = apply_values(yaml.safe_load(MISSION.read_text()), RUN_2)
+    raw["faults"], raw["duration_s"] = [], 4500.0
+    mission = load_mission(MISSION, text=yaml.safe_dump(raw))
+    m = run_fast(mission, RUN_2_SEED).metrics
+    assert m["margin_earth_deg"] > 0.0, m["margin_earth_deg"]
+
+
+def test_a_law_zone_rebuilt_outside_the_pointing_cycle_reaches_the_law():
+    from fsw.guidance import Guidance
+
+    guidance = Guidance(load_mission(MISSION).flight_software, events=lambda *a, **k: None)
+    guidance._update_sky(0.0)
+    guidance._sky_law_key = True  # as after the pointing cycle built its law
+    t = 0.0
+    while not guidance._update_sky(t):  # the Earth's zone moves ~0.06 deg/s from low orbit
+        assert guidance._sky_law_key is True
+        t += 0.1
+    assert guidance._sky_law_key is None  # the next pointing cycle rebuilds its law
