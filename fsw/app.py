@@ -250,7 +250,7 @@ class FlightSoftware:
         est = self.estimator.update(s)
         if self.coarse is not None and self.coarse.cycle(self.estimator, s.css_mA, s.mag_S_T,
                                                          not self.mtq_command_Am2.any(), s.t_s, self.guidance.ephem):
-            est = est._replace(q_NB=self.estimator.q_NB, initialized=self.estimator.initialized)
+            est = AttitudeEstimate(self.estimator.q_NB, est.omega_BN_B, self.estimator.initialized, est.innovation_deg)
         if s.st_fresh != self._st_was_valid:  # the star tracker was lost or is back
             self._st_events(s)
         g = self.guidance.step(s.t_s, s.dt_s, est.q_NB if est.initialized else None, est.omega_BN_B)

@@ -71,10 +71,10 @@ def test_ctrl_c_stops_the_campaign_and_keeps_finished_runs(tmp_path):
     import time
 
     out = tmp_path / "interrupted"
-    # 600 s runs (about a second each here): Ctrl-C must land while runs remain (5 s runs all finished
+    # 1800 s runs (a few seconds each here): Ctrl-C must land while runs remain (600 s runs all finished
     # before the signal once the loop got fast)
     proc = subprocess.Popen([sys.executable, "-m", "cli", "campaign", "run", str(REGRESSION), "--runs", "8",
-                             "--workers", "1", "--duration", "600", "--out", str(out), "--no-report"],
+                             "--workers", "1", "--duration", "1800", "--out", str(out), "--no-report"],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 240

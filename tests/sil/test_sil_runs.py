@@ -147,7 +147,7 @@ def test_fault_run_trips_fdir_and_keeps_out(runs):
 def test_interrupt_stops_all_three_processes_and_still_writes_the_summary(tmp_path):
     import psutil
 
-    proc = _start("demo-pointing", 600.0, tmp_path, start_new_session=True)
+    proc = _start("demo-pointing", 3000.0, tmp_path, start_new_session=True)  # long enough to be interrupted on a busy host
     deadline = time.monotonic() + 600
     raw = None
     while time.monotonic() < deadline:
