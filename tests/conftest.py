@@ -7,9 +7,15 @@ skipped with the reason and the commands that create the interface. Inside CI's 
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
+
+# A suite started in the background by a shell without job control inherits SIGINT ignored, and so would
+# every process it starts: a test that presses Ctrl-C on a run would wait for a run that never hears it.
+# Any handler set here is reset to the default when a child execs, so each started process hears Ctrl-C.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 
 VCAN_HINT = (
     "no SocketCAN vcan0 here; create it with "
