@@ -32,16 +32,12 @@ from typing import Any
 import numpy as np
 
 from fsw.estimation import _rotvec_quat
-from gnc.attitude import dcm_to_quat, quat_multiply_nb, quat_to_dcm, quat_to_dcm_nb
+from gnc.attitude import dcm_to_quat, quat_multiply_nb, quat_to_dcm, quat_to_dcm_nb, skew
 from gnc.field_model import FieldModel
 from gnc.magnetic import css_sun_fix
 
 _SECONDS_PER_DAY = 86400.0
 MIN_TRIAD_ANGLE_DEG = 10.0  # the Sun and the field closer than this do not fix the rotation about them
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -54,7 +50,7 @@ def vector_update(q: np.ndarray, bias: np.ndarray, P: np.ndarray, meas_B: np.nda
     new (q, bias, P), the innovation angle [deg] and the predicted 1-sigma of the innovation [deg]."""
     b_pred = quat_to_dcm_nb(np.ascontiguousarray(q)).T @ ref_N
     H = np.zeros((3, 6))
-    H[:, 0:3] = _skew(b_pred)
+    H[:, 0:3] = skew(b_pred)
     R = sigma_rad * sigma_rad * np.eye(3)
     S = H @ P @ H.T + R
     K = P @ H.T @ np.linalg.inv(S)
