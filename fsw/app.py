@@ -116,6 +116,7 @@ class FlightSoftware:
         # (fsw.coarse_attitude), when configured
         self.coarse = (CoarseAttitude(config.coarse_attitude, self.event, self.guidance.ephem.jd0_utc)
                        if config.coarse_attitude is not None and not self.plugins.get("estimator") else None)
+        self._coarse_margin = False  # the law's zones at the coarse attitude's margin (`_coarse_cycle`)
         self._max_speed = np.ascontiguousarray(self.control.max_speed, dtype=float)  # fixed at start-up
         # configuration the cycle reads every tick, fixed at start-up (no telecommand changes it)
         self._gnc_tm_every = config.tmtc.gnc_packet_every_n_cycles
@@ -248,9 +249,8 @@ class FlightSoftware:
             self._overrun()
 
         est = self.estimator.update(s)
-        if self.coarse is not None and self.coarse.cycle(self.estimator, s.css_mA, s.mag_S_T,
-                                                         not self.mtq_command_Am2.any(), s.t_s, self.guidance.ephem):
-            est = AttitudeEstimate(self.estimator.q_NB, est.omega_BN_B, self.estimator.initialized, est.innovation_deg)
+        if self.coarse is not None:
+            est = self._coarse_cycle(s, est)
         if s.st_fresh != self._st_was_valid:  # the star tracker was lost or is back
             self._st_events(s)
         g = self.guidance.step(s.t_s, s.dt_s, est.q_NB if est.initialized else None, est.omega_BN_B)
@@ -288,6 +288,18 @@ class FlightSoftware:
         if self.cycle % self._gnc_tm_every == 0:
             self._send_gnc_tm(s, g, ctrl, exec_ms)
         self.cycle += 1
+
+    def _coarse_cycle(self, s: Any, est: AttitudeEstimate) -> AttitudeEstimate:
+        """The coarse attitude's cycle (`fsw.coarse_attitude`): the estimate it changed, and the law's zones
+        grown to its margin while it flies (back to law.margin_deg when the star tracker returns)."""
+        changed = self.coarse.cycle(self.estimator, s.css_mA, s.mag_S_T, not self.mtq_command_Am2.any(), s.t_s,
+                                    self.guidance.ephem)
+        if self.coarse.active != self._coarse_margin:
+            self._coarse_margin = self.coarse.active
+            self.guidance.use_coarse_margin(self._coarse_margin)
+        if not changed:
+            return est
+        return AttitudeEstimate(self.estimator.q_NB, est.omega_BN_B, self.estimator.initialized, est.innovation_deg)
 
     def _detumble_complete(self, omega_BN_B: np.ndarray) -> None:
         """The rate has stayed below the threshold for the dwell: DETUMBLE_COMPLETE, then SAFE (rate damping

@@ -394,6 +394,7 @@ class CoarseAttitudeConfig(_Strict):
     magnetometer_q_BS: Quat = Field([1.0, 0.0, 0.0, 0.0], description="Magnetometer mounting as the flight software knows it: rotates sensor-frame vectors into body, scalar first (normalised on load).")
     field_degree: int = Field(1, ge=1, le=13, description="Degree of the onboard IGRF field model (1: the centred dipole; default: the truth's, spacecraft.disturbance.magnetic_field).")
     geomagnetic_gauss_T: list[Annotated[list[float], Field(min_length=2, max_length=2)]] | None = Field(None, description="The onboard field model's Schmidt semi-normalised Gauss coefficients (g, h) [T], n = 1..field_degree, m = 0..n (default with field_sigma_deg: IGRF-14's at epoch_utc).")
+    margin_deg: float | None = Field(None, ge=0.0, le=45.0, description="The law's margin while the coarse attitude flies [deg]: law.margin_deg plus the coarse estimate's error, which the star tracker's budget does not cover. The law's zones grow to it when the coarse sensors take over (COARSE_ATTITUDE_ON) and shrink back when the star tracker returns (COARSE_ATTITUDE_OFF). Default: law.margin_deg + 3 sun_sigma_deg; at least law.margin_deg + 3 sigma of the better of the two directions.")
 
     @field_validator("normals_B")
     @classmethod
@@ -655,7 +656,23 @@ class FswConfig(_Strict):
         if coarse is not None and coarse.field_sigma_deg is not None and not d.magnetometer:
             raise ValueError("coarse_attitude.field_sigma_deg needs magnetic_devices with magnetometer "
                              "(spacecraft.magnetometer)")
+        if coarse is not None and coarse.margin_deg is not None:
+            best = min(coarse.sun_sigma_deg, coarse.field_sigma_deg or math.inf)
+            floor = self.law.margin_deg + 3.0 * best
+            if coarse.margin_deg < floor:
+                raise ValueError(f"coarse_attitude.margin_deg {coarse.margin_deg:g} does not cover the coarse attitude's "
+                                 f"error: it must be at least law.margin_deg ({self.law.margin_deg:g}) plus 3 sigma of the "
+                                 f"better direction ({best:g} deg), {floor:g}; leave it out for law.margin_deg + 3 "
+                                 f"sun_sigma_deg ({self.law.margin_deg + 3.0 * coarse.sun_sigma_deg:g})")
         return self
+
+    def coarse_margin_deg(self) -> float | None:
+        """The law's margin while the coarse attitude flies [deg] (`CoarseAttitudeConfig.margin_deg`, its
+        default resolved), or None without a coarse attitude."""
+        coarse = self.coarse_attitude
+        if coarse is None:
+            return None
+        return coarse.margin_deg if coarse.margin_deg is not None else self.law.margin_deg + 3.0 * coarse.sun_sigma_deg
 
     @field_validator("epoch_utc")
     @classmethod

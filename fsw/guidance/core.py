@@ -71,21 +71,20 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self.acquisition_omega_B = _acquisition_rate_B(cfg, self.b_B)
 
     def _init_sky_slots(self, cfg) -> None:
-        """One slot per configured sky zone, with its zone builders (the law's, fast, and the margin's)."""
+        """One slot per configured sky zone, with its zone builders (the margins', fast, and the law's; with a
+        coarse attitude the law's for each margin, `PointingGuidance.use_coarse_margin`)."""
         p = cfg.pointing
         margin = cfg.law.margin_deg
+        coarse_margin = cfg.coarse_margin_deg()
         self.slots: list[_SkySlot] = []
         for i, z in enumerate(p.zones):
             extra = self.ephem.earth_angular_radius_deg if (z.body == "earth" and z.add_body_angular_radius) else 0.0
             fixed = np.asarray(z.direction_N, dtype=float) if z.body == "inertial" else None
-            self.slots.append(
-                _SkySlot(
-                    i, z.name, z.body,
-                    sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra, fast=True),
-                    sky_zones.SkyZoneBuilder(z.geometry, margin + ZONE_REBUILD_TOL_DEG, extra),
-                    fixed,
-                )
-            )
+            law = sky_zones.SkyZoneBuilder(z.geometry, margin + ZONE_REBUILD_TOL_DEG, extra)
+            slot = _SkySlot(i, z.name, z.body, sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra, fast=True), law, fixed)
+            if coarse_margin is not None:
+                slot.law_builders = (law, sky_zones.SkyZoneBuilder(z.geometry, coarse_margin + ZONE_REBUILD_TOL_DEG, extra))
+            self.slots.append(slot)
         self._body_codes = [_BODY_CODES[s.body] for s in self.slots]  # telemetry codes, fixed with the slots
         self.sky_geometry = ZoneGeometry(3, cfg.law.merge_gap_deg)
         if self.slots:

@@ -71,6 +71,7 @@ class _SkySlot:
     phys: object | None = None
     law: object | None = None
     phys_drift_deg: float = 0.0  # angle between center_N and built_center, this cycle
+    law_builders: tuple = ()  # (law.margin_deg's, the coarse attitude's margin's) with a coarse attitude
     # center_N and phys_drift_deg (and the guidance's `_dirs`) as the last cycle left them once
     # `PointingGuidance._settle_sky` has run: a compiled cycle leaves them to it (nothing in a steady
     # cycle reads them; every reader settles first)
@@ -217,6 +218,18 @@ class PointingGuidance:
             self._sky_law_key = None
         return rebuilt_law
 
+
+    def use_coarse_margin(self, coarse: bool) -> None:
+        """The law's zones inflated by the coarse attitude's margin (``coarse``: the estimate rests on the
+        Sun sensors and the magnetometer, degrees off where the star tracker's is arcseconds) or by
+        law.margin_deg again: each built law zone rebuilt now where it was built, and the law made anew."""
+        self._settle_sky()
+        for s in self.slots:
+            s.builder_law = s.law_builders[1 if coarse else 0]
+            if s.built_center_law is not None:
+                s.law = s.builder_law.build(s.built_center_law)
+        self._sky_pack = None
+        self._sky_law_key = None
 
     def _sky_margins(self, y_N: np.ndarray) -> tuple[list[float], float]:
         """Signed physical margins [deg], conservative: minus the zone's drift since it was built (as

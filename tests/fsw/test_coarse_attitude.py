@@ -246,3 +246,42 @@ def test_the_coarse_attitude_needs_its_sensors_and_cells_that_see_the_hemisphere
         CoarseAttitudeConfig(field_sigma_deg=2.0)
     with pytest.raises(ValueError, match="degree 2 takes 5"):
         CoarseAttitudeConfig(field_sigma_deg=2.0, field_degree=2, geomagnetic_gauss_T=GAUSS_T)
+
+
+def _coarse_fsw(**coarse) -> FswConfig:
+    return FswConfig(coarse_attitude=coarse, magnetic_devices={"sun_sensors": True}, law={"margin_deg": 3.0},
+                     pointing={"zones": [{"name": "sun", "body": "sun", "geometry": {"shape": "cone",
+                                                                                    "half_angle_deg": 40.0}}]})
+
+
+def test_the_coarse_margin_covers_the_coarse_error_or_the_mission_is_refused():
+    """Default: law.margin_deg + 3 sun_sigma_deg; a margin below law.margin_deg + 3 sigma of the better
+    direction is refused with the figure it needs."""
+    assert _coarse_fsw(sun_sigma_deg=2.0).coarse_margin_deg() == pytest.approx(9.0)
+    assert _coarse_fsw(sun_sigma_deg=1.0, margin_deg=6.5).coarse_margin_deg() == 6.5
+    assert FswConfig().coarse_margin_deg() is None
+    with pytest.raises(ValueError, match=r"coarse_attitude.margin_deg 5 does not cover .* at least .* 9"):
+        _coarse_fsw(sun_sigma_deg=2.0, margin_deg=5.0)
+    field = _field_cfg().model_dump() | {"field_sigma_deg": 1.0, "margin_deg": 6.0}  # the field's 1 deg: 3 + 3
+    FswConfig(coarse_attitude=field, magnetic_devices={"sun_sensors": True, "magnetometer": True},
+              law={"margin_deg": 3.0})
+
+
+def test_the_laws_zones_grow_to_the_coarse_margin_and_back():
+    """While the coarse attitude flies, the law avoids each zone by its margin (9 deg here), not the star
+    tracker's 3 deg; the physical zones, which the margins and the door judge, stay as they are."""
+    from fsw.guidance import Guidance
+    from fsw.guidance.common import signed_margin_deg
+
+    g = Guidance(_coarse_fsw(sun_sigma_deg=2.0))
+    g.sky_margins_at(0.0, np.array([1.0, 0.0, 0.0]))  # builds the zones
+    slot = g.slots[0]
+    probe = slot.center_N.copy()
+    axis = np.cross(probe, [0.0, 0.0, 1.0])
+    probe = quat_to_dcm(quat_from_axis_angle(axis / np.linalg.norm(axis), math.radians(55.0))) @ probe
+    fine, phys = signed_margin_deg(slot.law, probe), signed_margin_deg(slot.phys, probe)
+    g.use_coarse_margin(True)
+    assert signed_margin_deg(slot.law, probe) == pytest.approx(fine - 6.0, abs=0.05)
+    assert signed_margin_deg(slot.phys, probe) == phys
+    g.use_coarse_margin(False)
+    assert signed_margin_deg(slot.law, probe) == pytest.approx(fine, abs=1e-9)
