@@ -33,15 +33,12 @@ import numpy as np
 
 from fsw.estimation import _rotvec_quat
 from gnc.attitude import dcm_to_quat, quat_multiply_nb, quat_to_dcm, quat_to_dcm_nb, skew
+from fsw.guidance.common import angle_deg, unit_vector
 from gnc.field_model import FieldModel
 from gnc.magnetic import css_sun_fix
 
 _SECONDS_PER_DAY = 86400.0
 MIN_TRIAD_ANGLE_DEG = 10.0  # the Sun and the field closer than this do not fix the rotation about them
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
 
 
 def vector_update(q: np.ndarray, bias: np.ndarray, P: np.ndarray, meas_B: np.ndarray, ref_N: np.ndarray,
@@ -91,7 +88,7 @@ def triad_q_NB(first_B: np.ndarray, first_N: np.ndarray, second_B: np.ndarray, s
     """The attitude q_NB that puts ``first_B`` exactly on ``first_N`` and ``second_B`` in the plane of the two
     references (TRIAD; every vector a unit vector, the two pairs not parallel)."""
     def frame(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        t2 = _unit(np.cross(a, b))
+        t2 = unit_vector(np.cross(a, b))
         return np.column_stack((a, t2, np.cross(a, t2)))
 
     return dcm_to_quat(frame(first_N, second_N) @ frame(first_B, second_B).T)
@@ -151,7 +148,7 @@ class CoarseAttitude:
             out.append((sun_B, np.asarray(ephem.directions(t_s)["sun"], dtype=float), cfg.sun_sigma_deg))
         if self.uses_field and rods_quiet and np.all(np.isfinite(mag_S_T)) and np.any(mag_S_T):
             ref = self.field.field_N(ephem.position_N_km(t_s), self.jd0 + t_s / _SECONDS_PER_DAY)
-            out.append((_unit(self.R_BS @ mag_S_T), _unit(ref), cfg.field_sigma_deg))
+            out.append((unit_vector(self.R_BS @ mag_S_T), unit_vector(ref), cfg.field_sigma_deg))
         return out
 
     def _initialise(self, estimator: Any, pairs: list[tuple[np.ndarray, np.ndarray, float]]) -> bool:
@@ -161,7 +158,7 @@ class CoarseAttitude:
         if len(pairs) < 2:
             return False
         (s_B, s_N, s_sig), (b_B, b_N, b_sig) = sorted(pairs, key=lambda p: p[2])  # the more accurate first
-        if min(_angle_deg(s_B, b_B), _angle_deg(s_N, b_N)) < MIN_TRIAD_ANGLE_DEG:
+        if min(angle_deg(s_B, b_B), angle_deg(s_N, b_N)) < MIN_TRIAD_ANGLE_DEG:
             return False
         estimator.q_NB = triad_q_NB(s_B, s_N, b_B, b_N)
         att = math.radians(max(s_sig, b_sig)) * 2.0  # the rotation about the Sun line rests on the field alone
@@ -169,7 +166,7 @@ class CoarseAttitude:
         estimator.P[:, :] = np.diag([att * att] * 3 + [bias * bias] * 3)
         estimator.bias_B[:] = 0.0
         estimator.initialized = True
-        self.event("COARSE_ATTITUDE_FOUND", sun_field_angle_deg=_angle_deg(pairs[0][0], pairs[1][0]))
+        self.event("COARSE_ATTITUDE_FOUND", sun_field_angle_deg=angle_deg(pairs[0][0], pairs[1][0]))
         return True
 
     def _switch(self, lost: bool, coasting_s: float) -> None:
@@ -179,7 +176,3 @@ class CoarseAttitude:
             self.event("COARSE_ATTITUDE_ON", coasting_s=coasting_s)
         else:
             self.event("COARSE_ATTITUDE_OFF", fused=self.fused, rejected=self.rejected)
-
-
-def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    return math.degrees(math.acos(max(-1.0, min(1.0, float(a @ b)))))

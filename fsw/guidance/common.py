@@ -21,11 +21,13 @@ def _norm(v: np.ndarray) -> float:
     return math.sqrt(v.dot(v))
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
+def unit_vector(v: np.ndarray) -> np.ndarray:
+    """``v`` scaled to length one (a 3-vector of the guidance: never zero there)."""
     return v / _norm(v)
 
 
-def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle [deg] between unit 3-vectors ``a`` and ``b``."""
     return math.degrees(math.acos(max(-1.0, min(1.0, float(a[0] * b[0] + a[1] * b[1] + a[2] * b[2])))))
 
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from fsw.assumption_check import CheckResult
 from fsw.guidance._kernels import FP_WIDTH
-from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _saturate, _unit, signed_margin_deg
+from fsw.guidance.common import _BODY_CODES, GuidanceOutput, _saturate, unit_vector, signed_margin_deg
 from fsw.guidance.edge_rule import law_eps
 from gnc.sky_ephemeris import SkyEphemeris
 from fsw.guidance.path_following import PathFollowing
@@ -223,13 +223,13 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         """(zone index, margin deg) when a candidate target lies inside an (inflated) zone, else None."""
         if kind == "DIRECTION":
             self._update_sky(self.last_t_s)
-            x = _unit(np.asarray(value, dtype=float))
+            x = unit_vector(np.asarray(value, dtype=float))
             for s in self.slots:
                 m = signed_margin_deg(s.law, x)
                 if m <= 0.0:
                     return s.index, m
             return None
-        q = _unit(np.asarray(value, dtype=float))
+        q = unit_vector(np.asarray(value, dtype=float))
         for i, z in enumerate(self.s3_law_zones):
             m = signed_margin_deg(z, q)
             if m <= 0.0:
@@ -238,9 +238,9 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
 
     def set_target_direction(self, target_N: np.ndarray) -> None:
         if self.mode == "SAFE":  # kept for POINTING; SAFE keeps aiming at its Sun-safe attitude
-            self._held_target_N = _unit(np.asarray(target_N, dtype=float))
+            self._held_target_N = unit_vector(np.asarray(target_N, dtype=float))
             return
-        self.target_N = _unit(np.asarray(target_N, dtype=float))
+        self.target_N = unit_vector(np.asarray(target_N, dtype=float))
         self._drop_path()
         self._sky_law_key = None
         self._checks_dirty = True

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from fsw.guidance.common import _angle_deg
+from fsw.guidance.common import angle_deg
 from fsw.guidance.path_planning import PathFollower, advance_aim, path_length_deg, plan_path
 
 
@@ -49,7 +49,7 @@ class PathFollowing:
         self._follow(vertices, y)
         if not replanned:
             length = path_length_deg(vertices)
-            self.events("PATH_PLANNED", length_deg=length, detour_deg=length - _angle_deg(y, self.target_N),
+            self.events("PATH_PLANNED", length_deg=length, detour_deg=length - angle_deg(y, self.target_N),
                         legs=len(vertices) - 1)
 
     def _planning_polygons(self) -> dict:

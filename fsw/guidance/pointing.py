@@ -28,7 +28,7 @@ from fsw.guidance._kernels import (
     pointing_command_nb, pointing_law_nb, pointing_step_nb, zone_separations_nb,
 )
 from fsw.guidance.common import (
-    _NAN3, _NAN4, GuidanceOutput, _angle_deg, _make_star_law, signed_margin_deg,
+    _NAN3, _NAN4, GuidanceOutput, angle_deg, _make_star_law, signed_margin_deg,
 )
 from fsw.guidance.edge_rule import TARGET_IN_LAYER
 from gnc.sky_ephemeris import EPHEMERIS_NODE_S
@@ -190,11 +190,11 @@ class PointingGuidance:
                 self._sky_pack = None
                 s.phys, s.law = s.builder_phys.build(c), s.builder_law.build(c)
                 s.built_center, s.built_center_law = c.copy(), c.copy()
-                s.phys_drift_deg = _angle_deg(c, s.built_center)
+                s.phys_drift_deg = angle_deg(c, s.built_center)
                 first = True
                 continue
-            s.phys_drift_deg = _angle_deg(c, s.built_center)
-            law_drift = _angle_deg(c, s.built_center_law) / LAW_REBUILD_TRIGGER_DEG
+            s.phys_drift_deg = angle_deg(c, s.built_center)
+            law_drift = angle_deg(c, s.built_center_law) / LAW_REBUILD_TRIGGER_DEG
             phys_drift = s.phys_drift_deg / PHYS_REBUILD_TOL_DEG
             for drift, kind in ((law_drift, "law"), (phys_drift, "phys")):
                 if drift >= 1.0 and drift > worst:
@@ -208,7 +208,7 @@ class PointingGuidance:
             else:
                 worst_slot.phys = worst_slot.builder_phys.build(c)
                 worst_slot.built_center = c.copy()
-                worst_slot.phys_drift_deg = _angle_deg(c, worst_slot.built_center)
+                worst_slot.phys_drift_deg = angle_deg(c, worst_slot.built_center)
         rebuilt_law = first or worst_kind == "law"
         if rebuilt_law:
             # whoever asked (SAFE, the door's margins, a telecommand's check), the law must fly the new zone:
@@ -605,7 +605,7 @@ class PointingGuidance:
             return True
         slot.phys = slot.builder_phys.build(c)
         slot.built_center = c.copy()
-        slot.phys_drift_deg = _angle_deg(c, slot.built_center)
+        slot.phys_drift_deg = angle_deg(c, slot.built_center)
         return False
 
     def _settle_sky(self) -> None:

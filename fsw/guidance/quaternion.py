@@ -23,7 +23,7 @@ import numpy as np
 
 from fsw.guidance.attitude_planning import plan_attitude_path
 from fsw.guidance.common import (
-    GuidanceOutput, _make_gradient_law, _make_star_law, _saturate, _unit, signed_margin_deg,
+    GuidanceOutput, _make_gradient_law, _make_star_law, _saturate, unit_vector, signed_margin_deg,
 )
 from fsw.guidance.path_planning import PathFollower, advance_aim, path_length_deg
 from fsw.guidance.slew_limits import rate_for_distance_deg_s
@@ -61,7 +61,7 @@ class QuaternionGuidance:
 
 
     def set_target_quaternion(self, q_NB: np.ndarray) -> None:
-        self.q_target = _unit(np.asarray(q_NB, dtype=float))
+        self.q_target = unit_vector(np.asarray(q_NB, dtype=float))
         self._drop_s3_path()
         if self.mode != "SAFE":
             self._q_lift = None

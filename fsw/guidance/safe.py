@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from fsw.guidance.common import GuidanceOutput, _angle_deg, _norm, _saturate
+from fsw.guidance.common import GuidanceOutput, angle_deg, _norm, _saturate
 from fsw.guidance.zone_merging import ZoneGeometry
 from gnc.attitude import pointing_rate_command_nb, quat_from_axis_angle, quat_multiply, quat_to_dcm_nb
 from gnc.zones import _fibonacci_directions, default_tangent_basis
@@ -112,7 +112,7 @@ class SafeGuidance:
                           y_N: np.ndarray) -> GuidanceOutput:
         """Sun acquisition through POINTING: the law, the plan and the governor on the zones, aimed at the
         boresight of a Sun-safe attitude, the roll law turning ``sun_axis_B`` to the Sun, at SAFE's rate."""
-        if (self._safe_sun is None or _angle_deg(sun_N, self._safe_sun) > self.SAFE_AIM_REFRESH_DEG
+        if (self._safe_sun is None or angle_deg(sun_N, self._safe_sun) > self.SAFE_AIM_REFRESH_DEG
                 or self._safe_aim_covered()):
             self._safe_sun = sun_N
             self.target_N = self._sun_safe_boresight(sun_N, y_N)
@@ -163,7 +163,7 @@ class SafeGuidance:
         """Sun acquisition through QUATERNION: the paper's law on S^3 with the attitude zones, the plan and
         the governor, aimed at a Sun-safe attitude, at SAFE's rate; the QUATERNION target is kept."""
         kept = self.q_target, self.max_rate_rad_s
-        if self._safe_sun is None or _angle_deg(sun_N, self._safe_sun) > self.SAFE_AIM_REFRESH_DEG:
+        if self._safe_sun is None or angle_deg(sun_N, self._safe_sun) > self.SAFE_AIM_REFRESH_DEG:
             self._safe_sun = sun_N
             self._safe_q = self._sun_safe_attitude(sun_N, self._lift(q))
             self.q_target = self._safe_q
