@@ -422,10 +422,27 @@ class PointingGuidance:
                     d = math.acos(max(-1.0, min(1.0, float(ai @ aj))))
                     if not d - ri - rj >= gap:  # a close pair: the merge decides
                         self._merge_kept = None
-                        return geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
+                        return self._merge_close(zones, y)
             self._merge_kept = tuple(zones)
         geometry.pending, geometry.unmerged = [], []
         return list(zones), [[i] for i in range(len(zones))]
+
+    def _merge_close(self, zones: list, y: np.ndarray) -> tuple[list, list[list[int]]]:
+        """`ZoneGeometry.merge` of zones with a close pair. Its result depends on the boresight only where it
+        judged a pair that was not merged before against it; otherwise the same zone objects with the same
+        previous grouping give the same shapes, which are kept (a ground target moves the aim every cycle
+        and with it the law, not the merged Sun and Moon)."""
+        geometry = self.sky_geometry
+        key = (tuple(zones), tuple(tuple(g) for g in self._sky_groups))
+        kept = self._merge_close_kept
+        if kept is not None and kept[0][1] == key[1] and all(a is b for a, b in zip(kept[0][0], key[0])) \
+                and len(kept[0][0]) == len(key[0]):
+            geometry.pending, geometry.unmerged = list(kept[3]), list(kept[4])
+            return list(kept[1]), [list(g) for g in kept[2]]
+        merged, groups = geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
+        self._merge_close_kept = None if geometry.saw_keep_outside else (
+            key, tuple(merged), tuple(tuple(g) for g in groups), tuple(geometry.pending), tuple(geometry.unmerged))
+        return merged, groups
 
     def _law_zones_pack(self, merged: list):
         """`pack_zones` of the law's zones (from each zone's packed row), kept while they are the same

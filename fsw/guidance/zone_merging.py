@@ -24,6 +24,7 @@ class ZoneGeometry:
         self.groups: list[list[int]] = []
         self.pending: list = []  # would-be shapes of close pairs that could not merge around the boresight
         self.unmerged: list[tuple[int, int]] = []  # every close pair left separate, as indices into merge()'s output
+        self.saw_keep_outside = False  # the last merge() judged a new pair against keep_outside
 
     MAX_MERGED_RADIUS_RAD = math.radians(80.0)
 
@@ -52,6 +53,7 @@ class ZoneGeometry:
         groups, shapes, caps = [[i] for i in range(len(zones))], list(zones), list(zone_caps)
         refused: set[tuple[tuple[int, ...], tuple[int, ...]]] = set()
         self.pending = []
+        self.saw_keep_outside = False
         previous = [set(g) for g in keep_merged]
         while (found := self._first_merge(groups, caps, zone_caps, keep_outside, refused, previous)) is not None:
             gi, gj, shape = found
@@ -79,6 +81,7 @@ class ZoneGeometry:
                     continue
                 sticky = any(set(pair[0] + pair[1]) <= g for g in previous)
                 avoid = () if sticky else keep_outside
+                self.saw_keep_outside = self.saw_keep_outside or bool(len(avoid))
                 shape = sky_zones.enclosing_cone([zone_caps[k] for k in groups[gi] + groups[gj]])
                 if shape.bounding_cap[1] > self.MAX_MERGED_RADIUS_RAD or any(shape.contains(p) for p in avoid):
                     cone = shape if shape.bounding_cap[1] <= self.MAX_MERGED_RADIUS_RAD else None

@@ -139,6 +139,31 @@ def test_sun_and_moon_near_new_moon_are_merged_with_an_event() -> None:
         assert all(merged[0].separation(p) < 1e-9 for p in pts)
 
 
+def test_a_moving_aim_keeps_the_merged_zone_and_a_new_merge_around_the_boresight_is_judged_again() -> None:
+    """A ground target moves the aim every cycle and the law is made again; the Sun and Moon's merged zone is
+    kept (the same object) while they stay put, and equals a fresh merge. A merge that judged a new pair
+    against the boresight is not kept: the next boresight may refuse it."""
+    cfg = _epoch_cfg("2030-04-02T12:00:00+00:00", [SUN_STAR, MOON_CONE], [0.0, 0.0, 1.0])
+    g = Guidance(cfg)
+    q = np.array([1.0, 0, 0, 0])
+    g.step(0.0, 0.1, q, np.zeros(3))
+    first = g._sky_law_zones[0]
+    for k in range(3):  # the aim moves: the law is rebuilt, twice to keep its first merge
+        g.set_target_direction(np.array([0.0, math.sin(0.01 * (k + 1)), math.cos(0.01 * (k + 1))]))
+        g.step(0.1 * (k + 1), 0.1, q, np.zeros(3))
+    kept = g._sky_law_zones[0]
+    g.set_target_direction(np.array([0.0, math.sin(0.05), math.cos(0.05)]))
+    g.step(0.4, 0.1, q, np.zeros(3))
+    assert g._sky_law_zones[0] is kept and len(g._sky_law_zones) == 1
+    fresh, groups = ZoneGeometry(3, cfg.law.merge_gap_deg).merge([s.law for s in g.slots], keep_merged=[[0, 1]])
+    assert groups == [[0, 1]] and repr(fresh[0]) == repr(kept) == repr(first)
+    geometry = ZoneGeometry(3, cfg.law.merge_gap_deg)
+    geometry.merge([s.law for s in g.slots], keep_outside=[np.array([0.0, 0.0, 1.0])])
+    assert geometry.saw_keep_outside
+    geometry.merge([s.law for s in g.slots], keep_outside=[np.array([0.0, 0.0, 1.0])], keep_merged=[[0, 1]])
+    assert not geometry.saw_keep_outside
+
+
 def test_target_inside_a_zone_is_refused_and_a_moving_zone_pushes_the_target_out() -> None:
     cfg = _epoch_cfg("2030-03-29T12:00:00+00:00", [MOON_CONE], [0.0, 0.0, 1.0])
     g = Guidance(cfg)
