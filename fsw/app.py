@@ -132,7 +132,7 @@ class FlightSoftware:
         self.inject_overrun_s = 0.0  # test hook: busy-wait this long in the next GNC cycle
         self.last: CycleRecord | None = None
         self.mode_reason = "INIT"
-        self.eclipse = EclipseMonitor(config, self.event)  # the Earth's shadow, updated by housekeeping
+        self.eclipse = EclipseMonitor(config, self.event, self.guidance.ephem)  # updated by housekeeping
         self.hk = Housekeeping(self)
         if dispatcher is not None:
             CommandHandlers(self).register(dispatcher)

@@ -30,8 +30,11 @@ def shadow_state(fraction: float) -> str:
 class EclipseMonitor:
     """The Earth's shadow as the flight software knows it; `update` once per housekeeping period."""
 
-    def __init__(self, cfg: Any, event: Callable[..., None]) -> None:
-        self.ephem = SkyEphemeris(cfg) if "orbit" in cfg.model_fields_set else None
+    def __init__(self, cfg: Any, event: Callable[..., None], ephem: SkyEphemeris | None = None) -> None:
+        """``ephem``: the flight software's onboard ephemeris (the guidance's), so the shadow and the zones
+        come from one Sun and one orbit; built from ``cfg`` when not given."""
+        knows_orbit = "orbit" in cfg.model_fields_set
+        self.ephem = (ephem if ephem is not None else SkyEphemeris(cfg)) if knows_orbit else None
         self.event = event
         self.state = ECLIPSE_STATES[0]
         self.fraction = math.nan

@@ -138,3 +138,27 @@ def test_the_housekeeping_packet_carries_the_shadow(orbit_truth) -> None:
         assert ("ECLIPSE_ENTRY", {"sunlit_fraction": 0.0}) in fsw.telemetry.events
     finally:
         fsw.shutdown()
+
+
+def test_the_shadow_comes_from_the_guidances_ephemeris() -> None:
+    """One onboard Sun and orbit: the flight software's monitor reads the guidance's ephemeris (not a second
+    one), and still none without an orbit."""
+    from fsw.guidance import Guidance
+
+    cfg = FswConfig.model_validate({"orbit": {}})
+    guidance = Guidance(cfg)
+    monitor = EclipseMonitor(cfg, lambda name, **args: None, guidance.ephem)
+    assert monitor.ephem is guidance.ephem
+    assert EclipseMonitor(FswConfig(), lambda name, **args: None, guidance.ephem).ephem is None
+    from comms.bus import Icd, open_bus
+    from fsw.assembly import build_flight_software
+
+    mission = load_mission(MISSION).flight_software
+    bus = open_bus("virtual:eclipseshare", light=True)
+    fsw = build_flight_software(mission.model_copy(update={"law": mission.law.model_copy(
+        update={"assumption_check": "off"})}), bus, Icd())
+    try:
+        assert fsw.eclipse.ephem is fsw.guidance.ephem
+    finally:
+        fsw.shutdown()
+        bus.shutdown()
