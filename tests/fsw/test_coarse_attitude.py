@@ -285,3 +285,37 @@ def test_the_laws_zones_grow_to_the_coarse_margin_and_back():
     assert signed_margin_deg(slot.phys, probe) == phys
     g.use_coarse_margin(False)
     assert signed_margin_deg(slot.law, probe) == pytest.approx(fine, abs=1e-9)
+
+
+def test_a_boresight_the_grown_zone_catches_is_pushed_straight_out():
+    """The star tracker lost 5 deg from the Sun cone: the law's zone grows to 9 deg over the boresight, and
+    the law turns it straight out of the zone (at the rate limit), not on through the zone to a target
+    beyond it."""
+    from fsw.guidance import Guidance
+    from fsw.guidance.common import signed_margin_deg
+    from gnc.attitude import dcm_to_quat
+
+    cfg = FswConfig(initial_mode="POINTING", coarse_attitude={}, magnetic_devices={"sun_sensors": True},
+                    law={"margin_deg": 3.0}, pointing={"boresight_B": [0.0, 0.0, 1.0], "zones": [
+                        {"name": "sun", "body": "sun", "geometry": {"shape": "cone", "half_angle_deg": 40.0}}]})
+    g = Guidance(cfg)
+    g.sky_margins_at(0.0, np.array([1.0, 0.0, 0.0]))
+    sun = g.slots[0].center_N
+    across = np.cross(sun, [0.0, 0.0, 1.0])
+    across /= np.linalg.norm(across)
+
+    def from_sun(deg):
+        return math.cos(math.radians(deg)) * sun + math.sin(math.radians(deg)) * across
+
+    y = from_sun(45.0)
+    g.set_target_direction(from_sun(-60.0))  # beyond the Sun: the way to it runs through the zone
+    x_B = np.cross([0.0, 0.0, 1.0], y)
+    x_B /= np.linalg.norm(x_B)
+    q = dcm_to_quat(np.column_stack([x_B, np.cross(y, x_B), y]))
+    g.use_coarse_margin(True)
+    assert signed_margin_deg(g.slots[0].law, y) < -4.0 < 4.9 < signed_margin_deg(g.slots[0].phys, y)
+    out = g.step(0.0, 0.1, q, np.zeros(3))
+    y_dot = np.cross(quat_to_dcm(q) @ out.omega_cmd_BN_B, y)
+    outward = y * float(y @ sun) - sun  # away from the Sun, along the sphere at y
+    outward /= np.linalg.norm(outward)
+    assert float(y_dot @ outward) / np.linalg.norm(y_dot) > 0.99
