@@ -101,7 +101,7 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self._sky_res = None  # a compiled cycle's sky not applied to the slots yet (`_settle_sky`)
         self._target_out = (None, None)  # (target_N, its read-only copy the POINTING outputs share)
         self._merge_kept = None
-        self._merge_close_kept = None  # (key, merged, groups, pending, unmerged): `_merge_close`
+        self._merge_close_kept = None  # (zones, previous groups, merged, groups, pending, unmerged): `_merge_close`
         self._law_zones_kept = None
         self._governor_kept = None
         self._sky_group_first: list[int] = []

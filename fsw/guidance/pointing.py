@@ -57,6 +57,12 @@ def _warm_batch_kernels(builders: list) -> None:
         builder.build(np.array([1.0, 0.0, 0.0])).separation_batch(probe)
 
 
+def _same_objects(kept, now) -> bool:
+    """Whether two sequences hold the very same objects, in order (zones are immutable: the same object is
+    the same zone, and any rebuilt zone is a new one)."""
+    return len(kept) == len(now) and all(a is b for a, b in zip(kept, now))
+
+
 @dataclass
 class _SkySlot:
     index: int
@@ -217,7 +223,6 @@ class PointingGuidance:
             # flew a frozen Earth zone while the real one swept over the parked boresight, 35 deg deep.
             self._sky_law_key = None
         return rebuilt_law
-
 
     def use_coarse_margin(self, coarse: bool) -> None:
         """The law's zones inflated by the coarse attitude's margin (``coarse``: the estimate rests on the
@@ -413,7 +418,7 @@ class PointingGuidance:
         without calling it (and at once while they stay the same objects)."""
         geometry = self.sky_geometry
         kept = self._merge_kept
-        if not (kept is not None and len(kept) == len(zones) and all(a is b for a, b in zip(kept, zones))):
+        if not (kept is not None and _same_objects(kept, zones)):
             caps = [self._zone_facts(z)[0] for z in zones]
             gap = geometry.merge_gap_rad
             for gi in range(len(zones)):
@@ -433,22 +438,22 @@ class PointingGuidance:
         previous grouping give the same shapes, which are kept (a ground target moves the aim every cycle
         and with it the law, not the merged Sun and Moon)."""
         geometry = self.sky_geometry
-        key = (tuple(zones), tuple(tuple(g) for g in self._sky_groups))
+        previous = [list(g) for g in self._sky_groups]
         kept = self._merge_close_kept
-        if kept is not None and kept[0][1] == key[1] and all(a is b for a, b in zip(kept[0][0], key[0])) \
-                and len(kept[0][0]) == len(key[0]):
-            geometry.pending, geometry.unmerged = list(kept[3]), list(kept[4])
-            return list(kept[1]), [list(g) for g in kept[2]]
+        if kept is not None and _same_objects(kept[0], zones) and kept[1] == previous:
+            geometry.pending, geometry.unmerged = list(kept[4]), list(kept[5])
+            return list(kept[2]), [list(g) for g in kept[3]]
         merged, groups = geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
         self._merge_close_kept = None if geometry.saw_keep_outside else (
-            key, tuple(merged), tuple(tuple(g) for g in groups), tuple(geometry.pending), tuple(geometry.unmerged))
+            tuple(zones), previous, tuple(merged), [list(g) for g in groups], list(geometry.pending),
+            list(geometry.unmerged))
         return merged, groups
 
     def _law_zones_pack(self, merged: list):
         """`pack_zones` of the law's zones (from each zone's packed row), kept while they are the same
         objects."""
         kept = self._law_zones_kept
-        if kept is not None and len(kept[0]) == len(merged) and all(a is b for a, b in zip(kept[0], merged)):
+        if kept is not None and _same_objects(kept[0], merged):
             return kept[1]
         packs = [self._zone_facts(z)[1] for z in merged]
         if any(p is None for p in packs):
