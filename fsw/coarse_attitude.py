@@ -41,13 +41,13 @@ _SECONDS_PER_DAY = 86400.0
 MIN_TRIAD_ANGLE_DEG = 10.0  # the Sun and the field closer than this do not fix the rotation about them
 
 
-def vector_update(q: np.ndarray, bias: np.ndarray, P: np.ndarray, meas_B: np.ndarray, ref_N: np.ndarray,
-                  sigma_rad: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+def vector_update(q: np.ndarray, P: np.ndarray, meas_B: np.ndarray, ref_N: np.ndarray,
+                  sigma_rad: float) -> tuple[np.ndarray, np.ndarray, float, float]:
     """One MEKF update with a measured unit direction in body axes and its unit reference in N. Returns the
-    new (q, bias, P), the innovation angle [deg] and the predicted 1-sigma of the innovation [deg].
+    new (q, P), the innovation angle [deg] and the predicted 1-sigma of the innovation [deg].
 
     The gyro bias is a consider state (Schmidt): the update corrects the attitude and carries the bias's
-    covariance, but never moves the bias. A coarse direction's error is degrees and not white (the dark
+    covariance (P's bias rows), but never moves the bias, which is why it is neither taken nor returned. A coarse direction's error is degrees and not white (the dark
     cells' bound as the body turns about the Sun line); fused at 10 Hz the filter read its changes as a
     bias and walked it to 370 deg/h (true 2 deg/h), which then turned the attitude 22 deg off about the
     field line in the next eclipse. The bias the star tracker last estimated (or zero, blind) is the better
@@ -68,7 +68,7 @@ def vector_update(q: np.ndarray, bias: np.ndarray, P: np.ndarray, meas_B: np.nda
     q_new = q_new / np.linalg.norm(q_new)
     innov_deg = math.degrees(math.acos(max(-1.0, min(1.0, float(meas_B @ b_pred)))))
     sigma_deg = math.degrees(math.sqrt(max(0.0, float(np.trace(S)) / 2.0)))  # two axes across the line of sight
-    return q_new, bias.copy(), P_new, innov_deg, sigma_deg
+    return q_new, P_new, innov_deg, sigma_deg
 
 
 def _floor_across(P: np.ndarray, P_prior: np.ndarray, b: np.ndarray, sigma_rad: float) -> None:
@@ -133,13 +133,11 @@ class CoarseAttitude:
             return self._initialise(estimator, pairs)
         changed = False
         for meas_B, ref_N, sigma_deg in pairs:
-            q, bias, P, innov, sigma = vector_update(estimator.q_NB, estimator.bias_B, estimator.P, meas_B, ref_N,
-                                                     math.radians(sigma_deg))
+            q, P, innov, sigma = vector_update(estimator.q_NB, estimator.P, meas_B, ref_N, math.radians(sigma_deg))
             if innov > max(self.cfg.gate_deg, 4.0 * sigma):
                 self.rejected += 1
                 continue
             estimator.q_NB = q
-            estimator.bias_B[:] = bias
             estimator.P[:, :] = P
             self.fused += 1
             changed = True
