@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from fsw.config import FswConfig
 from fsw.guidance import Guidance, ZoneGeometry, signed_margin_deg
 from gnc import sky_zones as sz
-from gnc.ephemeris import julian_date_tdb, moon_direction_N, sun_direction_N
+from gnc.ephemeris import julian_date_tdb, moon_direction_N
 
 
 def _rot(q):
