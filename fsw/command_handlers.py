@@ -78,9 +78,10 @@ class CommandHandlers:
         c = list(v) + [0.0] * (4 - len(v))
         fsw.event("TARGET_SET", kind=kind, c0=c[0], c1=c[1], c2=c[2], c3=c[3])
 
-    def _refuse_in_zone(self, kind: str, v: np.ndarray) -> None:
-        """TARGET_REJECTED and a refusal when the target ``v`` lies inside a keep-out zone."""
-        hit = self.fsw.guidance.target_violation(kind, v)
+    def _refuse_in_zone(self, kind: str, v: np.ndarray, on_earth: bool = False) -> None:
+        """TARGET_REJECTED and a refusal when the target ``v`` lies inside a keep-out zone (``on_earth``: one
+        that guards a target on the Earth)."""
+        hit = self.fsw.guidance.target_violation(kind, v, on_earth)
         if hit is not None:
             zone, margin = hit
             bodies = self._zone_bodies(kind)
@@ -102,7 +103,7 @@ class CommandHandlers:
                 raise CommandValidationError(f"SET_TARGET: GROUND height {alt:.0f} m outside -500..9000 m",
                                              "ARG_OUT_OF_RANGE")
             ground = GroundTargetConfig(latitude_deg=lat, longitude_deg=lon, altitude_m=alt)
-        self._refuse_in_zone("DIRECTION", guidance.target_on_earth_N(kind.lower(), ground))
+        self._refuse_in_zone("DIRECTION", guidance.target_on_earth_N(kind.lower(), ground), on_earth=True)
         guidance.set_target_on_earth(kind.lower(), ground)
         fsw.restart_target_watch()
         fsw.event("TARGET_SET", kind=kind, c0=c0, c1=c1, c2=c2, c3=c3)

@@ -210,7 +210,8 @@ def pack_zones(zones: list) -> tuple[np.ndarray, np.ndarray] | None:
 FP_LAW_TARGET, FP_B, FP_TARGET, FP_ROLL_AXIS, FP_ROLL_REF = 17, 20, 23, 26, 29
 FP_EPH = 32  # 6 rows of 3: p_hat, q_hat, Sun and Moon at the two ephemeris nodes (`sky_directions_nb`)
 FP_PREV = 50  # then last cycle's margins (FP_NPREV of them), for the governor; the law kernel writes its own
-FP_WIDTH = 50  # plus one per slot
+# then one flag per slot, 1 where the slot's zone is disarmed (`PointingGuidance._update_arming`): its margin NaN
+FP_WIDTH = 50  # plus two per slot
 
 # result layout of `pointing_step_nb`
 (R_DIRS, R_Y, R_COMPLETE, R_WORST, R_WORST_KIND, R_NEAREST, R_AIM, R_OMEGA, R_LAW_RATE, R_ERROR, R_ROLL,
@@ -293,9 +294,12 @@ def pointing_law_nb(q, y, fp, law_tab, law_arcs, phys_tab, phys_arcs, drift, res
     m0 = R_DRIFT + n
     mmin = np.nan
     for i in range(n):
-        m = d_s_to_deg_nb(zone_signed_nb(y, phys_tab, phys_arcs, i, False)) - drift[i]
+        if fp[FP_PREV + n + i] != 0.0:  # disarmed: no keep-out, so no margin (nor a zone the governor nears)
+            m = np.nan
+        else:
+            m = d_s_to_deg_nb(zone_signed_nb(y, phys_tab, phys_arcs, i, False)) - drift[i]
         res[m0 + i] = m
-        if i == 0 or m < mmin:
+        if m == m and not mmin <= m:  # the smallest of the armed zones' margins
             mmin = m
     res[R_MARGIN_MIN] = mmin
     # the governor (`Guidance._governor_rate`): the nearest zone being approached

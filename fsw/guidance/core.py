@@ -68,6 +68,9 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self.q_target = np.asarray(cfg.quaternion.target_q_NB, dtype=float)
         self.sun_axis_B = np.asarray(cfg.safe.sun_axis_B, dtype=float)
         self.no_fix_s = 0.0
+        # the commanded POINTING target is a fixed direction: what arms the zones kept for inertial targets
+        # only (`PointingGuidance._update_arming`)
+        self._target_fixed = p.target_kind == "inertial"
         self.acquisition_omega_B = _acquisition_rate_B(cfg, self.b_B)
 
     def _init_sky_slots(self, cfg) -> None:
@@ -84,7 +87,10 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
             slot = _SkySlot(i, z.name, z.body, sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra, fast=True), law, fixed)
             if coarse_margin is not None:
                 slot.law_builders = (law, sky_zones.SkyZoneBuilder(z.geometry, coarse_margin + ZONE_REBUILD_TOL_DEG, extra))
+            slot.inertial_only = slot.disarmed = z.armed == "inertial_targets"  # armed once the boresight is clear
             self.slots.append(slot)
+        self._inertial_only = [s for s in self.slots if s.inertial_only]
+        self._armed = tuple(s.index for s in self.slots if not s.disarmed)
         self._body_codes = [_BODY_CODES[s.body] for s in self.slots]  # telemetry codes, fixed with the slots
         self.sky_geometry = ZoneGeometry(3, cfg.law.merge_gap_deg)
         if self.slots:
@@ -106,7 +112,8 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         self._governor_kept = None
         self._sky_group_first: list[int] = []
         self._sky_zones_merged = False
-        self._fp = np.zeros(FP_WIDTH + len(self.slots))
+        self._fp = np.zeros(FP_WIDTH + 2 * len(self.slots))
+        self._write_arming()
         self._eph_k = None
         self._fp_key = None
         self._fp_law = None
@@ -220,12 +227,16 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         room = angle_per_margin * min(closing) - BRAKING_RESERVE_DEG
         return math.radians(rate_for_distance_deg_s(room, self.accel_deg_s2, self.bandwidth_rad_s))
 
-    def target_violation(self, kind: str, value: np.ndarray) -> tuple[int, float] | None:
-        """(zone index, margin deg) when a candidate target lies inside an (inflated) zone, else None."""
+    def target_violation(self, kind: str, value: np.ndarray, on_earth: bool = False) -> tuple[int, float] | None:
+        """(zone index, margin deg) when a candidate target lies inside an (inflated) zone, else None.
+        ``on_earth``: the direction is a nadir or ground target's, which the zones kept for inertial targets
+        only do not guard."""
         if kind == "DIRECTION":
             self._update_sky(self.last_t_s)
             x = unit_vector(np.asarray(value, dtype=float))
             for s in self.slots:
+                if on_earth and s.inertial_only:
+                    continue
                 m = signed_margin_deg(s.law, x)
                 if m <= 0.0:
                     return s.index, m
@@ -238,6 +249,7 @@ class Guidance(PointingGuidance, PathFollowing, StallRecovery, QuaternionGuidanc
         return None
 
     def set_target_direction(self, target_N: np.ndarray) -> None:
+        self._target_fixed = True
         if self.mode == "SAFE":  # kept for POINTING; SAFE keeps aiming at its Sun-safe attitude
             self._held_target_N = unit_vector(np.asarray(target_N, dtype=float))
             return

@@ -28,7 +28,7 @@ from fsw.guidance._kernels import (
     pointing_command_nb, pointing_law_nb, pointing_step_nb, zone_separations_nb,
 )
 from fsw.guidance.common import (
-    _NAN3, _NAN4, GuidanceOutput, angle_deg, _make_star_law, signed_margin_deg,
+    _BODY_CODES, _NAN3, _NAN4, GuidanceOutput, angle_deg, _make_star_law, signed_margin_deg,
 )
 from fsw.guidance.edge_rule import TARGET_IN_LAYER
 from gnc.sky_ephemeris import EPHEMERIS_NODE_S
@@ -78,6 +78,10 @@ class _SkySlot:
     law: object | None = None
     phys_drift_deg: float = 0.0  # angle between center_N and built_center, this cycle
     law_builders: tuple = ()  # (law.margin_deg's, the coarse attitude's margin's) with a coarse attitude
+    # armed: 'inertial_targets' (`fsw.config.SkyZoneConfig.armed`): kept out only while the target is a fixed
+    # direction and the boresight has left it; disarmed, neither the law nor the margins see it
+    inertial_only: bool = False
+    disarmed: bool = False
     # center_N and phys_drift_deg (and the guidance's `_dirs`) as the last cycle left them once
     # `PointingGuidance._settle_sky` has run: a compiled cycle leaves them to it (nothing in a steady
     # cycle reads them; every reader settles first)
@@ -107,6 +111,8 @@ class PointingGuidance:
         self.set_target_direction(self.ephem.target_direction_N(self.last_t_s, point))
         self._track = (kind, point)
         self._tracked_N = self._held_target_N if self.mode == "SAFE" else self.target_N
+        self._target_fixed = False
+        self._update_arming(None)
 
     def target_on_earth_N(self, kind: str, ground=None, t_s: float | None = None) -> np.ndarray:
         """The direction of a nadir or ground target at ``t_s`` (default: the last cycle's time), e.g. to
@@ -236,12 +242,48 @@ class PointingGuidance:
         self._sky_pack = None
         self._sky_law_key = None
 
+    def _update_arming(self, y_N: np.ndarray | None) -> None:
+        """Arm or disarm the zones kept for inertial targets only: disarmed at once when the target is on the
+        Earth (its direction lies inside an Earth zone), armed when the target is a fixed direction and the
+        boresight ``y_N`` is outside the law's (inflated) zone, so the law starts from its safe set. Either
+        change makes the law anew on the armed zones (ZONE_ARMED, ZONE_DISARMED)."""
+        changed = False
+        for s in self._inertial_only:
+            if not s.disarmed and not self._target_fixed:
+                s.disarmed, changed = True, True
+                self.events("ZONE_DISARMED", zone=s.index, body=_BODY_CODES[s.body])
+            elif (s.disarmed and self._target_fixed and y_N is not None and s.law is not None
+                  and signed_margin_deg(s.law, y_N) > 0.0):
+                s.disarmed, changed = False, True
+                self.events("ZONE_ARMED", zone=s.index, body=_BODY_CODES[s.body])
+        if changed:
+            self._armed = tuple(s.index for s in self.slots if not s.disarmed)
+            self._write_arming()
+            self._sky_law_key = None
+            self._checks_dirty = True
+
+    def _write_arming(self) -> None:
+        """The disarmed slots' flags where the compiled law reads them (`pointing_law_nb`: a NaN margin)."""
+        n = len(self.slots)
+        self._fp[FP_PREV + n:FP_PREV + 2 * n] = [1.0 if s.disarmed else 0.0 for s in self.slots]
+
+    def _local_groups(self, groups: list[list[int]]) -> list[list[int]]:
+        """Slot-index ``groups`` as indices into the armed slots' zones (what the merge sees)."""
+        if len(self._armed) == len(self.slots):
+            return [list(g) for g in groups]
+        where = {k: j for j, k in enumerate(self._armed)}
+        local = [[where[k] for k in g if k in where] for g in groups]
+        return [g for g in local if g]
+
     def _sky_margins(self, y_N: np.ndarray) -> tuple[list[float], float]:
         """Signed physical margins [deg], conservative: minus the zone's drift since it was built (as
-        `_update_sky` found it this cycle)."""
+        `_update_sky` found it this cycle); NaN for a disarmed zone, which the smallest leaves out."""
         self._settle_sky()
-        margins = [signed_margin_deg(s.phys, y_N) - s.phys_drift_deg for s in self.slots]
-        return margins, (min(margins) if margins else float("nan"))
+        if self._inertial_only:
+            self._update_arming(y_N)
+        margins = [math.nan if s.disarmed else signed_margin_deg(s.phys, y_N) - s.phys_drift_deg for s in self.slots]
+        kept = [m for m in margins if m == m] if self._inertial_only else margins
+        return margins, (min(kept) if kept else float("nan"))
 
     def sky_margins_at(self, t_s: float, y_N: np.ndarray) -> tuple[list[float], list[str]]:
         """The boresight ``y_N``'s signed physical margins [deg] from the sky zones at onboard time ``t_s``
@@ -281,6 +323,8 @@ class PointingGuidance:
             self._follow_roll_rule(t_s, rule)
         if self._track_started is False or self._track is not None:
             self._track_target(t_s)
+        if self._inertial_only:
+            self._update_arming(boresight_nb(q, self.b_B))
         pack = self._sky_pack
         if pack is None or "directions" in vars(self.ephem):
             pack = self._sky_pack_now()
@@ -330,9 +374,12 @@ class PointingGuidance:
                 return self._pointing_output(t_s, res, y, False)
             out = GuidanceOutput(None, "POINTING", boresight_N=y, target_N=self.target_N.copy())
             out.sun_N, out.moon_N = self._dirs.get("sun", out.sun_N), self._dirs.get("moon", out.moon_N)
-            if self._sky_law is None:  # the law as arrays only so far (`_set_sky_law`): the same law as an object
-                self._sky_law = _make_star_law(self._sky_target, self._sky_law_zones, 1.0, self.kappa, self._sky_eps)
-            u_law, zone = self._sky_law.control_and_zone(y)
+            if not self._sky_law_zones:  # every zone disarmed: straight for the target
+                u_law, zone = self._sky_target, None
+            else:
+                if self._sky_law is None:  # the law as arrays only so far (`_set_sky_law`): the same law as an object
+                    self._sky_law = _make_star_law(self._sky_target, self._sky_law_zones, 1.0, self.kappa, self._sky_eps)
+                u_law, zone = self._sky_law.control_and_zone(y)
             out.eps, out.eps_max = self._sky_eps, self._sky_eps_max
             out.active_zone = -1 if zone is None else self._sky_groups[zone][0]
             out.margins_deg, out.margin_min_deg = self._sky_margins(y)
@@ -360,9 +407,12 @@ class PointingGuidance:
         """The law for the zones as they are now, the boresight ``y`` and the aim: merging, the path check,
         eps, the substitute target. What only depends on the zones is kept while they stay the same objects
         (merge without a close pair, the pairwise eps bound, the law's zone arrays)."""
-        zones = [s.law for s in self.slots]
+        armed = self._armed
+        zones = [self.slots[k].law for k in armed]
         geometry = self.sky_geometry
         merged, groups = self._merge_law_zones(zones, y)
+        if len(armed) != len(self.slots):  # the merge's groups index the armed zones: as slot indices
+            groups = [[armed[j] for j in g] for g in groups]
         if groups != self._sky_groups:
             self._report_merge(self._sky_groups, groups)
             self._checks_dirty = True
@@ -438,12 +488,12 @@ class PointingGuidance:
         previous grouping give the same shapes, which are kept (a ground target moves the aim every cycle
         and with it the law, not the merged Sun and Moon)."""
         geometry = self.sky_geometry
-        previous = [list(g) for g in self._sky_groups]
+        previous = self._local_groups(self._sky_groups)
         kept = self._merge_close_kept
         if kept is not None and _same_objects(kept[0], zones) and kept[1] == previous:
             geometry.pending, geometry.unmerged = list(kept[4]), list(kept[5])
             return list(kept[2]), [list(g) for g in kept[3]]
-        merged, groups = geometry.merge(zones, keep_outside=[y], keep_merged=self._sky_groups)
+        merged, groups = geometry.merge(zones, keep_outside=[y], keep_merged=previous)
         self._merge_close_kept = None if geometry.saw_keep_outside else (
             tuple(zones), previous, tuple(merged), [list(g) for g in groups], list(geometry.pending),
             list(geometry.unmerged))
@@ -456,7 +506,9 @@ class PointingGuidance:
         if kept is not None and _same_objects(kept[0], merged):
             return kept[1]
         packs = [self._zone_facts(z)[1] for z in merged]
-        if any(p is None for p in packs):
+        if not packs:  # every zone disarmed: a law with no zone to keep out (the kernels take no rows)
+            pack = _NO_LAW
+        elif any(p is None for p in packs):
             pack = None
         else:
             tab = np.concatenate([p[0] for p in packs])
@@ -496,6 +548,10 @@ class PointingGuidance:
         eps = _positive(eps, "eps")
         if eps >= 2.0:
             raise ValueError(f"eps must be < 2 (the largest separation on the sphere), got {eps}")
+        if not merged:
+            self._sky_law = None
+            self._law_pack = (zpack[0], zpack[1], law_target, eps)
+            return
         laws = self._law_zones_kept[3]
         tab = laws.get((self.kappa, eps))
         if tab is None:

@@ -358,9 +358,15 @@ def judge(mission, truth: dict[str, np.ndarray], fdir_trips: Sequence[str], cycl
     if mission.flight_software.quaternion.zones:
         zones += summary.attitude_zone_series(mission, summary.lifted_quaternions(mission, truth))
     metrics: dict[str, float] = {}
-    for z in zones:
-        metrics[f"margin_{z.name}_deg"] = min(metrics.get(f"margin_{z.name}_deg", math.inf), float(z.margin_deg.min()))
-    metrics["min_margin_deg"] = min((float(z.margin_deg.min()) for z in zones), default=math.inf)
+    lows = [(z.name, summary.zone_minimum(z)) for z in zones]  # None: a zone never armed (not judged)
+    for name, low in lows:
+        if low is not None:
+            metrics[f"margin_{name}_deg"] = min(metrics.get(f"margin_{name}_deg", math.inf), low[1])
+    for name, low in lows:
+        # NaN, not a number that could pass a criterion: the zone was never judged
+        metrics.setdefault(f"margin_{name}_deg", math.nan)
+    judged = [low[1] for _, low in lows if low is not None]
+    metrics["min_margin_deg"] = min(judged, default=math.nan if zones else math.inf)
     # the instrument's exposure: time and depth inside a sky zone with the door not fully closed (always
     # open without a door)
     exposure = summary.instrument_exposure(t, [z for z in zones if z.kind == "sky"], truth.get("door_position"))

@@ -7,6 +7,10 @@ the whole run, because the Sun, Moon and Earth zones move:
   target on the rotating Earth (nadir, a ground point) is checked where it is at each sampled time;
 * a ground target below its horizon (or under its ``min_elevation_deg``) for its whole dwell;
 * the initial attitude already inside a zone;
+* a zone with ``armed: inertial_targets`` (`fsw.config.SkyZoneConfig.armed`) only where the flight software
+  keeps it out: for a fixed (inertial) target; a nadir or ground target is checked without it, and an
+  initial boresight inside it is no error, since the flight software arms it only once the boresight has
+  left it;
 * a zone whose kernel g_i is not strictly inside it (the law pushes away from g_i);
 * the paper's Assumption 1 (zones pairwise at least 2 delta apart) and the admissible eps interval
   (0, min(eps_bar, 1 - cos delta)) at every sampled time, for the zones as the flight software flies
@@ -276,12 +280,14 @@ class SkyZones:
         law_inflation_deg = self.margin_deg + ZONE_REBUILD_TOL_DEG
         self.names: list[str] = []
         self.bodies: list[str] = []
+        self.armed: list[str] = []  # each zone's `SkyZoneConfig.armed`
         self._phys, self._law, self._fixed = [], [], []
         for z in fsw.pointing.zones:
             extra = (self.ephemeris.earth_angular_radius_deg
                      if z.body == "earth" and z.add_body_angular_radius else 0.0)
             self.names.append(z.name)
             self.bodies.append(z.body)
+            self.armed.append(z.armed)
             try:
                 self._phys.append(sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra))
                 self._law.append(sky_zones.SkyZoneBuilder(z.geometry, law_inflation_deg, extra))
@@ -303,13 +309,24 @@ class SkyZones:
     def law(self, t_s: float) -> list:
         return [b.build(c) for b, c in zip(self._law, self.centers(t_s))]
 
-    def as_flown(self, law_zones: list, target: np.ndarray) -> FlownZones:
+    def kept_for(self, seg: Segment) -> list[int]:
+        """Indices of the zones the flight software keeps out while it flies ``seg``'s target: all of them
+        for a fixed direction; for a nadir or ground target not those armed for inertial targets only,
+        which it disarms at once (its target lies inside the Earth's disc)."""
+        if seg.earth is None:
+            return list(range(len(self.names)))
+        return [k for k, armed in enumerate(self.armed) if armed != "inertial_targets"]
+
+    def as_flown(self, law_zones: list, target: np.ndarray, indices: list[int] | None = None) -> FlownZones:
         """Merge ``law_zones`` as the flight software does with the boresight at ``target`` (where it
-        settles: a merged zone must leave it outside, or the pair is bridged or left apart)."""
+        settles: a merged zone must leave it outside, or the pair is bridged or left apart). ``indices``:
+        the mission zone behind each of ``law_zones`` when they are not all of them (`kept_for`)."""
         from fsw.guidance import ZoneGeometry
 
         geometry = ZoneGeometry(3, self.merge_gap_deg)
         merged, groups = geometry.merge(list(law_zones), keep_outside=[np.asarray(target, dtype=float)])
+        if indices is not None:
+            groups = [[indices[j] for j in g] for g in groups]
         names = ["+".join(self.names[k] for k in g) for g in groups]
         return FlownZones(merged, groups, names, list(geometry.unmerged))
 
@@ -669,12 +686,23 @@ def _check_pointing(mission, segments, report, step_s, quick: bool = False) -> N
 
 
 def _check_initial_boresight(mission, sky: SkyZones, report) -> None:
-    """The initial boresight (truth) must not start inside a physical zone."""
+    """The initial boresight (truth) must not start inside a physical zone, but for one armed for inertial
+    targets only: the flight software starts with it disarmed and arms it once the boresight has left it
+    (an info when the initial target is a fixed direction; nothing when it is on the Earth)."""
     from gnc.attitude import quat_rotate
     y0 = np.asarray(quat_rotate(np.asarray(mission.initial_state.q_NB), np.asarray(mission.spacecraft.instrument_boresight_B)))
+    fixed_target = mission.flight_software.pointing.target_kind == "inertial"
     for k, zone in enumerate(sky.physical(0.0)):
         m = signed_margin_deg(zone, y0)
-        if m <= 0:
+        if m <= 0 and sky.armed[k] == "inertial_targets":
+            if fixed_target:
+                report.add("info", "initial-state", f"the instrument boresight starts at RA/Dec {_ra_dec(y0)}, "
+                           f"{-m:.2f} deg inside zone '{sky.names[k]}' ({BODY_NAMES.get(sky.bodies[k], 'its centre')} "
+                           f"is at RA/Dec {_ra_dec(sky.centers(0.0)[k])}), which is kept out for inertial targets "
+                           "only (armed: inertial_targets): the flight software arms it once the boresight has "
+                           "left it as the law sees it (inflated by law.margin_deg)", ("initial_state",),
+                           margin_deg=m)
+        elif m <= 0:
             report.add("error", "initial-state", f"the instrument boresight starts at RA/Dec {_ra_dec(y0)}, "
                        f"{-m:.2f} deg inside zone '{sky.names[k]}' ({BODY_NAMES.get(sky.bodies[k], 'its centre')} is "
                        f"at RA/Dec {_ra_dec(sky.centers(0.0)[k])}): start outside it, e.g. give initial_state as "
@@ -686,9 +714,15 @@ def _check_pointing_at(mission, sky: SkyZones, seg, i: int, t: float, held: dict
     """Sample i (time t) of a POINTING segment: the target clear of the zones and their layers as the law
     flies them, the merges, then (unless ``quick``) the assumptions; returns their eps_max (inf: none)."""
     phys, law_zones = sky.physical(t), sky.law(t)
-    if _target_in_law_zones(mission, sky, seg, i, t, phys, law_zones, held, report, seen):
+    kept = sky.kept_for(seg)
+    if _target_in_law_zones(mission, sky, seg, i, t, phys, law_zones, kept, held, report, seen):
         return math.inf  # the assumptions fail with it: one root cause, one error
-    flown = sky.as_flown(law_zones, seg.target)
+    if not kept:
+        return math.inf  # every zone disarmed for this target: nothing for the law to keep out
+    if len(kept) == len(law_zones):
+        flown = sky.as_flown(law_zones, seg.target)
+    else:
+        flown = sky.as_flown([law_zones[k] for k in kept], seg.target, kept)
     if _target_in_flown_layer(mission, seg, i, t, flown, held, report, seen):
         return math.inf
     _report_merges(sky, seg, t, flown, report, seen)
@@ -699,12 +733,18 @@ def _check_pointing_at(mission, sky: SkyZones, seg, i: int, t: float, held: dict
 
 
 def _target_in_law_zones(mission, sky: SkyZones, seg, i: int, t: float, phys: list, law_zones: list,
-                         held: dict[str, list[float]], report, seen: set) -> bool:
-    """Whether the target lies in a zone as the law sees it (inflated): an error at the segment's start,
-    later a zone that moved over it (held); each zone's kernel checked once on the way."""
+                         kept: list[int], held: dict[str, list[float]], report, seen: set) -> bool:
+    """Whether the target lies in a zone the flight software keeps out for it (``kept``, indices into
+    ``phys`` and ``law_zones``) as the law sees it (inflated): an error at the segment's start, later a zone
+    that moved over it (held); every zone's kernel checked once on the way, kept or not (its shape is
+    flown with other targets)."""
     target_inside = False
+    kept_set = set(kept)
+    kept_law = law_zones if len(kept) == len(law_zones) else [law_zones[k] for k in kept]
     for k, (zp, zl) in enumerate(zip(phys, law_zones)):
         _kernel_check(sky.names[k], zp, report, seen, ZONES_LOC + (k, "geometry"))
+        if k not in kept_set:
+            continue
         m_phys, m_law = signed_margin_deg(zp, seg.target), signed_margin_deg(zl, seg.target)
         if m_law <= 0:
             target_inside = True
@@ -712,7 +752,7 @@ def _target_in_law_zones(mission, sky: SkyZones, seg, i: int, t: float, phys: li
                 _hold(held, sky.names[k], t)
             elif (seg.source, sky.names[k]) not in seen:
                 seen.add((seg.source, sky.names[k]))
-                need = clearance_needed_deg(seg.target, zl, law_zones, mission.flight_software.law,
+                need = clearance_needed_deg(seg.target, zl, kept_law, mission.flight_software.law,
                                             start_deg=max(0.0, -m_law))
                 report.add("error", "target", _target_in_zone(seg, t, k, sky, m_phys, need),
                            seg.loc, t_s=t, margin_deg=m_phys, move_deg=need)

@@ -24,12 +24,20 @@ Requirements (``Mission.requirements``):
   physical sky zone with the door not fully closed (door truth: ``door_position`` > 0), at most
   ``max_instrument_exposure_s``. Reported for every mission in ``summary.json`` (``exposure``; without a
   door the instrument is always open) with its depth, the deepest margin among those samples.
+
+Armed zones: a sky zone with ``armed: inertial_targets`` counts, in every requirement and figure above, only
+on its armed samples (`ZoneSeries.judged`), which the judge derives from the mission's commanded POINTING
+targets and the truth alone, never from the flight software's own arming: not while a nadir or ground
+target is commanded; after an inertial target (``target_N``, ``ra_dec_deg``) is commanded, from the first
+sample whose true margin exceeds ``law.margin_deg`` (clear of the zone as the law sees it, where the
+flight software arms it), and from then on until a nadir or ground target is commanded again (a
+further inertial target, or a mode change, leaves it armed). A zone never armed is reported as not judged.
 """
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,8 +54,26 @@ ZONE_REBUILD_DEG = 0.001  # rebuild a moving star zone when its centre moved mor
 class ZoneSeries:
     name: str
     kind: str  # "sky" or "attitude"
-    margin_deg: np.ndarray  # per truth sample, signed
+    margin_deg: np.ndarray  # per truth sample, signed; NaN where not judged (see judged)
     boundary_history: list  # [(t_s, boundary points (m, 3))] for sky zones (plots)
+    # the samples the zone is judged on (a zone armed only for inertial targets); None: every sample. The
+    # mask, not NaN alone, decides: a NaN margin of an always-judged zone (NaN truth) must still fail
+    judged: np.ndarray | None = None
+
+
+def zone_minimum(zone: ZoneSeries) -> tuple[int, float] | None:
+    """(sample, margin [deg]) of the zone's smallest judged margin; None when no sample is judged."""
+    m = zone.margin_deg
+    if zone.judged is None:
+        if not len(m):
+            return None
+        i = int(np.argmin(m))
+    else:
+        idx = np.flatnonzero(zone.judged)
+        if not len(idx):
+            return None
+        i = int(idx[np.argmin(m[idx])])
+    return i, float(m[i])
 
 
 TRUTH_KEYS = {"t_s": (0,), "q_NB": (0, 4), "omega_BN_B": (0, 3), "wheel_speed_rad_s": (0, 0),
@@ -82,7 +108,7 @@ def instrument_exposure(t: np.ndarray, sky_zones: list[ZoneSeries], door_positio
     n = len(t)
     if n == 0 or not sky_zones:
         return out
-    margin = np.min(np.vstack([np.asarray(z.margin_deg, dtype=float) for z in sky_zones]), axis=0)
+    margin = np.min(np.vstack([_judged_or_inf(z) for z in sky_zones]), axis=0)
     inside = margin < 0.0
     exposed = inside if door_position is None else inside & (np.asarray(door_position, dtype=float) > 0.0)
     dt = np.diff(np.asarray(t, dtype=float))
@@ -93,6 +119,12 @@ def instrument_exposure(t: np.ndarray, sky_zones: list[ZoneSeries], door_positio
         out["depth_deg"] = float(-margin[exposed].min())
         out["first_t_s"] = float(t[int(np.argmax(exposed))])
     return out
+
+
+def _judged_or_inf(zone: ZoneSeries) -> np.ndarray:
+    # an unjudged sample is no exposure, whatever another zone's margin there
+    m = np.asarray(zone.margin_deg, dtype=float)
+    return m if zone.judged is None else np.where(zone.judged, m, math.inf)
 
 
 def _signed_margins(zone, X: np.ndarray) -> np.ndarray:
@@ -122,24 +154,86 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray, *,
     evaluated, until a stretch's lowest bound exceeds it. ``margin_deg`` holds the lower bound on the
     samples left out, and ``boundary_history`` only its last entry. The minimum is the full series' own
     (the same zones on the same samples). Once a margin is negative (the boresight inside a zone) every
-    sample is evaluated."""
+    sample is evaluated.
+
+    A zone with ``armed: inertial_targets`` is judged on its armed samples only (`pointing_spans`,
+    `armed_samples`): ``judged`` holds them, ``margin_deg`` is NaN elsewhere, and with ``minimum_only`` its
+    minimum is that of its armed samples."""
     from gnc import sky_zones
 
     out = []
     t = truth["t_s"]
-    for z in mission.flight_software.pointing.zones:
+    zones = mission.flight_software.pointing.zones
+    spans = pointing_spans(mission, t) if any(z.armed == "inertial_targets" for z in zones) else None
+    level = mission.flight_software.law.margin_deg
+    for z in zones:
+        arming = spans if z.armed == "inertial_targets" else None
         centers, extra = _zone_centers(z, truth, t)
         builder = sky_zones.SkyZoneBuilder(z.geometry, 0.0, extra)
         if z.geometry.shape == "cone":
-            out.append(_cone_series(z, builder, centers, extra, y_N, t, minimum_only))
-            continue
-        stretches = _stretches(centers, t)
-        shown = _shown_stretches(stretches, t)
-        if minimum_only:
-            out.append(_star_series_minimum(z, builder, stretches, shown, y_N, t))
+            series = _cone_series(z, builder, centers, extra, y_N, t, minimum_only)
         else:
-            out.append(_star_series_full(z, builder, stretches, set(shown), y_N, t))
+            stretches = _stretches(centers, t)
+            shown = _shown_stretches(stretches, t)
+            if minimum_only:
+                out.append(_star_series_minimum(z, builder, stretches, shown, y_N, t, arming, level))
+                continue
+            series = _star_series_full(z, builder, stretches, set(shown), y_N, t)
+        if arming is not None:
+            margins = series.margin_deg
+            series.judged = armed_samples(arming, len(t), lambda a, b: _first_above(margins[a:b], a, level))
+            series.margin_deg = np.where(series.judged, margins, math.nan)
+        out.append(series)
     return out
+
+
+def pointing_spans(mission, t: np.ndarray) -> list[tuple[int, int, bool]]:
+    """(first sample, end sample, on the Earth) per segment of `schedule` (the samples `error_series` gives
+    it): whether the POINTING target in force is nadir or a ground point rather than a fixed direction. The
+    initial target is ``pointing.target_kind``'s, then each SET_TARGET's; an attitude target (QUATERNION)
+    leaves the POINTING target as it was, which is why the kind is read from the commands and not from the
+    segments (a QUATERNION segment does not carry it)."""
+    from hil_sim.mission.model import SetTargetCommand
+
+    changes = [(0.0, mission.flight_software.pointing.target_kind != "inertial")]
+    changes += [(e.t_s, e.target_direction_N() is None) for e in mission.timeline
+                if isinstance(e, SetTargetCommand) and e.q_target_NB is None]
+    segments = schedule(mission)
+    spans = []
+    for s in segments:
+        sel = np.flatnonzero(_segment_samples(t, s, s is segments[-1]))
+        if len(sel):
+            on_earth = [earth for t_s, earth in changes if t_s <= s.t_start_s + 1e-9][-1]
+            spans.append((int(sel[0]), int(sel[-1]) + 1, on_earth))
+    return spans
+
+
+def armed_samples(spans: Sequence[tuple[int, int, bool]], n: int,
+                  first_positive: Callable[[int, int], int | None]) -> np.ndarray:
+    """The samples (of ``n``) an ``inertial_targets`` zone is judged on, over `pointing_spans`' ``spans``:
+    none while the target is on the Earth; in a span of an inertial target, from ``first_positive(a, b)``
+    (the first sample in [a, b) whose true margin exceeds law.margin_deg, None when none: where the boresight
+    has left the zone as the law sees it and the flight software arms it) to the span's end, and every sample
+    of the inertial spans that follow until a target on the Earth. The flight software too keeps the zone
+    armed across inertial targets and modes, so a boresight inside it at a command's time is a violation.
+    Judged from a margin of 0 instead, the smallest margin would be the arming sample's own, a few
+    thousandths of a degree, whatever the law did afterwards."""
+    armed = np.zeros(n, dtype=bool)
+    on = False
+    for a, b, on_earth in spans:
+        if on_earth:
+            on = False
+            continue
+        k = a if on else first_positive(a, b)
+        if k is not None:
+            armed[k:b] = True
+            on = True
+    return armed
+
+
+def _first_above(margins: np.ndarray, offset: int, level: float) -> int | None:
+    above = np.flatnonzero(margins > level)
+    return offset + int(above[0]) if len(above) else None
 
 
 def _zone_centers(z, truth: dict[str, np.ndarray], t: np.ndarray) -> tuple[np.ndarray, float]:
@@ -223,48 +317,99 @@ def _stretch_lower_bounds(builder, stretches: list, y_N: np.ndarray) -> list[np.
 
 
 def _star_series_minimum(z, builder, stretches: list, shown: list[int], y_N: np.ndarray,
-                         t: np.ndarray) -> ZoneSeries:
-    """The minimum-only series (see sky_zone_series): lower bounds where no sample can hold the minimum."""
+                         t: np.ndarray, arming: list[tuple[int, int, bool]] | None = None,
+                         level: float = 0.0) -> ZoneSeries:
+    """The minimum-only series (see sky_zone_series): lower bounds where no sample can hold the minimum.
+    ``arming``: `pointing_spans` for a zone judged only on its armed samples (None: every sample), armed
+    where the margin first exceeds ``level`` (`armed_samples`)."""
     bounds = _stretch_lower_bounds(builder, stretches, y_N)
-    lowest = np.array([b.min() if len(b) else math.inf for b in bounds])
     margins = np.empty(len(t))
     for (start, stop, _), b in zip(stretches, bounds):
         margins[start:stop] = b
     evaluated = np.zeros(len(t), dtype=bool)
-    best = math.inf
     built = {}
 
-    def evaluate(i: int, sel: np.ndarray) -> None:
+    def compute(i: int, sel: np.ndarray) -> np.ndarray:
         # the margins of samples sel of stretch i: per sample the full series' own values
-        nonlocal best
         start, stop, c0 = stretches[i]
         sel = sel[~evaluated[start:stop][sel]]
         if not len(sel):
-            return
+            return sel.astype(float)
         if i not in built:
             built[i] = builder.build(c0)
         m = _signed_margins(built[i], np.ascontiguousarray(y_N[start:stop][sel]))
         margins[start + sel] = m
         evaluated[start + sel] = True
-        best = min(best, float(m.min()))
+        return m
+
+    judged = None
+    best = math.inf
+    if arming is not None:
+        judged = armed_samples(arming, len(t), _lazy_first_above(stretches, margins, compute, level))
+        # samples the arming already evaluated hold exact margins: the armed ones count for the minimum
+        done = evaluated & judged
+        best = float(margins[done].min()) if done.any() else math.inf
+        # an unarmed sample never holds the minimum
+        bounds = [np.where(judged[start:stop], b, math.inf) for (start, stop, _), b in zip(stretches, bounds)]
+    lowest = np.array([b.min() if len(b) else math.inf for b in bounds])
+
+    def evaluate(i: int, sel: np.ndarray) -> None:
+        nonlocal best
+        m = compute(i, sel)
+        if len(m):
+            best = min(best, float(m.min()))
+
+    def candidates(i: int) -> np.ndarray:
+        start, stop, _ = stretches[i]
+        return np.arange(len(bounds[i])) if judged is None else np.flatnonzero(judged[start:stop])
 
     for i in np.argsort(lowest, kind="stable"):
+        if lowest[i] == math.inf:
+            break  # no armed sample here nor in the stretches after it
         if best >= 0.0 and lowest[i] > best + SKIP_SLACK_DEG:
             break  # this stretch and all after it cannot hold the minimum
         if best == math.inf:  # the sample of lowest bound first: its margin bounds the minimum
             evaluate(i, np.array([int(np.argmin(bounds[i]))]))
-        everything = np.arange(len(bounds[i]))
-        evaluate(i, everything if best < 0.0 else np.flatnonzero(~(bounds[i] > best + SKIP_SLACK_DEG)))
+        evaluate(i, candidates(i) if best < 0.0 else np.flatnonzero(~(bounds[i] > best + SKIP_SLACK_DEG)))
     if best < 0.0:  # inside a zone: every sample judged
         for i in range(len(stretches)):
-            evaluate(i, np.arange(len(bounds[i])))
+            evaluate(i, candidates(i))
+    if judged is not None:
+        margins[~judged] = math.nan
     history = []
     if shown:
         i = shown[-1]
         # only its boundary, when the stretch was never built: the search structure is not needed for a plot
         zone = built[i] if i in built else _boundary_only_zone(builder, stretches[i][2])
         history.append((float(t[stretches[i][0]]), np.asarray(zone.boundary(180))))
-    return ZoneSeries(z.name, "sky", margins, history)
+    return ZoneSeries(z.name, "sky", margins, history, judged)
+
+
+def _lazy_first_above(stretches: list, margins: np.ndarray, compute: Callable[[int, np.ndarray], np.ndarray],
+                      level: float) -> Callable[[int, int], int | None]:
+    """`armed_samples`' first_positive on a minimum-only series (``margins``: lower bounds, exact where
+    ``compute`` evaluated them): samples are evaluated in order, in blocks doubling in size, only where
+    the bound is not already above ``level``, so a stretch far from where the boresight leaves the zone is
+    never built."""
+    starts = np.array([s[0] for s in stretches])
+
+    def first_positive(a: int, b: int) -> int | None:
+        k, size = a, 1
+        while k < b:
+            stop = min(b, k + size)
+            first, last = np.searchsorted(starts, [k, stop - 1], "right")
+            for i in range(int(first) - 1, int(last)):
+                start, end, _ = stretches[i]
+                lo, hi = max(k, start), min(stop, end)
+                # a bound above the slack is a positive margin whatever the rounding of either
+                compute(i, np.flatnonzero(~(margins[lo:hi] > level + SKIP_SLACK_DEG)) + (lo - start))
+            found = _first_above(margins[k:stop], k, level)
+            if found is not None:
+                return found
+            k, size = stop, 2 * size
+        return None
+
+    return first_positive
 
 
 def _star_radius_bound_deg(builder) -> float | None:
@@ -344,7 +489,7 @@ def error_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> tupl
     err = np.full(len(t), np.nan)
     segments = schedule(mission)
     for s in segments:
-        sel = (t >= s.t_start_s - 1e-6) & (t < s.t_end_s - 1e-6) if s is not segments[-1] else (t >= s.t_start_s - 1e-6)
+        sel = _segment_samples(t, s, s is segments[-1])
         if s.mode == "POINTING" and s.earth is not None:  # where the target on the Earth truly is
             target = earth_target_truth_N(s, mission.epoch_utc, t[sel], truth["r_sc_N_km"][sel])
             err[sel] = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", y_N[sel], target), -1.0, 1.0)))
@@ -353,6 +498,11 @@ def error_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray) -> tupl
         elif s.mode == "QUATERNION":
             err[sel] = [math.degrees(attitude_error_angle(q, s.target)) for q in truth["q_NB"][sel]]
     return err, segments
+
+
+def _segment_samples(t: np.ndarray, s, last: bool) -> np.ndarray:
+    """The samples a `schedule` segment owns: [start, end), the last one every sample from its start on."""
+    return (t >= s.t_start_s - 1e-6) & ((t < s.t_end_s - 1e-6) | last)
 
 
 def settling(mission, t: np.ndarray, err: np.ndarray, segments) -> list[dict[str, Any]]:
@@ -581,7 +731,7 @@ def evaluate(run_dir: Path, mission, *, interrupted: bool = False, status: str |
         "telemetry_complete": {"complete": tm_complete, "detail": tm_detail},
         "pass": all(r["pass"] for r in reqs.results) and status == "completed",
         "requirements": reqs.results,
-        "zones": {z.name: {"kind": z.kind, "min_margin_deg": float(z.margin_deg.min()) if len(z.margin_deg) else None}
+        "zones": {z.name: {"kind": z.kind, "min_margin_deg": None if (low := zone_minimum(z)) is None else low[1]}
                   for z in zones},
         "exposure": exposure,
         "settling": settle,
@@ -616,11 +766,16 @@ def _judged_series(mission, truth: dict[str, np.ndarray]) -> tuple:
 
 def _judge_keepout_margins(reqs: _Requirements, zones: list[ZoneSeries], t: np.ndarray, req) -> None:
     for z in zones:
-        if len(z.margin_deg):
-            i = int(np.argmin(z.margin_deg))
-            reqs.requirement(f"keep-out margin {z.name}", float(z.margin_deg[i]),
-                             f"> {_num(req.min_keepout_margin_deg)}", float(z.margin_deg[i]) > req.min_keepout_margin_deg,
-                             f"minimum signed margin to the physical {z.kind} zone at t = {t[i]:.1f} s", "deg")
+        low = zone_minimum(z)
+        if low is not None:
+            i, value = low
+            armed = "" if z.judged is None else ", armed samples only"
+            reqs.requirement(f"keep-out margin {z.name}", value,
+                             f"> {_num(req.min_keepout_margin_deg)}", value > req.min_keepout_margin_deg,
+                             f"minimum signed margin to the physical {z.kind} zone at t = {t[i]:.1f} s{armed}", "deg")
+        elif z.judged is not None and len(z.judged):
+            reqs.not_judged(f"keep-out margin {z.name}", "armed only for inertial targets, and never armed: no "
+                            "inertial target was commanded with the boresight outside the zone", "never armed")
 
 
 def _judge_settling(reqs: _Requirements, settle: list[dict[str, Any]], t: np.ndarray, req,

@@ -150,10 +150,13 @@ def _margins_plot(plt, run_dir: Path, mission, series: dict, t: np.ndarray, ecli
                 label=f"law inflation {mission.flight_software.law.margin_deg:g} deg")
     ax1.set_ylabel("signed margin to physical zone [deg]")
     ax1.set_title(f"{mission.name}: keep-out margins (truth) and error to target")
+    # a zone never armed (all NaN, drawn as a gap) has no extent to fit
+    shown = [z.margin_deg for z in series["zones"] if np.isfinite(z.margin_deg).any()]
     if series["zones"]:
         ax1.legend(fontsize=8)
-        top = max(float(np.nanmax(z.margin_deg)) for z in series["zones"])
-        ax1.set_ylim(min(-1.0, min(float(np.nanmin(z.margin_deg)) for z in series["zones"]) - 1), min(top, 90) + 2)
+    if shown:
+        top = max(float(np.nanmax(m)) for m in shown)
+        ax1.set_ylim(min(-1.0, min(float(np.nanmin(m)) for m in shown) - 1), min(top, 90) + 2)
     ax2.semilogy(t, np.maximum(series["error_deg"], 1e-4))
     ax2.axhline(mission.requirements.settling_tolerance_deg, color="g", ls="--", lw=1, label="settling tolerance")
     ax2.set_ylabel("truth error to target [deg]")

@@ -220,4 +220,5 @@ def test_cycle_inputs_follow_what_the_guidance_replaces() -> None:
     assert np.array_equal(rows(fp, K.FP_ROLL_REF), g.roll_ref_N)
     assert np.array_equal(rows(fp, K.FP_EPH, 18), ephemeris_rows(12.3))
     assert fp[K.FP_T] == 12.3 and fp[K.FP_F] == 12.3 / 10.0 - 1 and fp[K.FP_STEADY] == 0.0
-    assert fp[K.FP_PREV:].tolist() == [4.0, 5.5, 7.25] and fp[K.FP_NPREV] == 3
+    assert fp[K.FP_PREV:K.FP_PREV + 3].tolist() == [4.0, 5.5, 7.25] and fp[K.FP_NPREV] == 3
+    assert fp[K.FP_PREV + 3:].tolist() == [0.0, 0.0, 0.0]  # no zone disarmed
