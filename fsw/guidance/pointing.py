@@ -31,6 +31,7 @@ from fsw.guidance.common import (
     _BODY_CODES, _NAN3, _NAN4, GuidanceOutput, angle_deg, _make_star_law, signed_margin_deg,
 )
 from fsw.guidance.edge_rule import TARGET_IN_LAYER
+from fsw.guidance.slew_limits import BRAKING_RESERVE_DEG, braking_distance_deg
 from gnc.sky_ephemeris import EPHEMERIS_NODE_S
 from fsw.guidance.watchdog import MIN_ERROR_DEG, RATE_FRACTION
 from fsw.guidance.zone_merging import ZoneGeometry
@@ -82,6 +83,7 @@ class _SkySlot:
     # direction and the boresight has left it; disarmed, neither the law nor the margins see it
     inertial_only: bool = False
     disarmed: bool = False
+    arming_seen: tuple[float, float] | None = None  # (time, margin from the law's zone) while waiting to arm
     # center_N and phys_drift_deg (and the guidance's `_dirs`) as the last cycle left them once
     # `PointingGuidance._settle_sky` has run: a compiled cycle leaves them to it (nothing in a steady
     # cycle reads them; every reader settles first)
@@ -112,7 +114,7 @@ class PointingGuidance:
         self._track = (kind, point)
         self._tracked_N = self._held_target_N if self.mode == "SAFE" else self.target_N
         self._target_fixed = False
-        self._update_arming(None)
+        self._update_arming(None, self.last_t_s)
 
     def target_on_earth_N(self, kind: str, ground=None, t_s: float | None = None) -> np.ndarray:
         """The direction of a nadir or ground target at ``t_s`` (default: the last cycle's time), e.g. to
@@ -242,25 +244,42 @@ class PointingGuidance:
         self._sky_pack = None
         self._sky_law_key = None
 
-    def _update_arming(self, y_N: np.ndarray | None) -> None:
+    def _update_arming(self, y_N: np.ndarray | None, t_s: float) -> None:
         """Arm or disarm the zones kept for inertial targets only: disarmed at once when the target is on the
-        Earth (its direction lies inside an Earth zone), armed when the target is a fixed direction and the
-        boresight ``y_N`` is outside the law's (inflated) zone, so the law starts from its safe set. Either
-        change makes the law anew on the armed zones (ZONE_ARMED, ZONE_DISARMED)."""
+        Earth (its direction lies inside an Earth zone); armed when the target is a fixed direction and the
+        boresight ``y_N`` is outside the law's (inflated) zone, so the law starts from its safe set, and can
+        stop short of the physical zone from the rate it closes on it (`armable`). Either change makes the
+        law anew on the armed zones (ZONE_ARMED, ZONE_DISARMED) and plans the slew again."""
         changed = False
         for s in self._inertial_only:
             if not s.disarmed and not self._target_fixed:
                 s.disarmed, changed = True, True
                 self.events("ZONE_DISARMED", zone=s.index, body=_BODY_CODES[s.body])
-            elif (s.disarmed and self._target_fixed and y_N is not None and s.law is not None
-                  and signed_margin_deg(s.law, y_N) > 0.0):
-                s.disarmed, changed = False, True
-                self.events("ZONE_ARMED", zone=s.index, body=_BODY_CODES[s.body])
+            elif s.disarmed and self._target_fixed and y_N is not None and s.law is not None:
+                m = signed_margin_deg(s.law, y_N)
+                seen = s.arming_seen
+                if seen is not None and t_s <= seen[0]:
+                    continue  # this cycle's margin was seen already (SAFE and the door ask again)
+                s.arming_seen = (t_s, m)
+                if seen is not None and self.armable(m, (seen[1] - m) / (t_s - seen[0])):
+                    s.disarmed, s.arming_seen, changed = False, None, True
+                    self.events("ZONE_ARMED", zone=s.index, body=_BODY_CODES[s.body])
         if changed:
             self._armed = tuple(s.index for s in self.slots if not s.disarmed)
             self._write_arming()
             self._sky_law_key = None
+            self._plan_due = True
             self._checks_dirty = True
+
+    def armable(self, law_margin_deg: float, closing_deg_s: float) -> bool:
+        """Whether a zone may be armed with the boresight ``law_margin_deg`` outside it as the law sees it,
+        closing on it at ``closing_deg_s``: outside it, and able to stop (`slew_limits.braking_distance_deg`)
+        within the inflation margin less the braking reserve. A zone sweeping onto a parked boresight (the
+        Earth's, 0.06 deg/s) arms as soon as it is outside; a slew heading into it at 1 deg/s (4 deg to stop
+        at 0.2 deg/s^2) waits until it has turned away."""
+        room = law_margin_deg + self.cfg.law.margin_deg - BRAKING_RESERVE_DEG
+        return law_margin_deg > 0.0 and braking_distance_deg(max(closing_deg_s, 0.0), self.accel_deg_s2,
+                                                             self.bandwidth_rad_s) <= room
 
     def _write_arming(self) -> None:
         """The disarmed slots' flags where the compiled law reads them (`pointing_law_nb`: a NaN margin)."""
@@ -280,7 +299,7 @@ class PointingGuidance:
         `_update_sky` found it this cycle); NaN for a disarmed zone, which the smallest leaves out."""
         self._settle_sky()
         if self._inertial_only:
-            self._update_arming(y_N)
+            self._update_arming(y_N, self.last_t_s)
         margins = [math.nan if s.disarmed else signed_margin_deg(s.phys, y_N) - s.phys_drift_deg for s in self.slots]
         kept = [m for m in margins if m == m] if self._inertial_only else margins
         return margins, (min(kept) if kept else float("nan"))
@@ -321,10 +340,10 @@ class PointingGuidance:
         rule = self.cfg.pointing.roll_reference
         if rule != "inertial" and self.mode == "POINTING":  # SAFE steers the roll to its own reference
             self._follow_roll_rule(t_s, rule)
-        if self._track_started is False or self._track is not None:
-            self._track_target(t_s)
+        if self.mode != "SAFE" and (self._track_started is False or self._track is not None):
+            self._track_target(t_s)  # SAFE flies its own aim, the target on the Earth held for POINTING
         if self._inertial_only:
-            self._update_arming(boresight_nb(q, self.b_B))
+            self._update_arming(boresight_nb(q, self.b_B), t_s)
         pack = self._sky_pack
         if pack is None or "directions" in vars(self.ephem):
             pack = self._sky_pack_now()
@@ -432,7 +451,7 @@ class PointingGuidance:
             if occ >= len(merged) and not self._escaping:
                 self.events("ASSUMPTION_VIOLATED", reason="target between two zones closing around the boresight: steering out of the gap")
             elif 0 <= occ < len(merged):
-                self.events("ASSUMPTION_VIOLATED", reason=TARGET_IN_LAYER.format(zone=occ))
+                self.events("ASSUMPTION_VIOLATED", reason=TARGET_IN_LAYER.format(zone=self._sky_group_first[occ]))
             self._occulted = occ
             self._checks_dirty = True
         if occ >= 0:

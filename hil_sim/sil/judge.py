@@ -165,7 +165,7 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray, *,
     t = truth["t_s"]
     zones = mission.flight_software.pointing.zones
     spans = pointing_spans(mission, t) if any(z.armed == "inertial_targets" for z in zones) else None
-    level = mission.flight_software.law.margin_deg
+    arm = _Arming.of(mission, t)
     for z in zones:
         arming = spans if z.armed == "inertial_targets" else None
         centers, extra = _zone_centers(z, truth, t)
@@ -176,12 +176,12 @@ def sky_zone_series(mission, truth: dict[str, np.ndarray], y_N: np.ndarray, *,
             stretches = _stretches(centers, t)
             shown = _shown_stretches(stretches, t)
             if minimum_only:
-                out.append(_star_series_minimum(z, builder, stretches, shown, y_N, t, arming, level))
+                out.append(_star_series_minimum(z, builder, stretches, shown, y_N, t, arming, arm))
                 continue
             series = _star_series_full(z, builder, stretches, set(shown), y_N, t)
         if arming is not None:
             margins = series.margin_deg
-            series.judged = armed_samples(arming, len(t), lambda a, b: _first_above(margins[a:b], a, level))
+            series.judged = armed_samples(arming, len(t), lambda a, b: arm.first(margins, a, b))
             series.margin_deg = np.where(series.judged, margins, math.nan)
         out.append(series)
     return out
@@ -212,8 +212,9 @@ def armed_samples(spans: Sequence[tuple[int, int, bool]], n: int,
                   first_positive: Callable[[int, int], int | None]) -> np.ndarray:
     """The samples (of ``n``) an ``inertial_targets`` zone is judged on, over `pointing_spans`' ``spans``:
     none while the target is on the Earth; in a span of an inertial target, from ``first_positive(a, b)``
-    (the first sample in [a, b) whose true margin exceeds law.margin_deg, None when none: where the boresight
-    has left the zone as the law sees it and the flight software arms it) to the span's end, and every sample
+    (the first sample in [a, b) where the boresight has left the zone as the law sees it, and can stop short
+    of it from the rate it closes on it, None when none: `_Arming`, the flight software's own rule,
+    `PointingGuidance.armable`, on the truth) to the span's end, and every sample
     of the inertial spans that follow until a target on the Earth. The flight software too keeps the zone
     armed across inertial targets and modes, so a boresight inside it at a command's time is a violation.
     Judged from a margin of 0 instead, the smallest margin would be the arming sample's own, a few
@@ -231,9 +232,35 @@ def armed_samples(spans: Sequence[tuple[int, int, bool]], n: int,
     return armed
 
 
-def _first_above(margins: np.ndarray, offset: int, level: float) -> int | None:
-    above = np.flatnonzero(margins > level)
-    return offset + int(above[0]) if len(above) else None
+@dataclass
+class _Arming:
+    """When an ``inertial_targets`` zone is armed on an inertial target: at the first sample whose true
+    margin exceeds law.margin_deg (outside the zone as the law sees it) and from which the boresight can
+    stop outside the zone (`fsw.guidance.slew_limits.braking_distance_deg` of the rate its margin falls at,
+    at the configured slew limits) with the braking reserve to spare."""
+
+    t: np.ndarray
+    level: float
+    accel_deg_s2: float
+    bandwidth_rad_s: float
+
+    @classmethod
+    def of(cls, mission, t: np.ndarray) -> "_Arming":
+        fsw = mission.flight_software
+        return cls(t, fsw.law.margin_deg, fsw.control.max_command_accel_deg_s2, fsw.control.rate_bandwidth_rad_s)
+
+    def first(self, margins: np.ndarray, a: int, b: int) -> int | None:
+        """The first armed sample in [a, b) of the exact ``margins`` (``margins[a - 1]`` too, when a > 0)."""
+        from fsw.guidance.slew_limits import BRAKING_RESERVE_DEG, braking_distance_deg
+
+        lo = max(a - 1, 0)
+        m, t = margins[lo:b], self.t[lo:b]
+        closing = np.zeros(len(m))
+        closing[1:] = np.maximum((m[:-1] - m[1:]) / np.maximum(np.diff(t), 1e-9), 0.0)
+        stop = braking_distance_deg(closing, self.accel_deg_s2, self.bandwidth_rad_s)
+        ok = np.flatnonzero((m > self.level) & (stop <= m - BRAKING_RESERVE_DEG))
+        ok = ok[ok + lo >= a]
+        return lo + int(ok[0]) if len(ok) else None
 
 
 def _zone_centers(z, truth: dict[str, np.ndarray], t: np.ndarray) -> tuple[np.ndarray, float]:
@@ -318,10 +345,10 @@ def _stretch_lower_bounds(builder, stretches: list, y_N: np.ndarray) -> list[np.
 
 def _star_series_minimum(z, builder, stretches: list, shown: list[int], y_N: np.ndarray,
                          t: np.ndarray, arming: list[tuple[int, int, bool]] | None = None,
-                         level: float = 0.0) -> ZoneSeries:
+                         arm: "_Arming | None" = None) -> ZoneSeries:
     """The minimum-only series (see sky_zone_series): lower bounds where no sample can hold the minimum.
     ``arming``: `pointing_spans` for a zone judged only on its armed samples (None: every sample), armed
-    where the margin first exceeds ``level`` (`armed_samples`)."""
+    by ``arm`` (`armed_samples`)."""
     bounds = _stretch_lower_bounds(builder, stretches, y_N)
     margins = np.empty(len(t))
     for (start, stop, _), b in zip(stretches, bounds):
@@ -345,7 +372,7 @@ def _star_series_minimum(z, builder, stretches: list, shown: list[int], y_N: np.
     judged = None
     best = math.inf
     if arming is not None:
-        judged = armed_samples(arming, len(t), _lazy_first_above(stretches, margins, compute, level))
+        judged = armed_samples(arming, len(t), _lazy_first_armed(stretches, margins, compute, arm))
         # samples the arming already evaluated hold exact margins: the armed ones count for the minimum
         done = evaluated & judged
         best = float(margins[done].min()) if done.any() else math.inf
@@ -385,25 +412,25 @@ def _star_series_minimum(z, builder, stretches: list, shown: list[int], y_N: np.
     return ZoneSeries(z.name, "sky", margins, history, judged)
 
 
-def _lazy_first_above(stretches: list, margins: np.ndarray, compute: Callable[[int, np.ndarray], np.ndarray],
-                      level: float) -> Callable[[int, int], int | None]:
+def _lazy_first_armed(stretches: list, margins: np.ndarray, compute: Callable[[int, np.ndarray], np.ndarray],
+                      arm: "_Arming") -> Callable[[int, int], int | None]:
     """`armed_samples`' first_positive on a minimum-only series (``margins``: lower bounds, exact where
-    ``compute`` evaluated them): samples are evaluated in order, in blocks doubling in size, only where
-    the bound is not already above ``level``, so a stretch far from where the boresight leaves the zone is
-    never built."""
+    ``compute`` evaluated them): samples are evaluated in order, in blocks doubling in size, each block
+    exactly (the rate the margin falls at needs every sample's), with the sample before it, so only the
+    stretches up to where the zone is armed are built."""
     starts = np.array([s[0] for s in stretches])
 
     def first_positive(a: int, b: int) -> int | None:
         k, size = a, 1
         while k < b:
             stop = min(b, k + size)
-            first, last = np.searchsorted(starts, [k, stop - 1], "right")
+            lo_block = max(k - 1, 0)
+            first, last = np.searchsorted(starts, [lo_block, stop - 1], "right")
             for i in range(int(first) - 1, int(last)):
                 start, end, _ = stretches[i]
-                lo, hi = max(k, start), min(stop, end)
-                # a bound above the slack is a positive margin whatever the rounding of either
-                compute(i, np.flatnonzero(~(margins[lo:hi] > level + SKIP_SLACK_DEG)) + (lo - start))
-            found = _first_above(margins[k:stop], k, level)
+                lo, hi = max(lo_block, start), min(stop, end)
+                compute(i, np.arange(lo, hi) - start)
+            found = arm.first(margins, k, stop)
             if found is not None:
                 return found
             k, size = stop, 2 * size

@@ -97,3 +97,47 @@ def test_a_target_on_the_earth_disarms_the_zone_at_once() -> None:
 def test_armed_takes_only_its_two_values() -> None:
     with pytest.raises(ValueError, match="armed"):
         FswConfig.model_validate({"pointing": {"zones": [{**EARTH, "armed": "sometimes"}]}})
+
+
+def test_a_zone_is_armed_only_where_the_boresight_can_stop_short_of_it() -> None:
+    """A fixed target commanded while the boresight still heads into the zone (2 deg/s): the zone is not
+    armed, though outside it, until the boresight has turned away; a zone sweeping at the orbit rate is
+    armed as soon as the boresight is outside it."""
+    from fsw.guidance.slew_limits import braking_distance_deg
+
+    g, events = _guidance("inertial_targets", target_kind="nadir")
+    need = braking_distance_deg(2.0, g.accel_deg_s2, g.bandwidth_rad_s)
+    assert need > 2.7 + g.cfg.law.margin_deg  # more than the room at the start of the approach below
+    assert g.armable(0.1, 0.064) and not g.armable(-0.1, 0.0) and not g.armable(2.7, 2.0)
+    eph = g.ephem
+    nadir = _unit(-eph.position_N_km(0.0))
+    normal = _unit(np.cross(eph.position_N_km(0.0), eph.velocity_direction_N(0.0)))
+    g.step(0.0, 0.1, _q_with_boresight(nadir), np.zeros(3))
+    g.set_target_direction(normal)
+    law_edge = eph.earth_angular_radius_deg + 5.0 + g.cfg.law.margin_deg  # the zone as the law sees it
+    # from 2.7 deg outside the law's zone in at 2 deg/s for 2.5 s (2.3 deg inside), then out at 2 deg/s
+    angles = [law_edge + 2.7 - 0.2 * k for k in range(26)] + [law_edge - 2.3 + 0.2 * k for k in range(1, 60)]
+    armed_at = None
+    for k, angle in enumerate(angles):
+        a = math.radians(angle)
+        g.step(0.1 * (k + 1), 0.1, _q_with_boresight(math.cos(a) * nadir + math.sin(a) * normal), np.zeros(3))
+        if armed_at is None and _names(events) == ["ZONE_ARMED"]:
+            armed_at = k
+    assert armed_at is not None and armed_at > 25  # after the turn
+    assert angles[armed_at] > law_edge  # and outside the zone
+
+
+def test_a_target_on_the_earth_is_still_followed_after_safe_and_the_zone_stays_disarmed() -> None:
+    """SAFE flies its own aim through the POINTING law (the Sun acquisition): the nadir target is held for
+    POINTING, not taken for a fixed direction, so the zone stays disarmed and nadir is followed again."""
+    g, events = _guidance("inertial_targets", target_kind="nadir")
+    q = _q_with_boresight(_unit(-g.ephem.position_N_km(0.0)))
+    q, _ = _fly(g, q, 0.0, 5.0)
+    g.set_mode("SAFE")
+    q, _ = _fly(g, q, 5.0, 30.0)
+    assert g.safe_phase != "RATE_DAMPING"  # the Sun acquisition ran the POINTING law
+    g.set_mode("POINTING")
+    q, rows = _fly(g, q, 35.0, 1.0)
+    out = g.step(36.0, 0.1, q, np.zeros(3))
+    assert np.allclose(out.target_N, _unit(-g.ephem.position_N_km(36.0)), atol=1e-12)
+    assert math.isnan(out.margins_deg[0]) and _names(events) == []

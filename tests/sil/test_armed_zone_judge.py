@@ -232,3 +232,20 @@ def test_fast_judge_agrees_with_the_sil_judge(tmp_path: Path, case: str, shape: 
     assert metrics["min_margin_deg"] == min(z["min_margin_deg"] for z in summary["zones"].values())
     assert metrics["instrument_exposure_s"] == summary["exposure"]["exposure_s"]
     assert metrics["instrument_exposure_depth_deg"] == summary["exposure"]["depth_deg"]
+
+
+@pytest.mark.parametrize("shape", sorted(EARTH_ZONES))
+def test_a_boresight_heading_into_the_zone_is_not_armed_until_it_can_stop(tmp_path: Path, shape: str) -> None:
+    """On the first star field the boresight is still heading into the zone at 4 deg/s: 4 deg out at 10 s,
+    2 deg inside at 11.5 s, out again and receding from 12 s. The flight software arms the zone only where
+    it can stop short of it (`PointingGuidance.armable`): the judge with it, from 13.5 s (5 deg out)."""
+    approach = [(9.0 + 0.5 * k, 9.5 + 0.5 * k, angle)
+                for k, angle in enumerate([38.0, 36.0, 34.0, 32.0, 30.0, 28.0, 29.0, 31.0, 32.5, 35.0])]
+    truth = _truth(_angles((0.0, 9.0, INSIDE), *approach, (20.0, 30.0, INSIDE)))
+    armed_from = ((T >= 13.5) & (T < 20.0)) | (T >= 30.0)
+    for minimum_only in (False, True):  # the fast judge's lazy series arms at the same sample
+        assert np.array_equal(_earth(_mission("inertial_targets", shape), truth, minimum_only).judged, armed_from)
+    assert _row(_summary(tmp_path, _mission("inertial_targets", shape), truth), "keep-out margin earth")["pass"]
+    # the same path with the zone armed from the start of the field: inside at 11.5 s
+    row = _row(_summary(tmp_path, _mission("always", shape), truth), "keep-out margin earth")
+    assert not row["pass"] and row["value"] == pytest.approx(-20.0, abs=1e-6)  # the city, inside its disc
