@@ -31,7 +31,7 @@ from fsw.guidance.common import (
     _BODY_CODES, _NAN3, _NAN4, GuidanceOutput, angle_deg, _make_star_law, signed_margin_deg,
 )
 from fsw.guidance.edge_rule import TARGET_IN_LAYER
-from fsw.guidance.slew_limits import BRAKING_RESERVE_DEG, braking_distance_deg
+from fsw.guidance.slew_limits import armable
 from gnc.sky_ephemeris import EPHEMERIS_NODE_S
 from fsw.guidance.watchdog import MIN_ERROR_DEG, RATE_FRACTION
 from fsw.guidance.zone_merging import ZoneGeometry
@@ -277,9 +277,8 @@ class PointingGuidance:
         within the inflation margin less the braking reserve. A zone sweeping onto a parked boresight (the
         Earth's, 0.06 deg/s) arms as soon as it is outside; a slew heading into it at 1 deg/s (4 deg to stop
         at 0.2 deg/s^2) waits until it has turned away."""
-        room = law_margin_deg + self.cfg.law.margin_deg - BRAKING_RESERVE_DEG
-        return law_margin_deg > 0.0 and braking_distance_deg(max(closing_deg_s, 0.0), self.accel_deg_s2,
-                                                             self.bandwidth_rad_s) <= room
+        return bool(armable(law_margin_deg, closing_deg_s, self.cfg.law.margin_deg, self.accel_deg_s2,
+                            self.bandwidth_rad_s))
 
     def _write_arming(self) -> None:
         """The disarmed slots' flags where the compiled law reads them (`pointing_law_nb`: a NaN margin)."""

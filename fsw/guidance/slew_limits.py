@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 BRAKING_RESERVE_DEG = 0.5
 BRAKING_REASON = "BRAKING_DISTANCE"
 # the rate loop's lag (1 / k_p) and the jerk-limited command's (1 / (2 k_p)), in loop time constants
@@ -41,6 +43,15 @@ def braking_distance_deg(rate_deg_s: float, accel_deg_s2: float, bandwidth_rad_s
     """Angle [deg] the body turns while stopping from ``rate_deg_s`` at ``accel_deg_s2`` after the rate
     loop's and the jerk limit's lag ``1.5 / bandwidth_rad_s`` [s]."""
     return rate_deg_s * rate_deg_s / (2.0 * accel_deg_s2) + LAG_TIME_CONSTANTS * rate_deg_s / bandwidth_rad_s
+
+
+def armable(law_margin_deg, closing_deg_s, margin_deg: float, accel_deg_s2: float, bandwidth_rad_s: float):
+    """Whether a zone kept for inertial targets may be armed (scalars or arrays alike): the boresight
+    ``law_margin_deg`` outside the zone as the law sees it (inflated by ``margin_deg``), and able to stop
+    from the rate it closes on it within the inflation less the braking reserve. The flight software's
+    rule (`PointingGuidance.armable`) and the judge's on the truth (`hil_sim.sil.judge`)."""
+    stop = braking_distance_deg(np.maximum(closing_deg_s, 0.0), accel_deg_s2, bandwidth_rad_s)
+    return (law_margin_deg > 0.0) & (stop <= law_margin_deg + margin_deg - BRAKING_RESERVE_DEG)
 
 
 def rate_for_distance_deg_s(distance_deg: float, accel_deg_s2: float, bandwidth_rad_s: float) -> float:

@@ -251,14 +251,14 @@ class _Arming:
 
     def first(self, margins: np.ndarray, a: int, b: int) -> int | None:
         """The first armed sample in [a, b) of the exact ``margins`` (``margins[a - 1]`` too, when a > 0)."""
-        from fsw.guidance.slew_limits import BRAKING_RESERVE_DEG, braking_distance_deg
+        from fsw.guidance.slew_limits import armable
 
         lo = max(a - 1, 0)
         m, t = margins[lo:b], self.t[lo:b]
         closing = np.zeros(len(m))
-        closing[1:] = np.maximum((m[:-1] - m[1:]) / np.maximum(np.diff(t), 1e-9), 0.0)
-        stop = braking_distance_deg(closing, self.accel_deg_s2, self.bandwidth_rad_s)
-        ok = np.flatnonzero((m > self.level) & (stop <= m - BRAKING_RESERVE_DEG))
+        closing[1:] = (m[:-1] - m[1:]) / np.maximum(np.diff(t), 1e-9)
+        # the flight software's rule on the truth: its margin from the zone as the law sees it
+        ok = np.flatnonzero(armable(m - self.level, closing, self.level, self.accel_deg_s2, self.bandwidth_rad_s))
         ok = ok[ok + lo >= a]
         return lo + int(ok[0]) if len(ok) else None
 
